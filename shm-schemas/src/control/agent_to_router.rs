@@ -1,0 +1,71 @@
+//! What an agent tells the router: who it is when it starts, that it leaves
+//! when it stops.
+
+use serde::{Deserialize, Serialize};
+
+/// How an agent's task is driven.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TaskKind {
+    /// Runs every period, to absolute deadlines.
+    Periodic,
+    /// Runs when an input arrives.
+    EventDriven,
+}
+
+impl std::fmt::Display for TaskKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            TaskKind::Periodic => "periodic",
+            TaskKind::EventDriven => "event-driven",
+        })
+    }
+}
+
+/// A port and the type name of what it carries.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PortSpec {
+    /// Port name, unique among the agent's inputs (or outputs).
+    pub name: String,
+    /// Stable payload type name, e.g. `nerve::Tick`.
+    pub type_name: String,
+}
+
+/// Everything the router needs to know about an agent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Registration {
+    /// Agent name, unique within the robot.
+    pub name: String,
+    /// Process id.
+    pub pid: u32,
+    /// Kind of agent (`ticker`, `relay`, `sonar`, ...).
+    pub kind: String,
+    /// Path of the executable.
+    pub executable: String,
+    /// Periodic or event-driven.
+    pub task: TaskKind,
+    /// Current period in nanoseconds (periodic agents).
+    pub period_ns: Option<u64>,
+    /// Input ports.
+    pub inputs: Vec<PortSpec>,
+    /// Output ports.
+    pub outputs: Vec<PortSpec>,
+    /// Log file, when the agent runs as a daemon.
+    pub log_file: Option<String>,
+    /// Whether the task is suspended at the time of registration.
+    pub suspended: bool,
+}
+
+/// A message from an agent to the router.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum AgentToRouter {
+    /// The agent starts (or re-registers with a restarted router).
+    Register(Registration),
+    /// The agent stops cleanly.
+    Unregister {
+        /// agent name
+        name: String,
+        /// its pid, so that a stale message cannot remove a newer agent
+        pid: u32,
+    },
+}

@@ -1,0 +1,266 @@
+//! What the command line (and the agents, through [`RouterRequest::Agent`])
+//! ask of the router, its answers, and the errors it reports.
+
+use super::agent_to_router::{AgentToRouter, PortSpec, TaskKind};
+use crate::names::PortRef;
+use crate::stats::AgentStats;
+use serde::{Deserialize, Serialize};
+
+/// Any request on the router's service `nerve/<robot>/router`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum RouterRequest {
+    /// From an agent.
+    Agent(AgentToRouter),
+    /// From the command line.
+    Cli(CliRequest),
+}
+
+/// A request from the command line.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum CliRequest {
+    /// The live agents, with their statistics.
+    Ps,
+    /// The connection list, with live figures per connection.
+    Graph,
+    /// Connect an output port to an input port.
+    Connect {
+        /// output port
+        from: PortRef,
+        /// input port
+        to: PortRef,
+    },
+    /// Remove a connection.
+    Disconnect {
+        /// output port
+        from: PortRef,
+        /// input port
+        to: PortRef,
+    },
+    /// Change the period of a periodic agent.
+    Rate {
+        /// agent
+        name: String,
+        /// new period
+        period_ns: u64,
+    },
+    /// Suspend an agent's task.
+    Suspend {
+        /// agent
+        name: String,
+    },
+    /// Resume an agent's task.
+    Resume {
+        /// agent
+        name: String,
+    },
+    /// Read a parameter of an agent.
+    ParamGet {
+        /// agent
+        name: String,
+        /// parameter
+        key: String,
+    },
+    /// Change a parameter of an agent.
+    ParamSet {
+        /// agent
+        name: String,
+        /// parameter
+        key: String,
+        /// value as text
+        value: String,
+    },
+    /// Stop an agent cleanly.
+    Stop {
+        /// agent
+        name: String,
+    },
+    /// Kill an agent with SIGKILL.
+    Kill {
+        /// agent
+        name: String,
+    },
+    /// Stop the router itself.
+    Shutdown,
+}
+
+/// Whether an agent's task runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AgentState {
+    /// The task runs.
+    Running,
+    /// The task is suspended.
+    Suspended,
+    /// The agent does not answer its control service.
+    Unresponsive,
+}
+
+impl std::fmt::Display for AgentState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            AgentState::Running => "running",
+            AgentState::Suspended => "suspended",
+            AgentState::Unresponsive => "unresponsive",
+        })
+    }
+}
+
+/// One live agent as `nerve ps` shows it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct AgentView {
+    /// name
+    pub name: String,
+    /// process id
+    pub pid: u32,
+    /// kind
+    pub kind: String,
+    /// state
+    pub state: AgentState,
+    /// periodic or event-driven
+    pub task: TaskKind,
+    /// period in nanoseconds (periodic agents)
+    pub period_ns: Option<u64>,
+    /// input ports with their types
+    pub inputs: Vec<PortSpec>,
+    /// output ports with their types
+    pub outputs: Vec<PortSpec>,
+    /// log file of a daemon
+    pub log_file: Option<String>,
+    /// statistics, when the agent answered in time
+    pub stats: Option<AgentStats>,
+}
+
+/// One connection as `nerve graph` shows it, with live figures measured at
+/// the receiving input.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ConnectionView {
+    /// output port
+    pub from: String,
+    /// input port
+    pub to: String,
+    /// payload type
+    pub type_name: String,
+    /// both ends are alive and the receiver holds the subscription
+    pub active: bool,
+    /// samples per second over the last seconds
+    pub rate_hz: f64,
+    /// age of the last sample received, in milliseconds
+    pub last_age_ms: Option<f64>,
+    /// samples received since the subscription was made
+    pub received: u64,
+    /// samples lost (sequence gaps) since the subscription was made
+    pub dropped: u64,
+}
+
+/// The whole graph.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct GraphView {
+    /// live agents with their ports
+    pub agents: Vec<AgentView>,
+    /// the connection list
+    pub connections: Vec<ConnectionView>,
+}
+
+/// The router's answer.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum RouterReply {
+    /// Done.
+    Ok,
+    /// A registration was accepted.
+    Registered {
+        /// the router's epoch, to notice a restarted router
+        epoch: u64,
+    },
+    /// The live agents.
+    Agents(Vec<AgentView>),
+    /// The graph.
+    Graph(GraphView),
+    /// The value of a parameter.
+    Param(String),
+    /// Refused.
+    Error(RouterError),
+}
+
+fn list(v: &[String]) -> String {
+    if v.is_empty() { "none".into() } else { v.join(", ") }
+}
+
+/// Why the router refused a request. The text says what to do.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
+pub enum RouterError {
+    /// The name is taken by a live agent.
+    #[error(
+        "an agent named {name:?} is already running (pid {pid}); choose another --name, or stop it first with `nerve stop {name}`"
+    )]
+    DuplicateName {
+        /// name
+        name: String,
+        /// the live agent's pid
+        pid: u32,
+    },
+    /// No live agent has that name.
+    #[error("no agent named {name:?} is running (running: {}); see `nerve ps`", list(.running))]
+    UnknownAgent {
+        /// name
+        name: String,
+        /// the live agents
+        running: Vec<String>,
+    },
+    /// The agent has no such port.
+    #[error("agent {agent:?} has no {direction} port {port:?} (its {direction} ports: {}); see `nerve ps`", list(.available))]
+    UnknownPort {
+        /// agent
+        agent: String,
+        /// port
+        port: String,
+        /// "input" or "output"
+        direction: String,
+        /// the ports of that direction
+        available: Vec<String>,
+    },
+    /// The two ports carry different types.
+    #[error("cannot connect {from} to {to}: {from} sends {from_type} but {to} takes {to_type}")]
+    TypeMismatch {
+        /// output port
+        from: String,
+        /// its type
+        from_type: String,
+        /// input port
+        to: String,
+        /// its type
+        to_type: String,
+    },
+    /// The connection does not exist.
+    #[error("{from} is not connected to {to}; see `nerve graph`")]
+    NotConnected {
+        /// output port
+        from: String,
+        /// input port
+        to: String,
+    },
+    /// The agent refused the command.
+    #[error("agent {name:?} refused: {message}")]
+    AgentRefused {
+        /// agent
+        name: String,
+        /// its reason
+        message: String,
+    },
+    /// The agent did not answer.
+    #[error("agent {name:?} did not answer: {detail}; check its log (`nerve ps` shows the log file)")]
+    AgentUnreachable {
+        /// agent
+        name: String,
+        /// what happened
+        detail: String,
+    },
+    /// The command does not apply to this agent.
+    #[error("{0}")]
+    NotApplicable(String),
+    /// A name in the request is invalid.
+    #[error("{0}")]
+    InvalidName(String),
+    /// The router could not do what was asked for another reason.
+    #[error("router error: {0}")]
+    Internal(String),
+}

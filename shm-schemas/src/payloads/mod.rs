@@ -1,0 +1,48 @@
+//! Data payloads: fixed-size `#[repr(C)]` types sent zero-copy between agents.
+//!
+//! One file per domain. Every payload implements [`Payload`], which ties the
+//! iceoryx2 type name (checked by iceoryx2 when a port opens a service) to the
+//! name nerve uses in its registry and error messages, and makes the payload
+//! printable as JSON by `nerve echo`.
+
+pub mod tick;
+
+pub use tick::Tick;
+
+use iceoryx2::prelude::ZeroCopySend;
+use serde::Serialize;
+use std::fmt::Debug;
+
+/// A type that can travel on a nerve port.
+///
+/// Derive it with `#[derive(ZeroCopySend)]`, `#[repr(C)]` and
+/// `#[type_name("nerve::Thing")]`, then `impl Payload for Thing {}`.
+pub trait Payload: ZeroCopySend + Debug + Copy + Serialize + Send + Sync + 'static {
+    /// The stable type name (`nerve::Tick`), the one iceoryx2 compares.
+    fn type_name() -> &'static str {
+        // SAFETY: reading the name has no precondition; the unsafety of
+        // `ZeroCopySend::type_name` concerns implementing it, not calling it.
+        unsafe { <Self as ZeroCopySend>::type_name() }
+    }
+}
+
+/// Calls `$m!(Type)` for every payload type this build knows, so that tools
+/// (`nerve echo`, `nerve hz`) can open a port whose type they learn at run time.
+#[macro_export]
+macro_rules! for_each_payload {
+    ($m:ident) => {
+        $m!($crate::payloads::Tick);
+    };
+}
+
+/// The type names of every payload this build knows.
+pub fn known_type_names() -> Vec<&'static str> {
+    let mut v = Vec::new();
+    macro_rules! push {
+        ($t:ty) => {
+            v.push(<$t as Payload>::type_name());
+        };
+    }
+    for_each_payload!(push);
+    v
+}
