@@ -1,1 +1,39 @@
-//! placeholder
+//! The nerve agent SDK: the template every agent is built from.
+//!
+//! An agent author implements [`Agent`] (ports and parameters in
+//! [`Agent::new`], the algorithm in [`Agent::step`]) and calls [`run`] from
+//! `main`. The SDK provides the rest, as in the thesis' Fig. 3-4:
+//!
+//! * a **message checker** thread serving the agent's control service
+//!   (`nerve/<robot>/<agent>/ctl`): connect and disconnect inputs, period,
+//!   suspend and resume, parameters, stop, statistics — each answered at once;
+//! * the **task**, periodic (absolute deadlines, period changeable at run
+//!   time, overruns and lateness measured) or event-driven (woken by input
+//!   through iceoryx2 events, never re-entered);
+//! * the common command line (`--robot`, `--name`, `--period`, `--daemon`,
+//!   `--log-level`), registration with the router and re-registration with a
+//!   restarted one, SCHED_FIFO and locked memory where permitted, sd_notify,
+//!   clean stop on SIGTERM and SIGINT.
+//!
+//! Ports are iceoryx2 publish-subscribe services of `#[repr(C)]` payloads
+//! (see `shm-schemas`): a sample is written once in shared memory and read in
+//! place by every subscriber.
+
+pub mod agent;
+pub mod cli;
+pub mod clock;
+pub mod control;
+pub mod daemon;
+pub mod meters;
+pub mod params;
+pub mod ports;
+pub mod rt;
+pub mod runtime;
+pub mod world;
+
+pub use agent::{Agent, AgentError, Context, Setup, Task};
+pub use cli::CommonArgs;
+pub use params::Param;
+pub use ports::{Input, Meta, Output, PortError};
+pub use runtime::{run, run_with_args};
+pub use world::{Ipc, World};

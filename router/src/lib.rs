@@ -1,1 +1,493 @@
-//! placeholder
+//! The nerve router: the registry of live agents and the connection list.
+//!
+//! It is control plane only. Agents register with it at start
+//! ([`AgentToRouter::Register`]) and leave on stop; the command line asks it
+//! to connect, disconnect, change rates, suspend, resume, set parameters and
+//! stop agents, and it carries these out by commanding the agents' message
+//! checkers. Data never passes through it: killing the router stops no data
+//! flow.
+//!
+//! * **Liveness**: every 250 ms it checks each agent's pid (and notices
+//!   zombies); a dead agent is removed from the live registry and the stale
+//!   iceoryx2 resources of dead nodes are cleaned. Its connections are kept,
+//!   so that the agent restarted under the same name is rewired.
+//! * **Persistence**: the connection list is saved atomically in the robot's
+//!   state directory and reloaded at start.
+//! * **Restart**: at start the router publishes a new epoch on
+//!   `nerve/<robot>/router/epoch`; running agents see it and re-register.
+
+pub mod store;
+
+use agent_sdk::clock::now_ns;
+use agent_sdk::control::{ControlClient, ControlError, ControlServer, ControlSize};
+use agent_sdk::runtime::epoch_service;
+use agent_sdk::world::{Ipc, World, pid_alive};
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::*;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::waitset::WaitSetRunResult;
+use shm_schemas::control::agent_to_router::{AgentToRouter, Registration, TaskKind};
+use shm_schemas::control::cli_to_router::{
+    AgentState, AgentView, CliRequest, ConnectionView, GraphView, RouterError, RouterReply, RouterRequest,
+};
+use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
+use shm_schemas::payloads::RouterEpoch;
+use shm_schemas::stats::AgentStats;
+use shm_schemas::{AgentName, PortRef};
+use std::collections::{BTreeMap, VecDeque};
+use std::time::{Duration, Instant};
+use store::{Connection, Store};
+
+/// How long the router waits for an agent's message checker to answer.
+pub const AGENT_TIMEOUT: Duration = Duration::from_millis(1000);
+/// How long it waits for statistics (per agent, for `ps` and `graph`).
+pub const STATS_TIMEOUT: Duration = Duration::from_millis(300);
+/// How often liveness is checked.
+pub const LIVENESS_PERIOD: Duration = Duration::from_millis(250);
+
+struct Entry {
+    reg: Registration,
+    client: Option<ControlClient<AgentCommand, AgentReply>>,
+    state: AgentState,
+}
+
+enum Action {
+    /// Re-apply every connection that involves this agent.
+    Rewire(String),
+}
+
+/// Why the router could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    /// Another router serves this robot.
+    #[error("a router already runs for robot {robot}; use it, or stop it first with `nerve --robot {robot} down`")]
+    AlreadyRunning {
+        /// robot
+        robot: String,
+    },
+    /// Anything else, with its message.
+    #[error("{0}")]
+    Other(String),
+}
+
+/// The router of one robot.
+pub struct Router {
+    server: ControlServer<RouterRequest, RouterReply>,
+    epoch_pub: Publisher<Ipc, RouterEpoch, ()>,
+    state: State,
+}
+
+/// Everything but the server, so that request handlers can borrow it mutably.
+struct State {
+    world: World,
+    node: Node<Ipc>,
+    epoch: u64,
+    agents: BTreeMap<String, Entry>,
+    connections: Vec<Connection>,
+    store: Store,
+    pending: VecDeque<Action>,
+    shutdown: bool,
+}
+
+impl std::fmt::Debug for Router {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Router")
+            .field("robot", self.state.world.robot())
+            .field("agents", &self.state.agents.len())
+            .finish()
+    }
+}
+
+impl Router {
+    /// Creates the router of `world`, loading the persisted connection list.
+    pub fn new(world: World) -> Result<Self, StartError> {
+        world.ensure_state_dirs().map_err(|e| StartError::Other(e.to_string()))?;
+        let node = world.node("router").map_err(|e| StartError::Other(e.to_string()))?;
+        world.cleanup_dead_nodes();
+        let server = ControlServer::create(&node, &world.robot().router_service(), ControlSize::ROUTER).map_err(|e| match e {
+            ControlError::AlreadyServed { .. } => StartError::AlreadyRunning { robot: world.robot().to_string() },
+            e => StartError::Other(e.to_string()),
+        })?;
+        let store = Store::new(world.state_dir());
+        let connections = store.load().map_err(StartError::Other)?;
+        let epoch = now_ns() ^ ((std::process::id() as u64) << 32);
+        let epoch_pub = epoch_service(&node, &world)
+            .map_err(StartError::Other)?
+            .publisher_builder()
+            .create()
+            .map_err(|e| StartError::Other(format!("cannot publish the router epoch: {e:?}")))?;
+        epoch_pub
+            .send_copy(RouterEpoch { epoch, pid: std::process::id(), reserved: 0 })
+            .map_err(|e| StartError::Other(format!("cannot publish the router epoch: {e:?}")))?;
+        tracing::info!(
+            "router of robot {} started (pid {}), {} connection(s) loaded from {}",
+            world.robot(),
+            std::process::id(),
+            connections.len(),
+            store.path().display()
+        );
+        Ok(Router {
+            server,
+            epoch_pub,
+            state: State {
+                world,
+                node,
+                epoch,
+                agents: BTreeMap::new(),
+                connections,
+                store,
+                pending: VecDeque::new(),
+                shutdown: false,
+            },
+        })
+    }
+
+    /// Serves until SIGTERM, SIGINT or a `Shutdown` request.
+    pub fn run(mut self) -> Result<(), String> {
+        let ws = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<Ipc>()
+            .map_err(|e| format!("cannot create the router's WaitSet: {e:?}"))?;
+        let _req = ws.attach_notification(self.server.listener()).map_err(|e| format!("{e:?}"))?;
+        let _tick = ws.attach_interval(LIVENESS_PERIOD).map_err(|e| format!("{e:?}"))?;
+        let mut last_liveness = Instant::now();
+        while !self.state.shutdown {
+            match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+                Ok(WaitSetRunResult::TerminationRequest) | Ok(WaitSetRunResult::Interrupt) => break,
+                Ok(_) => {}
+                Err(e) => {
+                    tracing::warn!("router wait failed: {e:?}");
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+            }
+            let state = &mut self.state;
+            if let Err(e) = self.server.serve(|req| match req {
+                Ok(req) => state.handle(req),
+                Err(e) => RouterReply::Error(RouterError::Internal(e.to_string())),
+            }) {
+                tracing::warn!("router service failed: {e}");
+            }
+            while let Some(action) = self.state.pending.pop_front() {
+                match action {
+                    Action::Rewire(name) => self.state.rewire(&name),
+                }
+            }
+            if last_liveness.elapsed() >= LIVENESS_PERIOD {
+                last_liveness = Instant::now();
+                self.state.check_liveness();
+                let _ = self.epoch_pub.update_connections();
+            }
+        }
+        tracing::info!("router stopped");
+        Ok(())
+    }
+}
+
+fn unknown_agent(name: &str, agents: &BTreeMap<String, Entry>) -> RouterError {
+    RouterError::UnknownAgent { name: name.into(), running: agents.keys().cloned().collect() }
+}
+
+impl State {
+    fn handle(&mut self, req: RouterRequest) -> RouterReply {
+        match req {
+            RouterRequest::Agent(AgentToRouter::Register(reg)) => self.register(reg),
+            RouterRequest::Agent(AgentToRouter::Unregister { name, pid }) => {
+                if self.agents.get(&name).is_some_and(|e| e.reg.pid == pid) {
+                    self.agents.remove(&name);
+                    tracing::info!("agent {name} (pid {pid}) left");
+                }
+                RouterReply::Ok
+            }
+            RouterRequest::Cli(cli) => match self.handle_cli(cli) {
+                Ok(reply) => reply,
+                Err(e) => RouterReply::Error(e),
+            },
+        }
+    }
+
+    fn register(&mut self, reg: Registration) -> RouterReply {
+        if let Err(e) = AgentName::new(&reg.name) {
+            return RouterReply::Error(RouterError::InvalidName(e.to_string()));
+        }
+        if let Some(existing) = self.agents.get(&reg.name) {
+            if existing.reg.pid != reg.pid && pid_alive(existing.reg.pid) {
+                return RouterReply::Error(RouterError::DuplicateName { name: reg.name, pid: existing.reg.pid });
+            }
+        }
+        let name = reg.name.clone();
+        let client = self.open_agent(&name);
+        tracing::info!(
+            "agent {name} registered: kind {}, pid {}, {}, inputs [{}], outputs [{}]",
+            reg.kind,
+            reg.pid,
+            reg.task,
+            reg.inputs.iter().map(|p| format!("{}: {}", p.name, p.type_name)).collect::<Vec<_>>().join(", "),
+            reg.outputs.iter().map(|p| format!("{}: {}", p.name, p.type_name)).collect::<Vec<_>>().join(", ")
+        );
+        let state = if reg.suspended { AgentState::Suspended } else { AgentState::Running };
+        self.agents.insert(name.clone(), Entry { reg, client, state });
+        self.pending.push_back(Action::Rewire(name));
+        RouterReply::Registered { epoch: self.epoch }
+    }
+
+    fn open_agent(&self, name: &str) -> Option<ControlClient<AgentCommand, AgentReply>> {
+        let agent = AgentName::new(name).ok()?;
+        match ControlClient::open(&self.node, &self.world.robot().ctl_service(&agent), ControlSize::AGENT) {
+            Ok(c) => Some(c),
+            Err(e) => {
+                tracing::warn!("cannot open the control service of {name}: {e}");
+                None
+            }
+        }
+    }
+
+    /// Sends a command to a live agent.
+    fn command(&mut self, name: &str, cmd: &AgentCommand, timeout: Duration) -> Result<AgentReply, RouterError> {
+        if !self.agents.contains_key(name) {
+            return Err(unknown_agent(name, &self.agents));
+        }
+        if self.agents.get(name).is_some_and(|e| e.client.is_none()) {
+            let client = self.open_agent(name);
+            if let Some(e) = self.agents.get_mut(name) {
+                e.client = client;
+            }
+        }
+        let Some(client) = self.agents.get(name).and_then(|e| e.client.as_ref()) else {
+            return Err(RouterError::AgentUnreachable { name: name.into(), detail: "its control service is missing".into() });
+        };
+        match client.call(cmd, timeout) {
+            Ok(AgentReply::Error(message)) => Err(RouterError::AgentRefused { name: name.into(), message }),
+            Ok(reply) => Ok(reply),
+            Err(e) => Err(RouterError::AgentUnreachable { name: name.into(), detail: e.to_string() }),
+        }
+    }
+
+    /// Applies every stored connection that involves `name` and whose other end is live.
+    fn rewire(&mut self, name: &str) {
+        let todo: Vec<Connection> = self
+            .connections
+            .iter()
+            .filter(|c| port_agent(&c.from) == name || port_agent(&c.to) == name)
+            .filter(|c| self.agents.contains_key(port_agent(&c.from)) && self.agents.contains_key(port_agent(&c.to)))
+            .cloned()
+            .collect();
+        for c in todo {
+            match self.send_connect(&c) {
+                Ok(()) => tracing::info!("rewired {} -> {}", c.from, c.to),
+                Err(e) => tracing::warn!("could not rewire {} -> {}: {e}", c.from, c.to),
+            }
+        }
+    }
+
+    fn send_connect(&mut self, c: &Connection) -> Result<(), RouterError> {
+        let (from_agent, from_port) = split_port(&c.from);
+        let (to_agent, to_port) = split_port(&c.to);
+        let cmd = AgentCommand::Connect {
+            input: to_port.into(),
+            from_agent: from_agent.into(),
+            from_port: from_port.into(),
+            type_name: c.type_name.clone(),
+        };
+        self.command(to_agent, &cmd, AGENT_TIMEOUT).map(|_| ())
+    }
+
+    fn persist(&self) {
+        if let Err(e) = self.store.save(&self.connections) {
+            tracing::error!("cannot save the connection list to {}: {e}", self.store.path().display());
+        }
+    }
+
+    fn check_liveness(&mut self) {
+        let dead: Vec<(String, u32)> = self
+            .agents
+            .iter()
+            .filter(|(_, e)| !pid_alive(e.reg.pid))
+            .map(|(n, e)| (n.clone(), e.reg.pid))
+            .collect();
+        if dead.is_empty() {
+            return;
+        }
+        for (name, pid) in &dead {
+            self.agents.remove(name);
+            tracing::warn!("agent {name} (pid {pid}) died; its connections are kept for its restart");
+        }
+        let cleaned = self.world.cleanup_dead_nodes();
+        if cleaned > 0 {
+            tracing::info!("cleaned the shared-memory resources of {cleaned} dead node(s)");
+        }
+    }
+
+    fn port_spec<'a>(&'a self, p: &PortRef, output: bool) -> Result<&'a str, RouterError> {
+        let entry = self.agents.get(p.agent.as_str()).ok_or_else(|| unknown_agent(p.agent.as_str(), &self.agents))?;
+        let ports = if output { &entry.reg.outputs } else { &entry.reg.inputs };
+        ports.iter().find(|s| s.name == p.port).map(|s| s.type_name.as_str()).ok_or_else(|| RouterError::UnknownPort {
+            agent: p.agent.to_string(),
+            port: p.port.clone(),
+            direction: if output { "output" } else { "input" }.into(),
+            available: ports.iter().map(|s| s.name.clone()).collect(),
+        })
+    }
+
+    fn handle_cli(&mut self, req: CliRequest) -> Result<RouterReply, RouterError> {
+        match req {
+            CliRequest::Ps => Ok(RouterReply::Agents(self.views())),
+            CliRequest::Graph => {
+                let agents = self.views();
+                let connections = self.connection_views(&agents);
+                Ok(RouterReply::Graph(GraphView { agents, connections }))
+            }
+            CliRequest::Connect { from, to } => {
+                let from_type = self.port_spec(&from, true)?.to_owned();
+                let to_type = self.port_spec(&to, false)?.to_owned();
+                if from_type != to_type {
+                    return Err(RouterError::TypeMismatch {
+                        from: from.to_string(),
+                        from_type,
+                        to: to.to_string(),
+                        to_type,
+                    });
+                }
+                let c = Connection { from: from.to_string(), to: to.to_string(), type_name: from_type };
+                self.send_connect(&c)?;
+                if !self.connections.contains(&c) {
+                    self.connections.push(c);
+                    self.persist();
+                }
+                tracing::info!("connected {from} -> {to}");
+                Ok(RouterReply::Ok)
+            }
+            CliRequest::Disconnect { from, to } => {
+                let (f, t) = (from.to_string(), to.to_string());
+                let Some(pos) = self.connections.iter().position(|c| c.from == f && c.to == t) else {
+                    return Err(RouterError::NotConnected { from: f, to: t });
+                };
+                self.connections.remove(pos);
+                self.persist();
+                if self.agents.contains_key(to.agent.as_str()) {
+                    let cmd = AgentCommand::Disconnect {
+                        input: to.port.clone(),
+                        from_agent: from.agent.to_string(),
+                        from_port: from.port.clone(),
+                    };
+                    if let Err(e) = self.command(to.agent.as_str(), &cmd, AGENT_TIMEOUT) {
+                        tracing::warn!("{e}");
+                    }
+                }
+                tracing::info!("disconnected {f} -> {t}");
+                Ok(RouterReply::Ok)
+            }
+            CliRequest::Rate { name, period_ns } => {
+                self.command(&name, &AgentCommand::SetPeriod { period_ns }, AGENT_TIMEOUT)?;
+                if let Some(e) = self.agents.get_mut(&name) {
+                    e.reg.period_ns = Some(period_ns);
+                }
+                Ok(RouterReply::Ok)
+            }
+            CliRequest::Suspend { name } => {
+                self.command(&name, &AgentCommand::Suspend, AGENT_TIMEOUT)?;
+                if let Some(e) = self.agents.get_mut(&name) {
+                    e.state = AgentState::Suspended;
+                }
+                Ok(RouterReply::Ok)
+            }
+            CliRequest::Resume { name } => {
+                self.command(&name, &AgentCommand::Resume, AGENT_TIMEOUT)?;
+                if let Some(e) = self.agents.get_mut(&name) {
+                    e.state = AgentState::Running;
+                }
+                Ok(RouterReply::Ok)
+            }
+            CliRequest::ParamGet { name, key } => match self.command(&name, &AgentCommand::ParamGet { key }, AGENT_TIMEOUT)? {
+                AgentReply::Param(v) => Ok(RouterReply::Param(v)),
+                other => Err(RouterError::Internal(format!("unexpected reply {other:?}"))),
+            },
+            CliRequest::ParamSet { name, key, value } => {
+                self.command(&name, &AgentCommand::ParamSet { key, value }, AGENT_TIMEOUT)?;
+                Ok(RouterReply::Ok)
+            }
+            CliRequest::Stop { name } => {
+                self.command(&name, &AgentCommand::Stop, AGENT_TIMEOUT)?;
+                Ok(RouterReply::Ok)
+            }
+            CliRequest::Kill { name } => {
+                let pid = self.agents.get(&name).map(|e| e.reg.pid).ok_or_else(|| unknown_agent(&name, &self.agents))?;
+                nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), nix::sys::signal::Signal::SIGKILL)
+                    .map_err(|e| RouterError::Internal(format!("cannot kill pid {pid}: {e}")))?;
+                tracing::info!("killed agent {name} (pid {pid}) on request");
+                let t0 = Instant::now();
+                while pid_alive(pid) && t0.elapsed() < Duration::from_millis(500) {
+                    std::thread::sleep(Duration::from_millis(2));
+                }
+                self.check_liveness();
+                Ok(RouterReply::Ok)
+            }
+            CliRequest::Shutdown => {
+                self.shutdown = true;
+                Ok(RouterReply::Ok)
+            }
+        }
+    }
+
+    fn stats_of(&mut self, name: &str) -> (Option<AgentStats>, bool) {
+        match self.command(name, &AgentCommand::Stats, STATS_TIMEOUT) {
+            Ok(AgentReply::Stats(s)) => (Some(s), true),
+            _ => (None, false),
+        }
+    }
+
+    fn views(&mut self) -> Vec<AgentView> {
+        let names: Vec<String> = self.agents.keys().cloned().collect();
+        let mut out = Vec::with_capacity(names.len());
+        for name in names {
+            let (stats, answered) = self.stats_of(&name);
+            let Some(e) = self.agents.get(&name) else { continue };
+            out.push(AgentView {
+                name: name.clone(),
+                pid: e.reg.pid,
+                kind: e.reg.kind.clone(),
+                state: if answered { e.state } else { AgentState::Unresponsive },
+                task: e.reg.task,
+                period_ns: if e.reg.task == TaskKind::Periodic { e.reg.period_ns } else { None },
+                inputs: e.reg.inputs.clone(),
+                outputs: e.reg.outputs.clone(),
+                log_file: e.reg.log_file.clone(),
+                stats,
+            });
+        }
+        out
+    }
+
+    fn connection_views(&self, agents: &[AgentView]) -> Vec<ConnectionView> {
+        self.connections
+            .iter()
+            .map(|c| {
+                let (fa, fp) = split_port(&c.from);
+                let (ta, tp) = split_port(&c.to);
+                let input = agents
+                    .iter()
+                    .find(|a| a.name == ta)
+                    .and_then(|a| a.stats.as_ref())
+                    .and_then(|s| s.inputs.iter().find(|i| i.input == tp && i.from_agent == fa && i.from_port == fp));
+                let from_live = agents.iter().any(|a| a.name == fa);
+                ConnectionView {
+                    from: c.from.clone(),
+                    to: c.to.clone(),
+                    type_name: c.type_name.clone(),
+                    active: from_live && input.is_some(),
+                    rate_hz: input.map(|i| i.rate_hz).unwrap_or(0.0),
+                    last_age_ms: input.and_then(|i| i.last_age_ns).map(|ns| ns as f64 / 1e6),
+                    received: input.map(|i| i.received).unwrap_or(0),
+                    dropped: input.map(|i| i.dropped).unwrap_or(0),
+                }
+            })
+            .collect()
+    }
+}
+
+fn split_port(p: &str) -> (&str, &str) {
+    p.split_once('/').unwrap_or((p, ""))
+}
+
+fn port_agent(p: &str) -> &str {
+    split_port(p).0
+}

@@ -19,6 +19,7 @@ pub mod fixed;
 pub mod header;
 pub mod names;
 pub mod payloads;
+pub mod ring;
 pub mod stats;
 
 pub use control::{PROTOCOL_VERSION, ProtocolError};

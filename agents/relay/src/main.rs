@@ -1,1 +1,37 @@
-fn main() {}
+//! `relay`: an event-driven agent that forwards every tick arriving on its
+//! input `in` to its output `out`, unchanged. Woken by input arrival, never
+//! re-entered; the simplest example of an event-driven agent.
+
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
+use shm_schemas::payloads::Tick;
+
+struct Relay {
+    input: Input<Tick>,
+    out: Output<Tick>,
+}
+
+impl Agent for Relay {
+    const KIND: &'static str = "relay";
+
+    fn task() -> Task {
+        Task::EventDriven
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        Ok(Relay { input: setup.input("in")?, out: setup.output("out")? })
+    }
+
+    fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        let mut result = Ok(());
+        self.input.drain(|_, tick| {
+            if let Err(e) = self.out.send(*tick) {
+                result = Err(e);
+            }
+        });
+        Ok(result?)
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<Relay>()
+}

@@ -5,8 +5,10 @@
 //! name nerve uses in its registry and error messages, and makes the payload
 //! printable as JSON by `nerve echo`.
 
+pub mod router;
 pub mod tick;
 
+pub use router::RouterEpoch;
 pub use tick::Tick;
 
 use iceoryx2::prelude::ZeroCopySend;
@@ -19,7 +21,7 @@ use std::fmt::Debug;
 /// `#[type_name("nerve::Thing")]`, then `impl Payload for Thing {}`.
 pub trait Payload: ZeroCopySend + Debug + Copy + Serialize + Send + Sync + 'static {
     /// The stable type name (`nerve::Tick`), the one iceoryx2 compares.
-    fn type_name() -> &'static str {
+    fn stable_type_name() -> &'static str {
         // SAFETY: reading the name has no precondition; the unsafety of
         // `ZeroCopySend::type_name` concerns implementing it, not calling it.
         unsafe { <Self as ZeroCopySend>::type_name() }
@@ -32,6 +34,7 @@ pub trait Payload: ZeroCopySend + Debug + Copy + Serialize + Send + Sync + 'stat
 macro_rules! for_each_payload {
     ($m:ident) => {
         $m!($crate::payloads::Tick);
+        $m!($crate::payloads::RouterEpoch);
     };
 }
 
@@ -40,7 +43,7 @@ pub fn known_type_names() -> Vec<&'static str> {
     let mut v = Vec::new();
     macro_rules! push {
         ($t:ty) => {
-            v.push(<$t as Payload>::type_name());
+            v.push(<$t as Payload>::stable_type_name());
         };
     }
     for_each_payload!(push);

@@ -25,6 +25,6 @@ mod tests {
     fn layout_is_stable() {
         assert_eq!(std::mem::size_of::<Tick>(), 16);
         assert_eq!(std::mem::align_of::<Tick>(), 8);
-        assert_eq!(<Tick as Payload>::type_name(), "nerve::Tick");
+        assert_eq!(<Tick as Payload>::stable_type_name(), "nerve::Tick");
     }
 }

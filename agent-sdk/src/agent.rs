@@ -1,0 +1,200 @@
+//! The agent template (thesis Fig. 3-4): the author implements [`Agent`],
+//! the SDK runs the message checker, the task and the daemon plumbing.
+//!
+//! ```no_run
+//! use agent_sdk::{Agent, AgentError, Context, Output, Setup, Task};
+//! use shm_schemas::payloads::Tick;
+//! use std::time::Duration;
+//!
+//! struct Ticker { out: Output<Tick>, seq: u64 }
+//!
+//! impl Agent for Ticker {
+//!     const KIND: &'static str = "ticker";
+//!     fn task() -> Task { Task::Periodic(Duration::from_millis(100)) }
+//!     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+//!         Ok(Ticker { out: setup.output("tick")?, seq: 0 })
+//!     }
+//!     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+//!         self.seq += 1;
+//!         self.out.send(Tick { seq: self.seq, stamp_ns: ctx.now_ns() })?;
+//!         Ok(())
+//!     }
+//! }
+//!
+//! fn main() -> std::process::ExitCode { agent_sdk::run::<Ticker>() }
+//! ```
+
+use crate::params::{Param, ParamTable};
+use crate::ports::{DynInput, Input, Output, PortError};
+use crate::world::{Ipc, World};
+use iceoryx2::prelude::Node;
+use shm_schemas::control::agent_to_router::PortSpec;
+use shm_schemas::names::validate_port_name;
+use shm_schemas::{AgentName, Payload};
+use std::fmt::Display;
+use std::str::FromStr;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// How the task is driven.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Task {
+    /// Every period (the default period; `--period` and `nerve rate` change it).
+    Periodic(Duration),
+    /// When an input arrives; never re-entered.
+    EventDriven,
+}
+
+/// An error of an agent, with a message for the user.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentError {
+    /// A port could not be made or used.
+    #[error(transparent)]
+    Port(#[from] PortError),
+    /// Bad configuration (arguments, parameters).
+    #[error("configuration: {0}")]
+    Config(String),
+    /// A device failed.
+    #[error("device: {0}")]
+    Device(String),
+    /// Anything else.
+    #[error("{0}")]
+    Other(String),
+}
+
+/// The agent's algorithm. Only [`Agent::new`] and [`Agent::step`] are required.
+pub trait Agent: Sized + Send + 'static {
+    /// The kind of agent, as shown by `nerve ps`.
+    const KIND: &'static str;
+
+    /// How the task is driven.
+    fn task() -> Task;
+
+    /// Creates the agent: declare ports and parameters on `setup`, open devices.
+    fn new(setup: &mut Setup) -> Result<Self, AgentError>;
+
+    /// Called once in the task thread before the first step.
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        Ok(())
+    }
+
+    /// One cycle of the task. Event-driven agents should drain their inputs.
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError>;
+
+    /// Called once in the task thread after the last step.
+    fn stop(&mut self, _ctx: &mut Context) {}
+}
+
+/// What [`Agent::new`] gets: the place to declare ports and parameters.
+pub struct Setup {
+    pub(crate) world: World,
+    pub(crate) name: AgentName,
+    pub(crate) node: Arc<Node<Ipc>>,
+    pub(crate) args: Vec<String>,
+    pub(crate) inputs: Vec<Arc<dyn DynInput>>,
+    pub(crate) outputs: Vec<PortSpec>,
+    pub(crate) params: ParamTable,
+}
+
+impl std::fmt::Debug for Setup {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Setup").field("name", &self.name).field("outputs", &self.outputs).finish()
+    }
+}
+
+impl Setup {
+    /// The agent's name.
+    pub fn name(&self) -> &str {
+        self.name.as_str()
+    }
+
+    /// The robot's world (state directory, iceoryx2 configuration).
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// Arguments given after `--` on the agent's command line.
+    pub fn args(&self) -> &[String] {
+        &self.args
+    }
+
+    /// Declares an output port.
+    pub fn output<T: Payload>(&mut self, port: &str) -> Result<Output<T>, AgentError> {
+        self.check_port(port)?;
+        let service = self.world.robot().port_service(self.name.as_str(), port);
+        let out = Output::create(&self.node, &service, self.name.as_str())?;
+        self.outputs.push(PortSpec { name: port.into(), type_name: T::stable_type_name().into() });
+        Ok(out)
+    }
+
+    /// Declares an input port; the router connects it to outputs.
+    pub fn input<T: Payload>(&mut self, port: &str) -> Result<Input<T>, AgentError> {
+        self.check_port(port)?;
+        let (input, inner) = Input::<T>::new(port);
+        self.inputs.push(inner);
+        Ok(input)
+    }
+
+    /// Declares a parameter with a default value.
+    pub fn param<T>(&mut self, key: &str, default: T) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display,
+    {
+        self.params.declare(key, default, None)
+    }
+
+    /// Declares a parameter whose values `check` must accept.
+    pub fn param_checked<T>(&mut self, key: &str, default: T, check: impl Fn(&T) -> Result<(), String> + Send + Sync + 'static) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display,
+    {
+        self.params.declare(key, default, Some(Box::new(check)))
+    }
+
+    fn check_port(&self, port: &str) -> Result<(), AgentError> {
+        validate_port_name(port).map_err(|e| AgentError::Config(e.to_string()))?;
+        if self.outputs.iter().any(|p| p.name == port) || self.inputs.iter().any(|p| p.name() == port) {
+            return Err(AgentError::Config(format!("port {port:?} is declared twice")));
+        }
+        Ok(())
+    }
+}
+
+/// What [`Agent::step`] gets each cycle.
+#[derive(Debug)]
+pub struct Context {
+    pub(crate) name: String,
+    pub(crate) cycle: u64,
+    pub(crate) now_ns: u64,
+    pub(crate) period: Option<Duration>,
+    pub(crate) stop: bool,
+}
+
+impl Context {
+    /// The agent's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// How many cycles ran before this one.
+    pub fn cycle(&self) -> u64 {
+        self.cycle
+    }
+
+    /// CLOCK_MONOTONIC ns at the start of this cycle.
+    pub fn now_ns(&self) -> u64 {
+        self.now_ns
+    }
+
+    /// The current period of a periodic task.
+    pub fn period(&self) -> Option<Duration> {
+        self.period
+    }
+
+    /// Asks the SDK to stop the agent after this cycle.
+    pub fn request_stop(&mut self) {
+        self.stop = true;
+    }
+}

@@ -1,0 +1,36 @@
+//! The command line every agent shares.
+
+use clap::Parser;
+
+/// Common options of every nerve agent. Agent-specific arguments follow `--`.
+#[derive(Debug, Clone, Parser)]
+#[command(about = "A nerve agent", long_about = None)]
+pub struct CommonArgs {
+    /// Robot (isolated world) to join.
+    #[arg(long, env = "NERVE_ROBOT", default_value = crate::world::DEFAULT_ROBOT)]
+    pub robot: String,
+    /// Agent name, unique within the robot (default: the agent's kind).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Period of a periodic task: 10ms, 1s, 100hz...
+    #[arg(long)]
+    pub period: Option<String>,
+    /// Detach and run as a daemon, logging to the robot's state directory.
+    #[arg(long)]
+    pub daemon: bool,
+    /// Log filter (error, warn, info, debug, trace or a tracing filter); RUST_LOG is used when absent.
+    #[arg(long)]
+    pub log_level: Option<String>,
+    /// Do not ask for SCHED_FIFO and locked memory.
+    #[arg(long)]
+    pub no_realtime: bool,
+    /// SCHED_FIFO priority of the task (the message checker runs one above).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(i32).range(1..=98))]
+    pub priority: i32,
+    /// Start with the task suspended.
+    #[arg(long)]
+    pub suspended: bool,
+    /// Arguments for the agent itself.
+    #[arg(last = true)]
+    pub args: Vec<String>,
+}

@@ -1,0 +1,101 @@
+//! The monotonic clock of the thesis' Fig. 2-1: one time base for every
+//! agent (CLOCK_MONOTONIC, shared by all processes on the host) and sleeping
+//! to absolute deadlines, so that periodic tasks do not drift.
+
+use std::time::Duration;
+
+/// Nanoseconds of CLOCK_MONOTONIC. Comparable across processes on one host.
+pub fn now_ns() -> u64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `ts` is a valid, writable timespec.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+/// Sleeps until CLOCK_MONOTONIC reaches `deadline_ns` (absolute), restarting
+/// after signals. Returns at once if the deadline has passed.
+pub fn sleep_until_ns(deadline_ns: u64) {
+    let ts = libc::timespec {
+        tv_sec: (deadline_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (deadline_ns % 1_000_000_000) as libc::c_long,
+    };
+    loop {
+        // SAFETY: `ts` is a valid timespec; the remainder pointer may be null with TIMER_ABSTIME.
+        let rc = unsafe {
+            libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut())
+        };
+        if rc != libc::EINTR {
+            return;
+        }
+    }
+}
+
+/// Formats a duration the way users write periods: `10ms`, `1.5s`, `250us`.
+pub fn format_duration(d: Duration) -> String {
+    let ns = d.as_nanos();
+    if ns % 1_000_000_000 == 0 {
+        format!("{}s", ns / 1_000_000_000)
+    } else if ns % 1_000_000 == 0 {
+        format!("{}ms", ns / 1_000_000)
+    } else if ns % 1_000 == 0 {
+        format!("{}us", ns / 1_000)
+    } else {
+        format!("{ns}ns")
+    }
+}
+
+/// Parses a period such as `10ms`, `1s`, `250us`, `100hz`, `2.5ms` or a bare
+/// number of milliseconds.
+pub fn parse_duration(s: &str) -> Result<Duration, String> {
+    let t = s.trim().to_ascii_lowercase();
+    let split = t.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let value: f64 = num
+        .parse()
+        .map_err(|_| format!("{s:?} is not a duration; write e.g. 10ms, 1s, 250us or 100hz"))?;
+    if !(value.is_finite() && value > 0.0) {
+        return Err(format!("{s:?}: a period must be greater than zero"));
+    }
+    let secs = match unit {
+        "" | "ms" => value / 1e3,
+        "s" => value,
+        "us" | "µs" => value / 1e6,
+        "ns" => value / 1e9,
+        "hz" => 1.0 / value,
+        "min" => value * 60.0,
+        _ => return Err(format!("{s:?}: unknown unit {unit:?}; use ns, us, ms, s, min or hz")),
+    };
+    let d = Duration::from_secs_f64(secs);
+    if d < Duration::from_micros(10) {
+        return Err(format!("{s:?} is shorter than the shortest period nerve runs (10us)"));
+    }
+    Ok(d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_periods() {
+        assert_eq!(parse_duration("10ms"), Ok(Duration::from_millis(10)));
+        assert_eq!(parse_duration("1s"), Ok(Duration::from_secs(1)));
+        assert_eq!(parse_duration("100hz"), Ok(Duration::from_millis(10)));
+        assert_eq!(parse_duration("250us"), Ok(Duration::from_micros(250)));
+        assert_eq!(parse_duration("5"), Ok(Duration::from_millis(5)));
+        assert!(parse_duration("0ms").is_err());
+        assert!(parse_duration("fast").is_err());
+        assert!(parse_duration("3parsecs").is_err());
+        assert!(parse_duration("1ns").is_err());
+        assert_eq!(format_duration(Duration::from_millis(10)), "10ms");
+    }
+
+    #[test]
+    fn sleeps_to_absolute_deadline() {
+        let start = now_ns();
+        sleep_until_ns(start + 2_000_000);
+        assert!(now_ns() >= start + 2_000_000);
+        // a past deadline returns at once
+        sleep_until_ns(start);
+    }
+}

@@ -1,0 +1,240 @@
+//! The control channel: request-response over iceoryx2, paired with an event
+//! service of the same name so that a server blocks until a request arrives.
+//!
+//! Requests and replies are postcard bytes in a versioned envelope
+//! (`shm_schemas::control`). Used for the router's service
+//! (`nerve/<robot>/router`) and each agent's control service
+//! (`nerve/<robot>/<agent>/ctl`).
+//!
+//! Clients poll for the reply with a short back-off: control traffic is rare,
+//! and this keeps every waiting side free of extra listeners.
+
+use crate::world::{Ipc, World};
+use iceoryx2::port::client::Client;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::server::Server;
+use iceoryx2::prelude::*;
+use serde::{Serialize, de::DeserializeOwned};
+use shm_schemas::control::{ProtocolError, decode, encode};
+use std::marker::PhantomData;
+use std::time::{Duration, Instant};
+
+/// How big a control service is.
+#[derive(Debug, Clone, Copy)]
+pub struct ControlSize {
+    /// clients that may be connected at once
+    pub max_clients: usize,
+    /// nodes that may open the service
+    pub max_nodes: usize,
+}
+
+impl ControlSize {
+    /// The router's service: every agent plus command-line tools.
+    pub const ROUTER: ControlSize = ControlSize { max_clients: 512, max_nodes: 640 };
+    /// An agent's control service: the router, a restarted router, tools.
+    pub const AGENT: ControlSize = ControlSize { max_clients: 8, max_nodes: 16 };
+}
+
+/// Errors of the control channel.
+#[derive(Debug, thiserror::Error)]
+pub enum ControlError {
+    /// Nobody serves the service.
+    #[error("no server on {service}")]
+    NoServer {
+        /// the service
+        service: String,
+    },
+    /// The server is busy: another server already runs on this service.
+    #[error("{service} is already served by another process")]
+    AlreadyServed {
+        /// the service
+        service: String,
+    },
+    /// No reply came in time.
+    #[error("no reply from {service} within {timeout:?}")]
+    Timeout {
+        /// the service
+        service: String,
+        /// how long we waited
+        timeout: Duration,
+    },
+    /// The peer speaks another protocol or sent garbage.
+    #[error(transparent)]
+    Protocol(#[from] ProtocolError),
+    /// iceoryx2 failed.
+    #[error("iceoryx2 error on {service}: {detail}")]
+    Ipc {
+        /// the service
+        service: String,
+        /// what iceoryx2 said
+        detail: String,
+    },
+}
+
+fn ipc_err(service: &str, e: impl std::fmt::Debug) -> ControlError {
+    ControlError::Ipc { service: service.into(), detail: format!("{e:?}") }
+}
+
+type Bytes = [u8];
+
+/// The serving side: receives requests and answers them.
+#[derive(Debug)]
+pub struct ControlServer<Req, Resp> {
+    service: String,
+    server: Server<Ipc, Bytes, (), Bytes, ()>,
+    listener: Listener<Ipc>,
+    _types: PhantomData<fn(Req) -> Resp>,
+}
+
+impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
+    /// Serves `service`. Only one server may serve a service at a time: a
+    /// second one gets [`ControlError::AlreadyServed`].
+    pub fn create(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<Self, ControlError> {
+        let name: ServiceName = service.try_into().map_err(|e| ipc_err(service, e))?;
+        let rr = node
+            .service_builder(&name)
+            .request_response::<Bytes, Bytes>()
+            .max_clients(size.max_clients)
+            .max_servers(1)
+            .max_nodes(size.max_nodes)
+            .max_active_requests_per_client(4)
+            .max_response_buffer_size(4)
+            .open_or_create()
+            .map_err(|e| ipc_err(service, e))?;
+        let server = rr
+            .server_builder()
+            .initial_max_slice_len(4096)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(|e| match e {
+                iceoryx2::service::port_factory::server::ServerCreateError::ExceedsMaxSupportedServers => {
+                    ControlError::AlreadyServed { service: service.into() }
+                }
+                e => ipc_err(service, e),
+            })?;
+        let ev = open_event(node, service, size)?;
+        let listener = ev.listener_builder().create().map_err(|e| ipc_err(service, e))?;
+        Ok(ControlServer { service: service.into(), server, listener, _types: PhantomData })
+    }
+
+    /// The listener that wakes when a request arrives (attach it to a WaitSet).
+    pub fn listener(&self) -> &Listener<Ipc> {
+        &self.listener
+    }
+
+    /// Answers every pending request with `handler`; returns how many were served.
+    pub fn serve(&self, mut handler: impl FnMut(Result<Req, ProtocolError>) -> Resp) -> Result<usize, ControlError> {
+        // drain the wake-ups first, so that a request arriving while we serve wakes us again
+        let _ = self.listener.try_wait(|_| {});
+        let mut n = 0;
+        while let Some(active) = self.server.receive().map_err(|e| ipc_err(&self.service, e))? {
+            let reply = handler(decode::<Req>(active.payload()));
+            let bytes = encode(&reply);
+            match active.loan_slice_uninit(bytes.len()) {
+                Ok(resp) => {
+                    if let Err(e) = resp.write_from_slice(&bytes).send() {
+                        tracing::warn!(service = %self.service, "could not send a reply: {e:?}");
+                    }
+                }
+                Err(e) => tracing::warn!(service = %self.service, "could not loan a reply: {e:?}"),
+            }
+            n += 1;
+        }
+        Ok(n)
+    }
+}
+
+/// The calling side.
+#[derive(Debug)]
+pub struct ControlClient<Req, Resp> {
+    service: String,
+    client: Client<Ipc, Bytes, (), Bytes, ()>,
+    notifier: Notifier<Ipc>,
+    _types: PhantomData<fn(Req) -> Resp>,
+}
+
+impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
+    /// Opens `service`; [`ControlError::NoServer`] when it does not exist.
+    pub fn open(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<Self, ControlError> {
+        let name: ServiceName = service.try_into().map_err(|e| ipc_err(service, e))?;
+        let rr = node
+            .service_builder(&name)
+            .request_response::<Bytes, Bytes>()
+            .max_clients(size.max_clients)
+            .max_servers(1)
+            .max_nodes(size.max_nodes)
+            .max_active_requests_per_client(4)
+            .max_response_buffer_size(4)
+            .open()
+            .map_err(|e| match e {
+                iceoryx2::service::builder::request_response::RequestResponseOpenError::DoesNotExist => {
+                    ControlError::NoServer { service: service.into() }
+                }
+                e => ipc_err(service, e),
+            })?;
+        let client = rr
+            .client_builder()
+            .initial_max_slice_len(4096)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(|e| ipc_err(service, e))?;
+        let ev = open_event(node, service, size)?;
+        let notifier = ev.notifier_builder().create().map_err(|e| ipc_err(service, e))?;
+        Ok(ControlClient { service: service.into(), client, notifier, _types: PhantomData })
+    }
+
+    /// The service this client calls.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// Sends `req` and waits up to `timeout` for the reply.
+    pub fn call(&self, req: &Req, timeout: Duration) -> Result<Resp, ControlError> {
+        let bytes = encode(req);
+        let loan = self.client.loan_slice_uninit(bytes.len()).map_err(|e| ipc_err(&self.service, e))?;
+        let pending = loan.write_from_slice(&bytes).send().map_err(|e| ipc_err(&self.service, e))?;
+        if pending.number_of_server_connections() == 0 {
+            return Err(ControlError::NoServer { service: self.service.clone() });
+        }
+        self.notifier.notify().map_err(|e| ipc_err(&self.service, e))?;
+        let start = Instant::now();
+        let mut backoff = Duration::from_micros(20);
+        loop {
+            if let Some(resp) = pending.receive().map_err(|e| ipc_err(&self.service, e))? {
+                return Ok(decode::<Resp>(resp.payload())?);
+            }
+            if !pending.is_connected() {
+                return Err(ControlError::NoServer { service: self.service.clone() });
+            }
+            if start.elapsed() > timeout {
+                return Err(ControlError::Timeout { service: self.service.clone(), timeout });
+            }
+            std::thread::sleep(backoff);
+            backoff = (backoff * 2).min(Duration::from_millis(2));
+        }
+    }
+}
+
+fn open_event(
+    node: &Node<Ipc>,
+    service: &str,
+    size: ControlSize,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Ipc>, ControlError> {
+    let name: ServiceName = service.try_into().map_err(|e| ipc_err(service, e))?;
+    node.service_builder(&name)
+        .event()
+        .max_notifiers(size.max_clients + 2)
+        .max_listeners(2)
+        .max_nodes(size.max_nodes)
+        .open_or_create()
+        .map_err(|e| ipc_err(service, e))
+}
+
+/// Opens the router's service of `world`.
+pub fn router_client<Req: Serialize, Resp: DeserializeOwned>(
+    world: &World,
+    node: &Node<Ipc>,
+) -> Result<ControlClient<Req, Resp>, ControlError> {
+    ControlClient::open(node, &world.robot().router_service(), ControlSize::ROUTER)
+}

@@ -1,0 +1,138 @@
+//! Run-time parameters: declared by the agent with a type and a default,
+//! read by the task through a [`Param`] handle, changed with
+//! `nerve param set NAME KEY VALUE`. The message checker parses and checks a
+//! new value with the parameter's type and answers at once; the task sees
+//! the new value at its next read.
+
+use std::collections::BTreeMap;
+use std::fmt::Display;
+use std::str::FromStr;
+use std::sync::{Arc, Mutex};
+
+/// A typed parameter handle.
+#[derive(Debug)]
+pub struct Param<T> {
+    value: Arc<Mutex<T>>,
+}
+
+impl<T> Clone for Param<T> {
+    fn clone(&self) -> Self {
+        Param { value: self.value.clone() }
+    }
+}
+
+impl<T: Clone> Param<T> {
+    /// The current value.
+    pub fn get(&self) -> T {
+        self.value.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    /// Changes the value from inside the agent.
+    pub fn set(&self, v: T) {
+        *self.value.lock().unwrap_or_else(|p| p.into_inner()) = v;
+    }
+}
+
+trait DynParam: Send + Sync {
+    fn get(&self) -> String;
+    fn set(&self, s: &str) -> Result<(), String>;
+    fn type_name(&self) -> &'static str;
+}
+
+struct Slot<T> {
+    value: Arc<Mutex<T>>,
+    check: Option<Box<dyn Fn(&T) -> Result<(), String> + Send + Sync>>,
+}
+
+impl<T> DynParam for Slot<T>
+where
+    T: FromStr + Display + Send + 'static,
+    T::Err: Display,
+{
+    fn get(&self) -> String {
+        self.value.lock().unwrap_or_else(|p| p.into_inner()).to_string()
+    }
+
+    fn set(&self, s: &str) -> Result<(), String> {
+        let v: T = s.trim().parse().map_err(|e: T::Err| format!("{s:?} is not a valid {}: {e}", self.type_name()))?;
+        if let Some(check) = &self.check {
+            check(&v)?;
+        }
+        *self.value.lock().unwrap_or_else(|p| p.into_inner()) = v;
+        Ok(())
+    }
+
+    fn type_name(&self) -> &'static str {
+        short_type_name::<T>()
+    }
+}
+
+fn short_type_name<T>() -> &'static str {
+    let full = std::any::type_name::<T>();
+    full.rsplit("::").next().unwrap_or(full)
+}
+
+/// The agent's parameters, by name.
+#[derive(Default)]
+pub struct ParamTable {
+    params: BTreeMap<String, Box<dyn DynParam>>,
+}
+
+impl std::fmt::Debug for ParamTable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_map().entries(self.params.iter().map(|(k, v)| (k, v.get()))).finish()
+    }
+}
+
+impl ParamTable {
+    /// Declares a parameter; `check` may refuse values (return a message saying what is allowed).
+    pub fn declare<T>(&mut self, key: &str, default: T, check: Option<Box<dyn Fn(&T) -> Result<(), String> + Send + Sync>>) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display,
+    {
+        let value = Arc::new(Mutex::new(default));
+        self.params.insert(key.into(), Box::new(Slot { value: value.clone(), check }));
+        Param { value }
+    }
+
+    /// The value of `key` as text.
+    pub fn get(&self, key: &str) -> Result<String, String> {
+        self.params.get(key).map(|p| p.get()).ok_or_else(|| self.unknown(key))
+    }
+
+    /// Sets `key` from text, checking it against the parameter's type.
+    pub fn set(&self, key: &str, value: &str) -> Result<(), String> {
+        self.params.get(key).ok_or_else(|| self.unknown(key))?.set(value)
+    }
+
+    /// Every parameter as (name, value).
+    pub fn snapshot(&self) -> Vec<(String, String)> {
+        self.params.iter().map(|(k, v)| (k.clone(), v.get())).collect()
+    }
+
+    fn unknown(&self, key: &str) -> String {
+        let known: Vec<String> = self.params.iter().map(|(k, v)| format!("{k} ({})", v.type_name())).collect();
+        format!(
+            "no parameter {key:?}; this agent's parameters: {}",
+            if known.is_empty() { "none".into() } else { known.join(", ") }
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn typed_set_and_get() {
+        let mut t = ParamTable::default();
+        let gain = t.declare("gain", 1.5f64, Some(Box::new(|v: &f64| if *v >= 0.0 { Ok(()) } else { Err("gain must be >= 0".into()) })));
+        assert_eq!(t.get("gain").as_deref(), Ok("1.5"));
+        t.set("gain", "2.25").expect("valid");
+        assert_eq!(gain.get(), 2.25);
+        assert!(t.set("gain", "fast").expect_err("not a number").contains("not a valid f64"));
+        assert!(t.set("gain", "-1").expect_err("checked").contains(">= 0"));
+        assert!(t.get("speed").expect_err("unknown").contains("gain (f64)"));
+    }
+}

@@ -1,0 +1,357 @@
+//! Typed ports.
+//!
+//! An [`Output`] is one iceoryx2 publish-subscribe service
+//! `nerve/<robot>/<agent>/<port>`, paired with an event service of the same
+//! name that wakes event-driven readers. An [`Input`] holds zero or more
+//! subscriptions (fan-in), made and dropped by the message checker when the
+//! router says so; the task sees a new subscription at its next cycle.
+//!
+//! Both sides open the services through [`port_service`] and [`port_event`],
+//! so their settings always agree (iceoryx2 refuses an opener that asks for
+//! more than the creator set up).
+
+use crate::clock::now_ns;
+use crate::meters::RateMeter;
+use crate::world::Ipc;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+use shm_schemas::stats::InputStats;
+use shm_schemas::{FixedName, Payload, SampleHeader};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+/// Fan-out of one output port: how many inputs may read it at once.
+pub const MAX_SUBSCRIBERS: usize = 16;
+/// Samples a subscription buffers before the oldest is overwritten (and counted as dropped).
+pub const SUBSCRIBER_BUFFER: usize = 16;
+const MAX_PUBLISHERS: usize = 4;
+const MAX_NODES: usize = 40;
+
+/// Why a port could not be made or used.
+#[derive(Debug, thiserror::Error)]
+pub enum PortError {
+    /// iceoryx2 refused.
+    #[error("port {service}: {detail}")]
+    Ipc {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        detail: String,
+    },
+}
+
+fn perr(service: &str, e: impl std::fmt::Debug) -> PortError {
+    PortError::Ipc { service: service.into(), detail: format!("{e:?}") }
+}
+
+type PortBuilder<T> = iceoryx2::service::builder::publish_subscribe::Builder<T, SampleHeader, Ipc>;
+
+/// The one place that sets up an output port's service, so that every opener agrees.
+fn port_builder<T: Payload>(node: &Node<Ipc>, service: &str) -> Result<PortBuilder<T>, PortError> {
+    let name: ServiceName = service.try_into().map_err(|e| perr(service, e))?;
+    Ok(node
+        .service_builder(&name)
+        .publish_subscribe::<T>()
+        .user_header::<SampleHeader>()
+        .max_publishers(MAX_PUBLISHERS)
+        .max_subscribers(MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
+        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+        .history_size(0)
+        .enable_safe_overflow(true))
+}
+
+/// Opens (or creates) the publish-subscribe service of an output port.
+pub fn port_service<T: Payload>(
+    node: &Node<Ipc>,
+    service: &str,
+) -> Result<publish_subscribe::PortFactory<Ipc, T, SampleHeader>, PortError> {
+    port_builder::<T>(node, service)?.open_or_create().map_err(|e| match e {
+        iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::IncompatibleTypes,
+        ) => PortError::Ipc {
+            service: service.into(),
+            detail: format!("the service exists with another payload type than {}", T::stable_type_name()),
+        },
+        e => perr(service, e),
+    })
+}
+
+/// Opens the service of an existing output port; `None` when it does not
+/// exist or carries another type (used by tools that probe a port's type).
+pub fn existing_port_service<T: Payload>(
+    node: &Node<Ipc>,
+    service: &str,
+) -> Option<publish_subscribe::PortFactory<Ipc, T, SampleHeader>> {
+    port_builder::<T>(node, service).ok()?.open().ok()
+}
+
+/// Opens (or creates) the event service paired with an output port.
+pub fn port_event(node: &Node<Ipc>, service: &str) -> Result<event::PortFactory<Ipc>, PortError> {
+    let name: ServiceName = service.try_into().map_err(|e| perr(service, e))?;
+    node.service_builder(&name)
+        .event()
+        .max_listeners(MAX_SUBSCRIBERS + 4)
+        .max_notifiers(MAX_PUBLISHERS + 4)
+        .max_nodes(MAX_NODES)
+        .open_or_create()
+        .map_err(|e| perr(service, e))
+}
+
+/// Metadata of a received sample.
+#[derive(Debug, Clone, Copy)]
+pub struct Meta {
+    /// the sending agent
+    pub sender: FixedName,
+    /// sequence number on the sending port
+    pub seq: u64,
+    /// when it was sent (CLOCK_MONOTONIC ns)
+    pub stamp_ns: u64,
+}
+
+/// An output port of payload type `T`.
+#[derive(Debug)]
+pub struct Output<T: Payload> {
+    service: String,
+    sender: FixedName,
+    publisher: Publisher<Ipc, T, SampleHeader>,
+    notifier: Notifier<Ipc>,
+    seq: AtomicU64,
+}
+
+impl<T: Payload> Output<T> {
+    pub(crate) fn create(node: &Node<Ipc>, service: &str, sender: &str) -> Result<Self, PortError> {
+        let ps = port_service::<T>(node, service)?;
+        let publisher = ps.publisher_builder().create().map_err(|e| perr(service, e))?;
+        let notifier = port_event(node, service)?.notifier_builder().create().map_err(|e| perr(service, e))?;
+        Ok(Output { service: service.into(), sender: FixedName::new(sender), publisher, notifier, seq: AtomicU64::new(0) })
+    }
+
+    /// The iceoryx2 service name of this port.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// Sends `value` (written once, in place, into shared memory) and wakes the readers.
+    pub fn send(&self, value: T) -> Result<(), PortError> {
+        let mut sample = self.publisher.loan_uninit().map_err(|e| perr(&self.service, e))?;
+        *sample.user_header_mut() = self.next_header();
+        sample.write_payload(value).send().map_err(|e| perr(&self.service, e))?;
+        self.notifier.notify().map_err(|e| perr(&self.service, e))?;
+        Ok(())
+    }
+
+    /// Sends a value built in place by `fill`, for payloads too large to build on the stack.
+    pub fn send_with(&self, fill: impl FnOnce(&mut T)) -> Result<(), PortError>
+    where
+        T: Default,
+    {
+        let mut sample = self.publisher.loan_uninit().map_err(|e| perr(&self.service, e))?;
+        *sample.user_header_mut() = self.next_header();
+        let mut sample = sample.write_payload(T::default());
+        fill(sample.payload_mut());
+        sample.send().map_err(|e| perr(&self.service, e))?;
+        self.notifier.notify().map_err(|e| perr(&self.service, e))?;
+        Ok(())
+    }
+
+    fn next_header(&self) -> SampleHeader {
+        let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
+        SampleHeader { sender: self.sender, seq, stamp_ns: now_ns() }
+    }
+}
+
+struct Subscription<T: Payload> {
+    from_agent: String,
+    from_port: String,
+    subscriber: Subscriber<Ipc, T, SampleHeader>,
+    listener: Arc<Listener<Ipc>>,
+    received: u64,
+    dropped: u64,
+    last_seq: u64,
+    last_ns: Option<u64>,
+    rate: RateMeter,
+}
+
+impl<T: Payload> Subscription<T> {
+    fn account(&mut self, h: &SampleHeader, now: u64) {
+        self.received += 1;
+        if self.last_seq != 0 && h.seq > self.last_seq + 1 {
+            self.dropped += h.seq - self.last_seq - 1;
+        }
+        self.last_seq = h.seq;
+        self.last_ns = Some(now);
+        self.rate.record(now);
+    }
+}
+
+pub(crate) struct InputInner<T: Payload> {
+    name: String,
+    subs: Mutex<Vec<Subscription<T>>>,
+    next: AtomicU64,
+}
+
+/// An input port of payload type `T`, fed by any number of output ports.
+pub struct Input<T: Payload> {
+    inner: Arc<InputInner<T>>,
+}
+
+impl<T: Payload> std::fmt::Debug for Input<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Input").field("name", &self.inner.name).field("type", &T::stable_type_name()).finish()
+    }
+}
+
+impl<T: Payload> Input<T> {
+    pub(crate) fn new(name: &str) -> (Self, Arc<InputInner<T>>) {
+        let inner = Arc::new(InputInner { name: name.into(), subs: Mutex::new(Vec::new()), next: AtomicU64::new(0) });
+        (Input { inner: inner.clone() }, inner)
+    }
+
+    fn subs(&self) -> MutexGuard<'_, Vec<Subscription<T>>> {
+        lock(&self.inner.subs)
+    }
+
+    /// Takes the next sample from any source (round robin between sources).
+    pub fn recv(&self) -> Option<(Meta, T)> {
+        let mut subs = self.subs();
+        let n = subs.len();
+        if n == 0 {
+            return None;
+        }
+        let start = self.inner.next.fetch_add(1, Ordering::Relaxed) as usize;
+        for i in 0..n {
+            let sub = &mut subs[(start + i) % n];
+            match sub.subscriber.receive() {
+                Ok(Some(sample)) => {
+                    let h = *sample.user_header();
+                    sub.account(&h, now_ns());
+                    return Some((Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }, *sample.payload()));
+                }
+                Ok(None) => {}
+                Err(e) => tracing::warn!(input = %self.inner.name, "receive failed: {e:?}"),
+            }
+        }
+        None
+    }
+
+    /// Hands every waiting sample, in place (zero copy), to `f`; returns how many.
+    pub fn drain(&self, mut f: impl FnMut(&Meta, &T)) -> usize {
+        let mut subs = self.subs();
+        let mut count = 0;
+        for sub in subs.iter_mut() {
+            loop {
+                match sub.subscriber.receive() {
+                    Ok(Some(sample)) => {
+                        let h = *sample.user_header();
+                        sub.account(&h, now_ns());
+                        f(&Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }, sample.payload());
+                        count += 1;
+                    }
+                    Ok(None) => break,
+                    Err(e) => {
+                        tracing::warn!(input = %self.inner.name, "receive failed: {e:?}");
+                        break;
+                    }
+                }
+            }
+        }
+        count
+    }
+
+    /// Drains every waiting sample and returns the newest (by stamp).
+    pub fn latest(&self) -> Option<(Meta, T)> {
+        let mut best: Option<(Meta, T)> = None;
+        self.drain(|m, v| {
+            if best.as_ref().is_none_or(|(b, _)| m.stamp_ns >= b.stamp_ns) {
+                best = Some((*m, *v));
+            }
+        });
+        best
+    }
+
+    /// How many sources feed this input now.
+    pub fn sources(&self) -> usize {
+        self.subs().len()
+    }
+}
+
+fn lock<X>(m: &Mutex<X>) -> MutexGuard<'_, X> {
+    // A panic in another thread aborts the process (panic = "abort"), so a
+    // poisoned lock cannot be observed; recover the guard regardless.
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// The type-erased side of an input, used by the message checker and the runtime.
+pub(crate) trait DynInput: Send + Sync {
+    fn name(&self) -> &str;
+    fn type_name(&self) -> &'static str;
+    /// Subscribes to `from_agent/from_port`; `Ok(false)` when already subscribed.
+    fn connect(&self, node: &Node<Ipc>, robot: &shm_schemas::RobotName, from_agent: &str, from_port: &str) -> Result<bool, PortError>;
+    /// Drops the subscription; `false` when there was none.
+    fn disconnect(&self, from_agent: &str, from_port: &str) -> bool;
+    fn listeners(&self) -> Vec<Arc<Listener<Ipc>>>;
+    fn stats(&self, now: u64) -> Vec<InputStats>;
+}
+
+impl<T: Payload> DynInput for InputInner<T> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn type_name(&self) -> &'static str {
+        T::stable_type_name()
+    }
+
+    fn connect(&self, node: &Node<Ipc>, robot: &shm_schemas::RobotName, from_agent: &str, from_port: &str) -> Result<bool, PortError> {
+        if lock(&self.subs).iter().any(|s| s.from_agent == from_agent && s.from_port == from_port) {
+            return Ok(false);
+        }
+        let service = robot.port_service(from_agent, from_port);
+        let ps = port_service::<T>(node, &service)?;
+        let subscriber = ps.subscriber_builder().buffer_size(SUBSCRIBER_BUFFER).create().map_err(|e| perr(&service, e))?;
+        let listener = port_event(node, &service)?.listener_builder().create().map_err(|e| perr(&service, e))?;
+        lock(&self.subs).push(Subscription {
+            from_agent: from_agent.into(),
+            from_port: from_port.into(),
+            subscriber,
+            listener: Arc::new(listener),
+            received: 0,
+            dropped: 0,
+            last_seq: 0,
+            last_ns: None,
+            rate: RateMeter::default(),
+        });
+        Ok(true)
+    }
+
+    fn disconnect(&self, from_agent: &str, from_port: &str) -> bool {
+        let mut subs = lock(&self.subs);
+        let before = subs.len();
+        subs.retain(|s| !(s.from_agent == from_agent && s.from_port == from_port));
+        subs.len() != before
+    }
+
+    fn listeners(&self) -> Vec<Arc<Listener<Ipc>>> {
+        lock(&self.subs).iter().map(|s| s.listener.clone()).collect()
+    }
+
+    fn stats(&self, now: u64) -> Vec<InputStats> {
+        lock(&self.subs)
+            .iter()
+            .map(|s| InputStats {
+                input: self.name.clone(),
+                from_agent: s.from_agent.clone(),
+                from_port: s.from_port.clone(),
+                received: s.received,
+                rate_hz: s.rate.rate(now),
+                last_age_ns: s.last_ns.map(|t| now.saturating_sub(t)),
+                dropped: s.dropped,
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,197 @@
+//! A robot's isolated world: its iceoryx2 configuration (own file prefix and
+//! root path), its state directory, and the helpers that find and clean what
+//! it leaves in shared memory.
+//!
+//! Every process of robot `R` — router, agents, the `nerve` command — builds
+//! the same [`World`] from the robot name, so they all see one another and
+//! nothing of any other robot on the host.
+
+use iceoryx2::config::Config;
+use iceoryx2::prelude::*;
+use shm_schemas::RobotName;
+use std::path::{Path as StdPath, PathBuf};
+
+/// The iceoryx2 service variant nerve uses everywhere: ports may move between
+/// the message-checker and task threads.
+pub type Ipc = ipc_threadsafe::Service;
+
+/// Environment variable naming the robot when `--robot` is not given.
+pub const ROBOT_ENV: &str = "NERVE_ROBOT";
+/// Environment variable overriding the base of the state directories (default `/tmp/nerve`).
+pub const HOME_ENV: &str = "NERVE_HOME";
+/// Robot name used when neither `--robot` nor `NERVE_ROBOT` is set.
+pub const DEFAULT_ROBOT: &str = "default";
+
+/// Why a world could not be set up.
+#[derive(Debug, thiserror::Error)]
+pub enum WorldError {
+    /// The robot name is invalid.
+    #[error("invalid robot name: {0}")]
+    Name(#[from] shm_schemas::NameError),
+    /// A path is not accepted by iceoryx2.
+    #[error("the state directory {path} cannot hold iceoryx2 files ({detail}); set {HOME_ENV} to a shorter path")]
+    Path {
+        /// the path
+        path: String,
+        /// what iceoryx2 said
+        detail: String,
+    },
+    /// The state directory could not be created.
+    #[error("cannot create the state directory {path}: {source}; set {HOME_ENV} to a writable directory")]
+    StateDir {
+        /// the path
+        path: String,
+        /// the cause
+        source: std::io::Error,
+    },
+    /// iceoryx2 refused to create a node.
+    #[error("cannot create an iceoryx2 node {name:?}: {detail}")]
+    Node {
+        /// node name
+        name: String,
+        /// what iceoryx2 said
+        detail: String,
+    },
+}
+
+/// One robot's world.
+#[derive(Debug, Clone)]
+pub struct World {
+    robot: RobotName,
+    config: Config,
+    state_dir: PathBuf,
+}
+
+impl World {
+    /// The world of `robot`, with its state under `$NERVE_HOME/<robot>` (default `/tmp/nerve/<robot>`).
+    pub fn new(robot: &str) -> Result<Self, WorldError> {
+        let robot = RobotName::new(robot)?;
+        let base = std::env::var_os(HOME_ENV).map(PathBuf::from).unwrap_or_else(|| PathBuf::from("/tmp/nerve"));
+        let state_dir = base.join(robot.as_str());
+        let iox_root = format!("{}/iox2/", state_dir.display());
+        let mut config = Config::default();
+        config.global.prefix = FileName::new(robot.shm_prefix().as_bytes())
+            .map_err(|e| WorldError::Path { path: robot.shm_prefix(), detail: format!("{e:?}") })?;
+        let root = Path::new(iox_root.as_bytes()).map_err(|e| WorldError::Path { path: iox_root.clone(), detail: format!("{e:?}") })?;
+        config.global.set_root_path(&root);
+        Ok(World { robot, config, state_dir })
+    }
+
+    /// The robot's name.
+    pub fn robot(&self) -> &RobotName {
+        &self.robot
+    }
+
+    /// The iceoryx2 configuration of this world.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The robot's state directory (connection list, logs, pid files).
+    pub fn state_dir(&self) -> &StdPath {
+        &self.state_dir
+    }
+
+    /// Creates the state directory and its `logs/` and `pids/` folders.
+    pub fn ensure_state_dirs(&self) -> Result<(), WorldError> {
+        for d in [self.state_dir.clone(), self.logs_dir(), self.pids_dir()] {
+            std::fs::create_dir_all(&d).map_err(|source| WorldError::StateDir { path: d.display().to_string(), source })?;
+        }
+        Ok(())
+    }
+
+    /// Where agents' daemon logs go.
+    pub fn logs_dir(&self) -> PathBuf {
+        self.state_dir.join("logs")
+    }
+
+    /// Where daemons write their pid files.
+    pub fn pids_dir(&self) -> PathBuf {
+        self.state_dir.join("pids")
+    }
+
+    /// The log file of agent `name`.
+    pub fn log_file(&self, name: &str) -> PathBuf {
+        self.logs_dir().join(format!("{name}.log"))
+    }
+
+    /// The pid file of agent `name` (or `router`).
+    pub fn pid_file(&self, name: &str) -> PathBuf {
+        self.pids_dir().join(format!("{name}.pid"))
+    }
+
+    /// Creates an iceoryx2 node in this world. Creating a node also removes
+    /// the stale resources of dead nodes.
+    pub fn node(&self, name: &str) -> Result<Node<Ipc>, WorldError> {
+        quiet_iceoryx2();
+        let node_name: NodeName = name.try_into().map_err(|e| WorldError::Node { name: name.into(), detail: format!("{e:?}") })?;
+        NodeBuilder::new()
+            .name(&node_name)
+            .config(&self.config)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<Ipc>()
+            .map_err(|e| WorldError::Node { name: name.into(), detail: format!("{e:?}") })
+    }
+
+    /// Files of this robot in `/dev/shm`.
+    pub fn shm_files(&self) -> Vec<PathBuf> {
+        let prefix = self.robot.shm_prefix();
+        let Ok(rd) = std::fs::read_dir("/dev/shm") else { return Vec::new() };
+        rd.filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+            .map(|e| e.path())
+            .collect()
+    }
+
+    /// Removes the resources of every dead node of this world; returns how many were cleaned.
+    pub fn cleanup_dead_nodes(&self) -> usize {
+        quiet_iceoryx2();
+        let mut dead = Vec::new();
+        let _ = Node::<Ipc>::list(&self.config, |state| {
+            if let NodeState::Dead(view) = state {
+                dead.push(view);
+            }
+            CallbackProgression::Continue
+        });
+        let mut n = 0;
+        for view in dead {
+            if view.try_remove_stale_resources().is_ok() {
+                n += 1;
+            }
+        }
+        n
+    }
+
+    /// Pids of the live iceoryx2 nodes of this world.
+    pub fn live_node_pids(&self) -> Vec<u32> {
+        use iceoryx2::node::NodeView;
+        let mut pids = Vec::new();
+        let _ = Node::<Ipc>::list(&self.config, |state| {
+            if let NodeState::Alive(view) = state {
+                if let Some(d) = view.details() {
+                    pids.push(d.process_id().value() as u32);
+                }
+            }
+            CallbackProgression::Continue
+        });
+        pids
+    }
+}
+
+/// Lowers iceoryx2's own logging to errors unless `IOX2_LOG_LEVEL` says otherwise.
+pub fn quiet_iceoryx2() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| set_log_level_from_env_or(LogLevel::Error));
+}
+
+/// Whether process `pid` is alive (exists and is not a zombie).
+pub fn pid_alive(pid: u32) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Ok(stat) => {
+            // the state is the first field after the parenthesised command
+            let state = stat.rsplit_once(')').and_then(|(_, rest)| rest.split_whitespace().next());
+            !matches!(state, Some("Z") | Some("X") | None)
+        }
+        Err(_) => false,
+    }
+}

@@ -1,0 +1,123 @@
+//! `nerve down`: stop every agent of the robot and its router with a
+//! grace → SIGTERM → SIGKILL ladder, then remove what they left: pid files,
+//! stale iceoryx2 resources, and this robot's files in `/dev/shm`.
+
+use crate::cli::DownArgs;
+use crate::client::RouterSession;
+use agent_sdk::World;
+use agent_sdk::world::pid_alive;
+use anyhow::Result;
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// (name, pid) of every process that has a pid file in the robot's state directory.
+fn pid_files(world: &World) -> Vec<(String, u32, std::path::PathBuf)> {
+    let Ok(rd) = std::fs::read_dir(world.pids_dir()) else { return vec![] };
+    rd.filter_map(|e| e.ok())
+        .filter_map(|e| {
+            let path = e.path();
+            let name = path.file_stem()?.to_str()?.to_owned();
+            let pid: u32 = std::fs::read_to_string(&path).ok()?.trim().parse().ok()?;
+            Some((name, pid, path))
+        })
+        .collect()
+}
+
+/// Whether `pid` still runs a nerve program (guards against pid reuse).
+fn is_nerve_process(pid: u32) -> bool {
+    std::fs::read(format!("/proc/{pid}/cmdline"))
+        .map(|c| String::from_utf8_lossy(&c).contains("nerve"))
+        .unwrap_or(false)
+}
+
+fn wait_gone(pids: &[u32], grace: Duration) -> Vec<u32> {
+    let t0 = Instant::now();
+    loop {
+        let alive: Vec<u32> = pids.iter().copied().filter(|p| pid_alive(*p)).collect();
+        if alive.is_empty() || t0.elapsed() >= grace {
+            return alive;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn signal_all(pids: &[u32], sig: Signal) {
+    for p in pids {
+        let _ = kill(Pid::from_raw(*p as i32), sig);
+    }
+}
+
+/// Stops everything of `world`; returns (processes stopped, processes killed).
+pub fn bring_down(world: &World, grace: Duration) -> (usize, usize) {
+    let mut pids: Vec<u32> = Vec::new();
+    // 1. ask the router to stop each agent, then itself
+    if let Ok(s) = RouterSession::open(world) {
+        if let Ok(RouterReply::Agents(agents)) = s.call(CliRequest::Ps) {
+            for a in &agents {
+                pids.push(a.pid);
+                let _ = s.call(CliRequest::Stop { name: a.name.clone() });
+            }
+        }
+        let _ = s.call(CliRequest::Shutdown);
+    }
+    // 2. every process with a pid file (agents started without a router, the router)
+    for (_, pid, _) in pid_files(world) {
+        if !pids.contains(&pid) && pid_alive(pid) && is_nerve_process(pid) {
+            pids.push(pid);
+        }
+    }
+    let mut alive = wait_gone(&pids, grace);
+    let mut killed = 0;
+    if !alive.is_empty() {
+        signal_all(&alive, Signal::SIGTERM);
+        alive = wait_gone(&alive, grace);
+    }
+    if !alive.is_empty() {
+        killed = alive.len();
+        signal_all(&alive, Signal::SIGKILL);
+        let left = wait_gone(&alive, Duration::from_secs(2));
+        for p in left {
+            eprintln!("warning: process {p} survived SIGKILL (uninterruptible sleep?)");
+        }
+    }
+    (pids.len(), killed)
+}
+
+/// Removes pid files of dead processes, stale iceoryx2 resources and, when
+/// no process of the robot is left, its shared-memory files.
+pub fn clean(world: &World) -> usize {
+    for (_, pid, path) in pid_files(world) {
+        if !pid_alive(pid) {
+            let _ = std::fs::remove_file(path);
+        }
+    }
+    world.cleanup_dead_nodes();
+    let me = std::process::id();
+    let others_alive = world.live_node_pids().into_iter().any(|p| p != me);
+    let mut removed = 0;
+    if !others_alive {
+        for f in world.shm_files() {
+            if std::fs::remove_file(&f).is_ok() {
+                removed += 1;
+            }
+        }
+        let _ = std::fs::remove_dir_all(world.state_dir().join("iox2"));
+    }
+    removed
+}
+
+pub fn down(world: &World, a: DownArgs) -> Result<ExitCode> {
+    let grace = Duration::from_secs_f64(a.grace.max(0.0));
+    let (stopped, killed) = bring_down(world, grace);
+    let removed = clean(world);
+    println!(
+        "robot {}: stopped {stopped} process(es){}{}",
+        world.robot(),
+        if killed > 0 { format!(", {killed} of them with SIGKILL") } else { String::new() },
+        if removed > 0 { format!("; removed {removed} stale shared-memory file(s)") } else { String::new() }
+    );
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,33 @@
+//! One module per family of commands; [`dispatch`] routes the parsed command line.
+
+mod down;
+mod echo;
+mod inspect;
+mod start;
+mod wire;
+
+use crate::cli::{Cli, Command};
+use agent_sdk::World;
+use anyhow::Result;
+use std::process::ExitCode;
+
+pub fn dispatch(cli: Cli) -> Result<ExitCode> {
+    let world = World::new(&cli.robot)?;
+    match cli.command {
+        Command::Router(a) => start::router(&world, a),
+        Command::Start(a) => start::start(&world, a),
+        Command::Ps(a) => inspect::ps(&world, a),
+        Command::Graph(a) => inspect::graph(&world, a),
+        Command::Connect(a) => wire::connect(&world, a),
+        Command::Disconnect(a) => wire::disconnect(&world, a),
+        Command::Rate { name, period } => wire::rate(&world, &name, &period),
+        Command::Suspend { name } => wire::simple(&world, wire::Simple::Suspend, &name),
+        Command::Resume { name } => wire::simple(&world, wire::Simple::Resume, &name),
+        Command::Stop { name } => wire::simple(&world, wire::Simple::Stop, &name),
+        Command::Kill { name } => wire::simple(&world, wire::Simple::Kill, &name),
+        Command::Param(p) => wire::param(&world, p),
+        Command::Echo(a) => echo::echo(&world, a),
+        Command::Hz(a) => echo::hz(&world, a),
+        Command::Down(a) => down::down(&world, a),
+    }
+}

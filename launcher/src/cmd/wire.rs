@@ -1,0 +1,74 @@
+//! Commands that change the running graph: connect, disconnect, rate,
+//! suspend, resume, parameters, stop and kill. Each is one request to the
+//! router, which commands the agents.
+
+use crate::cli::{ParamCmd, WireArgs};
+use crate::client::RouterSession;
+use agent_sdk::World;
+use anyhow::{Context as _, Result, bail};
+use shm_schemas::PortRef;
+use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
+use std::process::ExitCode;
+
+fn refs(a: &WireArgs) -> Result<(PortRef, PortRef)> {
+    let from: PortRef = a.from.parse().context("FROM")?;
+    let to: PortRef = a.to.parse().context("TO")?;
+    Ok((from, to))
+}
+
+pub fn connect(world: &World, a: WireArgs) -> Result<ExitCode> {
+    let (from, to) = refs(&a)?;
+    RouterSession::open(world)?.ok(CliRequest::Connect { from: from.clone(), to: to.clone() })?;
+    println!("connected {from} -> {to}");
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn disconnect(world: &World, a: WireArgs) -> Result<ExitCode> {
+    let (from, to) = refs(&a)?;
+    RouterSession::open(world)?.ok(CliRequest::Disconnect { from: from.clone(), to: to.clone() })?;
+    println!("disconnected {from} -> {to}");
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn rate(world: &World, name: &str, period: &str) -> Result<ExitCode> {
+    let d = agent_sdk::clock::parse_duration(period).map_err(anyhow::Error::msg)?;
+    RouterSession::open(world)?.ok(CliRequest::Rate { name: name.into(), period_ns: d.as_nanos() as u64 })?;
+    println!("{name}: period {}", agent_sdk::clock::format_duration(d));
+    Ok(ExitCode::SUCCESS)
+}
+
+#[derive(Debug, Clone, Copy)]
+pub enum Simple {
+    Suspend,
+    Resume,
+    Stop,
+    Kill,
+}
+
+pub fn simple(world: &World, what: Simple, name: &str) -> Result<ExitCode> {
+    let s = RouterSession::open(world)?;
+    let (req, done) = match what {
+        Simple::Suspend => (CliRequest::Suspend { name: name.into() }, "suspended"),
+        Simple::Resume => (CliRequest::Resume { name: name.into() }, "resumed"),
+        Simple::Stop => (CliRequest::Stop { name: name.into() }, "stopped"),
+        Simple::Kill => (CliRequest::Kill { name: name.into() }, "killed"),
+    };
+    s.ok(req)?;
+    println!("{name}: {done}");
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn param(world: &World, p: ParamCmd) -> Result<ExitCode> {
+    let s = RouterSession::open(world)?;
+    match p {
+        ParamCmd::Get { name, key } => match s.call(CliRequest::ParamGet { name, key })? {
+            RouterReply::Param(v) => println!("{v}"),
+            other => bail!("unexpected reply from the router: {other:?}"),
+        },
+        ParamCmd::Set { name, key, value } => {
+            s.ok(CliRequest::ParamSet { name: name.clone(), key: key.clone(), value: value.clone() })?;
+            println!("{name}: {key} = {value}");
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
