@@ -145,7 +145,12 @@ impl Setup {
     }
 
     /// Declares a parameter whose values `check` must accept.
-    pub fn param_checked<T>(&mut self, key: &str, default: T, check: impl Fn(&T) -> Result<(), String> + Send + Sync + 'static) -> Param<T>
+    pub fn param_checked<T>(
+        &mut self,
+        key: &str,
+        default: T,
+        check: impl Fn(&T) -> Result<(), String> + Send + Sync + 'static,
+    ) -> Param<T>
     where
         T: FromStr + Display + Send + 'static,
         T::Err: Display,

@@ -21,9 +21,8 @@ pub fn sleep_until_ns(deadline_ns: u64) {
     };
     loop {
         // SAFETY: `ts` is a valid timespec; the remainder pointer may be null with TIMER_ABSTIME.
-        let rc = unsafe {
-            libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut())
-        };
+        let rc =
+            unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) };
         if rc != libc::EINTR {
             return;
         }
@@ -50,9 +49,8 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
     let t = s.trim().to_ascii_lowercase();
     let split = t.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(t.len());
     let (num, unit) = t.split_at(split);
-    let value: f64 = num
-        .parse()
-        .map_err(|_| format!("{s:?} is not a duration; write e.g. 10ms, 1s, 250us or 100hz"))?;
+    let value: f64 =
+        num.parse().map_err(|_| format!("{s:?} is not a duration; write e.g. 10ms, 1s, 250us or 100hz"))?;
     if !(value.is_finite() && value > 0.0) {
         return Err(format!("{s:?}: a period must be greater than zero"));
     }

@@ -133,7 +133,13 @@ where
         let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
         let secs = now.as_secs();
         let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
-        write!(writer, "{h:02}:{m:02}:{s:02}.{:03} {:>5} [{}] ", now.subsec_millis(), event.metadata().level(), self.who)?;
+        write!(
+            writer,
+            "{h:02}:{m:02}:{s:02}.{:03} {:>5} [{}] ",
+            now.subsec_millis(),
+            event.metadata().level(),
+            self.who
+        )?;
         ctx.field_format().format_fields(writer.by_ref(), event)?;
         writeln!(writer)
     }

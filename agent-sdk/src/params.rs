@@ -86,7 +86,12 @@ impl std::fmt::Debug for ParamTable {
 
 impl ParamTable {
     /// Declares a parameter; `check` may refuse values (return a message saying what is allowed).
-    pub fn declare<T>(&mut self, key: &str, default: T, check: Option<Box<dyn Fn(&T) -> Result<(), String> + Send + Sync>>) -> Param<T>
+    pub fn declare<T>(
+        &mut self,
+        key: &str,
+        default: T,
+        check: Option<Box<dyn Fn(&T) -> Result<(), String> + Send + Sync>>,
+    ) -> Param<T>
     where
         T: FromStr + Display + Send + 'static,
         T::Err: Display,
@@ -127,7 +132,11 @@ mod tests {
     #[test]
     fn typed_set_and_get() {
         let mut t = ParamTable::default();
-        let gain = t.declare("gain", 1.5f64, Some(Box::new(|v: &f64| if *v >= 0.0 { Ok(()) } else { Err("gain must be >= 0".into()) })));
+        let gain = t.declare(
+            "gain",
+            1.5f64,
+            Some(Box::new(|v: &f64| if *v >= 0.0 { Ok(()) } else { Err("gain must be >= 0".into()) })),
+        );
         assert_eq!(t.get("gain").as_deref(), Ok("1.5"));
         t.set("gain", "2.25").expect("valid");
         assert_eq!(gain.get(), 2.25);

@@ -128,7 +128,13 @@ impl<T: Payload> Output<T> {
         let ps = port_service::<T>(node, service)?;
         let publisher = ps.publisher_builder().create().map_err(|e| perr(service, e))?;
         let notifier = port_event(node, service)?.notifier_builder().create().map_err(|e| perr(service, e))?;
-        Ok(Output { service: service.into(), sender: FixedName::new(sender), publisher, notifier, seq: AtomicU64::new(0) })
+        Ok(Output {
+            service: service.into(),
+            sender: FixedName::new(sender),
+            publisher,
+            notifier,
+            seq: AtomicU64::new(0),
+        })
     }
 
     /// The iceoryx2 service name of this port.
@@ -291,7 +297,13 @@ pub(crate) trait DynInput: Send + Sync {
     fn name(&self) -> &str;
     fn type_name(&self) -> &'static str;
     /// Subscribes to `from_agent/from_port`; `Ok(false)` when already subscribed.
-    fn connect(&self, node: &Node<Ipc>, robot: &shm_schemas::RobotName, from_agent: &str, from_port: &str) -> Result<bool, PortError>;
+    fn connect(
+        &self,
+        node: &Node<Ipc>,
+        robot: &shm_schemas::RobotName,
+        from_agent: &str,
+        from_port: &str,
+    ) -> Result<bool, PortError>;
     /// Drops the subscription; `false` when there was none.
     fn disconnect(&self, from_agent: &str, from_port: &str) -> bool;
     fn listeners(&self) -> Vec<Arc<Listener<Ipc>>>;
@@ -307,13 +319,20 @@ impl<T: Payload> DynInput for InputInner<T> {
         T::stable_type_name()
     }
 
-    fn connect(&self, node: &Node<Ipc>, robot: &shm_schemas::RobotName, from_agent: &str, from_port: &str) -> Result<bool, PortError> {
+    fn connect(
+        &self,
+        node: &Node<Ipc>,
+        robot: &shm_schemas::RobotName,
+        from_agent: &str,
+        from_port: &str,
+    ) -> Result<bool, PortError> {
         if lock(&self.subs).iter().any(|s| s.from_agent == from_agent && s.from_port == from_port) {
             return Ok(false);
         }
         let service = robot.port_service(from_agent, from_port);
         let ps = port_service::<T>(node, &service)?;
-        let subscriber = ps.subscriber_builder().buffer_size(SUBSCRIBER_BUFFER).create().map_err(|e| perr(&service, e))?;
+        let subscriber =
+            ps.subscriber_builder().buffer_size(SUBSCRIBER_BUFFER).create().map_err(|e| perr(&service, e))?;
         let listener = port_event(node, &service)?.listener_builder().create().map_err(|e| perr(&service, e))?;
         lock(&self.subs).push(Subscription {
             from_agent: from_agent.into(),

@@ -378,7 +378,13 @@ fn drain_listener(l: &Listener<Ipc>) {
     let _ = l.try_wait(|_| {});
 }
 
-fn event_loop<A: Agent>(agent: &mut A, sh: &Shared, inputs: &[Arc<dyn DynInput>], wake: &Listener<Ipc>, ctx: &mut Context) {
+fn event_loop<A: Agent>(
+    agent: &mut A,
+    sh: &Shared,
+    inputs: &[Arc<dyn DynInput>],
+    wake: &Listener<Ipc>,
+    ctx: &mut Context,
+) {
     loop {
         if sh.stopping() {
             return;
@@ -483,7 +489,13 @@ impl RouterLink {
         RouterLink { client: None, epoch, registered: None }
     }
 
-    fn register(&mut self, node: &Node<Ipc>, world: &World, reg: &Registration, sh: &Shared) -> Result<(), RegisterError> {
+    fn register(
+        &mut self,
+        node: &Node<Ipc>,
+        world: &World,
+        reg: &Registration,
+        sh: &Shared,
+    ) -> Result<(), RegisterError> {
         if self.client.is_none() {
             match router_client(world, node) {
                 Ok(c) => self.client = Some(c),
@@ -561,14 +573,19 @@ struct Checker<'a> {
 
 impl Checker<'_> {
     fn run(&self, server: &ControlServer<AgentCommand, AgentReply>, link: &mut RouterLink, reg: &Registration) {
-        let ws = match WaitSetBuilder::new().signal_handling_mode(SignalHandlingMode::HandleTerminationRequests).create::<Ipc>() {
+        let ws = match WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<Ipc>()
+        {
             Ok(ws) => ws,
             Err(e) => {
                 tracing::error!("cannot create the message checker's WaitSet: {e:?}");
                 return;
             }
         };
-        let (Ok(_ctl), Ok(_tick)) = (ws.attach_notification(server.listener()), ws.attach_interval(Duration::from_millis(100))) else {
+        let (Ok(_ctl), Ok(_tick)) =
+            (ws.attach_notification(server.listener()), ws.attach_interval(Duration::from_millis(100)))
+        else {
             tracing::error!("cannot attach the control service to the WaitSet");
             return;
         };
@@ -688,9 +705,7 @@ impl Checker<'_> {
             }
             AgentCommand::SetPeriod { period_ns } => match self.task_kind {
                 Task::EventDriven => AgentReply::Error("this agent is event-driven; it has no period".into()),
-                Task::Periodic(_) if period_ns < 10_000 => {
-                    AgentReply::Error("a period must be at least 10us".into())
-                }
+                Task::Periodic(_) if period_ns < 10_000 => AgentReply::Error("a period must be at least 10us".into()),
                 Task::Periodic(_) => {
                     self.shared.period_ns.store(period_ns, Ordering::Release);
                     self.shared.poke();

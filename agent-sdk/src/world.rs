@@ -19,6 +19,12 @@ pub type Ipc = ipc_threadsafe::Service;
 pub const ROBOT_ENV: &str = "NERVE_ROBOT";
 /// Environment variable overriding the base of the state directories (default `/tmp/nerve`).
 pub const HOME_ENV: &str = "NERVE_HOME";
+/// Environment variable overriding the iceoryx2 root path (default `/tmp/nerve-iox2/`).
+pub const IOX2_ROOT_ENV: &str = "NERVE_IOX2_ROOT";
+/// Default iceoryx2 root path. It is short on purpose: iceoryx2 event
+/// listeners are Unix datagram sockets under this path, and a socket path may
+/// not exceed 108 bytes. Robots sharing it stay isolated by their file prefix.
+pub const DEFAULT_IOX2_ROOT: &str = "/tmp/nerve-iox2/";
 /// Robot name used when neither `--robot` nor `NERVE_ROBOT` is set.
 pub const DEFAULT_ROBOT: &str = "default";
 
@@ -29,7 +35,9 @@ pub enum WorldError {
     #[error("invalid robot name: {0}")]
     Name(#[from] shm_schemas::NameError),
     /// A path is not accepted by iceoryx2.
-    #[error("the state directory {path} cannot hold iceoryx2 files ({detail}); set {HOME_ENV} to a shorter path")]
+    #[error(
+        "the iceoryx2 root {path} cannot be used ({detail}); set {IOX2_ROOT_ENV} to a short path such as /tmp/nerve-iox2/"
+    )]
     Path {
         /// the path
         path: String,
@@ -60,6 +68,7 @@ pub struct World {
     robot: RobotName,
     config: Config,
     state_dir: PathBuf,
+    iox_root: PathBuf,
 }
 
 impl World {
@@ -68,13 +77,23 @@ impl World {
         let robot = RobotName::new(robot)?;
         let base = std::env::var_os(HOME_ENV).map(PathBuf::from).unwrap_or_else(|| PathBuf::from("/tmp/nerve"));
         let state_dir = base.join(robot.as_str());
-        let iox_root = format!("{}/iox2/", state_dir.display());
+        let mut iox_root = std::env::var(IOX2_ROOT_ENV).unwrap_or_else(|_| DEFAULT_IOX2_ROOT.to_owned());
+        if !iox_root.ends_with('/') {
+            iox_root.push('/');
+        }
+        if iox_root.len() > 40 {
+            return Err(WorldError::Path {
+                path: iox_root,
+                detail: "longer than 40 bytes, which would overflow Unix socket paths".into(),
+            });
+        }
         let mut config = Config::default();
         config.global.prefix = FileName::new(robot.shm_prefix().as_bytes())
             .map_err(|e| WorldError::Path { path: robot.shm_prefix(), detail: format!("{e:?}") })?;
-        let root = Path::new(iox_root.as_bytes()).map_err(|e| WorldError::Path { path: iox_root.clone(), detail: format!("{e:?}") })?;
+        let root = Path::new(iox_root.as_bytes())
+            .map_err(|e| WorldError::Path { path: iox_root.clone(), detail: format!("{e:?}") })?;
         config.global.set_root_path(&root);
-        Ok(World { robot, config, state_dir })
+        Ok(World { robot, config, state_dir, iox_root: PathBuf::from(iox_root) })
     }
 
     /// The robot's name.
@@ -95,7 +114,8 @@ impl World {
     /// Creates the state directory and its `logs/` and `pids/` folders.
     pub fn ensure_state_dirs(&self) -> Result<(), WorldError> {
         for d in [self.state_dir.clone(), self.logs_dir(), self.pids_dir()] {
-            std::fs::create_dir_all(&d).map_err(|source| WorldError::StateDir { path: d.display().to_string(), source })?;
+            std::fs::create_dir_all(&d)
+                .map_err(|source| WorldError::StateDir { path: d.display().to_string(), source })?;
         }
         Ok(())
     }
@@ -124,7 +144,8 @@ impl World {
     /// the stale resources of dead nodes.
     pub fn node(&self, name: &str) -> Result<Node<Ipc>, WorldError> {
         quiet_iceoryx2();
-        let node_name: NodeName = name.try_into().map_err(|e| WorldError::Node { name: name.into(), detail: format!("{e:?}") })?;
+        let node_name: NodeName =
+            name.try_into().map_err(|e| WorldError::Node { name: name.into(), detail: format!("{e:?}") })?;
         NodeBuilder::new()
             .name(&node_name)
             .config(&self.config)
@@ -141,6 +162,24 @@ impl World {
             .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
             .map(|e| e.path())
             .collect()
+    }
+
+    /// This robot's files under the iceoryx2 root (node and service records, sockets).
+    pub fn iox2_files(&self) -> Vec<PathBuf> {
+        fn walk(dir: &StdPath, prefix: &str, out: &mut Vec<PathBuf>) {
+            let Ok(rd) = std::fs::read_dir(dir) else { return };
+            for e in rd.filter_map(|e| e.ok()) {
+                let p = e.path();
+                if p.is_dir() {
+                    walk(&p, prefix, out);
+                } else if e.file_name().to_string_lossy().starts_with(prefix) {
+                    out.push(p);
+                }
+            }
+        }
+        let mut out = Vec::new();
+        walk(&self.iox_root, &self.robot.shm_prefix(), &mut out);
+        out
     }
 
     /// Removes the resources of every dead node of this world; returns how many were cleaned.

@@ -23,8 +23,8 @@ use agent_sdk::control::{ControlClient, ControlError, ControlServer, ControlSize
 use agent_sdk::runtime::epoch_service;
 use agent_sdk::world::{Ipc, World, pid_alive};
 use iceoryx2::port::publisher::Publisher;
-use iceoryx2::prelude::*;
 use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use shm_schemas::control::agent_to_router::{AgentToRouter, Registration, TaskKind};
 use shm_schemas::control::cli_to_router::{
@@ -104,10 +104,12 @@ impl Router {
         world.ensure_state_dirs().map_err(|e| StartError::Other(e.to_string()))?;
         let node = world.node("router").map_err(|e| StartError::Other(e.to_string()))?;
         world.cleanup_dead_nodes();
-        let server = ControlServer::create(&node, &world.robot().router_service(), ControlSize::ROUTER).map_err(|e| match e {
-            ControlError::AlreadyServed { .. } => StartError::AlreadyRunning { robot: world.robot().to_string() },
-            e => StartError::Other(e.to_string()),
-        })?;
+        let server = ControlServer::create(&node, &world.robot().router_service(), ControlSize::ROUTER).map_err(
+            |e| match e {
+                ControlError::AlreadyServed { .. } => StartError::AlreadyRunning { robot: world.robot().to_string() },
+                e => StartError::Other(e.to_string()),
+            },
+        )?;
         let store = Store::new(world.state_dir());
         let connections = store.load().map_err(StartError::Other)?;
         let epoch = now_ns() ^ ((std::process::id() as u64) << 32);
@@ -253,7 +255,10 @@ impl State {
             }
         }
         let Some(client) = self.agents.get(name).and_then(|e| e.client.as_ref()) else {
-            return Err(RouterError::AgentUnreachable { name: name.into(), detail: "its control service is missing".into() });
+            return Err(RouterError::AgentUnreachable {
+                name: name.into(),
+                detail: "its control service is missing".into(),
+            });
         };
         match client.call(cmd, timeout) {
             Ok(AgentReply::Error(message)) => Err(RouterError::AgentRefused { name: name.into(), message }),
@@ -298,12 +303,8 @@ impl State {
     }
 
     fn check_liveness(&mut self) {
-        let dead: Vec<(String, u32)> = self
-            .agents
-            .iter()
-            .filter(|(_, e)| !pid_alive(e.reg.pid))
-            .map(|(n, e)| (n.clone(), e.reg.pid))
-            .collect();
+        let dead: Vec<(String, u32)> =
+            self.agents.iter().filter(|(_, e)| !pid_alive(e.reg.pid)).map(|(n, e)| (n.clone(), e.reg.pid)).collect();
         if dead.is_empty() {
             return;
         }
@@ -329,6 +330,8 @@ impl State {
     }
 
     fn handle_cli(&mut self, req: CliRequest) -> Result<RouterReply, RouterError> {
+        // answer from a registry without dead agents (a few /proc reads)
+        self.check_liveness();
         match req {
             CliRequest::Ps => Ok(RouterReply::Agents(self.views())),
             CliRequest::Graph => {
@@ -397,10 +400,12 @@ impl State {
                 }
                 Ok(RouterReply::Ok)
             }
-            CliRequest::ParamGet { name, key } => match self.command(&name, &AgentCommand::ParamGet { key }, AGENT_TIMEOUT)? {
-                AgentReply::Param(v) => Ok(RouterReply::Param(v)),
-                other => Err(RouterError::Internal(format!("unexpected reply {other:?}"))),
-            },
+            CliRequest::ParamGet { name, key } => {
+                match self.command(&name, &AgentCommand::ParamGet { key }, AGENT_TIMEOUT)? {
+                    AgentReply::Param(v) => Ok(RouterReply::Param(v)),
+                    other => Err(RouterError::Internal(format!("unexpected reply {other:?}"))),
+                }
+            }
             CliRequest::ParamSet { name, key, value } => {
                 self.command(&name, &AgentCommand::ParamSet { key, value }, AGENT_TIMEOUT)?;
                 Ok(RouterReply::Ok)
@@ -410,7 +415,8 @@ impl State {
                 Ok(RouterReply::Ok)
             }
             CliRequest::Kill { name } => {
-                let pid = self.agents.get(&name).map(|e| e.reg.pid).ok_or_else(|| unknown_agent(&name, &self.agents))?;
+                let pid =
+                    self.agents.get(&name).map(|e| e.reg.pid).ok_or_else(|| unknown_agent(&name, &self.agents))?;
                 nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), nix::sys::signal::Signal::SIGKILL)
                     .map_err(|e| RouterError::Internal(format!("cannot kill pid {pid}: {e}")))?;
                 tracing::info!("killed agent {name} (pid {pid}) on request");
@@ -463,11 +469,10 @@ impl State {
             .map(|c| {
                 let (fa, fp) = split_port(&c.from);
                 let (ta, tp) = split_port(&c.to);
-                let input = agents
-                    .iter()
-                    .find(|a| a.name == ta)
-                    .and_then(|a| a.stats.as_ref())
-                    .and_then(|s| s.inputs.iter().find(|i| i.input == tp && i.from_agent == fa && i.from_port == fp));
+                let input =
+                    agents.iter().find(|a| a.name == ta).and_then(|a| a.stats.as_ref()).and_then(|s| {
+                        s.inputs.iter().find(|i| i.input == tp && i.from_agent == fa && i.from_port == fp)
+                    });
                 let from_live = agents.iter().any(|a| a.name == fa);
                 ConnectionView {
                     from: c.from.clone(),

@@ -1,1 +1,196 @@
-//! placeholder
+//! Test harness for nerve's multi-process tests.
+//!
+//! Each [`Robot`] is an isolated world: a unique robot name (so its own
+//! iceoryx2 prefix `nerve_<robot>_`) and its own `NERVE_HOME` state
+//! directory. Dropping it brings everything down and removes its shared
+//! memory and state even when the test failed, so parallel tests and
+//! leftovers never interfere.
+//!
+//! The binaries under test are the ones cargo built next to the test
+//! executable (`target/<profile>/nerve`, `nerve-ticker`, ...): build them
+//! with `cargo build --workspace --bins` before running the tests.
+
+use serde_json::Value;
+use std::path::PathBuf;
+use std::process::{Command, Output};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+static COUNTER: AtomicU32 = AtomicU32::new(0);
+
+/// The directory holding the built binaries.
+pub fn bin_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let mut dir = exe.parent().expect("exe dir").to_path_buf();
+    if dir.ends_with("deps") {
+        dir.pop();
+    }
+    let nerve = dir.join("nerve");
+    assert!(
+        nerve.exists(),
+        "{} is missing: build the binaries first with `cargo build --workspace --bins`",
+        nerve.display()
+    );
+    dir
+}
+
+/// An isolated robot for one test.
+#[derive(Debug)]
+pub struct Robot {
+    /// robot name
+    pub name: String,
+    /// its NERVE_HOME
+    pub home: PathBuf,
+    bin: PathBuf,
+}
+
+impl Robot {
+    /// A new robot with a unique name; `tag` (a few letters) helps reading leftovers.
+    pub fn new(tag: &str) -> Self {
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        let tag: String = tag.chars().filter(|c| c.is_ascii_lowercase()).take(6).collect();
+        let name =
+            format!("t{}-{}{}", std::process::id(), n, if tag.is_empty() { String::new() } else { format!("-{tag}") });
+        assert!(name.len() <= 24, "robot name {name} too long");
+        let home = std::env::temp_dir().join(format!("nerve-test-{name}"));
+        let _ = std::fs::remove_dir_all(&home);
+        std::fs::create_dir_all(&home).expect("create NERVE_HOME");
+        Robot { name, home, bin: bin_dir() }
+    }
+
+    /// A command for binary `exe` (`nerve`, `nerve-ticker`...) in this robot's world.
+    pub fn command(&self, exe: &str) -> Command {
+        let mut c = Command::new(self.bin.join(exe));
+        c.env("NERVE_ROBOT", &self.name).env("NERVE_HOME", &self.home).env_remove("RUST_LOG");
+        c
+    }
+
+    /// Runs `nerve ARGS`.
+    pub fn nerve(&self, args: &[&str]) -> Output {
+        self.command("nerve").args(args).output().expect("run nerve")
+    }
+
+    /// Runs `nerve ARGS`, panics unless it succeeds; returns stdout.
+    pub fn ok(&self, args: &[&str]) -> String {
+        let out = self.nerve(args);
+        assert!(
+            out.status.success(),
+            "`nerve {}` failed ({}):\nstdout: {}\nstderr: {}",
+            args.join(" "),
+            out.status,
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+
+    /// Runs `nerve ARGS`, panics unless it fails; returns stderr.
+    pub fn fails(&self, args: &[&str]) -> String {
+        let out = self.nerve(args);
+        assert!(
+            !out.status.success(),
+            "`nerve {}` should have failed:\nstdout: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stdout)
+        );
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    }
+
+    /// Starts the router as a daemon.
+    pub fn router(&self) {
+        self.ok(&["router", "--daemon"]);
+    }
+
+    /// `nerve ps --json`.
+    pub fn ps(&self) -> Vec<Value> {
+        let out = self.ok(&["ps", "--json"]);
+        match serde_json::from_str::<Value>(&out) {
+            Ok(Value::Array(v)) => v,
+            other => panic!("ps --json gave {other:?}"),
+        }
+    }
+
+    /// The agent named `name` in `nerve ps --json`.
+    pub fn agent(&self, name: &str) -> Option<Value> {
+        self.ps().into_iter().find(|a| a["name"] == name)
+    }
+
+    /// The pid of agent `name`.
+    pub fn pid(&self, name: &str) -> u32 {
+        self.agent(name).and_then(|a| a["pid"].as_u64()).unwrap_or_else(|| panic!("agent {name} not in ps")) as u32
+    }
+
+    /// `nerve graph --json`.
+    pub fn graph(&self) -> Value {
+        serde_json::from_str(&self.ok(&["graph", "--json"])).expect("graph json")
+    }
+
+    /// `nerve echo PORT --count N --json --timeout 5`, parsed.
+    pub fn echo(&self, port: &str, n: u32) -> Vec<Value> {
+        let out = self.ok(&["echo", port, "--count", &n.to_string(), "--json", "--timeout", "5"]);
+        out.lines().map(|l| serde_json::from_str(l).expect("echo json line")).collect()
+    }
+
+    /// This robot's files in /dev/shm.
+    pub fn shm_files(&self) -> Vec<String> {
+        let prefix = format!("nerve_{}_", self.name);
+        std::fs::read_dir("/dev/shm")
+            .map(|rd| {
+                rd.filter_map(|e| e.ok())
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| n.starts_with(&prefix))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    /// `nerve down`, then checks that nothing of the robot is left.
+    pub fn down_and_check_clean(&self) {
+        self.ok(&["down", "--grace", "2"]);
+        let left = self.shm_files();
+        assert!(left.is_empty(), "left in /dev/shm after `nerve down`: {left:?}");
+        let pids = self.home.join(&self.name).join("pids");
+        let pid_files: Vec<_> = std::fs::read_dir(&pids)
+            .map(|rd| rd.filter_map(|e| e.ok()).map(|e| e.path()).collect())
+            .unwrap_or_default();
+        assert!(pid_files.is_empty(), "pid files left: {pid_files:?}");
+    }
+}
+
+impl Drop for Robot {
+    fn drop(&mut self) {
+        let _ = self.command("nerve").args(["down", "--grace", "1"]).output();
+        for f in self.shm_files() {
+            let _ = std::fs::remove_file(format!("/dev/shm/{f}"));
+        }
+        let _ = std::fs::remove_dir_all(&self.home);
+    }
+}
+
+/// Polls `cond` every 20 ms until it holds or `timeout` passes; returns whether it held.
+pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
+    let t0 = Instant::now();
+    loop {
+        if cond() {
+            return true;
+        }
+        if t0.elapsed() > timeout {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Whether process `pid` is alive and not a zombie.
+pub fn alive(pid: u32) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Ok(s) => !matches!(s.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().next()), Some("Z") | None),
+        Err(_) => false,
+    }
+}
+
+/// Sends SIGKILL to `pid`.
+pub fn sigkill(pid: u32) {
+    // SAFETY: kill has no memory-safety preconditions.
+    unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+}

@@ -24,7 +24,8 @@ impl Agent for Ticker {
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         Ok(Ticker {
             out: setup.output("tick")?,
-            step: setup.param_checked("step", 1u64, |v| if *v > 0 { Ok(()) } else { Err("step must be at least 1".into()) }),
+            step: setup
+                .param_checked("step", 1u64, |v| if *v > 0 { Ok(()) } else { Err("step must be at least 1".into()) }),
             seq: 0,
         })
     }

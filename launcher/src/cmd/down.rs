@@ -104,7 +104,16 @@ pub fn clean(world: &World) -> usize {
                 removed += 1;
             }
         }
-        let _ = std::fs::remove_dir_all(world.state_dir().join("iox2"));
+        for f in world.iox2_files() {
+            let dir = f.parent().map(std::path::Path::to_path_buf);
+            if std::fs::remove_file(&f).is_ok() {
+                removed += 1;
+            }
+            // node records live in a folder per node: drop it once empty
+            if let Some(d) = dir {
+                let _ = std::fs::remove_dir(d);
+            }
+        }
     }
     removed
 }
@@ -117,7 +126,11 @@ pub fn down(world: &World, a: DownArgs) -> Result<ExitCode> {
         "robot {}: stopped {stopped} process(es){}{}",
         world.robot(),
         if killed > 0 { format!(", {killed} of them with SIGKILL") } else { String::new() },
-        if removed > 0 { format!("; removed {removed} stale shared-memory file(s)") } else { String::new() }
+        if removed > 0 {
+            format!("; removed {removed} stale shared-memory and iceoryx2 file(s)")
+        } else {
+            String::new()
+        }
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -14,7 +14,7 @@ use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
-use shm_schemas::control::cli_to_router::{CliRequest, RouterReply, RouterError};
+use shm_schemas::control::cli_to_router::{CliRequest, RouterError, RouterReply};
 use shm_schemas::payloads::known_type_names;
 use shm_schemas::{Payload, PortRef, SampleHeader, for_each_payload};
 use std::io::Write;
@@ -70,7 +70,11 @@ fn watch<T: Payload>(
     mut f: impl FnMut(Event<'_, T>) -> bool,
 ) -> Result<bool> {
     let ps = existing_port_service::<T>(node, service).ok_or_else(|| anyhow!("the port {service} does not exist"))?;
-    let sub = ps.subscriber_builder().buffer_size(agent_sdk::ports::SUBSCRIBER_BUFFER).create().map_err(|e| anyhow!("{e:?}"))?;
+    let sub = ps
+        .subscriber_builder()
+        .buffer_size(agent_sdk::ports::SUBSCRIBER_BUFFER)
+        .create()
+        .map_err(|e| anyhow!("{e:?}"))?;
     let listener = port_event(node, service)?.listener_builder().create().map_err(|e| anyhow!("{e:?}"))?;
     let ws = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
@@ -115,7 +119,10 @@ pub fn echo(world: &World, a: EchoArgs) -> Result<ExitCode> {
         };
     }
     for_each_payload!(dispatch);
-    bail!("port {port} carries {type_name}, which this build of nerve cannot print (it knows {})", known_type_names().join(", "))
+    bail!(
+        "port {port} carries {type_name}, which this build of nerve cannot print (it knows {})",
+        known_type_names().join(", ")
+    )
 }
 
 fn echo_typed<T: Payload>(world: &World, node: &Node<Ipc>, port: &PortRef, a: &EchoArgs) -> Result<ExitCode> {

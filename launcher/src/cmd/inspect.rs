@@ -17,14 +17,28 @@ fn ports(p: &[shm_schemas::control::agent_to_router::PortSpec]) -> String {
     if p.is_empty() {
         "-".into()
     } else {
-        p.iter().map(|s| format!("{}:{}", s.name, s.type_name.trim_start_matches("nerve::"))).collect::<Vec<_>>().join(",")
+        p.iter()
+            .map(|s| format!("{}:{}", s.name, s.type_name.trim_start_matches("nerve::")))
+            .collect::<Vec<_>>()
+            .join(",")
     }
 }
 
 pub fn print_agents(agents: &[AgentView]) {
     println!(
         "{:<16} {:>8} {:<10} {:<12} {:<13} {:>8} {:>9} {:>24} {:>5} {:>6}  {:<24} {}",
-        "NAME", "PID", "KIND", "STATE", "TASK", "PERIOD", "RATE", "JITTER p50/p99/max", "OVR", "CPU%", "INPUTS", "OUTPUTS"
+        "NAME",
+        "PID",
+        "KIND",
+        "STATE",
+        "TASK",
+        "PERIOD",
+        "RATE",
+        "JITTER p50/p99/max",
+        "OVR",
+        "CPU%",
+        "INPUTS",
+        "OUTPUTS"
     );
     for a in agents {
         let (rate, jitter, ovr, cpu) = match &a.stats {
@@ -89,7 +103,10 @@ fn print_graph(g: &GraphView) {
         println!("no connections (make one with `nerve connect AGENT/PORT AGENT/PORT`)");
         return;
     }
-    println!("{:<24} {:<24} {:<18} {:<8} {:>9} {:>10} {:>9} {:>8}", "FROM", "TO", "TYPE", "ACTIVE", "RATE", "LAST AGE", "RECEIVED", "DROPPED");
+    println!(
+        "{:<24} {:<24} {:<18} {:<8} {:>9} {:>10} {:>9} {:>8}",
+        "FROM", "TO", "TYPE", "ACTIVE", "RATE", "LAST AGE", "RECEIVED", "DROPPED"
+    );
     for c in &g.connections {
         println!(
             "{:<24} {:<24} {:<18} {:<8} {:>9} {:>10} {:>9} {:>8}",
@@ -127,7 +144,11 @@ pub fn to_dot(robot: &str, g: &GraphView) -> String {
         for end in [&c.from, &c.to] {
             let agent = end.split('/').next().unwrap_or(end).to_string();
             if !names.contains(&agent) {
-                out += &format!("  \"{}\" [label=\"{}\\n(not running)\", style=dashed];\n", dot_escape(&agent), dot_escape(&agent));
+                out += &format!(
+                    "  \"{}\" [label=\"{}\\n(not running)\", style=dashed];\n",
+                    dot_escape(&agent),
+                    dot_escape(&agent)
+                );
                 names.push(agent);
             }
         }

@@ -103,10 +103,7 @@ pub fn start(world: &World, a: StartArgs) -> Result<ExitCode> {
     if !a.args.is_empty() {
         cmd.arg("--").args(&a.args);
     }
-    let status = cmd
-        .stdin(Stdio::null())
-        .status()
-        .with_context(|| format!("cannot run {}", exe.display()))?;
+    let status = cmd.stdin(Stdio::null()).status().with_context(|| format!("cannot run {}", exe.display()))?;
     if !status.success() {
         // the agent printed why on stderr
         return Ok(ExitCode::from(1));

@@ -6,9 +6,11 @@
 //! printable as JSON by `nerve echo`.
 
 pub mod router;
+pub mod scalar;
 pub mod tick;
 
 pub use router::RouterEpoch;
+pub use scalar::Scalar;
 pub use tick::Tick;
 
 use iceoryx2::prelude::ZeroCopySend;
@@ -35,6 +37,7 @@ macro_rules! for_each_payload {
     ($m:ident) => {
         $m!($crate::payloads::Tick);
         $m!($crate::payloads::RouterEpoch);
+        $m!($crate::payloads::Scalar);
     };
 }
 

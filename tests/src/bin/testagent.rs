@@ -1,0 +1,93 @@
+//! `testagent`: an agent that misbehaves on purpose, for fault tests (as
+//! dora's `tests/fault_tolerance` nodes). Periodic; input `in` and output
+//! `value`, both `nerve::Scalar` (a type no example agent uses, for
+//! type-mismatch tests).
+//!
+//! `-- --mode MODE`:
+//! * `scalar` (default): sends a counter on `value` each period;
+//! * `crash`: aborts on its first step (a crash at once);
+//! * `stubborn`: ignores SIGTERM and never finishes a step (must be SIGKILLed);
+//! * `hang`: its task blocks for ever in the first step (a hung agent; the
+//!   message checker still answers, but the watchdog pings stop);
+//! * `burn`: burns CPU in every step (for resource tests).
+
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
+use shm_schemas::payloads::Scalar;
+use std::time::Duration;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Mode {
+    Scalar,
+    Crash,
+    Stubborn,
+    Hang,
+    Burn,
+}
+
+struct TestAgent {
+    mode: Mode,
+    input: Input<Scalar>,
+    out: Output<Scalar>,
+    n: f64,
+}
+
+impl Agent for TestAgent {
+    const KIND: &'static str = "testagent";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_millis(20))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let mode = match setup.args() {
+            [] => Mode::Scalar,
+            [flag, m] if flag == "--mode" => match m.as_str() {
+                "scalar" => Mode::Scalar,
+                "crash" => Mode::Crash,
+                "stubborn" => Mode::Stubborn,
+                "hang" => Mode::Hang,
+                "burn" => Mode::Burn,
+                other => {
+                    return Err(AgentError::Config(format!(
+                        "unknown mode {other:?}; use scalar, crash, stubborn, hang or burn"
+                    )));
+                }
+            },
+            other => return Err(AgentError::Config(format!("unexpected arguments {other:?}; use `-- --mode MODE`"))),
+        };
+        Ok(TestAgent { mode, input: setup.input("in")?, out: setup.output("value")?, n: 0.0 })
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        match self.mode {
+            Mode::Scalar => {}
+            Mode::Crash => std::process::abort(),
+            Mode::Stubborn => {
+                // SAFETY: setting a signal disposition to SIG_IGN is always sound.
+                unsafe { libc::signal(libc::SIGTERM, libc::SIG_IGN) };
+                loop {
+                    std::thread::sleep(Duration::from_secs(3600));
+                }
+            }
+            Mode::Hang => loop {
+                std::thread::sleep(Duration::from_secs(3600));
+            },
+            Mode::Burn => {
+                let until = ctx.now_ns() + 15_000_000;
+                let mut x = 0u64;
+                while agent_sdk::clock::now_ns() < until {
+                    x = x.wrapping_mul(6364136223846793005).wrapping_add(1);
+                }
+                std::hint::black_box(x);
+            }
+        }
+        while self.input.recv().is_some() {}
+        self.n += 1.0;
+        self.out.send(Scalar { value: self.n, stamp_ns: ctx.now_ns() })?;
+        Ok(())
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<TestAgent>()
+}

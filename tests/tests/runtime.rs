@@ -1,0 +1,241 @@
+//! The core runtime, end to end: real processes, real shared memory.
+//! Data flows, rewiring, rates, suspend/resume, hot add, crashes of agents and
+//! of the router, refusals with clear errors, and nothing left behind.
+
+use nerve_tests::{Robot, alive, sigkill, wait_until};
+use serde_json::Value;
+use std::time::{Duration, Instant};
+
+fn rate_of(r: &Robot, name: &str) -> f64 {
+    r.agent(name).and_then(|a| a["stats"]["rate_hz"].as_f64()).unwrap_or(0.0)
+}
+
+fn connection<'a>(g: &'a Value, from: &str, to: &str) -> Option<&'a Value> {
+    g["connections"].as_array()?.iter().find(|c| c["from"] == from && c["to"] == to)
+}
+
+/// ticker → relay → echo, and `nerve down` leaves nothing.
+#[test]
+fn data_flows_ticker_relay_echo() {
+    let r = Robot::new("flow");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["start", "relay", "--name", "r1"]);
+    r.ok(&["connect", "t1/tick", "r1/in"]);
+    let samples = r.echo("r1/out", 5);
+    assert_eq!(samples.len(), 5);
+    let mut last = 0;
+    for s in &samples {
+        assert_eq!(s["from"], "r1", "sample header names the relay as sender: {s}");
+        assert_eq!(s["type"], "nerve::Tick");
+        let seq = s["data"]["seq"].as_u64().expect("tick seq");
+        assert!(seq > last, "ticks arrive in order: {samples:?}");
+        last = seq;
+    }
+    // the graph shows the live connection with figures
+    assert!(wait_until(Duration::from_secs(3), || {
+        let g = r.graph();
+        connection(&g, "t1/tick", "r1/in")
+            .is_some_and(|c| c["active"] == true && c["received"].as_u64().unwrap_or(0) > 0)
+    }));
+    let dot = r.ok(&["graph", "--dot"]);
+    assert!(dot.contains("\"t1\" -> \"r1\""), "{dot}");
+    r.down_and_check_clean();
+}
+
+/// Rewiring at run time switches the source without restarting either agent.
+#[test]
+fn rewire_switches_source_without_restart() {
+    let r = Robot::new("rewire");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["start", "ticker", "--name", "t2", "--period", "10ms"]);
+    r.ok(&["param", "set", "t2", "step", "1000"]);
+    r.ok(&["start", "relay", "--name", "r1"]);
+    r.ok(&["connect", "t1/tick", "r1/in"]);
+    r.echo("r1/out", 2);
+    let (pid_r1, pid_t1) = (r.pid("r1"), r.pid("t1"));
+
+    r.ok(&["disconnect", "t1/tick", "r1/in"]);
+    r.ok(&["connect", "t2/tick", "r1/in"]);
+    // after the switch, ticks come in steps of 1000 (t2's `step`)
+    assert!(wait_until(Duration::from_secs(5), || {
+        let s = r.echo("r1/out", 3);
+        s.windows(2)
+            .all(|w| w[1]["data"]["seq"].as_u64().unwrap_or(0) - w[0]["data"]["seq"].as_u64().unwrap_or(0) == 1000)
+    }));
+    assert_eq!(r.pid("r1"), pid_r1, "the relay was not restarted");
+    assert_eq!(r.pid("t1"), pid_t1, "the old source was not restarted");
+    let g = r.graph();
+    assert!(connection(&g, "t1/tick", "r1/in").is_none());
+    assert!(connection(&g, "t2/tick", "r1/in").is_some());
+    r.down_and_check_clean();
+}
+
+/// A period change shows in the measured rate; suspend stops output, resume restarts it.
+#[test]
+fn period_change_and_suspend_resume() {
+    let r = Robot::new("rate");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    assert!(
+        wait_until(Duration::from_secs(5), || (80.0..120.0).contains(&rate_of(&r, "t1"))),
+        "rate {}",
+        rate_of(&r, "t1")
+    );
+    r.ok(&["rate", "t1", "50ms"]);
+    assert!(
+        wait_until(Duration::from_secs(6), || (16.0..24.0).contains(&rate_of(&r, "t1"))),
+        "rate {}",
+        rate_of(&r, "t1")
+    );
+    assert_eq!(r.agent("t1").and_then(|a| a["period_ns"].as_u64()), Some(50_000_000));
+
+    r.ok(&["suspend", "t1"]);
+    assert_eq!(r.agent("t1").map(|a| a["state"].clone()), Some("suspended".into()));
+    let err = r.fails(&["echo", "t1/tick", "--count", "1", "--timeout", "1"]);
+    assert!(err.contains("no sample"), "{err}");
+    r.ok(&["resume", "t1"]);
+    assert_eq!(r.echo("t1/tick", 1).len(), 1);
+    assert_eq!(r.agent("t1").map(|a| a["state"].clone()), Some("running".into()));
+    r.down_and_check_clean();
+}
+
+/// An agent added while others run joins the graph.
+#[test]
+fn hot_added_agent_joins_graph() {
+    let r = Robot::new("hotadd");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["start", "relay", "--name", "r1"]);
+    r.ok(&["connect", "t1/tick", "r1/in"]);
+    r.echo("r1/out", 1);
+    r.ok(&["start", "relay", "--name", "r2"]);
+    r.ok(&["connect", "r1/out", "r2/in"]);
+    let s = r.echo("r2/out", 3);
+    assert!(s.iter().all(|x| x["from"] == "r2"));
+    let names: Vec<String> = r.ps().iter().map(|a| a["name"].as_str().unwrap_or("").to_owned()).collect();
+    assert_eq!(names, ["r1", "r2", "t1"]);
+    r.down_and_check_clean();
+}
+
+/// SIGKILL of an agent: others run on, the router reports it gone within 1 s,
+/// and restarting it under the same name restores its connections.
+#[test]
+fn killed_agent_is_noticed_and_rewired_on_restart() {
+    let r = Robot::new("kill");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["start", "relay", "--name", "r1"]);
+    r.ok(&["start", "relay", "--name", "r2"]);
+    r.ok(&["connect", "t1/tick", "r1/in"]);
+    r.ok(&["connect", "r1/out", "r2/in"]);
+    r.echo("r2/out", 1);
+    let victim = r.pid("r1");
+    let t1 = r.pid("t1");
+    sigkill(victim);
+    let t0 = Instant::now();
+    assert!(wait_until(Duration::from_secs(5), || r.agent("r1").is_none()), "router still lists r1");
+    let noticed = t0.elapsed();
+    assert!(noticed < Duration::from_secs(1), "the router took {noticed:?} to notice the dead agent");
+    assert!(alive(t1), "the ticker survives");
+    assert_eq!(r.echo("t1/tick", 1).len(), 1, "the ticker still publishes");
+    // connections are kept and restored for the restarted agent: t1 -> r1 -> r2
+    r.ok(&["start", "relay", "--name", "r1"]);
+    let s = r.echo("r2/out", 3);
+    assert_eq!(s.len(), 3);
+    let g = r.graph();
+    assert!(connection(&g, "t1/tick", "r1/in").is_some_and(|c| c["active"] == true));
+    r.down_and_check_clean();
+}
+
+/// SIGKILL of the router leaves data flowing; a restarted router lists the
+/// same agents and connections.
+#[test]
+fn router_crash_keeps_data_flowing_and_restart_restores() {
+    let r = Robot::new("router");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["start", "relay", "--name", "r1"]);
+    r.ok(&["connect", "t1/tick", "r1/in"]);
+    r.echo("r1/out", 1);
+    let router_pid: u32 = std::fs::read_to_string(r.home.join(&r.name).join("pids/router.pid"))
+        .expect("router pid file")
+        .trim()
+        .parse()
+        .expect("pid");
+    sigkill(router_pid);
+    assert!(wait_until(Duration::from_secs(2), || !alive(router_pid)));
+    // data keeps flowing with no router
+    let s = r.echo("r1/out", 5);
+    assert_eq!(s.len(), 5);
+    // a new router: agents re-register by themselves, the connection list is back
+    r.router();
+    assert!(wait_until(Duration::from_secs(5), || r.ps().len() == 2), "agents did not re-register: {:?}", r.ps());
+    let g = r.graph();
+    assert!(connection(&g, "t1/tick", "r1/in").is_some(), "{g}");
+    assert!(wait_until(Duration::from_secs(3), || connection(&r.graph(), "t1/tick", "r1/in")
+        .is_some_and(|c| c["active"] == true)));
+    r.down_and_check_clean();
+}
+
+/// Duplicate names, unknown agents or ports and mismatched types are refused with clear errors.
+#[test]
+fn bad_requests_are_refused_clearly() {
+    let r = Robot::new("refuse");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1"]);
+    r.ok(&["start", "relay", "--name", "r1"]);
+    r.ok(&["start", "testagent", "--name", "s1"]);
+
+    let e = r.fails(&["start", "ticker", "--name", "t1"]);
+    assert!(e.contains("already running") && e.contains("t1"), "{e}");
+    assert_eq!(r.ps().len(), 3, "the duplicate did not disturb the original");
+
+    let e = r.fails(&["connect", "ghost/tick", "r1/in"]);
+    assert!(e.contains("no agent named \"ghost\""), "{e}");
+    let e = r.fails(&["connect", "t1/tock", "r1/in"]);
+    assert!(e.contains("no output port \"tock\"") && e.contains("tick"), "{e}");
+    let e = r.fails(&["connect", "t1/tick", "r1/input"]);
+    assert!(e.contains("no input port \"input\""), "{e}");
+    let e = r.fails(&["connect", "s1/value", "r1/in"]);
+    assert!(e.contains("nerve::Scalar") && e.contains("nerve::Tick"), "both type names in: {e}");
+    let e = r.fails(&["connect", "t1-tick", "r1/in"]);
+    assert!(e.contains("AGENT/PORT"), "{e}");
+    let e = r.fails(&["rate", "r1", "10ms"]);
+    assert!(e.contains("event-driven"), "{e}");
+    let e = r.fails(&["rate", "t1", "fast"]);
+    assert!(e.contains("not a duration"), "{e}");
+    let e = r.fails(&["param", "set", "t1", "nope", "1"]);
+    assert!(e.contains("no parameter \"nope\"") && e.contains("step"), "{e}");
+    let e = r.fails(&["start", "nosuchkind", "--name", "x1"]);
+    assert!(e.contains("unknown agent kind"), "{e}");
+    let e = r.fails(&["start", "ticker", "--name", "Bad Name"]);
+    assert!(e.contains("lowercase"), "{e}");
+    let e = r.fails(&["disconnect", "t1/tick", "r1/in"]);
+    assert!(e.contains("not connected"), "{e}");
+    r.down_and_check_clean();
+}
+
+/// Without a router, commands say how to start one.
+#[test]
+fn no_router_is_reported_with_advice() {
+    let r = Robot::new("norouter");
+    let e = r.fails(&["ps"]);
+    assert!(e.contains("no router runs") && e.contains("nerve --robot"), "{e}");
+    r.down_and_check_clean();
+}
+
+/// `nerve stop` stops an agent cleanly: it leaves the registry, its pid file goes.
+#[test]
+fn stop_is_clean() {
+    let r = Robot::new("stop");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1"]);
+    let pid = r.pid("t1");
+    r.ok(&["stop", "t1"]);
+    assert!(wait_until(Duration::from_secs(3), || !alive(pid)), "agent did not exit");
+    assert!(r.agent("t1").is_none());
+    assert!(!r.home.join(&r.name).join("pids/t1.pid").exists());
+    r.down_and_check_clean();
+}
