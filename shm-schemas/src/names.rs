@@ -57,13 +57,7 @@ pub enum NameError {
     NotAPortRef(String),
 }
 
-fn check(
-    what: &'static str,
-    name: &str,
-    max: usize,
-    extra: &[char],
-    allowed: &'static str,
-) -> Result<(), NameError> {
+fn check(what: &'static str, name: &str, max: usize, extra: &[char], allowed: &'static str) -> Result<(), NameError> {
     if name.is_empty() {
         return Err(NameError::Empty { what });
     }
@@ -74,10 +68,7 @@ fn check(
     if !(first.is_ascii_lowercase() || first.is_ascii_digit()) {
         return Err(NameError::BadChar { what, name: name.into(), ch: first, allowed });
     }
-    if let Some(ch) = name
-        .chars()
-        .find(|c| !(c.is_ascii_lowercase() || c.is_ascii_digit() || extra.contains(c)))
-    {
+    if let Some(ch) = name.chars().find(|c| !(c.is_ascii_lowercase() || c.is_ascii_digit() || extra.contains(c))) {
         return Err(NameError::BadChar { what, name: name.into(), ch, allowed });
     }
     Ok(())

@@ -8,6 +8,7 @@
 
 pub mod agent_to_router;
 pub mod cli_to_router;
+pub mod describe;
 pub mod router_to_agent;
 
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
@@ -51,14 +52,11 @@ pub fn encode<T: Serialize>(body: &T) -> Vec<u8> {
 
 /// Decodes an envelope, checking the version first.
 pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ProtocolError> {
-    let (version, _) = postcard::take_from_bytes::<u16>(bytes)
-        .map_err(|e| ProtocolError::Malformed(e.to_string()))?;
+    let (version, _) = postcard::take_from_bytes::<u16>(bytes).map_err(|e| ProtocolError::Malformed(e.to_string()))?;
     if version != PROTOCOL_VERSION {
         return Err(ProtocolError::VersionMismatch { peer: version, ours: PROTOCOL_VERSION });
     }
-    postcard::from_bytes::<Envelope<T>>(bytes)
-        .map(|e| e.body)
-        .map_err(|e| ProtocolError::Malformed(e.to_string()))
+    postcard::from_bytes::<Envelope<T>>(bytes).map(|e| e.body).map_err(|e| ProtocolError::Malformed(e.to_string()))
 }
 
 #[cfg(test)]
@@ -75,8 +73,7 @@ mod tests {
 
     #[test]
     fn other_version_is_refused_with_advice() {
-        let bytes = postcard::to_stdvec(&Envelope { version: 999u16, body: AgentCommand::Stop })
-            .expect("encodes");
+        let bytes = postcard::to_stdvec(&Envelope { version: 999u16, body: AgentCommand::Stop }).expect("encodes");
         let err = decode::<AgentCommand>(&bytes).expect_err("must refuse");
         assert_eq!(err, ProtocolError::VersionMismatch { peer: 999, ours: PROTOCOL_VERSION });
         assert!(err.to_string().contains("rebuild"));

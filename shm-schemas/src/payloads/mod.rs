@@ -38,6 +38,7 @@ macro_rules! for_each_payload {
         $m!($crate::payloads::Tick);
         $m!($crate::payloads::RouterEpoch);
         $m!($crate::payloads::Scalar);
+        $m!($crate::ring::RingNotice);
     };
 }
 

@@ -1,0 +1,191 @@
+//! Operating-system plumbing shared by writer and reader: the memory mapping
+//! of a ring file, typed views of its header and slots, clocks, and the
+//! "is the writer still alive" check.
+
+use nix::errno::Errno;
+use nix::sys::mman::{MapFlags, ProtFlags, mmap, munmap};
+use shm_schemas::ring::{RingHeader, SlotHeader};
+use std::fs::File;
+use std::num::NonZeroUsize;
+use std::ptr::NonNull;
+
+/// A `MAP_SHARED` mapping of a whole ring file, unmapped on drop.
+///
+/// All access to the shared bytes goes through the typed views below: the
+/// headers are made of atomics (or of fields written once before the magic
+/// was published), and payload bytes are only touched under the seqlock
+/// protocol of `writer.rs` / `reader.rs`.
+#[derive(Debug)]
+pub(crate) struct Mapping {
+    ptr: NonNull<u8>,
+    len: usize,
+}
+
+// SAFETY: the mapping is plain memory shared with other processes; every
+// concurrent access to it is through atomics or seqlock-validated reads, and
+// the writer's mutable access is serialised by `&mut RingWriter`.
+unsafe impl Send for Mapping {}
+// SAFETY: see `Send`; `&Mapping` only gives out shared views.
+unsafe impl Sync for Mapping {}
+
+impl Mapping {
+    /// Maps `len` bytes of `file` from offset 0, read-only or read-write.
+    pub(crate) fn new(file: &File, len: usize, writable: bool) -> Result<Self, Errno> {
+        let length = NonZeroUsize::new(len).ok_or(Errno::EINVAL)?;
+        let prot = if writable { ProtFlags::PROT_READ | ProtFlags::PROT_WRITE } else { ProtFlags::PROT_READ };
+        // SAFETY: a fresh mapping chosen by the kernel (addr None) aliases no
+        // Rust object; its lifetime is tied to `Mapping` and ends in `drop`.
+        let ptr = unsafe { mmap(None, length, prot, MapFlags::MAP_SHARED, file, 0) }?;
+        Ok(Mapping { ptr: ptr.cast(), len })
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.len
+    }
+
+    pub(crate) fn base(&self) -> *mut u8 {
+        self.ptr.as_ptr()
+    }
+
+    /// The ring header at offset 0.
+    pub(crate) fn header(&self) -> &RingHeader {
+        // SAFETY: the mapping is page-aligned and at least RING_HEADER_SIZE
+        // long (checked by every constructor's caller before use); the
+        // mutable fields are atomics, so a shared reference is sound while
+        // another process updates them.
+        unsafe { &*(self.ptr.as_ptr() as *const RingHeader) }
+    }
+}
+
+impl Drop for Mapping {
+    fn drop(&mut self) {
+        // SAFETY: ptr/len are exactly what mmap returned; no reference into
+        // the mapping outlives `self` (all views borrow from it).
+        if let Err(e) = unsafe { munmap(self.ptr.cast(), self.len) } {
+            tracing::warn!("munmap of a ring failed: {e}");
+        }
+    }
+}
+
+/// The geometry of a ring, as read from (or written to) its header, checked
+/// against the size of the mapping so that slot views stay in bounds.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Geometry {
+    pub(crate) header_size: u64,
+    pub(crate) slot_count: u32,
+    pub(crate) slot_capacity: u64,
+    pub(crate) slot_stride: u64,
+}
+
+impl Geometry {
+    /// The geometry of a new ring; `None` on arithmetic overflow.
+    pub(crate) fn new(slot_count: u32, slot_capacity: u64) -> Option<Self> {
+        use shm_schemas::ring::{RING_HEADER_SIZE, SLOT_ALIGN, SLOT_HEADER_SIZE};
+        let padded = slot_capacity.checked_add(SLOT_ALIGN - 1)? / SLOT_ALIGN * SLOT_ALIGN;
+        let slot_stride = padded.checked_add(u64::from(SLOT_HEADER_SIZE))?;
+        let g = Geometry { header_size: u64::from(RING_HEADER_SIZE), slot_count, slot_capacity, slot_stride };
+        g.file_len()?;
+        Some(g)
+    }
+
+    /// Total bytes of the file; `None` on overflow or beyond `isize::MAX`.
+    pub(crate) fn file_len(&self) -> Option<u64> {
+        let len = self.slot_stride.checked_mul(u64::from(self.slot_count))?.checked_add(self.header_size)?;
+        (len <= isize::MAX as u64).then_some(len)
+    }
+
+    /// The geometry stored in a header, if it is self-consistent and fits in
+    /// `mapped` bytes.
+    pub(crate) fn from_header(h: &RingHeader, mapped: usize) -> Option<Self> {
+        use shm_schemas::ring::{SLOT_ALIGN, SLOT_HEADER_SIZE};
+        let g = Geometry {
+            header_size: u64::from(h.header_size),
+            slot_count: h.slot_count,
+            slot_capacity: h.slot_capacity,
+            slot_stride: h.slot_stride,
+        };
+        let ok = h.slot_header_size == SLOT_HEADER_SIZE
+            && g.header_size >= std::mem::size_of::<RingHeader>() as u64
+            && g.header_size % SLOT_ALIGN == 0
+            && g.slot_count >= 1
+            && g.slot_stride % SLOT_ALIGN == 0
+            && g.slot_stride >= g.slot_capacity.checked_add(u64::from(SLOT_HEADER_SIZE))?
+            && g.file_len()? <= mapped as u64;
+        ok.then_some(g)
+    }
+
+    /// The slot of frame `seq`.
+    pub(crate) fn slot_of(&self, seq: u64) -> u32 {
+        (seq % u64::from(self.slot_count)) as u32
+    }
+}
+
+/// The slot header of slot `i`.
+///
+/// # Safety
+/// `geo` must have been validated against `map` (`Geometry::from_header` or
+/// the writer's own sizing) and `i < geo.slot_count`.
+pub(crate) unsafe fn slot_header<'a>(map: &'a Mapping, geo: &Geometry, i: u32) -> &'a SlotHeader {
+    let off = geo.header_size + u64::from(i) * geo.slot_stride;
+    // SAFETY: in bounds by the caller's contract; 64-byte aligned because the
+    // mapping is page-aligned and header_size and slot_stride are multiples of
+    // 64; all fields are atomics, so shared references are sound while other
+    // processes store to them.
+    unsafe { &*(map.base().add(off as usize) as *const SlotHeader) }
+}
+
+/// A pointer to the payload of slot `i` (`geo.slot_capacity` bytes).
+///
+/// # Safety
+/// As for [`slot_header`].
+pub(crate) unsafe fn slot_payload(map: &Mapping, geo: &Geometry, i: u32) -> *mut u8 {
+    let off = geo.header_size + u64::from(i) * geo.slot_stride + u64::from(shm_schemas::ring::SLOT_HEADER_SIZE);
+    // SAFETY: in bounds by the caller's contract.
+    unsafe { map.base().add(off as usize) }
+}
+
+/// CLOCK_MONOTONIC now, in nanoseconds: the clock every nerve stamp uses.
+pub fn monotonic_ns() -> u64 {
+    clock_ns(nix::time::ClockId::CLOCK_MONOTONIC)
+}
+
+/// CLOCK_REALTIME now, in nanoseconds.
+pub(crate) fn realtime_ns() -> u64 {
+    clock_ns(nix::time::ClockId::CLOCK_REALTIME)
+}
+
+fn clock_ns(id: nix::time::ClockId) -> u64 {
+    match nix::time::clock_gettime(id) {
+        Ok(ts) => (ts.tv_sec() as u64).saturating_mul(1_000_000_000).saturating_add(ts.tv_nsec() as u64),
+        // clock_gettime cannot fail for these clocks on Linux
+        Err(_) => 0,
+    }
+}
+
+/// Whether process `pid` exists and is not a zombie. Pid 0 (no writer) is
+/// not alive. A pid reused by an unrelated process reads as alive: the
+/// callers only use this to choose between "being written" and "will never
+/// be complete", and err on the side of "being written".
+pub(crate) fn pid_alive(pid: u32) -> bool {
+    if pid == 0 || pid > i32::MAX as u32 {
+        return false;
+    }
+    match nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), None) {
+        Ok(()) | Err(Errno::EPERM) => {}
+        Err(_) => return false,
+    }
+    // A killed process that its parent has not reaped yet still answers
+    // kill(0); /proc tells a zombie apart (state after the ")" of the name).
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Ok(stat) => {
+            let state = stat.rfind(')').and_then(|i| stat[i + 1..].split_whitespace().next());
+            !matches!(state, Some("Z" | "X" | "x"))
+        }
+        Err(_) => true,
+    }
+}
+
+/// This process's pid.
+pub(crate) fn my_pid() -> u32 {
+    std::process::id()
+}
