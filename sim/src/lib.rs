@@ -1,0 +1,41 @@
+//! nerve-sim: a 2-D world that stands in for the robots H1 and H2.
+//!
+//! It emulates the robots' hardware so that the very same agent code drives
+//! the simulator and the real robot:
+//!
+//! * [`world`]: strict TOML world files (walls with doors, boxes, coloured
+//!   and moving objects, checkpoints and the target, start pose);
+//! * [`robot`]: the H1 and H2 models and the noise model;
+//! * [`sim`]: the deterministic fixed-step core — differential drive with
+//!   wheel slip, collisions with a disc robot, ground truth;
+//! * [`sensors`]: sonar ring and IR receiver; [`camera`]: 320x240 RGB
+//!   rendering into a caller's buffer;
+//! * [`pty`] and [`hub`]: each device on its own pseudo-terminal, published
+//!   as a symlink, speaking the `nerve-devices` protocols;
+//! * [`run`]: the real-time loop of the `nerve-sim` binary; [`truth`]: the
+//!   ground-truth CSV.
+//!
+//! Tests and other crates drive a [`Simulation`] step by step; the binary is a
+//! thin main around [`run::run`].
+#![warn(missing_docs)]
+
+pub mod camera;
+pub mod geom;
+pub mod hub;
+pub mod pty;
+pub mod robot;
+pub mod run;
+pub mod sensors;
+pub mod sim;
+pub mod truth;
+pub mod world;
+
+pub use camera::{CAMERA_FRAME_BYTES, CAMERA_HEIGHT, CAMERA_WIDTH};
+pub use geom::{Segment, Vec2};
+pub use hub::DeviceHub;
+pub use pty::{DeviceKind, PtyDevice, PtyError, PtyStats};
+pub use robot::{NoiseModel, RobotKind, RobotModel};
+pub use run::{RunError, RunOptions, RunSummary, install_stop_handler, run};
+pub use sim::{SimConfig, SimError, Simulation, Truth};
+pub use truth::{TRUTH_HEADER, TruthError, TruthLog};
+pub use world::{World, WorldError};
