@@ -30,6 +30,12 @@ pub struct CommonArgs {
     /// Start with the task suspended.
     #[arg(long)]
     pub suspended: bool,
+    /// Set a parameter before the task starts (repeatable): --param gain=1.5
+    #[arg(long = "param", value_name = "KEY=VALUE")]
+    pub params: Vec<String>,
+    /// Print the agent's kind, task, ports and parameters as JSON, and exit.
+    #[arg(long)]
+    pub describe: bool,
     /// Arguments for the agent itself.
     #[arg(last = true)]
     pub args: Vec<String>,

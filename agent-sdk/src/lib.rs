@@ -24,6 +24,7 @@ pub mod cli;
 pub mod clock;
 pub mod control;
 pub mod daemon;
+pub mod memory;
 pub mod meters;
 pub mod params;
 pub mod ports;

@@ -48,6 +48,8 @@ struct TaskFigures {
     lateness: LatenessRecorder,
     errors: u64,
     last_cycle_ns: u64,
+    /// when the running step started; 0 between steps
+    in_step_since_ns: u64,
 }
 
 /// State shared by the message checker and the task.
@@ -94,6 +96,15 @@ pub fn run_with_args<A: Agent>(args: CommonArgs) -> ExitCode {
     if let Err(e) = AgentName::new(&name) {
         return startup_error(&mut readiness, &format!("invalid --name: {e}"));
     }
+    if args.describe {
+        return match describe::<A>(&args) {
+            Ok(json) => {
+                println!("{json}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => startup_error(&mut readiness, &e),
+        };
+    }
     if args.daemon {
         if let Err(e) = world.ensure_state_dirs() {
             return startup_error(&mut readiness, &e.to_string());
@@ -117,6 +128,58 @@ fn startup_error(readiness: &mut Readiness, msg: &str) -> ExitCode {
     }
     readiness.fail(msg);
     ExitCode::from(EXIT_STARTUP)
+}
+
+/// The agent's description, made by running [`Agent::new`] in a private,
+/// throw-away world (so authors must open devices in [`Agent::start`], not in `new`).
+fn describe<A: Agent>(args: &CommonArgs) -> Result<String, String> {
+    use shm_schemas::control::describe::Description;
+    let world = World::new(&format!("describe-{}", std::process::id())).map_err(|e| e.to_string())?;
+    let node = Arc::new(world.node("describe").map_err(|e| e.to_string())?);
+    let mut setup = Setup {
+        world: world.clone(),
+        name: AgentName::new(A::KIND).map_err(|e| e.to_string())?,
+        node,
+        args: args.args.clone(),
+        inputs: Vec::new(),
+        outputs: Vec::new(),
+        params: ParamTable::default(),
+    };
+    let agent = A::new(&mut setup).map_err(|e| format!("{} could not be set up: {e}", A::KIND))?;
+    apply_params(&setup.params, &args.params)?;
+    let (task, default_period_ns) = match A::task() {
+        Task::Periodic(p) => (TaskKind::Periodic, Some(p.as_nanos() as u64)),
+        Task::EventDriven => (TaskKind::EventDriven, None),
+    };
+    let d = Description {
+        protocol: shm_schemas::PROTOCOL_VERSION,
+        kind: A::KIND.into(),
+        task,
+        default_period_ns,
+        inputs: setup
+            .inputs
+            .iter()
+            .map(|i| PortSpec { name: i.name().into(), type_name: i.type_name().into() })
+            .collect(),
+        outputs: setup.outputs.clone(),
+        params: setup.params.snapshot(),
+    };
+    drop(agent);
+    drop(setup);
+    // iceoryx2 keeps a management file per prefix; this world is private and gone
+    for f in world.shm_files() {
+        let _ = std::fs::remove_file(f);
+    }
+    serde_json::to_string(&d).map_err(|e| e.to_string())
+}
+
+/// Applies `--param KEY=VALUE` settings.
+fn apply_params(table: &ParamTable, settings: &[String]) -> Result<(), String> {
+    for s in settings {
+        let (k, v) = s.split_once('=').ok_or_else(|| format!("--param {s:?}: write KEY=VALUE"))?;
+        table.set(k.trim(), v).map_err(|e| format!("--param {s}: {e}"))?;
+    }
+    Ok(())
 }
 
 fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut Readiness) -> Result<(), String> {
@@ -171,6 +234,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     };
     let agent = A::new(&mut setup).map_err(|e| format!("{} {name:?} could not start: {e}", A::KIND))?;
     let Setup { inputs, outputs, params, .. } = setup;
+    apply_params(&params, &args.params)?;
 
     let shared = Arc::new(Shared {
         period_ns: AtomicU64::new(period.map(|p| p.as_nanos() as u64).unwrap_or(0)),
@@ -178,7 +242,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         stop: AtomicBool::new(false),
         generation: AtomicU64::new(0),
         realtime: AtomicBool::new(false),
-        figures: Mutex::new(TaskFigures::default()),
+        figures: Mutex::new(TaskFigures { last_cycle_ns: now_ns(), ..TaskFigures::default() }),
         gate: (Mutex::new(()), Condvar::new()),
         wake,
     });
@@ -291,7 +355,10 @@ fn task_main<A: Agent>(
 }
 
 fn run_step<A: Agent>(agent: &mut A, sh: &Shared, ctx: &mut Context) {
-    if let Err(e) = agent.step(ctx) {
+    sh.figures().in_step_since_ns = ctx.now_ns.max(1);
+    let result = agent.step(ctx);
+    sh.figures().in_step_since_ns = 0;
+    if let Err(e) = result {
         let mut f = sh.figures();
         f.errors += 1;
         if f.errors.is_power_of_two() {
@@ -641,14 +708,23 @@ impl Checker<'_> {
         }
     }
 
-    /// Whether the task thread has made progress recently enough to keep the watchdog happy.
+    /// Whether the task thread has made progress recently enough to keep the
+    /// watchdog happy: no step runs for longer than the watchdog interval, and
+    /// a periodic task has completed a cycle recently.
     fn task_alive(&self, now: u64, wd: Duration) -> bool {
+        let wd_ns = wd.as_nanos() as u64;
+        let (last, in_step) = {
+            let f = self.shared.figures();
+            (f.last_cycle_ns, f.in_step_since_ns)
+        };
+        if in_step != 0 && now.saturating_sub(in_step) > wd_ns {
+            return false;
+        }
         if self.shared.suspended.load(Ordering::Acquire) || matches!(self.task_kind, Task::EventDriven) {
             return true;
         }
-        let last = self.shared.figures().last_cycle_ns;
         let period = self.shared.period_ns.load(Ordering::Acquire);
-        last == 0 || now.saturating_sub(last) < (wd.as_nanos() as u64).max(period * 2)
+        now.saturating_sub(last) < wd_ns.max(period * 2)
     }
 
     fn find_input(&self, name: &str) -> Result<&Arc<dyn DynInput>, String> {

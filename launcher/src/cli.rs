@@ -63,8 +63,47 @@ pub enum Command {
     Echo(EchoArgs),
     /// Measure the rate of an output port.
     Hz(HzArgs),
+    /// Start a robot from a launch file (router, agents, connections).
+    Launch(LaunchArgs),
     /// Stop every agent and the router of the robot, and remove what they left.
     Down(DownArgs),
+    /// Show an agent's log.
+    Logs(LogsArgs),
+    /// Run an agent kind in place of this process (for systemd units).
+    Exec(ExecArgs),
+}
+
+/// `nerve launch`
+#[derive(Debug, Args)]
+pub struct LaunchArgs {
+    /// The launch file (TOML).
+    pub file: std::path::PathBuf,
+    /// Stay attached: stream the agents' logs, stop everything on Ctrl-C.
+    #[arg(long)]
+    pub foreground: bool,
+}
+
+/// `nerve logs`
+#[derive(Debug, Args)]
+pub struct LogsArgs {
+    /// Agent name (or `router`).
+    pub name: String,
+    /// Keep printing new lines.
+    #[arg(long, short)]
+    pub follow: bool,
+    /// Only the last N lines.
+    #[arg(long, short = 'n')]
+    pub lines: Option<usize>,
+}
+
+/// `nerve exec`
+#[derive(Debug, Args)]
+pub struct ExecArgs {
+    /// Agent kind.
+    pub kind: String,
+    /// Arguments of the agent (common options, then `--` and its own).
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+    pub args: Vec<String>,
 }
 
 /// `nerve router`

@@ -28,7 +28,8 @@ use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use shm_schemas::control::agent_to_router::{AgentToRouter, Registration, TaskKind};
 use shm_schemas::control::cli_to_router::{
-    AgentState, AgentView, CliRequest, ConnectionView, GraphView, RouterError, RouterReply, RouterRequest,
+    AgentState, AgentView, CliRequest, ConnectionView, GraphView, RestartPolicy, RouterError, RouterReply,
+    RouterRequest, Supervision,
 };
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
 use shm_schemas::payloads::RouterEpoch;
@@ -54,6 +55,27 @@ struct Entry {
 enum Action {
     /// Re-apply every connection that involves this agent.
     Rewire(String),
+}
+
+/// The longest back-off between two restarts.
+pub const MAX_BACKOFF: Duration = Duration::from_secs(10);
+
+/// Supervision state of one agent.
+struct Supervised {
+    spec: Supervision,
+    /// restart times within the window
+    recent: VecDeque<Instant>,
+    total: u32,
+    failed: bool,
+    next_start: Option<Instant>,
+    /// `nerve stop` asked it to leave: do not restart
+    stopped_by_user: bool,
+}
+
+impl Supervised {
+    fn new(spec: Supervision) -> Self {
+        Supervised { spec, recent: VecDeque::new(), total: 0, failed: false, next_start: None, stopped_by_user: false }
+    }
 }
 
 /// Why the router could not start.
@@ -87,6 +109,9 @@ struct State {
     store: Store,
     pending: VecDeque<Action>,
     shutdown: bool,
+    supervised: BTreeMap<String, Supervised>,
+    /// start-up processes of restarted agents, reaped as they exit
+    children: Vec<std::process::Child>,
 }
 
 impl std::fmt::Debug for Router {
@@ -140,6 +165,8 @@ impl Router {
                 store,
                 pending: VecDeque::new(),
                 shutdown: false,
+                supervised: BTreeMap::new(),
+                children: Vec::new(),
             },
         })
     }
@@ -153,6 +180,8 @@ impl Router {
         let _req = ws.attach_notification(self.server.listener()).map_err(|e| format!("{e:?}"))?;
         let _tick = ws.attach_interval(LIVENESS_PERIOD).map_err(|e| format!("{e:?}"))?;
         let mut last_liveness = Instant::now();
+        let watchdog = agent_sdk::daemon::watchdog_interval();
+        let mut last_ping = Instant::now();
         while !self.state.shutdown {
             match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
                 Ok(WaitSetRunResult::TerminationRequest) | Ok(WaitSetRunResult::Interrupt) => break,
@@ -177,7 +206,14 @@ impl Router {
             if last_liveness.elapsed() >= LIVENESS_PERIOD {
                 last_liveness = Instant::now();
                 self.state.check_liveness();
+                self.state.run_restarts();
                 let _ = self.epoch_pub.update_connections();
+            }
+            if let Some(wd) = watchdog {
+                if last_ping.elapsed() >= wd / 2 {
+                    let _ = agent_sdk::daemon::sd_notify("WATCHDOG=1");
+                    last_ping = Instant::now();
+                }
             }
         }
         tracing::info!("router stopped");
@@ -197,6 +233,7 @@ impl State {
                 if self.agents.get(&name).is_some_and(|e| e.reg.pid == pid) {
                     self.agents.remove(&name);
                     tracing::info!("agent {name} (pid {pid}) left");
+                    self.exited(&name, false);
                 }
                 RouterReply::Ok
             }
@@ -227,6 +264,10 @@ impl State {
             reg.outputs.iter().map(|p| format!("{}: {}", p.name, p.type_name)).collect::<Vec<_>>().join(", ")
         );
         let state = if reg.suspended { AgentState::Suspended } else { AgentState::Running };
+        if let Some(sup) = self.supervised.get_mut(&name) {
+            sup.stopped_by_user = false;
+            sup.next_start = None;
+        }
         self.agents.insert(name.clone(), Entry { reg, client, state });
         self.pending.push_back(Action::Rewire(name));
         RouterReply::Registered { epoch: self.epoch }
@@ -311,6 +352,7 @@ impl State {
         for (name, pid) in &dead {
             self.agents.remove(name);
             tracing::warn!("agent {name} (pid {pid}) died; its connections are kept for its restart");
+            self.exited(name, true);
         }
         let cleaned = self.world.cleanup_dead_nodes();
         if cleaned > 0 {
@@ -411,7 +453,34 @@ impl State {
                 Ok(RouterReply::Ok)
             }
             CliRequest::Stop { name } => {
+                if let Some(sup) = self.supervised.get_mut(&name) {
+                    sup.stopped_by_user = true;
+                    sup.next_start = None;
+                }
                 self.command(&name, &AgentCommand::Stop, AGENT_TIMEOUT)?;
+                Ok(RouterReply::Ok)
+            }
+            CliRequest::Supervise(spec) => {
+                if spec.argv.is_empty() {
+                    return Err(RouterError::NotApplicable("supervision needs a command line".into()));
+                }
+                tracing::info!(
+                    "supervising {}: restart {:?}, at most {} restarts in {:?}",
+                    spec.name,
+                    spec.policy,
+                    spec.max_restarts,
+                    Duration::from_nanos(spec.window_ns)
+                );
+                let name = spec.name.clone();
+                match self.supervised.get_mut(&name) {
+                    Some(s) => {
+                        s.spec = spec;
+                        s.failed = false;
+                    }
+                    None => {
+                        self.supervised.insert(name, Supervised::new(spec));
+                    }
+                }
                 Ok(RouterReply::Ok)
             }
             CliRequest::Kill { name } => {
@@ -430,6 +499,72 @@ impl State {
             CliRequest::Shutdown => {
                 self.shutdown = true;
                 Ok(RouterReply::Ok)
+            }
+        }
+    }
+
+    /// A supervised agent exited (`failure`: died without leaving cleanly).
+    fn exited(&mut self, name: &str, failure: bool) {
+        let Some(sup) = self.supervised.get_mut(name) else { return };
+        let wanted = match sup.spec.policy {
+            RestartPolicy::Never => false,
+            RestartPolicy::OnFailure => failure,
+            RestartPolicy::Always => true,
+        };
+        if !wanted || sup.stopped_by_user || sup.failed || self.shutdown {
+            return;
+        }
+        let now = Instant::now();
+        let window = Duration::from_nanos(sup.spec.window_ns);
+        while sup.recent.front().is_some_and(|t| now.duration_since(*t) > window) {
+            sup.recent.pop_front();
+        }
+        if sup.recent.len() as u32 >= sup.spec.max_restarts {
+            sup.failed = true;
+            tracing::error!(
+                "agent {name} failed: {} restarts within {window:?}; not restarting it (see its log, fix it, then `nerve start` it or launch again)",
+                sup.recent.len()
+            );
+            return;
+        }
+        let exp = sup.recent.len().min(16) as u32;
+        let delay = Duration::from_nanos(sup.spec.backoff_ns).saturating_mul(1 << exp).min(MAX_BACKOFF);
+        sup.next_start = Some(now + delay);
+        tracing::warn!(
+            "restarting {name} in {delay:?} (restart {} of at most {} within {window:?})",
+            sup.recent.len() + 1,
+            sup.spec.max_restarts
+        );
+    }
+
+    /// Starts the supervised agents whose back-off has passed; reaps start-up processes.
+    fn run_restarts(&mut self) {
+        self.children.retain_mut(|c| !matches!(c.try_wait(), Ok(Some(_))));
+        let now = Instant::now();
+        let due: Vec<String> = self
+            .supervised
+            .iter()
+            .filter(|(n, s)| s.next_start.is_some_and(|t| t <= now) && !self.agents.contains_key(*n))
+            .map(|(n, _)| n.clone())
+            .collect();
+        for name in due {
+            let log = self.world.log_file(&name);
+            let Some(sup) = self.supervised.get_mut(&name) else { continue };
+            sup.next_start = None;
+            sup.recent.push_back(now);
+            sup.total += 1;
+            let stderr = std::fs::OpenOptions::new().create(true).append(true).open(&log);
+            let mut cmd = std::process::Command::new(&sup.spec.argv[0]);
+            cmd.args(&sup.spec.argv[1..]).stdin(std::process::Stdio::null()).stdout(std::process::Stdio::null());
+            if let Ok(f) = stderr {
+                cmd.stderr(f);
+            }
+            match cmd.spawn() {
+                Ok(child) => {
+                    tracing::info!("restarted {name} (restart {})", sup.total);
+                    self.children.push(child);
+                }
+                Err(e) => tracing::error!("cannot restart {name}: {e} ({})", sup.spec.argv[0]),
             }
         }
     }
@@ -458,8 +593,31 @@ impl State {
                 outputs: e.reg.outputs.clone(),
                 log_file: e.reg.log_file.clone(),
                 stats,
+                restarts: self.supervised.get(&name).map(|s| s.total).unwrap_or(0),
+                importance: self.supervised.get(&name).map(|s| s.spec.importance),
             });
         }
+        // supervised agents that are not running: restarting or failed
+        for (name, sup) in &self.supervised {
+            if self.agents.contains_key(name) || !(sup.failed || sup.next_start.is_some()) {
+                continue;
+            }
+            out.push(AgentView {
+                name: name.clone(),
+                pid: 0,
+                kind: sup.spec.argv[0].rsplit('/').next().unwrap_or("").trim_start_matches("nerve-").to_owned(),
+                state: if sup.failed { AgentState::Failed } else { AgentState::Restarting },
+                task: TaskKind::Periodic,
+                period_ns: None,
+                inputs: vec![],
+                outputs: vec![],
+                log_file: Some(self.world.log_file(name).display().to_string()),
+                stats: None,
+                restarts: sup.total,
+                importance: Some(sup.spec.importance),
+            });
+        }
+        out.sort_by(|a, b| a.name.cmp(&b.name));
         out
     }
 

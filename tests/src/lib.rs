@@ -46,7 +46,14 @@ pub struct Robot {
 
 impl Robot {
     /// A new robot with a unique name; `tag` (a few letters) helps reading leftovers.
+    ///
+    /// The test process becomes a child subreaper, as init is on a real
+    /// system: daemons whose parents exit are re-parented to it, and
+    /// [`reap`] collects them when they die (PID 1 of the build sandbox does
+    /// not reap orphans).
     pub fn new(tag: &str) -> Self {
+        // SAFETY: prctl with PR_SET_CHILD_SUBREAPER takes no pointers.
+        unsafe { libc::prctl(libc::PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) };
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
         let tag: String = tag.chars().filter(|c| c.is_ascii_lowercase()).take(6).collect();
         let name =
@@ -99,6 +106,20 @@ impl Robot {
     /// Starts the router as a daemon.
     pub fn router(&self) {
         self.ok(&["router", "--daemon"]);
+    }
+
+    /// Writes a launch file for this robot (its `robot = ...` line set to this robot) and returns its path.
+    pub fn launch_file(&self, file_name: &str, contents: &str) -> PathBuf {
+        let body: String = contents
+            .lines()
+            .map(|l| {
+                if l.trim_start().starts_with("robot =") { format!("robot = \"{}\"", self.name) } else { l.to_owned() }
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        let path = self.home.join(file_name);
+        std::fs::write(&path, body + "\n").expect("write launch file");
+        path
     }
 
     /// `nerve ps --json`.
@@ -179,6 +200,23 @@ pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+}
+
+/// Collects every exited child (re-parented daemons included).
+pub fn reap() {
+    loop {
+        let mut status = 0;
+        // SAFETY: waitpid with WNOHANG and a valid status pointer.
+        let rc = unsafe { libc::waitpid(-1, &mut status, libc::WNOHANG) };
+        if rc <= 0 {
+            break;
+        }
+    }
+}
+
+/// Whether `pid` exists at all (a zombie counts).
+pub fn exists(pid: u32) -> bool {
+    std::path::Path::new(&format!("/proc/{pid}")).exists()
 }
 
 /// Whether process `pid` is alive and not a zombie.

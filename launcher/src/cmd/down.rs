@@ -57,7 +57,9 @@ pub fn bring_down(world: &World, grace: Duration) -> (usize, usize) {
     if let Ok(s) = RouterSession::open(world) {
         if let Ok(RouterReply::Agents(agents)) = s.call(CliRequest::Ps) {
             for a in &agents {
-                pids.push(a.pid);
+                if a.pid > 0 {
+                    pids.push(a.pid);
+                }
                 let _ = s.call(CliRequest::Stop { name: a.name.clone() });
             }
         }
@@ -65,7 +67,7 @@ pub fn bring_down(world: &World, grace: Duration) -> (usize, usize) {
     }
     // 2. every process with a pid file (agents started without a router, the router)
     for (_, pid, _) in pid_files(world) {
-        if !pids.contains(&pid) && pid_alive(pid) && is_nerve_process(pid) {
+        if pid > 0 && !pids.contains(&pid) && pid_alive(pid) && is_nerve_process(pid) {
             pids.push(pid);
         }
     }

@@ -55,7 +55,7 @@ pub fn print_agents(agents: &[AgentView]) {
             None => ("?".into(), "?".into(), "?".into(), "?".into()),
         };
         println!(
-            "{:<16} {:>8} {:<10} {:<12} {:<13} {:>8} {:>9} {:>24} {:>5} {:>6}  {:<24} {}",
+            "{:<16} {:>8} {:<10} {:<12} {:<13} {:>8} {:>9} {:>24} {:>5} {:>6} {:>4}  {:<24} {}",
             a.name,
             a.pid,
             a.kind,
@@ -66,6 +66,7 @@ pub fn print_agents(agents: &[AgentView]) {
             jitter,
             ovr,
             cpu,
+            a.restarts,
             ports(&a.inputs),
             ports(&a.outputs)
         );

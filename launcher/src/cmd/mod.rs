@@ -1,9 +1,11 @@
 //! One module per family of commands; [`dispatch`] routes the parsed command line.
 
-mod down;
+pub mod down;
 mod echo;
 mod inspect;
-mod start;
+mod launch;
+mod logs;
+pub mod start;
 mod wire;
 
 use crate::cli::{Cli, Command};
@@ -29,5 +31,8 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Echo(a) => echo::echo(&world, a),
         Command::Hz(a) => echo::hz(&world, a),
         Command::Down(a) => down::down(&world, a),
+        Command::Launch(a) => launch::launch(&cli.robot, a),
+        Command::Logs(a) => logs::logs(&world, a),
+        Command::Exec(a) => start::exec(&world, a),
     }
 }

@@ -1,7 +1,7 @@
 //! `nerve router` and `nerve start`: running the router, and hot-adding an
 //! agent as a daemon.
 
-use crate::cli::{RouterArgs, StartArgs};
+use crate::cli::{ExecArgs, RouterArgs, StartArgs};
 use agent_sdk::World;
 use agent_sdk::daemon::{Readiness, daemonize, init_logging, sd_notify};
 use anyhow::{Context as _, Result, bail};
@@ -109,4 +109,13 @@ pub fn start(world: &World, a: StartArgs) -> Result<ExitCode> {
         return Ok(ExitCode::from(1));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Replaces this process with the agent of kind `a.kind` (same pid, so
+/// systemd's `Type=notify` and watchdog see the agent itself).
+pub fn exec(world: &World, a: ExecArgs) -> Result<ExitCode> {
+    use std::os::unix::process::CommandExt;
+    let exe = resolve_kind(&a.kind)?;
+    let err = Command::new(&exe).arg("--robot").arg(world.robot().as_str()).args(&a.args).exec();
+    bail!("cannot run {}: {err}", exe.display())
 }

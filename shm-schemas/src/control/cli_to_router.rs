@@ -79,8 +79,41 @@ pub enum CliRequest {
         /// agent
         name: String,
     },
+    /// Supervise an agent: restart it by `argv` when it dies, per `policy`.
+    Supervise(Supervision),
     /// Stop the router itself.
     Shutdown,
+}
+
+/// When a supervised agent is restarted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RestartPolicy {
+    /// Never.
+    Never,
+    /// When it dies without leaving cleanly (crash, kill).
+    OnFailure,
+    /// Whenever it exits, unless stopped by `nerve stop` or `nerve down`.
+    Always,
+}
+
+/// How the router restarts an agent.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Supervision {
+    /// agent name
+    pub name: String,
+    /// the command line that starts it as a daemon
+    pub argv: Vec<String>,
+    /// when to restart
+    pub policy: RestartPolicy,
+    /// restarts allowed within `window_ns`; past it the agent is marked failed
+    pub max_restarts: u32,
+    /// the window, ns
+    pub window_ns: u64,
+    /// first back-off delay, ns; it doubles with each restart in the window
+    pub backoff_ns: u64,
+    /// 1..10, for the resource manager
+    pub importance: u8,
 }
 
 /// Whether an agent's task runs.
@@ -93,6 +126,10 @@ pub enum AgentState {
     Suspended,
     /// The agent does not answer its control service.
     Unresponsive,
+    /// The agent died and its supervisor will restart it after a back-off.
+    Restarting,
+    /// The agent died too often; its supervisor gave up.
+    Failed,
 }
 
 impl std::fmt::Display for AgentState {
@@ -101,6 +138,8 @@ impl std::fmt::Display for AgentState {
             AgentState::Running => "running",
             AgentState::Suspended => "suspended",
             AgentState::Unresponsive => "unresponsive",
+            AgentState::Restarting => "restarting",
+            AgentState::Failed => "failed",
         })
     }
 }
@@ -128,6 +167,12 @@ pub struct AgentView {
     pub log_file: Option<String>,
     /// statistics, when the agent answered in time
     pub stats: Option<AgentStats>,
+    /// restarts by the supervisor since it was first supervised
+    #[serde(default)]
+    pub restarts: u32,
+    /// importance (1..10) when supervised
+    #[serde(default)]
+    pub importance: Option<u8>,
 }
 
 /// One connection as `nerve graph` shows it, with live figures measured at

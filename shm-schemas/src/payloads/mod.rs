@@ -5,12 +5,20 @@
 //! name nerve uses in its registry and error messages, and makes the payload
 //! printable as JSON by `nerve echo`.
 
+pub mod head;
+pub mod ir;
+pub mod motion;
 pub mod router;
 pub mod scalar;
+pub mod sonar;
 pub mod tick;
 
+pub use head::{HeadCommand, HeadState};
+pub use ir::IrSighting;
+pub use motion::{GroundTruth, LinguisticCommand, LinguisticTerm, Odometry, SafetyStop, VelocityCommand};
 pub use router::RouterEpoch;
 pub use scalar::Scalar;
+pub use sonar::{SONAR_DIRECTIONS, SonarScan};
 pub use tick::Tick;
 
 use iceoryx2::prelude::ZeroCopySend;
@@ -39,6 +47,15 @@ macro_rules! for_each_payload {
         $m!($crate::payloads::RouterEpoch);
         $m!($crate::payloads::Scalar);
         $m!($crate::ring::RingNotice);
+        $m!($crate::payloads::SonarScan);
+        $m!($crate::payloads::VelocityCommand);
+        $m!($crate::payloads::LinguisticCommand);
+        $m!($crate::payloads::SafetyStop);
+        $m!($crate::payloads::Odometry);
+        $m!($crate::payloads::GroundTruth);
+        $m!($crate::payloads::IrSighting);
+        $m!($crate::payloads::HeadCommand);
+        $m!($crate::payloads::HeadState);
     };
 }
 

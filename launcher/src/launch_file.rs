@@ -1,0 +1,490 @@
+//! Launch files: a robot composed in one TOML file.
+//!
+//! ```toml
+//! robot = "demo"                 # optional
+//! [[agent]]
+//! name = "t1"
+//! kind = "ticker"                # or exe = "path/to/agent"
+//! period = "10ms"
+//! params = { step = 1 }
+//! restart = "on-failure"         # never | on-failure | always
+//! [[agent]]
+//! name = "r1"
+//! kind = "relay"
+//! [[connect]]
+//! from = "t1/tick"
+//! to = "r1/in"
+//! ```
+//!
+//! Parsing is strict (unknown keys are refused) and the whole file is
+//! checked before anything starts: syntax, names, unknown kinds, missing
+//! executables, duplicate names, periods, connections to unknown agents or
+//! ports, mismatched types. Ports and types come from each agent executable's
+//! `--describe`. Every problem is reported as `FILE:LINE: what, and what to do`.
+
+use crate::cmd::start::resolve_kind;
+use agent_sdk::World;
+use serde::Deserialize;
+use shm_schemas::control::agent_to_router::TaskKind;
+use shm_schemas::control::describe::Description;
+use shm_schemas::{AgentName, PortRef, RobotName};
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+use toml::Spanned;
+
+/// When a supervised agent is restarted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RestartPolicy {
+    /// never
+    Never,
+    /// when it dies without leaving cleanly
+    OnFailure,
+    /// whenever it exits, unless stopped by `nerve stop` or `nerve down`
+    Always,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    robot: Option<Spanned<String>>,
+    #[serde(default)]
+    agent: Vec<RawAgent>,
+    #[serde(default)]
+    connect: Vec<RawConnect>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAgent {
+    name: Spanned<String>,
+    kind: Option<Spanned<String>>,
+    exe: Option<Spanned<String>>,
+    period: Option<Spanned<String>>,
+    device: Option<Spanned<String>>,
+    #[serde(default)]
+    args: Vec<String>,
+    #[serde(default)]
+    params: BTreeMap<String, toml::Value>,
+    restart: Option<Spanned<RestartPolicy>>,
+    max_restarts: Option<u32>,
+    restart_window: Option<Spanned<String>>,
+    backoff: Option<Spanned<String>>,
+    importance: Option<Spanned<u8>>,
+    #[serde(default)]
+    suspended: bool,
+    log_level: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConnect {
+    from: Spanned<String>,
+    to: Spanned<String>,
+}
+
+/// One agent of a validated launch file.
+#[derive(Debug, Clone)]
+pub struct AgentSpec {
+    /// name
+    pub name: String,
+    /// kind shown to the user
+    pub kind: String,
+    /// the executable
+    pub exe: PathBuf,
+    /// period, for periodic agents
+    pub period: Option<String>,
+    /// agent-specific arguments (after `--`), with `{state}` and `{robot}` expanded
+    pub args: Vec<String>,
+    /// `KEY=VALUE` parameter settings
+    pub params: Vec<String>,
+    /// restart policy
+    pub restart: RestartPolicy,
+    /// restarts allowed within `restart_window`
+    pub max_restarts: u32,
+    /// the window
+    pub restart_window: Duration,
+    /// first back-off delay (doubles per restart in the window)
+    pub backoff: Duration,
+    /// 1..10, for the resource manager
+    pub importance: u8,
+    /// start suspended
+    pub suspended: bool,
+    /// log filter
+    pub log_level: Option<String>,
+    /// the agent's own description
+    pub description: Description,
+}
+
+impl AgentSpec {
+    /// The command line that starts this agent as a daemon.
+    pub fn argv(&self, robot: &str) -> Vec<String> {
+        let mut v = vec![
+            self.exe.display().to_string(),
+            "--robot".into(),
+            robot.into(),
+            "--name".into(),
+            self.name.clone(),
+            "--daemon".into(),
+        ];
+        if let Some(p) = &self.period {
+            v.extend(["--period".into(), p.clone()]);
+        }
+        if let Some(l) = &self.log_level {
+            v.extend(["--log-level".into(), l.clone()]);
+        }
+        if self.suspended {
+            v.push("--suspended".into());
+        }
+        for p in &self.params {
+            v.extend(["--param".into(), p.clone()]);
+        }
+        if !self.args.is_empty() {
+            v.push("--".into());
+            v.extend(self.args.iter().cloned());
+        }
+        v
+    }
+}
+
+/// A validated launch file.
+#[derive(Debug, Clone)]
+pub struct LaunchFile {
+    /// the file
+    pub path: PathBuf,
+    /// agents in file order
+    pub agents: Vec<AgentSpec>,
+    /// connections (from, to) in file order
+    pub connections: Vec<(PortRef, PortRef)>,
+}
+
+/// Every problem found in a launch file, each with its line.
+#[derive(Debug)]
+pub struct LaunchErrors {
+    /// the file
+    pub path: PathBuf,
+    /// (line, message)
+    pub errors: Vec<(usize, String)>,
+}
+
+impl std::fmt::Display for LaunchErrors {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (line, msg) in &self.errors {
+            writeln!(f, "{}:{line}: {msg}", self.path.display())?;
+        }
+        write!(f, "{} problem(s) in {}; nothing was started", self.errors.len(), self.path.display())
+    }
+}
+
+impl std::error::Error for LaunchErrors {}
+
+fn line_of(src: &str, offset: usize) -> usize {
+    src[..offset.min(src.len())].bytes().filter(|b| *b == b'\n').count() + 1
+}
+
+struct Ctx<'a> {
+    src: &'a str,
+    errors: Vec<(usize, String)>,
+}
+
+impl Ctx<'_> {
+    fn err<T>(&mut self, at: &Spanned<T>, msg: impl Into<String>) {
+        let line = line_of(self.src, at.span().start);
+        self.errors.push((line, msg.into()));
+    }
+}
+
+/// Expands `{state}` and `{robot}` in a launch-file string.
+pub fn expand(s: &str, world: &World) -> String {
+    s.replace("{state}", &world.state_dir().display().to_string()).replace("{robot}", world.robot().as_str())
+}
+
+fn param_text(v: &toml::Value) -> Option<String> {
+    match v {
+        toml::Value::String(s) => Some(s.clone()),
+        toml::Value::Integer(i) => Some(i.to_string()),
+        toml::Value::Float(f) => Some(f.to_string()),
+        toml::Value::Boolean(b) => Some(b.to_string()),
+        _ => None,
+    }
+}
+
+/// Runs `EXE --describe [--param ..] -- ARGS` and parses its description.
+pub fn describe(exe: &Path, params: &[String], args: &[String]) -> Result<Description, String> {
+    let mut cmd = std::process::Command::new(exe);
+    cmd.arg("--describe").arg("--no-realtime");
+    for p in params {
+        cmd.arg("--param").arg(p);
+    }
+    if !args.is_empty() {
+        cmd.arg("--").args(args);
+    }
+    let out = cmd.env_remove("NOTIFY_SOCKET").output().map_err(|e| format!("cannot run {}: {e}", exe.display()))?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let msg = err.lines().rfind(|l| l.starts_with("error")).unwrap_or(err.trim());
+        return Err(msg.trim_start_matches("error: ").to_owned());
+    }
+    let d: Description = serde_json::from_slice(&out.stdout).map_err(|e| {
+        format!("{} is not a nerve agent (its --describe output is not understood: {e})", exe.display())
+    })?;
+    if d.protocol != shm_schemas::PROTOCOL_VERSION {
+        return Err(shm_schemas::ProtocolError::VersionMismatch {
+            peer: d.protocol,
+            ours: shm_schemas::PROTOCOL_VERSION,
+        }
+        .to_string());
+    }
+    Ok(d)
+}
+
+/// Reads and checks a launch file for `world` (the robot the file runs on).
+/// `world_for` gets the robot name (from the file, else the command line).
+pub fn load(path: &Path, default_robot: &str) -> Result<(LaunchFile, World), Box<dyn std::error::Error + Send + Sync>> {
+    let src = std::fs::read_to_string(path).map_err(|e| format!("cannot read launch file {}: {e}", path.display()))?;
+    let fail = |errors| Box::new(LaunchErrors { path: path.to_path_buf(), errors });
+    let raw: RawFile = match toml::from_str(&src) {
+        Ok(r) => r,
+        Err(e) => {
+            let line = e.span().map(|s| line_of(&src, s.start)).unwrap_or(1);
+            let msg = e.message().to_owned();
+            let hint = if msg.contains("unknown field") { "; see the launch-file keys in README.md" } else { "" };
+            return Err(fail(vec![(line, format!("{msg}{hint}"))]));
+        }
+    };
+    let mut cx = Ctx { src: &src, errors: Vec::new() };
+    let robot = match &raw.robot {
+        Some(r) => match RobotName::new(r.get_ref()) {
+            Ok(_) => r.get_ref().clone(),
+            Err(e) => {
+                cx.err(r, e.to_string());
+                default_robot.to_owned()
+            }
+        },
+        None => default_robot.to_owned(),
+    };
+    let world = World::new(&robot)?;
+
+    let mut agents = Vec::new();
+    let mut seen: HashMap<String, usize> = HashMap::new();
+    let mut descriptions: HashMap<(PathBuf, Vec<String>, Vec<String>), Result<Description, String>> = HashMap::new();
+    if raw.agent.is_empty() {
+        cx.errors.push((1, "no [[agent]] in the file; add at least one agent".into()));
+    }
+    for a in &raw.agent {
+        let name = a.name.get_ref().clone();
+        if let Err(e) = AgentName::new(&name) {
+            cx.err(&a.name, e.to_string());
+            continue;
+        }
+        let line = line_of(&src, a.name.span().start);
+        if let Some(first) = seen.insert(name.clone(), line) {
+            cx.err(
+                &a.name,
+                format!("duplicate agent name {name:?} (first defined on line {first}); names must be unique"),
+            );
+            continue;
+        }
+        let (kind, exe) = match (&a.kind, &a.exe) {
+            (Some(k), None) => match resolve_kind(k.get_ref()) {
+                Ok(exe) => (k.get_ref().clone(), exe),
+                Err(e) => {
+                    cx.err(k, format!("{e:#}"));
+                    continue;
+                }
+            },
+            (None, Some(x)) => {
+                let p = PathBuf::from(expand(x.get_ref(), &world));
+                match resolve_kind(&p.display().to_string()) {
+                    Ok(exe) => (p.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(), exe),
+                    Err(_) => {
+                        cx.err(
+                            x,
+                            format!(
+                                "executable {} is missing or not executable; build it or fix the path",
+                                p.display()
+                            ),
+                        );
+                        continue;
+                    }
+                }
+            }
+            (Some(k), Some(_)) => {
+                cx.err(k, format!("agent {name:?} has both `kind` and `exe`; give one"));
+                continue;
+            }
+            (None, None) => {
+                cx.err(&a.name, format!("agent {name:?} needs `kind = \"...\"` (e.g. ticker) or `exe = \"path\"`"));
+                continue;
+            }
+        };
+        let mut args: Vec<String> = a.args.iter().map(|s| expand(s, &world)).collect();
+        if let Some(d) = &a.device {
+            args.push("--device".into());
+            args.push(expand(d.get_ref(), &world));
+        }
+        let mut params = Vec::new();
+        for (k, v) in &a.params {
+            match param_text(v) {
+                Some(t) => params.push(format!("{k}={t}")),
+                None => cx.err(&a.name, format!("parameter {k:?} of {name:?} must be a string, number or boolean")),
+            }
+        }
+        let dur = |cx: &mut Ctx, s: &Option<Spanned<String>>, default: Duration| match s {
+            Some(s) => agent_sdk::clock::parse_duration(s.get_ref()).unwrap_or_else(|e| {
+                cx.err(s, e);
+                default
+            }),
+            None => default,
+        };
+        if let Some(p) = &a.period {
+            if let Err(e) = agent_sdk::clock::parse_duration(p.get_ref()) {
+                cx.err(p, format!("period: {e}"));
+            }
+        }
+        let restart_window = dur(&mut cx, &a.restart_window, Duration::from_secs(60));
+        let backoff = dur(&mut cx, &a.backoff, Duration::from_millis(250));
+        let importance = match &a.importance {
+            Some(i) if !(1..=10).contains(i.get_ref()) => {
+                cx.err(i, "importance must be between 1 and 10");
+                5
+            }
+            Some(i) => *i.get_ref(),
+            None => 5,
+        };
+        let key = (exe.clone(), params.clone(), args.clone());
+        let description = descriptions.entry(key).or_insert_with(|| describe(&exe, &params, &args)).clone();
+        let description = match description {
+            Ok(d) => d,
+            Err(e) => {
+                cx.err(a.kind.as_ref().or(a.exe.as_ref()).unwrap_or(&a.name), format!("agent {name:?}: {e}"));
+                continue;
+            }
+        };
+        if a.period.is_some() && description.task == TaskKind::EventDriven {
+            if let Some(p) = &a.period {
+                cx.err(p, format!("agent {name:?} ({kind}) is event-driven; remove `period`"));
+            }
+        }
+        agents.push(AgentSpec {
+            name,
+            kind,
+            exe,
+            period: a.period.as_ref().map(|p| p.get_ref().clone()),
+            args,
+            params,
+            restart: a.restart.as_ref().map(|r| *r.get_ref()).unwrap_or(RestartPolicy::OnFailure),
+            max_restarts: a.max_restarts.unwrap_or(5),
+            restart_window,
+            backoff,
+            importance,
+            suspended: a.suspended,
+            log_level: a.log_level.clone(),
+            description,
+        });
+    }
+
+    let mut connections = Vec::new();
+    for c in &raw.connect {
+        let from: PortRef = match c.from.get_ref().parse() {
+            Ok(p) => p,
+            Err(e) => {
+                cx.err(&c.from, e.to_string());
+                continue;
+            }
+        };
+        let to: PortRef = match c.to.get_ref().parse() {
+            Ok(p) => p,
+            Err(e) => {
+                cx.err(&c.to, e.to_string());
+                continue;
+            }
+        };
+        let find = |p: &PortRef| agents.iter().find(|a| a.name == p.agent.as_str());
+        let from_type = match find(&from) {
+            None => {
+                if !seen.contains_key(from.agent.as_str()) {
+                    cx.err(&c.from, format!("no agent named {:?} in this file", from.agent.as_str()));
+                }
+                None
+            }
+            Some(a) => match a.description.outputs.iter().find(|o| o.name == from.port) {
+                Some(o) => Some(o.type_name.clone()),
+                None => {
+                    let names: Vec<&str> = a.description.outputs.iter().map(|o| o.name.as_str()).collect();
+                    cx.err(
+                        &c.from,
+                        format!(
+                            "agent {:?} ({}) has no output port {:?}; its outputs: {}",
+                            a.name,
+                            a.kind,
+                            from.port,
+                            list(&names)
+                        ),
+                    );
+                    None
+                }
+            },
+        };
+        let to_type = match find(&to) {
+            None => {
+                if !seen.contains_key(to.agent.as_str()) {
+                    cx.err(&c.to, format!("no agent named {:?} in this file", to.agent.as_str()));
+                }
+                None
+            }
+            Some(a) => match a.description.inputs.iter().find(|i| i.name == to.port) {
+                Some(i) => Some(i.type_name.clone()),
+                None => {
+                    let names: Vec<&str> = a.description.inputs.iter().map(|i| i.name.as_str()).collect();
+                    cx.err(
+                        &c.to,
+                        format!(
+                            "agent {:?} ({}) has no input port {:?}; its inputs: {}",
+                            a.name,
+                            a.kind,
+                            to.port,
+                            list(&names)
+                        ),
+                    );
+                    None
+                }
+            },
+        };
+        if let (Some(ft), Some(tt)) = (&from_type, &to_type) {
+            if ft != tt {
+                cx.err(&c.from, format!("cannot connect {from} to {to}: {from} sends {ft} but {to} takes {tt}"));
+                continue;
+            }
+        }
+        if from_type.is_some() && to_type.is_some() {
+            if connections.iter().any(|(f, t)| f == &from && t == &to) {
+                cx.err(&c.from, format!("connection {from} -> {to} is listed twice"));
+            } else {
+                connections.push((from, to));
+            }
+        }
+    }
+    if !cx.errors.is_empty() {
+        cx.errors.sort_by_key(|(l, _)| *l);
+        return Err(fail(cx.errors));
+    }
+    Ok((LaunchFile { path: path.to_path_buf(), agents, connections }, world))
+}
+
+fn list(v: &[&str]) -> String {
+    if v.is_empty() { "none".into() } else { v.join(", ") }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lines_are_counted_from_one() {
+        assert_eq!(line_of("a\nb\nc", 0), 1);
+        assert_eq!(line_of("a\nb\nc", 2), 2);
+        assert_eq!(line_of("a\nb\nc", 4), 3);
+    }
+}

@@ -1,0 +1,254 @@
+//! Launch files, `nerve launch` and `nerve down`, supervision, systemd units
+//! and sd_notify: real processes, real shared memory.
+
+use nerve_tests::{Robot, alive, exists, reap, wait_until};
+use std::os::unix::net::UnixDatagram;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn pipeline() -> String {
+    std::fs::read_to_string(repo().join("launch/pipeline.toml")).expect("launch/pipeline.toml")
+}
+
+/// The example launch file comes up, data flows over both connections, and
+/// `nerve down` leaves no process, pid file or shared memory behind.
+#[test]
+fn launch_pipeline_then_down_leaves_nothing() {
+    let r = Robot::new("launch");
+    let file = r.launch_file("pipeline.toml", &pipeline());
+    let out = r.command("nerve").arg("launch").arg(&file).output().expect("launch");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("[1/3] t1 (ticker)") && err.contains("[3/3] r2 (relay)"), "progress per agent: {err}");
+    let pids: Vec<u32> = r.ps().iter().map(|a| a["pid"].as_u64().unwrap_or(0) as u32).collect();
+    assert_eq!(pids.len(), 3);
+    assert_eq!(r.echo("r1/out", 3).len(), 3);
+    assert_eq!(r.echo("r2/out", 3).len(), 3);
+    let g = r.graph();
+    assert_eq!(g["connections"].as_array().map(|c| c.len()), Some(2));
+    // agents log with their names
+    let log = r.ok(&["logs", "t1"]);
+    assert!(log.contains("[t1]"), "{log}");
+    r.down_and_check_clean();
+    reap();
+    for p in pids {
+        assert!(!exists(p), "process {p} left behind (or a zombie)");
+    }
+}
+
+/// Every kind of bad launch file is refused with file and line, and nothing starts.
+#[test]
+fn bad_launch_files_are_refused_with_file_and_line() {
+    let r = Robot::new("badlf");
+    let head = "robot = \"x\"\n";
+    let cases: &[(&str, String, &str)] = &[
+        ("syntax", format!("{head}[[agent]]\nname = \"t1\nkind = \"ticker\"\n"), ":3:"),
+        (
+            "unknown key",
+            format!("{head}[[agent]]\nname = \"t1\"\nkind = \"ticker\"\ncolour = \"red\"\n"),
+            "unknown field",
+        ),
+        (
+            "unknown kind",
+            format!("{head}[[agent]]\nname = \"t1\"\nkind = \"tickr\"\n"),
+            ":4: unknown agent kind \"tickr\"",
+        ),
+        (
+            "missing exe",
+            format!("{head}[[agent]]\nname = \"t1\"\nexe = \"/nonexistent/agent\"\n"),
+            ":4: executable /nonexistent/agent is missing",
+        ),
+        (
+            "duplicate",
+            format!("{head}[[agent]]\nname = \"t1\"\nkind = \"ticker\"\n[[agent]]\nname = \"t1\"\nkind = \"relay\"\n"),
+            ":6: duplicate agent name \"t1\" (first defined on line 3)",
+        ),
+        ("bad name", format!("{head}[[agent]]\nname = \"T 1\"\nkind = \"ticker\"\n"), ":3: agent name"),
+        ("bad period", format!("{head}[[agent]]\nname = \"t1\"\nkind = \"ticker\"\nperiod = \"soon\"\n"), ":5: period"),
+        (
+            "unknown agent",
+            format!(
+                "{head}[[agent]]\nname = \"t1\"\nkind = \"ticker\"\n[[connect]]\nfrom = \"t1/tick\"\nto = \"ghost/in\"\n"
+            ),
+            ":7: no agent named \"ghost\"",
+        ),
+        (
+            "unknown port",
+            format!(
+                "{head}[[agent]]\nname = \"t1\"\nkind = \"ticker\"\n[[agent]]\nname = \"r1\"\nkind = \"relay\"\n[[connect]]\nfrom = \"t1/tock\"\nto = \"r1/in\"\n"
+            ),
+            ":9: agent \"t1\" (ticker) has no output port \"tock\"; its outputs: tick",
+        ),
+        (
+            "type mismatch",
+            format!(
+                "{head}[[agent]]\nname = \"s1\"\nkind = \"testagent\"\n[[agent]]\nname = \"r1\"\nkind = \"relay\"\n[[connect]]\nfrom = \"s1/value\"\nto = \"r1/in\"\n"
+            ),
+            "s1/value sends nerve::Scalar but r1/in takes nerve::Tick",
+        ),
+    ];
+    for (what, body, expect) in cases {
+        let file = r.launch_file("bad.toml", body);
+        let out = r.command("nerve").arg("launch").arg(&file).output().expect("launch");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{what}: accepted");
+        assert!(err.contains(&file.display().to_string()), "{what}: names the file: {err}");
+        assert!(err.contains(expect), "{what}: expected {expect:?} in:\n{err}");
+        assert!(err.contains("nothing was started"), "{what}: {err}");
+        assert!(r.shm_files().is_empty(), "{what}: shared memory was created");
+        let ps = r.nerve(&["ps"]);
+        assert!(!ps.status.success(), "{what}: a router was started");
+        // `nerve ps` joined the robot's world to look: clean that up for the next case
+        r.ok(&["down"]);
+    }
+}
+
+/// An agent that crashes at once is restarted with growing back-off, then
+/// marked failed; the others run on; no restart storm.
+#[test]
+fn crashing_agent_is_restarted_with_backoff_then_marked_failed() {
+    let r = Robot::new("crash");
+    let file = r.launch_file(
+        "crash.toml",
+        "robot = \"x\"\n[[agent]]\nname = \"t1\"\nkind = \"ticker\"\n\n[[agent]]\nname = \"bad\"\nkind = \"testagent\"\nargs = [\"--mode\", \"crash\"]\nrestart = \"on-failure\"\nmax_restarts = 3\nbackoff = \"100ms\"\nrestart_window = \"60s\"\n",
+    );
+    let t0 = Instant::now();
+    // the crash comes after registration, so the launch itself succeeds
+    r.command("nerve").arg("launch").arg(&file).output().expect("launch");
+    let failed = || r.ps().iter().any(|a| a["name"] == "bad" && a["state"] == "failed");
+    assert!(wait_until(Duration::from_secs(30), failed), "never marked failed: {:?}", r.ps());
+    let elapsed = t0.elapsed();
+    let bad = r.ps().into_iter().find(|a| a["name"] == "bad").expect("bad listed");
+    assert_eq!(bad["restarts"], 3, "exactly max_restarts restarts: {bad}");
+    // back-off 100 + 200 + 400 ms at least between the crashes
+    assert!(elapsed >= Duration::from_millis(700), "restarted too fast: {elapsed:?}");
+    // it stays failed: no further restarts
+    std::thread::sleep(Duration::from_millis(800));
+    let bad = r.ps().into_iter().find(|a| a["name"] == "bad").expect("bad listed");
+    assert_eq!(bad["restarts"], 3);
+    assert!(r.agent("t1").is_some_and(|a| a["state"] == "running"), "the others run on");
+    let table = r.ok(&["ps"]);
+    assert!(table.contains("failed"), "{table}");
+    r.down_and_check_clean();
+}
+
+/// An agent that ignores SIGTERM is killed after the grace time; no zombie remains.
+#[test]
+fn sigterm_ignoring_agent_is_killed_after_grace() {
+    let r = Robot::new("stubborn");
+    r.router();
+    r.ok(&["start", "testagent", "--name", "mule", "--", "--mode", "stubborn"]);
+    let pid = r.pid("mule");
+    std::thread::sleep(Duration::from_millis(300)); // its first step ignores SIGTERM and blocks
+    let out = r.ok(&["down", "--grace", "1"]);
+    assert!(out.contains("with SIGKILL"), "{out}");
+    reap();
+    assert!(!alive(pid), "still running");
+    assert!(!exists(pid), "left a zombie");
+    assert!(r.shm_files().is_empty(), "{:?}", r.shm_files());
+}
+
+/// A crashed agent restarted by the supervisor gets its connections back.
+#[test]
+fn supervisor_restart_restores_connections() {
+    let r = Robot::new("superv");
+    let file = r.launch_file("pipeline.toml", &pipeline());
+    r.ok(&["launch", file.to_str().expect("utf-8 path")]);
+    let old = r.pid("r1");
+    nerve_tests::sigkill(old);
+    assert!(
+        wait_until(Duration::from_secs(10), || r
+            .agent("r1")
+            .is_some_and(|a| a["pid"].as_u64().unwrap_or(0) as u32 != old && a["pid"] != 0)),
+        "r1 was not restarted: {:?}",
+        r.ps()
+    );
+    assert_eq!(r.echo("r1/out", 3).len(), 3, "the restarted relay is fed again");
+    assert_eq!(r.agent("r1").map(|a| a["restarts"].clone()), Some(1.into()));
+    r.down_and_check_clean();
+}
+
+fn recv_all(sock: &UnixDatagram, for_how_long: Duration) -> Vec<(Duration, String)> {
+    let t0 = Instant::now();
+    let mut out = Vec::new();
+    let mut buf = [0u8; 512];
+    sock.set_read_timeout(Some(Duration::from_millis(50))).expect("timeout");
+    while t0.elapsed() < for_how_long {
+        if let Ok(n) = sock.recv(&mut buf) {
+            for line in String::from_utf8_lossy(&buf[..n]).lines() {
+                out.push((t0.elapsed(), line.to_owned()));
+            }
+        }
+    }
+    out
+}
+
+/// Agents tell systemd READY=1 and ping WATCHDOG=1 at half the interval; a
+/// hung agent stops pinging.
+#[test]
+fn sd_notify_ready_and_watchdog() {
+    let r = Robot::new("notify");
+    let sock_path = r.home.join("notify.sock");
+    let sock = UnixDatagram::bind(&sock_path).expect("bind notify socket");
+    let mut healthy = r
+        .command("nerve-ticker")
+        .args(["--name", "t1", "--period", "10ms"])
+        .env("NOTIFY_SOCKET", &sock_path)
+        .env("WATCHDOG_USEC", "200000")
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("spawn ticker");
+    let msgs = recv_all(&sock, Duration::from_millis(1500));
+    let _ = healthy.kill();
+    let _ = healthy.wait();
+    assert_eq!(msgs.first().map(|m| m.1.as_str()), Some("READY=1"), "{msgs:?}");
+    let pings = msgs.iter().filter(|m| m.1 == "WATCHDOG=1").count();
+    assert!(pings >= 5, "about one ping per 100 ms expected: {msgs:?}");
+
+    let mut hung = r
+        .command("nerve-testagent")
+        .args(["--name", "h1", "--", "--mode", "hang"])
+        .env("NOTIFY_SOCKET", &sock_path)
+        .env("WATCHDOG_USEC", "200000")
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("spawn hung agent");
+    let msgs = recv_all(&sock, Duration::from_millis(1500));
+    let _ = hung.kill();
+    let _ = hung.wait();
+    assert!(msgs.iter().any(|m| m.1 == "READY=1"), "{msgs:?}");
+    let late_pings = msgs.iter().filter(|m| m.1 == "WATCHDOG=1" && m.0 > Duration::from_millis(500)).count();
+    assert_eq!(late_pings, 0, "a hung agent must stop pinging: {msgs:?}");
+    r.down_and_check_clean();
+}
+
+/// `systemd-analyze verify` accepts every unit with no warning.
+#[test]
+fn systemd_units_verify() {
+    let r = Robot::new("units");
+    let dir = r.home.join("units");
+    std::fs::create_dir_all(&dir).expect("units dir");
+    let nerve = nerve_tests::bin_dir().join("nerve");
+    for unit in ["nerve-router.service", "nerve-agent@.service", "nerve.target"] {
+        let text = std::fs::read_to_string(repo().join("systemd").join(unit)).expect("unit file");
+        let text = text.replace("/usr/local/bin/nerve", &nerve.display().to_string());
+        std::fs::write(dir.join(unit), text).expect("write unit");
+    }
+    let agent_instance = dir.join("nerve-agent@t1.service");
+    let _ = std::fs::remove_file(&agent_instance);
+    std::os::unix::fs::symlink(dir.join("nerve-agent@.service"), &agent_instance).expect("instance link");
+    let out = std::process::Command::new("systemd-analyze")
+        .arg("verify")
+        .arg(dir.join("nerve-router.service"))
+        .arg(&agent_instance)
+        .arg(dir.join("nerve.target"))
+        .env("SYSTEMD_LOG_LEVEL", "warning")
+        .output()
+        .expect("systemd-analyze is missing: `apt-get install systemd` (.ci/run does)");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && stderr.trim().is_empty(), "systemd-analyze verify complained:\n{stderr}");
+}
