@@ -33,6 +33,9 @@ impl<T: Clone> Param<T> {
     }
 }
 
+/// A check on a new parameter value; the error says what is allowed.
+pub type ParamCheck<T> = Box<dyn Fn(&T) -> Result<(), String> + Send + Sync>;
+
 trait DynParam: Send + Sync {
     fn get(&self) -> String;
     fn set(&self, s: &str) -> Result<(), String>;
@@ -41,7 +44,7 @@ trait DynParam: Send + Sync {
 
 struct Slot<T> {
     value: Arc<Mutex<T>>,
-    check: Option<Box<dyn Fn(&T) -> Result<(), String> + Send + Sync>>,
+    check: Option<ParamCheck<T>>,
 }
 
 impl<T> DynParam for Slot<T>
@@ -86,12 +89,7 @@ impl std::fmt::Debug for ParamTable {
 
 impl ParamTable {
     /// Declares a parameter; `check` may refuse values (return a message saying what is allowed).
-    pub fn declare<T>(
-        &mut self,
-        key: &str,
-        default: T,
-        check: Option<Box<dyn Fn(&T) -> Result<(), String> + Send + Sync>>,
-    ) -> Param<T>
+    pub fn declare<T>(&mut self, key: &str, default: T, check: Option<ParamCheck<T>>) -> Param<T>
     where
         T: FromStr + Display + Send + 'static,
         T::Err: Display,

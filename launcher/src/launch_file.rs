@@ -268,7 +268,9 @@ pub fn load(path: &Path, default_robot: &str) -> Result<(LaunchFile, World), Box
 
     let mut agents = Vec::new();
     let mut seen: HashMap<String, usize> = HashMap::new();
-    let mut descriptions: HashMap<(PathBuf, Vec<String>, Vec<String>), Result<Description, String>> = HashMap::new();
+    // one `--describe` per distinct (executable, parameters, arguments)
+    type DescribeKey = (PathBuf, Vec<String>, Vec<String>);
+    let mut descriptions: HashMap<DescribeKey, Result<Description, String>> = HashMap::new();
     if raw.agent.is_empty() {
         cx.errors.push((1, "no [[agent]] in the file; add at least one agent".into()));
     }

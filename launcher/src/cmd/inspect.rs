@@ -25,8 +25,7 @@ fn ports(p: &[shm_schemas::control::agent_to_router::PortSpec]) -> String {
 }
 
 pub fn print_agents(agents: &[AgentView]) {
-    println!(
-        "{:<16} {:>8} {:<10} {:<12} {:<13} {:>8} {:>9} {:>24} {:>5} {:>6}  {:<24} {}",
+    const HEADER: [&str; 12] = [
         "NAME",
         "PID",
         "KIND",
@@ -37,9 +36,11 @@ pub fn print_agents(agents: &[AgentView]) {
         "JITTER p50/p99/max",
         "OVR",
         "CPU%",
+        "RST",
         "INPUTS",
-        "OUTPUTS"
-    );
+    ];
+    let [n, p, k, st, t, pe, r, j, o, c, rs, i] = HEADER;
+    println!("{n:<16} {p:>8} {k:<10} {st:<12} {t:<13} {pe:>8} {r:>9} {j:>24} {o:>5} {c:>6} {rs:>4}  {i:<24} OUTPUTS");
     for a in agents {
         let (rate, jitter, ovr, cpu) = match &a.stats {
             Some(s) => (
