@@ -165,6 +165,24 @@ impl<T: Payload> Output<T> {
         Ok(())
     }
 
+    /// Sends a payload written in place by `fill`, without writing a default
+    /// value first: a large frame costs one write into shared memory, not two.
+    ///
+    /// # Safety
+    /// `fill` must leave the payload initialised: every field a reader will
+    /// look at written, and only bit patterns valid for `T` in the rest (for
+    /// plain numeric and byte-array payloads any bytes are valid).
+    pub unsafe fn send_uninit(&self, fill: impl FnOnce(&mut std::mem::MaybeUninit<T>)) -> Result<(), PortError> {
+        let mut sample = self.publisher.loan_uninit().map_err(|e| perr(&self.service, e))?;
+        *sample.user_header_mut() = self.next_header();
+        fill(sample.payload_mut());
+        // SAFETY: the caller guarantees that `fill` initialised the payload.
+        let sample = unsafe { sample.assume_init() };
+        sample.send().map_err(|e| perr(&self.service, e))?;
+        self.notifier.notify().map_err(|e| perr(&self.service, e))?;
+        Ok(())
+    }
+
     fn next_header(&self) -> SampleHeader {
         let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
         SampleHeader { sender: self.sender, seq, stamp_ns: now_ns() }

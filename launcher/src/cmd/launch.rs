@@ -74,8 +74,7 @@ pub fn launch(cli_robot: &str, a: LaunchArgs) -> Result<ExitCode> {
         RouterReply::Agents(v) => v.into_iter().filter(|a| a.pid > 0).map(|a| a.name).collect(),
         _ => vec![],
     };
-    let failed = start_agents(&world, &file, &running)?;
-    wait_registered(&session, &file)?;
+    // supervision first, so that an agent dying right after it starts is restarted
     for spec in &file.agents {
         session.ok(CliRequest::Supervise(proto::Supervision {
             name: spec.name.clone(),
@@ -87,6 +86,8 @@ pub fn launch(cli_robot: &str, a: LaunchArgs) -> Result<ExitCode> {
             importance: spec.importance,
         }))?;
     }
+    let failed = start_agents(&world, &file, &running)?;
+    wait_registered(&session, &file)?;
     let mut wiring_failed = 0;
     for (from, to) in &file.connections {
         match session.ok(CliRequest::Connect { from: from.clone(), to: to.clone() }) {
@@ -173,8 +174,9 @@ fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<
 fn wait_registered(session: &RouterSession, file: &LaunchFile) -> Result<()> {
     let t0 = Instant::now();
     loop {
+        // registered, or already in the supervisor's hands (restarting, failed)
         let live: Vec<String> = match session.call(CliRequest::Ps)? {
-            RouterReply::Agents(v) => v.into_iter().filter(|a| a.pid > 0).map(|a| a.name).collect(),
+            RouterReply::Agents(v) => v.into_iter().map(|a| a.name).collect(),
             _ => vec![],
         };
         let missing: Vec<&str> =
@@ -214,4 +216,41 @@ fn follow(world: &World, file: &LaunchFile) -> Result<()> {
         if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
     );
     Ok(())
+}
+
+/// Launches `path` as `nerve launch` does (without `--foreground`) on robot
+/// `robot` unless the file names its own, and returns the robot's world.
+/// Unlike [`launch`], any failure — an invalid file, an agent that did not
+/// start or register, a connection refused — is an error. Used by `nerve demo`.
+pub(crate) fn launch_robot(robot: &str, path: &std::path::Path) -> Result<World> {
+    let (file, world) = launch_file::load(path, robot).map_err(|e| anyhow!("{e}"))?;
+    world.ensure_state_dirs()?;
+    ensure_router(&world)?;
+    let session = RouterSession::open(&world)?;
+    let running: Vec<String> = match session.call(CliRequest::Ps)? {
+        RouterReply::Agents(v) => v.into_iter().filter(|a| a.pid > 0).map(|a| a.name).collect(),
+        _ => vec![],
+    };
+    let failed = start_agents(&world, &file, &running)?;
+    if failed > 0 {
+        bail!("{failed} agent(s) of {} did not start (see the lines above)", path.display());
+    }
+    wait_registered(&session, &file)?;
+    for spec in &file.agents {
+        session
+            .ok(CliRequest::Supervise(proto::Supervision {
+                name: spec.name.clone(),
+                argv: spec.argv(world.robot().as_str()),
+                policy: policy(spec.restart),
+                max_restarts: spec.max_restarts,
+                window_ns: spec.restart_window.as_nanos() as u64,
+                backoff_ns: spec.backoff.as_nanos() as u64,
+                importance: spec.importance,
+            }))
+            .with_context(|| format!("the router refused to supervise {}", spec.name))?;
+    }
+    for (from, to) in &file.connections {
+        session.ok(CliRequest::Connect { from: from.clone(), to: to.clone() }).with_context(|| format!("cannot connect {from} -> {to}"))?;
+    }
+    Ok(world)
 }

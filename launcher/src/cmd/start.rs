@@ -23,12 +23,19 @@ pub fn router(world: &World, a: RouterArgs) -> Result<ExitCode> {
             bail!(e);
         }
     };
+    // liveness checks and restarts keep their timing under load; agents run above (20+)
+    if let Err(e) = agent_sdk::rt::set_thread_fifo(ROUTER_PRIORITY) {
+        tracing::info!("real-time scheduling not permitted ({e}); the router runs with normal priority");
+    }
     readiness.ready(&format!("router of robot {} started (pid {})", world.robot(), std::process::id()));
     let _ = sd_notify("READY=1");
     router.run().map_err(anyhow::Error::msg)?;
     drop(readiness);
     Ok(ExitCode::SUCCESS)
 }
+
+/// SCHED_FIFO priority of the router: below every agent's task (20) and message checker.
+const ROUTER_PRIORITY: i32 = 10;
 
 /// Prefix of agent executables: kind `ticker` is the program `nerve-ticker`.
 pub const AGENT_PREFIX: &str = "nerve-";

@@ -1,0 +1,275 @@
+//! The benchmark's own agents, written with the real SDK exactly as any
+//! nerve agent is, and run as processes of this executable through hidden
+//! subcommands (`nerve-bench __agent-ping ...`) that call
+//! [`agent_sdk::run_with_args`].
+//!
+//! * `ping` (event-driven): on `nerve resume` it starts a batch: it sends a
+//!   sample on `out` and, each time the echo comes back on `in`, records the
+//!   round-trip time and sends the next; after `--count` round trips it
+//!   writes them to `<out-dir>/batch-<k>.txt` and waits for the next resume.
+//! * `pong` (event-driven): echoes every sample of `in` on `out`
+//!   (`Output::send_uninit`: only the sequence number is written, in place).
+//! * `jitter` (periodic): records, for `--cycles` cycles, how late each
+//!   wake-up was after its absolute deadline, writes the values to `--out`
+//!   and idles until stopped.
+
+use crate::payloads::BenchPayload;
+use crate::with_payload;
+use agent_sdk::clock::now_ns;
+use agent_sdk::{Agent, AgentError, CommonArgs, Context, Input, Output, Setup, Task};
+use clap::Parser;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+/// Arguments after `--` of the benchmark agents.
+#[derive(Debug, Parser)]
+#[command(no_binary_name = true)]
+struct BenchAgentArgs {
+    /// payload size in bytes (8, 230400 or 6220800)
+    #[arg(long, default_value_t = 8)]
+    size: usize,
+    /// ping: round trips per batch
+    #[arg(long, default_value_t = 1000)]
+    count: usize,
+    /// ping: directory for batch files; jitter: the output file
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// jitter: cycles to record
+    #[arg(long, default_value_t = 1000)]
+    cycles: usize,
+}
+
+fn agent_args(setup: &Setup) -> Result<BenchAgentArgs, AgentError> {
+    BenchAgentArgs::try_parse_from(setup.args()).map_err(|e| AgentError::Config(e.to_string()))
+}
+
+/// Writes one value per line to `path` atomically (temp file, then rename).
+pub fn write_values(path: &Path, values: &[u64]) -> std::io::Result<()> {
+    let tmp = path.with_extension("tmp");
+    {
+        let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+        for v in values {
+            writeln!(f, "{v}")?;
+        }
+        f.flush()?;
+    }
+    std::fs::rename(&tmp, path)
+}
+
+/// Reads the values [`write_values`] wrote.
+pub fn read_values(path: &Path) -> anyhow::Result<Vec<u64>> {
+    use anyhow::Context as _;
+    let s = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    s.lines()
+        .filter(|l| !l.is_empty())
+        .map(|l| l.trim().parse::<u64>().with_context(|| format!("bad value {l:?} in {}", path.display())))
+        .collect()
+}
+
+/// The ping side of the SDK round trip.
+struct Ping<P: BenchPayload> {
+    input: Input<P>,
+    out: Output<P>,
+    count: usize,
+    dir: PathBuf,
+    batch: u64,
+    seq: u64,
+    /// (seq, send time) of the sample in flight
+    outstanding: Option<(u64, u64)>,
+    rtts: Vec<u64>,
+}
+
+impl<P: BenchPayload> Ping<P> {
+    fn send_next(&mut self) -> Result<(), AgentError> {
+        self.seq += 1;
+        let seq = self.seq;
+        let t0 = now_ns();
+        self.outstanding = Some((seq, t0));
+        // SAFETY: bench payloads are a sequence number plus plain bytes; any bytes are valid.
+        unsafe { self.out.send_uninit(|p| P::write_seq_raw(p.as_mut_ptr(), seq)) }?;
+        Ok(())
+    }
+}
+
+impl<P: BenchPayload> Agent for Ping<P> {
+    const KIND: &'static str = "bench-ping";
+
+    fn task() -> Task {
+        Task::EventDriven
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let a = agent_args(setup)?;
+        let dir = a.out.ok_or_else(|| AgentError::Config("ping needs --out DIR".into()))?;
+        Ok(Ping {
+            input: setup.input("in")?,
+            out: setup.output("out")?,
+            count: a.count.max(1),
+            dir,
+            batch: 0,
+            seq: 0,
+            outstanding: None,
+            rtts: Vec::with_capacity(a.count.max(1)),
+        })
+    }
+
+    fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        let want = self.outstanding.map(|(s, _)| s);
+        let mut seen_at = None;
+        let drained = self.input.drain(|_, p| {
+            if Some(p.seq()) == want {
+                seen_at = Some(now_ns());
+            }
+        });
+        match (seen_at, self.outstanding) {
+            (Some(t), Some((_, t0))) => {
+                self.rtts.push(t.saturating_sub(t0));
+                self.outstanding = None;
+                if self.rtts.len() >= self.count {
+                    self.batch += 1;
+                    let path = self.dir.join(format!("batch-{}.txt", self.batch));
+                    write_values(&path, &self.rtts)
+                        .map_err(|e| AgentError::Other(format!("cannot write {}: {e}", path.display())))?;
+                    self.rtts.clear();
+                    Ok(())
+                } else {
+                    self.send_next()
+                }
+            }
+            // woken without input: a `nerve resume` starts a batch, or restarts a stalled one
+            _ if drained == 0 => match self.outstanding {
+                None => self.send_next(),
+                Some((_, t0)) if now_ns().saturating_sub(t0) > 500_000_000 => self.send_next(),
+                Some(_) => Ok(()),
+            },
+            _ => Ok(()), // a stale echo
+        }
+    }
+}
+
+/// The pong side: echoes every sample.
+struct Pong<P: BenchPayload> {
+    input: Input<P>,
+    out: Output<P>,
+}
+
+impl<P: BenchPayload> Agent for Pong<P> {
+    const KIND: &'static str = "bench-pong";
+
+    fn task() -> Task {
+        Task::EventDriven
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        agent_args(setup)?;
+        Ok(Pong { input: setup.input("in")?, out: setup.output("out")? })
+    }
+
+    fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        let mut result = Ok(());
+        self.input.drain(|_, p| {
+            let seq = p.seq();
+            // SAFETY: as in `Ping::send_next`: any bytes are valid beside the sequence number.
+            if let Err(e) = unsafe { self.out.send_uninit(|q| P::write_seq_raw(q.as_mut_ptr(), seq)) } {
+                result = Err(e);
+            }
+        });
+        Ok(result?)
+    }
+}
+
+/// A periodic agent that measures its own wake-up lateness.
+struct Jitter {
+    cycles: usize,
+    out: PathBuf,
+    /// when `start` returned; the SDK's first deadline is one period later
+    t_start: u64,
+    /// index of the current deadline (deadline k is t_start + (k+1) * period)
+    idx: u64,
+    lateness: Vec<u64>,
+    written: bool,
+}
+
+impl Agent for Jitter {
+    const KIND: &'static str = "bench-jitter";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_millis(1))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let a = agent_args(setup)?;
+        let out = a.out.ok_or_else(|| AgentError::Config("jitter needs --out FILE".into()))?;
+        Ok(Jitter {
+            cycles: a.cycles.max(1),
+            out,
+            t_start: 0,
+            idx: 0,
+            lateness: Vec::with_capacity(a.cycles.max(1)),
+            written: false,
+        })
+    }
+
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        // the SDK sets its first deadline to now + period right after this returns,
+        // so this estimate is early by a few tens of ns: lateness reads slightly high, never low
+        self.t_start = now_ns();
+        Ok(())
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        if self.written {
+            return Ok(());
+        }
+        let period = ctx.period().map(|p| p.as_nanos() as u64).unwrap_or(1_000_000).max(1);
+        let t0 = self.t_start;
+        let deadline = move |k: u64| t0 + (k + 1) * period;
+        self.lateness.push(ctx.now_ns().saturating_sub(deadline(self.idx)));
+        self.idx += 1;
+        // mirror the SDK: deadlines that passed during the work are skipped
+        let done = now_ns();
+        while deadline(self.idx) <= done {
+            self.idx += 1;
+        }
+        if self.lateness.len() >= self.cycles {
+            self.written = true;
+            write_values(&self.out, &self.lateness)
+                .map_err(|e| AgentError::Other(format!("cannot write {}: {e}", self.out.display())))?;
+        }
+        Ok(())
+    }
+}
+
+/// Entry of the hidden agent subcommands: `args` is everything after the subcommand.
+pub fn run_agent(which: &str, args: Vec<String>) -> ExitCode {
+    let common = match CommonArgs::try_parse_from(std::iter::once(format!("nerve-bench {which}")).chain(args)) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(2);
+        }
+    };
+    let size = match BenchAgentArgs::try_parse_from(&common.args) {
+        Ok(a) => a.size,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(2);
+        }
+    };
+    match which {
+        "__agent-ping" => with_payload!(size, P => agent_sdk::run_with_args::<Ping<P>>(common), _ => bad_size(size)),
+        "__agent-pong" => with_payload!(size, P => agent_sdk::run_with_args::<Pong<P>>(common), _ => bad_size(size)),
+        "__agent-jitter" => agent_sdk::run_with_args::<Jitter>(common),
+        _ => {
+            eprintln!("error: unknown agent subcommand {which}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn bad_size(size: usize) -> ExitCode {
+    eprintln!("error: no payload of {size} bytes; use 8, 230400 or 6220800");
+    ExitCode::from(2)
+}

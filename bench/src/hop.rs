@@ -1,0 +1,489 @@
+//! Scenario `hop`: one-hop round-trip latency between two processes,
+//! event-driven (both sides blocked until woken), for each payload size and
+//! four transports measured side by side, interleaved batch by batch:
+//!
+//! * `nerve`: two SDK agents (`bench-ping`, `bench-pong`) in a robot of their
+//!   own, with a router, wired with `nerve connect` as users do; a batch is
+//!   started with `nerve suspend` + `nerve resume` of the ping agent;
+//! * `iox2-waitset`: raw iceoryx2, reader blocked on a WaitSet;
+//! * `iox2-listener`: raw iceoryx2, reader blocked on the listener itself;
+//! * `iox2-waitset-fill`: as `iox2-waitset`, but every send first writes
+//!   `P::default()` into the sample, as `Output::send_with` does: it shows how
+//!   much of nerve's gap is that fill;
+//! * `uds`: a blocking Unix stream socket, copying.
+//!
+//! The benchmark's own ping side runs at the agents' SCHED_FIFO priority (20)
+//! with locked memory, like the SDK's task thread, so that only the code
+//! paths differ. The first samples of every batch are dropped (warm-up), and
+//! so is a whole first round.
+
+use crate::agents::read_values;
+use crate::machine::{Machine, command_line};
+use crate::payloads::{BenchPayload, SIZES, label};
+use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file};
+use crate::raw::{Mode, Side};
+use crate::stats::{Summary, median_f64, ratio};
+use crate::uds::UdsPing;
+use crate::with_payload;
+use anyhow::{Context as _, Result, anyhow, bail};
+use serde::Serialize;
+use std::io::BufRead as _;
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+/// Samples dropped at the start of every batch.
+const DISCARD: usize = 5;
+/// The transports, in the order of the tables.
+pub const TRANSPORTS: [&str; 5] = ["nerve", "iox2-waitset", "iox2-listener", "iox2-waitset-fill", "uds"];
+/// nerve may be this much slower than raw iceoryx2 (the target).
+pub const TARGET_RATIO: f64 = 1.1;
+
+/// Options of the hop scenario.
+#[derive(Debug, Clone)]
+pub struct HopOpts {
+    /// smoke run
+    pub quick: bool,
+    /// payload sizes (bytes)
+    pub sizes: Vec<usize>,
+    /// measured rounds (a warm-up round comes first)
+    pub rounds: usize,
+    /// round trips per batch, by size; None for the defaults
+    pub count: Option<usize>,
+    /// show children's output
+    pub verbose: bool,
+    /// where batch files go
+    pub work: PathBuf,
+}
+
+/// Results of one transport at one payload size.
+#[derive(Debug, Clone, Serialize)]
+pub struct HopResult {
+    /// transport
+    pub transport: String,
+    /// payload bytes
+    pub size: usize,
+    /// payload label
+    pub label: String,
+    /// all measured round trips pooled
+    pub rtt: Summary,
+    /// median round trip of each round, ns
+    pub round_p50_ns: Vec<u64>,
+}
+
+/// nerve against the others at one payload size.
+#[derive(Debug, Clone, Serialize)]
+pub struct HopRatio {
+    /// payload bytes
+    pub size: usize,
+    /// nerve p50 / iox2-waitset p50 (pooled)
+    pub nerve_vs_waitset_p50: f64,
+    /// nerve p99 / iox2-waitset p99
+    pub nerve_vs_waitset_p99: f64,
+    /// median over rounds of the per-round p50 ratio
+    pub nerve_vs_waitset_p50_round_median: f64,
+    /// nerve p50 / iox2-listener p50
+    pub nerve_vs_listener_p50: f64,
+    /// nerve p99 / iox2-listener p99
+    pub nerve_vs_listener_p99: f64,
+    /// nerve p50 / iox2-waitset-fill p50: the SDK's cost apart from the fill
+    pub nerve_vs_waitset_fill_p50: f64,
+    /// nerve p99 / iox2-waitset-fill p99
+    pub nerve_vs_waitset_fill_p99: f64,
+    /// uds p50 / nerve p50
+    pub uds_vs_nerve_p50: f64,
+    /// whether nerve p50 is within the target of iox2-waitset p50
+    pub target_met: bool,
+}
+
+/// Time to write a whole payload once (what `Output::send_with` adds per send).
+#[derive(Debug, Clone, Serialize)]
+pub struct FillCost {
+    /// payload bytes
+    pub size: usize,
+    /// median time to zero the payload in warm memory (the same buffer again), ns
+    pub memset_warm_p50_ns: u64,
+    /// median time to zero it in memory not touched recently (64 MiB of buffers in turn), ns
+    pub memset_cold_p50_ns: u64,
+}
+
+/// The hop report.
+#[derive(Debug, Clone, Serialize)]
+pub struct HopReport {
+    /// "hop"
+    pub scenario: &'static str,
+    /// the command that produced it
+    pub command: String,
+    /// the machine
+    pub machine: Machine,
+    /// measured rounds
+    pub rounds: usize,
+    /// round trips per batch, by size
+    pub batch: Vec<(usize, usize)>,
+    /// per transport and size
+    pub results: Vec<HopResult>,
+    /// per size
+    pub ratios: Vec<HopRatio>,
+    /// target ratio (nerve / iox2-waitset, p50)
+    pub target_ratio: f64,
+    /// cost of filling a payload once, by size
+    pub fill_cost: Vec<FillCost>,
+    /// wall time of the run, s
+    pub seconds: f64,
+}
+
+fn default_count(size: usize, quick: bool) -> usize {
+    match (size, quick) {
+        (8, false) => 3000,
+        (8, true) => 300,
+        (230_400, false) => 1500,
+        (230_400, true) => 100,
+        (_, false) => 250,
+        (_, true) => 30,
+    }
+}
+
+/// Something that runs a batch of round trips.
+trait Pinger {
+    fn batch(&mut self, robot: &Robot, count: usize) -> Result<Vec<u64>>;
+}
+
+impl<P: BenchPayload> Pinger for Side<P> {
+    fn batch(&mut self, _robot: &Robot, count: usize) -> Result<Vec<u64>> {
+        self.ping_batch(count)
+    }
+}
+
+impl Pinger for UdsPing {
+    fn batch(&mut self, _robot: &Robot, count: usize) -> Result<Vec<u64>> {
+        self.ping_batch(count)
+    }
+}
+
+/// The SDK ping agent, driven through the `nerve` command.
+struct NervePing {
+    name: String,
+    dir: PathBuf,
+    next: u64,
+}
+
+impl Pinger for NervePing {
+    fn batch(&mut self, robot: &Robot, _count: usize) -> Result<Vec<u64>> {
+        self.next += 1;
+        let path = self.dir.join(format!("batch-{}.txt", self.next));
+        for attempt in 0..3 {
+            robot.run(&["suspend", &self.name])?;
+            robot.run(&["resume", &self.name])?;
+            if wait_file(&path, Duration::from_secs(30), &mut [])? {
+                let v = read_values(&path)?;
+                let _ = std::fs::remove_file(&path);
+                return Ok(v);
+            }
+            eprintln!("  {}: batch {} did not finish (attempt {}); resuming again", self.name, self.next, attempt + 1);
+        }
+        bail!("the nerve ping agent {} produced no batch {} in 90 s; see its log with --verbose", self.name, self.next)
+    }
+}
+
+fn agent_name(prefix: &str, size: usize) -> String {
+    let s = match size {
+        8 => "8".to_owned(),
+        230_400 => "230k".to_owned(),
+        _ => "6m".to_owned(),
+    };
+    format!("{prefix}-{s}")
+}
+
+/// Reads the `ready` line of a child, with its exit as an error.
+fn await_ready(child: &mut ChildGuard, what: &str) -> Result<()> {
+    let out = child.stdout().ok_or_else(|| anyhow!("{what}: no stdout"))?;
+    let mut line = String::new();
+    std::io::BufReader::new(out).read_line(&mut line).with_context(|| format!("{what}: reading readiness"))?;
+    if line.trim() != "ready" {
+        child.check_alive()?;
+        bail!("{what} did not become ready (said {line:?})");
+    }
+    Ok(())
+}
+
+fn measure_fill(size: usize) -> FillCost {
+    let time = |buf: &mut [u8]| {
+        let t0 = agent_sdk::clock::now_ns();
+        // SAFETY: `buf` is valid for `buf.len()` bytes.
+        unsafe { std::ptr::write_bytes(std::hint::black_box(buf.as_mut_ptr()), 0, buf.len()) };
+        std::hint::black_box(&buf);
+        agent_sdk::clock::now_ns() - t0
+    };
+    let mut one = vec![1u8; size];
+    let warm: Vec<u64> = (0..21).map(|_| time(&mut one)).collect();
+    let n = ((64usize << 20) / size.max(1)).clamp(2, 4096);
+    let mut many: Vec<Vec<u8>> = (0..n).map(|_| vec![1u8; size]).collect();
+    let cold: Vec<u64> = (0..(3 * n).min(300)).map(|i| time(&mut many[i % n])).collect();
+    FillCost { size, memset_warm_p50_ns: Summary::of(&warm).p50_ns, memset_cold_p50_ns: Summary::of(&cold).p50_ns }
+}
+
+/// Runs the hop scenario.
+pub fn run(opts: &HopOpts) -> Result<HopReport> {
+    let started = Instant::now();
+    let machine = Machine::probe();
+    for s in &opts.sizes {
+        if !SIZES.contains(s) {
+            bail!("no payload of {s} bytes; use 8, 230400 or 6220800");
+        }
+    }
+    let counts: Vec<(usize, usize)> =
+        opts.sizes.iter().map(|&s| (s, opts.count.unwrap_or_else(|| default_count(s, opts.quick)))).collect();
+    let count_of = |s: usize| counts.iter().find(|(x, _)| *x == s).map(|(_, c)| *c).unwrap_or(100);
+
+    // the robot first: dropped last, so `nerve down` runs after every child stopped
+    let robot = Robot::new("h", opts.verbose)?;
+    eprintln!(
+        "hop: robot {} (sizes {:?}, {} rounds{})",
+        robot.name,
+        opts.sizes,
+        opts.rounds,
+        if opts.quick { "" } else { " + warm-up" }
+    );
+    let _router = robot.start_router()?;
+    let mut children: Vec<ChildGuard> = Vec::new();
+
+    // nerve agents, wired through the router
+    let mut names = Vec::new();
+    for &size in &opts.sizes {
+        let dir = opts.work.join(agent_name("nerve", size));
+        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        for (role, sub) in [("ping", "__agent-ping"), ("pong", "__agent-pong")] {
+            let name = agent_name(role, size);
+            let mut cmd = self_command(sub)?;
+            cmd.args(["--robot", &robot.name, "--name", &name]);
+            if role == "ping" {
+                cmd.arg("--suspended");
+            }
+            cmd.args(["--", "--size", &size.to_string(), "--count", &count_of(size).to_string()]);
+            cmd.arg("--out").arg(&dir);
+            cmd.env("NERVE_HOME", &robot.home);
+            // Output::send_with builds T::default() before writing it into the sample;
+            // frames of megabytes need a task stack larger than the default 2 MiB
+            // (NERVE_BENCH_DEFAULT_STACK=1 leaves it out, to show the failure)
+            if std::env::var_os("NERVE_BENCH_DEFAULT_STACK").is_none() {
+                cmd.env("RUST_MIN_STACK", (64usize << 20).to_string());
+            }
+            robot.quiet(&mut cmd);
+            children.push(ChildGuard::spawn(&format!("agent {name}"), cmd)?);
+            names.push(name);
+        }
+    }
+    let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
+    robot.wait_registered(&name_refs, Duration::from_secs(15))?;
+    for &size in &opts.sizes {
+        let (ping, pong) = (agent_name("ping", size), agent_name("pong", size));
+        robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
+        robot.run(&["connect", &format!("{pong}/out"), &format!("{ping}/in")])?;
+    }
+    eprintln!("hop: nerve agents running and connected");
+
+    // raw iceoryx2 and socket pongs
+    for &size in &opts.sizes {
+        for mode in ["waitset", "listener", "waitset-fill"] {
+            let mut cmd = self_command("__raw-pong")?;
+            cmd.args(["--robot", &robot.name, "--mode", mode, "--size", &size.to_string()]);
+            cmd.env("NERVE_HOME", &robot.home).stdout(Stdio::piped());
+            if !opts.verbose {
+                cmd.stderr(Stdio::null());
+            }
+            let mut c = ChildGuard::spawn(&format!("raw pong {mode} {size}"), cmd)?;
+            await_ready(&mut c, "raw iceoryx2 pong")?;
+            children.push(c);
+        }
+        let path = robot.home.join(format!("uds-{size}.sock"));
+        let mut cmd = self_command("__uds-pong")?;
+        cmd.arg("--path").arg(&path).args(["--size", &size.to_string()]).stdout(Stdio::piped());
+        if !opts.verbose {
+            cmd.stderr(Stdio::null());
+        }
+        let mut c = ChildGuard::spawn(&format!("socket pong {size}"), cmd)?;
+        await_ready(&mut c, "socket pong")?;
+        children.push(c);
+    }
+
+    // the ping sides; from here on this thread runs like an agent's task
+    let mut pingers: Vec<(usize, &'static str, Box<dyn Pinger>)> = Vec::new();
+    for &size in &opts.sizes {
+        pingers.push((
+            size,
+            "nerve",
+            Box::new(NervePing {
+                name: agent_name("ping", size),
+                dir: opts.work.join(agent_name("nerve", size)),
+                next: 0,
+            }),
+        ));
+        for (mode, t) in [
+            (Mode::Waitset, "iox2-waitset"),
+            (Mode::Listener, "iox2-listener"),
+            (Mode::WaitsetFill, "iox2-waitset-fill"),
+        ] {
+            let p: Box<dyn Pinger> = with_payload!(size, P => Box::new(Side::<P>::open(&robot.name, mode, "ping", "pong", "raw-ping")?), _ => bail!("size"));
+            pingers.push((size, t, p));
+        }
+        let path = robot.home.join(format!("uds-{size}.sock"));
+        pingers.push((size, "uds", Box::new(UdsPing::connect(&path, size)?)));
+    }
+    realtime_like_an_agent(20);
+
+    let mut samples: Vec<Vec<u64>> = vec![Vec::new(); pingers.len()];
+    let mut round_p50: Vec<Vec<u64>> = vec![Vec::new(); pingers.len()];
+    let result = (|| -> Result<()> {
+        // a quick run has no warm-up round (the first samples of each batch are still dropped)
+        for round in usize::from(opts.quick)..=opts.rounds {
+            let t_round = Instant::now();
+            for &size in &opts.sizes {
+                let idx: Vec<usize> = (0..pingers.len()).filter(|&i| pingers[i].0 == size).collect();
+                // rotate the order every round so that no transport always runs first
+                for k in 0..idx.len() {
+                    let i = idx[(k + round) % idx.len()];
+                    let v = pingers[i]
+                        .2
+                        .batch(&robot, count_of(size))
+                        .with_context(|| format!("{} at {} B, round {round}", pingers[i].1, size))?;
+                    if round > 0 {
+                        let kept = &v[DISCARD.min(v.len())..];
+                        round_p50[i].push(Summary::of(kept).p50_ns);
+                        samples[i].extend_from_slice(kept);
+                    }
+                }
+            }
+            let what = if round == 0 { "warm-up".to_owned() } else { format!("round {round}/{}", opts.rounds) };
+            eprintln!("hop: {what} done in {:.1} s", t_round.elapsed().as_secs_f64());
+            for &size in &opts.sizes {
+                if round == 0 {
+                    break;
+                }
+                let line: Vec<String> = pingers
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| p.0 == size)
+                    .map(|(i, p)| format!("{} {:.1}us", p.1, round_p50[i].last().copied().unwrap_or(0) as f64 / 1e3))
+                    .collect();
+                eprintln!("  {:>7}: {}", label(size), line.join(", "));
+            }
+        }
+        Ok(())
+    })();
+    normal_priority();
+    let keys: Vec<(usize, &'static str)> = pingers.iter().map(|p| (p.0, p.1)).collect();
+    drop(pingers);
+    for mut c in children.drain(..) {
+        c.stop(Duration::from_secs(2));
+    }
+    result?;
+
+    let mut results = Vec::new();
+    for &size in &opts.sizes {
+        for t in TRANSPORTS {
+            let i = keys
+                .iter()
+                .position(|k| *k == (size, t))
+                .ok_or_else(|| anyhow!("internal: no samples for {t} {size}"))?;
+            results.push(HopResult {
+                transport: t.into(),
+                size,
+                label: label(size).into(),
+                rtt: Summary::of(&samples[i]),
+                round_p50_ns: round_p50[i].clone(),
+            });
+        }
+    }
+    let find = |t: &str, s: usize| results.iter().find(|r| r.transport == t && r.size == s);
+    let mut ratios = Vec::new();
+    for &size in &opts.sizes {
+        let (Some(n), Some(w), Some(l), Some(f), Some(u)) = (
+            find("nerve", size),
+            find("iox2-waitset", size),
+            find("iox2-listener", size),
+            find("iox2-waitset-fill", size),
+            find("uds", size),
+        ) else {
+            continue;
+        };
+        let per_round: Vec<f64> = n.round_p50_ns.iter().zip(&w.round_p50_ns).map(|(a, b)| ratio(*a, *b)).collect();
+        let r = ratio(n.rtt.p50_ns, w.rtt.p50_ns);
+        ratios.push(HopRatio {
+            size,
+            nerve_vs_waitset_p50: r,
+            nerve_vs_waitset_p99: ratio(n.rtt.p99_ns, w.rtt.p99_ns),
+            nerve_vs_waitset_p50_round_median: median_f64(&per_round),
+            nerve_vs_listener_p50: ratio(n.rtt.p50_ns, l.rtt.p50_ns),
+            nerve_vs_listener_p99: ratio(n.rtt.p99_ns, l.rtt.p99_ns),
+            nerve_vs_waitset_fill_p50: ratio(n.rtt.p50_ns, f.rtt.p50_ns),
+            nerve_vs_waitset_fill_p99: ratio(n.rtt.p99_ns, f.rtt.p99_ns),
+            uds_vs_nerve_p50: ratio(u.rtt.p50_ns, n.rtt.p50_ns),
+            target_met: r <= TARGET_RATIO,
+        });
+    }
+    drop(_router);
+    drop(robot);
+    Ok(HopReport {
+        scenario: "hop",
+        command: command_line(),
+        machine,
+        rounds: opts.rounds,
+        batch: counts,
+        results,
+        ratios,
+        target_ratio: TARGET_RATIO,
+        fill_cost: opts.sizes.iter().map(|&s| measure_fill(s)).collect(),
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Prints the tables of a hop report (markdown).
+pub fn print_tables(r: &HopReport) {
+    println!("| payload | transport | n | median µs | p99 µs | max µs |");
+    println!("|---|---|---:|---:|---:|---:|");
+    for x in &r.results {
+        println!(
+            "| {} | {} | {} | {} | {} | {} |",
+            x.label,
+            x.transport,
+            x.rtt.n,
+            crate::stats::us(x.rtt.p50_ns),
+            crate::stats::us(x.rtt.p99_ns),
+            crate::stats::us(x.rtt.max_ns)
+        );
+    }
+    println!();
+    println!(
+        "| payload | nerve/iox2-waitset p50 | (median of rounds) | p99 | nerve/iox2-listener p50 | p99 | nerve/iox2-waitset-fill p50 | p99 | uds/nerve p50 | target ≤{TARGET_RATIO} |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    for x in &r.ratios {
+        println!(
+            "| {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
+            label(x.size),
+            x.nerve_vs_waitset_p50,
+            x.nerve_vs_waitset_p50_round_median,
+            x.nerve_vs_waitset_p99,
+            x.nerve_vs_listener_p50,
+            x.nerve_vs_listener_p99,
+            x.nerve_vs_waitset_fill_p50,
+            x.nerve_vs_waitset_fill_p99,
+            x.uds_vs_nerve_p50,
+            if x.target_met { "met" } else { "missed" }
+        );
+    }
+    println!();
+    for f in &r.fill_cost {
+        println!(
+            "fill cost {}: memset of the whole payload {} µs warm, {} µs cold",
+            label(f.size),
+            crate::stats::us(f.memset_warm_p50_ns),
+            crate::stats::us(f.memset_cold_p50_ns)
+        );
+    }
+}
+
+/// Where batch files of a run go.
+pub fn work_dir(out: &Path) -> PathBuf {
+    out.join(format!("hop-work-{}", std::process::id()))
+}

@@ -1,0 +1,170 @@
+//! `nerve-bench`: the benchmarks behind BENCHMARKS.md.
+//!
+//! ```text
+//! nerve-bench hop    [--quick] [--json] [--out DIR] [--payloads 8,230400,6220800] [--rounds N]
+//! nerve-bench jitter [--quick] [--json] [--out DIR] [--rates 1000,100] [--seconds S] [--rounds N]
+//! ```
+//!
+//! * `hop`: one-hop round-trip latency, event-driven, nerve SDK agents
+//!   against raw iceoryx2 (WaitSet and listener) and a Unix socket.
+//! * `jitter`: lateness of a periodic SDK agent against `cyclictest`.
+//!
+//! Results go to `DIR/<scenario>.json` (and `DIR/hop-latency.png`); the
+//! tables are printed as markdown on stdout, or the JSON with `--json`.
+//! Progress goes to stderr. Every run uses a robot of its own (`b<pid>h`,
+//! `b<pid>j`) and takes it down at the end.
+//!
+//! The same executable also runs the processes of the benchmarks, through
+//! hidden subcommands: `__agent-ping`, `__agent-pong`, `__agent-jitter` (SDK
+//! agents), `__raw-pong`, `__uds-pong` and `__busy`.
+
+mod agents;
+mod hop;
+mod jitter;
+mod machine;
+mod payloads;
+mod plot;
+mod procs;
+mod raw;
+mod stats;
+mod uds;
+
+use anyhow::{Context as _, Result};
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Benchmarks of nerve.
+#[derive(Debug, Parser)]
+#[command(name = "nerve-bench", about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    scenario: Scenario,
+}
+
+#[derive(Debug, clap::Args)]
+struct Common {
+    /// A smoke run of a few seconds.
+    #[arg(long)]
+    quick: bool,
+    /// Print the results as JSON on stdout instead of tables.
+    #[arg(long)]
+    json: bool,
+    /// Directory for the JSON results (and the plot).
+    #[arg(long, default_value = "bench-results")]
+    out: PathBuf,
+    /// Show the output of the processes the benchmark starts.
+    #[arg(long)]
+    verbose: bool,
+}
+
+#[derive(Debug, Subcommand)]
+enum Scenario {
+    /// One-hop round-trip latency: nerve SDK vs raw iceoryx2 vs Unix socket.
+    Hop {
+        #[command(flatten)]
+        common: Common,
+        /// Payload sizes in bytes.
+        #[arg(long, value_delimiter = ',', default_values_t = payloads::SIZES)]
+        payloads: Vec<usize>,
+        /// Measured rounds (each transport one batch per round, interleaved).
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// Round trips per batch (default by payload size).
+        #[arg(long)]
+        count: Option<usize>,
+    },
+    /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
+    Jitter {
+        #[command(flatten)]
+        common: Common,
+        /// Rates in Hz.
+        #[arg(long, value_delimiter = ',', default_values_t = [1000u64, 100])]
+        rates: Vec<u64>,
+        /// Seconds per chunk.
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// Chunks per system and condition (interleaved).
+        #[arg(long)]
+        rounds: Option<usize>,
+    },
+}
+
+fn main() -> ExitCode {
+    let mut args = std::env::args().skip(1);
+    if let Some(first) = args.next() {
+        let rest: Vec<String> = args.collect();
+        match first.as_str() {
+            "__agent-ping" | "__agent-pong" | "__agent-jitter" => return agents::run_agent(&first, rest),
+            "__raw-pong" => return raw::pong_main(rest),
+            "__uds-pong" => return uds::pong_main(rest),
+            "__busy" => return jitter::busy_main(),
+            _ => {}
+        }
+    }
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn write_json(out: &std::path::Path, name: &str, value: &impl serde::Serialize) -> Result<PathBuf> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let path = out.join(name);
+    let s = serde_json::to_string_pretty(value).context("cannot encode the results")?;
+    std::fs::write(&path, s + "\n").with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path)
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.scenario {
+        Scenario::Hop { common, payloads, rounds, count } => {
+            let opts = hop::HopOpts {
+                quick: common.quick,
+                sizes: payloads,
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 7 }).max(1),
+                count,
+                verbose: common.verbose,
+                work: hop::work_dir(&common.out),
+            };
+            let report = hop::run(&opts);
+            let _ = std::fs::remove_dir_all(&opts.work);
+            let report = report?;
+            let json = write_json(&common.out, "hop.json", &report)?;
+            let png = common.out.join("hop-latency.png");
+            if let Err(e) = plot::hop_png(&report, &png) {
+                eprintln!("warning: no plot: {e:#}");
+            }
+            eprintln!("hop: results in {} and {} ({:.0} s)", json.display(), png.display(), report.seconds);
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
+            } else {
+                hop::print_tables(&report);
+            }
+        }
+        Scenario::Jitter { common, rates, seconds, rounds } => {
+            let opts = jitter::JitterOpts {
+                rates,
+                seconds: seconds.unwrap_or(if common.quick { 1.0 } else { 5.0 }),
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 3 }).max(1),
+                verbose: common.verbose,
+                work: common.out.join(format!("jitter-work-{}", std::process::id())),
+            };
+            let report = jitter::run(&opts);
+            let _ = std::fs::remove_dir_all(&opts.work);
+            let report = report?;
+            let json = write_json(&common.out, "jitter.json", &report)?;
+            eprintln!("jitter: results in {} ({:.0} s)", json.display(), report.seconds);
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
+            } else {
+                jitter::print_tables(&report);
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,87 @@
+//! The PNG of round-trip latency against payload size, one line per
+//! transport (median solid, p99 dashed-looking thin line with crosses), both
+//! axes logarithmic.
+
+use crate::hop::{HopReport, TRANSPORTS};
+use anyhow::{Result, anyhow};
+use plotters::prelude::*;
+use std::path::Path;
+
+fn colour(t: &str) -> RGBColor {
+    match t {
+        "nerve" => RGBColor(200, 30, 30),
+        "iox2-waitset" => RGBColor(30, 90, 200),
+        "iox2-listener" => RGBColor(20, 150, 60),
+        "iox2-waitset-fill" => RGBColor(230, 140, 20),
+        _ => RGBColor(120, 120, 120),
+    }
+}
+
+/// Draws `report` into `path` (PNG, 1000x640).
+pub fn hop_png(report: &HopReport, path: &Path) -> Result<()> {
+    let e = |x: &dyn std::fmt::Display| anyhow!("plot {}: {x}", path.display());
+    let root = BitMapBackend::new(path, (1000, 640)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let ys: Vec<f64> =
+        report.results.iter().flat_map(|r| [r.rtt.p50_ns, r.rtt.p99_ns]).map(|v| v as f64 / 1e3).collect();
+    let ymax = ys.iter().copied().fold(10.0, f64::max) * 2.0;
+    let ymin = ys.iter().copied().filter(|v| *v > 0.0).fold(f64::MAX, f64::min).min(ymax / 10.0) / 2.0;
+    let title = format!(
+        "one-hop round trip, event-driven, 2 processes ({} CPUs, {})",
+        report.machine.nproc,
+        report.machine.cpu.split_whitespace().take(4).collect::<Vec<_>>().join(" ")
+    );
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d((4f64..2e7f64).log_scale(), (ymin.max(0.1)..ymax).log_scale())
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .x_desc("payload bytes (8 B, 320x240 RGB, 1920x1080 RGB)")
+        .y_desc("round trip, µs (solid: median, thin: p99)")
+        .x_label_formatter(&|v| {
+            if *v >= 1e6 {
+                format!("{:.0}M", v / 1e6)
+            } else if *v >= 1e3 {
+                format!("{:.0}k", v / 1e3)
+            } else {
+                format!("{v:.0}")
+            }
+        })
+        .y_label_formatter(&|v| if *v >= 10.0 { format!("{v:.0}") } else { format!("{v:.1}") })
+        .draw()
+        .map_err(|x| e(&x))?;
+    for t in TRANSPORTS {
+        let pts: Vec<(f64, f64, f64)> = report
+            .results
+            .iter()
+            .filter(|r| r.transport == t)
+            .map(|r| (r.size as f64, r.rtt.p50_ns as f64 / 1e3, r.rtt.p99_ns as f64 / 1e3))
+            .collect();
+        if pts.is_empty() {
+            continue;
+        }
+        let c = colour(t);
+        chart
+            .draw_series(LineSeries::new(pts.iter().map(|p| (p.0, p.1)), c.stroke_width(3)))
+            .map_err(|x| e(&x))?
+            .label(t)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
+        chart.draw_series(pts.iter().map(|p| Circle::new((p.0, p.1), 5, c.filled()))).map_err(|x| e(&x))?;
+        chart.draw_series(LineSeries::new(pts.iter().map(|p| (p.0, p.2)), c.stroke_width(1))).map_err(|x| e(&x))?;
+        chart.draw_series(pts.iter().map(|p| Cross::new((p.0, p.2), 5, c.stroke_width(1)))).map_err(|x| e(&x))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 16))
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}

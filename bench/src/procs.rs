@@ -1,0 +1,266 @@
+//! Processes the benchmarks start, and the robot they run in.
+//!
+//! Every child is held by a [`ChildGuard`] that stops it when dropped
+//! (SIGTERM, a short grace, then SIGKILL) and asks the kernel to send it
+//! SIGTERM should this process die first. A [`Robot`] has a unique name
+//! (`b<pid>`...) and runs `nerve --robot NAME down` when dropped, so nothing
+//! is left in `/dev/shm`.
+
+use anyhow::{Context as _, Result, bail};
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+use std::os::unix::process::CommandExt as _;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A child process that is stopped when dropped.
+#[derive(Debug)]
+pub struct ChildGuard {
+    name: String,
+    child: Child,
+}
+
+impl ChildGuard {
+    /// Spawns `cmd`; the child gets SIGTERM if this process dies.
+    pub fn spawn(name: &str, mut cmd: Command) -> Result<Self> {
+        // SAFETY: prctl is async-signal-safe and touches no memory of the parent.
+        unsafe {
+            cmd.pre_exec(|| {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong, 0, 0, 0) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+        let child = cmd.spawn().with_context(|| format!("cannot start {name} ({cmd:?})"))?;
+        Ok(ChildGuard { name: name.into(), child })
+    }
+
+    /// The child's stdout, when piped.
+    pub fn stdout(&mut self) -> Option<std::process::ChildStdout> {
+        self.child.stdout.take()
+    }
+
+    /// Fails when the child has exited already.
+    pub fn check_alive(&mut self) -> Result<()> {
+        if let Some(status) = self.child.try_wait().with_context(|| format!("cannot wait for {}", self.name))? {
+            bail!("{} exited early ({status}); run with --verbose to see its log", self.name);
+        }
+        Ok(())
+    }
+
+    /// Stops the child: SIGTERM, up to `grace`, then SIGKILL.
+    pub fn stop(&mut self, grace: Duration) {
+        if matches!(self.child.try_wait(), Ok(Some(_))) {
+            return;
+        }
+        let pid = Pid::from_raw(self.child.id() as i32);
+        let _ = kill(pid, Signal::SIGTERM);
+        let t0 = Instant::now();
+        while t0.elapsed() < grace {
+            if matches!(self.child.try_wait(), Ok(Some(_))) {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        self.stop(Duration::from_secs(2));
+    }
+}
+
+/// Where the `nerve` command is: `$NERVE_BIN`, next to this executable (or
+/// its parent, for test executables under `deps/`), or on `PATH`.
+pub fn nerve_bin() -> Result<PathBuf> {
+    if let Some(p) = std::env::var_os("NERVE_BIN") {
+        return Ok(PathBuf::from(p));
+    }
+    let exe = std::env::current_exe().context("cannot find this executable")?;
+    for dir in exe.ancestors().skip(1).take(2) {
+        let cand = dir.join("nerve");
+        if cand.is_file() {
+            return Ok(cand);
+        }
+    }
+    if let Some(path) = std::env::var_os("PATH") {
+        for dir in std::env::split_paths(&path) {
+            let cand = dir.join("nerve");
+            if cand.is_file() {
+                return Ok(cand);
+            }
+        }
+    }
+    bail!(
+        "cannot find the `nerve` command next to {} or on PATH; build it into the same target dir \
+         (`CARGO_TARGET_DIR=/work/target-bench cargo build --release -p nerve`) or set NERVE_BIN",
+        exe.display()
+    )
+}
+
+/// One isolated robot for one benchmark run, taken down when dropped.
+#[derive(Debug)]
+pub struct Robot {
+    /// the robot's name
+    pub name: String,
+    nerve: PathBuf,
+    /// NERVE_HOME of the run (a private temp dir, removed at the end)
+    pub home: PathBuf,
+    verbose: bool,
+}
+
+impl Robot {
+    /// A robot named `b<pid><tag>`, with its state in a private directory.
+    pub fn new(tag: &str, verbose: bool) -> Result<Self> {
+        let name = format!("b{}{tag}", std::process::id());
+        let home = std::env::temp_dir().join(format!("nerve-bench-{name}"));
+        std::fs::create_dir_all(&home).with_context(|| format!("cannot create {}", home.display()))?;
+        Ok(Robot { name, nerve: nerve_bin()?, home, verbose })
+    }
+
+    /// A `nerve --robot NAME ...` command.
+    pub fn nerve(&self) -> Command {
+        let mut c = Command::new(&self.nerve);
+        c.arg("--robot").arg(&self.name).env("NERVE_HOME", &self.home);
+        c
+    }
+
+    /// Runs `nerve --robot NAME args...`, fails with its stderr when it fails; returns stdout.
+    pub fn run(&self, args: &[&str]) -> Result<String> {
+        let out = self
+            .nerve()
+            .args(args)
+            .stdin(Stdio::null())
+            .output()
+            .with_context(|| format!("cannot run nerve {}", args.join(" ")))?;
+        if !out.status.success() {
+            bail!(
+                "`nerve --robot {} {}` failed ({}): {}",
+                self.name,
+                args.join(" "),
+                out.status,
+                String::from_utf8_lossy(&out.stderr).trim()
+            );
+        }
+        Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+    }
+
+    /// Starts the router in the foreground as a child and waits until it answers.
+    pub fn start_router(&self) -> Result<ChildGuard> {
+        let mut cmd = self.nerve();
+        cmd.arg("router").stdin(Stdio::null());
+        self.quiet(&mut cmd);
+        let mut guard = ChildGuard::spawn("nerve router", cmd)?;
+        let t0 = Instant::now();
+        loop {
+            if self.run(&["ps", "--json"]).is_ok() {
+                return Ok(guard);
+            }
+            guard.check_alive()?;
+            if t0.elapsed() > Duration::from_secs(10) {
+                bail!("the router of robot {} did not answer within 10 s", self.name);
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Waits until the router lists every agent of `names`.
+    pub fn wait_registered(&self, names: &[&str], timeout: Duration) -> Result<serde_json::Value> {
+        let t0 = Instant::now();
+        loop {
+            let ps = self.ps()?;
+            let listed: Vec<&str> =
+                ps.as_array().map(|a| a.iter().filter_map(|x| x["name"].as_str()).collect()).unwrap_or_default();
+            if names.iter().all(|n| listed.contains(n)) {
+                return Ok(ps);
+            }
+            if t0.elapsed() > timeout {
+                bail!("agents {names:?} did not register with the router within {timeout:?} (listed: {listed:?})");
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// `nerve ps --json`, parsed.
+    pub fn ps(&self) -> Result<serde_json::Value> {
+        let out = self.run(&["ps", "--json"])?;
+        serde_json::from_str(&out).context("cannot parse `nerve ps --json`")
+    }
+
+    /// Silences a child's output unless `--verbose`.
+    pub fn quiet(&self, cmd: &mut Command) {
+        if !self.verbose {
+            cmd.stdout(Stdio::null()).stderr(Stdio::null());
+        }
+    }
+}
+
+impl Drop for Robot {
+    fn drop(&mut self) {
+        let out = self.nerve().args(["down", "--grace", "1"]).stdin(Stdio::null()).output();
+        match out {
+            Ok(o) if o.status.success() => {}
+            Ok(o) => eprintln!(
+                "warning: `nerve --robot {} down` failed: {}",
+                self.name,
+                String::from_utf8_lossy(&o.stderr).trim()
+            ),
+            Err(e) => eprintln!("warning: cannot run `nerve --robot {} down`: {e}", self.name),
+        }
+        let _ = std::fs::remove_dir_all(&self.home);
+    }
+}
+
+/// A command that re-runs this executable with a hidden subcommand.
+pub fn self_command(sub: &str) -> Result<Command> {
+    let exe = std::env::current_exe().context("cannot find this executable")?;
+    let mut c = Command::new(exe);
+    c.arg(sub).stdin(Stdio::null());
+    Ok(c)
+}
+
+/// Waits for a file to appear, watching `children` for early exits.
+pub fn wait_file(path: &Path, timeout: Duration, children: &mut [&mut ChildGuard]) -> Result<bool> {
+    let t0 = Instant::now();
+    while t0.elapsed() < timeout {
+        if path.exists() {
+            return Ok(true);
+        }
+        for c in children.iter_mut() {
+            c.check_alive()?;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    Ok(false)
+}
+
+/// Puts the calling thread under SCHED_FIFO at `prio`, not inherited by
+/// children it forks, and locks memory as the SDK does; says so when refused.
+pub fn realtime_like_an_agent(prio: i32) -> bool {
+    // SAFETY: plain system calls on the calling thread, valid arguments.
+    unsafe {
+        let _ = libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE | libc::MCL_ONFAULT);
+        let param = libc::sched_param { sched_priority: prio };
+        let rc = libc::sched_setscheduler(0, libc::SCHED_FIFO | libc::SCHED_RESET_ON_FORK, &param);
+        if rc != 0 {
+            eprintln!(
+                "warning: SCHED_FIFO refused ({}); comparison runs without real-time priority",
+                std::io::Error::last_os_error()
+            );
+            return false;
+        }
+    }
+    true
+}
+
+/// Back to SCHED_OTHER for the calling thread.
+pub fn normal_priority() {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: plain system call on the calling thread.
+    unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) };
+}
