@@ -78,6 +78,16 @@ fn ipc_err(service: &str, e: impl std::fmt::Debug) -> ControlError {
 
 type Bytes = [u8];
 
+/// Requests a client may have in flight. A call waits for its reply, so one
+/// is in flight; one more covers a call abandoned on time-out. Every slot is
+/// multiplied by the number of clients in the server's shared memory: with
+/// 4 x 4 x 4 slots of 4 KiB the router's segment was 136 MB and each call of
+/// the `nerve` command spent half a second mapping and unmapping it.
+const MAX_ACTIVE_REQUESTS: usize = 2;
+/// First size of a message buffer; larger messages (a `ps` of 100 agents)
+/// grow it by powers of two.
+const INITIAL_MESSAGE_BYTES: usize = 512;
+
 /// The serving side: receives requests and answers them.
 #[derive(Debug)]
 pub struct ControlServer<Req, Resp> {
@@ -98,13 +108,15 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
             .max_clients(size.max_clients)
             .max_servers(1)
             .max_nodes(size.max_nodes)
-            .max_active_requests_per_client(4)
-            .max_response_buffer_size(4)
+            .max_active_requests_per_client(MAX_ACTIVE_REQUESTS)
+            .max_response_buffer_size(1)
+            .max_borrowed_responses_per_pending_response(1)
+            .max_loaned_requests(1)
             .open_or_create()
             .map_err(|e| ipc_err(service, e))?;
         let server = rr
             .server_builder()
-            .initial_max_slice_len(4096)
+            .initial_max_slice_len(INITIAL_MESSAGE_BYTES)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(|e| match e {
@@ -164,8 +176,10 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
             .max_clients(size.max_clients)
             .max_servers(1)
             .max_nodes(size.max_nodes)
-            .max_active_requests_per_client(4)
-            .max_response_buffer_size(4)
+            .max_active_requests_per_client(MAX_ACTIVE_REQUESTS)
+            .max_response_buffer_size(1)
+            .max_borrowed_responses_per_pending_response(1)
+            .max_loaned_requests(1)
             .open()
             .map_err(|e| match e {
                 iceoryx2::service::builder::request_response::RequestResponseOpenError::DoesNotExist => {
@@ -175,7 +189,7 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
             })?;
         let client = rr
             .client_builder()
-            .initial_max_slice_len(4096)
+            .initial_max_slice_len(INITIAL_MESSAGE_BYTES)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(|e| ipc_err(service, e))?;

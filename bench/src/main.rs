@@ -3,11 +3,13 @@
 //! ```text
 //! nerve-bench hop    [--quick] [--json] [--out DIR] [--payloads 8,230400,6220800] [--rounds N]
 //! nerve-bench jitter [--quick] [--json] [--out DIR] [--rates 1000,100] [--seconds S] [--rounds N]
+//! nerve-bench control [--quick] [--json] [--out DIR] [--rounds N] [--launch 10,50]
 //! ```
 //!
 //! * `hop`: one-hop round-trip latency, event-driven, nerve SDK agents
 //!   against raw iceoryx2 (WaitSet and listener) and a Unix socket.
 //! * `jitter`: lateness of a periodic SDK agent against `cyclictest`.
+//! * `control`: hot-add, rewire and launch latencies of the control plane.
 //!
 //! Results go to `DIR/<scenario>.json` (and `DIR/hop-latency.png`); the
 //! tables are printed as markdown on stdout, or the JSON with `--json`.
@@ -19,6 +21,7 @@
 //! agents), `__raw-pong`, `__uds-pong` and `__busy`.
 
 mod agents;
+mod control;
 mod hop;
 mod jitter;
 mod machine;
@@ -73,6 +76,17 @@ enum Scenario {
         /// Round trips per batch (default by payload size).
         #[arg(long)]
         count: Option<usize>,
+    },
+    /// Control plane: hot-add, rewire, launch of 10 and 50 agents.
+    Control {
+        #[command(flatten)]
+        common: Common,
+        /// Hot-add and rewire repetitions.
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// Launch sizes (agents per launch file).
+        #[arg(long, value_delimiter = ',')]
+        launch: Option<Vec<usize>>,
     },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
@@ -144,6 +158,22 @@ fn run(cli: Cli) -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
             } else {
                 hop::print_tables(&report);
+            }
+        }
+        Scenario::Control { common, rounds, launch } => {
+            let opts = control::ControlOpts {
+                rounds: rounds.unwrap_or(if common.quick { 3 } else { 20 }).max(1),
+                launch_sizes: launch.unwrap_or(if common.quick { vec![10] } else { vec![10, 50] }),
+                launch_rounds: if common.quick { 1 } else { 3 },
+                verbose: common.verbose,
+            };
+            let report = control::run(&opts)?;
+            let json = write_json(&common.out, "control.json", &report)?;
+            eprintln!("control: results in {} ({:.0} s)", json.display(), report.seconds);
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
+            } else {
+                control::print_tables(&report);
             }
         }
         Scenario::Jitter { common, rates, seconds, rounds } => {

@@ -1,0 +1,267 @@
+//! `control`: the control plane, as users feel it.
+//!
+//! * **hot-add**: `nerve start relay --name h` (the router already holds the
+//!   connection `t1/tick -> h/in` from an earlier run of `h`) until the first
+//!   sample of `h/out` reaches a subscriber in this process;
+//! * **rewire**: `nerve connect t2/tick r/in` until the first sample from the
+//!   new source leaves `r/out` — once through the `nerve` command (a process
+//!   per command, as a user types it) and once as a direct request to the
+//!   router (what a program such as the decision maker pays);
+//! * **launch**: `nerve launch` of 10 and 50 agents (a ticker and a chain of
+//!   relays), from the command to all registered and connected, router start
+//!   included.
+
+use crate::machine::{Machine, command_line};
+use crate::procs::Robot;
+use crate::stats::Summary;
+use agent_sdk::World;
+use agent_sdk::clock::now_ns;
+use agent_sdk::control::router_client;
+use agent_sdk::ports::{port_event, port_service};
+use anyhow::{Context as _, Result, anyhow, bail};
+use serde::Serialize;
+use shm_schemas::control::cli_to_router::{CliRequest, RouterReply, RouterRequest};
+use shm_schemas::payloads::Tick;
+use shm_schemas::PortRef;
+use std::time::{Duration, Instant};
+
+/// Options of the control scenario.
+#[derive(Debug)]
+pub struct ControlOpts {
+    /// hot-add and rewire repetitions
+    pub rounds: usize,
+    /// launch sizes
+    pub launch_sizes: Vec<usize>,
+    /// launches per size
+    pub launch_rounds: usize,
+    /// show child output
+    pub verbose: bool,
+}
+
+/// Launch time for one size.
+#[derive(Debug, Serialize)]
+pub struct LaunchRow {
+    /// agents in the file
+    pub agents: usize,
+    /// wall time of `nerve launch`, ns
+    pub launch: Summary,
+}
+
+/// Results of the control scenario.
+#[derive(Debug, Serialize)]
+pub struct ControlReport {
+    /// the machine
+    pub machine: Machine,
+    /// the command that produced it
+    pub command: String,
+    /// `nerve start` to the first sample downstream, ns
+    pub hot_add: Summary,
+    /// `nerve connect` (the command) to the first sample from the new source, ns
+    pub rewire_cli: Summary,
+    /// a connect request to the router to the first sample from the new source, ns
+    pub rewire_request: Summary,
+    /// launch times
+    pub launch: Vec<LaunchRow>,
+    /// hot-add median / 20 ms
+    pub hot_add_vs_target: f64,
+    /// rewire (request) median / 5 ms
+    pub rewire_vs_target: f64,
+    /// wall time of the whole scenario, s
+    pub seconds: f64,
+}
+
+/// A subscriber on an output port, in this process.
+struct Watch {
+    _node: iceoryx2::prelude::Node<agent_sdk::Ipc>,
+    sub: iceoryx2::port::subscriber::Subscriber<agent_sdk::Ipc, Tick, shm_schemas::SampleHeader>,
+    listener: iceoryx2::port::listener::Listener<agent_sdk::Ipc>,
+}
+
+impl Watch {
+    fn new(robot: &Robot, agent: &str, port: &str) -> Result<Self> {
+        let world = World::new(&robot.name)?;
+        let node = world.node(&format!("bench-{}", std::process::id()))?;
+        let service = world.robot().port_service(agent, port);
+        let sub = port_service::<Tick>(&node, &service)?
+            .subscriber_builder()
+            .buffer_size(agent_sdk::ports::SUBSCRIBER_BUFFER)
+            .create()
+            .map_err(|e| anyhow!("{e:?}"))?;
+        let listener = port_event(&node, &service)?.listener_builder().create().map_err(|e| anyhow!("{e:?}"))?;
+        Ok(Watch { _node: node, sub, listener })
+    }
+
+    fn drain(&self) {
+        let _ = self.listener.try_wait(|_| {});
+        while let Ok(Some(_)) = self.sub.receive() {}
+    }
+
+    /// Waits for a sample sent after `after_ns` that satisfies `pred`; returns when it arrived.
+    fn wait_for(&self, after_ns: u64, timeout: Duration, pred: impl Fn(&Tick) -> bool) -> Result<u64> {
+        let t0 = Instant::now();
+        loop {
+            while let Some(s) = self.sub.receive().map_err(|e| anyhow!("{e:?}"))? {
+                if s.user_header().stamp_ns >= after_ns && pred(s.payload()) {
+                    return Ok(now_ns());
+                }
+            }
+            let left = timeout.checked_sub(t0.elapsed()).ok_or_else(|| anyhow!("no sample within {timeout:?}"))?;
+            let _ = self.listener.timed_wait(|_| {}, left.min(Duration::from_millis(50)));
+        }
+    }
+}
+
+fn wait_gone(robot: &Robot, name: &str) -> Result<()> {
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(10) {
+        let ps = robot.ps()?;
+        if !ps.as_array().is_some_and(|a| a.iter().any(|x| x["name"] == name)) {
+            return Ok(());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    bail!("{name} did not leave")
+}
+
+fn hot_add(opts: &ControlOpts) -> Result<Vec<u64>> {
+    let robot = Robot::new("ch", opts.verbose)?;
+    let _router = robot.start_router()?;
+    robot.run(&["start", "ticker", "--name", "t1", "--period", "1ms"])?;
+    robot.run(&["start", "relay", "--name", "h"])?;
+    robot.run(&["connect", "t1/tick", "h/in"])?;
+    robot.run(&["stop", "h"])?;
+    wait_gone(&robot, "h")?;
+    let watch = Watch::new(&robot, "h", "out")?;
+    let mut v = Vec::new();
+    for i in 0..opts.rounds {
+        eprintln!("control: hot-add {}/{}", i + 1, opts.rounds);
+        watch.drain();
+        let t0 = now_ns();
+        robot.run(&["start", "relay", "--name", "h"])?;
+        let t1 = watch.wait_for(t0, Duration::from_secs(5), |_| true)?;
+        v.push(t1 - t0);
+        robot.run(&["stop", "h"])?;
+        wait_gone(&robot, "h")?;
+    }
+    Ok(v)
+}
+
+fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>)> {
+    let robot = Robot::new("cr", opts.verbose)?;
+    let _router = robot.start_router()?;
+    robot.run(&["start", "ticker", "--name", "t1", "--period", "1ms"])?;
+    robot.run(&["start", "ticker", "--name", "t2", "--period", "1ms"])?;
+    robot.run(&["param", "set", "t2", "step", "1000000000"])?;
+    robot.run(&["start", "relay", "--name", "r"])?;
+    robot.run(&["connect", "t1/tick", "r/in"])?;
+    let watch = Watch::new(&robot, "r", "out")?;
+    let world = World::new(&robot.name)?;
+    let node = world.node(&format!("bench-rq-{}", std::process::id()))?;
+    let client = router_client::<RouterRequest, RouterReply>(&world, &node)?;
+    let (from, to): (PortRef, PortRef) = ("t2/tick".parse()?, "r/in".parse()?);
+    let from_t2 = |t: &Tick| t.seq >= 1_000_000_000;
+    let (mut cli, mut req) = (Vec::new(), Vec::new());
+    for i in 0..opts.rounds {
+        eprintln!("control: rewire {}/{}", i + 1, opts.rounds);
+        for via_cli in [true, false] {
+            watch.drain();
+            let t0 = now_ns();
+            if via_cli {
+                robot.run(&["connect", "t2/tick", "r/in"])?;
+            } else {
+                match client.call(&RouterRequest::Cli(CliRequest::Connect { from: from.clone(), to: to.clone() }), Duration::from_secs(5)) {
+                    Ok(RouterReply::Ok) => {}
+                    other => bail!("connect refused: {other:?}"),
+                }
+            }
+            let t1 = watch.wait_for(t0, Duration::from_secs(5), from_t2)?;
+            if via_cli { cli.push(t1 - t0) } else { req.push(t1 - t0) }
+            robot.run(&["disconnect", "t2/tick", "r/in"])?;
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+    Ok((cli, req))
+}
+
+fn launch_file(robot: &str, agents: usize) -> String {
+    let mut s = format!("robot = \"{robot}\"\n\n[[agent]]\nname = \"t1\"\nkind = \"ticker\"\nperiod = \"100ms\"\n");
+    for i in 1..agents {
+        s += &format!("\n[[agent]]\nname = \"r{i}\"\nkind = \"relay\"\n");
+    }
+    for i in 1..agents {
+        let from = if i == 1 { "t1/tick".to_string() } else { format!("r{}/out", i - 1) };
+        s += &format!("\n[[connect]]\nfrom = \"{from}\"\nto = \"r{i}/in\"\n");
+    }
+    s
+}
+
+fn launch(opts: &ControlOpts, agents: usize) -> Result<Vec<u64>> {
+    let mut v = Vec::new();
+    for i in 0..opts.launch_rounds {
+        eprintln!("control: launch of {agents} agents {}/{}", i + 1, opts.launch_rounds);
+        let robot = Robot::new(&format!("l{agents}x{i}"), opts.verbose)?;
+        let file = robot.home.join("launch.toml");
+        std::fs::write(&file, launch_file(&robot.name, agents)).context("cannot write the launch file")?;
+        let t0 = now_ns();
+        robot.run(&["launch", &file.display().to_string()])?;
+        v.push(now_ns() - t0);
+        let ps = robot.ps()?;
+        let n = ps.as_array().map(|a| a.len()).unwrap_or(0);
+        if n != agents {
+            bail!("launch of {agents} agents left {n} running");
+        }
+        drop(robot); // nerve down
+    }
+    Ok(v)
+}
+
+/// Runs the scenario.
+pub fn run(opts: &ControlOpts) -> Result<ControlReport> {
+    let t0 = Instant::now();
+    let machine = Machine::probe();
+    let hot = hot_add(opts)?;
+    let (cli, req) = rewire(opts)?;
+    let mut rows = Vec::new();
+    for &n in &opts.launch_sizes {
+        rows.push(LaunchRow { agents: n, launch: Summary::of(&launch(opts, n)?) });
+    }
+    let hot_add = Summary::of(&hot);
+    let rewire_request = Summary::of(&req);
+    Ok(ControlReport {
+        machine,
+        command: command_line(),
+        hot_add_vs_target: hot_add.p50_ns as f64 / 20e6,
+        rewire_vs_target: rewire_request.p50_ns as f64 / 5e6,
+        hot_add,
+        rewire_cli: Summary::of(&cli),
+        rewire_request,
+        launch: rows,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+fn ms(ns: u64) -> String {
+    format!("{:.2}", ns as f64 / 1e6)
+}
+
+/// Prints the tables as markdown.
+pub fn print_tables(r: &ControlReport) {
+    println!("| measure | n | median ms | p99 ms | max ms | target | median / target |");
+    println!("|---|---:|---:|---:|---:|---|---:|");
+    let row = |name: &str, s: &Summary, target: &str, ratio: Option<f64>| {
+        println!(
+            "| {name} | {} | {} | {} | {} | {target} | {} |",
+            s.n,
+            ms(s.p50_ns),
+            ms(s.p99_ns),
+            ms(s.max_ns),
+            ratio.map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into())
+        )
+    };
+    row("hot-add (`nerve start` → first sample downstream)", &r.hot_add, "≤ 20 ms", Some(r.hot_add_vs_target));
+    row("rewire, request to the router → first sample from the new source", &r.rewire_request, "≤ 5 ms", Some(r.rewire_vs_target));
+    row("rewire, `nerve connect` command → first sample", &r.rewire_cli, "-", None);
+    for l in &r.launch {
+        row(&format!("`nerve launch` of {} agents → all registered and connected", l.agents), &l.launch, "-", None);
+    }
+}
