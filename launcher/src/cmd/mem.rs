@@ -17,13 +17,12 @@
 //! writer.
 
 use agent_sdk::World;
-use agent_sdk::clock::{format_duration, parse_duration};
+use agent_sdk::clock::parse_duration;
 use anyhow::{Context as _, Result};
 use nerve_stm::{FrameSelector, ListedRing, RingName, RingReader, dump_png, list_rings, monotonic_ns};
 use serde_json::{Value, json};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Duration;
 
 /// `nerve mem ...`
 #[derive(Debug, clap::Subcommand)]
@@ -62,9 +61,9 @@ pub fn mem(world: &World, cmd: MemCmd) -> Result<ExitCode> {
 fn parse_time(text: &str, now_ns: u64) -> Result<u64> {
     let t = text.trim();
     if let Some(rel) = t.strip_prefix('-') {
-        let d = parse_duration(rel).map_err(anyhow::Error::msg).with_context(|| {
-            format!("--at {text}: a relative time is a duration before now, like -2s or -150ms")
-        })?;
+        let d = parse_duration(rel)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("--at {text}: a relative time is a duration before now, like -2s or -150ms"))?;
         return Ok(now_ns.saturating_sub(d.as_nanos() as u64));
     }
     t.parse::<u64>().with_context(|| {
@@ -76,8 +75,9 @@ fn parse_time(text: &str, now_ns: u64) -> Result<u64> {
 
 fn dump(world: &World, ring: &str, seq: Option<u64>, at: Option<&str>, out: &std::path::Path) -> Result<ExitCode> {
     let name = RingName::parse(ring).with_context(|| format!("ring {ring:?}"))?;
-    let reader = RingReader::open(world.robot(), &name)
-        .with_context(|| format!("cannot read ring {name} of robot {} (`nerve mem list` shows its rings)", world.robot()))?;
+    let reader = RingReader::open(world.robot(), &name).with_context(|| {
+        format!("cannot read ring {name} of robot {} (`nerve mem list` shows its rings)", world.robot())
+    })?;
     let now = monotonic_ns();
     let which = match (seq, at) {
         (Some(s), _) => FrameSelector::Seq(s),
@@ -95,7 +95,7 @@ fn dump(world: &World, ring: &str, seq: Option<u64>, at: Option<&str>, out: &std
         meta.width,
         meta.height,
         meta.format().map_or_else(|| format!("code {}", meta.format_code), |f| f.to_string()),
-        format_duration(Duration::from_nanos(now.saturating_sub(meta.stamp_ns).max(1)))
+        age(now.saturating_sub(meta.stamp_ns))
     );
     Ok(ExitCode::SUCCESS)
 }
@@ -123,6 +123,16 @@ fn to_json(e: &ListedRing) -> Value {
     }
 }
 
+/// A duration for people: `850us`, `42ms`, `1.5s`, `12s`.
+fn age(ns: u64) -> String {
+    match ns {
+        n if n < 1_000_000 => format!("{}us", n / 1_000),
+        n if n < 1_000_000_000 => format!("{}ms", n / 1_000_000),
+        n if n < 10_000_000_000 => format!("{:.1}s", n as f64 / 1e9),
+        n => format!("{}s", n / 1_000_000_000),
+    }
+}
+
 fn bytes(n: u64) -> String {
     match n {
         n if n >= 10 << 20 => format!("{}MiB", n >> 20),
@@ -143,8 +153,8 @@ fn list(world: &World, as_json: bool) -> Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     println!(
-        "{:<8} {:>6} {:>9} {:>10} {:>8} {:>9}  {:<18} {}",
-        "RING", "SLOTS", "SLOT", "LAST_SEQ", "RATE", "AGE", "FRAME", "WRITER"
+        "{:<8} {:>6} {:>9} {:>10} {:>8} {:>9}  {:<18} WRITER",
+        "RING", "SLOTS", "SLOT", "LAST_SEQ", "RATE", "AGE", "FRAME"
     );
     for e in &rings {
         match &e.info {
@@ -163,7 +173,7 @@ fn list(world: &World, as_json: bool) -> Result<ExitCode> {
                     bytes(i.slot_capacity),
                     i.last_seq,
                     i.rate_hz.map_or_else(|| "-".into(), |r| format!("{r:.1}Hz")),
-                    i.last_age_ns.map_or_else(|| "-".into(), |a| format_duration(Duration::from_nanos(a.max(1)))),
+                    i.last_age_ns.map_or_else(|| "-".into(), age),
                     frame,
                     match (i.writer_pid, i.writer_alive) {
                         (Some(p), true) => format!("pid {p}"),
@@ -196,5 +206,7 @@ mod tests {
     fn sizes() {
         assert_eq!(bytes(230_400), "225KiB");
         assert_eq!(bytes(64), "64B");
+        assert_eq!(age(42_000_000), "42ms");
+        assert_eq!(age(1_500_000_000), "1.5s");
     }
 }
