@@ -1,7 +1,9 @@
-//! The `nerve-sim` binary as a real process: it publishes the sonar pty,
-//! which delivers 12-range frames at 4 Hz of simulated time; it accepts a
-//! wheel command after which the encoder counts change; SIGTERM stops it
-//! cleanly (links removed, truth log written).
+//! The `nerve-sim` binary (an agent of kind `sim`) as a real process, run
+//! alone (no router: it runs unregistered) in a robot world of its own: it
+//! publishes the sonar pty, which delivers 12-range frames at 4 Hz of
+//! simulated time; it accepts a wheel command after which the encoder counts
+//! change; SIGTERM stops it cleanly (links removed, truth log written, no
+//! camera ring left).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -42,6 +44,8 @@ fn sim_binary_serves_sonar_and_motor_over_ptys() {
     let truth = dir.join("truth.csv");
     let mut sim = Sim {
         child: Command::new(env!("CARGO_BIN_EXE_nerve-sim"))
+            .args(["--robot", &format!("simbin-{}", std::process::id()), "--no-realtime", "--log-level", "warn", "--"])
+            .env("NERVE_HOME", &dir)
             .arg("--world")
             .arg(world())
             .args(["--robot-model", "h1", "--seed", "3", "--duration", "600"])
@@ -49,7 +53,6 @@ fn sim_binary_serves_sonar_and_motor_over_ptys() {
             .arg(&dev)
             .arg("--truth")
             .arg(&truth)
-            .env("NERVE_LOG", "warn")
             .stdin(Stdio::null())
             .spawn()
             .expect("start nerve-sim"),
@@ -114,10 +117,7 @@ fn sim_binary_serves_sonar_and_motor_over_ptys() {
     // Closing and reopening the sonar port works.
     drop(sonar);
     let mut sonar = SerialLink::open(&dev.join("sonar")).expect("reopen sonar");
-    assert!(matches!(
-        sonar.recv(Duration::from_secs(10)).expect("read"),
-        Some(Message::SonarScan(_))
-    ));
+    assert!(matches!(sonar.recv(Duration::from_secs(10)).expect("read"), Some(Message::SonarScan(_))));
     drop(sonar);
     drop(motor);
 
@@ -136,6 +136,8 @@ fn sim_binary_serves_sonar_and_motor_over_ptys() {
     for name in ["sonar", "motor", "head", "ir"] {
         assert!(std::fs::symlink_metadata(dev.join(name)).is_err(), "{name} link removed");
     }
+    let ring = format!("/dev/shm/nerve_simbin-{}_stm_simcam", std::process::id());
+    assert!(std::fs::metadata(&ring).is_err(), "{ring} removed at stop");
     let csv = std::fs::read_to_string(&truth).expect("truth log");
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some(nerve_sim::TRUTH_HEADER));
@@ -152,6 +154,8 @@ fn bad_world_file_is_reported_with_its_name() {
     let w = dir.join("broken.toml");
     std::fs::write(&w, "[robot]\nx = 1\ny = 1\nspeed = 2\n").expect("write");
     let out = Command::new(env!("CARGO_BIN_EXE_nerve-sim"))
+        .args(["--robot", &format!("simbad-{}", std::process::id()), "--no-realtime", "--"])
+        .env("NERVE_HOME", &dir)
         .arg("--world")
         .arg(&w)
         .arg("--dev-dir")

@@ -122,10 +122,7 @@ fn host_may_close_and_reopen() {
             hub.step(&mut sim);
         }
         let got = recv_exactly(&mut sonar, 2);
-        assert!(
-            got.iter().all(|m| matches!(m, Message::SonarScan(_))),
-            "round {round}: only fresh scans: {got:?}"
-        );
+        assert!(got.iter().all(|m| matches!(m, Message::SonarScan(_))), "round {round}: only fresh scans: {got:?}");
         assert_eq!(hub.device(DeviceKind::Sonar).expect("sonar").stats().connects, round);
         drop(sonar);
         for _ in 0..30 {
@@ -134,10 +131,7 @@ fn host_may_close_and_reopen() {
     }
     // a second agent on the same device is refused while the first holds it
     let _first = SerialLink::open(&dir.join("motor")).expect("open");
-    assert!(matches!(
-        SerialLink::open(&dir.join("motor")),
-        Err(nerve_devices::SerialOpenError::Busy { .. })
-    ));
+    assert!(matches!(SerialLink::open(&dir.join("motor")), Err(nerve_devices::SerialOpenError::Busy { .. })));
     drop(hub);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -10,11 +10,8 @@ fn test_room_loads_for_both_robots() {
     let world = World::load(&path).expect("test-room.toml is valid");
     assert_eq!(world.name, "test-room");
     // the east wall is cut by the door into two pieces
-    let east: Vec<_> = world
-        .walls
-        .iter()
-        .filter(|w| (w.seg.a.x - 6.0).abs() < 1e-9 && (w.seg.b.x - 6.0).abs() < 1e-9)
-        .collect();
+    let east: Vec<_> =
+        world.walls.iter().filter(|w| (w.seg.a.x - 6.0).abs() < 1e-9 && (w.seg.b.x - 6.0).abs() < 1e-9).collect();
     assert_eq!(east.len(), 2);
     assert!(world.checkpoints.iter().any(|c| c.target));
     for model in [RobotModel::h1(), RobotModel::h2()] {

@@ -8,16 +8,20 @@
 pub mod head;
 pub mod ir;
 pub mod motion;
+pub mod resources;
 pub mod router;
 pub mod scalar;
+pub mod situation;
 pub mod sonar;
 pub mod tick;
 
 pub use head::{HeadCommand, HeadState};
 pub use ir::IrSighting;
 pub use motion::{GroundTruth, LinguisticCommand, LinguisticTerm, Odometry, SafetyStop, VelocityCommand};
+pub use resources::{AgentLoad, LoadLevel, MAX_AGENT_LOADS, ResourceReport};
 pub use router::RouterEpoch;
 pub use scalar::Scalar;
+pub use situation::{DangerLevel, Mode, Situation, TargetState};
 pub use sonar::{SONAR_DIRECTIONS, SonarScan};
 pub use tick::Tick;
 
@@ -56,6 +60,9 @@ macro_rules! for_each_payload {
         $m!($crate::payloads::IrSighting);
         $m!($crate::payloads::HeadCommand);
         $m!($crate::payloads::HeadState);
+        $m!($crate::payloads::Situation);
+        $m!($crate::payloads::Mode);
+        $m!($crate::payloads::ResourceReport);
     };
 }
 

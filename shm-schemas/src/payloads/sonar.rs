@@ -57,8 +57,7 @@ mod tests {
 
     #[test]
     fn nearest_ignores_invalid() {
-        let mut s = SonarScan::default();
-        s.ranges_m = [5.0; SONAR_DIRECTIONS];
+        let mut s = SonarScan { ranges_m: [5.0; SONAR_DIRECTIONS], ..Default::default() };
         s.ranges_m[2] = 0.1;
         s.ranges_m[4] = 0.7;
         s.valid[4] = 1;

@@ -1,0 +1,457 @@
+//! The device thread of nerve's sensor and actuator agents (thesis Fig. 2-3:
+//! the "receiver" that listens to the hardware).
+//!
+//! [`DeviceLink::spawn`] starts a thread that owns one serial device (a
+//! board's `/dev/ttyUSB*` or a simulator's pseudo-terminal), decodes its
+//! frames with [`nerve_devices::SerialLink`] and hands every message to the
+//! agent's task through a bounded channel ([`DeviceLink::try_recv`]); the task
+//! sends commands back with [`DeviceLink::send`].
+//!
+//! **Failures.** When the device cannot be opened, or vanishes while open
+//! (the pty closed: `BrokenPipe`, EIO, end of file), the thread logs it once
+//! at `warn` level, then retries with **exponential backoff** ([`Backoff`]:
+//! 100 ms doubling up to 5 s, by default), sleeping between attempts — never
+//! a busy loop. Further failed attempts are logged at `debug` level only,
+//! with a `warn` line again at attempts 8, 16, 32, ... so that a log does
+//! not fill up. When the device reappears it is reopened, logged at `info`
+//! level ("device recovered"), and the backoff starts over. Decoder
+//! counters ([`LinkStats`]) are cumulative over reopenings.
+
+use nerve_devices::{DecodeStats, Message, SerialLink};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// How often the thread looks for outgoing commands while waiting for input.
+const POLL: Duration = Duration::from_millis(20);
+/// Messages buffered for the task before the oldest are dropped (counted).
+const CHANNEL_DEPTH: usize = 256;
+
+/// Why the device thread could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// The OS refused a thread.
+    #[error("cannot start the device thread for {path}: {source}")]
+    Thread {
+        /// device path
+        path: PathBuf,
+        /// OS error
+        source: std::io::Error,
+    },
+}
+
+/// Exponential backoff between reconnection attempts.
+#[derive(Debug, Clone)]
+pub struct Backoff {
+    initial: Duration,
+    max: Duration,
+    next: Duration,
+    attempts: u64,
+}
+
+impl Backoff {
+    /// Starts at `initial`, doubles after each failure, never exceeds `max`.
+    pub fn new(initial: Duration, max: Duration) -> Self {
+        Backoff { initial, max: max.max(initial), next: initial, attempts: 0 }
+    }
+
+    /// The delay before the next attempt; doubles the one after.
+    pub fn next_delay(&mut self) -> Duration {
+        let d = self.next;
+        self.next = (self.next * 2).min(self.max);
+        self.attempts += 1;
+        d
+    }
+
+    /// Failed attempts since the last success.
+    pub fn attempts(&self) -> u64 {
+        self.attempts
+    }
+
+    /// After a success: start over.
+    pub fn reset(&mut self) {
+        self.next = self.initial;
+        self.attempts = 0;
+    }
+}
+
+impl Default for Backoff {
+    fn default() -> Self {
+        Backoff::new(Duration::from_millis(100), Duration::from_secs(5))
+    }
+}
+
+/// Counters of a device link, cumulative over reopenings.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LinkStats {
+    /// Decoder counters (frames, garbage bytes, bad checksums, truncated...).
+    pub decode: DecodeStats,
+    /// Whether the device is open now.
+    pub connected: bool,
+    /// Successful opens.
+    pub opens: u64,
+    /// Times the open device vanished (closed, I/O error).
+    pub losses: u64,
+    /// Failed open attempts.
+    pub failed_opens: u64,
+    /// Messages dropped because the task did not take them in time.
+    pub overflow: u64,
+    /// Commands that could not be written (device absent or failing).
+    pub unsent: u64,
+}
+
+fn add(a: DecodeStats, b: DecodeStats) -> DecodeStats {
+    DecodeStats {
+        frames: a.frames + b.frames,
+        garbage_bytes: a.garbage_bytes + b.garbage_bytes,
+        bad_headers: a.bad_headers + b.bad_headers,
+        bad_checksums: a.bad_checksums + b.bad_checksums,
+        truncated: a.truncated + b.truncated,
+        invalid_payloads: a.invalid_payloads + b.invalid_payloads,
+    }
+}
+
+/// What the device thread tells the task.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DeviceEvent {
+    /// A decoded message and the CLOCK_MONOTONIC-like instant it was read.
+    Message(Message, Instant),
+    /// The device was opened (first time or after a loss).
+    Connected,
+    /// The device vanished; the thread is retrying.
+    Lost,
+}
+
+/// A serial device kept open by its own thread; see the module documentation.
+#[derive(Debug)]
+pub struct DeviceLink {
+    events: Receiver<DeviceEvent>,
+    commands: SyncSender<Message>,
+    stats: Arc<Mutex<LinkStats>>,
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+    path: PathBuf,
+}
+
+/// Options of a [`DeviceLink`].
+#[derive(Debug, Clone)]
+pub struct LinkOptions {
+    /// Backoff between reconnection attempts.
+    pub backoff: Backoff,
+    /// Name used in log lines (`sonar`, `motor`...).
+    pub label: String,
+}
+
+impl DeviceLink {
+    /// Starts the device thread for `path`. It opens the device itself (and
+    /// keeps retrying), so this succeeds even when the device is absent.
+    pub fn spawn(path: &Path, opts: LinkOptions) -> Result<Self, LinkError> {
+        let (ev_tx, ev_rx) = sync_channel(CHANNEL_DEPTH);
+        let (cmd_tx, cmd_rx) = sync_channel(16);
+        let stats = Arc::new(Mutex::new(LinkStats::default()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let worker = Worker {
+            path: path.to_path_buf(),
+            opts,
+            events: ev_tx,
+            commands: cmd_rx,
+            stats: stats.clone(),
+            stop: stop.clone(),
+            base: DecodeStats::default(),
+        };
+        let handle = std::thread::Builder::new()
+            .name("device".into())
+            .spawn(move || worker.run())
+            .map_err(|source| LinkError::Thread { path: path.to_path_buf(), source })?;
+        Ok(DeviceLink { events: ev_rx, commands: cmd_tx, stats, stop, handle: Some(handle), path: path.to_path_buf() })
+    }
+
+    /// The device path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The next event, if one is waiting.
+    pub fn try_recv(&self) -> Option<DeviceEvent> {
+        self.events.try_recv().ok()
+    }
+
+    /// The next event, waiting at most `timeout`.
+    pub fn recv_timeout(&self, timeout: Duration) -> Option<DeviceEvent> {
+        self.events.recv_timeout(timeout).ok()
+    }
+
+    /// Queues a command for the device; `false` (and counted) when the queue
+    /// is full. Commands queued while the device is absent are discarded.
+    pub fn send(&self, msg: Message) -> bool {
+        match self.commands.try_send(msg) {
+            Ok(()) => true,
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                lock(&self.stats).unsent += 1;
+                false
+            }
+        }
+    }
+
+    /// The counters now.
+    pub fn stats(&self) -> LinkStats {
+        *lock(&self.stats)
+    }
+}
+
+impl Drop for DeviceLink {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+struct Worker {
+    path: PathBuf,
+    opts: LinkOptions,
+    events: SyncSender<DeviceEvent>,
+    commands: Receiver<Message>,
+    stats: Arc<Mutex<LinkStats>>,
+    stop: Arc<AtomicBool>,
+    /// decoder counters of the links closed so far
+    base: DecodeStats,
+}
+
+impl Worker {
+    fn stopping(&self) -> bool {
+        self.stop.load(Ordering::Acquire)
+    }
+
+    /// Sleeps `d` in short slices, returning early on stop.
+    fn sleep(&self, d: Duration) {
+        let end = Instant::now() + d;
+        while !self.stopping() {
+            let now = Instant::now();
+            if now >= end {
+                return;
+            }
+            std::thread::sleep((end - now).min(Duration::from_millis(50)));
+        }
+    }
+
+    fn emit(&self, ev: DeviceEvent) {
+        match self.events.try_send(ev) {
+            Ok(()) | Err(TrySendError::Disconnected(_)) => {}
+            Err(TrySendError::Full(_)) => lock(&self.stats).overflow += 1,
+        }
+    }
+
+    fn run(mut self) {
+        let label = self.opts.label.clone();
+        let mut backoff = self.opts.backoff.clone();
+        let mut ever_open = false;
+        while !self.stopping() {
+            match SerialLink::open(&self.path) {
+                Ok(link) => {
+                    if ever_open {
+                        tracing::info!(
+                            device = %label, path = %self.path.display(),
+                            "device recovered after {} attempt(s)", backoff.attempts()
+                        );
+                    } else {
+                        tracing::info!(device = %label, path = %self.path.display(), "device opened");
+                    }
+                    ever_open = true;
+                    backoff.reset();
+                    // commands queued while the device was away are stale
+                    while self.commands.try_recv().is_ok() {}
+                    {
+                        let mut s = lock(&self.stats);
+                        s.opens += 1;
+                        s.connected = true;
+                    }
+                    self.emit(DeviceEvent::Connected);
+                    let why = self.serve(link);
+                    if self.stopping() {
+                        break;
+                    }
+                    lock(&self.stats).losses += 1;
+                    self.emit(DeviceEvent::Lost);
+                    tracing::warn!(
+                        device = %label, path = %self.path.display(),
+                        "device lost ({why}); reconnecting with backoff"
+                    );
+                }
+                Err(e) => {
+                    lock(&self.stats).failed_opens += 1;
+                    let delay = backoff.next_delay();
+                    let n = backoff.attempts();
+                    if n == 1 || n.is_power_of_two() && n >= 8 {
+                        tracing::warn!(
+                            device = %label, attempt = n,
+                            "{e}; retrying in {} ms (backoff doubles up to {} ms)",
+                            delay.as_millis(), self.opts.backoff.max.as_millis()
+                        );
+                    } else {
+                        tracing::debug!(device = %label, attempt = n, "{e}; retrying in {} ms", delay.as_millis());
+                    }
+                    self.sleep(delay);
+                }
+            }
+        }
+    }
+
+    /// Serves an open link until it fails or the thread stops; returns why it ended.
+    fn serve(&mut self, mut link: SerialLink) -> String {
+        let why = loop {
+            if self.stopping() {
+                break "stopping".to_owned();
+            }
+            let mut failed = None;
+            while let Ok(cmd) = self.commands.try_recv() {
+                if let Err(e) = link.send(&cmd) {
+                    lock(&self.stats).unsent += 1;
+                    failed = Some(format!("write failed: {e}"));
+                    break;
+                }
+            }
+            if let Some(f) = failed {
+                break f;
+            }
+            let result = link.recv(POLL);
+            lock(&self.stats).decode = add(self.base, link.stats());
+            match result {
+                Ok(Some(m)) => {
+                    self.emit(DeviceEvent::Message(m, Instant::now()));
+                    // more frames may be buffered: take them without waiting
+                    while let Ok(Some(m)) = link.recv(Duration::ZERO) {
+                        self.emit(DeviceEvent::Message(m, Instant::now()));
+                    }
+                }
+                Ok(None) => {}
+                Err(e) => break format!("read failed: {e}"),
+            }
+        };
+        self.base = add(self.base, link.stats());
+        let mut s = lock(&self.stats);
+        s.decode = self.base;
+        s.connected = false;
+        why
+    }
+}
+
+/// Whether `setup` is the throw-away world of `--describe` (which runs
+/// `Agent::new` only to list ports and parameters): agents then accept a
+/// missing `--device` and open nothing.
+pub fn describing(setup: &agent_sdk::Setup) -> bool {
+    setup.world().robot().as_str().starts_with("describe-")
+}
+
+/// Parses an agent's own arguments (those after `--`) with clap; the error
+/// is clap's message, which names the bad option and lists the good ones.
+pub fn parse_agent_args<T: clap::Parser>(kind: &str, args: &[String]) -> Result<T, agent_sdk::AgentError> {
+    T::try_parse_from(std::iter::once(format!("nerve-{kind} --")).chain(args.iter().cloned()))
+        .map_err(|e| agent_sdk::AgentError::Config(format!("agent arguments (after `--`): {e}")))
+}
+
+/// Declares the read-only counter parameters of a device link on `setup`
+/// and returns a handle that copies [`LinkStats`] into them.
+pub fn counter_params(setup: &mut agent_sdk::Setup) -> CounterParams {
+    let mut p = |k: &str| setup.param_checked(k, 0u64, |_| Err("this is a read-only counter kept by the agent".into()));
+    CounterParams {
+        frames: p("frames"),
+        garbage_bytes: p("garbage_bytes"),
+        bad_headers: p("bad_headers"),
+        bad_checksums: p("bad_checksums"),
+        truncated: p("truncated"),
+        invalid_payloads: p("invalid_payloads"),
+        opens: p("device_opens"),
+        losses: p("device_losses"),
+        failed_opens: p("device_failed_opens"),
+        last_logged: DecodeStats::default(),
+        last_log: None,
+    }
+}
+
+/// The read-only counter parameters of a device link (see [`counter_params`]):
+/// `frames`, `garbage_bytes`, `bad_headers`, `bad_checksums`, `truncated`,
+/// `invalid_payloads`, `device_opens`, `device_losses`, `device_failed_opens`.
+#[derive(Debug)]
+pub struct CounterParams {
+    frames: agent_sdk::Param<u64>,
+    garbage_bytes: agent_sdk::Param<u64>,
+    bad_headers: agent_sdk::Param<u64>,
+    bad_checksums: agent_sdk::Param<u64>,
+    truncated: agent_sdk::Param<u64>,
+    invalid_payloads: agent_sdk::Param<u64>,
+    opens: agent_sdk::Param<u64>,
+    losses: agent_sdk::Param<u64>,
+    failed_opens: agent_sdk::Param<u64>,
+    last_logged: DecodeStats,
+    last_log: Option<Instant>,
+}
+
+impl CounterParams {
+    /// Copies the counters into the parameters; logs (at most every 5 s)
+    /// when the decoder dropped anything since the last log line.
+    pub fn update(&mut self, s: &LinkStats, label: &str) {
+        let d = s.decode;
+        self.frames.set(d.frames);
+        self.garbage_bytes.set(d.garbage_bytes);
+        self.bad_headers.set(d.bad_headers);
+        self.bad_checksums.set(d.bad_checksums);
+        self.truncated.set(d.truncated);
+        self.invalid_payloads.set(d.invalid_payloads);
+        self.opens.set(s.opens);
+        self.losses.set(s.losses);
+        self.failed_opens.set(s.failed_opens);
+        let dirty = d.garbage_bytes != self.last_logged.garbage_bytes
+            || d.rejected_frames() != self.last_logged.rejected_frames();
+        if dirty && self.last_log.is_none_or(|t| t.elapsed() >= Duration::from_secs(5)) {
+            tracing::warn!(
+                device = %label,
+                "line noise: {} garbage bytes, {} bad headers, {} bad checksums, {} truncated, {} invalid payloads dropped so far ({} good frames); parsing resynchronised",
+                d.garbage_bytes, d.bad_headers, d.bad_checksums, d.truncated, d.invalid_payloads, d.frames
+            );
+            self.last_logged = d;
+            self.last_log = Some(Instant::now());
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn backoff_doubles_to_the_cap_and_resets() {
+        let mut b = Backoff::new(Duration::from_millis(100), Duration::from_millis(700));
+        let d: Vec<u128> = (0..5).map(|_| b.next_delay().as_millis()).collect();
+        assert_eq!(d, vec![100, 200, 400, 700, 700]);
+        assert_eq!(b.attempts(), 5);
+        b.reset();
+        assert_eq!(b.next_delay(), Duration::from_millis(100));
+    }
+
+    #[test]
+    fn absent_device_is_retried_not_spun() {
+        let dir = std::env::temp_dir().join(format!("nerve-devlink-{}", std::process::id()));
+        let link = DeviceLink::spawn(
+            &dir.join("nope"),
+            LinkOptions {
+                backoff: Backoff::new(Duration::from_millis(20), Duration::from_millis(80)),
+                label: "t".into(),
+            },
+        )
+        .expect("spawn");
+        std::thread::sleep(Duration::from_millis(500));
+        let s = link.stats();
+        // 20 + 40 + 80 + 80 + ... ms: about 7 attempts in 500 ms, never hundreds
+        assert!((3..=12).contains(&s.failed_opens), "{s:?}");
+        assert!(!s.connected);
+    }
+}

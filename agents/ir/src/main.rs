@@ -1,0 +1,113 @@
+//! `ir`: the checkpoint sensor agent.
+//!
+//! Opens the IR receiver's serial port (`-- --device PATH`) in a device
+//! thread and publishes each of its reports (10 Hz) on output `sighting`
+//! (`nerve::IrSighting`): whether a checkpoint is seen, its code and which of
+//! its four transmitters are received (from which the robot's bearing around
+//! the checkpoint follows, `IrSighting::sector`). A change of what is seen
+//! is logged at info level.
+//!
+//! Periodic (default 50 ms). Parameters: read-only counters `frames`,
+//! `garbage_bytes`, `bad_headers`, `bad_checksums`, `truncated`,
+//! `invalid_payloads`, `device_opens`, `device_losses`,
+//! `device_failed_opens`. A device that vanishes is logged and reopened with
+//! exponential backoff (see `nerve_devlink`); no sightings are published
+//! meanwhile.
+
+use agent_sdk::{Agent, AgentError, Context, Output, Setup, Task};
+use nerve_devices::Message;
+use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink, LinkOptions};
+use shm_schemas::payloads::IrSighting;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Arguments after `--`.
+#[derive(Debug, clap::Parser)]
+struct Args {
+    /// Serial device of the IR receiver.
+    #[arg(long)]
+    device: Option<PathBuf>,
+}
+
+struct Ir {
+    device: Option<PathBuf>,
+    link: Option<DeviceLink>,
+    out: Output<IrSighting>,
+    counters: CounterParams,
+    seq: u64,
+    last_seq: Option<u16>,
+    last_seen: Option<(u8, u8)>,
+}
+
+impl Agent for Ir {
+    const KIND: &'static str = "ir";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_millis(50))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
+        if args.device.is_none() && !nerve_devlink::describing(setup) {
+            return Err(AgentError::Config(
+                "no device: give the IR receiver's serial port after `--`, e.g. `nerve start ir -- --device /dev/ttyUSB2`"
+                    .into(),
+            ));
+        }
+        Ok(Ir {
+            device: args.device,
+            link: None,
+            out: setup.output("sighting")?,
+            counters: nerve_devlink::counter_params(setup),
+            seq: 0,
+            last_seq: None,
+            last_seen: None,
+        })
+    }
+
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        let Some(path) = &self.device else {
+            return Err(AgentError::Config("no --device given".into()));
+        };
+        self.link = Some(
+            DeviceLink::spawn(path, LinkOptions { backoff: Default::default(), label: "ir".into() })
+                .map_err(|e| AgentError::Device(e.to_string()))?,
+        );
+        Ok(())
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        let Some(link) = &self.link else { return Ok(()) };
+        let mut result = Ok(());
+        while let Some(ev) = link.try_recv() {
+            let DeviceEvent::Message(Message::IrReport(r), at) = ev else { continue };
+            self.seq += self.last_seq.map_or(1, |l| u64::from(r.seq.wrapping_sub(l).max(1)));
+            self.last_seq = Some(r.seq);
+            let seen = r.sighting.map(|s| (s.checkpoint_id, s.transmitters));
+            if seen != self.last_seen {
+                match seen {
+                    Some((id, tx)) => tracing::info!("checkpoint {id} seen (transmitters {tx:#06b})"),
+                    None => tracing::info!("no checkpoint in sight"),
+                }
+                self.last_seen = seen;
+            }
+            let sighting = IrSighting {
+                seq: self.seq,
+                stamp_ns: ctx.now_ns().saturating_sub(at.elapsed().as_nanos() as u64),
+                seen: u8::from(seen.is_some()),
+                checkpoint_id: seen.map_or(0, |s| s.0),
+                transmitters: seen.map_or(0, |s| s.1),
+                reserved: [0; 5],
+            };
+            if let Err(e) = self.out.send(sighting) {
+                result = Err(e.into());
+            }
+        }
+        self.counters.update(&link.stats(), "ir");
+        result
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<Ir>()
+}

@@ -1,0 +1,306 @@
+//! `motor`: the foot motor agent — the actuator pattern of the thesis'
+//! Fig. 2-4 in front of the wheel board.
+//!
+//! Inputs (fan-in from any number of agents; the sample header names the
+//! sender, and the latest command of each sender is kept):
+//! * `cmd` — `nerve::VelocityCommand`, numeric (v, ω);
+//! * `say` — `nerve::LinguisticCommand`, e.g. "turn right a little";
+//! * `stop` — `nerve::SafetyStop`, which always wins.
+//!
+//! Every cycle (periodic, default 50 ms) the commands go through the filter,
+//! the fuzzy rule base and the weighted fusion of `nerve_motor`; the result
+//! is ramped to the base's limits, turned into wheel speeds and sent to the
+//! motor board over the serial port `-- --device PATH`. The board's encoder
+//! reports (20 Hz) are integrated into odometry.
+//!
+//! Outputs: `odom` (`nerve::Odometry`, per encoder report) and `applied`
+//! (`nerve::VelocityCommand`, what was sent to the wheels, every cycle).
+//!
+//! Parameters: `weights` (`sender:weight,...`), `default_weight`, `v_max`,
+//! `omega_max`, `accel_max`, `stale_ms`, `cruise`; read-only counters
+//! `accepted`, `refused` and the device link's counters. Agent arguments:
+//! `--device PATH` (required), `--robot-model h1|h2` (geometry and limits,
+//! default h1), `--start X,Y,THETA_DEG` (odometry start pose, default 0,0,0).
+//!
+//! When the board vanishes the agent logs it, keeps deciding (so a stop is
+//! never missed) and reopens the port with exponential backoff; the first
+//! command after recovery is the current decision. On stop it commands the
+//! wheels to zero (the board has no command timeout).
+
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
+use nerve_devices::{DiffDriveGeometry, Message, Pose2, WheelCommand, wrap_angle};
+use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink, LinkOptions};
+use nerve_motor::{Fusion, Limits, Weights, drive::wheel_speeds};
+use shm_schemas::payloads::{LinguisticCommand, Odometry, SafetyStop, VelocityCommand};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Arguments after `--`.
+#[derive(Debug, clap::Parser)]
+struct Args {
+    /// Serial device of the motor board.
+    #[arg(long)]
+    device: Option<PathBuf>,
+    /// Robot model: h1 or h2 (wheel geometry and limits).
+    #[arg(long, default_value = "h1", value_parser = ["h1", "h2"])]
+    robot_model: String,
+    /// Odometry start pose: X,Y,THETA_DEG.
+    #[arg(long, value_parser = parse_pose)]
+    start: Option<Pose2>,
+}
+
+fn parse_pose(s: &str) -> Result<Pose2, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|_| format!("{x:?} is not a number")))
+        .collect::<Result<_, _>>()?;
+    match v.as_slice() {
+        [x, y, deg] if v.iter().all(|a| a.is_finite()) => {
+            Ok(Pose2 { x: *x, y: *y, theta: wrap_angle(deg.to_radians()) })
+        }
+        _ => Err("write X,Y,THETA_DEG, e.g. 1.0,2.0,90".into()),
+    }
+}
+
+struct Motor {
+    device: Option<PathBuf>,
+    link: Option<DeviceLink>,
+    cmd: Input<VelocityCommand>,
+    say: Input<LinguisticCommand>,
+    stop: Input<SafetyStop>,
+    odom_out: Output<Odometry>,
+    applied_out: Output<VelocityCommand>,
+    weights: Param<String>,
+    default_weight: Param<f64>,
+    v_max: Param<f64>,
+    omega_max: Param<f64>,
+    accel_max: Param<f64>,
+    stale_ms: Param<u64>,
+    cruise: Param<f64>,
+    accepted: Param<u64>,
+    refused: Param<u64>,
+    counters: CounterParams,
+    base_limits: Limits,
+    geometry: DiffDriveGeometry,
+    wheel_max_mm_s: f64,
+    fusion: Fusion,
+    odometry: nerve_devices::Odometry,
+    last_report: Option<(u32, Pose2)>,
+    refusals_by_sender: BTreeMap<String, u64>,
+    last_stopped_by: Option<String>,
+    was_idle: bool,
+    last_step_ns: u64,
+}
+
+fn positive(v: &f64) -> Result<(), String> {
+    if v.is_finite() && *v > 0.0 { Ok(()) } else { Err("must be a positive number".into()) }
+}
+
+impl Motor {
+    fn limits(&self) -> Limits {
+        Limits {
+            v_max: self.v_max.get(),
+            omega_max: self.omega_max.get(),
+            accel_max: self.accel_max.get(),
+            stale_ns: self.stale_ms.get() * 1_000_000,
+            ..self.base_limits
+        }
+    }
+
+    fn refused_from(&mut self, sender: &str, what: &str, why: &dyn std::fmt::Display) {
+        self.refused.set(self.refused.get() + 1);
+        let n = self.refusals_by_sender.entry(sender.to_owned()).or_insert(0);
+        *n += 1;
+        if n.is_power_of_two() {
+            tracing::warn!("refused {what} from {sender} ({n} so far from it): {why}");
+        }
+    }
+
+    fn on_encoder(&mut self, r: &nerve_devices::EncoderReport, stamp_ns: u64) -> Result<(), AgentError> {
+        let pose = self.odometry.update(r);
+        let (mut v, mut omega) = (0.0, 0.0);
+        if let Some((t0, p0)) = self.last_report {
+            let dt = f64::from(r.time_ms.wrapping_sub(t0)) / 1000.0;
+            if dt > 1e-3 && dt < 5.0 {
+                let (dx, dy) = (pose.x - p0.x, pose.y - p0.y);
+                let mid = p0.theta + 0.5 * wrap_angle(pose.theta - p0.theta);
+                v = (dx * mid.cos() + dy * mid.sin()) / dt;
+                omega = wrap_angle(pose.theta - p0.theta) / dt;
+            }
+        }
+        self.last_report = Some((r.time_ms, pose));
+        self.odom_out.send(Odometry { x: pose.x, y: pose.y, theta: pose.theta, v, omega, stamp_ns })?;
+        Ok(())
+    }
+}
+
+impl Agent for Motor {
+    const KIND: &'static str = "motor";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_millis(50))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
+        if args.device.is_none() && !nerve_devlink::describing(setup) {
+            return Err(AgentError::Config(
+                "no device: give the motor board's serial port after `--`, e.g. `nerve start motor -- --device /dev/ttyUSB1` \
+                 (with the simulator: `-- --device <state dir>/dev/motor`)"
+                    .into(),
+            ));
+        }
+        let (limits, geometry, wheel_max) = match args.robot_model.as_str() {
+            "h2" => (Limits::H2, DiffDriveGeometry::H2, 600.0),
+            _ => (Limits::H1, DiffDriveGeometry::H1, 800.0),
+        };
+        let read_only = |_: &u64| Err::<(), String>("this is a read-only counter kept by the agent".into());
+        let (v_lim, w_lim) = (limits.v_max, limits.omega_max);
+        Ok(Motor {
+            device: args.device,
+            link: None,
+            cmd: setup.input("cmd")?,
+            say: setup.input("say")?,
+            stop: setup.input("stop")?,
+            odom_out: setup.output("odom")?,
+            applied_out: setup.output("applied")?,
+            weights: setup.param_checked("weights", String::new(), |s: &String| Weights::parse(s).map(|_| ())),
+            default_weight: setup.param_checked("default_weight", 1.0, |v: &f64| {
+                if v.is_finite() && *v >= 0.0 { Ok(()) } else { Err("must be a finite number >= 0".into()) }
+            }),
+            v_max: setup.param_checked("v_max", v_lim, move |v: &f64| {
+                if v.is_finite() && *v > 0.0 && *v <= v_lim {
+                    Ok(())
+                } else {
+                    Err(format!("must be in (0, {v_lim}], the board's limit"))
+                }
+            }),
+            omega_max: setup.param_checked("omega_max", w_lim, move |v: &f64| {
+                if v.is_finite() && *v > 0.0 && *v <= w_lim { Ok(()) } else { Err(format!("must be in (0, {w_lim}]")) }
+            }),
+            accel_max: setup.param_checked("accel_max", limits.accel_max, positive),
+            stale_ms: setup.param_checked("stale_ms", limits.stale_ns / 1_000_000, |v: &u64| {
+                if (10..=60_000).contains(v) { Ok(()) } else { Err("must be between 10 and 60000 ms".into()) }
+            }),
+            cruise: setup.param_checked("cruise", 0.3, positive),
+            accepted: setup.param_checked("accepted", 0u64, read_only),
+            refused: setup.param_checked("refused", 0u64, read_only),
+            counters: nerve_devlink::counter_params(setup),
+            base_limits: limits,
+            geometry,
+            wheel_max_mm_s: wheel_max,
+            fusion: Fusion::new(0.3),
+            odometry: nerve_devices::Odometry::new(geometry, args.start.unwrap_or_default()),
+            last_report: None,
+            refusals_by_sender: BTreeMap::new(),
+            last_stopped_by: None,
+            was_idle: true,
+            last_step_ns: 0,
+        })
+    }
+
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        let Some(path) = &self.device else {
+            return Err(AgentError::Config("no --device given".into()));
+        };
+        self.link = Some(
+            DeviceLink::spawn(path, LinkOptions { backoff: Default::default(), label: "motor".into() })
+                .map_err(|e| AgentError::Device(e.to_string()))?,
+        );
+        Ok(())
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        let now = ctx.now_ns();
+        let mut result: Result<(), AgentError> = Ok(());
+        // the board: encoder reports
+        let mut reports = Vec::new();
+        if let Some(link) = &self.link {
+            while let Some(ev) = link.try_recv() {
+                match ev {
+                    DeviceEvent::Message(Message::EncoderReport(r), at) => {
+                        reports.push((r, now.saturating_sub(at.elapsed().as_nanos() as u64)))
+                    }
+                    DeviceEvent::Connected => self.last_report = None,
+                    _ => {}
+                }
+            }
+        }
+        for (r, stamp) in reports {
+            if let Err(e) = self.on_encoder(&r, stamp) {
+                result = Err(e);
+            }
+        }
+
+        // the filter: every command of every sender
+        let limits = self.limits();
+        let mut offered = Vec::new();
+        self.cmd.drain(|m, c| offered.push((m.sender.as_str().to_owned(), Ok(*c))));
+        self.say.drain(|m, c| offered.push((m.sender.as_str().to_owned(), Err(*c))));
+        for (sender, c) in offered {
+            let r = match c {
+                Ok(c) => self.fusion.offer_numeric(&sender, &c, now, &limits).map_err(|e| ("command", e)),
+                Err(c) => self
+                    .fusion
+                    .offer_linguistic(&sender, &c, now, &limits)
+                    .map(|_| ())
+                    .map_err(|e| ("linguistic command", e)),
+            };
+            match r {
+                Ok(()) => self.accepted.set(self.accepted.get() + 1),
+                Err((what, e)) => self.refused_from(&sender, what, &e),
+            }
+        }
+        let mut stops = Vec::new();
+        self.stop.drain(|m, s| stops.push((m.sender.as_str().to_owned(), *s)));
+        for (sender, s) in stops {
+            self.fusion.offer_stop(&sender, &s, now);
+        }
+
+        // fusion, control, wheels
+        self.fusion.cruise = self.cruise.get();
+        let weights = Weights::parse(&self.weights.get()).unwrap_or_default();
+        let dt = if self.last_step_ns == 0 {
+            ctx.period().map_or(0.05, |p| p.as_secs_f64())
+        } else {
+            (now.saturating_sub(self.last_step_ns)) as f64 / 1e9
+        };
+        self.last_step_ns = now;
+        let d = self.fusion.decide(now, dt, &limits, &weights, self.default_weight.get());
+        if d.stopped_by != self.last_stopped_by {
+            match &d.stopped_by {
+                Some(s) => tracing::warn!("safety stop from {s}: the base stops"),
+                None => tracing::info!("safety stop released"),
+            }
+            self.last_stopped_by = d.stopped_by.clone();
+        }
+        let idle = d.sources == 0;
+        if idle && !self.was_idle {
+            tracing::info!("no fresh command from any source: stopping (dead man)");
+        }
+        self.was_idle = idle;
+        let (left, right) = wheel_speeds(d.v, d.omega, self.geometry.wheel_base_mm / 1000.0, self.wheel_max_mm_s);
+        if let Some(link) = &self.link {
+            link.send(WheelCommand { left_mm_s: left, right_mm_s: right }.into());
+            self.counters.update(&link.stats(), "motor");
+        }
+        self.applied_out.send(VelocityCommand { v: d.v, omega: d.omega, stamp_ns: now })?;
+        result
+    }
+
+    fn stop(&mut self, _ctx: &mut Context) {
+        if let Some(link) = &self.link {
+            if link.stats().connected {
+                link.send(WheelCommand::default().into());
+                // the device thread writes within its 20 ms poll
+                std::thread::sleep(Duration::from_millis(60));
+                tracing::info!("wheels commanded to zero");
+            }
+        }
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<Motor>()
+}

@@ -1,0 +1,145 @@
+//! `sonar`: the sonar sensor agent (thesis section 4.2.2.1).
+//!
+//! Opens the sonar ring module's serial port (`-- --device PATH`, a real
+//! `/dev/ttyUSB*` or the simulator's `{state}/dev/sonar`) in a device thread,
+//! decodes its frames (resynchronising after garbage), estimates the risk
+//! in each of the 12 directions from the change of range between samples
+//! ([`nerve_sonar::RiskEstimator`]) and publishes every scan on its output
+//! `scan` (`nerve::SonarScan`).
+//!
+//! Periodic (default 50 ms): each cycle takes the scans the device thread
+//! received. Parameters: `ttc_horizon` (s), `near` (m), `smoothing`,
+//! `max_closing` (m/s); read-only counters `frames`, `garbage_bytes`,
+//! `bad_headers`, `bad_checksums`, `truncated`, `invalid_payloads`,
+//! `device_opens`, `device_losses`, `device_failed_opens`, `missed_scans`,
+//! `artefacts`. A device that vanishes is logged and reopened with
+//! exponential backoff; see `nerve_devlink`.
+
+use agent_sdk::{Agent, AgentError, Context, Output, Param, Setup, Task};
+use nerve_devices::{Message, SONAR_NO_ECHO};
+use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink, LinkOptions};
+use nerve_sonar::{DIRECTIONS, RiskEstimator, RiskParams, SeqUnwrapper};
+use shm_schemas::payloads::SonarScan;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Arguments after `--`.
+#[derive(Debug, clap::Parser)]
+struct Args {
+    /// Serial device of the sonar ring module.
+    #[arg(long)]
+    device: Option<PathBuf>,
+}
+
+struct Sonar {
+    device: Option<PathBuf>,
+    link: Option<DeviceLink>,
+    out: Output<SonarScan>,
+    ttc_horizon: Param<f64>,
+    near: Param<f64>,
+    smoothing: Param<f64>,
+    max_closing: Param<f64>,
+    counters: CounterParams,
+    missed: Param<u64>,
+    artefacts: Param<u64>,
+    estimator: RiskEstimator,
+    seq: SeqUnwrapper,
+    t0: Instant,
+}
+
+fn positive(v: &f64) -> Result<(), String> {
+    if v.is_finite() && *v > 0.0 { Ok(()) } else { Err("must be a positive number".into()) }
+}
+
+impl Agent for Sonar {
+    const KIND: &'static str = "sonar";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_millis(50))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
+        if args.device.is_none() && !nerve_devlink::describing(setup) {
+            return Err(AgentError::Config(
+                "no device: give the sonar module's serial port after `--`, e.g. `nerve start sonar -- --device /dev/ttyUSB0` \
+                 (with the simulator: `-- --device <state dir>/dev/sonar`)"
+                    .into(),
+            ));
+        }
+        let d = RiskParams::default();
+        let read_only = |_: &u64| Err::<(), String>("this is a read-only counter kept by the agent".into());
+        Ok(Sonar {
+            device: args.device,
+            link: None,
+            out: setup.output("scan")?,
+            ttc_horizon: setup.param_checked("ttc_horizon", d.ttc_horizon, positive),
+            near: setup.param_checked("near", d.near, positive),
+            smoothing: setup.param_checked("smoothing", d.smoothing, |v| {
+                if *v > 0.0 && *v <= 1.0 { Ok(()) } else { Err("smoothing must be in (0, 1]".into()) }
+            }),
+            max_closing: setup.param_checked("max_closing", d.max_closing, positive),
+            counters: nerve_devlink::counter_params(setup),
+            missed: setup.param_checked("missed_scans", 0u64, read_only),
+            artefacts: setup.param_checked("artefacts", 0u64, read_only),
+            estimator: RiskEstimator::new(),
+            seq: SeqUnwrapper::default(),
+            t0: Instant::now(),
+        })
+    }
+
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        let Some(path) = &self.device else {
+            return Err(AgentError::Config("no --device given".into()));
+        };
+        let link = DeviceLink::spawn(path, LinkOptions { backoff: Default::default(), label: "sonar".into() })
+            .map_err(|e| AgentError::Device(e.to_string()))?;
+        self.link = Some(link);
+        Ok(())
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        let Some(link) = &self.link else { return Ok(()) };
+        let mut result = Ok(());
+        while let Some(ev) = link.try_recv() {
+            let DeviceEvent::Message(msg, at) = ev else { continue };
+            let Message::SonarScan(s) = msg else {
+                tracing::debug!("ignoring {:?} on the sonar line", msg.message_type());
+                continue;
+            };
+            let ranges: [Option<f64>; DIRECTIONS] =
+                std::array::from_fn(|i| (s.ranges_mm[i] != SONAR_NO_ECHO).then(|| f64::from(s.ranges_mm[i]) / 1000.0));
+            let p = RiskParams {
+                ttc_horizon: self.ttc_horizon.get(),
+                near: self.near.get(),
+                smoothing: self.smoothing.get(),
+                max_closing: self.max_closing.get(),
+            };
+            let t = at.duration_since(self.t0).as_secs_f64();
+            let risk = self.estimator.update(t, &ranges, &p);
+            let seq = self.seq.unwrap(s.seq);
+            // the stamp: when the device thread read it, on the SDK's clock
+            let age = at.elapsed().as_nanos() as u64;
+            let stamp_ns = ctx.now_ns().saturating_sub(age);
+            let scan = SonarScan {
+                seq,
+                stamp_ns,
+                ranges_m: std::array::from_fn(|i| ranges[i].unwrap_or(0.0) as f32),
+                risk: std::array::from_fn(|i| risk[i] as f32),
+                valid: std::array::from_fn(|i| u8::from(ranges[i].is_some())),
+                reserved: [0; 4],
+            };
+            if let Err(e) = self.out.send(scan) {
+                result = Err(e.into());
+            }
+        }
+        self.counters.update(&link.stats(), "sonar");
+        self.missed.set(self.seq.missed);
+        self.artefacts.set(self.estimator.artefacts);
+        result
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<Sonar>()
+}
