@@ -1,0 +1,297 @@
+//! `resource`: the resource manager (thesis section 3.2.6), a virtual
+//! sensor of the machine's CPU and memory that also acts on them.
+//!
+//! Periodic (default every second). Each cycle it
+//!
+//! * asks the router for the live agents (`nerve ps`: pid, importance,
+//!   period, state), and measures with `sysinfo` the CPU and memory of each
+//!   agent's process and of the machine (per-process CPU is the difference
+//!   of two samples at least `sysinfo::MINIMUM_CPU_UPDATE_INTERVAL` apart,
+//!   so the first cycle only primes the counters);
+//! * judges the load level with the thresholds of the knowledge base's
+//!   `[resources]` table (`-- --kb FILE`; without it, built-in defaults:
+//!   machine CPU 85 % high, 95 % critical, 70 % back to normal);
+//! * acts, at most once per `settle`: lengthens the period of the least
+//!   important agent, then suspends extras, and gives everything back in
+//!   reverse order once the load is normal (see `plan`); every action is
+//!   logged as `resource: ACTION (load LEVEL ...)`;
+//! * publishes `nerve::ResourceReport` on output `load` for the decision maker.
+//!
+//! ```text
+//! nerve start resource --name resource -- --kb kb/explore.toml
+//! nerve connect resource/load decision/load
+//! ```
+
+use agent_sdk::control::{ControlClient, router_client};
+use agent_sdk::world::Ipc;
+use agent_sdk::{Agent, AgentError, Context, Output, Setup, Task, World};
+use clap::Parser;
+use iceoryx2::prelude::Node;
+use nerve_decision::{KnowledgeBase, ResourcePolicy};
+use nerve_resource::{Action, AgentObs, Measures, Planner, level};
+use shm_schemas::FixedName;
+use shm_schemas::control::agent_to_router::TaskKind;
+use shm_schemas::control::cli_to_router::{AgentState, AgentView, CliRequest, RouterReply, RouterRequest};
+use shm_schemas::payloads::{AgentLoad, LoadLevel, MAX_AGENT_LOADS, ResourceReport};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use sysinfo::{MINIMUM_CPU_UPDATE_INTERVAL, Pid, ProcessRefreshKind, ProcessesToUpdate, System};
+
+/// How long one router call may take (`Ps` asks every agent for its figures).
+const ROUTER_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The resource manager's own options (after `--`).
+#[derive(Debug, Parser)]
+#[command(name = "nerve-resource --", about = "resource manager options")]
+struct Args {
+    /// The knowledge base whose `[resources]` table is the policy (see docs/decision.md).
+    #[arg(long)]
+    kb: Option<PathBuf>,
+}
+
+type RouterClient = ControlClient<RouterRequest, RouterReply>;
+
+struct Resource {
+    planner: Planner,
+    world: World,
+    node_name: String,
+    out: Output<ResourceReport>,
+    sys: Option<System>,
+    router: Option<(RouterClient, Node<Ipc>)>,
+    level: LoadLevel,
+    last_refresh: Option<Instant>,
+    warm: bool,
+    router_warned: bool,
+}
+
+impl Resource {
+    fn router(&mut self) -> Option<&RouterClient> {
+        if self.router.is_none() {
+            let r = self
+                .world
+                .node(&self.node_name)
+                .map_err(|e| e.to_string())
+                .and_then(|node| router_client(&self.world, &node).map(|c| (c, node)).map_err(|e| e.to_string()));
+            match r {
+                Ok(r) => self.router = Some(r),
+                Err(e) => {
+                    if !self.router_warned {
+                        tracing::warn!(
+                            "cannot reach the router ({e}); measuring the machine only until it runs (`nerve router --daemon`)"
+                        );
+                        self.router_warned = true;
+                    }
+                    return None;
+                }
+            }
+        }
+        self.router.as_ref().map(|(c, _)| c)
+    }
+
+    fn call(&mut self, req: CliRequest) -> Result<RouterReply, String> {
+        let Some(client) = self.router() else { return Err("no router".into()) };
+        match client.call(&RouterRequest::Cli(req), ROUTER_TIMEOUT) {
+            Ok(RouterReply::Error(e)) => Err(e.to_string()),
+            Ok(r) => {
+                self.router_warned = false;
+                Ok(r)
+            }
+            Err(e) => {
+                self.router = None;
+                Err(e.to_string())
+            }
+        }
+    }
+
+    fn agents(&mut self) -> Vec<AgentView> {
+        match self.call(CliRequest::Ps) {
+            Ok(RouterReply::Agents(v)) => v,
+            Ok(other) => {
+                tracing::warn!("unexpected reply to ps: {other:?}");
+                Vec::new()
+            }
+            Err(e) => {
+                tracing::debug!("ps: {e}");
+                Vec::new()
+            }
+        }
+    }
+
+    fn act(&mut self, action: &Action) -> bool {
+        let req = match action {
+            Action::Slow { name, to_ns, .. } | Action::Restore { name, to_ns, .. } => {
+                CliRequest::Rate { name: name.clone(), period_ns: *to_ns }
+            }
+            Action::Suspend { name } => CliRequest::Suspend { name: name.clone() },
+            Action::Resume { name } => CliRequest::Resume { name: name.clone() },
+        };
+        match self.call(req) {
+            Ok(_) => true,
+            Err(e) => {
+                tracing::warn!("resource: could not {action}: {e}");
+                false
+            }
+        }
+    }
+}
+
+impl Agent for Resource {
+    const KIND: &'static str = "resource";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_secs(1))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let args = Args::try_parse_from(std::iter::once("nerve-resource --".to_owned()).chain(setup.args().to_vec()))
+            .map_err(|e| AgentError::Config(e.to_string()))?;
+        let policy = match &args.kb {
+            Some(p) => {
+                let path = std::path::absolute(p).unwrap_or_else(|_| p.clone());
+                KnowledgeBase::load(&path).map_err(|e| AgentError::Config(e.to_string()))?.resources
+            }
+            None => ResourcePolicy::default(),
+        };
+        Ok(Resource {
+            planner: Planner::new(policy, setup.name()),
+            world: setup.world().clone(),
+            node_name: format!("{}-rm", setup.name()),
+            out: setup.output("load")?,
+            sys: None,
+            router: None,
+            level: LoadLevel::Normal,
+            last_refresh: None,
+            warm: false,
+            router_warned: false,
+        })
+    }
+
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        let sys = System::new().map_err(|e| {
+            AgentError::Other(format!("cannot read the system's figures ({e}); is /proc mounted and readable?"))
+        })?;
+        self.sys = Some(sys);
+        let p = self.planner.policy();
+        tracing::info!(
+            "policy: machine cpu {:?}, agents cpu {:?}, memory {:?}; settle {}, slow x{} up to x{}",
+            p.machine_cpu,
+            p.agents_cpu,
+            p.memory,
+            agent_sdk::clock::format_duration(p.settle),
+            p.slow_factor,
+            p.max_slow
+        );
+        Ok(())
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        let now = ctx.now_ns();
+        let views = self.agents();
+        let pids: Vec<Pid> = views.iter().map(|v| Pid::from_u32(v.pid)).collect();
+        let Some(sys) = self.sys.as_mut() else { return Ok(()) };
+        // per-process CPU is the difference of two samples at least MINIMUM_CPU_UPDATE_INTERVAL apart
+        if self.last_refresh.is_none_or(|t| t.elapsed() >= MINIMUM_CPU_UPDATE_INTERVAL) {
+            sys.refresh_cpu_usage();
+            sys.refresh_memory();
+            sys.refresh_processes_specifics(
+                ProcessesToUpdate::Some(&pids),
+                true,
+                ProcessRefreshKind::nothing().with_cpu().with_memory(),
+            );
+            self.warm = self.last_refresh.is_some();
+            self.last_refresh = Some(Instant::now());
+        }
+        let policy = self.planner.policy().clone();
+        let mut obs: Vec<(AgentObs, u64)> = views
+            .iter()
+            .map(|v| {
+                let p = sys.process(Pid::from_u32(v.pid));
+                let importance = policy.importance_of(&v.name, v.importance);
+                (
+                    AgentObs {
+                        name: v.name.clone(),
+                        importance,
+                        period_ns: if v.task == TaskKind::Periodic { v.period_ns } else { None },
+                        suspended: v.state == AgentState::Suspended,
+                        cpu_percent: p.map_or(0.0, |p| f64::from(p.cpu_usage())),
+                    },
+                    p.map_or(0, |p| p.memory()),
+                )
+            })
+            .collect();
+        let total_mem = sys.total_memory();
+        let m = Measures {
+            machine_cpu: f64::from(sys.global_cpu_usage()),
+            agents_cpu: obs.iter().map(|(o, _)| o.cpu_percent).sum(),
+            memory: if total_mem > 0 { sys.used_memory() as f64 * 100.0 / total_mem as f64 } else { 0.0 },
+        };
+        let cpus = sys.cpus().len() as u32;
+        let (mem_total, mem_used) = (total_mem, sys.used_memory());
+        if !self.warm {
+            return Ok(()); // the first sample only primes the CPU counters
+        }
+        let new_level = level(&policy, &m, self.level);
+        if new_level != self.level {
+            tracing::info!(
+                "resource: load level {} -> {} (machine cpu {:.0}%, agents {:.0}% of one core, memory {:.0}%)",
+                self.level.name(),
+                new_level.name(),
+                m.machine_cpu,
+                m.agents_cpu,
+                m.memory
+            );
+            self.level = new_level;
+        }
+        // only agents that answer can be acted on (not restarting, failed or unresponsive ones)
+        let agents: Vec<AgentObs> = obs
+            .iter()
+            .zip(&views)
+            .filter(|(_, v)| matches!(v.state, AgentState::Running | AgentState::Suspended))
+            .map(|((o, _), _)| o.clone())
+            .collect();
+        if let Some(action) = self.planner.plan(new_level, &agents, now) {
+            let ok = self.act(&action);
+            if ok {
+                tracing::info!(
+                    "resource: {action} (load {}, agents {:.0}% of one core, machine {:.0}%)",
+                    new_level.name(),
+                    m.agents_cpu,
+                    m.machine_cpu
+                );
+            }
+            self.planner.done(&action, ok, now);
+        }
+
+        obs.sort_by(|a, b| b.0.cpu_percent.total_cmp(&a.0.cpu_percent));
+        let mut report = ResourceReport {
+            stamp_ns: now,
+            machine_cpu_percent: m.machine_cpu as f32,
+            agents_cpu_percent: m.agents_cpu as f32,
+            mem_total_bytes: mem_total,
+            mem_used_bytes: mem_used,
+            agents_rss_bytes: obs.iter().map(|(_, rss)| rss).sum(),
+            cpus,
+            level: new_level as u8,
+            agent_count: obs.len().min(MAX_AGENT_LOADS) as u8,
+            slowed: self.planner.slowed().len().min(255) as u8,
+            suspended: self.planner.suspended().len().min(255) as u8,
+            ..Default::default()
+        };
+        for (slot, (o, rss)) in report.agents.iter_mut().zip(&obs) {
+            *slot = AgentLoad {
+                name: FixedName::new(&o.name),
+                cpu_percent: o.cpu_percent as f32,
+                rss_bytes: *rss,
+                importance: o.importance,
+                action: self.planner.action_of(&o.name),
+                reserved: [0; 6],
+            };
+        }
+        self.out.send(report)?;
+        Ok(())
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<Resource>()
+}

@@ -1,0 +1,287 @@
+//! The safety monitor of the thesis (section 4.2.2.3) as a library: from one
+//! sonar scan, how fast to go, which way to turn, whether to stop, and how
+//! dangerous the surroundings are.
+//!
+//! Directions are those of `nerve::SonarScan`: direction `i` points
+//! `i × 30°` counter-clockwise from ahead (0 ahead, 3 left, 9 right). A
+//! direction without an echo counts as open up to `max_range`.
+//!
+//! * **Front** is the sector {-30°, 0°, +30°} (directions 11, 0, 1); its
+//!   clearance is the nearest range there, its risk the largest risk there.
+//! * **Slowing down**: the closeness `c = (slow_dist - front) / (slow_dist -
+//!   stop_dist)`, clamped to 0 … 1, scales the speed: `v = cruise × (1 - c)`.
+//! * **Turn choice** ([`choose_side`]): each side (left 30°, 60°, 90°; right
+//!   -30°, -60°, -90°) scores the mean of `range × (1 - risk)` — open *and*
+//!   safe; the robot turns toward the better side, and keeps its previous
+//!   side unless the other is better by `side_margin` (no dithering in
+//!   front of a wall). The turn rate is `omega_max × c`.
+//! * **Stop rule** ([`stop_rule`]): stop moving (turning still allowed) when
+//!   the front clearance is under `stop_dist` or the front risk reaches
+//!   `risk_stop`; release only once the clearance exceeds `stop_dist +
+//!   release_margin` and the risk is under `0.8 × risk_stop` (hysteresis).
+//!   While stopped the robot turns on the spot toward the chosen side.
+//! * **Danger level**: `stop` while stopped; `high` when the front is closer
+//!   than halfway between `stop_dist` and `slow_dist` or its risk reaches
+//!   `risk_high`; `low` when something is within `slow_dist`, the front risk
+//!   reaches 0.2, or both sides are nearer than `narrow_dist` (a narrow
+//!   place); else `none`.
+
+use shm_schemas::payloads::{DangerLevel, SONAR_DIRECTIONS, SonarScan};
+
+/// Directions of the front sector.
+pub const FRONT: [usize; 3] = [11, 0, 1];
+/// Directions of the left side, front to back.
+pub const LEFT: [usize; 3] = [1, 2, 3];
+/// Directions of the right side, front to back.
+pub const RIGHT: [usize; 3] = [11, 10, 9];
+
+/// The safety monitor's settings (its run-time parameters).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    /// Start slowing down at this front clearance, m.
+    pub slow_dist: f32,
+    /// Stop moving under this front clearance, m.
+    pub stop_dist: f32,
+    /// Released once the clearance exceeds `stop_dist + release_margin`, m.
+    pub release_margin: f32,
+    /// Speed with a clear front, m/s.
+    pub cruise: f32,
+    /// Largest turn rate, rad/s.
+    pub omega_max: f32,
+    /// Stop at this front risk.
+    pub risk_stop: f32,
+    /// Danger `high` from this front risk.
+    pub risk_high: f32,
+    /// Both sides nearer than this: a narrow place, m.
+    pub narrow_dist: f32,
+    /// A direction without echo counts as this far, m.
+    pub max_range: f32,
+    /// The other side must score this much better (fraction) to switch sides.
+    pub side_margin: f32,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            slow_dist: 1.0,
+            stop_dist: 0.35,
+            release_margin: 0.1,
+            cruise: 0.3,
+            omega_max: 1.0,
+            risk_stop: 0.8,
+            risk_high: 0.5,
+            narrow_dist: 0.6,
+            max_range: 3.0,
+            side_margin: 0.15,
+        }
+    }
+}
+
+/// A side to turn to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    /// Counter-clockwise, ω > 0.
+    Left,
+    /// Clockwise, ω < 0.
+    Right,
+}
+
+impl Side {
+    /// +1 for left, -1 for right.
+    pub fn sign(self) -> f32 {
+        match self {
+            Side::Left => 1.0,
+            Side::Right => -1.0,
+        }
+    }
+}
+
+/// What the monitor concludes from one scan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Judgement {
+    /// Forward speed to ask for, m/s.
+    pub v: f32,
+    /// Turn rate to ask for, rad/s.
+    pub omega: f32,
+    /// Stop moving (turning allowed).
+    pub stop: bool,
+    /// The side chosen.
+    pub side: Side,
+    /// Danger level.
+    pub level: DangerLevel,
+    /// Danger 0 … 1.
+    pub danger: f32,
+    /// Front clearance, m.
+    pub front: f32,
+}
+
+/// Ranges with every silent or invalid direction counted as `max_range`.
+pub fn effective_ranges(scan: &SonarScan, max_range: f32) -> [f32; SONAR_DIRECTIONS] {
+    let mut r = [max_range; SONAR_DIRECTIONS];
+    for (i, x) in r.iter_mut().enumerate() {
+        let v = scan.ranges_m[i];
+        if scan.valid[i] == 1 && v.is_finite() && v >= 0.0 {
+            *x = v.min(max_range);
+        }
+    }
+    r
+}
+
+fn risk_of(scan: &SonarScan, i: usize) -> f32 {
+    let r = scan.risk[i];
+    if r.is_finite() { r.clamp(0.0, 1.0) } else { 1.0 }
+}
+
+/// Score of a side: mean of `range × (1 - risk)` over its directions.
+pub fn side_score(ranges: &[f32; SONAR_DIRECTIONS], scan: &SonarScan, dirs: &[usize]) -> f32 {
+    dirs.iter().map(|&i| ranges[i] * (1.0 - risk_of(scan, i))).sum::<f32>() / dirs.len() as f32
+}
+
+/// The side to turn to: the safer, wider one, with hysteresis on `previous`.
+pub fn choose_side(ranges: &[f32; SONAR_DIRECTIONS], scan: &SonarScan, previous: Option<Side>, margin: f32) -> Side {
+    let (l, r) = (side_score(ranges, scan, &LEFT), side_score(ranges, scan, &RIGHT));
+    match previous {
+        Some(Side::Left) if r <= l * (1.0 + margin) => Side::Left,
+        Some(Side::Right) if l <= r * (1.0 + margin) => Side::Right,
+        _ => {
+            if l >= r {
+                Side::Left
+            } else {
+                Side::Right
+            }
+        }
+    }
+}
+
+/// Whether to stop moving, given the front clearance and risk and whether the robot is stopped now.
+pub fn stop_rule(front: f32, front_risk: f32, stopped: bool, s: &Settings) -> bool {
+    if front < s.stop_dist || front_risk >= s.risk_stop {
+        return true;
+    }
+    stopped && !(front > s.stop_dist + s.release_margin && front_risk < 0.8 * s.risk_stop)
+}
+
+/// Judges one scan; `previous` is the last judgement (for the hysteresis).
+pub fn judge(scan: &SonarScan, s: &Settings, previous: Option<&Judgement>) -> Judgement {
+    let ranges = effective_ranges(scan, s.max_range);
+    let front = FRONT.iter().map(|&i| ranges[i]).fold(f32::INFINITY, f32::min);
+    let front_risk = FRONT.iter().map(|&i| risk_of(scan, i)).fold(0.0, f32::max);
+    let span = (s.slow_dist - s.stop_dist).max(1e-3);
+    let c = ((s.slow_dist - front) / span).clamp(0.0, 1.0);
+    let side = choose_side(&ranges, scan, previous.map(|p| p.side), s.side_margin);
+    let stop = stop_rule(front, front_risk, previous.is_some_and(|p| p.stop), s);
+    let (v, omega) = if stop {
+        (0.0, side.sign() * s.omega_max * 0.6)
+    } else {
+        (s.cruise * (1.0 - c), side.sign() * s.omega_max * c)
+    };
+    let narrow = ranges[3] < s.narrow_dist && ranges[9] < s.narrow_dist;
+    let level = if stop {
+        DangerLevel::Stop
+    } else if front < (s.stop_dist + s.slow_dist) / 2.0 || front_risk >= s.risk_high {
+        DangerLevel::High
+    } else if front < s.slow_dist || front_risk >= 0.2 || narrow {
+        DangerLevel::Low
+    } else {
+        DangerLevel::None
+    };
+    let danger = if stop { 1.0 } else { c.max(front_risk) };
+    Judgement { v, omega, stop, side, level, danger, front }
+}
+
+/// Limits a change of command to `rate × dt` (the motor refuses jumps).
+pub fn slew(from: f32, to: f32, rate: f32, dt: f32) -> f32 {
+    let d = rate * dt.max(0.0);
+    to.clamp(from - d, from + d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scan with every direction at `far` metres and no risk.
+    fn scan(far: f32) -> SonarScan {
+        SonarScan { ranges_m: [far; SONAR_DIRECTIONS], valid: [1; SONAR_DIRECTIONS], ..Default::default() }
+    }
+
+    #[test]
+    fn open_space_is_safe_and_fast() {
+        let s = Settings::default();
+        let j = judge(&scan(3.0), &s, None);
+        assert_eq!((j.level, j.stop), (DangerLevel::None, false));
+        assert!((j.v - s.cruise).abs() < 1e-6 && j.omega.abs() < 1e-6, "{j:?}");
+        // no echo at all counts as open
+        let silent = SonarScan::default();
+        assert_eq!(judge(&silent, &s, None).level, DangerLevel::None);
+    }
+
+    #[test]
+    fn slows_down_and_turns_toward_the_wider_side() {
+        let s = Settings::default();
+        let mut sc = scan(3.0);
+        sc.ranges_m[0] = 0.7; // obstacle ahead
+        sc.ranges_m[9] = 0.8; // right side cluttered
+        sc.ranges_m[10] = 0.8;
+        let j = judge(&sc, &s, None);
+        assert!(j.v > 0.0 && j.v < s.cruise, "slower: {j:?}");
+        assert_eq!(j.side, Side::Left);
+        assert!(j.omega > 0.0, "turns left: {j:?}");
+        assert_eq!(j.level, DangerLevel::Low);
+        // the left side is open but risky (something approaches there): go right
+        sc.ranges_m[9] = 3.0;
+        sc.ranges_m[10] = 2.0;
+        sc.risk[1] = 0.9;
+        sc.risk[2] = 0.9;
+        sc.risk[3] = 0.9;
+        assert_eq!(judge(&sc, &s, None).side, Side::Right);
+    }
+
+    #[test]
+    fn side_choice_keeps_its_side_unless_clearly_better() {
+        let mut sc = scan(2.0);
+        sc.ranges_m[9] = 2.2; // right a little wider
+        let r = effective_ranges(&sc, 3.0);
+        assert_eq!(choose_side(&r, &sc, None, 0.15), Side::Right);
+        assert_eq!(choose_side(&r, &sc, Some(Side::Left), 0.15), Side::Left, "not better by 15 %");
+        sc.ranges_m[10] = 3.0;
+        sc.ranges_m[11] = 3.0;
+        let r = effective_ranges(&sc, 3.0);
+        assert_eq!(choose_side(&r, &sc, Some(Side::Left), 0.15), Side::Right);
+    }
+
+    #[test]
+    fn stops_moving_not_turning_when_too_close_and_releases_with_hysteresis() {
+        let s = Settings::default();
+        let mut sc = scan(3.0);
+        sc.ranges_m[11] = 0.3;
+        let j = judge(&sc, &s, None);
+        assert!(j.stop && j.v == 0.0 && j.omega != 0.0, "{j:?}");
+        assert_eq!((j.level, j.danger), (DangerLevel::Stop, 1.0));
+        // a little further, within the release margin: still stopped
+        sc.ranges_m[11] = 0.4;
+        let j2 = judge(&sc, &s, Some(&j));
+        assert!(j2.stop, "{j2:?}");
+        assert!(!judge(&sc, &s, None).stop, "a fresh monitor would not stop at 0.4 m");
+        sc.ranges_m[11] = 0.5;
+        assert!(!judge(&sc, &s, Some(&j2)).stop);
+        // a fast approach stops too, even far away
+        let mut sc = scan(3.0);
+        sc.risk[0] = 0.85;
+        assert!(judge(&sc, &s, None).stop);
+        assert!(!stop_rule(1.0, 0.0, false, &s));
+    }
+
+    #[test]
+    fn narrow_place_is_low_danger_and_invalid_values_are_safe() {
+        let s = Settings::default();
+        let mut sc = scan(3.0);
+        sc.ranges_m[3] = 0.5;
+        sc.ranges_m[9] = 0.5;
+        assert_eq!(judge(&sc, &s, None).level, DangerLevel::Low);
+        let mut sc = scan(3.0);
+        sc.risk[0] = f32::NAN; // a broken risk counts as the worst
+        assert!(judge(&sc, &s, None).stop);
+        assert_eq!(slew(0.0, 1.0, 2.0, 0.1), 0.2);
+        assert_eq!(slew(0.5, 0.0, 2.0, 0.1), 0.3);
+    }
+}

@@ -1,0 +1,239 @@
+//! The wall follower of the thesis (section 4.2.2.3: "keeps increasing the
+//! speed of the robot and tries to maintain the distance between the robot
+//! and the wall") as a library.
+//!
+//! Directions are those of `nerve::SonarScan` (`i × 30°` counter-clockwise
+//! from ahead). For a wall on the left the sonars at 60°, 90° and 120°
+//! (directions 2, 3, 4) see it; on the right those at -60°, -90°, -120°
+//! (10, 9, 8).
+//!
+//! * **Distance** to the wall: the smallest of `r90`, `r60 × sin 60°` and
+//!   `r120 × sin 60°` (perpendicular estimates), over valid echoes within
+//!   `wall_range`.
+//! * **Side** (`auto`): the side with the nearer wall; the current side is
+//!   kept unless the other wall is nearer by 20 %.
+//! * **Turn**: `ω = s × (kp × (d - target) + ka × (r60 - r120))` with `s` = +1
+//!   for a left wall, -1 for a right one: too far turns toward the wall, a
+//!   wall that opens ahead (r60 > r120: heading away) turns toward it too.
+//!   A wall or obstacle ahead closer than `front_slow` adds a turn away
+//!   from the wall (the inside corner) and scales the speed down.
+//! * **Speed** rises by `accel × dt` every cycle up to `v_max` (from
+//!   `v_min`), and is scaled by the front clearance.
+//! * No wall within range: straight ahead, speed still rising.
+
+use shm_schemas::payloads::{SONAR_DIRECTIONS, SonarScan};
+
+/// Which wall to follow.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WallSide {
+    /// The wall on the robot's left.
+    Left,
+    /// The wall on the robot's right.
+    Right,
+}
+
+impl WallSide {
+    fn sign(self) -> f32 {
+        match self {
+            WallSide::Left => 1.0,
+            WallSide::Right => -1.0,
+        }
+    }
+
+    /// Directions at 60°, 90° and 120° toward this side.
+    fn dirs(self) -> [usize; 3] {
+        match self {
+            WallSide::Left => [2, 3, 4],
+            WallSide::Right => [10, 9, 8],
+        }
+    }
+}
+
+/// The wall follower's settings (its run-time parameters).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    /// Distance to keep from the wall, m.
+    pub target: f32,
+    /// Gain on the distance error, rad/s per m.
+    pub kp: f32,
+    /// Gain on the alignment (r60 - r120), rad/s per m.
+    pub ka: f32,
+    /// Speed to start from, m/s.
+    pub v_min: f32,
+    /// Speed to rise to, m/s.
+    pub v_max: f32,
+    /// How fast the speed rises, m/s².
+    pub accel: f32,
+    /// Largest turn rate, rad/s.
+    pub omega_max: f32,
+    /// A wall ahead nearer than this slows down and turns away, m.
+    pub front_slow: f32,
+    /// Echoes further than this are not a wall, m.
+    pub wall_range: f32,
+    /// `None`: follow the nearer wall.
+    pub side: Option<WallSide>,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            target: 0.6,
+            kp: 1.2,
+            ka: 0.8,
+            v_min: 0.1,
+            v_max: 0.6,
+            accel: 0.1,
+            omega_max: 1.0,
+            front_slow: 1.0,
+            wall_range: 2.0,
+            side: None,
+        }
+    }
+}
+
+fn range(scan: &SonarScan, i: usize, max: f32) -> Option<f32> {
+    let r = scan.ranges_m[i % SONAR_DIRECTIONS];
+    (scan.valid[i % SONAR_DIRECTIONS] == 1 && r.is_finite() && r >= 0.0 && r <= max).then_some(r)
+}
+
+/// The perpendicular distance to the wall on `side`, if one is within `max`.
+pub fn wall_distance(scan: &SonarScan, side: WallSide, max: f32) -> Option<f32> {
+    let [d60, d90, d120] = side.dirs();
+    let sin60 = 60f32.to_radians().sin();
+    [range(scan, d90, max), range(scan, d60, max).map(|r| r * sin60), range(scan, d120, max).map(|r| r * sin60)]
+        .into_iter()
+        .flatten()
+        .reduce(f32::min)
+}
+
+/// The side to follow: the nearer wall, keeping `previous` unless the other is nearer by 20 %.
+pub fn choose_wall(scan: &SonarScan, s: &Settings, previous: Option<WallSide>) -> Option<WallSide> {
+    if let Some(fixed) = s.side {
+        return Some(fixed);
+    }
+    let l = wall_distance(scan, WallSide::Left, s.wall_range);
+    let r = wall_distance(scan, WallSide::Right, s.wall_range);
+    match (l, r, previous) {
+        (None, None, _) => None,
+        (Some(_), None, _) => Some(WallSide::Left),
+        (None, Some(_), _) => Some(WallSide::Right),
+        (Some(l), Some(r), Some(WallSide::Left)) => Some(if r < 0.8 * l { WallSide::Right } else { WallSide::Left }),
+        (Some(l), Some(r), Some(WallSide::Right)) => Some(if l < 0.8 * r { WallSide::Left } else { WallSide::Right }),
+        (Some(l), Some(r), None) => Some(if l <= r { WallSide::Left } else { WallSide::Right }),
+    }
+}
+
+/// One cycle's command.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Command {
+    /// Forward speed, m/s.
+    pub v: f32,
+    /// Turn rate, rad/s.
+    pub omega: f32,
+    /// The wall followed.
+    pub side: Option<WallSide>,
+    /// The speed before scaling by the front clearance (the rising speed).
+    pub rising: f32,
+}
+
+/// The command for `scan`, `dt` seconds after the last one whose rising speed was `rising`.
+pub fn follow(scan: &SonarScan, s: &Settings, previous: Option<WallSide>, rising: f32, dt: f32) -> Command {
+    let rising = (rising.max(s.v_min) + s.accel * dt.max(0.0)).min(s.v_max);
+    let side = choose_wall(scan, s, previous);
+    let mut omega = 0.0;
+    if let Some(side) = side {
+        let [d60, _, d120] = side.dirs();
+        if let Some(d) = wall_distance(scan, side, s.wall_range) {
+            omega += side.sign() * s.kp * (d - s.target);
+        }
+        if let (Some(a), Some(b)) = (range(scan, d60, s.wall_range), range(scan, d120, s.wall_range)) {
+            omega += side.sign() * s.ka * (a - b);
+        }
+    }
+    let front = [11usize, 0, 1].iter().filter_map(|&i| range(scan, i, f32::INFINITY)).fold(f32::INFINITY, f32::min);
+    let mut scale = 1.0;
+    if front < s.front_slow {
+        let c = (1.0 - front / s.front_slow).clamp(0.0, 1.0);
+        scale = 1.0 - c;
+        // inside corner: turn away from the wall (or left when none is followed)
+        let away = side.map_or(1.0, |w| -w.sign());
+        omega += away * s.omega_max * c;
+    }
+    Command { v: rising * scale, omega: omega.clamp(-s.omega_max, s.omega_max), side, rising }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scan(pairs: &[(usize, f32)]) -> SonarScan {
+        let mut s = SonarScan::default();
+        for &(i, r) in pairs {
+            s.ranges_m[i] = r;
+            s.valid[i] = 1;
+        }
+        s
+    }
+
+    /// A straight wall on the left, parallel, at `d` metres.
+    fn left_wall(d: f32) -> SonarScan {
+        let k = 1.0 / 60f32.to_radians().sin();
+        scan(&[(2, d * k), (3, d), (4, d * k)])
+    }
+
+    #[test]
+    fn keeps_the_distance() {
+        let s = Settings::default();
+        let at = follow(&left_wall(0.6), &s, None, 0.2, 0.1);
+        assert_eq!(at.side, Some(WallSide::Left));
+        assert!(at.omega.abs() < 1e-4, "on target, parallel: {at:?}");
+        assert!(follow(&left_wall(1.0), &s, None, 0.2, 0.1).omega > 0.0, "too far: toward the wall (left)");
+        assert!(follow(&left_wall(0.3), &s, None, 0.2, 0.1).omega < 0.0, "too near: away");
+        // mirrored for a right wall
+        let k = 1.0 / 60f32.to_radians().sin();
+        let right = scan(&[(10, 1.0 * k), (9, 1.0), (8, 1.0 * k)]);
+        let c = follow(&right, &s, None, 0.2, 0.1);
+        assert_eq!(c.side, Some(WallSide::Right));
+        assert!(c.omega < 0.0, "too far from a right wall: turn right");
+    }
+
+    #[test]
+    fn heading_away_turns_back() {
+        let s = Settings::default();
+        // at the right distance, but the wall opens ahead (r60 > r120)
+        let sc = scan(&[(2, 0.9), (3, 0.6), (4, 0.6)]);
+        assert!(follow(&sc, &s, None, 0.2, 0.1).omega > 0.0);
+    }
+
+    #[test]
+    fn speed_rises_to_the_limit_and_slows_at_a_corner() {
+        let s = Settings::default();
+        let mut v = 0.0;
+        for _ in 0..100 {
+            v = follow(&left_wall(0.6), &s, None, v, 0.1).rising;
+        }
+        assert!((v - s.v_max).abs() < 1e-6);
+        let mut corner = left_wall(0.6);
+        corner.ranges_m[0] = 0.5;
+        corner.valid[0] = 1;
+        let c = follow(&corner, &s, Some(WallSide::Left), v, 0.1);
+        assert!(c.v < v * 0.6, "slower: {c:?}");
+        assert!(c.omega < 0.0, "turns away from the left wall: {c:?}");
+        // nothing around: straight, rising from v_min
+        let c = follow(&SonarScan::default(), &s, None, 0.0, 0.1);
+        assert_eq!((c.side, c.omega), (None, 0.0));
+        assert!((c.v - (s.v_min + s.accel * 0.1)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn side_choice_has_hysteresis() {
+        let s = Settings::default();
+        let sc = scan(&[(3, 0.9), (9, 0.8)]);
+        assert_eq!(choose_wall(&sc, &s, None), Some(WallSide::Right));
+        assert_eq!(choose_wall(&sc, &s, Some(WallSide::Left)), Some(WallSide::Left));
+        let sc = scan(&[(3, 0.9), (9, 0.5)]);
+        assert_eq!(choose_wall(&sc, &s, Some(WallSide::Left)), Some(WallSide::Right));
+        let fixed = Settings { side: Some(WallSide::Left), ..s };
+        assert_eq!(choose_wall(&sc, &fixed, None), Some(WallSide::Left));
+    }
+}
