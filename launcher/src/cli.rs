@@ -71,6 +71,14 @@ pub enum Command {
     Logs(LogsArgs),
     /// Run an agent kind in place of this process (for systemd units).
     Exec(ExecArgs),
+    /// Send one command to an actuator agent from the terminal (drive the robot by hand).
+    Cmd(crate::cmd::drive::CmdArgs),
+    /// Short-term memory: list rings, dump an image slot as PNG.
+    #[command(subcommand)]
+    Mem(crate::cmd::mem::MemCmd),
+    /// Reproduce an experiment of the thesis (`nerve demo explore`).
+    #[command(subcommand)]
+    Demo(crate::cmd::demo::DemoCmd),
 }
 
 /// `nerve launch`

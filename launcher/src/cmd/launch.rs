@@ -231,11 +231,7 @@ pub(crate) fn launch_robot(robot: &str, path: &std::path::Path) -> Result<World>
         RouterReply::Agents(v) => v.into_iter().filter(|a| a.pid > 0).map(|a| a.name).collect(),
         _ => vec![],
     };
-    let failed = start_agents(&world, &file, &running)?;
-    if failed > 0 {
-        bail!("{failed} agent(s) of {} did not start (see the lines above)", path.display());
-    }
-    wait_registered(&session, &file)?;
+    // supervision first, so that an agent dying right after it starts is restarted
     for spec in &file.agents {
         session
             .ok(CliRequest::Supervise(proto::Supervision {
@@ -249,8 +245,15 @@ pub(crate) fn launch_robot(robot: &str, path: &std::path::Path) -> Result<World>
             }))
             .with_context(|| format!("the router refused to supervise {}", spec.name))?;
     }
+    let failed = start_agents(&world, &file, &running)?;
+    if failed > 0 {
+        bail!("{failed} agent(s) of {} did not start (see the lines above)", path.display());
+    }
+    wait_registered(&session, &file)?;
     for (from, to) in &file.connections {
-        session.ok(CliRequest::Connect { from: from.clone(), to: to.clone() }).with_context(|| format!("cannot connect {from} -> {to}"))?;
+        session
+            .ok(CliRequest::Connect { from: from.clone(), to: to.clone() })
+            .with_context(|| format!("cannot connect {from} -> {to}"))?;
     }
     Ok(world)
 }

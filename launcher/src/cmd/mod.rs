@@ -1,10 +1,13 @@
 //! One module per family of commands; [`dispatch`] routes the parsed command line.
 
+pub mod demo;
 pub mod down;
+pub mod drive;
 mod echo;
 mod inspect;
 mod launch;
 mod logs;
+pub mod mem;
 pub mod start;
 mod wire;
 
@@ -34,5 +37,8 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Launch(a) => launch::launch(&cli.robot, a),
         Command::Logs(a) => logs::logs(&world, a),
         Command::Exec(a) => start::exec(&world, a),
+        Command::Demo(c) => demo::demo(&cli.robot, c),
+        Command::Mem(c) => mem::mem(&world, c),
+        Command::Cmd(a) => drive::cmd(&world, a),
     }
 }

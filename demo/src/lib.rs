@@ -1,0 +1,64 @@
+//! nerve-demo: analysis and figures of nerve's demos.
+//!
+//! The exploration demo (`nerve demo explore`, thesis section 4.2) runs the
+//! whole robot against the simulator and then hands its records to this
+//! crate, which builds nothing and starts nothing itself:
+//!
+//! * [`truth`]: the simulator's ground-truth CSV, read while it is written;
+//! * [`scene`]: the world file's geometry as the analysis needs it (solid
+//!   things, door openings, the target and its path);
+//! * [`analysis`]: the run's verdict — doorway reached, target followed,
+//!   collisions, clearance — as [`analysis::Summary`] (`summary.json`);
+//! * [`modes`]: the decision maker's mode changes parsed from its log;
+//! * [`cpu`]: CPU use per agent sampled during the run;
+//! * [`plot`]: the trajectory over the map (Fig. 4-4) and velocity, angular
+//!   speed and heading against time (Fig. 4-6), as PNG and SVG.
+//!
+//! The definitions of `reached_doorway` and `reached_target` are in
+//! `docs/demo.md` and on [`analysis::analyse`].
+
+pub mod analysis;
+pub mod cpu;
+pub mod modes;
+pub mod plot;
+pub mod scene;
+pub mod truth;
+
+pub use analysis::{Analysis, Criteria, Summary, analyse};
+pub use nerve_sim;
+pub use scene::Scene;
+pub use truth::{TruthRow, read_truth};
+
+/// Why the demo's analysis failed.
+#[derive(Debug, thiserror::Error)]
+pub enum DemoError {
+    /// A file could not be read or written.
+    #[error("{what} {path}: {source}")]
+    Io {
+        /// What was being done.
+        what: &'static str,
+        /// The file.
+        path: std::path::PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The world file.
+    #[error(transparent)]
+    World(#[from] nerve_sim::WorldError),
+    /// A file whose content is not what it should be.
+    #[error("{path}: {problem}")]
+    Format {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// Drawing a figure.
+    #[error("cannot draw {path}: {message}")]
+    Plot {
+        /// The figure.
+        path: std::path::PathBuf,
+        /// What plotters said.
+        message: String,
+    },
+}

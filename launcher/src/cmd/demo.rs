@@ -1,0 +1,498 @@
+//! `nerve demo explore`: the exploration experiment of the thesis (section
+//! 4.2) from one command.
+//!
+//! It builds nothing: it takes `launch/explore.toml`, writes a derived copy
+//! into the output directory with the chosen world and seed (and every
+//! relative path made absolute), launches the router, the simulator and
+//! every agent from it as daemons, follows the run (a progress line every
+//! few seconds: simulated time, true pose, the decision maker's mode, the
+//! distance to the target), and ends when the robot has followed the target
+//! (reached it, as defined in `docs/demo.md`, and stayed there for
+//! `--hold` seconds), at `--time-limit` seconds of simulated time, or on
+//! Ctrl-C. Then it stops everything as `nerve down` does and writes into
+//! `--out` (default `out/explore-<seed>/`):
+//!
+//! * `trajectory.png|svg`: the map with the robot's and the person's paths (Fig. 4-4);
+//! * `motion.png|svg`: velocity, angular speed and heading against time (Fig. 4-6);
+//! * `truth.csv`: the simulator's ground truth as written;
+//! * `log.csv`: the ground truth with clearance, target position and
+//!   distance, and the decision maker's mode per row;
+//! * `summary.json`: the verdict ([`nerve_demo::Summary`]), the mode changes
+//!   and the CPU used by each agent;
+//! * `launch.toml`: the launch file that ran; `logs/`: every agent's log.
+//!
+//! Exit code 0 when the run completed (whatever the robot achieved: read
+//! `summary.json`), 1 when it could not be run.
+
+use super::down::{bring_down, clean};
+use super::logs::{INTERRUPTED, Tail, catch_interrupts};
+use crate::client::RouterSession;
+use agent_sdk::World;
+use anyhow::{Context as _, Result, bail};
+use nerve_demo::analysis::{DoorwayWatch, at_target, time_in_modes};
+use nerve_demo::cpu::CpuTable;
+use nerve_demo::modes::{ClockMap, now_s_of_day, parse_change, parse_log};
+use nerve_demo::truth::TruthTail;
+use nerve_demo::{Criteria, Scene, TruthRow, analyse};
+use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+/// `nerve demo ...`
+#[derive(Debug, clap::Subcommand)]
+pub enum DemoCmd {
+    /// The exploration experiment (thesis 4.2): through a crowded room and a
+    /// doorway to a person with a red object, who leads the robot into a U-turn.
+    Explore(ExploreArgs),
+}
+
+/// `nerve demo explore`
+#[derive(Debug, clap::Args)]
+pub struct ExploreArgs {
+    /// World file [default: worlds/explore.toml of the nerve source tree].
+    #[arg(long)]
+    pub world: Option<PathBuf>,
+    /// Seed of the simulator's noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output directory [default: out/explore-<seed>].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Stop after this many seconds of simulated time.
+    #[arg(long, default_value_t = 140.0)]
+    pub time_limit: f64,
+    /// Launch file to derive the run's from [default: launch/explore.toml].
+    #[arg(long)]
+    pub launch: Option<PathBuf>,
+    /// Robot centre to target centre, m, that counts as reaching the target.
+    #[arg(long, default_value_t = Criteria::default().target_reach_m)]
+    pub reach: f64,
+    /// Seconds the robot must stay at the target before the run ends.
+    #[arg(long, default_value_t = 2.0)]
+    pub hold: f64,
+    /// Seconds between progress lines.
+    #[arg(long, default_value_t = 3.0)]
+    pub progress: f64,
+}
+
+/// Runs a demo.
+pub fn demo(robot: &str, cmd: DemoCmd) -> Result<ExitCode> {
+    match cmd {
+        DemoCmd::Explore(a) => explore(robot, a),
+    }
+}
+
+/// Finds `rel` relative to the current directory, else to the nerve source
+/// tree the running executable was built in (`target/<profile>/nerve`).
+fn find_file(rel: &Path, what: &str) -> Result<PathBuf> {
+    if rel.is_absolute() || rel.exists() {
+        return std::fs::canonicalize(rel).with_context(|| format!("cannot use {what} {}", rel.display()));
+    }
+    let exe = std::env::current_exe().context("cannot find the nerve executable")?;
+    for dir in exe.ancestors().skip(1) {
+        let p = dir.join(rel);
+        if p.exists() {
+            return std::fs::canonicalize(&p).with_context(|| format!("cannot use {what} {}", p.display()));
+        }
+    }
+    bail!(
+        "cannot find {what} {} (looked in the current directory and above {}); run from the nerve source tree or give its path",
+        rel.display(),
+        exe.display()
+    )
+}
+
+/// Sets `--flag value` in an argument list (replacing or appending).
+fn set_flag(args: &mut Vec<toml::Value>, flag: &str, value: String) {
+    if let Some(i) = args.iter().position(|a| a.as_str() == Some(flag)) {
+        if i + 1 < args.len() {
+            args[i + 1] = toml::Value::String(value);
+            return;
+        }
+        args.truncate(i);
+    }
+    args.push(toml::Value::String(flag.to_owned()));
+    args.push(toml::Value::String(value));
+}
+
+/// The run's launch file: the template with this robot, world and seed, and
+/// relative paths that exist under the source tree made absolute (daemons
+/// may run from any directory).
+fn derive_launch(template: &Path, robot: &str, world: &Path, seed: u64) -> Result<String> {
+    let text =
+        std::fs::read_to_string(template).with_context(|| format!("cannot read launch file {}", template.display()))?;
+    let mut doc: toml::Table =
+        toml::from_str(&text).with_context(|| format!("launch file {} is not valid TOML", template.display()))?;
+    let base = template.parent().and_then(Path::parent).map(Path::to_path_buf).unwrap_or_default();
+    doc.insert("robot".into(), toml::Value::String(robot.to_owned()));
+    let Some(toml::Value::Array(agents)) = doc.get_mut("agent") else {
+        bail!("launch file {} has no [[agent]]", template.display());
+    };
+    let mut found_sim = false;
+    for a in agents.iter_mut() {
+        let Some(t) = a.as_table_mut() else { continue };
+        let is_sim = t.get("kind").and_then(|k| k.as_str()) == Some("sim");
+        let args = t.entry("args").or_insert_with(|| toml::Value::Array(vec![]));
+        let Some(args) = args.as_array_mut() else { bail!("`args` of an agent must be a list of strings") };
+        for v in args.iter_mut() {
+            if let Some(s) = v.as_str() {
+                let p = Path::new(s);
+                if s.contains('/') && !s.starts_with('-') && !s.contains('{') && p.is_relative() && base.join(p).exists() {
+                    *v = toml::Value::String(base.join(p).display().to_string());
+                }
+            }
+        }
+        if is_sim {
+            found_sim = true;
+            set_flag(args, "--world", world.display().to_string());
+            set_flag(args, "--seed", seed.to_string());
+        }
+    }
+    if !found_sim {
+        bail!("launch file {} has no agent of kind \"sim\"; the demo needs the simulator", template.display());
+    }
+    let body = toml::to_string(&doc).context("cannot write the derived launch file")?;
+    Ok(format!(
+        "# Derived by `nerve demo explore` from {} (robot {robot}, world {}, seed {seed}).\n{body}",
+        template.display(),
+        world.display()
+    ))
+}
+
+/// The value after `--truth` of the simulator, expanded.
+fn truth_path(launch_text: &str, world: &World) -> Option<PathBuf> {
+    let doc: toml::Table = toml::from_str(launch_text).ok()?;
+    let agents = doc.get("agent")?.as_array()?;
+    let sim = agents.iter().find(|a| a.get("kind").and_then(|k| k.as_str()) == Some("sim"))?;
+    let args = sim.get("args")?.as_array()?;
+    let i = args.iter().position(|a| a.as_str() == Some("--truth"))?;
+    Some(PathBuf::from(crate::launch_file::expand(args.get(i + 1)?.as_str()?, world)))
+}
+
+/// Agents running on `world`: (name, kind, pid, cpu percent, restarts).
+fn sample_agents(world: &World) -> Vec<(String, String, u32, Option<f64>, u32)> {
+    let Ok(s) = RouterSession::open(world) else { return vec![] };
+    match s.call(CliRequest::Ps) {
+        Ok(RouterReply::Agents(v)) => v
+            .into_iter()
+            .map(|a| (a.name, a.kind, a.pid, a.stats.map(|s| s.cpu_percent), a.restarts))
+            .collect(),
+        _ => vec![],
+    }
+}
+
+/// How the run ended.
+#[derive(Debug, Clone, PartialEq)]
+enum End {
+    Followed,
+    TimeLimit,
+    Interrupted,
+    Stalled(String),
+}
+
+impl End {
+    fn reason(&self) -> String {
+        match self {
+            End::Followed => "target followed".into(),
+            End::TimeLimit => "time limit".into(),
+            End::Interrupted => "interrupted".into(),
+            End::Stalled(why) => format!("stalled: {why}"),
+        }
+    }
+}
+
+fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
+    let t_wall = Instant::now();
+    if !(a.time_limit > 0.0 && a.time_limit.is_finite()) {
+        bail!("--time-limit must be a positive number of seconds");
+    }
+    let world_file = find_file(a.world.as_deref().unwrap_or(Path::new("worlds/explore.toml")), "world file")?;
+    let template = find_file(a.launch.as_deref().unwrap_or(Path::new("launch/explore.toml")), "launch file")?;
+    let scene = Scene::load(&world_file).with_context(|| format!("cannot use world {}", world_file.display()))?;
+    let out = a.out.clone().unwrap_or_else(|| PathBuf::from(format!("out/explore-{}", a.seed)));
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create output directory {}", out.display()))?;
+    let out = std::fs::canonicalize(&out).with_context(|| format!("cannot use output directory {}", out.display()))?;
+
+    let nworld = World::new(robot)?;
+    let live: Vec<String> = sample_agents(&nworld).into_iter().filter(|a| a.2 > 0).map(|a| a.0).collect();
+    if !live.is_empty() {
+        bail!(
+            "robot {robot} already runs {} agent(s) ({}); stop them with `nerve --robot {robot} down` or pick another --robot",
+            live.len(),
+            live.join(", ")
+        );
+    }
+    let derived = derive_launch(&template, robot, &world_file, a.seed)?;
+    let launch_path = out.join("launch.toml");
+    std::fs::write(&launch_path, &derived).with_context(|| format!("cannot write {}", launch_path.display()))?;
+    let truth = truth_path(&derived, &nworld).unwrap_or_else(|| nworld.state_dir().join("truth.csv"));
+    let _ = std::fs::remove_file(&truth);
+    let decision_log = nworld.log_file("decision");
+    let decision_offset = std::fs::metadata(&decision_log).map(|m| m.len()).unwrap_or(0);
+
+    println!(
+        "nerve demo explore: world {} ({}), seed {}, robot {robot}, time limit {} s; output {}",
+        scene.world.name,
+        world_file.display(),
+        a.seed,
+        a.time_limit,
+        out.display()
+    );
+    catch_interrupts();
+    let launched = super::launch::launch_robot(robot, &launch_path);
+    let world = match launched {
+        Ok(w) => w,
+        Err(e) => {
+            eprintln!("error: the robot did not come up: {e:#}");
+            let (_, _) = bring_down(&nworld, Duration::from_secs(2));
+            clean(&nworld);
+            return Ok(ExitCode::from(1));
+        }
+    };
+    println!("robot up in {:.1} s; following the run (Ctrl-C ends it early)", t_wall.elapsed().as_secs_f64());
+
+    let outcome = follow(&world, &scene, &a, &truth, &decision_log, decision_offset);
+    // whatever happened, stop everything and leave nothing behind
+    let (stopped, killed) = bring_down(&world, Duration::from_secs(3));
+    clean(&world);
+    println!(
+        "stopped {stopped} process(es){}",
+        if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
+    );
+    let (end, clock, cpu) = outcome?;
+
+    // the records
+    let rows = nerve_demo::read_truth(&truth).with_context(|| "the simulator left no usable ground truth")?;
+    if rows.is_empty() {
+        bail!("the ground truth {} is empty: the simulator never ran (see {}/logs/sim.log)", truth.display(), out.display());
+    }
+    std::fs::copy(&truth, out.join("truth.csv")).with_context(|| format!("cannot copy {}", truth.display()))?;
+    copy_logs(&world, &out.join("logs"));
+    let log_text = read_from(&decision_log, decision_offset);
+    let modes = parse_log(&log_text, &clock);
+    let criteria = Criteria { target_reach_m: a.reach };
+    let analysis = analyse(&scene, &rows, criteria);
+    let mut s = analysis.summary.clone();
+    s.seed = a.seed;
+    s.robot = robot.to_owned();
+    s.end_reason = end.reason();
+    s.time_in_mode_s = time_in_modes(&modes, s.duration_s);
+    s.mode_changes = modes.clone();
+    s.cpu = cpu;
+    s.wall_time_s = t_wall.elapsed().as_secs_f64();
+    write_log_csv(&out.join("log.csv"), &rows, &analysis, &modes)?;
+    let title = format!("{} (seed {})", scene.world.name, a.seed);
+    let figs = nerve_demo::plot::write_all(&out, &scene, &rows, &analysis, &modes, &title)?;
+    s.wall_time_s = t_wall.elapsed().as_secs_f64();
+    let json = serde_json::to_string_pretty(&s)?;
+    std::fs::write(out.join("summary.json"), json + "\n").context("cannot write summary.json")?;
+
+    println!(
+        "{}: doorway {}{}, target {}{}, {} collision(s), min clearance {:.2} m, {:.1} s simulated, {} mode change(s), {:.0} s wall",
+        s.end_reason,
+        if s.reached_doorway { "reached" } else { "NOT reached" },
+        s.doorway_time_s.map(|t| format!(" at {t:.1} s")).unwrap_or_default(),
+        if s.reached_target { "reached" } else { "NOT reached" },
+        s.target_time_s.map(|t| format!(" at {t:.1} s")).unwrap_or_default(),
+        s.collisions,
+        s.min_clearance_m,
+        s.duration_s,
+        s.mode_changes.len(),
+        s.wall_time_s
+    );
+    println!("wrote {}/summary.json, log.csv, truth.csv, launch.toml, logs/ and", out.display());
+    for f in figs.files {
+        println!("  {}", f.display());
+    }
+    if let End::Stalled(why) = &end {
+        eprintln!("error: the run stalled: {why}");
+        return Ok(ExitCode::from(1));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// What `follow` hands back: how it ended, the log-clock mapping, CPU per agent.
+type Followed = (End, ClockMap, std::collections::BTreeMap<String, nerve_demo::analysis::AgentCpu>);
+
+/// Follows the run until it ends; prints progress.
+fn follow(world: &World, scene: &Scene, a: &ExploreArgs, truth: &Path, decision_log: &Path, offset: u64) -> Result<Followed> {
+    let criteria = Criteria { target_reach_m: a.reach };
+    let mut tail = TruthTail::new(truth);
+    let mut dlog = Tail::new(decision_log.to_path_buf(), offset);
+    let mut watch = DoorwayWatch::default();
+    let mut clock = ClockMap::default();
+    let mut cpu = CpuTable::default();
+    let mut last: Option<TruthRow> = None;
+    let mut mode = String::from("-");
+    let mut at_since: Option<f64> = None;
+    let t0 = Instant::now();
+    let mut last_rows = Instant::now();
+    let mut next_progress = Instant::now();
+    let mut next_sample = Instant::now();
+    let wall_limit = Duration::from_secs_f64(a.time_limit * 1.5 + 30.0);
+    let end = loop {
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            break End::Interrupted;
+        }
+        let rows = tail.poll();
+        let now = now_s_of_day();
+        if let Some(r) = rows.last() {
+            clock.observe(now, r.t);
+            last_rows = Instant::now();
+        }
+        let mut followed = false;
+        for r in &rows {
+            watch.push(scene, r);
+            if at_target(scene, &criteria, watch.crossed.map(|c| c.0), r) {
+                let since = *at_since.get_or_insert(r.t);
+                followed |= r.t - since >= a.hold;
+            } else {
+                at_since = None;
+            }
+            last = Some(*r);
+        }
+        for line in dlog.poll() {
+            if let Some((_, m)) = parse_change(line.split_once(']').map_or(line.as_str(), |(_, m)| m)) {
+                mode = m;
+            }
+        }
+        if Instant::now() >= next_sample {
+            next_sample = Instant::now() + Duration::from_secs(2);
+            for (name, kind, pid, pct, restarts) in sample_agents(world) {
+                cpu.record(&name, &kind, pct, restarts, pid);
+            }
+        }
+        if Instant::now() >= next_progress {
+            next_progress = Instant::now() + Duration::from_secs_f64(a.progress.max(0.5));
+            progress(scene, last.as_ref(), &mode, watch.crossed.is_some());
+        }
+        if followed {
+            break End::Followed;
+        }
+        if last.is_some_and(|r| r.t >= a.time_limit) {
+            break End::TimeLimit;
+        }
+        if last_rows.elapsed() > Duration::from_secs(20) {
+            break End::Stalled(format!(
+                "no new ground truth in {} for 20 s (see `nerve --robot {} logs sim`)",
+                truth.display(),
+                world.robot()
+            ));
+        }
+        if t0.elapsed() > wall_limit {
+            break End::Stalled(format!("the simulation ran slower than real time; {wall_limit:?} of wall time passed"));
+        }
+        std::thread::sleep(Duration::from_millis(250));
+    };
+    progress(scene, last.as_ref(), &mode, watch.crossed.is_some());
+    for (name, kind, pid, pct, restarts) in sample_agents(world) {
+        cpu.record(&name, &kind, pct, restarts, pid);
+    }
+    Ok((end, clock, cpu.finish()))
+}
+
+fn progress(scene: &Scene, r: Option<&TruthRow>, mode: &str, doorway: bool) {
+    let Some(r) = r else {
+        println!("  waiting for the simulator's first step...");
+        return;
+    };
+    let target = scene
+        .target_at(r.t)
+        .map(|p| format!("{:5.2} m", p.dist(nerve_sim_vec(r.x, r.y))))
+        .unwrap_or_else(|| "-".into());
+    println!(
+        "  t {:6.1} s  pose ({:6.2}, {:6.2}, {:5.0}°)  v {:5.2} m/s  mode {:<10} target {}  doorway {}  collisions {}",
+        r.t,
+        r.x,
+        r.y,
+        r.theta.to_degrees(),
+        r.v,
+        mode,
+        target,
+        if doorway { "passed" } else { "not yet" },
+        r.collisions
+    );
+    let _ = std::io::stdout().flush();
+}
+
+fn nerve_sim_vec(x: f64, y: f64) -> nerve_demo::nerve_sim::Vec2 {
+    nerve_demo::nerve_sim::Vec2::new(x, y)
+}
+
+/// The text of `path` from `offset` on (empty when unreadable).
+fn read_from(path: &Path, offset: u64) -> String {
+    let text = std::fs::read(path).unwrap_or_default();
+    let start = usize::try_from(offset).unwrap_or(0).min(text.len());
+    String::from_utf8_lossy(&text[start..]).into_owned()
+}
+
+/// Copies every agent's log (and the router's) into `dir`.
+fn copy_logs(world: &World, dir: &Path) {
+    if let Err(e) = std::fs::create_dir_all(dir) {
+        tracing::warn!("cannot create {}: {e}", dir.display());
+        return;
+    }
+    let Ok(rd) = std::fs::read_dir(world.logs_dir()) else { return };
+    for e in rd.flatten() {
+        let _ = std::fs::copy(e.path(), dir.join(e.file_name()));
+    }
+}
+
+/// `log.csv`: the truth with derived columns and the mode in force.
+fn write_log_csv(
+    path: &Path,
+    rows: &[TruthRow],
+    a: &nerve_demo::Analysis,
+    modes: &[nerve_demo::analysis::ModeChange],
+) -> Result<()> {
+    let f = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    let mut w = std::io::BufWriter::new(f);
+    let err = || format!("cannot write {}", path.display());
+    writeln!(w, "t,x,y,theta,v,omega,collisions,in_contact,clearance_m,target_x,target_y,target_dist_m,mode")
+        .with_context(err)?;
+    let mut k = 0;
+    let mut mode = "";
+    for (i, r) in rows.iter().enumerate() {
+        while k < modes.len() && modes[k].t_s.is_some_and(|t| t <= r.t) {
+            mode = &modes[k].mode;
+            k += 1;
+        }
+        let (tx, ty, td) = match a.target.get(i).copied().flatten() {
+            Some(p) => (format!("{:.3}", p.x), format!("{:.3}", p.y), format!("{:.3}", p.dist(nerve_sim_vec(r.x, r.y)))),
+            None => (String::new(), String::new(), String::new()),
+        };
+        writeln!(
+            w,
+            "{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.4},{tx},{ty},{td},{mode}",
+            r.t,
+            r.x,
+            r.y,
+            r.theta,
+            r.v,
+            r.omega,
+            r.collisions,
+            u8::from(r.in_contact),
+            a.clearance.get(i).copied().unwrap_or(f64::NAN)
+        )
+        .with_context(err)?;
+    }
+    w.flush().with_context(err)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flags_are_replaced_or_appended() {
+        let mut v: Vec<toml::Value> = ["--world", "a", "--x"].iter().map(|s| toml::Value::String((*s).into())).collect();
+        set_flag(&mut v, "--world", "b".into());
+        set_flag(&mut v, "--seed", "3".into());
+        let s: Vec<&str> = v.iter().filter_map(|x| x.as_str()).collect();
+        assert_eq!(s, ["--world", "b", "--x", "--seed", "3"]);
+    }
+}

@@ -1,0 +1,257 @@
+//! The exploration demo (`nerve demo explore`, docs/demo.md).
+//!
+//! * the analysis on synthetic ground truth: doorway crossing, reaching the
+//!   target after it settled, clearance and collisions;
+//! * the figures are written and not empty;
+//! * end to end: the whole robot against the simulator on two seeds and on
+//!   the second world must reach the doorway and the target without a
+//!   collision, and must do so when the tracker is killed mid-run (the
+//!   supervisor restarts it).
+
+use nerve_demo::{Criteria, Scene, analyse, read_truth};
+use nerve_tests::{Robot, reap, wait_until};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn scene(name: &str) -> Scene {
+    Scene::load(&repo().join("worlds").join(name)).expect("world loads")
+}
+
+const HEADER: &str = "t,x,y,theta,v,omega,wheel_left,wheel_right,enc_left,enc_right,collisions,in_contact,pan,tilt";
+
+/// A synthetic truth log: the robot drives through `waypoints` at 0.3 m/s,
+/// sampled at 10 Hz, pausing `(index, seconds)` at given waypoints;
+/// `collide_at` sets the collision counter from that time on.
+fn synthetic(dir: &Path, waypoints: &[(f64, f64)], pauses: &[(usize, f64)], collide_at: Option<f64>) -> PathBuf {
+    let mut rows = vec![HEADER.to_owned()];
+    let mut t = 0.0;
+    let mut push = |t: f64, x: f64, y: f64, th: f64, v: f64| {
+        let c = u8::from(collide_at.is_some_and(|c| t >= c));
+        rows.push(format!("{t:.3},{x:.4},{y:.4},{th:.4},{v:.3},0.0,0,0,0,0,{c},{c},0,0"));
+    };
+    for (i, w) in waypoints.windows(2).enumerate() {
+        let (a, b) = (w[0], w[1]);
+        let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
+        let th = (b.1 - a.1).atan2(b.0 - a.0);
+        if let Some((_, p)) = pauses.iter().find(|(k, _)| *k == i) {
+            let n = (p * 10.0) as usize;
+            for _ in 0..n {
+                push(t, a.0, a.1, th, 0.0);
+                t += 0.1;
+            }
+        }
+        let n = ((len / 0.3) * 10.0).ceil().max(1.0) as usize;
+        for k in 0..n {
+            let f = k as f64 / n as f64;
+            push(t, a.0 + (b.0 - a.0) * f, a.1 + (b.1 - a.1) * f, th, 0.3);
+            t += 0.1;
+        }
+    }
+    if let Some(last) = waypoints.last() {
+        for _ in 0..30 {
+            push(t, last.0, last.1, 3.1, 0.0);
+            t += 0.1;
+        }
+    }
+    std::fs::create_dir_all(dir).expect("dir");
+    let p = dir.join("truth.csv");
+    std::fs::write(&p, rows.join("\n") + "\n").expect("write truth");
+    p
+}
+
+fn tmp(tag: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("nerve-demo-test-{}-{tag}", std::process::id()))
+}
+
+/// Through the room, the doorway and the corridor to where the person
+/// stops, waiting there until the person has finished stepping back, then
+/// following them: doorway and target reached, no collision, positive clearance.
+const GOOD_RUN: &[(f64, f64)] =
+    &[(1.1, 3.2), (2.5, 2.9), (3.4, 1.8), (4.8, 1.8), (6.0, 2.2), (10.0, 2.2), (12.0, 2.2), (11.4, 2.4)];
+
+#[test]
+fn analysis_of_a_good_synthetic_run() {
+    let s = scene("explore.toml");
+    let dir = tmp("good");
+    // pause at (12.0, 2.2) (the 7th waypoint, segment 6) long enough for the person to settle (~97 s)
+    let truth = synthetic(&dir, GOOD_RUN, &[(6, 70.0)], None);
+    let rows = read_truth(&truth).expect("reads");
+    let a = analyse(&s, &rows, Criteria::default());
+    let sum = &a.summary;
+    assert!(sum.reached_doorway, "{sum:?}");
+    let td = sum.doorway_time_s.expect("doorway time");
+    // the door is at x = 7: the crossing happens between the rows on either side
+    let before = rows.iter().rfind(|r| r.t < td).expect("row before");
+    let at = rows.iter().find(|r| r.t >= td).expect("row at");
+    assert!(before.x < 7.0 && at.x >= 7.0, "crossing at {td}: {before:?} -> {at:?}");
+    assert!(sum.reached_target, "{sum:?}");
+    let tt = sum.target_time_s.expect("target time");
+    let settle = s.target_settles_at().expect("the person's path ends");
+    assert!(tt >= settle, "target counted at {tt} before the person settled at {settle}");
+    assert_eq!(sum.collisions, 0);
+    assert!(sum.min_clearance_m > 0.05 && sum.min_clearance_m < 1.0, "{}", sum.min_clearance_m);
+    assert!(sum.turn_after_doorway_deg.is_some_and(|d| d > 150.0), "U-turn: {:?}", sum.turn_after_doorway_deg);
+    assert_eq!(a.clearance.len(), rows.len());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn analysis_counts_collisions_clearance_and_misses() {
+    let s = scene("explore.toml");
+    let dir = tmp("bad");
+    // stays in the room and scrapes the boxes on the south wall (x = 3 .. 4.2, y = 0 .. 0.9)
+    let truth = synthetic(&dir, &[(1.1, 3.2), (2.6, 1.15), (4.5, 1.15)], &[], Some(10.0));
+    let rows = read_truth(&truth).expect("reads");
+    let sum = analyse(&s, &rows, Criteria::default()).summary;
+    assert!(!sum.reached_doorway && !sum.reached_target, "{sum:?}");
+    assert_eq!(sum.collisions, 1);
+    assert!(sum.min_clearance_m.abs() < 0.02, "touching the boxes: {}", sum.min_clearance_m);
+    // near the door, with a huge reach, but without going through the door
+    // (e.g. a log of another world): not reached
+    let truth = synthetic(&dir, &[(6.0, 2.2), (6.5, 2.2)], &[], None);
+    let rows = read_truth(&truth).expect("reads");
+    let sum = analyse(&s, &rows, Criteria { target_reach_m: 10.0 }).summary;
+    assert!(!sum.reached_doorway && !sum.reached_target, "{sum:?}");
+    // reaching the person before they stepped back is not following them
+    let truth = synthetic(&dir, &GOOD_RUN[..7], &[], None);
+    let rows = read_truth(&truth).expect("reads");
+    let sum = analyse(&s, &rows, Criteria::default()).summary;
+    assert!(sum.reached_doorway && !sum.reached_target, "{sum:?}");
+    assert!(sum.min_target_distance_m.is_some_and(|d| d < 1.5), "{sum:?}");
+    // backing out through the door is not reaching it
+    let truth = synthetic(&dir, &[(8.0, 2.2), (6.0, 2.2)], &[], None);
+    let rows = read_truth(&truth).expect("reads");
+    let sum = analyse(&s, &rows, Criteria::default()).summary;
+    assert!(!sum.reached_doorway, "wrong direction counts: {sum:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn second_world_doorway_is_on_another_wall() {
+    let s = scene("explore-2.toml");
+    let d = s.doors[0].opening;
+    assert!((d.a.y - 6.0).abs() < 1e-9 && (d.b.y - 6.0).abs() < 1e-9, "door in the north wall: {d:?}");
+    let dir = tmp("w2");
+    let path = [(2.2, 1.0), (2.8, 3.0), (1.5, 5.0), (1.5, 7.0), (1.5, 11.2), (2.3, 10.1)];
+    let truth = synthetic(&dir, &path, &[(4, 80.0)], None);
+    let rows = read_truth(&truth).expect("reads");
+    let sum = analyse(&s, &rows, Criteria::default()).summary;
+    assert!(sum.reached_doorway && sum.reached_target && sum.collisions == 0, "{sum:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn figures_are_written_as_png_and_svg() {
+    let s = scene("explore.toml");
+    let dir = tmp("plots");
+    let truth = synthetic(&dir, GOOD_RUN, &[(6, 70.0)], None);
+    let rows = read_truth(&truth).expect("reads");
+    let a = analyse(&s, &rows, Criteria::default());
+    let modes = nerve_demo::modes::parse_log(
+        "00:00:01.000  INFO [decision] mode change: none -> explore\n00:00:40.000  INFO [decision] mode change: explore -> track\n",
+        &nerve_demo::modes::ClockMap { sim_zero_s_of_day: Some(0.0) },
+    );
+    assert_eq!(modes.len(), 2);
+    let figs = nerve_demo::plot::write_all(&dir, &s, &rows, &a, &modes, "synthetic").expect("plots");
+    assert_eq!(figs.files.len(), 4);
+    for f in &figs.files {
+        let len = std::fs::metadata(f).map(|m| m.len()).unwrap_or(0);
+        assert!(len > 5_000, "{} is {len} bytes", f.display());
+    }
+    let png = std::fs::read(dir.join("trajectory.png")).expect("png");
+    assert_eq!(&png[1..4], b"PNG");
+    let svg = std::fs::read_to_string(dir.join("motion.svg")).expect("svg");
+    if let Some(keep) = std::env::var_os("NERVE_DEMO_KEEP_PLOTS") {
+        for f in &figs.files {
+            let _ = std::fs::copy(f, Path::new(&keep).join(f.file_name().expect("file name")));
+        }
+    }
+    assert!(svg.contains("<svg") && svg.contains("velocity"), "svg has its labels");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+// ---------------------------------------------------------------- end to end
+
+/// Runs `nerve demo explore ARGS` for robot `r`; returns the parsed summary.
+fn run_demo(r: &Robot, args: &[&str], during: impl FnOnce(&Robot)) -> Value {
+    let out = r.home.join("out");
+    let t0 = Instant::now();
+    let child = r
+        .command("nerve")
+        .args(["demo", "explore", "--out"])
+        .arg(&out)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start nerve demo");
+    during(r);
+    let res = child.wait_with_output().expect("nerve demo");
+    let stdout = String::from_utf8_lossy(&res.stdout);
+    let stderr = String::from_utf8_lossy(&res.stderr);
+    assert!(res.status.success(), "nerve demo failed:\n{stdout}\n{stderr}");
+    let wall = t0.elapsed();
+    assert!(wall < Duration::from_secs(180), "took {wall:?}:\n{stdout}");
+    let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json");
+    let s: Value = serde_json::from_str(&text).expect("summary is JSON");
+    for f in ["trajectory.png", "trajectory.svg", "motion.png", "motion.svg", "truth.csv", "log.csv", "launch.toml"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    // nothing is left behind
+    reap();
+    assert!(r.shm_files().is_empty(), "left in /dev/shm: {:?}", r.shm_files());
+    s
+}
+
+fn assert_success(s: &Value) {
+    assert_eq!(s["reached_doorway"], true, "{s:#}");
+    assert_eq!(s["reached_target"], true, "{s:#}");
+    assert_eq!(s["collisions"], 0, "{s:#}");
+    assert!(s["mode_changes"].as_array().is_some_and(|m| !m.is_empty()), "{s:#}");
+    assert!(s["cpu"].as_object().is_some_and(|c| c.contains_key("tracker")), "{s:#}");
+}
+
+#[test]
+fn demo_explore_seed_1() {
+    let r = Robot::new("demoa");
+    let s = run_demo(&r, &["--seed", "1"], |_| {});
+    assert_success(&s);
+}
+
+#[test]
+fn demo_explore_seed_2() {
+    let r = Robot::new("demob");
+    let s = run_demo(&r, &["--seed", "2"], |_| {});
+    assert_success(&s);
+}
+
+#[test]
+fn demo_explore_second_world() {
+    let r = Robot::new("democ");
+    let world = repo().join("worlds/explore-2.toml");
+    let s = run_demo(&r, &["--seed", "3", "--world", world.to_str().expect("utf-8 path")], |_| {});
+    assert_success(&s);
+    assert_eq!(s["world"], "explore-2");
+}
+
+/// `nerve kill tracker` while the robot explores: the supervisor restarts
+/// it, and the robot still finishes.
+#[test]
+fn demo_survives_killing_the_tracker() {
+    let r = Robot::new("demok");
+    let s = run_demo(&r, &["--seed", "1"], |r| {
+        let up = wait_until(Duration::from_secs(60), || {
+            r.nerve(&["ps", "--json"]).status.success() && r.agent("tracker").is_some_and(|a| a["pid"].as_u64() > Some(0))
+        });
+        assert!(up, "the tracker never came up");
+        std::thread::sleep(Duration::from_secs(20));
+        r.ok(&["kill", "tracker"]);
+    });
+    assert_success(&s);
+    assert!(s["cpu"]["tracker"]["restarts"].as_u64() >= Some(1), "{s:#}");
+}
