@@ -34,9 +34,14 @@ fn launch_pipeline_then_down_leaves_nothing() {
     let log = r.ok(&["logs", "t1"]);
     assert!(log.contains("[t1]"), "{log}");
     r.down_and_check_clean();
-    reap();
     for p in pids {
-        assert!(!exists(p), "process {p} left behind (or a zombie)");
+        assert!(
+            wait_until(Duration::from_secs(5), || {
+                reap();
+                !exists(p)
+            }),
+            "process {p} left behind (or a zombie)"
+        );
     }
 }
 
@@ -146,9 +151,15 @@ fn sigterm_ignoring_agent_is_killed_after_grace() {
     std::thread::sleep(Duration::from_millis(300)); // its first step ignores SIGTERM and blocks
     let out = r.ok(&["down", "--grace", "1"]);
     assert!(out.contains("with SIGKILL"), "{out}");
-    reap();
     assert!(!alive(pid), "still running");
-    assert!(!exists(pid), "left a zombie");
+    // a killed process becomes waitable once all its threads have exited
+    assert!(
+        wait_until(Duration::from_secs(5), || {
+            reap();
+            !exists(pid)
+        }),
+        "left a zombie"
+    );
     assert!(r.shm_files().is_empty(), "{:?}", r.shm_files());
 }
 

@@ -96,8 +96,14 @@ pub fn clean(world: &World) -> usize {
             let _ = std::fs::remove_file(path);
         }
     }
-    world.cleanup_dead_nodes();
     let me = std::process::id();
+    // a killed process keeps its node "alive" (its lock held) until its last
+    // thread has exited, shortly after it shows as a zombie: wait for those
+    let t0 = std::time::Instant::now();
+    while world.live_node_pids().into_iter().any(|p| p != me && !pid_alive(p)) && t0.elapsed() < Duration::from_secs(3) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    world.cleanup_dead_nodes();
     let others_alive = world.live_node_pids().into_iter().any(|p| p != me);
     let mut removed = 0;
     if !others_alive {
