@@ -662,7 +662,7 @@ impl Checker<'_> {
         let mut last_ping = Instant::now();
         loop {
             match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
-                Ok(WaitSetRunResult::TerminationRequest) | Ok(WaitSetRunResult::Interrupt) => {
+                Ok(WaitSetRunResult::TerminationRequest) => {
                     tracing::info!("termination requested by signal");
                     return;
                 }

@@ -20,9 +20,9 @@ use agent_sdk::control::router_client;
 use agent_sdk::ports::{port_event, port_service};
 use anyhow::{Context as _, Result, anyhow, bail};
 use serde::Serialize;
+use shm_schemas::PortRef;
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply, RouterRequest};
 use shm_schemas::payloads::Tick;
-use shm_schemas::PortRef;
 use std::time::{Duration, Instant};
 
 /// Options of the control scenario.
@@ -106,7 +106,7 @@ impl Watch {
                 }
             }
             let left = timeout.checked_sub(t0.elapsed()).ok_or_else(|| anyhow!("no sample within {timeout:?}"))?;
-            let _ = self.listener.timed_wait(|_| {}, left.min(Duration::from_millis(50)));
+            let _ = self.listener.timed_wait(|_| {}, left.min(Duration::from_millis(2)));
         }
     }
 }
@@ -169,13 +169,20 @@ fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>)> {
             if via_cli {
                 robot.run(&["connect", "t2/tick", "r/in"])?;
             } else {
-                match client.call(&RouterRequest::Cli(CliRequest::Connect { from: from.clone(), to: to.clone() }), Duration::from_secs(5)) {
+                match client.call(
+                    &RouterRequest::Cli(CliRequest::Connect { from: from.clone(), to: to.clone() }),
+                    Duration::from_secs(5),
+                ) {
                     Ok(RouterReply::Ok) => {}
                     other => bail!("connect refused: {other:?}"),
                 }
             }
             let t1 = watch.wait_for(t0, Duration::from_secs(5), from_t2)?;
-            if via_cli { cli.push(t1 - t0) } else { req.push(t1 - t0) }
+            if via_cli {
+                cli.push(t1 - t0)
+            } else {
+                req.push(t1 - t0)
+            }
             robot.run(&["disconnect", "t2/tick", "r/in"])?;
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -259,7 +266,12 @@ pub fn print_tables(r: &ControlReport) {
         )
     };
     row("hot-add (`nerve start` → first sample downstream)", &r.hot_add, "≤ 20 ms", Some(r.hot_add_vs_target));
-    row("rewire, request to the router → first sample from the new source", &r.rewire_request, "≤ 5 ms", Some(r.rewire_vs_target));
+    row(
+        "rewire, request to the router → first sample from the new source",
+        &r.rewire_request,
+        "≤ 5 ms",
+        Some(r.rewire_vs_target),
+    );
     row("rewire, `nerve connect` command → first sample", &r.rewire_cli, "-", None);
     for l in &r.launch {
         row(&format!("`nerve launch` of {} agents → all registered and connected", l.agents), &l.launch, "-", None);

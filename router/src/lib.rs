@@ -184,7 +184,7 @@ impl Router {
         let mut last_ping = Instant::now();
         while !self.state.shutdown {
             match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
-                Ok(WaitSetRunResult::TerminationRequest) | Ok(WaitSetRunResult::Interrupt) => break,
+                Ok(WaitSetRunResult::TerminationRequest) => break,
                 Ok(_) => {}
                 Err(e) => {
                     tracing::warn!("router wait failed: {e:?}");

@@ -85,7 +85,7 @@ fn watch<T: Payload>(
     let mut last_sample = now_ns();
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
-            Ok(WaitSetRunResult::TerminationRequest) | Ok(WaitSetRunResult::Interrupt) => return Ok(true),
+            Ok(WaitSetRunResult::TerminationRequest) => return Ok(true),
             Ok(_) => {}
             Err(e) => bail!("wait failed: {e:?}"),
         }
