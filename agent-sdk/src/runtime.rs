@@ -507,6 +507,7 @@ fn event_loop<A: Agent>(
                 f.last_cycle_ns = t;
             }
             if sh.generation.load(Ordering::Acquire) != generation {
+                tracing::debug!("inputs changed: rebuilding the task's WaitSet");
                 break; // inputs changed: rebuild the WaitSet
             }
         }
@@ -755,8 +756,13 @@ impl Checker<'_> {
                         inp.type_name()
                     ));
                 }
+                let t0 = now_ns();
                 match inp.connect(self.node, self.world.robot(), &from_agent, &from_port) {
                     Ok(changed) => {
+                        tracing::debug!(
+                            "subscribed {input} to {from_agent}/{from_port} in {} us",
+                            (now_ns() - t0) / 1000
+                        );
                         if changed {
                             tracing::info!("input {input} now reads {from_agent}/{from_port}");
                             self.changed_inputs();

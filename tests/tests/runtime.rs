@@ -152,7 +152,8 @@ fn killed_agent_is_noticed_and_rewired_on_restart() {
     assert!(wait_until(Duration::from_secs(10), || r.agent("r1").is_none()), "router still lists r1");
     // the router's own detection time, from its log (the CLI's latency under load is not the router's)
     let log = r.ok(&["logs", "router"]);
-    let line = log.lines().find(|l| l.contains(&format!("agent r1 (pid {victim}) died"))).expect("router logs the death");
+    let line =
+        log.lines().find(|l| l.contains(&format!("agent r1 (pid {victim}) died"))).expect("router logs the death");
     let noticed = log_seconds_of_day(line) - killed_at;
     assert!(noticed < 1.0, "the router took {noticed:.3} s to notice the dead agent: {line}");
     assert!(alive(t1), "the ticker survives");

@@ -100,7 +100,8 @@ pub fn clean(world: &World) -> usize {
     // a killed process keeps its node "alive" (its lock held) until its last
     // thread has exited, shortly after it shows as a zombie: wait for those
     let t0 = std::time::Instant::now();
-    while world.live_node_pids().into_iter().any(|p| p != me && !pid_alive(p)) && t0.elapsed() < Duration::from_secs(3) {
+    while world.live_node_pids().into_iter().any(|p| p != me && !pid_alive(p)) && t0.elapsed() < Duration::from_secs(3)
+    {
         std::thread::sleep(Duration::from_millis(20));
     }
     world.cleanup_dead_nodes();
