@@ -132,7 +132,10 @@ mod tests {
             Some((Some("explore".into()), "track".into()))
         );
         assert_eq!(parse_change("mode changed from a to b"), Some((Some("a".into()), "b".into())));
-        assert_eq!(parse_change("switching mode=\"track\" from=avoid danger=0.2"), Some((Some("avoid".into()), "track".into())));
+        assert_eq!(
+            parse_change("switching mode=\"track\" from=avoid danger=0.2"),
+            Some((Some("avoid".into()), "track".into()))
+        );
         assert_eq!(parse_change("started: kind decision"), None);
     }
 

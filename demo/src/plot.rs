@@ -103,7 +103,11 @@ where
     // walls
     chart
         .draw_series(
-            scene.world.walls.iter().map(|w| PathElement::new(vec![(w.seg.a.x, w.seg.a.y), (w.seg.b.x, w.seg.b.y)], WALL.stroke_width(4))),
+            scene
+                .world
+                .walls
+                .iter()
+                .map(|w| PathElement::new(vec![(w.seg.a.x, w.seg.a.y), (w.seg.b.x, w.seg.b.y)], WALL.stroke_width(4))),
         )
         .map_err(e)?
         .label("walls")
@@ -144,10 +148,7 @@ where
                 }
                 if let (Some(first), Some(last)) = (pts.first(), pts.last()) {
                     chart
-                        .draw_series([
-                            Circle::new(*first, 5, col.stroke_width(2)),
-                            Circle::new(*last, 6, col.filled()),
-                        ])
+                        .draw_series([Circle::new(*first, 5, col.stroke_width(2)), Circle::new(*last, 6, col.filled())])
                         .map_err(e)?;
                 }
             }
@@ -249,7 +250,10 @@ where
         for m in modes {
             if let Some(t) = m.t_s.filter(|t| (0.0..=t_end).contains(t)) {
                 chart
-                    .draw_series(std::iter::once(PathElement::new(vec![(t, lo), (t, hi)], RGBColor(150, 150, 150).stroke_width(1))))
+                    .draw_series(std::iter::once(PathElement::new(
+                        vec![(t, lo), (t, hi)],
+                        RGBColor(150, 150, 150).stroke_width(1),
+                    )))
                     .map_err(e)?;
                 if k == 0 {
                     chart

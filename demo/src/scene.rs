@@ -90,9 +90,11 @@ impl Scene {
                 });
             }
         }
-        let target = world.objects.iter().position(|o| o.name == "red-object").or_else(|| {
-            world.objects.iter().position(|o| o.color[0] > 150 && o.color[1] < 90 && o.color[2] < 90)
-        });
+        let target = world
+            .objects
+            .iter()
+            .position(|o| o.name == "red-object")
+            .or_else(|| world.objects.iter().position(|o| o.color[0] > 150 && o.color[1] < 90 && o.color[2] < 90));
         let model = RobotModel::h1();
         Ok(Scene { world, doors, target, robot_radius: model.radius, body_height: model.body_height })
     }
@@ -127,11 +129,8 @@ impl Scene {
         let walls = w.walls.iter().map(|wl| wl.seg.distance_to(p));
         let boxes = w.boxes.iter().flat_map(|b| b.edges.iter().map(move |e| e.distance_to(p)));
         let tubes = w.checkpoints.iter().map(|c| c.position.dist(p) - c.radius);
-        let objects = w
-            .objects
-            .iter()
-            .filter(|o| o.z[0] < self.body_height)
-            .map(|o| o.position_at(t).dist(p) - o.radius);
+        let objects =
+            w.objects.iter().filter(|o| o.z[0] < self.body_height).map(|o| o.position_at(t).dist(p) - o.radius);
         walls.chain(boxes).chain(tubes).chain(objects).fold(f64::INFINITY, f64::min)
     }
 
@@ -203,7 +202,8 @@ mod world_files {
             let s = Scene::load(&root.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
             assert_eq!(s.doors.len(), 1, "{f}");
             assert!(s.target.is_some() && s.target_settles_at().is_some(), "{f}");
-            Simulation::new(s.world.clone(), RobotModel::h1(), SimConfig::new(1)).unwrap_or_else(|e| panic!("{f}: {e}"));
+            Simulation::new(s.world.clone(), RobotModel::h1(), SimConfig::new(1))
+                .unwrap_or_else(|e| panic!("{f}: {e}"));
         }
     }
 }

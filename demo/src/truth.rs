@@ -90,8 +90,8 @@ pub fn parse_truth(text: &str, origin: &Path) -> Result<Vec<TruthRow>, DemoError
         path: origin.to_path_buf(),
         problem: "empty file; the simulator wrote no ground truth".into(),
     })?;
-    let cols = Columns::from_header(header)
-        .map_err(|problem| DemoError::Format { path: origin.to_path_buf(), problem })?;
+    let cols =
+        Columns::from_header(header).map_err(|problem| DemoError::Format { path: origin.to_path_buf(), problem })?;
     let body: Vec<&str> = lines.filter(|l| !l.trim().is_empty()).collect();
     let mut rows = Vec::with_capacity(body.len());
     for (i, l) in body.iter().enumerate() {
@@ -176,7 +176,9 @@ mod tests {
 
     #[test]
     fn parses_and_tolerates_a_cut_last_line() {
-        let text = format!("{HEAD}\n0.010,1.0,2.0,0.1,0.2,0.0,0,0,0,0,0,0,0,0\n0.020,1.1,2.0,0.1,0.2,0.0,0,0,0,0,1,1,0,0\n0.03,1.");
+        let text = format!(
+            "{HEAD}\n0.010,1.0,2.0,0.1,0.2,0.0,0,0,0,0,0,0,0,0\n0.020,1.1,2.0,0.1,0.2,0.0,0,0,0,0,1,1,0,0\n0.03,1."
+        );
         let rows = parse_truth(&text, Path::new("t.csv")).expect("parses");
         assert_eq!(rows.len(), 2);
         assert_eq!(rows[1].collisions, 1);

@@ -246,7 +246,8 @@ fn demo_survives_killing_the_tracker() {
     let r = Robot::new("demok");
     let s = run_demo(&r, &["--seed", "1"], |r| {
         let up = wait_until(Duration::from_secs(60), || {
-            r.nerve(&["ps", "--json"]).status.success() && r.agent("tracker").is_some_and(|a| a["pid"].as_u64() > Some(0))
+            r.nerve(&["ps", "--json"]).status.success()
+                && r.agent("tracker").is_some_and(|a| a["pid"].as_u64() > Some(0))
         });
         assert!(up, "the tracker never came up");
         std::thread::sleep(Duration::from_secs(20));

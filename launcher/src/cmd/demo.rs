@@ -140,7 +140,12 @@ fn derive_launch(template: &Path, robot: &str, world: &Path, seed: u64) -> Resul
         for v in args.iter_mut() {
             if let Some(s) = v.as_str() {
                 let p = Path::new(s);
-                if s.contains('/') && !s.starts_with('-') && !s.contains('{') && p.is_relative() && base.join(p).exists() {
+                if s.contains('/')
+                    && !s.starts_with('-')
+                    && !s.contains('{')
+                    && p.is_relative()
+                    && base.join(p).exists()
+                {
                     *v = toml::Value::String(base.join(p).display().to_string());
                 }
             }
@@ -176,10 +181,9 @@ fn truth_path(launch_text: &str, world: &World) -> Option<PathBuf> {
 fn sample_agents(world: &World) -> Vec<(String, String, u32, Option<f64>, u32)> {
     let Ok(s) = RouterSession::open(world) else { return vec![] };
     match s.call(CliRequest::Ps) {
-        Ok(RouterReply::Agents(v)) => v
-            .into_iter()
-            .map(|a| (a.name, a.kind, a.pid, a.stats.map(|s| s.cpu_percent), a.restarts))
-            .collect(),
+        Ok(RouterReply::Agents(v)) => {
+            v.into_iter().map(|a| (a.name, a.kind, a.pid, a.stats.map(|s| s.cpu_percent), a.restarts)).collect()
+        }
         _ => vec![],
     }
 }
@@ -267,7 +271,11 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     // the records
     let rows = nerve_demo::read_truth(&truth).with_context(|| "the simulator left no usable ground truth")?;
     if rows.is_empty() {
-        bail!("the ground truth {} is empty: the simulator never ran (see {}/logs/sim.log)", truth.display(), out.display());
+        bail!(
+            "the ground truth {} is empty: the simulator never ran (see {}/logs/sim.log)",
+            truth.display(),
+            out.display()
+        );
     }
     std::fs::copy(&truth, out.join("truth.csv")).with_context(|| format!("cannot copy {}", truth.display()))?;
     copy_logs(&world, &out.join("logs"));
@@ -318,7 +326,14 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
 type Followed = (End, ClockMap, std::collections::BTreeMap<String, nerve_demo::analysis::AgentCpu>);
 
 /// Follows the run until it ends; prints progress.
-fn follow(world: &World, scene: &Scene, a: &ExploreArgs, truth: &Path, decision_log: &Path, offset: u64) -> Result<Followed> {
+fn follow(
+    world: &World,
+    scene: &Scene,
+    a: &ExploreArgs,
+    truth: &Path,
+    decision_log: &Path,
+    offset: u64,
+) -> Result<Followed> {
     let criteria = Criteria { target_reach_m: a.reach };
     let mut tail = TruthTail::new(truth);
     let mut dlog = Tail::new(decision_log.to_path_buf(), offset);
@@ -383,7 +398,9 @@ fn follow(world: &World, scene: &Scene, a: &ExploreArgs, truth: &Path, decision_
             ));
         }
         if t0.elapsed() > wall_limit {
-            break End::Stalled(format!("the simulation ran slower than real time; {wall_limit:?} of wall time passed"));
+            break End::Stalled(format!(
+                "the simulation ran slower than real time; {wall_limit:?} of wall time passed"
+            ));
         }
         std::thread::sleep(Duration::from_millis(250));
     };
@@ -461,7 +478,9 @@ fn write_log_csv(
             k += 1;
         }
         let (tx, ty, td) = match a.target.get(i).copied().flatten() {
-            Some(p) => (format!("{:.3}", p.x), format!("{:.3}", p.y), format!("{:.3}", p.dist(nerve_sim_vec(r.x, r.y)))),
+            Some(p) => {
+                (format!("{:.3}", p.x), format!("{:.3}", p.y), format!("{:.3}", p.dist(nerve_sim_vec(r.x, r.y))))
+            }
             None => (String::new(), String::new(), String::new()),
         };
         writeln!(
@@ -489,7 +508,8 @@ mod tests {
 
     #[test]
     fn flags_are_replaced_or_appended() {
-        let mut v: Vec<toml::Value> = ["--world", "a", "--x"].iter().map(|s| toml::Value::String((*s).into())).collect();
+        let mut v: Vec<toml::Value> =
+            ["--world", "a", "--x"].iter().map(|s| toml::Value::String((*s).into())).collect();
         set_flag(&mut v, "--world", "b".into());
         set_flag(&mut v, "--seed", "3".into());
         let s: Vec<&str> = v.iter().filter_map(|x| x.as_str()).collect();
