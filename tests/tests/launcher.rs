@@ -263,3 +263,53 @@ fn systemd_units_verify() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success() && stderr.trim().is_empty(), "systemd-analyze verify complained:\n{stderr}");
 }
+
+/// `nerve launch --foreground` streams the agents' logs, each line with its
+/// agent's name, and stops everything on Ctrl-C.
+#[test]
+fn foreground_launch_streams_logs_and_stops_on_ctrl_c() {
+    use std::io::Read;
+    let r = Robot::new("fg");
+    let file = r.launch_file("pipeline.toml", &pipeline());
+    let mut child = r
+        .command("nerve")
+        .arg("launch")
+        .arg(&file)
+        .arg("--foreground")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("spawn nerve launch --foreground");
+    assert!(wait_until(Duration::from_secs(20), || r.nerve(&["ps", "--json"]).status.success() && r.ps().len() == 3));
+    let pids: Vec<u32> = r.ps().iter().map(|a| a["pid"].as_u64().unwrap_or(0) as u32).collect();
+    std::thread::sleep(Duration::from_millis(500));
+    // SAFETY: kill has no memory-safety preconditions.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let t0 = Instant::now();
+    let status = loop {
+        if let Ok(Some(s)) = child.try_wait() {
+            break Some(s);
+        }
+        if t0.elapsed() > Duration::from_secs(20) {
+            let _ = child.kill();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(status.is_some_and(|s| s.success()), "launch --foreground did not stop cleanly on Ctrl-C");
+    let mut out = String::new();
+    child.stdout.take().expect("stdout").read_to_string(&mut out).expect("read stdout");
+    for name in ["t1", "r1", "r2", "router"] {
+        assert!(out.contains(&format!("[{name}]")), "no log line of {name} streamed:\n{out}");
+    }
+    for p in pids {
+        assert!(
+            wait_until(Duration::from_secs(5), || {
+                reap();
+                !exists(p)
+            }),
+            "process {p} left behind"
+        );
+    }
+    assert!(r.shm_files().is_empty(), "{:?}", r.shm_files());
+}
