@@ -164,6 +164,11 @@ impl World {
             .collect()
     }
 
+    /// The iceoryx2 root path (shared by every robot; files carry the robot's prefix).
+    pub fn iox2_root(&self) -> &StdPath {
+        &self.iox_root
+    }
+
     /// This robot's files under the iceoryx2 root (node and service records, sockets).
     pub fn iox2_files(&self) -> Vec<PathBuf> {
         fn walk(dir: &StdPath, prefix: &str, out: &mut Vec<PathBuf>) {

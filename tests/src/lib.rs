@@ -178,8 +178,27 @@ impl Robot {
     }
 }
 
+impl Robot {
+    /// Prints the last lines of every log of the robot (router and agents) on stderr.
+    pub fn dump_logs(&self) {
+        let logs = self.home.join(&self.name).join("logs");
+        let Ok(rd) = std::fs::read_dir(&logs) else { return };
+        for e in rd.filter_map(|e| e.ok()) {
+            let text = std::fs::read_to_string(e.path()).unwrap_or_default();
+            let lines: Vec<&str> = text.lines().collect();
+            eprintln!("----- {} (last {} lines)", e.path().display(), lines.len().min(40));
+            for l in &lines[lines.len().saturating_sub(40)..] {
+                eprintln!("{l}");
+            }
+        }
+    }
+}
+
 impl Drop for Robot {
     fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.dump_logs();
+        }
         let _ = self.command("nerve").args(["down", "--grace", "1"]).output();
         for f in self.shm_files() {
             let _ = std::fs::remove_file(format!("/dev/shm/{f}"));

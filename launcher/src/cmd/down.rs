@@ -26,11 +26,29 @@ fn pid_files(world: &World) -> Vec<(String, u32, std::path::PathBuf)> {
         .collect()
 }
 
-/// Whether `pid` still runs a nerve program (guards against pid reuse).
-fn is_nerve_process(pid: u32) -> bool {
-    std::fs::read(format!("/proc/{pid}/cmdline"))
-        .map(|c| String::from_utf8_lossy(&c).contains("nerve"))
-        .unwrap_or(false)
+/// Whether `pid` runs a nerve program of this robot. A pid file can outlive
+/// its process (a crash), and the pid can be reused meanwhile — possibly by
+/// another robot's router or agent: the robot is read from the process's own
+/// `--robot` argument, else its `NERVE_ROBOT`, else the default robot.
+fn belongs_to(pid: u32, world: &World) -> bool {
+    let Ok(cmdline) = std::fs::read(format!("/proc/{pid}/cmdline")) else { return false };
+    let args: Vec<String> = cmdline.split(|b| *b == 0).map(|a| String::from_utf8_lossy(a).into_owned()).collect();
+    if !args.iter().any(|a| a.contains("nerve")) {
+        return false;
+    }
+    let robot = args
+        .windows(2)
+        .find(|w| w[0] == "--robot")
+        .map(|w| w[1].clone())
+        .or_else(|| args.iter().find_map(|a| a.strip_prefix("--robot=").map(str::to_owned)))
+        .or_else(|| {
+            let env = std::fs::read(format!("/proc/{pid}/environ")).ok()?;
+            env.split(|b| *b == 0).find_map(|v| {
+                String::from_utf8_lossy(v).strip_prefix(&format!("{}=", agent_sdk::world::ROBOT_ENV)).map(str::to_owned)
+            })
+        })
+        .unwrap_or_else(|| agent_sdk::world::DEFAULT_ROBOT.to_owned());
+    robot == world.robot().as_str()
 }
 
 fn wait_gone(pids: &[u32], grace: Duration) -> Vec<u32> {
@@ -67,7 +85,7 @@ pub fn bring_down(world: &World, grace: Duration) -> (usize, usize) {
     }
     // 2. every process with a pid file (agents started without a router, the router)
     for (_, pid, _) in pid_files(world) {
-        if pid > 0 && !pids.contains(&pid) && pid_alive(pid) && is_nerve_process(pid) {
+        if pid > 0 && !pids.contains(&pid) && pid_alive(pid) && belongs_to(pid, world) {
             pids.push(pid);
         }
     }
@@ -113,14 +131,18 @@ pub fn clean(world: &World) -> usize {
                 removed += 1;
             }
         }
+        // node records live in a folder per node (`nodes/<id>/`): drop it once
+        // empty. Never the shared folders themselves (the root, `nodes/`,
+        // `services/`): other robots create files in them at any moment.
+        let nodes_dir = world.iox2_root().join("nodes");
         for f in world.iox2_files() {
-            let dir = f.parent().map(std::path::Path::to_path_buf);
             if std::fs::remove_file(&f).is_ok() {
                 removed += 1;
             }
-            // node records live in a folder per node: drop it once empty
-            if let Some(d) = dir {
-                let _ = std::fs::remove_dir(d);
+            if let Some(dir) = f.parent() {
+                if dir.parent() == Some(nodes_dir.as_path()) {
+                    let _ = std::fs::remove_dir(dir);
+                }
             }
         }
     }
