@@ -246,7 +246,9 @@ where
             .light_line_style(RGBColor(238, 238, 238))
             .draw()
             .map_err(e)?;
-        // the decision maker's modes: a thin vertical line at each change, labelled in the top panel
+        // the decision maker's modes: a thin vertical line at each change,
+        // labelled in the top panel where there is room for the label
+        let mut last_label = f64::NEG_INFINITY;
         for m in modes {
             if let Some(t) = m.t_s.filter(|t| (0.0..=t_end).contains(t)) {
                 chart
@@ -255,7 +257,8 @@ where
                         RGBColor(150, 150, 150).stroke_width(1),
                     )))
                     .map_err(e)?;
-                if k == 0 {
+                if k == 0 && t - last_label >= t_end * 0.045 {
+                    last_label = t;
                     chart
                         .draw_series(std::iter::once(Text::new(
                             m.mode.clone(),
@@ -277,7 +280,7 @@ where
                     chart
                         .draw_series(std::iter::once(Text::new(
                             what,
-                            (t, lo + (hi - lo) * 0.1),
+                            (if t > t_end * 0.85 { t - t_end * 0.09 } else { t }, lo + (hi - lo) * 0.1),
                             ("sans-serif", 12).into_font().color(&col),
                         )))
                         .map_err(e)?;

@@ -85,14 +85,17 @@ pub fn demo(robot: &str, cmd: DemoCmd) -> Result<ExitCode> {
     }
 }
 
-/// Finds `rel` relative to the current directory, else to the nerve source
-/// tree the running executable was built in (`target/<profile>/nerve`).
+/// Finds `rel` relative to the current directory, else above the running
+/// executable (`<tree>/target/<profile>/nerve`), else in the source tree
+/// this `nerve` was compiled from.
 fn find_file(rel: &Path, what: &str) -> Result<PathBuf> {
     if rel.is_absolute() || rel.exists() {
         return std::fs::canonicalize(rel).with_context(|| format!("cannot use {what} {}", rel.display()));
     }
     let exe = std::env::current_exe().context("cannot find the nerve executable")?;
-    for dir in exe.ancestors().skip(1) {
+    // the source tree this nerve was built from (also when CARGO_TARGET_DIR is elsewhere)
+    let built_from = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    for dir in exe.ancestors().skip(1).chain(std::iter::once(built_from.as_path())) {
         let p = dir.join(rel);
         if p.exists() {
             return std::fs::canonicalize(&p).with_context(|| format!("cannot use {what} {}", p.display()));
