@@ -101,19 +101,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
     /// Serves `service`. Only one server may serve a service at a time: a
     /// second one gets [`ControlError::AlreadyServed`].
     pub fn create(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<Self, ControlError> {
-        let name: ServiceName = service.try_into().map_err(|e| ipc_err(service, e))?;
-        let rr = node
-            .service_builder(&name)
-            .request_response::<Bytes, Bytes>()
-            .max_clients(size.max_clients)
-            .max_servers(1)
-            .max_nodes(size.max_nodes)
-            .max_active_requests_per_client(MAX_ACTIVE_REQUESTS)
-            .max_response_buffer_size(1)
-            .max_borrowed_responses_per_pending_response(1)
-            .max_loaned_requests(1)
-            .open_or_create()
-            .map_err(|e| ipc_err(service, e))?;
+        let rr = rr_builder(node, service, size)?.open_or_create().map_err(|e| ipc_err(service, e))?;
         let server = rr
             .server_builder()
             .initial_max_slice_len(INITIAL_MESSAGE_BYTES)
@@ -169,24 +157,12 @@ pub struct ControlClient<Req, Resp> {
 impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
     /// Opens `service`; [`ControlError::NoServer`] when it does not exist.
     pub fn open(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<Self, ControlError> {
-        let name: ServiceName = service.try_into().map_err(|e| ipc_err(service, e))?;
-        let rr = node
-            .service_builder(&name)
-            .request_response::<Bytes, Bytes>()
-            .max_clients(size.max_clients)
-            .max_servers(1)
-            .max_nodes(size.max_nodes)
-            .max_active_requests_per_client(MAX_ACTIVE_REQUESTS)
-            .max_response_buffer_size(1)
-            .max_borrowed_responses_per_pending_response(1)
-            .max_loaned_requests(1)
-            .open()
-            .map_err(|e| match e {
-                iceoryx2::service::builder::request_response::RequestResponseOpenError::DoesNotExist => {
-                    ControlError::NoServer { service: service.into() }
-                }
-                e => ipc_err(service, e),
-            })?;
+        let rr = rr_builder(node, service, size)?.open().map_err(|e| match e {
+            iceoryx2::service::builder::request_response::RequestResponseOpenError::DoesNotExist => {
+                ControlError::NoServer { service: service.into() }
+            }
+            e => ipc_err(service, e),
+        })?;
         let client = rr
             .client_builder()
             .initial_max_slice_len(INITIAL_MESSAGE_BYTES)
@@ -228,6 +204,23 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
             backoff = (backoff * 2).min(Duration::from_millis(2));
         }
     }
+}
+
+type RrBuilder = iceoryx2::service::builder::request_response::Builder<Bytes, (), Bytes, (), Ipc>;
+
+/// The one place that sets up a control service, so that server and clients agree.
+fn rr_builder(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<RrBuilder, ControlError> {
+    let name: ServiceName = service.try_into().map_err(|e| ipc_err(service, e))?;
+    Ok(node
+        .service_builder(&name)
+        .request_response::<Bytes, Bytes>()
+        .max_clients(size.max_clients)
+        .max_servers(1)
+        .max_nodes(size.max_nodes)
+        .max_active_requests_per_client(MAX_ACTIVE_REQUESTS)
+        .max_response_buffer_size(1)
+        .max_borrowed_responses_per_pending_response(1)
+        .max_loaned_requests(1))
 }
 
 fn open_event(

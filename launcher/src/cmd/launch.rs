@@ -68,36 +68,8 @@ pub fn launch(cli_robot: &str, a: LaunchArgs) -> Result<ExitCode> {
         world.robot(),
         file.connections.len()
     );
-    ensure_router(&world)?;
-    let session = RouterSession::open(&world)?;
-    let running: Vec<String> = match session.call(CliRequest::Ps)? {
-        RouterReply::Agents(v) => v.into_iter().filter(|a| a.pid > 0).map(|a| a.name).collect(),
-        _ => vec![],
-    };
-    // supervision first, so that an agent dying right after it starts is restarted
-    for spec in &file.agents {
-        session.ok(CliRequest::Supervise(proto::Supervision {
-            name: spec.name.clone(),
-            argv: spec.argv(world.robot().as_str()),
-            policy: policy(spec.restart),
-            max_restarts: spec.max_restarts,
-            window_ns: spec.restart_window.as_nanos() as u64,
-            backoff_ns: spec.backoff.as_nanos() as u64,
-            importance: spec.importance,
-        }))?;
-    }
-    let failed = start_agents(&world, &file, &running)?;
-    wait_registered(&session, &file)?;
-    let mut wiring_failed = 0;
-    for (from, to) in &file.connections {
-        match session.ok(CliRequest::Connect { from: from.clone(), to: to.clone() }) {
-            Ok(()) => eprintln!("  connected {from} -> {to}"),
-            Err(e) => {
-                wiring_failed += 1;
-                eprintln!("  could not connect {from} -> {to}: {e:#}");
-            }
-        }
-    }
+    let up = bring_up(&world, &file)?;
+    let (failed, wiring_failed) = (up.failed, up.wiring_failed);
     eprintln!(
         "robot {} is up: {} agent(s) running, {} connection(s), in {:.2} s{}",
         world.robot(),
@@ -106,7 +78,6 @@ pub fn launch(cli_robot: &str, a: LaunchArgs) -> Result<ExitCode> {
         t0.elapsed().as_secs_f64(),
         if a.foreground { "" } else { " (`nerve ps`, `nerve graph`, `nerve logs NAME`, `nerve down`)" }
     );
-    drop(session);
     if a.foreground {
         follow(&world, &file)?;
         return Ok(ExitCode::SUCCESS);
@@ -225,13 +196,35 @@ fn follow(world: &World, file: &LaunchFile) -> Result<()> {
 pub(crate) fn launch_robot(robot: &str, path: &std::path::Path) -> Result<World> {
     let (file, world) = launch_file::load(path, robot).map_err(|e| anyhow!("{e}"))?;
     world.ensure_state_dirs()?;
-    ensure_router(&world)?;
-    let session = RouterSession::open(&world)?;
+    let up = bring_up(&world, &file)?;
+    if up.failed > 0 {
+        bail!("{} agent(s) of {} did not start (see the lines above)", up.failed, path.display());
+    }
+    if up.wiring_failed > 0 {
+        bail!("{} connection(s) of {} could not be made (see the lines above)", up.wiring_failed, path.display());
+    }
+    Ok(world)
+}
+
+/// What [`bring_up`] achieved.
+struct BroughtUp {
+    /// agents that did not start
+    failed: usize,
+    /// connections that could not be made
+    wiring_failed: usize,
+}
+
+/// Starts the router if needed, hands every agent to its supervision (first,
+/// so that an agent dying right after it starts is restarted), starts the
+/// agents not yet running, waits until they have registered, and applies the
+/// connections — a progress line for each.
+fn bring_up(world: &World, file: &LaunchFile) -> Result<BroughtUp> {
+    ensure_router(world)?;
+    let session = RouterSession::open(world)?;
     let running: Vec<String> = match session.call(CliRequest::Ps)? {
         RouterReply::Agents(v) => v.into_iter().filter(|a| a.pid > 0).map(|a| a.name).collect(),
         _ => vec![],
     };
-    // supervision first, so that an agent dying right after it starts is restarted
     for spec in &file.agents {
         session
             .ok(CliRequest::Supervise(proto::Supervision {
@@ -245,15 +238,17 @@ pub(crate) fn launch_robot(robot: &str, path: &std::path::Path) -> Result<World>
             }))
             .with_context(|| format!("the router refused to supervise {}", spec.name))?;
     }
-    let failed = start_agents(&world, &file, &running)?;
-    if failed > 0 {
-        bail!("{failed} agent(s) of {} did not start (see the lines above)", path.display());
-    }
-    wait_registered(&session, &file)?;
+    let failed = start_agents(world, file, &running)?;
+    wait_registered(&session, file)?;
+    let mut wiring_failed = 0;
     for (from, to) in &file.connections {
-        session
-            .ok(CliRequest::Connect { from: from.clone(), to: to.clone() })
-            .with_context(|| format!("cannot connect {from} -> {to}"))?;
+        match session.ok(CliRequest::Connect { from: from.clone(), to: to.clone() }) {
+            Ok(()) => eprintln!("  connected {from} -> {to}"),
+            Err(e) => {
+                wiring_failed += 1;
+                eprintln!("  could not connect {from} -> {to}: {e:#}");
+            }
+        }
     }
-    Ok(world)
+    Ok(BroughtUp { failed, wiring_failed })
 }
