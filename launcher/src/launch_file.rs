@@ -22,7 +22,7 @@
 //! ports, mismatched types. Ports and types come from each agent executable's
 //! `--describe`. Every problem is reported as `FILE:LINE: what, and what to do`.
 
-use crate::cmd::start::resolve_kind;
+use crate::kinds::resolve_kind;
 use agent_sdk::World;
 use serde::Deserialize;
 use shm_schemas::control::agent_to_router::TaskKind;

@@ -5,6 +5,7 @@
 mod cli;
 mod client;
 mod cmd;
+mod kinds;
 mod launch_file;
 
 use clap::Parser;
