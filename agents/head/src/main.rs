@@ -20,7 +20,7 @@ mod aim;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use aim::Aim;
 use nerve_devices::Message;
-use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink, LinkOptions};
+use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
 use nerve_motor::{Limits, Weights};
 use shm_schemas::payloads::{HeadCommand, HeadState, LinguisticCommand};
 use std::path::PathBuf;
@@ -65,12 +65,11 @@ impl Agent for Head {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
-        if args.device.is_none() && !nerve_devlink::describing(setup) {
-            return Err(AgentError::Config(
-                "no device: give the head board's serial port after `--`, e.g. `nerve start head -- --device /dev/ttyUSB3`"
-                    .into(),
-            ));
-        }
+        nerve_devlink::require_device(
+            setup,
+            &args.device,
+            "no device: give the head board's serial port after `--`, e.g. `nerve start head -- --device /dev/ttyUSB3`",
+        )?;
         let read_only = |_: &u64| Err::<(), String>("this is a read-only counter kept by the agent".into());
         Ok(Head {
             device: args.device,
@@ -96,13 +95,7 @@ impl Agent for Head {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        let Some(path) = &self.device else {
-            return Err(AgentError::Config("no --device given".into()));
-        };
-        self.link = Some(
-            DeviceLink::spawn(path, LinkOptions { backoff: Default::default(), label: "head".into() })
-                .map_err(|e| AgentError::Device(e.to_string()))?,
-        );
+        self.link = Some(nerve_devlink::open_link(&self.device, "head")?);
         Ok(())
     }
 

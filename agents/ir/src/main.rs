@@ -16,7 +16,7 @@
 
 use agent_sdk::{Agent, AgentError, Context, Output, Setup, Task};
 use nerve_devices::Message;
-use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink, LinkOptions};
+use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
 use shm_schemas::payloads::IrSighting;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -48,12 +48,11 @@ impl Agent for Ir {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
-        if args.device.is_none() && !nerve_devlink::describing(setup) {
-            return Err(AgentError::Config(
-                "no device: give the IR receiver's serial port after `--`, e.g. `nerve start ir -- --device /dev/ttyUSB2`"
-                    .into(),
-            ));
-        }
+        nerve_devlink::require_device(
+            setup,
+            &args.device,
+            "no device: give the IR receiver's serial port after `--`, e.g. `nerve start ir -- --device /dev/ttyUSB2`",
+        )?;
         Ok(Ir {
             device: args.device,
             link: None,
@@ -66,13 +65,7 @@ impl Agent for Ir {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        let Some(path) = &self.device else {
-            return Err(AgentError::Config("no --device given".into()));
-        };
-        self.link = Some(
-            DeviceLink::spawn(path, LinkOptions { backoff: Default::default(), label: "ir".into() })
-                .map_err(|e| AgentError::Device(e.to_string()))?,
-        );
+        self.link = Some(nerve_devlink::open_link(&self.device, "ir")?);
         Ok(())
     }
 

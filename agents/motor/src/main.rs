@@ -29,7 +29,7 @@
 
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_devices::{DiffDriveGeometry, Message, Pose2, WheelCommand, wrap_angle};
-use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink, LinkOptions};
+use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
 use nerve_motor::{Fusion, Limits, Weights, drive::wheel_speeds};
 use shm_schemas::payloads::{LinguisticCommand, Odometry, SafetyStop, VelocityCommand};
 use std::collections::BTreeMap;
@@ -144,13 +144,12 @@ impl Agent for Motor {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
-        if args.device.is_none() && !nerve_devlink::describing(setup) {
-            return Err(AgentError::Config(
-                "no device: give the motor board's serial port after `--`, e.g. `nerve start motor -- --device /dev/ttyUSB1` \
-                 (with the simulator: `-- --device <state dir>/dev/motor`)"
-                    .into(),
-            ));
-        }
+        nerve_devlink::require_device(
+            setup,
+            &args.device,
+            "no device: give the motor board's serial port after `--`, e.g. `nerve start motor -- --device /dev/ttyUSB1` \
+                 (with the simulator: `-- --device <state dir>/dev/motor`)",
+        )?;
         let (limits, geometry, wheel_max) = match args.robot_model.as_str() {
             "h2" => (Limits::H2, DiffDriveGeometry::H2, 600.0),
             _ => (Limits::H1, DiffDriveGeometry::H1, 800.0),
@@ -201,13 +200,7 @@ impl Agent for Motor {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        let Some(path) = &self.device else {
-            return Err(AgentError::Config("no --device given".into()));
-        };
-        self.link = Some(
-            DeviceLink::spawn(path, LinkOptions { backoff: Default::default(), label: "motor".into() })
-                .map_err(|e| AgentError::Device(e.to_string()))?,
-        );
+        self.link = Some(nerve_devlink::open_link(&self.device, "motor")?);
         Ok(())
     }
 

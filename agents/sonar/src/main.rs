@@ -17,7 +17,7 @@
 
 use agent_sdk::{Agent, AgentError, Context, Output, Param, Setup, Task};
 use nerve_devices::{Message, SONAR_NO_ECHO};
-use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink, LinkOptions};
+use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
 use nerve_sonar::{DIRECTIONS, RiskEstimator, RiskParams, SeqUnwrapper};
 use shm_schemas::payloads::SonarScan;
 use std::path::PathBuf;
@@ -60,13 +60,12 @@ impl Agent for Sonar {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
-        if args.device.is_none() && !nerve_devlink::describing(setup) {
-            return Err(AgentError::Config(
-                "no device: give the sonar module's serial port after `--`, e.g. `nerve start sonar -- --device /dev/ttyUSB0` \
-                 (with the simulator: `-- --device <state dir>/dev/sonar`)"
-                    .into(),
-            ));
-        }
+        nerve_devlink::require_device(
+            setup,
+            &args.device,
+            "no device: give the sonar module's serial port after `--`, e.g. `nerve start sonar -- --device /dev/ttyUSB0` \
+                 (with the simulator: `-- --device <state dir>/dev/sonar`)",
+        )?;
         let d = RiskParams::default();
         let read_only = |_: &u64| Err::<(), String>("this is a read-only counter kept by the agent".into());
         Ok(Sonar {
@@ -89,12 +88,7 @@ impl Agent for Sonar {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        let Some(path) = &self.device else {
-            return Err(AgentError::Config("no --device given".into()));
-        };
-        let link = DeviceLink::spawn(path, LinkOptions { backoff: Default::default(), label: "sonar".into() })
-            .map_err(|e| AgentError::Device(e.to_string()))?;
-        self.link = Some(link);
+        self.link = Some(nerve_devlink::open_link(&self.device, "sonar")?);
         Ok(())
     }
 
