@@ -22,6 +22,23 @@ impl Drop for Sim {
     }
 }
 
+/// Removes a test robot's files from /dev/shm when dropped, even when the
+/// test fails (iceoryx2 keeps a management file per robot after a clean exit).
+struct ShmGuard(String);
+
+impl Drop for ShmGuard {
+    fn drop(&mut self) {
+        let prefix = format!("nerve_{}_", self.0);
+        if let Ok(rd) = std::fs::read_dir("/dev/shm") {
+            for e in rd.filter_map(|e| e.ok()) {
+                if e.file_name().to_string_lossy().starts_with(&prefix) {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+    }
+}
+
 fn world() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/test-room.toml")
 }
@@ -37,6 +54,8 @@ fn wait_for(link: &Path) {
 
 #[test]
 fn sim_binary_serves_sonar_and_motor_over_ptys() {
+    let robot = format!("simbin-{}", std::process::id());
+    let _shm = ShmGuard(robot.clone());
     let dir = std::env::temp_dir().join(format!("nerve-sim-bin-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("tmp dir");
@@ -44,7 +63,7 @@ fn sim_binary_serves_sonar_and_motor_over_ptys() {
     let truth = dir.join("truth.csv");
     let mut sim = Sim {
         child: Command::new(env!("CARGO_BIN_EXE_nerve-sim"))
-            .args(["--robot", &format!("simbin-{}", std::process::id()), "--no-realtime", "--log-level", "warn", "--"])
+            .args(["--robot", &robot, "--no-realtime", "--log-level", "warn", "--"])
             .env("NERVE_HOME", &dir)
             .arg("--world")
             .arg(world())
@@ -149,12 +168,14 @@ fn sim_binary_serves_sonar_and_motor_over_ptys() {
 
 #[test]
 fn bad_world_file_is_reported_with_its_name() {
+    let robot = format!("simbad-{}", std::process::id());
+    let _shm = ShmGuard(robot.clone());
     let dir = std::env::temp_dir().join(format!("nerve-sim-badworld-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("tmp dir");
     let w = dir.join("broken.toml");
     std::fs::write(&w, "[robot]\nx = 1\ny = 1\nspeed = 2\n").expect("write");
     let out = Command::new(env!("CARGO_BIN_EXE_nerve-sim"))
-        .args(["--robot", &format!("simbad-{}", std::process::id()), "--no-realtime", "--"])
+        .args(["--robot", &robot, "--no-realtime", "--"])
         .env("NERVE_HOME", &dir)
         .arg("--world")
         .arg(&w)
