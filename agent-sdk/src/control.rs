@@ -21,19 +21,42 @@ use std::marker::PhantomData;
 use std::time::{Duration, Instant};
 
 /// How big a control service is.
+///
+/// Messages of a service with `max_message: None` grow on demand (iceoryx2's
+/// power-of-two allocation: up to 256 segments). The price is paid per
+/// client: each server-to-client connection keeps the state of every
+/// response slot of every possible segment, and the server has a slot per
+/// client. With 512 clients that was a 10 MiB connection file per agent,
+/// fully resident in the agent and in the router (1 GiB for 100 agents).
+/// A service with many clients therefore uses fixed-size messages
+/// (`Some(bytes)`: one static segment).
 #[derive(Debug, Clone, Copy)]
 pub struct ControlSize {
     /// clients that may be connected at once
     pub max_clients: usize,
     /// nodes that may open the service
     pub max_nodes: usize,
+    /// the largest message, fixed; `None`: any size
+    pub max_message: Option<usize>,
 }
 
 impl ControlSize {
-    /// The router's service: every agent plus command-line tools.
-    pub const ROUTER: ControlSize = ControlSize { max_clients: 512, max_nodes: 640 };
+    /// The router's service for agents (registration): every agent of the
+    /// robot, small fixed-size messages.
+    pub const ROUTER: ControlSize = ControlSize { max_clients: 512, max_nodes: 640, max_message: Some(8192) };
+    /// The router's service for tools and programs (`nerve ps` of 500 agents
+    /// is a large reply): a few clients at once.
+    pub const ROUTER_CLI: ControlSize = ControlSize { max_clients: 32, max_nodes: 64, max_message: None };
     /// An agent's control service: the router, a restarted router, tools.
-    pub const AGENT: ControlSize = ControlSize { max_clients: 8, max_nodes: 16 };
+    pub const AGENT: ControlSize = ControlSize { max_clients: 8, max_nodes: 16, max_message: None };
+
+    fn slice_len(&self) -> usize {
+        self.max_message.unwrap_or(INITIAL_MESSAGE_BYTES)
+    }
+
+    fn allocation(&self) -> AllocationStrategy {
+        if self.max_message.is_some() { AllocationStrategy::Static } else { AllocationStrategy::PowerOfTwo }
+    }
 }
 
 /// Errors of the control channel.
@@ -58,6 +81,16 @@ pub enum ControlError {
         service: String,
         /// how long we waited
         timeout: Duration,
+    },
+    /// A message larger than the service allows.
+    #[error("a message of {bytes} bytes is larger than the {max} bytes {service} takes")]
+    TooLarge {
+        /// the service
+        service: String,
+        /// the message's size
+        bytes: usize,
+        /// the service's limit
+        max: usize,
     },
     /// The peer speaks another protocol or sent garbage.
     #[error(transparent)]
@@ -92,6 +125,7 @@ const INITIAL_MESSAGE_BYTES: usize = 512;
 #[derive(Debug)]
 pub struct ControlServer<Req, Resp> {
     service: String,
+    size: ControlSize,
     server: Server<Ipc, Bytes, (), Bytes, ()>,
     listener: Listener<Ipc>,
     _types: PhantomData<fn(Req) -> Resp>,
@@ -104,8 +138,8 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
         let rr = rr_builder(node, service, size)?.open_or_create().map_err(|e| ipc_err(service, e))?;
         let server = rr
             .server_builder()
-            .initial_max_slice_len(INITIAL_MESSAGE_BYTES)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .initial_max_slice_len(size.slice_len())
+            .allocation_strategy(size.allocation())
             .create()
             .map_err(|e| match e {
                 iceoryx2::service::port_factory::server::ServerCreateError::ExceedsMaxSupportedServers => {
@@ -115,7 +149,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
             })?;
         let ev = open_event(node, service, size)?;
         let listener = ev.listener_builder().create().map_err(|e| ipc_err(service, e))?;
-        Ok(ControlServer { service: service.into(), server, listener, _types: PhantomData })
+        Ok(ControlServer { service: service.into(), size, server, listener, _types: PhantomData })
     }
 
     /// The listener that wakes when a request arrives (attach it to a WaitSet).
@@ -131,6 +165,11 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
         while let Some(active) = self.server.receive().map_err(|e| ipc_err(&self.service, e))? {
             let reply = handler(decode::<Req>(active.payload()));
             let bytes = encode(&reply);
+            if let Some(max) = self.size.max_message.filter(|&m| bytes.len() > m) {
+                tracing::warn!(service = %self.service, "a reply of {} bytes exceeds the service's {max}; not sent", bytes.len());
+                n += 1;
+                continue;
+            }
             match active.loan_slice_uninit(bytes.len()) {
                 Ok(resp) => {
                     if let Err(e) = resp.write_from_slice(&bytes).send() {
@@ -149,6 +188,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
 #[derive(Debug)]
 pub struct ControlClient<Req, Resp> {
     service: String,
+    size: ControlSize,
     client: Client<Ipc, Bytes, (), Bytes, ()>,
     notifier: Notifier<Ipc>,
     _types: PhantomData<fn(Req) -> Resp>,
@@ -165,13 +205,13 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
         })?;
         let client = rr
             .client_builder()
-            .initial_max_slice_len(INITIAL_MESSAGE_BYTES)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .initial_max_slice_len(size.slice_len())
+            .allocation_strategy(size.allocation())
             .create()
             .map_err(|e| ipc_err(service, e))?;
         let ev = open_event(node, service, size)?;
         let notifier = ev.notifier_builder().create().map_err(|e| ipc_err(service, e))?;
-        Ok(ControlClient { service: service.into(), client, notifier, _types: PhantomData })
+        Ok(ControlClient { service: service.into(), size, client, notifier, _types: PhantomData })
     }
 
     /// The service this client calls.
@@ -182,6 +222,9 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
     /// Sends `req` and waits up to `timeout` for the reply.
     pub fn call(&self, req: &Req, timeout: Duration) -> Result<Resp, ControlError> {
         let bytes = encode(req);
+        if let Some(max) = self.size.max_message.filter(|&m| bytes.len() > m) {
+            return Err(ControlError::TooLarge { service: self.service.clone(), bytes: bytes.len(), max });
+        }
         let loan = self.client.loan_slice_uninit(bytes.len()).map_err(|e| ipc_err(&self.service, e))?;
         let pending = loan.write_from_slice(&bytes).send().map_err(|e| ipc_err(&self.service, e))?;
         if pending.number_of_server_connections() == 0 {
@@ -238,8 +281,17 @@ fn open_event(
         .map_err(|e| ipc_err(service, e))
 }
 
-/// Opens the router's service of `world`.
+/// Opens the router's service for tools and programs of `world`
+/// (`nerve` commands, the decision maker, benchmarks).
 pub fn router_client<Req: Serialize, Resp: DeserializeOwned>(
+    world: &World,
+    node: &Node<Ipc>,
+) -> Result<ControlClient<Req, Resp>, ControlError> {
+    ControlClient::open(node, &world.robot().router_cli_service(), ControlSize::ROUTER_CLI)
+}
+
+/// Opens the router's service for agents of `world` (registration).
+pub fn agent_router_client<Req: Serialize, Resp: DeserializeOwned>(
     world: &World,
     node: &Node<Ipc>,
 ) -> Result<ControlClient<Req, Resp>, ControlError> {

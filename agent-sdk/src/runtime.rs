@@ -13,7 +13,7 @@
 use crate::agent::{Agent, AgentError, Context, Setup, Task};
 use crate::cli::CommonArgs;
 use crate::clock::{now_ns, parse_duration, sleep_until_ns};
-use crate::control::{ControlClient, ControlError, ControlServer, ControlSize, router_client};
+use crate::control::{ControlClient, ControlError, ControlServer, ControlSize, agent_router_client};
 use crate::daemon::{Readiness, daemonize, init_logging, sd_notify, watchdog_interval};
 use crate::meters::{CpuMeter, LatenessRecorder, RateMeter, rss_bytes};
 use crate::params::ParamTable;
@@ -565,7 +565,7 @@ impl RouterLink {
         sh: &Shared,
     ) -> Result<(), RegisterError> {
         if self.client.is_none() {
-            match router_client(world, node) {
+            match agent_router_client(world, node) {
                 Ok(c) => self.client = Some(c),
                 Err(ControlError::NoServer { .. }) => return Err(RegisterError::NoRouter),
                 Err(e) => return Err(RegisterError::Other(e.to_string())),

@@ -55,6 +55,11 @@ struct Entry {
 enum Action {
     /// Re-apply every connection that involves this agent.
     Rewire(String),
+    /// Write the connection list to disk. Deferred until the replies of the
+    /// current batch are sent: the fsyncs take 10-60 ms on a busy disk, and a
+    /// `nerve connect` (or a decision maker rewiring) should not wait for them.
+    /// The connection is live in the agents before the reply either way.
+    Persist,
 }
 
 /// The longest back-off between two restarts.
@@ -94,7 +99,10 @@ pub enum StartError {
 
 /// The router of one robot.
 pub struct Router {
+    /// agents register here (many clients, small messages)
     server: ControlServer<RouterRequest, RouterReply>,
+    /// tools and programs call here (few clients, replies of any size)
+    cli_server: ControlServer<RouterRequest, RouterReply>,
     epoch_pub: Publisher<Ipc, RouterEpoch, ()>,
     state: State,
 }
@@ -129,12 +137,14 @@ impl Router {
         world.ensure_state_dirs().map_err(|e| StartError::Other(e.to_string()))?;
         let node = world.node("router").map_err(|e| StartError::Other(e.to_string()))?;
         world.cleanup_dead_nodes();
-        let server = ControlServer::create(&node, &world.robot().router_service(), ControlSize::ROUTER).map_err(
-            |e| match e {
+        let serve = |service: String, size: ControlSize| {
+            ControlServer::create(&node, &service, size).map_err(|e| match e {
                 ControlError::AlreadyServed { .. } => StartError::AlreadyRunning { robot: world.robot().to_string() },
                 e => StartError::Other(e.to_string()),
-            },
-        )?;
+            })
+        };
+        let server = serve(world.robot().router_service(), ControlSize::ROUTER)?;
+        let cli_server = serve(world.robot().router_cli_service(), ControlSize::ROUTER_CLI)?;
         let store = Store::new(world.state_dir());
         let connections = store.load().map_err(StartError::Other)?;
         let epoch = now_ns() ^ ((std::process::id() as u64) << 32);
@@ -155,6 +165,7 @@ impl Router {
         );
         Ok(Router {
             server,
+            cli_server,
             epoch_pub,
             state: State {
                 world,
@@ -178,6 +189,7 @@ impl Router {
             .create::<Ipc>()
             .map_err(|e| format!("cannot create the router's WaitSet: {e:?}"))?;
         let _req = ws.attach_notification(self.server.listener()).map_err(|e| format!("{e:?}"))?;
+        let _cli = ws.attach_notification(self.cli_server.listener()).map_err(|e| format!("{e:?}"))?;
         let _tick = ws.attach_interval(LIVENESS_PERIOD).map_err(|e| format!("{e:?}"))?;
         let mut last_liveness = Instant::now();
         let watchdog = agent_sdk::daemon::watchdog_interval();
@@ -191,16 +203,19 @@ impl Router {
                     std::thread::sleep(Duration::from_millis(50));
                 }
             }
-            let state = &mut self.state;
-            if let Err(e) = self.server.serve(|req| match req {
-                Ok(req) => state.handle(req),
-                Err(e) => RouterReply::Error(RouterError::Internal(e.to_string())),
-            }) {
-                tracing::warn!("router service failed: {e}");
+            for server in [&self.server, &self.cli_server] {
+                let state = &mut self.state;
+                if let Err(e) = server.serve(|req| match req {
+                    Ok(req) => state.handle(req),
+                    Err(e) => RouterReply::Error(RouterError::Internal(e.to_string())),
+                }) {
+                    tracing::warn!("router service failed: {e}");
+                }
             }
             while let Some(action) = self.state.pending.pop_front() {
                 match action {
                     Action::Rewire(name) => self.state.rewire(&name),
+                    Action::Persist => self.state.persist(),
                 }
             }
             if last_liveness.elapsed() >= LIVENESS_PERIOD {
@@ -337,6 +352,13 @@ impl State {
         self.command(to_agent, &cmd, AGENT_TIMEOUT).map(|_| ())
     }
 
+    /// Saves the connection list once the current replies are out.
+    fn request_persist(&mut self) {
+        if !self.pending.iter().any(|a| matches!(a, Action::Persist)) {
+            self.pending.push_back(Action::Persist);
+        }
+    }
+
     fn persist(&self) {
         if let Err(e) = self.store.save(&self.connections) {
             tracing::error!("cannot save the connection list to {}: {e}", self.store.path().display());
@@ -396,7 +418,7 @@ impl State {
                 self.send_connect(&c)?;
                 if !self.connections.contains(&c) {
                     self.connections.push(c);
-                    self.persist();
+                    self.request_persist();
                 }
                 tracing::info!("connected {from} -> {to}");
                 Ok(RouterReply::Ok)
@@ -407,7 +429,7 @@ impl State {
                     return Err(RouterError::NotConnected { from: f, to: t });
                 };
                 self.connections.remove(pos);
-                self.persist();
+                self.request_persist();
                 if self.agents.contains_key(to.agent.as_str()) {
                     let cmd = AgentCommand::Disconnect {
                         input: to.port.clone(),

@@ -104,9 +104,16 @@ impl RobotName {
         format!("nerve_{}_", self.0)
     }
 
-    /// The router's control service, `nerve/<robot>/router`.
+    /// The router's service for agents (registration), `nerve/<robot>/router`.
     pub fn router_service(&self) -> String {
         format!("nerve/{}/router", self.0)
+    }
+
+    /// The router's service for tools and programs (`nerve` commands, the
+    /// decision maker), `nerve/<robot>/router/cli`: few clients, replies of
+    /// any size. Agents register on [`RobotName::router_service`].
+    pub fn router_cli_service(&self) -> String {
+        format!("nerve/{}/router/cli", self.0)
     }
 
     /// The router's epoch service, on which a (re)started router announces itself.
