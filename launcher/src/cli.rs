@@ -79,6 +79,8 @@ pub enum Command {
     /// Reproduce an experiment of the thesis (`nerve demo explore`).
     #[command(subcommand)]
     Demo(crate::cmd::demo::DemoCmd),
+    /// Run a benchmark scenario (runs `nerve-bench`; see BENCHMARKS.md).
+    Bench(crate::cmd::bench::BenchArgs),
 }
 
 /// `nerve launch`

@@ -1,6 +1,7 @@
 //! Agent kinds: kind `ticker` is the executable `nerve-ticker`, found next to
 //! the `nerve` program or on `PATH`; a path names any agent executable. Used
-//! by `nerve start`, `nerve exec` and the launch-file checks.
+//! by `nerve start`, `nerve exec` and the launch-file checks (and, through
+//! [`find_program`], by `nerve bench` to find `nerve-bench`).
 
 use anyhow::{Result, bail};
 use std::path::{Path, PathBuf};
@@ -19,6 +20,18 @@ pub fn resolve_kind(kind: &str) -> Result<PathBuf> {
         return Ok(p);
     }
     let file = format!("{AGENT_PREFIX}{kind}");
+    if let Some(p) = find_program(&file) {
+        return Ok(p);
+    }
+    let known = known_kinds();
+    bail!(
+        "unknown agent kind {kind:?}: no executable {file} next to nerve or on PATH; known kinds: {} (build agents with `cargo build --workspace`)",
+        if known.is_empty() { "none found".to_string() } else { known.join(", ") }
+    )
+}
+
+/// Finds the executable `file` next to this program, else on `PATH`.
+pub fn find_program(file: &str) -> Option<PathBuf> {
     let mut dirs: Vec<PathBuf> = Vec::new();
     if let Some(dir) = std::env::current_exe().ok().and_then(|p| p.parent().map(Path::to_path_buf)) {
         dirs.push(dir);
@@ -26,17 +39,7 @@ pub fn resolve_kind(kind: &str) -> Result<PathBuf> {
     if let Some(path) = std::env::var_os("PATH") {
         dirs.extend(std::env::split_paths(&path));
     }
-    for d in &dirs {
-        let p = d.join(&file);
-        if is_executable(&p) {
-            return Ok(p);
-        }
-    }
-    let known = known_kinds();
-    bail!(
-        "unknown agent kind {kind:?}: no executable {file} next to nerve or on PATH; known kinds: {} (build agents with `cargo build --workspace`)",
-        if known.is_empty() { "none found".to_string() } else { known.join(", ") }
-    )
+    dirs.into_iter().map(|d| d.join(file)).find(|p| is_executable(p))
 }
 
 /// Agent kinds installed next to this program.

@@ -1,5 +1,6 @@
 //! One module per family of commands; [`dispatch`] routes the parsed command line.
 
+pub mod bench;
 pub mod demo;
 pub mod down;
 pub mod drive;
@@ -40,5 +41,6 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Demo(c) => demo::demo(&cli.robot, c),
         Command::Mem(c) => mem::mem(&world, c),
         Command::Cmd(a) => drive::cmd(&world, a),
+        Command::Bench(a) => bench::bench(a),
     }
 }

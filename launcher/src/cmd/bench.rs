@@ -1,0 +1,65 @@
+//! `nerve bench SCENARIO [--quick] [--json] [...]`: runs a scenario of the
+//! benchmark program `nerve-bench` (crate `bench/`), found next to `nerve` or
+//! on `PATH`, in place of this process, so that its progress, tables, exit
+//! status and Ctrl-C behave exactly as if it had been called directly.
+//!
+//! The scenarios and what they measure are described in BENCHMARKS.md. Every
+//! scenario starts robots of its own (`b<pid>...`) and takes them down; the
+//! `--robot` option of `nerve` does not apply.
+
+use crate::kinds::find_program;
+use anyhow::{Result, bail};
+use clap::{Args, ValueEnum};
+use std::os::unix::process::CommandExt as _;
+use std::process::{Command, ExitCode};
+
+/// The program that holds the scenarios.
+const BENCH_PROGRAM: &str = "nerve-bench";
+
+/// The benchmark scenarios (issue 7 of the project).
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum Scenario {
+    /// One hop: nerve ports vs raw iceoryx2 vs a Unix socket vs Cyclone DDS (ddsperf), 8 B to 1080p.
+    Hop,
+    /// Three hops end to end (sonar → safety → motor shape) against one hop.
+    Pipeline,
+    /// Lateness of a periodic task at 1 kHz and 100 Hz beside cyclictest.
+    Jitter,
+    /// The short-term-memory image path with 1, 4 and 8 readers.
+    Images,
+    /// Control plane: hot-add, rewire, launch of 10 and 50 agents.
+    Control,
+    /// 100 agents at 10 Hz: CPU, router CPU, memory per agent, `nerve ps` time.
+    Scale,
+}
+
+/// `nerve bench`
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// The scenario to run.
+    pub scenario: Scenario,
+    /// Options of the scenario, passed on to `nerve-bench SCENARIO`: `--quick`
+    /// (a smoke run of a few seconds), `--json` (machine-readable results with
+    /// the ratios), `--out DIR`, ... (`nerve bench SCENARIO --help` lists them).
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+    pub args: Vec<String>,
+}
+
+/// Replaces this process with `nerve-bench SCENARIO ARGS...`.
+pub fn bench(a: BenchArgs) -> Result<ExitCode> {
+    let Some(program) = find_program(BENCH_PROGRAM) else {
+        bail!(
+            "{BENCH_PROGRAM} is not installed next to nerve or on PATH; build it with \
+             `cargo build --release -p nerve-bench -p nerve --bins` and run target/release/nerve bench"
+        );
+    };
+    let scenario = a.scenario.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
+    let mut cmd = Command::new(&program);
+    cmd.arg(&scenario).args(&a.args);
+    // the scenarios start `nerve` themselves: this very executable
+    if let Ok(me) = std::env::current_exe() {
+        cmd.env("NERVE_BIN", me);
+    }
+    let err = cmd.exec();
+    bail!("cannot run {}: {err}", program.display())
+}
