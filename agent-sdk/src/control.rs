@@ -121,6 +121,13 @@ const MAX_ACTIVE_REQUESTS: usize = 2;
 /// grow it by powers of two.
 const INITIAL_MESSAGE_BYTES: usize = 512;
 
+/// The longest sleep between two looks for a reply. A control call nests
+/// (a `nerve connect` waits for the router, which waits for the agent), so
+/// each level's polling granularity adds up: at 2 ms it was a good part of a
+/// 10 ms rewire. A waiting caller now looks at least every 200 µs, which
+/// costs a few thousand wake-ups a second only while a call is pending.
+const MAX_POLL_INTERVAL: Duration = Duration::from_micros(200);
+
 /// The serving side: receives requests and answers them.
 #[derive(Debug)]
 pub struct ControlServer<Req, Resp> {
@@ -155,6 +162,14 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
     /// The listener that wakes when a request arrives (attach it to a WaitSet).
     pub fn listener(&self) -> &Listener<Ipc> {
         &self.listener
+    }
+
+    /// Brings the server's connections up to date with the clients that came
+    /// and went, off the request path: a client that left (a `nerve` command
+    /// that exited) is otherwise cleaned up by the next `serve`, and the next
+    /// caller waits for it.
+    pub fn tidy(&self) {
+        let _ = self.server.has_requests();
     }
 
     /// Answers every pending request with `handler`; returns how many were served.
@@ -225,29 +240,55 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
         if let Some(max) = self.size.max_message.filter(|&m| bytes.len() > m) {
             return Err(ControlError::TooLarge { service: self.service.clone(), bytes: bytes.len(), max });
         }
+        let start = Instant::now();
+        let mut attempt = 0;
+        loop {
+            attempt += 1;
+            match self.attempt(&bytes, start, timeout)? {
+                Some(resp) => return Ok(resp),
+                // The request was not taken. A client that has just appeared can
+                // race the server's set-up of its reply connection (iceoryx2 then
+                // drops the request unanswered: about 1 call in 600 of freshly
+                // started `nerve` commands did so). The server did not handle it,
+                // so sending it again is safe; a server that is really gone stays
+                // gone.
+                None if attempt < SEND_ATTEMPTS && start.elapsed() < timeout => {
+                    tracing::debug!(service = %self.service, "request not taken (attempt {attempt}); sending it again");
+                    std::thread::sleep(Duration::from_millis(2 * attempt as u64));
+                }
+                None => return Err(ControlError::NoServer { service: self.service.clone() }),
+            }
+        }
+    }
+
+    /// Sends the request once and waits for the reply; `None` when no server
+    /// took it (none connected, or the request was dropped unanswered).
+    fn attempt(&self, bytes: &[u8], start: Instant, timeout: Duration) -> Result<Option<Resp>, ControlError> {
         let loan = self.client.loan_slice_uninit(bytes.len()).map_err(|e| ipc_err(&self.service, e))?;
-        let pending = loan.write_from_slice(&bytes).send().map_err(|e| ipc_err(&self.service, e))?;
+        let pending = loan.write_from_slice(bytes).send().map_err(|e| ipc_err(&self.service, e))?;
         if pending.number_of_server_connections() == 0 {
-            return Err(ControlError::NoServer { service: self.service.clone() });
+            return Ok(None);
         }
         self.notifier.notify().map_err(|e| ipc_err(&self.service, e))?;
-        let start = Instant::now();
-        let mut backoff = Duration::from_micros(20);
+        let mut backoff = Duration::from_micros(10);
         loop {
             if let Some(resp) = pending.receive().map_err(|e| ipc_err(&self.service, e))? {
-                return Ok(decode::<Resp>(resp.payload())?);
+                return Ok(Some(decode::<Resp>(resp.payload())?));
             }
             if !pending.is_connected() {
-                return Err(ControlError::NoServer { service: self.service.clone() });
+                return Ok(None);
             }
             if start.elapsed() > timeout {
                 return Err(ControlError::Timeout { service: self.service.clone(), timeout });
             }
             std::thread::sleep(backoff);
-            backoff = (backoff * 2).min(Duration::from_millis(2));
+            backoff = (backoff * 2).min(MAX_POLL_INTERVAL);
         }
     }
 }
+
+/// How often a call sends a request that no server took before it gives up.
+const SEND_ATTEMPTS: u32 = 3;
 
 type RrBuilder = iceoryx2::service::builder::request_response::Builder<Bytes, (), Bytes, (), Ipc>;
 

@@ -37,7 +37,7 @@ use shm_schemas::stats::AgentStats;
 use shm_schemas::{AgentName, PortRef};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
-use store::{Connection, Store};
+use store::{Connection, Store, Writer};
 
 /// How long the router waits for an agent's message checker to answer.
 pub const AGENT_TIMEOUT: Duration = Duration::from_millis(1000);
@@ -114,7 +114,7 @@ struct State {
     epoch: u64,
     agents: BTreeMap<String, Entry>,
     connections: Vec<Connection>,
-    store: Store,
+    writer: Writer,
     pending: VecDeque<Action>,
     shutdown: bool,
     supervised: BTreeMap<String, Supervised>,
@@ -173,7 +173,8 @@ impl Router {
                 epoch,
                 agents: BTreeMap::new(),
                 connections,
-                store,
+                writer: Writer::start(store.clone())
+                    .map_err(|e| StartError::Other(format!("cannot start the persisting thread: {e}")))?,
                 pending: VecDeque::new(),
                 shutdown: false,
                 supervised: BTreeMap::new(),
@@ -222,6 +223,8 @@ impl Router {
                 last_liveness = Instant::now();
                 self.state.check_liveness();
                 self.state.run_restarts();
+                self.server.tidy();
+                self.cli_server.tidy();
                 let _ = self.epoch_pub.update_connections();
             }
             if let Some(wd) = watchdog {
@@ -231,6 +234,7 @@ impl Router {
                 }
             }
         }
+        self.state.writer.flush();
         tracing::info!("router stopped");
         Ok(())
     }
@@ -360,9 +364,7 @@ impl State {
     }
 
     fn persist(&self) {
-        if let Err(e) = self.store.save(&self.connections) {
-            tracing::error!("cannot save the connection list to {}: {e}", self.store.path().display());
-        }
+        self.writer.save(self.connections.clone());
     }
 
     fn check_liveness(&mut self) {
@@ -395,7 +397,9 @@ impl State {
 
     fn handle_cli(&mut self, req: CliRequest) -> Result<RouterReply, RouterError> {
         // answer from a registry without dead agents (a few /proc reads)
+        let t0 = std::time::Instant::now();
         self.check_liveness();
+        tracing::trace!("liveness checked in {} us", t0.elapsed().as_micros());
         match req {
             CliRequest::Ps => Ok(RouterReply::Agents(self.views())),
             CliRequest::Graph => {
@@ -415,7 +419,9 @@ impl State {
                     });
                 }
                 let c = Connection { from: from.to_string(), to: to.to_string(), type_name: from_type };
+                let t0 = std::time::Instant::now();
                 self.send_connect(&c)?;
+                tracing::debug!("{from} -> {to}: the agent subscribed and answered in {} us", t0.elapsed().as_micros());
                 if !self.connections.contains(&c) {
                     self.connections.push(c);
                     self.request_persist();

@@ -1,6 +1,12 @@
 //! The persisted connection list: `<state>/connections.json`, written
 //! atomically (temporary file, fsync, rename, fsync of the directory) so that
 //! a router killed at any moment leaves either the old or the new list.
+//!
+//! The router writes through a [`Writer`] thread: the two fsyncs take tens of
+//! milliseconds on a busy disk, and a router blocked in them made the next
+//! `nerve connect` (or a decision maker's rewiring) wait. The thread writes
+//! the newest list it has been given, skipping lists overtaken meanwhile,
+//! and is flushed when the router stops.
 
 use serde::{Deserialize, Serialize};
 use std::io::Write;
@@ -73,6 +79,53 @@ impl Store {
     }
 }
 
+/// Saves connection lists on a thread of its own, newest first.
+#[derive(Debug)]
+pub struct Writer {
+    tx: Option<std::sync::mpsc::Sender<Vec<Connection>>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Writer {
+    /// Starts the thread that saves into `store`.
+    pub fn start(store: Store) -> std::io::Result<Self> {
+        let (tx, rx) = std::sync::mpsc::channel::<Vec<Connection>>();
+        let thread = std::thread::Builder::new().name("persist".into()).spawn(move || {
+            while let Ok(mut list) = rx.recv() {
+                // a newer list makes the older ones pointless
+                while let Ok(newer) = rx.try_recv() {
+                    list = newer;
+                }
+                if let Err(e) = store.save(&list) {
+                    tracing::error!("cannot save the connection list to {}: {e}", store.path().display());
+                }
+            }
+        })?;
+        Ok(Writer { tx: Some(tx), thread: Some(thread) })
+    }
+
+    /// Queues `list` to be saved.
+    pub fn save(&self, list: Vec<Connection>) {
+        if let Some(tx) = &self.tx {
+            let _ = tx.send(list);
+        }
+    }
+
+    /// Waits until every queued list is saved.
+    pub fn flush(&mut self) {
+        self.tx.take();
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for Writer {
+    fn drop(&mut self) {
+        self.flush();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -87,6 +140,21 @@ mod tests {
         assert_eq!(store.load(), Ok(c));
         std::fs::write(store.path(), b"{ not json").expect("writes");
         assert!(store.load().expect_err("corrupt").contains("fix or remove"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn writer_saves_the_newest_list_and_flushes() {
+        let dir = std::env::temp_dir().join(format!("nerve-store-writer-{}", std::process::id()));
+        let store = Store::new(&dir);
+        let mut w = Writer::start(store.clone()).expect("thread");
+        for i in 0..20 {
+            w.save(vec![Connection { from: format!("a{i}/out"), to: "b/in".into(), type_name: "nerve::Tick".into() }]);
+        }
+        w.flush();
+        let got = store.load().expect("load");
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].from, "a19/out");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
