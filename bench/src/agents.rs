@@ -180,6 +180,121 @@ impl<P: BenchPayload> Agent for Pong<P> {
     }
 }
 
+/// The ping side of the polling round trip: a periodic task (started with
+/// `--period 10us`, the SDK's shortest) that checks its input every cycle
+/// with `Input::drain` instead of blocking on it. A `nerve resume` starts a
+/// batch of `count` round trips; when it is written the agent idles until
+/// the next resume (the benchmark suspends it in between).
+struct PollPing<P: BenchPayload> {
+    input: Input<P>,
+    out: Output<P>,
+    count: usize,
+    dir: PathBuf,
+    batch: u64,
+    seq: u64,
+    outstanding: Option<(u64, u64)>,
+    rtts: Vec<u64>,
+    /// a batch is under way
+    running: bool,
+    /// when the last cycle ran
+    last_step_ns: u64,
+}
+
+impl<P: BenchPayload> Agent for PollPing<P> {
+    const KIND: &'static str = "bench-poll-ping";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_micros(10))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let a = agent_args(setup)?;
+        let dir = a.out.ok_or_else(|| AgentError::Config("poll-ping needs --out DIR".into()))?;
+        Ok(PollPing {
+            input: setup.input("in")?,
+            out: setup.output("out")?,
+            count: a.count.max(1),
+            dir,
+            batch: 0,
+            seq: 0,
+            outstanding: None,
+            rtts: Vec::with_capacity(a.count.max(1)),
+            running: false,
+            last_step_ns: 0,
+        })
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        // a gap between two cycles means the agent was suspended: a resume starts a batch
+        if ctx.now_ns().saturating_sub(self.last_step_ns) > 50_000_000 {
+            self.running = true;
+            self.outstanding = None;
+            self.rtts.clear();
+        }
+        self.last_step_ns = ctx.now_ns();
+        let want = self.outstanding.map(|(s, _)| s);
+        let mut seen_at = None;
+        self.input.drain(|_, p| {
+            if Some(p.seq()) == want {
+                seen_at = Some(now_ns());
+            }
+        });
+        if let (Some(t), Some((_, t0))) = (seen_at, self.outstanding) {
+            self.rtts.push(t.saturating_sub(t0));
+            self.outstanding = None;
+            if self.rtts.len() >= self.count {
+                self.batch += 1;
+                self.running = false;
+                let path = self.dir.join(format!("batch-{}.txt", self.batch));
+                write_values(&path, &self.rtts)
+                    .map_err(|e| AgentError::Other(format!("cannot write {}: {e}", path.display())))?;
+                self.rtts.clear();
+            }
+        }
+        let stalled = self.outstanding.is_some_and(|(_, t0)| now_ns().saturating_sub(t0) > 500_000_000);
+        if self.running && (self.outstanding.is_none() || stalled) {
+            self.seq += 1;
+            let seq = self.seq;
+            self.outstanding = Some((seq, now_ns()));
+            // SAFETY: as in `Ping::send_next`.
+            unsafe { self.out.send_uninit(|p| P::write_seq_raw(p.as_mut_ptr(), seq)) }?;
+        }
+        Ok(())
+    }
+}
+
+/// The pong side of the polling round trip: a periodic task that echoes
+/// whatever its input holds every cycle.
+struct PollPong<P: BenchPayload> {
+    input: Input<P>,
+    out: Output<P>,
+}
+
+impl<P: BenchPayload> Agent for PollPong<P> {
+    const KIND: &'static str = "bench-poll-pong";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_micros(10))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        agent_args(setup)?;
+        Ok(PollPong { input: setup.input("in")?, out: setup.output("out")? })
+    }
+
+    fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        let mut result = Ok(());
+        self.input.drain(|_, p| {
+            let seq = p.seq();
+            // SAFETY: as in `Ping::send_next`.
+            if let Err(e) = unsafe { self.out.send_uninit(|q| P::write_seq_raw(q.as_mut_ptr(), seq)) } {
+                result = Err(e);
+            }
+        });
+        Ok(result?)
+    }
+}
+
 /// A periodic agent that measures its own wake-up lateness.
 struct Jitter {
     cycles: usize,
@@ -261,6 +376,12 @@ pub fn run_agent(which: &str, args: Vec<String>) -> ExitCode {
     match which {
         "__agent-ping" => with_payload!(size, P => agent_sdk::run_with_args::<Ping<P>>(common), _ => bad_size(size)),
         "__agent-pong" => with_payload!(size, P => agent_sdk::run_with_args::<Pong<P>>(common), _ => bad_size(size)),
+        "__agent-poll-ping" => {
+            with_payload!(size, P => agent_sdk::run_with_args::<PollPing<P>>(common), _ => bad_size(size))
+        }
+        "__agent-poll-pong" => {
+            with_payload!(size, P => agent_sdk::run_with_args::<PollPong<P>>(common), _ => bad_size(size))
+        }
         "__agent-jitter" => agent_sdk::run_with_args::<Jitter>(common),
         _ => {
             eprintln!("error: unknown agent subcommand {which}");

@@ -2,7 +2,8 @@
 //!
 //! * **hot-add**: `nerve start relay --name h` (the router already holds the
 //!   connection `t1/tick -> h/in` from an earlier run of `h`) until the first
-//!   sample of `h/out` reaches a subscriber in this process;
+//!   sample of `h/out` leaves `h` (its header stamp, seen by a subscriber
+//!   in this process), and until the command returns;
 //! * **rewire**: `nerve connect t2/tick r/in` until the first sample from the
 //!   new source leaves `r/out` — once through the `nerve` command (a process
 //!   per command, as a user types it) and once as a direct request to the
@@ -56,10 +57,14 @@ pub struct ControlReport {
     pub command: String,
     /// `nerve start` to the first sample downstream, ns
     pub hot_add: Summary,
+    /// `nerve start` to the command's exit (the agent registered and ready), ns
+    pub hot_add_command: Summary,
     /// `nerve connect` (the command) to the first sample from the new source, ns
     pub rewire_cli: Summary,
     /// a connect request to the router to the first sample from the new source, ns
     pub rewire_request: Summary,
+    /// a connect request to the router to its reply (the agent has subscribed), ns
+    pub rewire_reply: Summary,
     /// launch times
     pub launch: Vec<LaunchRow>,
     /// hot-add median / 20 ms
@@ -96,13 +101,18 @@ impl Watch {
         while let Ok(Some(_)) = self.sub.receive() {}
     }
 
-    /// Waits for a sample sent after `after_ns` that satisfies `pred`; returns when it arrived.
+    /// Waits for a sample sent after `after_ns` that satisfies `pred`;
+    /// returns the time it left the agent (its header stamp, taken by
+    /// `Output::send` on the shared monotonic clock). Taking the stamp rather
+    /// than the time this process received it keeps out of the figure how
+    /// long the command that caused it took to exit and this process to look.
     fn wait_for(&self, after_ns: u64, timeout: Duration, pred: impl Fn(&Tick) -> bool) -> Result<u64> {
         let t0 = Instant::now();
         loop {
             while let Some(s) = self.sub.receive().map_err(|e| anyhow!("{e:?}"))? {
-                if s.user_header().stamp_ns >= after_ns && pred(s.payload()) {
-                    return Ok(now_ns());
+                let stamp = s.user_header().stamp_ns;
+                if stamp >= after_ns && pred(s.payload()) {
+                    return Ok(stamp);
                 }
             }
             let left = timeout.checked_sub(t0.elapsed()).ok_or_else(|| anyhow!("no sample within {timeout:?}"))?;
@@ -123,7 +133,8 @@ fn wait_gone(robot: &Robot, name: &str) -> Result<()> {
     bail!("{name} did not leave")
 }
 
-fn hot_add(opts: &ControlOpts) -> Result<Vec<u64>> {
+/// Hot-adds: (`nerve start` → first sample downstream, `nerve start` → the command returned), ns.
+fn hot_add(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>)> {
     let robot = Robot::new("ch", opts.verbose)?;
     let _router = robot.start_router()?;
     robot.run(&["start", "ticker", "--name", "t1", "--period", "1ms"])?;
@@ -132,21 +143,23 @@ fn hot_add(opts: &ControlOpts) -> Result<Vec<u64>> {
     robot.run(&["stop", "h"])?;
     wait_gone(&robot, "h")?;
     let watch = Watch::new(&robot, "h", "out")?;
-    let mut v = Vec::new();
+    let (mut v, mut cmd) = (Vec::new(), Vec::new());
     for i in 0..opts.rounds {
         eprintln!("control: hot-add {}/{}", i + 1, opts.rounds);
         watch.drain();
         let t0 = now_ns();
         robot.run(&["start", "relay", "--name", "h"])?;
+        cmd.push(now_ns() - t0);
         let t1 = watch.wait_for(t0, Duration::from_secs(5), |_| true)?;
         v.push(t1 - t0);
         robot.run(&["stop", "h"])?;
         wait_gone(&robot, "h")?;
     }
-    Ok(v)
+    Ok((v, cmd))
 }
 
-fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>)> {
+/// Rewires: (`nerve connect` → first sample, request → first sample, request → the router's reply), ns.
+fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>, Vec<u64>)> {
     let robot = Robot::new("cr", opts.verbose)?;
     let _router = robot.start_router()?;
     robot.run(&["start", "ticker", "--name", "t1", "--period", "1ms"])?;
@@ -160,7 +173,7 @@ fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>)> {
     let client = router_client::<RouterRequest, RouterReply>(&world, &node)?;
     let (from, to): (PortRef, PortRef) = ("t2/tick".parse()?, "r/in".parse()?);
     let from_t2 = |t: &Tick| t.seq >= 1_000_000_000;
-    let (mut cli, mut req) = (Vec::new(), Vec::new());
+    let (mut cli, mut req, mut reply) = (Vec::new(), Vec::new(), Vec::new());
     for i in 0..opts.rounds {
         eprintln!("control: rewire {}/{}", i + 1, opts.rounds);
         for via_cli in [true, false] {
@@ -173,7 +186,7 @@ fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>)> {
                     &RouterRequest::Cli(CliRequest::Connect { from: from.clone(), to: to.clone() }),
                     Duration::from_secs(5),
                 ) {
-                    Ok(RouterReply::Ok) => {}
+                    Ok(RouterReply::Ok) => reply.push(now_ns() - t0),
                     other => bail!("connect refused: {other:?}"),
                 }
             }
@@ -187,7 +200,7 @@ fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>)> {
             std::thread::sleep(Duration::from_millis(20));
         }
     }
-    Ok((cli, req))
+    Ok((cli, req, reply))
 }
 
 fn launch_file(robot: &str, agents: usize) -> String {
@@ -226,8 +239,8 @@ fn launch(opts: &ControlOpts, agents: usize) -> Result<Vec<u64>> {
 pub fn run(opts: &ControlOpts) -> Result<ControlReport> {
     let t0 = Instant::now();
     let machine = Machine::probe();
-    let hot = hot_add(opts)?;
-    let (cli, req) = rewire(opts)?;
+    let (hot, hot_cmd) = hot_add(opts)?;
+    let (cli, req, reply) = rewire(opts)?;
     let mut rows = Vec::new();
     for &n in &opts.launch_sizes {
         rows.push(LaunchRow { agents: n, launch: Summary::of(&launch(opts, n)?) });
@@ -240,8 +253,10 @@ pub fn run(opts: &ControlOpts) -> Result<ControlReport> {
         hot_add_vs_target: hot_add.p50_ns as f64 / 20e6,
         rewire_vs_target: rewire_request.p50_ns as f64 / 5e6,
         hot_add,
+        hot_add_command: Summary::of(&hot_cmd),
         rewire_cli: Summary::of(&cli),
         rewire_request,
+        rewire_reply: Summary::of(&reply),
         launch: rows,
         seconds: t0.elapsed().as_secs_f64(),
     })
@@ -266,12 +281,14 @@ pub fn print_tables(r: &ControlReport) {
         )
     };
     row("hot-add (`nerve start` → first sample downstream)", &r.hot_add, "≤ 20 ms", Some(r.hot_add_vs_target));
+    row("hot-add, `nerve start` → the command returns", &r.hot_add_command, "-", None);
     row(
         "rewire, request to the router → first sample from the new source",
         &r.rewire_request,
         "≤ 5 ms",
         Some(r.rewire_vs_target),
     );
+    row("rewire, request to the router → its reply (the agent has subscribed)", &r.rewire_reply, "-", None);
     row("rewire, `nerve connect` command → first sample", &r.rewire_cli, "-", None);
     for l in &r.launch {
         row(&format!("`nerve launch` of {} agents → all registered and connected", l.agents), &l.launch, "-", None);

@@ -18,6 +18,7 @@
 //! so is a whole first round.
 
 use crate::agents::read_values;
+use crate::dds::{self, DdsPeer};
 use crate::machine::{Machine, command_line};
 use crate::payloads::{BenchPayload, SIZES, label};
 use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file};
@@ -35,7 +36,8 @@ use std::time::{Duration, Instant};
 /// Samples dropped at the start of every batch.
 const DISCARD: usize = 5;
 /// The transports, in the order of the tables.
-pub const TRANSPORTS: [&str; 5] = ["nerve", "iox2-waitset", "iox2-listener", "iox2-waitset-fill", "uds"];
+pub const TRANSPORTS: [&str; 8] =
+    ["nerve", "iox2-waitset", "iox2-listener", "iox2-waitset-fill", "uds", "ddsperf", "nerve-poll", "iox2-poll"];
 /// nerve may be this much slower than raw iceoryx2 (the target).
 pub const TARGET_RATIO: f64 = 1.1;
 
@@ -92,6 +94,10 @@ pub struct HopRatio {
     pub nerve_vs_waitset_fill_p99: f64,
     /// uds p50 / nerve p50
     pub uds_vs_nerve_p50: f64,
+    /// ddsperf p50 / nerve p50 (None without ddsperf)
+    pub dds_vs_nerve_p50: Option<f64>,
+    /// nerve-poll p50 / iox2-poll p50
+    pub nerve_poll_vs_iox2_poll_p50: Option<f64>,
     /// whether nerve p50 is within the target of iox2-waitset p50
     pub target_met: bool,
 }
@@ -132,7 +138,7 @@ pub struct HopReport {
     pub seconds: f64,
 }
 
-fn default_count(size: usize, quick: bool) -> usize {
+pub(crate) fn default_count(size: usize, quick: bool) -> usize {
     match (size, quick) {
         (8, false) => 3000,
         (8, true) => 300,
@@ -160,11 +166,71 @@ impl Pinger for UdsPing {
     }
 }
 
-/// The SDK ping agent, driven through the `nerve` command.
-struct NervePing {
-    name: String,
-    dir: PathBuf,
-    next: u64,
+/// Starts a benchmark SDK agent (`role` `ping`, suspended until a batch, or
+/// `pong`) named `name` in `robot`; a ping writes its batches into `dir`.
+pub(crate) fn spawn_bench_agent(
+    robot: &Robot,
+    role: &str,
+    name: &str,
+    size: usize,
+    count: usize,
+    dir: &Path,
+) -> Result<ChildGuard> {
+    let mut cmd = self_command(&format!("__agent-{role}"))?;
+    cmd.args(["--robot", &robot.name, "--name", name]);
+    if role == "ping" || role.starts_with("poll-") {
+        cmd.arg("--suspended");
+    }
+    if role.starts_with("poll-") {
+        // two tasks waking at 100 kHz under SCHED_FIFO take both cores of a
+        // 2-core machine from the router (SCHED_OTHER), and the `nerve
+        // suspend` that ends the batch never gets an answer: a polling agent
+        // is a normal-priority task, as anyone polling would run it
+        cmd.arg("--no-realtime");
+    }
+    cmd.args(["--", "--size", &size.to_string(), "--count", &count.to_string()]);
+    cmd.arg("--out").arg(dir);
+    cmd.env("NERVE_HOME", &robot.home);
+    // Output::send_with builds T::default() before writing it into the sample;
+    // frames of megabytes need a task stack larger than the default 2 MiB
+    // (NERVE_BENCH_DEFAULT_STACK=1 leaves it out, to show the failure)
+    if std::env::var_os("NERVE_BENCH_DEFAULT_STACK").is_none() {
+        cmd.env("RUST_MIN_STACK", (64usize << 20).to_string());
+    }
+    robot.quiet(&mut cmd);
+    ChildGuard::spawn(&format!("agent {name}"), cmd)
+}
+
+/// The polling SDK agents: the pong is resumed for the batch only (it polls
+/// at 100 kHz while it runs), then the ping as [`NervePing`] does.
+struct NervePollPing {
+    ping: NervePing,
+    pong: String,
+}
+
+impl Pinger for NervePollPing {
+    fn batch(&mut self, robot: &Robot, count: usize) -> Result<Vec<u64>> {
+        robot.run(&["resume", &self.pong])?;
+        let v = self.ping.batch(robot, count);
+        let _ = robot.run(&["suspend", &self.ping.name]);
+        robot.run(&["suspend", &self.pong])?;
+        v
+    }
+}
+
+/// The SDK ping agent, driven through the `nerve` command: each batch is a
+/// `nerve suspend` + `nerve resume`, and the agent writes `batch-<k>.txt`.
+pub(crate) struct NervePing {
+    pub(crate) name: String,
+    pub(crate) dir: PathBuf,
+    pub(crate) next: u64,
+}
+
+impl NervePing {
+    /// Runs one batch; returns its round-trip times, ns.
+    pub(crate) fn run_batch(&mut self, robot: &Robot) -> Result<Vec<u64>> {
+        Pinger::batch(self, robot, 0)
+    }
 }
 
 impl Pinger for NervePing {
@@ -252,24 +318,12 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     for &size in &opts.sizes {
         let dir = opts.work.join(agent_name("nerve", size));
         std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        for (role, sub) in [("ping", "__agent-ping"), ("pong", "__agent-pong")] {
+        let poll_dir = opts.work.join(agent_name("nerve-poll", size));
+        std::fs::create_dir_all(&poll_dir).with_context(|| format!("cannot create {}", poll_dir.display()))?;
+        for role in ["ping", "pong", "poll-ping", "poll-pong"] {
             let name = agent_name(role, size);
-            let mut cmd = self_command(sub)?;
-            cmd.args(["--robot", &robot.name, "--name", &name]);
-            if role == "ping" {
-                cmd.arg("--suspended");
-            }
-            cmd.args(["--", "--size", &size.to_string(), "--count", &count_of(size).to_string()]);
-            cmd.arg("--out").arg(&dir);
-            cmd.env("NERVE_HOME", &robot.home);
-            // Output::send_with builds T::default() before writing it into the sample;
-            // frames of megabytes need a task stack larger than the default 2 MiB
-            // (NERVE_BENCH_DEFAULT_STACK=1 leaves it out, to show the failure)
-            if std::env::var_os("NERVE_BENCH_DEFAULT_STACK").is_none() {
-                cmd.env("RUST_MIN_STACK", (64usize << 20).to_string());
-            }
-            robot.quiet(&mut cmd);
-            children.push(ChildGuard::spawn(&format!("agent {name}"), cmd)?);
+            let d = if role.starts_with("poll-") { &poll_dir } else { &dir };
+            children.push(spawn_bench_agent(&robot, role, &name, size, count_of(size), d)?);
             names.push(name);
         }
     }
@@ -279,12 +333,15 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         let (ping, pong) = (agent_name("ping", size), agent_name("pong", size));
         robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
         robot.run(&["connect", &format!("{pong}/out"), &format!("{ping}/in")])?;
+        let (ping, pong) = (agent_name("poll-ping", size), agent_name("poll-pong", size));
+        robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
+        robot.run(&["connect", &format!("{pong}/out"), &format!("{ping}/in")])?;
     }
     eprintln!("hop: nerve agents running and connected");
 
     // raw iceoryx2 and socket pongs
     for &size in &opts.sizes {
-        for mode in ["waitset", "listener", "waitset-fill"] {
+        for mode in ["waitset", "listener", "waitset-fill", "poll"] {
             let mut cmd = self_command("__raw-pong")?;
             cmd.args(["--robot", &robot.name, "--mode", mode, "--size", &size.to_string()]);
             cmd.env("NERVE_HOME", &robot.home).stdout(Stdio::piped());
@@ -318,10 +375,23 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 next: 0,
             }),
         ));
+        pingers.push((
+            size,
+            "nerve-poll",
+            Box::new(NervePollPing {
+                ping: NervePing {
+                    name: agent_name("poll-ping", size),
+                    dir: opts.work.join(agent_name("nerve-poll", size)),
+                    next: 0,
+                },
+                pong: agent_name("poll-pong", size),
+            }),
+        ));
         for (mode, t) in [
             (Mode::Waitset, "iox2-waitset"),
             (Mode::Listener, "iox2-listener"),
             (Mode::WaitsetFill, "iox2-waitset-fill"),
+            (Mode::Poll, "iox2-poll"),
         ] {
             let p: Box<dyn Pinger> = with_payload!(size, P => Box::new(Side::<P>::open(&robot.name, mode, "ping", "pong", "raw-ping")?), _ => bail!("size"));
             pingers.push((size, t, p));
@@ -329,6 +399,15 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         let path = robot.home.join(format!("uds-{size}.sock"));
         pingers.push((size, "uds", Box::new(UdsPing::connect(&path, size)?)));
     }
+    // Cyclone DDS, when installed
+    let dds_peer = if dds::available() {
+        Some(DdsPeer::start(opts.verbose)?)
+    } else {
+        eprintln!("hop: warning: `ddsperf` not found (apt-get install cyclonedds-tools); no Cyclone DDS row");
+        None
+    };
+    let mut dds_intervals: Vec<(usize, Vec<dds::Interval>, Vec<u64>)> =
+        opts.sizes.iter().map(|&s| (s, Vec::new(), Vec::new())).collect();
     realtime_like_an_agent(20);
 
     let mut samples: Vec<Vec<u64>> = vec![Vec::new(); pingers.len()];
@@ -352,6 +431,22 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                         samples[i].extend_from_slice(kept);
                     }
                 }
+                if let Some(peer) = &dds_peer {
+                    let secs = if opts.quick {
+                        1
+                    } else if size > 1_000_000 {
+                        4
+                    } else {
+                        2
+                    };
+                    let v = peer.batch(size, secs).with_context(|| format!("ddsperf at {size} B, round {round}"))?;
+                    if round > 0 {
+                        if let Some(d) = dds_intervals.iter_mut().find(|d| d.0 == size) {
+                            d.2.push(dds::summarise(&v).p50_ns);
+                            d.1.extend(v);
+                        }
+                    }
+                }
             }
             let what = if round == 0 { "warm-up".to_owned() } else { format!("round {round}/{}", opts.rounds) };
             eprintln!("hop: {what} done in {:.1} s", t_round.elapsed().as_secs_f64());
@@ -373,6 +468,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     normal_priority();
     let keys: Vec<(usize, &'static str)> = pingers.iter().map(|p| (p.0, p.1)).collect();
     drop(pingers);
+    drop(dds_peer);
     for mut c in children.drain(..) {
         c.stop(Duration::from_secs(2));
     }
@@ -381,6 +477,18 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     let mut results = Vec::new();
     for &size in &opts.sizes {
         for t in TRANSPORTS {
+            if t == "ddsperf" {
+                if let Some((_, iv, rounds)) = dds_intervals.iter().find(|d| d.0 == size && !d.1.is_empty()) {
+                    results.push(HopResult {
+                        transport: t.into(),
+                        size,
+                        label: label(size).into(),
+                        rtt: dds::summarise(iv),
+                        round_p50_ns: rounds.clone(),
+                    });
+                }
+                continue;
+            }
             let i = keys
                 .iter()
                 .position(|k| *k == (size, t))
@@ -418,6 +526,11 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             nerve_vs_waitset_fill_p50: ratio(n.rtt.p50_ns, f.rtt.p50_ns),
             nerve_vs_waitset_fill_p99: ratio(n.rtt.p99_ns, f.rtt.p99_ns),
             uds_vs_nerve_p50: ratio(u.rtt.p50_ns, n.rtt.p50_ns),
+            dds_vs_nerve_p50: find("ddsperf", size).map(|d| ratio(d.rtt.p50_ns, n.rtt.p50_ns)),
+            nerve_poll_vs_iox2_poll_p50: match (find("nerve-poll", size), find("iox2-poll", size)) {
+                (Some(a), Some(b)) => Some(ratio(a.rtt.p50_ns, b.rtt.p50_ns)),
+                _ => None,
+            },
             target_met: r <= TARGET_RATIO,
         });
     }
@@ -454,12 +567,13 @@ pub fn print_tables(r: &HopReport) {
     }
     println!();
     println!(
-        "| payload | nerve/iox2-waitset p50 | (median of rounds) | p99 | nerve/iox2-listener p50 | p99 | nerve/iox2-waitset-fill p50 | p99 | uds/nerve p50 | target ≤{TARGET_RATIO} |"
+        "| payload | nerve/iox2-waitset p50 | (median of rounds) | p99 | nerve/iox2-listener p50 | p99 | nerve/iox2-waitset-fill p50 | p99 | uds/nerve p50 | ddsperf/nerve p50 | nerve-poll/iox2-poll p50 | target ≤{TARGET_RATIO} |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    let opt = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
     for x in &r.ratios {
         println!(
-            "| {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
+            "| {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} | {} |",
             label(x.size),
             x.nerve_vs_waitset_p50,
             x.nerve_vs_waitset_p50_round_median,
@@ -469,6 +583,8 @@ pub fn print_tables(r: &HopReport) {
             x.nerve_vs_waitset_fill_p50,
             x.nerve_vs_waitset_fill_p99,
             x.uds_vs_nerve_p50,
+            opt(x.dds_vs_nerve_p50),
+            opt(x.nerve_poll_vs_iox2_poll_p50),
             if x.target_met { "met" } else { "missed" }
         );
     }

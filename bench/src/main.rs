@@ -22,13 +22,18 @@
 
 mod agents;
 mod control;
+mod dds;
 mod hop;
+mod images;
 mod jitter;
 mod machine;
 mod payloads;
+mod pipeline;
 mod plot;
+mod plot_images;
 mod procs;
 mod raw;
+mod scale;
 mod stats;
 mod uds;
 
@@ -88,6 +93,54 @@ enum Scenario {
         #[arg(long, value_delimiter = ',')]
         launch: Option<Vec<usize>>,
     },
+    /// Three hops end to end (sonar → safety → motor shape) against one hop, SDK agents.
+    Pipeline {
+        #[command(flatten)]
+        common: Common,
+        /// Payload sizes in bytes.
+        #[arg(long, value_delimiter = ',', default_values_t = [8usize, 230_400])]
+        payloads: Vec<usize>,
+        /// Measured rounds (each path one batch per round, interleaved).
+        #[arg(long)]
+        rounds: Option<usize>,
+    },
+    /// 100 agents at 10 Hz: machine, agent and router CPU, memory per agent (RSS, PSS), `nerve ps` time.
+    Scale {
+        #[command(flatten)]
+        common: Common,
+        /// Agents in all (half tickers, half relays).
+        #[arg(long, default_value_t = 100)]
+        agents: usize,
+        /// Period of the tickers, in ms.
+        #[arg(long, default_value_t = 100)]
+        period_ms: u64,
+        /// Measuring window, in seconds.
+        #[arg(long)]
+        window: Option<f64>,
+    },
+    /// Frames to 1, 4 and 8 readers: nerve's short-term memory vs iceoryx2 slices vs Unix socket.
+    Images {
+        #[command(flatten)]
+        common: Common,
+        /// Resolutions (RGB).
+        #[arg(long, value_delimiter = ',', default_values_t = ["320x240".to_owned(), "640x480".to_owned(), "1920x1080".to_owned()])]
+        resolutions: Vec<String>,
+        /// Reader counts, 1 to 8 (default 1,4,8; 1,8 with --quick).
+        #[arg(long, value_delimiter = ',')]
+        readers: Option<Vec<usize>>,
+        /// Measured rounds (each transport one paced and one closed-loop batch per round, interleaved).
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// Frames per second of the paced batches.
+        #[arg(long, default_value_t = 200.0)]
+        rate: f64,
+        /// Seconds per paced batch.
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// Seconds per closed-loop batch.
+        #[arg(long)]
+        max_seconds: Option<f64>,
+    },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
         #[command(flatten)]
@@ -109,10 +162,15 @@ fn main() -> ExitCode {
     if let Some(first) = args.next() {
         let rest: Vec<String> = args.collect();
         match first.as_str() {
-            "__agent-ping" | "__agent-pong" | "__agent-jitter" => return agents::run_agent(&first, rest),
+            "__agent-ping" | "__agent-pong" | "__agent-poll-ping" | "__agent-poll-pong" | "__agent-jitter" => {
+                return agents::run_agent(&first, rest);
+            }
             "__raw-pong" => return raw::pong_main(rest),
             "__uds-pong" => return uds::pong_main(rest),
             "__busy" => return jitter::busy_main(),
+            "__agent-img-writer" | "__agent-img-reader" => return images::run_agent(&first, rest),
+            "__img-iox2-reader" => return images::iox2_reader_main(rest),
+            "__img-uds-reader" => return images::uds_reader_main(rest),
             _ => {}
         }
     }
@@ -135,7 +193,49 @@ fn write_json(out: &std::path::Path, name: &str, value: &impl serde::Serialize) 
 }
 
 fn run(cli: Cli) -> Result<()> {
+    if cfg!(debug_assertions) {
+        eprintln!(
+            "warning: this nerve-bench is a debug build: its numbers say little. \
+             Build with `cargo build --release -p nerve-bench -p nerve --bins`."
+        );
+    }
     match cli.scenario {
+        Scenario::Pipeline { common, payloads, rounds } => {
+            let opts = pipeline::PipelineOpts {
+                quick: common.quick,
+                sizes: payloads,
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 7 }).max(1),
+                verbose: common.verbose,
+                work: common.out.join(format!("pipeline-work-{}", std::process::id())),
+            };
+            let report = pipeline::run(&opts);
+            let _ = std::fs::remove_dir_all(&opts.work);
+            let report = report?;
+            let json = write_json(&common.out, "pipeline.json", &report)?;
+            eprintln!("pipeline: results in {} ({:.0} s)", json.display(), report.seconds);
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
+            } else {
+                pipeline::print_tables(&report);
+            }
+        }
+        Scenario::Scale { common, agents, period_ms, window } => {
+            let opts = scale::ScaleOpts {
+                agents: if common.quick { agents.min(20) } else { agents }.max(2),
+                period_ms: period_ms.max(1),
+                window_s: window.unwrap_or(if common.quick { 2.0 } else { 20.0 }),
+                ps_runs: if common.quick { 3 } else { 20 },
+                verbose: common.verbose,
+            };
+            let report = scale::run(&opts)?;
+            let json = write_json(&common.out, "scale.json", &report)?;
+            eprintln!("scale: results in {} ({:.0} s)", json.display(), report.seconds);
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
+            } else {
+                scale::print_tables(&report);
+            }
+        }
         Scenario::Hop { common, payloads, rounds, count } => {
             let opts = hop::HopOpts {
                 quick: common.quick,
@@ -174,6 +274,33 @@ fn run(cli: Cli) -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
             } else {
                 control::print_tables(&report);
+            }
+        }
+        Scenario::Images { common, resolutions, readers, rounds, rate, seconds, max_seconds } => {
+            let opts = images::ImagesOpts {
+                quick: common.quick,
+                resolutions,
+                readers: readers.unwrap_or(if common.quick { vec![1, 8] } else { vec![1, 4, 8] }),
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 5 }).max(1),
+                rate,
+                paced_seconds: seconds.unwrap_or(if common.quick { 0.25 } else { 0.5 }),
+                max_seconds: max_seconds.unwrap_or(if common.quick { 0.15 } else { 0.3 }),
+                verbose: common.verbose,
+                work: images::work_dir(&common.out),
+            };
+            let report = images::run(&opts);
+            let _ = std::fs::remove_dir_all(&opts.work);
+            let report = report?;
+            let json = write_json(&common.out, "images.json", &report)?;
+            let png = common.out.join("images-latency.png");
+            if let Err(e) = plot_images::images_png(&report, &png) {
+                eprintln!("warning: no plot: {e:#}");
+            }
+            eprintln!("images: results in {} and {} ({:.0} s)", json.display(), png.display(), report.seconds);
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
+            } else {
+                images::print_tables(&report);
             }
         }
         Scenario::Jitter { common, rates, seconds, rounds } => {

@@ -13,6 +13,9 @@ fn colour(t: &str) -> RGBColor {
         "iox2-waitset" => RGBColor(30, 90, 200),
         "iox2-listener" => RGBColor(20, 150, 60),
         "iox2-waitset-fill" => RGBColor(230, 140, 20),
+        "ddsperf" => RGBColor(140, 60, 170),
+        "nerve-poll" => RGBColor(240, 120, 160),
+        "iox2-poll" => RGBColor(90, 190, 210),
         _ => RGBColor(120, 120, 120),
     }
 }

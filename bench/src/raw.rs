@@ -40,6 +40,11 @@ pub enum Mode {
     /// as `Waitset`, but each send first writes `P::default()` into the
     /// sample and then the sequence number, as `Output::send_with` does
     WaitsetFill,
+    /// busy polling: both sides spin on `Subscriber::receive` and send no
+    /// events, except one to wake the pong at the start of a batch (the pong
+    /// blocks on its listener after 20 ms without a sample, so that it does
+    /// not hold a core between batches)
+    Poll,
 }
 
 impl Mode {
@@ -48,6 +53,7 @@ impl Mode {
             Mode::Waitset => "waitset",
             Mode::Listener => "listener",
             Mode::WaitsetFill => "waitset-fill",
+            Mode::Poll => "poll",
         }
     }
 }
@@ -158,7 +164,9 @@ impl<P: BenchPayload> Side<P> {
             s.assume_init()
         };
         s.send().map_err(|e| anyhow!("send: {e:?}"))?;
-        self.notifier.notify().map_err(|e| anyhow!("notify: {e:?}"))?;
+        if self.mode != Mode::Poll {
+            self.notifier.notify().map_err(|e| anyhow!("notify: {e:?}"))?;
+        }
         Ok(())
     }
 
@@ -193,7 +201,7 @@ impl<P: BenchPayload> Side<P> {
             Mode::Waitset | Mode::WaitsetFill => {
                 Ok(Some(self.waitset.attach_notification(&self.listener).map_err(|e| anyhow!("attach: {e:?}"))?))
             }
-            Mode::Listener => Ok(None),
+            Mode::Listener | Mode::Poll => Ok(None),
         }
     }
 
@@ -208,6 +216,10 @@ impl<P: BenchPayload> Side<P> {
                 seq += 1;
                 let t0 = now_ns();
                 self.send(seq)?;
+                if self.mode == Mode::Poll && rtts.is_empty() {
+                    // wake the pong from its idle wait; the rest of the batch is pure polling
+                    self.notifier.notify().map_err(|e| anyhow!("notify: {e:?}"))?;
+                }
                 loop {
                     let mut seen = None;
                     while let Some(sample) = self.subscriber.receive().map_err(|e| anyhow!("receive: {e:?}"))? {
@@ -222,6 +234,10 @@ impl<P: BenchPayload> Side<P> {
                     if now_ns().saturating_sub(t0) > 2_000_000_000 {
                         bail!("no echo for 2 s from the raw iceoryx2 pong ({:?}, {} B)", self.mode, P::SIZE);
                     }
+                    if self.mode == Mode::Poll {
+                        std::hint::spin_loop();
+                        continue;
+                    }
                     if !self.wait(guard.as_ref(), Duration::from_millis(500))? {
                         bail!("interrupted");
                     }
@@ -235,6 +251,7 @@ impl<P: BenchPayload> Side<P> {
     /// The pong loop: echoes every sample until SIGTERM.
     fn pong_loop(&self) -> Result<()> {
         let guard = self.attach()?;
+        let mut last_rx = now_ns();
         loop {
             let mut seqs = [0u64; SUBSCRIBER_BUFFER];
             let mut n = 0;
@@ -246,6 +263,15 @@ impl<P: BenchPayload> Side<P> {
             }
             for &s in &seqs[..n] {
                 self.send(s)?;
+            }
+            if self.mode == Mode::Poll {
+                if n > 0 {
+                    last_rx = now_ns();
+                }
+                if now_ns().saturating_sub(last_rx) < 20_000_000 {
+                    std::hint::spin_loop();
+                    continue;
+                }
             }
             if n == 0 && self.node.wait(Duration::ZERO).is_err() {
                 return Ok(()); // SIGTERM or SIGINT

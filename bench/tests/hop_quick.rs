@@ -20,7 +20,7 @@ fn hop_quick_8_bytes_produces_results() {
     assert!(out.status.success(), "nerve-bench hop failed: {stderr}");
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON");
     let results = report["results"].as_array().expect("results");
-    for t in ["nerve", "iox2-waitset", "iox2-listener", "uds"] {
+    for t in ["nerve", "iox2-waitset", "iox2-listener", "uds", "nerve-poll", "iox2-poll"] {
         let r = results.iter().find(|r| r["transport"] == t && r["size"] == 8).expect("a result per transport");
         assert!(r["rtt"]["n"].as_u64().unwrap_or(0) > 0, "{t}: no samples");
     }

@@ -1,0 +1,270 @@
+//! Scenario `pipeline`: three hops end to end against one hop, both through
+//! SDK agents in one robot, measured side by side, batch by batch interleaved.
+//!
+//! * `one-hop`: `ping-1 → pong-1 → ping-1`, the round trip of `hop`; one hop
+//!   is half of it (the two hops of a round trip are alike: same payload,
+//!   same code path, one wake-up each);
+//! * `three-hop`: `ping-3 → sonar → safety → ping-3`: the shape of the
+//!   robot's reflex path (sonar agent, safety agent, motor agent), where
+//!   `sonar` and `safety` are forwarding SDK agents (the `pong` of `hop`:
+//!   drain the input, send in place) and `ping-3` is both the source and the
+//!   sink, so one clock stamps both ends and no cross-process clock is needed.
+//!
+//! Each batch is started with `nerve suspend` + `nerve resume` of its ping
+//! agent, which then runs `count` round trips one after the other (each sent
+//! when the previous came back: no queueing). The ratio the issue asks for is
+//! `three-hop / one hop = three-hop / (one-hop round trip / 2)`, target 3.3:
+//! three times one hop plus 10%.
+
+use crate::hop::{NervePing, default_count, spawn_bench_agent};
+use crate::machine::{Machine, command_line};
+use crate::payloads::{SIZES, label};
+use crate::procs::{ChildGuard, Robot};
+use crate::stats::{Summary, median_f64, ratio, us};
+use anyhow::{Context as _, Result, bail};
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Samples dropped at the start of every batch.
+const DISCARD: usize = 5;
+/// Three hops may take this much longer than one hop.
+pub const TARGET_RATIO: f64 = 3.3;
+
+/// Options of the pipeline scenario.
+#[derive(Debug, Clone)]
+pub struct PipelineOpts {
+    /// smoke run
+    pub quick: bool,
+    /// payload sizes (bytes)
+    pub sizes: Vec<usize>,
+    /// measured rounds (a warm-up round comes first unless quick)
+    pub rounds: usize,
+    /// show children's output
+    pub verbose: bool,
+    /// where batch files go
+    pub work: PathBuf,
+}
+
+/// One path at one payload size.
+#[derive(Debug, Clone, Serialize)]
+pub struct PathResult {
+    /// `one-hop` (a round trip: two hops) or `three-hop`
+    pub path: String,
+    /// payload bytes
+    pub size: usize,
+    /// payload label
+    pub label: String,
+    /// hops per measured sample (2 for the round trip, 3 for the pipeline)
+    pub hops: u32,
+    /// all measured samples pooled, ns
+    pub latency: Summary,
+    /// median of each round, ns
+    pub round_p50_ns: Vec<u64>,
+}
+
+/// The ratio of one size.
+#[derive(Debug, Clone, Serialize)]
+pub struct PipelineRatio {
+    /// payload bytes
+    pub size: usize,
+    /// one hop, ns: half the one-hop round-trip median
+    pub one_hop_p50_ns: u64,
+    /// three hops end to end, median, ns
+    pub three_hop_p50_ns: u64,
+    /// three-hop p50 / one-hop p50 (pooled)
+    pub three_vs_one_p50: f64,
+    /// the same from p99s
+    pub three_vs_one_p99: f64,
+    /// median over rounds of the per-round ratio
+    pub three_vs_one_p50_round_median: f64,
+    /// whether the pooled p50 ratio is within the target
+    pub target_met: bool,
+}
+
+/// The pipeline report.
+#[derive(Debug, Clone, Serialize)]
+pub struct PipelineReport {
+    /// "pipeline"
+    pub scenario: &'static str,
+    /// the command that produced it
+    pub command: String,
+    /// the machine
+    pub machine: Machine,
+    /// measured rounds
+    pub rounds: usize,
+    /// samples per batch, by size
+    pub batch: Vec<(usize, usize)>,
+    /// per path and size
+    pub results: Vec<PathResult>,
+    /// per size
+    pub ratios: Vec<PipelineRatio>,
+    /// target ratio
+    pub target_ratio: f64,
+    /// wall time, s
+    pub seconds: f64,
+}
+
+fn tag(size: usize) -> &'static str {
+    match size {
+        8 => "8",
+        230_400 => "230k",
+        _ => "6m",
+    }
+}
+
+/// Runs the scenario.
+pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
+    let started = Instant::now();
+    let machine = Machine::probe();
+    for s in &opts.sizes {
+        if !SIZES.contains(s) {
+            bail!("no payload of {s} bytes; use 8, 230400 or 6220800");
+        }
+    }
+    let counts: Vec<(usize, usize)> = opts.sizes.iter().map(|&s| (s, default_count(s, opts.quick))).collect();
+    let robot = Robot::new("p", opts.verbose)?;
+    eprintln!("pipeline: robot {} (sizes {:?}, {} rounds)", robot.name, opts.sizes, opts.rounds);
+    let _router = robot.start_router()?;
+    let mut children: Vec<ChildGuard> = Vec::new();
+    let mut names = Vec::new();
+    // (size, path, hops, ping)
+    let mut paths: Vec<(usize, &'static str, u32, NervePing)> = Vec::new();
+    for &(size, count) in &counts {
+        let t = tag(size);
+        let (p1, q1, p3, s3, f3) =
+            (format!("p1-{t}"), format!("q1-{t}"), format!("p3-{t}"), format!("sonar-{t}"), format!("safety-{t}"));
+        for (role, name) in [("ping", &p1), ("pong", &q1), ("ping", &p3), ("pong", &s3), ("pong", &f3)] {
+            let dir = opts.work.join(name);
+            std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+            children.push(spawn_bench_agent(&robot, role, name, size, count, &dir)?);
+            names.push(name.clone());
+        }
+        paths.push((size, "one-hop", 2, NervePing { name: p1.clone(), dir: opts.work.join(&p1), next: 0 }));
+        paths.push((size, "three-hop", 3, NervePing { name: p3.clone(), dir: opts.work.join(&p3), next: 0 }));
+    }
+    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+    robot.wait_registered(&refs, Duration::from_secs(20))?;
+    for &size in &opts.sizes {
+        let t = tag(size);
+        for (from, to) in [
+            (format!("p1-{t}/out"), format!("q1-{t}/in")),
+            (format!("q1-{t}/out"), format!("p1-{t}/in")),
+            (format!("p3-{t}/out"), format!("sonar-{t}/in")),
+            (format!("sonar-{t}/out"), format!("safety-{t}/in")),
+            (format!("safety-{t}/out"), format!("p3-{t}/in")),
+        ] {
+            robot.run(&["connect", &from, &to])?;
+        }
+    }
+    eprintln!("pipeline: agents running and connected");
+
+    let mut samples: Vec<Vec<u64>> = vec![Vec::new(); paths.len()];
+    let mut round_p50: Vec<Vec<u64>> = vec![Vec::new(); paths.len()];
+    let result = (|| -> Result<()> {
+        for round in usize::from(opts.quick)..=opts.rounds {
+            let t_round = Instant::now();
+            for &size in &opts.sizes {
+                let idx: Vec<usize> = (0..paths.len()).filter(|&i| paths[i].0 == size).collect();
+                for k in 0..idx.len() {
+                    let i = idx[(k + round) % idx.len()];
+                    let v = paths[i]
+                        .3
+                        .run_batch(&robot)
+                        .with_context(|| format!("{} at {size} B, round {round}", paths[i].1))?;
+                    if round > 0 {
+                        let kept = &v[DISCARD.min(v.len())..];
+                        round_p50[i].push(Summary::of(kept).p50_ns);
+                        samples[i].extend_from_slice(kept);
+                    }
+                }
+            }
+            let what = if round == 0 { "warm-up".to_owned() } else { format!("round {round}/{}", opts.rounds) };
+            eprintln!("pipeline: {what} done in {:.1} s", t_round.elapsed().as_secs_f64());
+        }
+        Ok(())
+    })();
+    for mut c in children.drain(..) {
+        c.stop(Duration::from_secs(2));
+    }
+    result?;
+
+    let results: Vec<PathResult> = paths
+        .iter()
+        .enumerate()
+        .map(|(i, (size, path, hops, _))| PathResult {
+            path: (*path).into(),
+            size: *size,
+            label: label(*size).into(),
+            hops: *hops,
+            latency: Summary::of(&samples[i]),
+            round_p50_ns: round_p50[i].clone(),
+        })
+        .collect();
+    let mut ratios = Vec::new();
+    for &size in &opts.sizes {
+        let find = |p: &str| results.iter().find(|r| r.size == size && r.path == p);
+        let (Some(one), Some(three)) = (find("one-hop"), find("three-hop")) else { continue };
+        // one hop = half a round trip; ratio(three, rtt) * 2
+        let per_round: Vec<f64> =
+            three.round_p50_ns.iter().zip(&one.round_p50_ns).map(|(a, b)| 2.0 * ratio(*a, *b)).collect();
+        let r = 2.0 * ratio(three.latency.p50_ns, one.latency.p50_ns);
+        ratios.push(PipelineRatio {
+            size,
+            one_hop_p50_ns: one.latency.p50_ns / 2,
+            three_hop_p50_ns: three.latency.p50_ns,
+            three_vs_one_p50: r,
+            three_vs_one_p99: 2.0 * ratio(three.latency.p99_ns, one.latency.p99_ns),
+            three_vs_one_p50_round_median: median_f64(&per_round),
+            target_met: r <= TARGET_RATIO,
+        });
+    }
+    drop(_router);
+    drop(robot);
+    Ok(PipelineReport {
+        scenario: "pipeline",
+        command: command_line(),
+        machine,
+        rounds: opts.rounds,
+        batch: counts,
+        results,
+        ratios,
+        target_ratio: TARGET_RATIO,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Prints the tables (markdown).
+pub fn print_tables(r: &PipelineReport) {
+    println!("| payload | path | hops | n | median µs | p99 µs | max µs |");
+    println!("|---|---|---:|---:|---:|---:|---:|");
+    for x in &r.results {
+        println!(
+            "| {} | {} | {} | {} | {} | {} | {} |",
+            x.label,
+            if x.path == "one-hop" { "one-hop round trip" } else { "three-hop pipeline" },
+            x.hops,
+            x.latency.n,
+            us(x.latency.p50_ns),
+            us(x.latency.p99_ns),
+            us(x.latency.max_ns)
+        );
+    }
+    println!();
+    println!(
+        "| payload | one hop µs (½ round trip) | three hops µs | three / one p50 | (median of rounds) | p99 | target ≤{TARGET_RATIO} |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---|");
+    for x in &r.ratios {
+        println!(
+            "| {} | {} | {} | {:.2} | {:.2} | {:.2} | {} |",
+            label(x.size),
+            us(x.one_hop_p50_ns),
+            us(x.three_hop_p50_ns),
+            x.three_vs_one_p50,
+            x.three_vs_one_p50_round_median,
+            x.three_vs_one_p99,
+            if x.target_met { "met" } else { "missed" }
+        );
+    }
+}

@@ -1,0 +1,81 @@
+//! End to end, one smoke run per scenario besides `hop` (which has its own
+//! test): `nerve-bench SCENARIO --quick --json` runs, prints a report with the
+//! fields users script against, writes `DIR/<scenario>.json`, and leaves
+//! nothing of its robot in /dev/shm. Values are never checked against
+//! targets (no timed assertions); only that they were measured.
+//!
+//! Needs the `nerve`, `nerve-ticker` and `nerve-relay` executables built into
+//! the same target dir (`cargo build --workspace --bins`).
+
+use serde_json::Value;
+use std::path::PathBuf;
+use std::process::Command;
+
+/// Runs `nerve-bench <args> --quick --json --out DIR`; returns the report.
+fn run(scenario: &str, extra: &[&str]) -> Value {
+    let out_dir: PathBuf = std::env::temp_dir().join(format!("nerve-bench-{scenario}-{}", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_nerve-bench"))
+        .arg(scenario)
+        .args(["--quick", "--json", "--out"])
+        .arg(&out_dir)
+        .args(extra)
+        .output()
+        .expect("nerve-bench runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "nerve-bench {scenario} failed: {stderr}");
+    let report: Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON");
+    assert!(out_dir.join(format!("{scenario}.json")).is_file(), "no {scenario}.json");
+    let robot = stderr
+        .split_whitespace()
+        .skip_while(|w| *w != "robot")
+        .nth(1)
+        .map(|r| format!("nerve_{r}_"))
+        .expect("the robot name is reported");
+    let left = std::fs::read_dir("/dev/shm")
+        .map(|rd| rd.filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().starts_with(&robot)).count())
+        .unwrap_or(0);
+    assert_eq!(left, 0, "shared memory of robot left behind ({robot})");
+    let _ = std::fs::remove_dir_all(&out_dir);
+    report
+}
+
+#[test]
+fn pipeline_quick_measures_one_and_three_hops() {
+    let r = run("pipeline", &["--payloads", "8"]);
+    let results = r["results"].as_array().expect("results");
+    for path in ["one-hop", "three-hop"] {
+        let x = results.iter().find(|x| x["path"] == path).expect("a result per path");
+        assert!(x["latency"]["n"].as_u64().unwrap_or(0) > 0, "{path}: no samples");
+    }
+    let ratio = &r["ratios"][0];
+    assert!(ratio["three_vs_one_p50"].as_f64().is_some_and(|v| v > 0.0));
+    assert!(ratio["target_met"].is_boolean());
+}
+
+#[test]
+fn scale_quick_measures_cpu_memory_and_ps() {
+    let r = run("scale", &["--agents", "10", "--window", "1"]);
+    assert_eq!(r["agents"], 10);
+    assert!(r["agent_pss_kib_p50"].as_u64().unwrap_or(0) > 0);
+    assert!(r["router"]["rss_kib"].as_u64().unwrap_or(0) > 0);
+    assert!(r["ps"]["n"].as_u64().unwrap_or(0) > 0);
+    assert!(r["idle"]["router_pct"].as_f64().is_some());
+    assert!(r["target_met"].is_boolean());
+}
+
+#[test]
+fn images_quick_reads_every_frame_intact() {
+    let r = run("images", &["--resolutions", "320x240", "--readers", "1,4"]);
+    let results = r["results"].as_array().expect("results");
+    for t in ["stm", "iox2-slice", "uds"] {
+        for n in [1, 4] {
+            let x = results
+                .iter()
+                .find(|x| x["transport"] == t && x["readers"] == n && x["mode"] == "paced")
+                .unwrap_or_else(|| panic!("no paced result for {t} with {n} readers"));
+            assert!(x["frames"].as_u64().unwrap_or(0) > 0, "{t}/{n}: no frames");
+            assert_eq!(x["bad"], 0, "{t}/{n}: frames read torn or wrong");
+        }
+    }
+    assert!(!r["scaling"].as_array().expect("scaling").is_empty());
+}
