@@ -26,3 +26,14 @@ pub fn block_termination_signals() {
     set.add(Signal::SIGTERM);
     let _ = pthread_sigmask(SigmaskHow::SIG_BLOCK, Some(&set), None);
 }
+
+/// Makes the calling thread's timed sleeps wake on time (a timer slack of
+/// 1 ns). Linux lets the wake-up of a normal-priority thread slip by up to
+/// 50 µs so that timers can be batched; SCHED_FIFO threads have no slack,
+/// but a task running without real-time privileges would otherwise wake
+/// that much late every cycle (measured: a 100 kHz polling agent pair's
+/// round trip was 95-100 µs, where event-driven agents take 36-55 µs).
+pub fn tight_timer_slack() {
+    // SAFETY: PR_SET_TIMERSLACK takes a plain integer argument.
+    let _ = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) };
+}

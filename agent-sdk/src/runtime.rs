@@ -284,6 +284,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         .name("task".into())
         .spawn(move || {
             rt::block_termination_signals();
+            rt::tight_timer_slack();
             if want_rt {
                 match rt::set_thread_fifo(prio) {
                     Ok(()) => task_shared.realtime.store(true, Ordering::Relaxed),
