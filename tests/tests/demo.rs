@@ -6,7 +6,11 @@
 //! * end to end: the whole robot against the simulator on two seeds and on
 //!   the second world must reach the doorway and the target without a
 //!   collision, and must do so when the tracker is killed mid-run (the
-//!   supervisor restarts it).
+//!   supervisor restarts it) and with a CPU-hungry agent added (the
+//!   resource manager lengthens periods).
+//!
+//! The end-to-end tests (`demo_*`) each run a whole robot in real time for
+//! about two minutes; `.config/nextest.toml` runs them one at a time.
 
 use nerve_demo::{Criteria, Scene, analyse, read_truth};
 use nerve_tests::{Robot, reap, wait_until};
@@ -177,8 +181,13 @@ fn figures_are_written_as_png_and_svg() {
 
 // ---------------------------------------------------------------- end to end
 
-/// Runs `nerve demo explore ARGS` for robot `r`; returns the parsed summary.
+/// Runs `nerve demo explore ARGS` for robot `r` with `launch/explore.toml`; returns the parsed summary.
 fn run_demo(r: &Robot, args: &[&str], during: impl FnOnce(&Robot)) -> Value {
+    run_demo_with(r, &repo().join("launch/explore.toml"), args, during)
+}
+
+/// Runs `nerve demo explore --launch LAUNCH ARGS` for robot `r`; returns the parsed summary.
+fn run_demo_with(r: &Robot, launch: &Path, args: &[&str], during: impl FnOnce(&Robot)) -> Value {
     let out = r.home.join("out");
     let t0 = Instant::now();
     let child = r
@@ -186,7 +195,7 @@ fn run_demo(r: &Robot, args: &[&str], during: impl FnOnce(&Robot)) -> Value {
         .args(["demo", "explore", "--out"])
         .arg(&out)
         .arg("--launch")
-        .arg(repo().join("launch/explore.toml"))
+        .arg(launch)
         .args(args)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
@@ -222,35 +231,40 @@ fn assert_success(s: &Value) {
     assert!(s["cpu"].as_object().is_some_and(|c| c.contains_key("tracker")), "{s:#}");
 }
 
+/// Removes the robot's home (the run's output) once a test has passed; a
+/// failed test leaves it for reading.
+fn clean_up(r: &Robot) {
+    let _ = std::fs::remove_dir_all(&r.home);
+}
+
 #[test]
-#[ignore = "behaviour agents not reliable yet (runs vary with timing; see docs/demo.md, Status); run with --ignored"]
 fn demo_explore_seed_1() {
     let r = Robot::new("demoa");
     let s = run_demo(&r, &["--seed", "1", "--world", world("explore.toml").as_str()], |_| {});
     assert_success(&s);
+    clean_up(&r);
 }
 
 #[test]
-#[ignore = "behaviour agents not reliable yet: seed 2 reached doorway and target but the tracker drove into the standing person (1 collision); see docs/demo.md"]
 fn demo_explore_seed_2() {
     let r = Robot::new("demob");
     let s = run_demo(&r, &["--seed", "2", "--world", world("explore.toml").as_str()], |_| {});
     assert_success(&s);
+    clean_up(&r);
 }
 
 #[test]
-#[ignore = "behaviour agents not reliable yet (runs vary with timing; see docs/demo.md, Status); run with --ignored"]
 fn demo_explore_second_world() {
     let r = Robot::new("democ");
     let s = run_demo(&r, &["--seed", "3", "--world", world("explore-2.toml").as_str()], |_| {});
     assert_success(&s);
     assert_eq!(s["world"], "explore-2");
+    clean_up(&r);
 }
 
 /// `nerve kill tracker` while the robot explores: the supervisor restarts
 /// it, and the robot still finishes.
 #[test]
-#[ignore = "behaviour agents not reliable yet (runs vary with timing; see docs/demo.md, Status); run with --ignored"]
 fn demo_survives_killing_the_tracker() {
     let r = Robot::new("demok");
     let s = run_demo(&r, &["--seed", "1", "--world", world("explore.toml").as_str()], |r| {
@@ -264,4 +278,37 @@ fn demo_survives_killing_the_tracker() {
     });
     assert_success(&s);
     assert!(s["cpu"]["tracker"]["restarts"].as_u64() >= Some(1), "{s:#}");
+    clean_up(&r);
+}
+
+/// The agent added to the robot by [`demo_with_a_cpu_hungry_agent`]: it
+/// burns 15 ms of CPU every 20 ms (75 % of a core, five times what the
+/// whole robot uses), at the default importance.
+const HOG: &str = r#"
+[[agent]]
+name = "hog"
+kind = "testagent"
+args = ["--mode", "burn"]
+"#;
+
+/// A CPU-hungry agent is added to the robot: the resource manager (policy in
+/// `kb/explore.toml`) sees the robot's agents over their CPU threshold and
+/// lengthens periods, least important first — the wall follower's, then
+/// the hog's — and the robot still reaches the doorway and the target
+/// without touching anything.
+#[test]
+fn demo_with_a_cpu_hungry_agent() {
+    let r = Robot::new("demoh");
+    let template = std::fs::read_to_string(repo().join("launch/explore.toml")).expect("launch/explore.toml");
+    let kb = repo().join("kb/explore.toml").display().to_string();
+    assert!(template.contains("\"kb/explore.toml\""), "the launch file names its knowledge base");
+    // the copy lives outside the source tree: give it the knowledge base's absolute path
+    let text = template.replace("\"kb/explore.toml\"", &format!("{kb:?}")) + HOG;
+    let launch = r.launch_file("explore-hog.toml", &text);
+    let s = run_demo_with(&r, &launch, &["--seed", "4", "--world", world("explore.toml").as_str()], |_| {});
+    let log = std::fs::read_to_string(r.home.join("out/logs/resource.log")).unwrap_or_default();
+    assert!(s["cpu"].as_object().is_some_and(|c| c.contains_key("hog")), "the hog ran: {s:#}");
+    assert!(log.contains("resource: slow down"), "no period was lengthened; the resource manager's log:\n{log}");
+    assert_success(&s);
+    clean_up(&r);
 }

@@ -318,4 +318,32 @@ resume = ["wall-follow"]
         assert_eq!(a[0].to_string(), "period of wall-follow = 500ms");
         assert_eq!(actions(&kb.modes["avoid"]).last(), Some(&Action::Suspend("wall-follow".into())));
     }
+
+    /// `kb/explore.toml`: danger beats the target; a close target is held
+    /// with the tracker alone on the foot (nothing else pushes the robot on
+    /// into it); a seen one is tracked with the safety monitor's help.
+    #[test]
+    fn the_shipped_knowledge_base_lets_danger_and_the_target_compete() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../kb/explore.toml");
+        let kb = KnowledgeBase::load(&path).expect("kb/explore.toml is valid");
+        let mode = |danger, target| {
+            let f = Facts { danger, target, load: Some(LoadLevel::Normal) };
+            lookup(&kb, &f).map(|(_, m)| m.name.clone()).unwrap_or_default()
+        };
+        use DangerLevel as D;
+        use TargetState as T;
+        assert_eq!(mode(Some(D::None), Some(T::None)), "explore");
+        assert_eq!(mode(Some(D::Low), Some(T::Seen)), "track");
+        assert_eq!(mode(Some(D::Low), Some(T::Close)), "hold");
+        for danger in [Some(D::High), Some(D::Stop), None] {
+            for target in [Some(T::Seen), Some(T::Close), None] {
+                assert_eq!(mode(danger, target), "avoid", "{danger:?} {target:?}");
+            }
+        }
+        let motor = |m: &str| kb.modes[m].weights["motor"].clone();
+        assert_eq!(motor("hold").get("safety"), Some(&0.0));
+        assert!(motor("hold").get("tracker").is_some_and(|w| *w > 0.0));
+        assert!(motor("track").get("safety").is_some_and(|w| *w > 0.0));
+        assert!(kb.modes["avoid"].urgent);
+    }
 }

@@ -7,7 +7,14 @@
 //! direction without an echo counts as open up to `max_range`.
 //!
 //! * **Front** is the sector {-30°, 0°, +30°} (directions 11, 0, 1); its
-//!   clearance is the nearest range there, its risk the largest risk there.
+//!   risk is the largest risk there. Its **clearance** is the room the body
+//!   has to move forward: the nearest range of the front sector, and the
+//!   ranges of the **flanks** (±60°, directions 2 and 10) counted
+//!   `1 / cos 60° = 2` times farther ([`FLANK_FACTOR`]). Ranges are from the
+//!   robot's rim (the sonars sit on it), but the rim is round: driving
+//!   forward, it closes on a thing at 60° at half the speed, and reaches it
+//!   if nothing else turns the robot away — a thin object (a person) beside
+//!   the front sector is otherwise invisible to the front until it touches.
 //! * **Slowing down**: the closeness `c = (slow_dist - front) / (slow_dist -
 //!   stop_dist)`, clamped to 0 … 1, scales the speed: `v = cruise × (1 - c)`.
 //! * **Turn choice** ([`choose_side`]): each side (left 30°, 60°, 90°; right
@@ -30,6 +37,10 @@ use shm_schemas::payloads::{DangerLevel, SONAR_DIRECTIONS, SonarScan};
 
 /// Directions of the front sector.
 pub const FRONT: [usize; 3] = [11, 0, 1];
+/// Directions of the flanks (±60°), whose ranges count in the front clearance.
+pub const FLANK: [usize; 2] = [2, 10];
+/// A flank range counts this many times farther in the front clearance (1 / cos 60°).
+pub const FLANK_FACTOR: f32 = 2.0;
 /// Directions of the left side, front to back.
 pub const LEFT: [usize; 3] = [1, 2, 3];
 /// Directions of the right side, front to back.
@@ -111,7 +122,7 @@ pub struct Judgement {
     pub level: DangerLevel,
     /// Danger 0 … 1.
     pub danger: f32,
-    /// Front clearance, m.
+    /// Front clearance (the front sector and the flanks, see the module documentation), m.
     pub front: f32,
 }
 
@@ -153,6 +164,13 @@ pub fn choose_side(ranges: &[f32; SONAR_DIRECTIONS], scan: &SonarScan, previous:
     }
 }
 
+/// The front clearance: the nearest range of the front sector, and the
+/// flanks' ranges × [`FLANK_FACTOR`].
+pub fn front_clearance(ranges: &[f32; SONAR_DIRECTIONS]) -> f32 {
+    let ahead = FRONT.iter().map(|&i| ranges[i]).fold(f32::INFINITY, f32::min);
+    FLANK.iter().map(|&i| ranges[i] * FLANK_FACTOR).fold(ahead, f32::min)
+}
+
 /// Whether to stop moving, given the front clearance and risk and whether the robot is stopped now.
 pub fn stop_rule(front: f32, front_risk: f32, stopped: bool, s: &Settings) -> bool {
     if front < s.stop_dist || front_risk >= s.risk_stop {
@@ -164,7 +182,7 @@ pub fn stop_rule(front: f32, front_risk: f32, stopped: bool, s: &Settings) -> bo
 /// Judges one scan; `previous` is the last judgement (for the hysteresis).
 pub fn judge(scan: &SonarScan, s: &Settings, previous: Option<&Judgement>) -> Judgement {
     let ranges = effective_ranges(scan, s.max_range);
-    let front = FRONT.iter().map(|&i| ranges[i]).fold(f32::INFINITY, f32::min);
+    let front = front_clearance(&ranges);
     let front_risk = FRONT.iter().map(|&i| risk_of(scan, i)).fold(0.0, f32::max);
     let span = (s.slow_dist - s.stop_dist).max(1e-3);
     let c = ((s.slow_dist - front) / span).clamp(0.0, 1.0);
@@ -269,6 +287,26 @@ mod tests {
         sc.risk[0] = 0.85;
         assert!(judge(&sc, &s, None).stop);
         assert!(!stop_rule(1.0, 0.0, false, &s));
+    }
+
+    #[test]
+    fn something_close_beside_the_front_slows_and_stops_too() {
+        let s = Settings::default();
+        // a thin thing at 60° to the left, out of the front sector
+        let mut sc = scan(3.0);
+        sc.ranges_m[2] = 0.4;
+        let j = judge(&sc, &s, None);
+        assert!(!j.stop && j.v < s.cruise && (j.front - 0.8).abs() < 1e-6, "slower: {j:?}");
+        assert_eq!(j.side, Side::Right, "turns away from it");
+        sc.ranges_m[2] = 0.15;
+        let j = judge(&sc, &s, None);
+        assert!(j.stop && j.v == 0.0 && j.omega < 0.0, "stops moving, turns away: {j:?}");
+        // at 90° it is beside the path: no effect
+        let mut sc = scan(3.0);
+        sc.ranges_m[3] = 0.2;
+        sc.ranges_m[9] = 0.2;
+        let j = judge(&sc, &s, None);
+        assert!(!j.stop && (j.v - s.cruise).abs() < 1e-6, "{j:?}");
     }
 
     #[test]

@@ -22,7 +22,13 @@
 //! * the **speed** is `v_max × (1 - size / close_size)` while the target is
 //!   smaller than `close_size` (a fraction of the image), reduced while the
 //!   target is off to the side; 0 once it is close — the tracker stops the
-//!   robot in front of the target.
+//!   robot in front of the target (and keeps turning to face it);
+//! * **close** has hysteresis: a target becomes close at `close_size` and
+//!   stays close until it shrinks under `release × close_size` (it steps
+//!   back), so that the state does not flicker at the threshold while the
+//!   robot stands in front of it. With the H1 camera (60° wide, 1 m high)
+//!   and the red jersey of the worlds (radius 0.24 m, 0.4 m tall) a size of
+//!   0.15 is about 1.2 m centre to centre, 0.12 about 1.4 m.
 
 use shm_schemas::payloads::TargetState;
 
@@ -138,6 +144,8 @@ pub struct Settings {
     pub min_area: usize,
     /// Target size (fraction of the image) at which it is close: stop.
     pub close_size: f32,
+    /// A close target stays close until its size falls under `release × close_size`.
+    pub release: f32,
     /// Speed toward a far target, m/s.
     pub v_max: f32,
     /// Head gain: fraction of the offset angle corrected per frame.
@@ -161,6 +169,7 @@ impl Default for Settings {
         Settings {
             min_area: 30,
             close_size: 0.15,
+            release: 0.8,
             v_max: 0.3,
             k_head: 0.5,
             k_turn: 1.2,
@@ -192,8 +201,18 @@ pub struct Steer {
     pub omega: f32,
 }
 
-/// Steers toward `blob` (if any) in a `width × height` image, the head being at `(pan, tilt)`.
-pub fn steer(blob: Option<&Blob>, width: usize, height: usize, pan: f32, tilt: f32, s: &Settings) -> Steer {
+/// Steers toward `blob` (if any) in a `width × height` image, the head being
+/// at `(pan, tilt)`; `was_close` says whether the target was close at the
+/// previous frame (the hysteresis of `close`).
+pub fn steer(
+    blob: Option<&Blob>,
+    width: usize,
+    height: usize,
+    pan: f32,
+    tilt: f32,
+    was_close: bool,
+    s: &Settings,
+) -> Steer {
     let Some(b) = blob.filter(|b| b.area >= s.min_area.max(1)) else {
         return Steer { state: TargetState::None, size: 0.0, bearing: 0.0, pan, tilt, v: 0.0, omega: 0.0 };
     };
@@ -207,7 +226,7 @@ pub fn steer(blob: Option<&Blob>, width: usize, height: usize, pan: f32, tilt: f
     let new_pan = (pan - s.k_head * ax).clamp(-s.pan_max, s.pan_max);
     let new_tilt = (tilt - s.k_head * ay).clamp(-s.tilt_max, s.tilt_max);
     let omega = (s.k_turn * bearing).clamp(-s.omega_max, s.omega_max);
-    let close = size >= s.close_size;
+    let close = size >= s.close_size || (was_close && size >= s.release.clamp(0.0, 1.0) * s.close_size);
     let v = if close {
         0.0
     } else {
@@ -276,22 +295,40 @@ mod tests {
         let s = Settings::default();
         let blob = |cx: f32, area: usize| Blob { area, cx, cy: 119.5, bbox: (0, 0, 0, 0) };
         // target to the right, small: head pans right, foot turns right, goes forward
-        let st = steer(Some(&blob(279.5, 400)), 320, 240, 0.0, 0.0, &s);
+        let st = steer(Some(&blob(279.5, 400)), 320, 240, 0.0, 0.0, false, &s);
         assert_eq!(st.state, TargetState::Seen);
         assert!(st.pan < 0.0 && st.omega < 0.0 && st.bearing < 0.0, "{st:?}");
         assert!(st.v > 0.0 && st.v < s.v_max, "{st:?}");
         assert!(st.tilt.abs() < 1e-6);
         // centred in the image but the head looks left: the body turns left to follow the head
-        let st = steer(Some(&blob(159.5, 400)), 320, 240, 0.5, 0.0, &s);
+        let st = steer(Some(&blob(159.5, 400)), 320, 240, 0.5, 0.0, false, &s);
         assert!((st.bearing - 0.5).abs() < 1e-6 && st.omega > 0.0 && (st.pan - 0.5).abs() < 1e-6);
         // straight ahead and large: close, stop
-        let st = steer(Some(&blob(159.5, 320 * 240 / 5)), 320, 240, 0.0, 0.0, &s);
+        let st = steer(Some(&blob(159.5, 320 * 240 / 5)), 320, 240, 0.0, 0.0, false, &s);
         assert_eq!((st.state, st.v), (TargetState::Close, 0.0));
         // noise and nothing: no target, no motion, head stays
-        let st = steer(Some(&blob(10.0, 5)), 320, 240, 0.2, 0.1, &s);
+        let st = steer(Some(&blob(10.0, 5)), 320, 240, 0.2, 0.1, true, &s);
         assert_eq!((st.state, st.v, st.omega, st.pan, st.tilt), (TargetState::None, 0.0, 0.0, 0.2, 0.1));
         // head limits hold
-        let st = steer(Some(&blob(0.0, 400)), 320, 240, s.pan_max, 0.0, &s);
+        let st = steer(Some(&blob(0.0, 400)), 320, 240, s.pan_max, 0.0, false, &s);
         assert!(st.pan <= s.pan_max);
+    }
+
+    #[test]
+    fn close_holds_until_the_target_steps_back() {
+        let s = Settings::default();
+        let px = |frac: f32| (frac * 320.0 * 240.0) as usize;
+        let blob = |area: usize| Blob { area, cx: 159.5, cy: 119.5, bbox: (0, 0, 0, 0) };
+        // just under close_size: seen, and barely moving
+        let st = steer(Some(&blob(px(0.14))), 320, 240, 0.0, 0.0, false, &s);
+        assert_eq!(st.state, TargetState::Seen);
+        assert!(st.v > 0.0 && st.v < 0.1 * s.v_max, "{st:?}");
+        // the same size after it was close: still close, no motion forward
+        let st = steer(Some(&blob(px(0.14))), 320, 240, 0.0, 0.0, true, &s);
+        assert_eq!((st.state, st.v), (TargetState::Close, 0.0));
+        // it stepped back under release × close_size: seen again, the robot follows
+        let st = steer(Some(&blob(px(0.11))), 320, 240, 0.0, 0.0, true, &s);
+        assert_eq!(st.state, TargetState::Seen);
+        assert!(st.v > 0.0, "{st:?}");
     }
 }

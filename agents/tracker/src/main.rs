@@ -6,7 +6,8 @@
 //!
 //! * output `head_cmd` (`nerve::HeadCommand`): the head turns to centre the target;
 //! * output `cmd` (`nerve::VelocityCommand`): the foot turns toward it, comes
-//!   closer while it is small, stops once it is close; nothing is sent
+//!   closer while it is small, stops once it is close (and stays stopped
+//!   until the target steps back: `release`); nothing is sent
 //!   while no target is seen, so that the other sources lead;
 //! * output `situation` (`nerve::Situation`): target none / seen / close,
 //!   its size and bearing, for the decision maker.
@@ -40,6 +41,7 @@ struct Tracker {
     situation: Output<Situation>,
     min_area: Param<u64>,
     close_size: Param<f32>,
+    release: Param<f32>,
     v_max: Param<f32>,
     lost_frames: Param<u64>,
     finder: BlobFinder,
@@ -75,6 +77,9 @@ impl Agent for Tracker {
             }),
             close_size: setup.param_checked("close_size", d.close_size, |v| {
                 if *v > 0.0 && *v <= 1.0 { Ok(()) } else { Err("close_size is a fraction in (0, 1]".into()) }
+            }),
+            release: setup.param_checked("release", d.release, |v| {
+                if *v > 0.0 && *v <= 1.0 { Ok(()) } else { Err("release is a fraction of close_size in (0, 1]".into()) }
             }),
             v_max: setup.param_checked("v_max", d.v_max, |v| {
                 if v.is_finite() && *v >= 0.0 && *v <= 0.8 { Ok(()) } else { Err("v_max is in [0, 0.8] m/s".into()) }
@@ -117,11 +122,12 @@ impl Agent for Tracker {
         let s = Settings {
             min_area: self.min_area.get() as usize,
             close_size: self.close_size.get(),
+            release: self.release.get(),
             v_max: self.v_max.get(),
             ..Settings::default()
         };
         let (pan, tilt) = self.pan_tilt;
-        let st = steer(blob.as_ref(), w, h, pan, tilt, &s);
+        let st = steer(blob.as_ref(), w, h, pan, tilt, self.state == TargetState::Close, &s);
         if st.state != self.state {
             tracing::info!("target {} (size {:.3}, bearing {:.2} rad)", st.state.name(), st.size, st.bearing);
             self.state = st.state;
