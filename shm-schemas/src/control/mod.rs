@@ -42,6 +42,14 @@ pub enum ProtocolError {
     /// The bytes are not a valid message.
     #[error("malformed control message: {0}")]
     Malformed(String),
+    /// A reply is larger than the control service carries.
+    #[error("the reply ({bytes} bytes) is larger than the {max} bytes this control service carries")]
+    TooLarge {
+        /// the reply's size
+        bytes: usize,
+        /// the service's limit
+        max: usize,
+    },
 }
 
 /// Encodes `body` in an envelope of the current version.
