@@ -383,13 +383,22 @@ fn serial_noise_is_counted_dropped_and_parsing_resynchronises() {
         }
         dev
     });
-    let scans = r.echo("sonar/scan", 3);
+    // The agent may still be working through the backlog when the echo
+    // subscribes (on a loaded machine it was): a scan of the good frame
+    // written before the noise (1.000 m) may come first. Every scan must be
+    // a frame that was written, never a misparse of the noise, and the
+    // frames after the noise must arrive intact.
+    let scans = r.echo("sonar/scan", 6);
     stop.store(true, Ordering::Relaxed);
     let dev = writer.join().expect("writer");
-    for s in &scans {
-        let r0 = s["data"]["ranges_m"][0].as_f64().expect("range");
-        assert!((r0 - 1.234).abs() < 1e-6, "frames after the noise decode exactly: {s}");
+    let ranges: Vec<f64> = scans.iter().map(|s| s["data"]["ranges_m"][0].as_f64().expect("range")).collect();
+    for (s, r0) in scans.iter().zip(&ranges) {
+        assert!((r0 - 1.234).abs() < 1e-6 || (r0 - 1.0).abs() < 1e-6, "only frames that were written decode: {s}");
     }
+    assert!(
+        ranges.iter().rev().take(3).all(|r0| (r0 - 1.234).abs() < 1e-6),
+        "frames after the noise decode exactly: {ranges:?}"
+    );
     let garbage = param_u64(&r, "sonar", "garbage_bytes");
     assert!(garbage >= 60_000, "noise counted as garbage: {garbage}");
     assert!(param_u64(&r, "sonar", "bad_checksums") >= 1);
