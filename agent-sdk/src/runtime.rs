@@ -201,7 +201,10 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         }
     }
 
+    let t_start = Instant::now();
+    let stage = |what: &str| tracing::debug!("start-up: {what} at {} us", t_start.elapsed().as_micros());
     let node = Arc::new(world.node(name).map_err(|e| e.to_string())?);
+    stage("node created");
     let ctl_service = world.robot().ctl_service(&agent_name);
     let server: ControlServer<AgentCommand, AgentReply> = ControlServer::create(&node, &ctl_service, ControlSize::AGENT)
         .map_err(|e| match e {
@@ -212,6 +215,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
             e => e.to_string(),
         })?;
 
+    stage("control service created");
     let wake_service = format!("nerve/{}/{}/_wake", world.robot(), name);
     let wake_factory = node
         .service_builder(&wake_service.as_str().try_into().map_err(|e| format!("{e:?}"))?)
@@ -232,7 +236,9 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         outputs: Vec::new(),
         params: ParamTable::default(),
     };
+    stage("wake-up event created");
     let agent = A::new(&mut setup).map_err(|e| format!("{} {name:?} could not start: {e}", A::KIND))?;
+    stage("agent and its ports created");
     let Setup { inputs, outputs, params, .. } = setup;
     apply_params(&params, &args.params)?;
 
@@ -263,7 +269,10 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         suspended: args.suspended,
     };
     let mut link = RouterLink::new(&world, &node);
-    match link.register(&node, &world, &registration, &shared) {
+    stage("router epoch subscribed");
+    let registered = link.register(&node, &world, &registration, &shared);
+    stage("registration answered");
+    match registered {
         Ok(()) => {}
         Err(RegisterError::Refused(e)) => return Err(e.to_string()),
         Err(RegisterError::NoRouter) => tracing::warn!(

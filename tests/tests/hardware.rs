@@ -556,6 +556,15 @@ fn fuzzy_fusion_of_conflicting_linguistic_commands() {
     r.down_and_check_clean();
 }
 
+/// Sets the flag when dropped, also while a panic unwinds.
+struct Finish<'a>(&'a AtomicBool);
+
+impl Drop for Finish<'_> {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+}
+
 /// A safety stop overrides every other source, however heavily weighted, and
 /// the base moves again once it is released.
 #[test]
@@ -566,6 +575,8 @@ fn safety_stop_overrides_every_source() {
     r.ok(&["param", "set", "motor", "weights", "planner:100"]);
     let done = AtomicBool::new(false);
     std::thread::scope(|s| {
+        // a failed assertion must still end the injecting thread, or the scope never returns
+        let _finish = Finish(&done);
         s.spawn(|| {
             inject(&r, "motor", "cmd", Duration::from_millis(50), |_| {
                 (!done.load(Ordering::Relaxed))
@@ -575,13 +586,14 @@ fn safety_stop_overrides_every_source() {
         assert!(wait_until(Duration::from_secs(5), || {
             r.echo("motor/applied", 1).first().is_some_and(|a| (f(a, "v") - 0.3).abs() < 1e-9)
         }));
-        assert!(last_wheels(&bytes.lock().expect("lock")).is_some_and(|(l, rr)| l == 300 && rr == 300));
+        // the board reads the wheel frame a moment after `applied` is published
+        let wheels = || last_wheels(&bytes.lock().expect("lock"));
+        assert!(wait_until(Duration::from_secs(2), || wheels() == Some((300, 300))), "wheels: {:?}", wheels());
         let stop = SafetyStop { active: 1, allow_turn: 0, reserved: [0; 2], hold_ms: 0, stamp_ns: now_ns() };
         inject(&r, "motor", "stop", Duration::from_millis(10), |i| (i == 0).then(|| vec![("safety", stop)]));
         let a = r.echo("motor/applied", 3);
         assert!(a.iter().all(|x| f(x, "v") == 0.0), "stopped although the planner still drives: {a:?}");
-        std::thread::sleep(Duration::from_millis(200));
-        assert_eq!(last_wheels(&bytes.lock().expect("lock")), Some((0, 0)));
+        assert!(wait_until(Duration::from_secs(2), || wheels() == Some((0, 0))), "wheels: {:?}", wheels());
         assert!(log_of(&r, "motor").contains("safety stop from safety"));
         let release = SafetyStop { active: 0, stamp_ns: now_ns(), ..stop };
         inject(&r, "motor", "stop", Duration::from_millis(10), |i| (i == 0).then(|| vec![("safety", release)]));
