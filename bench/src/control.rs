@@ -196,7 +196,21 @@ fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>, Vec<u64>)> {
             } else {
                 req.push(t1 - t0)
             }
-            robot.run(&["disconnect", "t2/tick", "r/in"])?;
+            // undone the same way: a `nerve` process that has just come and
+            // gone leaves the router a departed client to clean up (about
+            // 5 ms) on the next caller's time, which a program rewiring
+            // through its own connection does not meet
+            if via_cli {
+                robot.run(&["disconnect", "t2/tick", "r/in"])?;
+            } else {
+                match client.call(
+                    &RouterRequest::Cli(CliRequest::Disconnect { from: from.clone(), to: to.clone() }),
+                    Duration::from_secs(5),
+                ) {
+                    Ok(RouterReply::Ok) => {}
+                    other => bail!("disconnect refused: {other:?}"),
+                }
+            }
             std::thread::sleep(Duration::from_millis(20));
         }
     }

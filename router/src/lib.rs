@@ -320,7 +320,21 @@ impl State {
                 detail: "its control service is missing".into(),
             });
         };
-        match client.call(cmd, timeout) {
+        let mut result = client.call(cmd, timeout);
+        if matches!(result, Err(ControlError::NoServer { .. })) {
+            // The client was opened while the agent's previous instance (same
+            // name) was still leaving, and may be bound to the service it
+            // tore down: open it afresh and try once more (seen about once in
+            // 40 hot-add/stop cycles).
+            let fresh = self.open_agent(name);
+            if let Some(c) = &fresh {
+                result = c.call(cmd, timeout);
+            }
+            if let Some(e) = self.agents.get_mut(name) {
+                e.client = fresh;
+            }
+        }
+        match result {
             Ok(AgentReply::Error(message)) => Err(RouterError::AgentRefused { name: name.into(), message }),
             Ok(reply) => Ok(reply),
             Err(e) => Err(RouterError::AgentUnreachable { name: name.into(), detail: e.to_string() }),
