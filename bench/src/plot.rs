@@ -30,7 +30,7 @@ pub fn hop_png(report: &HopReport, path: &Path) -> Result<()> {
     let ymax = ys.iter().copied().fold(10.0, f64::max) * 2.0;
     let ymin = ys.iter().copied().filter(|v| *v > 0.0).fold(f64::MAX, f64::min).min(ymax / 10.0) / 2.0;
     let title = format!(
-        "one-hop round trip, event-driven, 2 processes ({} CPUs, {})",
+        "one-hop round trip, 2 processes, event-driven and polling ({} CPUs, {})",
         report.machine.nproc,
         report.machine.cpu.split_whitespace().take(4).collect::<Vec<_>>().join(" ")
     );
