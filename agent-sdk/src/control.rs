@@ -342,3 +342,67 @@ pub fn agent_router_client<Req: Serialize, Resp: DeserializeOwned>(
 ) -> Result<ControlClient<Req, Resp>, ControlError> {
     ControlClient::open(node, &world.robot().router_service(), ControlSize::ROUTER)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    /// Removes the test robot's shared-memory and iceoryx2 files, even when the test fails.
+    struct Cleanup(World);
+
+    impl Drop for Cleanup {
+        fn drop(&mut self) {
+            for f in self.0.shm_files().into_iter().chain(self.0.iox2_files()) {
+                let _ = std::fs::remove_file(f);
+            }
+        }
+    }
+
+    #[test]
+    fn oversized_messages_are_refused_or_answered_with_an_error() {
+        let world = World::new(&format!("ctl{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let size = ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128) };
+        let service = format!("nerve/{}/test/ctl", world.robot());
+        let done = Arc::new(AtomicBool::new(false));
+        let server_thread = {
+            let (world, service, done) = (world.clone(), service.clone(), done.clone());
+            std::thread::spawn(move || {
+                let node = world.node("server").expect("node");
+                let server: ControlServer<String, String> =
+                    ControlServer::create(&node, &service, size).expect("server");
+                while !done.load(Ordering::Relaxed) {
+                    server
+                        .serve(|req| match req {
+                            Ok(r) if r == "big" => "x".repeat(500),
+                            Ok(r) => format!("echo {r}"),
+                            Err(e) => format!("error: {e}"),
+                        })
+                        .expect("serve");
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            })
+        };
+        let node = world.node("client").expect("node");
+        let t0 = Instant::now();
+        let client = loop {
+            match ControlClient::<String, String>::open(&node, &service, size) {
+                Ok(c) => break c,
+                Err(_) if t0.elapsed() < Duration::from_secs(5) => std::thread::sleep(Duration::from_millis(10)),
+                Err(e) => panic!("no server: {e}"),
+            }
+        };
+        let timeout = Duration::from_secs(5);
+        assert_eq!(client.call(&"hi".to_owned(), timeout).expect("small call"), "echo hi");
+        // a request over the limit never leaves the client
+        let e = client.call(&"y".repeat(300), timeout).expect_err("too large a request");
+        assert!(matches!(e, ControlError::TooLarge { max: 128, .. }), "{e}");
+        // a reply over the limit comes back as the handler's error reply, not as a time-out
+        let reply = client.call(&"big".to_owned(), timeout).expect("an answer");
+        assert!(reply.starts_with("error: the reply (") && reply.contains("128 bytes"), "{reply}");
+        done.store(true, Ordering::Relaxed);
+        server_thread.join().expect("server thread");
+    }
+}
