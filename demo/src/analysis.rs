@@ -19,6 +19,11 @@
 //! * **min_clearance_m**: the smallest distance between the robot's disc and
 //!   any solid thing (walls, box sides, tubes, objects low enough to bump
 //!   into, at their position at that time) over the run; 0 means touching.
+//! * **first_track_s**: the first change of the decision maker into a mode
+//!   in which the tracker leads the foot ([`TRACKING_MODES`]: it saw the
+//!   target); **time_in_mode_before_track_s**: the seconds spent in each mode
+//!   before it (before the end when the target was never tracked) — how long
+//!   the robot explored before it saw the person.
 
 use crate::scene::Scene;
 use crate::truth::TruthRow;
@@ -38,6 +43,14 @@ impl Default for Criteria {
         Criteria { target_reach_m: 1.5 }
     }
 }
+
+/// The modes of `kb/explore.toml` in which the tracker leads the foot: the
+/// target is in sight.
+pub const TRACKING_MODES: [&str; 2] = ["track", "hold"];
+
+/// The modes of `kb/explore.toml` in which the wall follower leads the foot
+/// (`lean` is `explore` slowed down under load).
+pub const EXPLORING_MODES: [&str; 2] = ["explore", "lean"];
 
 /// One change of the decision maker's mode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -125,6 +138,13 @@ pub struct Summary {
     pub mode_changes: Vec<ModeChange>,
     /// Seconds spent in each mode (from the mode changes).
     pub time_in_mode_s: BTreeMap<String, f64>,
+    /// First change into a [`TRACKING_MODES`] mode (the target seen), s.
+    #[serde(default)]
+    pub first_track_s: Option<f64>,
+    /// Seconds spent in each mode before `first_track_s` (before the end
+    /// when the target was never tracked).
+    #[serde(default)]
+    pub time_in_mode_before_track_s: BTreeMap<String, f64>,
     /// CPU per agent.
     pub cpu: BTreeMap<String, AgentCpu>,
 }
@@ -295,6 +315,18 @@ pub fn time_in_modes(changes: &[ModeChange], end: f64) -> BTreeMap<String, f64> 
         let until = timed.get(i + 1).map_or(end, |n| n.0).max(*t);
         *out.entry((*m).to_owned()).or_insert(0.0) += until.min(end).max(*t) - t;
     }
+    out
+}
+
+/// The time of the first change into one of `modes`, if any (and timed).
+pub fn first_change_into(changes: &[ModeChange], modes: &[&str]) -> Option<f64> {
+    changes.iter().find(|c| modes.contains(&c.mode.as_str())).and_then(|c| c.t_s)
+}
+
+/// Seconds spent in each mode before `until` (modes not entered by then are left out).
+pub fn time_in_modes_before(changes: &[ModeChange], until: f64) -> BTreeMap<String, f64> {
+    let mut out = time_in_modes(changes, until);
+    out.retain(|_, s| *s > 0.0);
     out
 }
 

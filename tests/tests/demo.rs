@@ -1,10 +1,12 @@
 //! The exploration demo (`nerve demo explore`, docs/demo.md).
 //!
 //! * the analysis on synthetic ground truth: doorway crossing, reaching the
-//!   target after it settled, clearance and collisions;
+//!   target after it settled, clearance and collisions; the time explored
+//!   before the target was first tracked, from the decision maker's log;
 //! * the figures are written and not empty;
 //! * end to end: the whole robot against the simulator on two seeds and on
-//!   the second world must reach the doorway and the target without a
+//!   the second world must explore (follow walls) for a while before it sees
+//!   the person, then reach the doorway and the target without a
 //!   collision, and must do so when the tracker is killed mid-run (the
 //!   supervisor restarts it) and with a CPU-hungry agent added (the
 //!   resource manager lengthens periods).
@@ -12,6 +14,7 @@
 //! The end-to-end tests (`demo_*`) each run a whole robot in real time for
 //! about two minutes; `.config/nextest.toml` runs them one at a time.
 
+use nerve_demo::analysis::{EXPLORING_MODES, TRACKING_MODES, first_change_into, time_in_modes_before};
 use nerve_demo::{Criteria, Scene, analyse, read_truth};
 use nerve_tests::{Robot, reap, wait_until};
 use serde_json::Value;
@@ -72,11 +75,12 @@ fn tmp(tag: &str) -> PathBuf {
     std::env::temp_dir().join(format!("nerve-demo-test-{}-{tag}", std::process::id()))
 }
 
-/// Through the room, the doorway and the corridor to where the person
-/// stops, waiting there until the person has finished stepping back, then
-/// following them: doorway and target reached, no collision, positive clearance.
+/// Through the room (round the shelf's north end), the doorway and the
+/// corridor to where the person stops, waiting there until the person has
+/// finished stepping back, then following them: doorway and target reached,
+/// no collision, positive clearance.
 const GOOD_RUN: &[(f64, f64)] =
-    &[(1.1, 3.2), (2.5, 2.9), (3.4, 1.8), (4.8, 1.8), (6.0, 2.2), (10.0, 2.2), (12.0, 2.2), (11.4, 2.4)];
+    &[(1.0, 2.6), (1.6, 3.2), (4.6, 3.2), (4.8, 1.1), (6.0, 1.1), (10.0, 1.1), (12.0, 1.1), (11.4, 1.3)];
 
 #[test]
 fn analysis_of_a_good_synthetic_run() {
@@ -108,8 +112,8 @@ fn analysis_of_a_good_synthetic_run() {
 fn analysis_counts_collisions_clearance_and_misses() {
     let s = scene("explore.toml");
     let dir = tmp("bad");
-    // stays in the room and scrapes the boxes on the south wall (x = 3 .. 4.2, y = 0 .. 0.9)
-    let truth = synthetic(&dir, &[(1.1, 3.2), (2.6, 1.15), (4.5, 1.15)], &[], Some(10.0));
+    // stays in the room and scrapes the box on the south wall (x = 1.75 .. 2.65, y = 0 .. 0.7)
+    let truth = synthetic(&dir, &[(1.0, 2.6), (1.8, 0.95), (3.0, 0.95)], &[], Some(10.0));
     let rows = read_truth(&truth).expect("reads");
     let sum = analyse(&s, &rows, Criteria::default()).summary;
     assert!(!sum.reached_doorway && !sum.reached_target, "{sum:?}");
@@ -117,7 +121,7 @@ fn analysis_counts_collisions_clearance_and_misses() {
     assert!(sum.min_clearance_m.abs() < 0.02, "touching the boxes: {}", sum.min_clearance_m);
     // near the door, with a huge reach, but without going through the door
     // (e.g. a log of another world): not reached
-    let truth = synthetic(&dir, &[(6.0, 2.2), (6.5, 2.2)], &[], None);
+    let truth = synthetic(&dir, &[(6.0, 1.1), (6.5, 1.1)], &[], None);
     let rows = read_truth(&truth).expect("reads");
     let sum = analyse(&s, &rows, Criteria { target_reach_m: 10.0 }).summary;
     assert!(!sum.reached_doorway && !sum.reached_target, "{sum:?}");
@@ -128,7 +132,7 @@ fn analysis_counts_collisions_clearance_and_misses() {
     assert!(sum.reached_doorway && !sum.reached_target, "{sum:?}");
     assert!(sum.min_target_distance_m.is_some_and(|d| d < 1.5), "{sum:?}");
     // backing out through the door is not reaching it
-    let truth = synthetic(&dir, &[(8.0, 2.2), (6.0, 2.2)], &[], None);
+    let truth = synthetic(&dir, &[(8.0, 1.1), (6.0, 1.1)], &[], None);
     let rows = read_truth(&truth).expect("reads");
     let sum = analyse(&s, &rows, Criteria::default()).summary;
     assert!(!sum.reached_doorway, "wrong direction counts: {sum:?}");
@@ -139,14 +143,40 @@ fn analysis_counts_collisions_clearance_and_misses() {
 fn second_world_doorway_is_on_another_wall() {
     let s = scene("explore-2.toml");
     let d = s.doors[0].opening;
-    assert!((d.a.y - 6.0).abs() < 1e-9 && (d.b.y - 6.0).abs() < 1e-9, "door in the north wall: {d:?}");
+    assert!((d.a.y - 6.5).abs() < 1e-9 && (d.b.y - 6.5).abs() < 1e-9, "door in the north wall: {d:?}");
     let dir = tmp("w2");
-    let path = [(2.2, 1.0), (2.8, 3.0), (1.5, 5.0), (1.5, 7.0), (1.5, 11.2), (2.3, 10.1)];
+    // west along the south wing, north up the west wing, through the door
+    let path = [(5.6, 1.6), (2.0, 1.8), (1.5, 4.0), (1.5, 7.0), (1.5, 11.7), (2.3, 10.6)];
     let truth = synthetic(&dir, &path, &[(4, 80.0)], None);
     let rows = read_truth(&truth).expect("reads");
     let sum = analyse(&s, &rows, Criteria::default()).summary;
     assert!(sum.reached_doorway && sum.reached_target && sum.collisions == 0, "{sum:?}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn time_explored_before_the_target_is_tracked() {
+    let log = "00:00:01.000  INFO [decision] mode change: none -> avoid (danger unknown; rule 1)
+00:00:02.000  INFO [decision] mode change: avoid -> explore (danger none; rule 5)
+00:00:10.000  INFO [decision] mode change: explore -> lean (load critical; rule 4)
+00:00:14.500  INFO [decision] mode change: lean -> avoid (danger high; rule 1)
+00:00:16.000  INFO [decision] mode change: avoid -> track (target seen; rule 3)
+00:00:30.000  INFO [decision] mode change: track -> hold (target close; rule 2)
+00:00:40.000  INFO [decision] mode change: hold -> explore (target none; rule 5)
+";
+    let modes = nerve_demo::modes::parse_log(log, &nerve_demo::modes::ClockMap { sim_zero_s_of_day: Some(0.0) });
+    assert_eq!(modes.len(), 7);
+    let first = first_change_into(&modes, &TRACKING_MODES).expect("tracked");
+    assert!((first - 16.0).abs() < 1e-9, "{first}");
+    let before = time_in_modes_before(&modes, first);
+    let explored: f64 = EXPLORING_MODES.iter().filter_map(|m| before.get(*m)).sum();
+    assert!((explored - 12.5).abs() < 1e-9, "{before:?}");
+    assert!((before["avoid"] - 2.5).abs() < 1e-9, "{before:?}");
+    assert!(!before.contains_key("track") && !before.contains_key("hold"), "{before:?}");
+    // never tracked: everything counts, up to the end
+    let never = &modes[..3];
+    assert_eq!(first_change_into(never, &TRACKING_MODES), None);
+    assert!((time_in_modes_before(never, 20.0)["lean"] - 10.0).abs() < 1e-9);
 }
 
 #[test]
@@ -196,6 +226,11 @@ fn run_demo_with(r: &Robot, launch: &Path, args: &[&str], during: impl FnOnce(&R
         .arg(&out)
         .arg("--launch")
         .arg(launch)
+        // The demo's default limit is 140 s of simulated time. A run that
+        // loops round the shelf before it finds the doorway took 120 s (one
+        // in ten); the tests give such runs room rather than fail them,
+        // and still hold the whole run to the issue's 3 minutes of wall time.
+        .args(["--time-limit", "160"])
         .args(args)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
@@ -210,6 +245,19 @@ fn run_demo_with(r: &Robot, launch: &Path, args: &[&str], during: impl FnOnce(&R
     assert!(wall < Duration::from_secs(180), "took {wall:?}:\n{stdout}");
     let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json");
     let s: Value = serde_json::from_str(&text).expect("summary is JSON");
+    // the figures of the run, for the test's output (`--success-output final`)
+    println!(
+        "explored {:.1} s, first track {}, doorway {}, target {}, collisions {}, min clearance {} at {}, {} s simulated, {:.0} s wall",
+        explored_before_tracking(&s),
+        s["first_track_s"],
+        s["doorway_time_s"],
+        s["target_time_s"],
+        s["collisions"],
+        s["min_clearance_m"],
+        s["min_clearance_at_s"],
+        s["duration_s"],
+        wall.as_secs_f64()
+    );
     for f in ["trajectory.png", "trajectory.svg", "motion.png", "motion.svg", "truth.csv", "log.csv", "launch.toml"] {
         assert!(out.join(f).exists(), "{f} missing");
     }
@@ -223,7 +271,19 @@ fn world(name: &str) -> String {
     repo().join("worlds").join(name).display().to_string()
 }
 
+/// Seconds the decision maker spent in the wall-following modes (`explore`,
+/// `lean`) before it first tracked the target.
+fn explored_before_tracking(s: &Value) -> f64 {
+    EXPLORING_MODES.iter().filter_map(|m| s["time_in_mode_before_track_s"][*m].as_f64()).sum()
+}
+
+/// The run was a success: the robot explored the room before it saw the
+/// person (in both worlds the person is out of sight from the start), went
+/// through the doorway and followed the person, touching nothing.
 fn assert_success(s: &Value) {
+    assert!(s["first_track_s"].as_f64().is_some(), "the target was never tracked: {s:#}");
+    let explored = explored_before_tracking(s);
+    assert!(explored >= 5.0, "explored only {explored:.1} s before tracking the target: {s:#}");
     assert_eq!(s["reached_doorway"], true, "{s:#}");
     assert_eq!(s["reached_target"], true, "{s:#}");
     assert_eq!(s["collisions"], 0, "{s:#}");
@@ -232,8 +292,17 @@ fn assert_success(s: &Value) {
 }
 
 /// Removes the robot's home (the run's output) once a test has passed; a
-/// failed test leaves it for reading.
+/// failed test leaves it for reading. With `NERVE_DEMO_KEEP_RUNS=DIR` the
+/// run's summary and figures are copied to `DIR/<robot>/` first.
 fn clean_up(r: &Robot) {
+    if let Some(keep) = std::env::var_os("NERVE_DEMO_KEEP_RUNS") {
+        let to = Path::new(&keep).join(&r.name);
+        if std::fs::create_dir_all(&to).is_ok() {
+            for f in ["summary.json", "trajectory.png", "motion.png"] {
+                let _ = std::fs::copy(r.home.join("out").join(f), to.join(f));
+            }
+        }
+    }
     let _ = std::fs::remove_dir_all(&r.home);
 }
 

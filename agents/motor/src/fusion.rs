@@ -30,8 +30,11 @@
 //! **Fusion.** Per dimension (v and ω), the target is the weighted mean of
 //! every fresh numeric command (weight of its sender) and of the linguistic
 //! result (weight Σ sender weight × intensity of the rules that fired on that
-//! dimension). A dimension nobody speaks about keeps its current value; with
-//! no fresh command at all the base stops (dead man).
+//! dimension). A dimension nobody speaks about keeps its current value; when
+//! no fresh command carries a positive weight — none at all (dead man), or
+//! every fresh sender weighted 0 (e.g. the decision maker gave the foot to
+//! a source that died) — the target is zero on both dimensions: the base
+//! stops and does not turn.
 //!
 //! **Safety.** Any active stop (input `stop`) wins over everything: the
 //! speed is set to 0 at once (not ramped; the board decelerates at its own
@@ -88,6 +91,10 @@ pub struct Decision {
     pub stopped_by: Option<String>,
     /// Senders with a fresh command.
     pub sources: usize,
+    /// Senders with a fresh command that counts: a positive weight (and,
+    /// for a linguistic command, a positive intensity). With none the base
+    /// stops.
+    pub weighted: usize,
 }
 
 /// The fusion state of one base; see the module documentation.
@@ -199,8 +206,10 @@ impl Fusion {
         let dt = dt.clamp(1e-3, 1.0);
         let (turn, accel) = self.linguistic(l, weights, default_w);
         let (mut v_num, mut v_den, mut w_num, mut w_den) = (0.0, 0.0, 0.0, 0.0);
+        let mut weighted = 0;
         for (sender, c) in &self.numeric {
             let w = weights.of(sender, default_w);
+            weighted += usize::from(w > 0.0);
             v_num += w * c.v;
             v_den += w;
             w_num += w * c.omega;
@@ -214,8 +223,10 @@ impl Fusion {
             w_num += w * omega;
             w_den += w;
         }
+        weighted += self.said.iter().filter(|(sender, s)| weights.of(sender, default_w) * s.intensity > 0.0).count();
         let sources = self.numeric.len() + self.said.len();
-        let idle = sources == 0;
+        // nobody fresh with a positive weight: stop, do not keep the last speed and turn
+        let idle = weighted == 0;
         let pick = |num: f64, den: f64, current: f64| {
             if den > 1e-12 {
                 num / den
@@ -240,7 +251,7 @@ impl Fusion {
         }
         self.v = v;
         self.omega = omega;
-        Decision { v, omega, target_v, target_omega, stopped_by, sources }
+        Decision { v, omega, target_v, target_omega, stopped_by, sources, weighted }
     }
 }
 
@@ -367,5 +378,44 @@ mod tests {
         let fast = VelocityCommand { v: 3.0, omega: 0.0, stamp_ns: NOW + 600_000_000 };
         assert!(f.offer_numeric("b", &fast, NOW + 600_000_000, &l).is_err());
         assert_eq!(f.decide(NOW + 600_000_000, 0.05, &l, &w, 1.0).sources, 0);
+    }
+
+    #[test]
+    fn fresh_sources_all_weighted_zero_stop_the_base() {
+        let l = Limits::H1;
+        let mut f = Fusion::new(0.3);
+        // the tracker drives alone (the decision maker's `hold`), the others silenced
+        let w = Weights::parse("tracker:1,safety:0,wall-follow:0").expect("w");
+        let mut t = NOW;
+        let cmd = |v, omega, stamp_ns| VelocityCommand { v, omega, stamp_ns };
+        for _ in 0..40 {
+            t += 50_000_000;
+            f.offer_numeric("tracker", &cmd(0.3, 0.5, t), t, &l).expect("ok");
+            f.offer_numeric("safety", &cmd(0.2, 0.0, t), t, &l).expect("ok");
+            f.decide(t, 0.05, &l, &w, 1.0);
+        }
+        let (v, omega) = f.applied();
+        assert!(v > 0.25 && omega > 0.45, "driving: {v} {omega}");
+        // the tracker dies: only the safety monitor (weight 0) and a
+        // linguistic source (weight 0) stay fresh; its last command goes stale
+        t += l.stale_ns + 1;
+        for _ in 0..40 {
+            t += 50_000_000;
+            f.offer_numeric("safety", &cmd(0.2, 0.0, t), t, &l).expect("ok");
+            f.offer_linguistic("wall-follow", &LinguisticCommand::new(LinguisticTerm::TurnLeftMuch, 1.0, t), t, &l)
+                .expect("ok");
+            let d = f.decide(t, 0.05, &l, &w, 1.0);
+            assert_eq!((d.target_v, d.target_omega), (0.0, 0.0), "a weight-0 source keeps it going: {d:?}");
+            assert_eq!((d.sources, d.weighted), (2, 0));
+        }
+        assert_eq!(f.applied(), (0.0, 0.0), "ramped down to a standstill");
+        // a linguistic command of intensity 0 does not count either
+        f.offer_linguistic("joystick", &LinguisticCommand::new(LinguisticTerm::TurnLeftMuch, 0.0, t), t, &l)
+            .expect("ok");
+        assert_eq!(f.decide(t, 0.05, &l, &w, 1.0).weighted, 0);
+        // a source with a positive weight drives again
+        f.offer_numeric("tracker", &cmd(0.1, 0.0, t), t, &l).expect("ok");
+        let d = f.decide(t, 0.05, &l, &w, 1.0);
+        assert_eq!((d.target_v, d.weighted), (0.1, 1));
     }
 }

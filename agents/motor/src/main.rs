@@ -268,9 +268,13 @@ impl Agent for Motor {
             }
             self.last_stopped_by = d.stopped_by.clone();
         }
-        let idle = d.sources == 0;
+        let idle = d.weighted == 0;
         if idle && !self.was_idle {
-            tracing::info!("no fresh command from any source: stopping (dead man)");
+            if d.sources == 0 {
+                tracing::info!("no fresh command from any source: stopping (dead man)");
+            } else {
+                tracing::info!("{} fresh source(s), none with a positive weight: stopping", d.sources);
+            }
         }
         self.was_idle = idle;
         let (left, right) = wheel_speeds(d.v, d.omega, self.geometry.wheel_base_mm / 1000.0, self.wheel_max_mm_s);

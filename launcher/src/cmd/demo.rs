@@ -29,7 +29,9 @@ use super::logs::{INTERRUPTED, Tail, catch_interrupts};
 use crate::client::RouterSession;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
-use nerve_demo::analysis::{DoorwayWatch, at_target, time_in_modes};
+use nerve_demo::analysis::{
+    DoorwayWatch, EXPLORING_MODES, TRACKING_MODES, at_target, first_change_into, time_in_modes, time_in_modes_before,
+};
 use nerve_demo::cpu::CpuTable;
 use nerve_demo::modes::{ClockMap, now_s_of_day, parse_change, parse_log};
 use nerve_demo::truth::TruthTail;
@@ -291,6 +293,8 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     s.robot = robot.to_owned();
     s.end_reason = end.reason();
     s.time_in_mode_s = time_in_modes(&modes, s.duration_s);
+    s.first_track_s = first_change_into(&modes, &TRACKING_MODES);
+    s.time_in_mode_before_track_s = time_in_modes_before(&modes, s.first_track_s.unwrap_or(s.duration_s));
     s.mode_changes = modes.clone();
     s.cpu = cpu;
     s.wall_time_s = t_wall.elapsed().as_secs_f64();
@@ -301,9 +305,11 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     let json = serde_json::to_string_pretty(&s)?;
     std::fs::write(out.join("summary.json"), json + "\n").context("cannot write summary.json")?;
 
+    let explored: f64 = EXPLORING_MODES.iter().filter_map(|m| s.time_in_mode_before_track_s.get(*m)).sum();
     println!(
-        "{}: doorway {}{}, target {}{}, {} collision(s), min clearance {:.2} m, {:.1} s simulated, {} mode change(s), {:.0} s wall",
+        "{}: explored {explored:.1} s{}, doorway {}{}, target {}{}, {} collision(s), min clearance {:.2} m, {:.1} s simulated, {} mode change(s), {:.0} s wall",
         s.end_reason,
+        s.first_track_s.map(|t| format!(" before tracking at {t:.1} s")).unwrap_or_else(|| ", never tracked".into()),
         if s.reached_doorway { "reached" } else { "NOT reached" },
         s.doorway_time_s.map(|t| format!(" at {t:.1} s")).unwrap_or_default(),
         if s.reached_target { "reached" } else { "NOT reached" },
