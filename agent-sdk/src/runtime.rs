@@ -268,10 +268,11 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         log_file: readiness.pid_file().map(|_| world.log_file(name).display().to_string()),
         suspended: args.suspended,
     };
-    let mut link = RouterLink::new(&world, &node);
-    stage("router epoch subscribed");
+    let mut link = RouterLink::new();
     let registered = link.register(&node, &world, &registration, &shared);
     stage("registration answered");
+    link.watch_epoch(&world, &node);
+    stage("router epoch subscribed");
     match registered {
         Ok(()) => {}
         Err(RegisterError::Refused(e)) => return Err(e.to_string()),
@@ -556,15 +557,22 @@ pub fn epoch_service(
 }
 
 impl RouterLink {
-    fn new(world: &World, node: &Node<Ipc>) -> Self {
-        let epoch = match epoch_service(node, world) {
+    fn new() -> Self {
+        RouterLink { client: None, epoch: None, registered: None }
+    }
+
+    /// Subscribes to the router's epoch. Done after the first registration,
+    /// which is on the path of a hot-add: the subscription keeps the latest
+    /// epoch (history 1), so a router that restarted in between is still
+    /// noticed by the next [`RouterLink::poll`].
+    fn watch_epoch(&mut self, world: &World, node: &Node<Ipc>) {
+        self.epoch = match epoch_service(node, world) {
             Ok(f) => f.subscriber_builder().buffer_size(1).history_request(1).create().ok(),
             Err(e) => {
                 tracing::warn!("{e}; a restarted router will not be noticed");
                 None
             }
         };
-        RouterLink { client: None, epoch, registered: None }
     }
 
     fn register(

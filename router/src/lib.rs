@@ -273,7 +273,10 @@ impl State {
             }
         }
         let name = reg.name.clone();
-        let client = self.open_agent(&name);
+        // The agent's control client is opened when first needed (by the
+        // rewiring queued below, right after this reply), not before the
+        // reply: the agent goes on starting its threads meanwhile.
+        let client = None;
         tracing::info!(
             "agent {name} registered: kind {}, pid {}, {}, inputs [{}], outputs [{}]",
             reg.kind,
