@@ -14,6 +14,7 @@
 //!   and idles until stopped.
 
 use crate::payloads::BenchPayload;
+use crate::procs::parse_sub;
 use crate::with_payload;
 use agent_sdk::clock::now_ns;
 use agent_sdk::{Agent, AgentError, CommonArgs, Context, Input, Output, Setup, Task};
@@ -68,8 +69,9 @@ pub fn read_values(path: &Path) -> anyhow::Result<Vec<u64>> {
         .collect()
 }
 
-/// The ping side of the SDK round trip.
-struct Ping<P: BenchPayload> {
+/// The round-trip bookkeeping of a ping agent, shared by the event-driven
+/// [`Ping`] and the polling [`PollPing`].
+struct PingSide<P: BenchPayload> {
     input: Input<P>,
     out: Output<P>,
     count: usize,
@@ -81,29 +83,21 @@ struct Ping<P: BenchPayload> {
     rtts: Vec<u64>,
 }
 
-impl<P: BenchPayload> Ping<P> {
-    fn send_next(&mut self) -> Result<(), AgentError> {
-        self.seq += 1;
-        let seq = self.seq;
-        let t0 = now_ns();
-        self.outstanding = Some((seq, t0));
-        // SAFETY: bench payloads are a sequence number plus plain bytes; any bytes are valid.
-        unsafe { self.out.send_uninit(|p| P::write_seq_raw(p.as_mut_ptr(), seq)) }?;
-        Ok(())
-    }
+/// What one look at a ping's input found.
+struct Collected {
+    /// samples drained
+    drained: usize,
+    /// the echo of the sample in flight came back
+    echo: bool,
+    /// ... and it completed the batch, which is written
+    batch_done: bool,
 }
 
-impl<P: BenchPayload> Agent for Ping<P> {
-    const KIND: &'static str = "bench-ping";
-
-    fn task() -> Task {
-        Task::EventDriven
-    }
-
-    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+impl<P: BenchPayload> PingSide<P> {
+    fn new(setup: &mut Setup, kind: &str) -> Result<Self, AgentError> {
         let a = agent_args(setup)?;
-        let dir = a.out.ok_or_else(|| AgentError::Config("ping needs --out DIR".into()))?;
-        Ok(Ping {
+        let dir = a.out.ok_or_else(|| AgentError::Config(format!("{kind} needs --out DIR")))?;
+        Ok(PingSide {
             input: setup.input("in")?,
             out: setup.output("out")?,
             count: a.count.max(1),
@@ -115,7 +109,30 @@ impl<P: BenchPayload> Agent for Ping<P> {
         })
     }
 
-    fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+    fn send_next(&mut self) -> Result<(), AgentError> {
+        self.seq += 1;
+        let seq = self.seq;
+        let t0 = now_ns();
+        self.outstanding = Some((seq, t0));
+        // SAFETY: bench payloads are a sequence number plus plain bytes; any bytes are valid.
+        unsafe { self.out.send_uninit(|p| P::write_seq_raw(p.as_mut_ptr(), seq)) }?;
+        Ok(())
+    }
+
+    /// Whether the sample in flight has waited longer than any echo would.
+    fn stalled(&self) -> bool {
+        self.outstanding.is_some_and(|(_, t0)| now_ns().saturating_sub(t0) > 500_000_000)
+    }
+
+    /// Forgets a batch under way.
+    fn restart(&mut self) {
+        self.outstanding = None;
+        self.rtts.clear();
+    }
+
+    /// Drains the input; records the round trip when the echo of the sample
+    /// in flight is among it, and writes `batch-<k>.txt` when the batch is full.
+    fn collect(&mut self) -> Result<Collected, AgentError> {
         let want = self.outstanding.map(|(s, _)| s);
         let mut seen_at = None;
         let drained = self.input.drain(|_, p| {
@@ -123,29 +140,61 @@ impl<P: BenchPayload> Agent for Ping<P> {
                 seen_at = Some(now_ns());
             }
         });
-        match (seen_at, self.outstanding) {
-            (Some(t), Some((_, t0))) => {
-                self.rtts.push(t.saturating_sub(t0));
-                self.outstanding = None;
-                if self.rtts.len() >= self.count {
-                    self.batch += 1;
-                    let path = self.dir.join(format!("batch-{}.txt", self.batch));
-                    write_values(&path, &self.rtts)
-                        .map_err(|e| AgentError::Other(format!("cannot write {}: {e}", path.display())))?;
-                    self.rtts.clear();
-                    Ok(())
-                } else {
-                    self.send_next()
-                }
-            }
-            // woken without input: a `nerve resume` starts a batch, or restarts a stalled one
-            _ if drained == 0 => match self.outstanding {
-                None => self.send_next(),
-                Some((_, t0)) if now_ns().saturating_sub(t0) > 500_000_000 => self.send_next(),
-                Some(_) => Ok(()),
-            },
-            _ => Ok(()), // a stale echo
+        let (Some(t), Some((_, t0))) = (seen_at, self.outstanding) else {
+            return Ok(Collected { drained, echo: false, batch_done: false });
+        };
+        self.rtts.push(t.saturating_sub(t0));
+        self.outstanding = None;
+        let batch_done = self.rtts.len() >= self.count;
+        if batch_done {
+            self.batch += 1;
+            let path = self.dir.join(format!("batch-{}.txt", self.batch));
+            write_values(&path, &self.rtts)
+                .map_err(|e| AgentError::Other(format!("cannot write {}: {e}", path.display())))?;
+            self.rtts.clear();
         }
+        Ok(Collected { drained, echo: true, batch_done })
+    }
+}
+
+/// Echoes every sample of `input` on `out`, writing only the sequence number in place.
+fn echo_all<P: BenchPayload>(input: &Input<P>, out: &Output<P>) -> Result<(), AgentError> {
+    let mut result = Ok(());
+    input.drain(|_, p| {
+        let seq = p.seq();
+        // SAFETY: as in `PingSide::send_next`: any bytes are valid beside the sequence number.
+        if let Err(e) = unsafe { out.send_uninit(|q| P::write_seq_raw(q.as_mut_ptr(), seq)) } {
+            result = Err(e);
+        }
+    });
+    Ok(result?)
+}
+
+/// The ping side of the SDK round trip.
+struct Ping<P: BenchPayload>(PingSide<P>);
+
+impl<P: BenchPayload> Agent for Ping<P> {
+    const KIND: &'static str = "bench-ping";
+
+    fn task() -> Task {
+        Task::EventDriven
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        Ok(Ping(PingSide::new(setup, "ping")?))
+    }
+
+    fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        let side = &mut self.0;
+        let c = side.collect()?;
+        if c.echo {
+            return if c.batch_done { Ok(()) } else { side.send_next() };
+        }
+        // woken without input: a `nerve resume` starts a batch, or restarts a stalled one
+        if c.drained == 0 && (side.outstanding.is_none() || side.stalled()) {
+            return side.send_next();
+        }
+        Ok(()) // a stale echo, or the echo still on its way
     }
 }
 
@@ -168,15 +217,7 @@ impl<P: BenchPayload> Agent for Pong<P> {
     }
 
     fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        let mut result = Ok(());
-        self.input.drain(|_, p| {
-            let seq = p.seq();
-            // SAFETY: as in `Ping::send_next`: any bytes are valid beside the sequence number.
-            if let Err(e) = unsafe { self.out.send_uninit(|q| P::write_seq_raw(q.as_mut_ptr(), seq)) } {
-                result = Err(e);
-            }
-        });
-        Ok(result?)
+        echo_all(&self.input, &self.out)
     }
 }
 
@@ -186,14 +227,7 @@ impl<P: BenchPayload> Agent for Pong<P> {
 /// batch of `count` round trips; when it is written the agent idles until
 /// the next resume (the benchmark suspends it in between).
 struct PollPing<P: BenchPayload> {
-    input: Input<P>,
-    out: Output<P>,
-    count: usize,
-    dir: PathBuf,
-    batch: u64,
-    seq: u64,
-    outstanding: Option<(u64, u64)>,
-    rtts: Vec<u64>,
+    side: PingSide<P>,
     /// a batch is under way
     running: bool,
     /// when the last cycle ran
@@ -208,56 +242,21 @@ impl<P: BenchPayload> Agent for PollPing<P> {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let a = agent_args(setup)?;
-        let dir = a.out.ok_or_else(|| AgentError::Config("poll-ping needs --out DIR".into()))?;
-        Ok(PollPing {
-            input: setup.input("in")?,
-            out: setup.output("out")?,
-            count: a.count.max(1),
-            dir,
-            batch: 0,
-            seq: 0,
-            outstanding: None,
-            rtts: Vec::with_capacity(a.count.max(1)),
-            running: false,
-            last_step_ns: 0,
-        })
+        Ok(PollPing { side: PingSide::new(setup, "poll-ping")?, running: false, last_step_ns: 0 })
     }
 
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
         // a gap between two cycles means the agent was suspended: a resume starts a batch
         if ctx.now_ns().saturating_sub(self.last_step_ns) > 50_000_000 {
             self.running = true;
-            self.outstanding = None;
-            self.rtts.clear();
+            self.side.restart();
         }
         self.last_step_ns = ctx.now_ns();
-        let want = self.outstanding.map(|(s, _)| s);
-        let mut seen_at = None;
-        self.input.drain(|_, p| {
-            if Some(p.seq()) == want {
-                seen_at = Some(now_ns());
-            }
-        });
-        if let (Some(t), Some((_, t0))) = (seen_at, self.outstanding) {
-            self.rtts.push(t.saturating_sub(t0));
-            self.outstanding = None;
-            if self.rtts.len() >= self.count {
-                self.batch += 1;
-                self.running = false;
-                let path = self.dir.join(format!("batch-{}.txt", self.batch));
-                write_values(&path, &self.rtts)
-                    .map_err(|e| AgentError::Other(format!("cannot write {}: {e}", path.display())))?;
-                self.rtts.clear();
-            }
+        if self.side.collect()?.batch_done {
+            self.running = false;
         }
-        let stalled = self.outstanding.is_some_and(|(_, t0)| now_ns().saturating_sub(t0) > 500_000_000);
-        if self.running && (self.outstanding.is_none() || stalled) {
-            self.seq += 1;
-            let seq = self.seq;
-            self.outstanding = Some((seq, now_ns()));
-            // SAFETY: as in `Ping::send_next`.
-            unsafe { self.out.send_uninit(|p| P::write_seq_raw(p.as_mut_ptr(), seq)) }?;
+        if self.running && (self.side.outstanding.is_none() || self.side.stalled()) {
+            self.side.send_next()?;
         }
         Ok(())
     }
@@ -283,15 +282,7 @@ impl<P: BenchPayload> Agent for PollPong<P> {
     }
 
     fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        let mut result = Ok(());
-        self.input.drain(|_, p| {
-            let seq = p.seq();
-            // SAFETY: as in `Ping::send_next`.
-            if let Err(e) = unsafe { self.out.send_uninit(|q| P::write_seq_raw(q.as_mut_ptr(), seq)) } {
-                result = Err(e);
-            }
-        });
-        Ok(result?)
+        echo_all(&self.input, &self.out)
     }
 }
 
@@ -359,12 +350,9 @@ impl Agent for Jitter {
 
 /// Entry of the hidden agent subcommands: `args` is everything after the subcommand.
 pub fn run_agent(which: &str, args: Vec<String>) -> ExitCode {
-    let common = match CommonArgs::try_parse_from(std::iter::once(format!("nerve-bench {which}")).chain(args)) {
+    let common: CommonArgs = match parse_sub(&format!("nerve-bench {which}"), args) {
         Ok(c) => c,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(2);
-        }
+        Err(code) => return code,
     };
     let size = match BenchAgentArgs::try_parse_from(&common.args) {
         Ok(a) => a.size,

@@ -23,12 +23,11 @@ use crate::machine::{Machine, command_line};
 use crate::payloads::{BenchPayload, SIZES, label};
 use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file};
 use crate::raw::{Mode, Side};
-use crate::stats::{Summary, median_f64, ratio};
+use crate::stats::{Rounds, Summary, median_f64, ratio};
 use crate::uds::UdsPing;
 use crate::with_payload;
 use anyhow::{Context as _, Result, anyhow, bail};
 use serde::Serialize;
-use std::io::BufRead as _;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
@@ -251,25 +250,17 @@ impl Pinger for NervePing {
     }
 }
 
-fn agent_name(prefix: &str, size: usize) -> String {
-    let s = match size {
-        8 => "8".to_owned(),
-        230_400 => "230k".to_owned(),
-        _ => "6m".to_owned(),
-    };
-    format!("{prefix}-{s}")
+/// The short form of a payload size in agent names: `8`, `230k`, `6m`.
+pub(crate) fn size_tag(size: usize) -> &'static str {
+    match size {
+        8 => "8",
+        230_400 => "230k",
+        _ => "6m",
+    }
 }
 
-/// Reads the `ready` line of a child, with its exit as an error.
-fn await_ready(child: &mut ChildGuard, what: &str) -> Result<()> {
-    let out = child.stdout().ok_or_else(|| anyhow!("{what}: no stdout"))?;
-    let mut line = String::new();
-    std::io::BufReader::new(out).read_line(&mut line).with_context(|| format!("{what}: reading readiness"))?;
-    if line.trim() != "ready" {
-        child.check_alive()?;
-        bail!("{what} did not become ready (said {line:?})");
-    }
-    Ok(())
+fn agent_name(prefix: &str, size: usize) -> String {
+    format!("{prefix}-{}", size_tag(size))
 }
 
 fn measure_fill(size: usize) -> FillCost {
@@ -349,7 +340,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 cmd.stderr(Stdio::null());
             }
             let mut c = ChildGuard::spawn(&format!("raw pong {mode} {size}"), cmd)?;
-            await_ready(&mut c, "raw iceoryx2 pong")?;
+            c.await_ready("raw iceoryx2 pong")?;
             children.push(c);
         }
         let path = robot.home.join(format!("uds-{size}.sock"));
@@ -359,7 +350,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             cmd.stderr(Stdio::null());
         }
         let mut c = ChildGuard::spawn(&format!("socket pong {size}"), cmd)?;
-        await_ready(&mut c, "socket pong")?;
+        c.await_ready("socket pong")?;
         children.push(c);
     }
 
@@ -410,26 +401,19 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         opts.sizes.iter().map(|&s| (s, Vec::new(), Vec::new())).collect();
     realtime_like_an_agent(20);
 
-    let mut samples: Vec<Vec<u64>> = vec![Vec::new(); pingers.len()];
-    let mut round_p50: Vec<Vec<u64>> = vec![Vec::new(); pingers.len()];
+    let mut rounds = Rounds::new(pingers.len(), DISCARD);
     let result = (|| -> Result<()> {
         // a quick run has no warm-up round (the first samples of each batch are still dropped)
         for round in usize::from(opts.quick)..=opts.rounds {
             let t_round = Instant::now();
             for &size in &opts.sizes {
                 let idx: Vec<usize> = (0..pingers.len()).filter(|&i| pingers[i].0 == size).collect();
-                // rotate the order every round so that no transport always runs first
-                for k in 0..idx.len() {
-                    let i = idx[(k + round) % idx.len()];
+                for i in Rounds::order(&idx, round) {
                     let v = pingers[i]
                         .2
                         .batch(&robot, count_of(size))
                         .with_context(|| format!("{} at {} B, round {round}", pingers[i].1, size))?;
-                    if round > 0 {
-                        let kept = &v[DISCARD.min(v.len())..];
-                        round_p50[i].push(Summary::of(kept).p50_ns);
-                        samples[i].extend_from_slice(kept);
-                    }
+                    rounds.keep(i, round, &v);
                 }
                 if let Some(peer) = &dds_peer {
                     let secs = if opts.quick {
@@ -458,7 +442,9 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                     .iter()
                     .enumerate()
                     .filter(|(_, p)| p.0 == size)
-                    .map(|(i, p)| format!("{} {:.1}us", p.1, round_p50[i].last().copied().unwrap_or(0) as f64 / 1e3))
+                    .map(|(i, p)| {
+                        format!("{} {:.1}us", p.1, rounds.round_p50[i].last().copied().unwrap_or(0) as f64 / 1e3)
+                    })
                     .collect();
                 eprintln!("  {:>7}: {}", label(size), line.join(", "));
             }
@@ -478,13 +464,13 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     for &size in &opts.sizes {
         for t in TRANSPORTS {
             if t == "ddsperf" {
-                if let Some((_, iv, rounds)) = dds_intervals.iter().find(|d| d.0 == size && !d.1.is_empty()) {
+                if let Some((_, iv, dds_round_p50)) = dds_intervals.iter().find(|d| d.0 == size && !d.1.is_empty()) {
                     results.push(HopResult {
                         transport: t.into(),
                         size,
                         label: label(size).into(),
                         rtt: dds::summarise(iv),
-                        round_p50_ns: rounds.clone(),
+                        round_p50_ns: dds_round_p50.clone(),
                     });
                 }
                 continue;
@@ -497,8 +483,8 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 transport: t.into(),
                 size,
                 label: label(size).into(),
-                rtt: Summary::of(&samples[i]),
-                round_p50_ns: round_p50[i].clone(),
+                rtt: Summary::of(&rounds.samples[i]),
+                round_p50_ns: rounds.round_p50[i].clone(),
             });
         }
     }

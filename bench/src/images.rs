@@ -35,11 +35,10 @@ pub use uds::reader_main as uds_reader_main;
 use crate::machine::{Machine, command_line};
 use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file};
 use crate::stats::{Summary, median_f64, ratio, us};
-use anyhow::{Context as _, Result, anyhow, bail};
+use anyhow::{Context as _, Result, bail};
 use frame::{Acks, BatchReq, FramePub, Mode, ReaderRec, Res, WriterBatch};
 use serde::Serialize;
 use std::collections::HashMap;
-use std::io::BufRead as _;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
@@ -338,18 +337,6 @@ fn mkdir(p: &Path) -> Result<()> {
     std::fs::create_dir_all(p).with_context(|| format!("cannot create {}", p.display()))
 }
 
-/// Reads the `ready` line of a child, with its exit as an error.
-fn await_ready(child: &mut ChildGuard, what: &str) -> Result<()> {
-    let out = child.stdout().ok_or_else(|| anyhow!("{what}: no stdout"))?;
-    let mut line = String::new();
-    std::io::BufReader::new(out).read_line(&mut line).with_context(|| format!("{what}: reading readiness"))?;
-    if line.trim() != "ready" {
-        child.check_alive()?;
-        bail!("{what} did not become ready (said {line:?})");
-    }
-    Ok(())
-}
-
 fn stm_writer_name(res: Res) -> String {
     format!("iw-{}", res.key)
 }
@@ -491,7 +478,7 @@ pub fn run(opts: &ImagesOpts) -> Result<ImagesReport> {
         }
     }
     for mut c in pending {
-        await_ready(&mut c, "image reader")?;
+        c.await_ready("image reader")?;
         children.push(c);
     }
     let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();

@@ -16,11 +16,11 @@
 //! `three-hop / one hop = three-hop / (one-hop round trip / 2)`, target 3.3:
 //! three times one hop plus 10%.
 
-use crate::hop::{NervePing, default_count, spawn_bench_agent};
+use crate::hop::{NervePing, default_count, size_tag, spawn_bench_agent};
 use crate::machine::{Machine, command_line};
 use crate::payloads::{SIZES, label};
 use crate::procs::{ChildGuard, Robot};
-use crate::stats::{Summary, median_f64, ratio, us};
+use crate::stats::{Rounds, Summary, median_f64, ratio, us};
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -105,14 +105,6 @@ pub struct PipelineReport {
     pub seconds: f64,
 }
 
-fn tag(size: usize) -> &'static str {
-    match size {
-        8 => "8",
-        230_400 => "230k",
-        _ => "6m",
-    }
-}
-
 /// Runs the scenario.
 pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
     let started = Instant::now();
@@ -131,7 +123,7 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
     // (size, path, hops, ping)
     let mut paths: Vec<(usize, &'static str, u32, NervePing)> = Vec::new();
     for &(size, count) in &counts {
-        let t = tag(size);
+        let t = size_tag(size);
         let (p1, q1, p3, s3, f3) =
             (format!("p1-{t}"), format!("q1-{t}"), format!("p3-{t}"), format!("sonar-{t}"), format!("safety-{t}"));
         for (role, name) in [("ping", &p1), ("pong", &q1), ("ping", &p3), ("pong", &s3), ("pong", &f3)] {
@@ -146,7 +138,7 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
     robot.wait_registered(&refs, Duration::from_secs(20))?;
     for &size in &opts.sizes {
-        let t = tag(size);
+        let t = size_tag(size);
         for (from, to) in [
             (format!("p1-{t}/out"), format!("q1-{t}/in")),
             (format!("q1-{t}/out"), format!("p1-{t}/in")),
@@ -159,24 +151,18 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
     }
     eprintln!("pipeline: agents running and connected");
 
-    let mut samples: Vec<Vec<u64>> = vec![Vec::new(); paths.len()];
-    let mut round_p50: Vec<Vec<u64>> = vec![Vec::new(); paths.len()];
+    let mut rounds = Rounds::new(paths.len(), DISCARD);
     let result = (|| -> Result<()> {
         for round in usize::from(opts.quick)..=opts.rounds {
             let t_round = Instant::now();
             for &size in &opts.sizes {
                 let idx: Vec<usize> = (0..paths.len()).filter(|&i| paths[i].0 == size).collect();
-                for k in 0..idx.len() {
-                    let i = idx[(k + round) % idx.len()];
+                for i in Rounds::order(&idx, round) {
                     let v = paths[i]
                         .3
                         .run_batch(&robot)
                         .with_context(|| format!("{} at {size} B, round {round}", paths[i].1))?;
-                    if round > 0 {
-                        let kept = &v[DISCARD.min(v.len())..];
-                        round_p50[i].push(Summary::of(kept).p50_ns);
-                        samples[i].extend_from_slice(kept);
-                    }
+                    rounds.keep(i, round, &v);
                 }
             }
             let what = if round == 0 { "warm-up".to_owned() } else { format!("round {round}/{}", opts.rounds) };
@@ -197,8 +183,8 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
             size: *size,
             label: label(*size).into(),
             hops: *hops,
-            latency: Summary::of(&samples[i]),
-            round_p50_ns: round_p50[i].clone(),
+            latency: Summary::of(&rounds.samples[i]),
+            round_p50_ns: rounds.round_p50[i].clone(),
         })
         .collect();
     let mut ratios = Vec::new();

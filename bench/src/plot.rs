@@ -7,10 +7,11 @@ use anyhow::{Result, anyhow};
 use plotters::prelude::*;
 use std::path::Path;
 
-fn colour(t: &str) -> RGBColor {
+/// The colour of a transport, the same in every plot.
+pub(crate) fn colour(t: &str) -> RGBColor {
     match t {
-        "nerve" => RGBColor(200, 30, 30),
-        "iox2-waitset" => RGBColor(30, 90, 200),
+        "nerve" | "stm" => RGBColor(200, 30, 30),
+        "iox2-waitset" | "iox2-slice" => RGBColor(30, 90, 200),
         "iox2-listener" => RGBColor(20, 150, 60),
         "iox2-waitset-fill" => RGBColor(230, 140, 20),
         "ddsperf" => RGBColor(140, 60, 170),
@@ -20,6 +21,64 @@ fn colour(t: &str) -> RGBColor {
     }
 }
 
+/// A logarithmic y range (µs) that holds every value of `ys`, with a margin.
+pub(crate) fn log_range(ys: &[f64]) -> std::ops::Range<f64> {
+    let ymax = ys.iter().copied().fold(10.0, f64::max) * 2.0;
+    let ymin = ys.iter().copied().filter(|v| *v > 0.0).fold(f64::MAX, f64::min).min(ymax / 10.0) / 2.0;
+    ymin.max(0.1)..ymax
+}
+
+/// Formats a value of a logarithmic µs axis.
+pub(crate) fn us_label(v: &f64) -> String {
+    if *v >= 10.0 { format!("{v:.0}") } else { format!("{v:.1}") }
+}
+
+/// Draws one transport: `pts` are (x, main value, second value); the main
+/// values as a thick line with dots (and the legend entry), the second as a
+/// thin line with crosses.
+pub(crate) fn draw_transport<DB, X, Y>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<X, Y>>,
+    label: &str,
+    pts: &[(f64, f64, f64)],
+) -> Result<(), String>
+where
+    DB: DrawingBackend,
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+    let c = colour(label);
+    chart
+        .draw_series(LineSeries::new(pts.iter().map(|p| (p.0, p.1)), c.stroke_width(3)))
+        .map_err(e)?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
+    chart.draw_series(pts.iter().map(|p| Circle::new((p.0, p.1), 5, c.filled()))).map_err(e)?;
+    chart.draw_series(LineSeries::new(pts.iter().map(|p| (p.0, p.2)), c.stroke_width(1))).map_err(e)?;
+    chart.draw_series(pts.iter().map(|p| Cross::new((p.0, p.2), 5, c.stroke_width(1)))).map_err(e)?;
+    Ok(())
+}
+
+/// Draws the legend in the upper left corner.
+pub(crate) fn draw_legend<'a, DB, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    font_size: u32,
+) -> Result<(), String>
+where
+    DB: DrawingBackend + 'a,
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", font_size))
+        .draw()
+        .map_err(|x| x.to_string())
+}
+
 /// Draws `report` into `path` (PNG, 1000x640).
 pub fn hop_png(report: &HopReport, path: &Path) -> Result<()> {
     let e = |x: &dyn std::fmt::Display| anyhow!("plot {}: {x}", path.display());
@@ -27,8 +86,6 @@ pub fn hop_png(report: &HopReport, path: &Path) -> Result<()> {
     root.fill(&WHITE).map_err(|x| e(&x))?;
     let ys: Vec<f64> =
         report.results.iter().flat_map(|r| [r.rtt.p50_ns, r.rtt.p99_ns]).map(|v| v as f64 / 1e3).collect();
-    let ymax = ys.iter().copied().fold(10.0, f64::max) * 2.0;
-    let ymin = ys.iter().copied().filter(|v| *v > 0.0).fold(f64::MAX, f64::min).min(ymax / 10.0) / 2.0;
     let title = format!(
         "one-hop round trip, 2 processes, event-driven and polling ({} CPUs, {})",
         report.machine.nproc,
@@ -39,7 +96,7 @@ pub fn hop_png(report: &HopReport, path: &Path) -> Result<()> {
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(70)
-        .build_cartesian_2d((4f64..2e7f64).log_scale(), (ymin.max(0.1)..ymax).log_scale())
+        .build_cartesian_2d((4f64..2e7f64).log_scale(), log_range(&ys).log_scale())
         .map_err(|x| e(&x))?;
     chart
         .configure_mesh()
@@ -54,7 +111,7 @@ pub fn hop_png(report: &HopReport, path: &Path) -> Result<()> {
                 format!("{v:.0}")
             }
         })
-        .y_label_formatter(&|v| if *v >= 10.0 { format!("{v:.0}") } else { format!("{v:.1}") })
+        .y_label_formatter(&us_label)
         .draw()
         .map_err(|x| e(&x))?;
     for t in TRANSPORTS {
@@ -67,24 +124,9 @@ pub fn hop_png(report: &HopReport, path: &Path) -> Result<()> {
         if pts.is_empty() {
             continue;
         }
-        let c = colour(t);
-        chart
-            .draw_series(LineSeries::new(pts.iter().map(|p| (p.0, p.1)), c.stroke_width(3)))
-            .map_err(|x| e(&x))?
-            .label(t)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
-        chart.draw_series(pts.iter().map(|p| Circle::new((p.0, p.1), 5, c.filled()))).map_err(|x| e(&x))?;
-        chart.draw_series(LineSeries::new(pts.iter().map(|p| (p.0, p.2)), c.stroke_width(1))).map_err(|x| e(&x))?;
-        chart.draw_series(pts.iter().map(|p| Cross::new((p.0, p.2), 5, c.stroke_width(1)))).map_err(|x| e(&x))?;
+        draw_transport(&mut chart, t, &pts).map_err(|x| e(&x))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 16))
-        .draw()
-        .map_err(|x| e(&x))?;
+    draw_legend(&mut chart, 16).map_err(|x| e(&x))?;
     root.present().map_err(|x| e(&x))?;
     Ok(())
 }

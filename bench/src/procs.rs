@@ -11,7 +11,7 @@ use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use std::os::unix::process::CommandExt as _;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
 
 /// A child process that is stopped when dropped.
@@ -40,6 +40,20 @@ impl ChildGuard {
     /// The child's stdout, when piped.
     pub fn stdout(&mut self) -> Option<std::process::ChildStdout> {
         self.child.stdout.take()
+    }
+
+    /// Reads the child's `ready` line (its stdout must be piped); its exit
+    /// or any other line is an error.
+    pub fn await_ready(&mut self, what: &str) -> Result<()> {
+        use std::io::BufRead as _;
+        let out = self.stdout().with_context(|| format!("{what}: no stdout"))?;
+        let mut line = String::new();
+        std::io::BufReader::new(out).read_line(&mut line).with_context(|| format!("{what}: reading readiness"))?;
+        if line.trim() != "ready" {
+            self.check_alive()?;
+            bail!("{what} did not become ready (said {line:?})");
+        }
+        Ok(())
     }
 
     /// Fails when the child has exited already.
@@ -263,4 +277,25 @@ pub fn normal_priority() {
     let param = libc::sched_param { sched_priority: 0 };
     // SAFETY: plain system call on the calling thread.
     unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) };
+}
+
+/// Parses the arguments of the hidden subcommand `name` (`args`: what
+/// follows it); a usage error is printed and becomes exit status 2.
+pub fn parse_sub<A: clap::Parser>(name: &str, args: Vec<String>) -> Result<A, ExitCode> {
+    A::try_parse_from(std::iter::once(name.to_owned()).chain(args)).map_err(|e| {
+        let _ = e.print();
+        ExitCode::from(2)
+    })
+}
+
+/// The exit status of a child process's work: an error is printed as
+/// `error: WHAT: ...` and becomes exit status 1.
+pub fn exit_status(what: &str, r: Result<()>) -> ExitCode {
+    match r {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {what}: {e:#}");
+            ExitCode::from(1)
+        }
+    }
 }

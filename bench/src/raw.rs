@@ -10,7 +10,7 @@
 //! ping side in the benchmark process.
 
 use crate::payloads::BenchPayload;
-use crate::procs::realtime_like_an_agent;
+use crate::procs::{exit_status, parse_sub, realtime_like_an_agent};
 use crate::with_payload;
 use agent_sdk::World;
 use agent_sdk::clock::now_ns;
@@ -297,21 +297,14 @@ struct PongArgs {
 
 /// Entry of `nerve-bench __raw-pong`: prints `ready` once its ports exist.
 pub fn pong_main(args: Vec<String>) -> ExitCode {
-    let a = match PongArgs::try_parse_from(std::iter::once("__raw-pong".to_owned()).chain(args)) {
+    let a: PongArgs = match parse_sub("__raw-pong", args) {
         Ok(a) => a,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(2);
-        }
+        Err(code) => return code,
     };
-    let r = with_payload!(a.size, P => pong::<P>(&a), _ => Err(anyhow!("no payload of {} bytes", a.size)));
-    match r {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: raw pong: {e:#}");
-            ExitCode::from(1)
-        }
-    }
+    exit_status(
+        "raw pong",
+        with_payload!(a.size, P => pong::<P>(&a), _ => Err(anyhow!("no payload of {} bytes", a.size))),
+    )
 }
 
 fn pong<P: BenchPayload>(a: &PongArgs) -> Result<()> {

@@ -37,6 +37,42 @@ impl Summary {
     }
 }
 
+/// Batches of several systems measured in interleaved rounds: the order of
+/// the systems rotates every round, the first samples of every batch are
+/// dropped (warm-up), and round 0, a warm-up round, is dropped whole.
+#[derive(Debug, Clone)]
+pub struct Rounds {
+    /// samples dropped at the start of every batch
+    discard: usize,
+    /// the kept samples of each system, pooled
+    pub samples: Vec<Vec<u64>>,
+    /// the median of each measured round, per system
+    pub round_p50: Vec<Vec<u64>>,
+}
+
+impl Rounds {
+    /// For `systems` systems, dropping the first `discard` samples of every batch.
+    pub fn new(systems: usize, discard: usize) -> Self {
+        Rounds { discard, samples: vec![Vec::new(); systems], round_p50: vec![Vec::new(); systems] }
+    }
+
+    /// The order in which the systems `idx` run in round `round`, rotated
+    /// so that none always runs first.
+    pub fn order(idx: &[usize], round: usize) -> impl Iterator<Item = usize> + '_ {
+        (0..idx.len()).map(move |k| idx[(k + round) % idx.len()])
+    }
+
+    /// Keeps the batch `v` of system `i` in round `round`.
+    pub fn keep(&mut self, i: usize, round: usize, v: &[u64]) {
+        if round == 0 {
+            return;
+        }
+        let kept = &v[self.discard.min(v.len())..];
+        self.round_p50[i].push(Summary::of(kept).p50_ns);
+        self.samples[i].extend_from_slice(kept);
+    }
+}
+
 /// `a / b`, or 0 when `b` is 0.
 pub fn ratio(a: u64, b: u64) -> f64 {
     if b == 0 { 0.0 } else { a as f64 / b as f64 }
@@ -67,5 +103,18 @@ mod tests {
         let s = Summary::of(&[5, 1, 3, 2, 4]);
         assert_eq!((s.n, s.min_ns, s.p50_ns, s.max_ns), (5, 1, 3, 5));
         assert_eq!(median_f64(&[3.0, 1.0, 2.0, 10.0]), 2.5);
+    }
+
+    #[test]
+    fn rounds_rotate_drop_the_warm_up_and_the_first_samples() {
+        let order: Vec<usize> = Rounds::order(&[3, 5, 7], 1).collect();
+        assert_eq!(order, vec![5, 7, 3]);
+        let mut r = Rounds::new(2, 2);
+        r.keep(0, 0, &[100, 100, 100]); // warm-up round: dropped
+        r.keep(0, 1, &[900, 900, 1, 2, 3]);
+        r.keep(1, 1, &[5]); // shorter than the discard: nothing kept
+        assert_eq!(r.samples[0], vec![1, 2, 3]);
+        assert_eq!(r.round_p50[0], vec![2]);
+        assert!(r.samples[1].is_empty());
     }
 }

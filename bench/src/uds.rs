@@ -3,7 +3,7 @@
 //! child process (`nerve-bench __uds-pong`), the ping side in the benchmark
 //! process; both at the same SCHED_FIFO priority as an agent's task.
 
-use crate::procs::realtime_like_an_agent;
+use crate::procs::{exit_status, parse_sub, realtime_like_an_agent};
 use agent_sdk::clock::now_ns;
 use anyhow::{Context as _, Result, bail};
 use clap::Parser;
@@ -59,19 +59,9 @@ struct PongArgs {
 
 /// Entry of `nerve-bench __uds-pong`: prints `ready` once it listens; echoes until EOF.
 pub fn pong_main(args: Vec<String>) -> ExitCode {
-    let a = match PongArgs::try_parse_from(std::iter::once("__uds-pong".to_owned()).chain(args)) {
-        Ok(a) => a,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(2);
-        }
-    };
-    match pong(&a) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: socket pong: {e:#}");
-            ExitCode::from(1)
-        }
+    match parse_sub::<PongArgs>("__uds-pong", args) {
+        Ok(a) => exit_status("socket pong", pong(&a)),
+        Err(code) => code,
     }
 }
 

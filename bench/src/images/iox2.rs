@@ -12,7 +12,7 @@
 //! benchmark robot's iceoryx2 world, so that `nerve down` removes them.
 
 use super::frame::{self, FrameHead, FramePub, Recorder, Res};
-use crate::procs::realtime_like_an_agent;
+use crate::procs::{exit_status, parse_sub, realtime_like_an_agent};
 use agent_sdk::World;
 use agent_sdk::clock::now_ns;
 use anyhow::{Context as _, Result, anyhow};
@@ -157,20 +157,9 @@ struct ReaderArgs {
 
 /// Entry of `nerve-bench __img-iox2-reader`: prints `ready` once subscribed.
 pub fn reader_main(args: Vec<String>) -> ExitCode {
-    let r = ReaderArgs::try_parse_from(std::iter::once("__img-iox2-reader".to_owned()).chain(args));
-    let a = match r {
-        Ok(a) => a,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(2);
-        }
-    };
-    match reader(&a) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: iox2 image reader: {e:#}");
-            ExitCode::from(1)
-        }
+    match parse_sub::<ReaderArgs>("__img-iox2-reader", args) {
+        Ok(a) => exit_status("iox2 image reader", reader(&a)),
+        Err(code) => code,
     }
 }
 

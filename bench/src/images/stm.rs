@@ -14,6 +14,7 @@
 //!   in place with `read_notice_with`, the seqlock verified.
 
 use super::frame::{self, Acks, BatchReq, FrameHead, FramePub, Recorder, Res};
+use crate::procs::parse_sub;
 use agent_sdk::clock::now_ns;
 use agent_sdk::memory::{DEFAULT_SLOTS, FrameDesc, MemorySetup as _, PixelFormat, RingInput, RingOutput, RingSpec};
 use agent_sdk::{Agent, AgentError, CommonArgs, Context, Setup, Task};
@@ -174,12 +175,9 @@ impl Agent for ImgReader {
 
 /// Entry of `__agent-img-writer` and `__agent-img-reader`.
 pub fn run_agent(which: &str, args: Vec<String>) -> ExitCode {
-    let common = match CommonArgs::try_parse_from(std::iter::once(format!("nerve-bench {which}")).chain(args)) {
+    let common: CommonArgs = match parse_sub(&format!("nerve-bench {which}"), args) {
         Ok(c) => c,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(2);
-        }
+        Err(code) => return code,
     };
     match which {
         "__agent-img-writer" => agent_sdk::run_with_args::<ImgWriter>(common),

@@ -7,7 +7,7 @@
 //! checks it there.
 
 use super::frame::{self, FrameHead, FramePub, Recorder, Res};
-use crate::procs::realtime_like_an_agent;
+use crate::procs::{exit_status, parse_sub, realtime_like_an_agent};
 use agent_sdk::clock::now_ns;
 use anyhow::{Context as _, Result, bail};
 use clap::Parser;
@@ -68,19 +68,9 @@ struct ReaderArgs {
 
 /// Entry of `nerve-bench __img-uds-reader`: prints `ready` once it listens; reads until EOF.
 pub fn reader_main(args: Vec<String>) -> ExitCode {
-    let a = match ReaderArgs::try_parse_from(std::iter::once("__img-uds-reader".to_owned()).chain(args)) {
-        Ok(a) => a,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(2);
-        }
-    };
-    match reader(&a) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: socket image reader: {e:#}");
-            ExitCode::from(1)
-        }
+    match parse_sub::<ReaderArgs>("__img-uds-reader", args) {
+        Ok(a) => exit_status("socket image reader", reader(&a)),
+        Err(code) => code,
     }
 }
 
