@@ -55,11 +55,6 @@ struct Entry {
 enum Action {
     /// Re-apply every connection that involves this agent.
     Rewire(String),
-    /// Write the connection list to disk. Deferred until the replies of the
-    /// current batch are sent: the fsyncs take 10-60 ms on a busy disk, and a
-    /// `nerve connect` (or a decision maker rewiring) should not wait for them.
-    /// The connection is live in the agents before the reply either way.
-    Persist,
 }
 
 /// The longest back-off between two restarts.
@@ -216,7 +211,6 @@ impl Router {
             while let Some(action) = self.state.pending.pop_front() {
                 match action {
                     Action::Rewire(name) => self.state.rewire(&name),
-                    Action::Persist => self.state.persist(),
                 }
             }
             if last_liveness.elapsed() >= LIVENESS_PERIOD {
@@ -311,37 +305,44 @@ impl State {
         if !self.agents.contains_key(name) {
             return Err(unknown_agent(name, &self.agents));
         }
-        if self.agents.get(name).is_some_and(|e| e.client.is_none()) {
+        let mut result = self.call_agent(name, cmd, timeout, false);
+        if matches!(result, Some(Err(ControlError::NoServer { .. }))) {
+            // The client was opened while the agent's previous instance (same
+            // name) was still leaving, and may be bound to the service it
+            // tore down: open it afresh and try once more (seen about once in
+            // 40 hot-add/stop cycles).
+            if let Some(again) = self.call_agent(name, cmd, timeout, true) {
+                result = Some(again);
+            }
+        }
+        match result {
+            None => Err(RouterError::AgentUnreachable {
+                name: name.into(),
+                detail: "its control service is missing".into(),
+            }),
+            Some(Ok(AgentReply::Error(message))) => Err(RouterError::AgentRefused { name: name.into(), message }),
+            Some(Ok(reply)) => Ok(reply),
+            Some(Err(e)) => Err(RouterError::AgentUnreachable { name: name.into(), detail: e.to_string() }),
+        }
+    }
+
+    /// Calls `name` through its control client, opening the client first
+    /// when it has none or when `reopen`; `None` when it cannot be opened.
+    fn call_agent(
+        &mut self,
+        name: &str,
+        cmd: &AgentCommand,
+        timeout: Duration,
+        reopen: bool,
+    ) -> Option<Result<AgentReply, ControlError>> {
+        if reopen || self.agents.get(name).is_some_and(|e| e.client.is_none()) {
             let client = self.open_agent(name);
             if let Some(e) = self.agents.get_mut(name) {
                 e.client = client;
             }
         }
-        let Some(client) = self.agents.get(name).and_then(|e| e.client.as_ref()) else {
-            return Err(RouterError::AgentUnreachable {
-                name: name.into(),
-                detail: "its control service is missing".into(),
-            });
-        };
-        let mut result = client.call(cmd, timeout);
-        if matches!(result, Err(ControlError::NoServer { .. })) {
-            // The client was opened while the agent's previous instance (same
-            // name) was still leaving, and may be bound to the service it
-            // tore down: open it afresh and try once more (seen about once in
-            // 40 hot-add/stop cycles).
-            let fresh = self.open_agent(name);
-            if let Some(c) = &fresh {
-                result = c.call(cmd, timeout);
-            }
-            if let Some(e) = self.agents.get_mut(name) {
-                e.client = fresh;
-            }
-        }
-        match result {
-            Ok(AgentReply::Error(message)) => Err(RouterError::AgentRefused { name: name.into(), message }),
-            Ok(reply) => Ok(reply),
-            Err(e) => Err(RouterError::AgentUnreachable { name: name.into(), detail: e.to_string() }),
-        }
+        let client = self.agents.get(name).and_then(|e| e.client.as_ref())?;
+        Some(client.call(cmd, timeout))
     }
 
     /// Applies every stored connection that involves `name` and whose other end is live.
@@ -373,13 +374,8 @@ impl State {
         self.command(to_agent, &cmd, AGENT_TIMEOUT).map(|_| ())
     }
 
-    /// Saves the connection list once the current replies are out.
-    fn request_persist(&mut self) {
-        if !self.pending.iter().any(|a| matches!(a, Action::Persist)) {
-            self.pending.push_back(Action::Persist);
-        }
-    }
-
+    /// Hands the connection list to the writer thread, which saves it off
+    /// the request path (its fsyncs take 10-60 ms on a busy disk).
     fn persist(&self) {
         self.writer.save(self.connections.clone());
     }
@@ -414,9 +410,7 @@ impl State {
 
     fn handle_cli(&mut self, req: CliRequest) -> Result<RouterReply, RouterError> {
         // answer from a registry without dead agents (a few /proc reads)
-        let t0 = std::time::Instant::now();
         self.check_liveness();
-        tracing::trace!("liveness checked in {} us", t0.elapsed().as_micros());
         match req {
             CliRequest::Ps => Ok(RouterReply::Agents(self.views())),
             CliRequest::Graph => {
@@ -441,7 +435,7 @@ impl State {
                 tracing::debug!("{from} -> {to}: the agent subscribed and answered in {} us", t0.elapsed().as_micros());
                 if !self.connections.contains(&c) {
                     self.connections.push(c);
-                    self.request_persist();
+                    self.persist();
                 }
                 tracing::info!("connected {from} -> {to}");
                 Ok(RouterReply::Ok)
@@ -452,7 +446,7 @@ impl State {
                     return Err(RouterError::NotConnected { from: f, to: t });
                 };
                 self.connections.remove(pos);
-                self.request_persist();
+                self.persist();
                 if self.agents.contains_key(to.agent.as_str()) {
                     let cmd = AgentCommand::Disconnect {
                         input: to.port.clone(),
