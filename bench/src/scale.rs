@@ -148,20 +148,20 @@ fn mem_of(pid: u32) -> Option<Mem> {
     Some(Mem { rss_kib: field("Rss:")?, pss_kib: field("Pss:")? })
 }
 
-/// CPU of the machine, the agents and the router over `window`.
-fn measure_cpu(agents: &[u32], router: u32, window: Duration) -> Result<Cpu> {
+/// CPU of the machine (of `cores` cores), the agents and the router over `window`.
+fn measure_cpu(agents: &[u32], router: Option<u32>, window: Duration, cores: usize) -> Result<Cpu> {
     let sum = |pids: &[u32]| pids.iter().filter_map(|&p| proc_ticks(p)).sum::<u64>();
+    let router_ticks = || router.and_then(proc_ticks).unwrap_or(0);
     let (b0, t0) = machine_ticks()?;
-    let (a0, r0) = (sum(agents), proc_ticks(router).unwrap_or(0));
+    let (a0, r0) = (sum(agents), router_ticks());
     let start = Instant::now();
     std::thread::sleep(window);
     let secs = start.elapsed().as_secs_f64();
     let (b1, t1) = machine_ticks()?;
-    let (a1, r1) = (sum(agents), proc_ticks(router).unwrap_or(0));
+    let (a1, r1) = (sum(agents), router_ticks());
     let hz = clock_ticks();
-    let cores = Machine::probe().nproc.max(1) as f64;
     Ok(Cpu {
-        machine_pct: if t1 > t0 { 100.0 * cores * (b1 - b0) as f64 / (t1 - t0) as f64 } else { 0.0 },
+        machine_pct: if t1 > t0 { 100.0 * cores.max(1) as f64 * (b1 - b0) as f64 / (t1 - t0) as f64 } else { 0.0 },
         agents_pct: 100.0 * a1.saturating_sub(a0) as f64 / hz / secs,
         router_pct: 100.0 * r1.saturating_sub(r0) as f64 / hz / secs,
     })
@@ -196,11 +196,7 @@ pub fn run(opts: &ScaleOpts) -> Result<ScaleReport> {
     let machine = Machine::probe();
     let window = Duration::from_secs_f64(opts.window_s);
     eprintln!("scale: the machine alone for {:.0} s", opts.window_s);
-    let (b0, t0) = machine_ticks()?;
-    std::thread::sleep(window);
-    let (b1, t1) = machine_ticks()?;
-    let machine_before_pct =
-        if t1 > t0 { 100.0 * machine.nproc.max(1) as f64 * (b1 - b0) as f64 / (t1 - t0) as f64 } else { 0.0 };
+    let machine_before_pct = measure_cpu(&[], None, window, machine.nproc)?.machine_pct;
 
     let robot = Robot::new("s", opts.verbose)?;
     let file = robot.home.join("scale.toml");
@@ -231,7 +227,7 @@ pub fn run(opts: &ScaleOpts) -> Result<ScaleReport> {
         1e3 / opts.period_ms as f64,
         opts.window_s
     );
-    let running = measure_cpu(&pids, router, window)?;
+    let running = measure_cpu(&pids, Some(router), window, machine.nproc)?;
     let mems: Vec<Mem> = pids.iter().filter_map(|&p| mem_of(p)).collect();
     let router_mem = mem_of(router).unwrap_or_default();
 
@@ -249,7 +245,7 @@ pub fn run(opts: &ScaleOpts) -> Result<ScaleReport> {
     }
     std::thread::sleep(Duration::from_secs(1));
     eprintln!("scale: measuring {} idle agents for {:.0} s", pids.len(), opts.window_s);
-    let idle = measure_cpu(&pids, router, window)?;
+    let idle = measure_cpu(&pids, Some(router), window, machine.nproc)?;
 
     let rss = Summary::of(&mems.iter().map(|m| m.rss_kib).collect::<Vec<_>>());
     let pss = Summary::of(&mems.iter().map(|m| m.pss_kib).collect::<Vec<_>>());
