@@ -527,6 +527,8 @@ fn fuzzy_fusion_of_conflicting_linguistic_commands() {
     let omega_for = |r: &Robot| -> f64 {
         let done = AtomicBool::new(false);
         std::thread::scope(|s| {
+            // ends the injecting thread when the measurement is done, or failed
+            let _finish = Finish(&done);
             s.spawn(|| {
                 inject(r, "motor", "say", Duration::from_millis(50), |_| {
                     (!done.load(Ordering::Relaxed)).then(|| {
@@ -541,7 +543,6 @@ fn fuzzy_fusion_of_conflicting_linguistic_commands() {
             // the ramp (4 rad/s²) reaches the target within a few cycles
             std::thread::sleep(Duration::from_millis(800));
             let a = r.echo("motor/applied", 3);
-            done.store(true, Ordering::Relaxed);
             f(&a[2], "omega")
         })
     };
@@ -575,7 +576,8 @@ fn safety_stop_overrides_every_source() {
     r.ok(&["param", "set", "motor", "weights", "planner:100"]);
     let done = AtomicBool::new(false);
     std::thread::scope(|s| {
-        // a failed assertion must still end the injecting thread, or the scope never returns
+        // ends the injecting thread at the end, also after a failed assertion
+        // (or the scope would never return)
         let _finish = Finish(&done);
         s.spawn(|| {
             inject(&r, "motor", "cmd", Duration::from_millis(50), |_| {
@@ -600,7 +602,6 @@ fn safety_stop_overrides_every_source() {
         assert!(wait_until(Duration::from_secs(5), || {
             r.echo("motor/applied", 1).first().is_some_and(|a| f(a, "v") > 0.0)
         }));
-        done.store(true, Ordering::Relaxed);
     });
     stop_reader.store(true, Ordering::Relaxed);
     let _ = h.join();
