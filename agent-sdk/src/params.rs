@@ -36,6 +36,13 @@ impl<T: Clone> Param<T> {
 /// A check on a new parameter value; the error says what is allowed.
 pub type ParamCheck<T> = Box<dyn Fn(&T) -> Result<(), String> + Send + Sync>;
 
+/// A check for `Setup::param_checked`: a finite number greater than 0
+/// (distances, speeds, periods).
+pub fn positive<T: Copy + Into<f64>>(v: &T) -> Result<(), String> {
+    let x: f64 = (*v).into();
+    if x.is_finite() && x > 0.0 { Ok(()) } else { Err("must be a number > 0".into()) }
+}
+
 trait DynParam: Send + Sync {
     fn get(&self) -> String;
     fn set(&self, s: &str) -> Result<(), String>;
@@ -126,6 +133,14 @@ impl ParamTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn positive_takes_finite_numbers_above_zero() {
+        assert!(positive(&0.5f32).is_ok() && positive(&2.0f64).is_ok());
+        for bad in [0.0f64, -1.0, f64::NAN, f64::INFINITY] {
+            assert_eq!(positive(&bad), Err("must be a number > 0".to_owned()), "{bad}");
+        }
+    }
 
     #[test]
     fn typed_set_and_get() {

@@ -27,6 +27,7 @@
 //! command after recovery is the current decision. On stop it commands the
 //! wheels to zero (the board has no command timeout).
 
+use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_devices::{DiffDriveGeometry, Message, Pose2, WheelCommand, wrap_angle};
 use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
@@ -91,10 +92,6 @@ struct Motor {
     last_stopped_by: Option<String>,
     was_idle: bool,
     last_step_ns: u64,
-}
-
-fn positive(v: &f64) -> Result<(), String> {
-    if v.is_finite() && *v > 0.0 { Ok(()) } else { Err("must be a positive number".into()) }
 }
 
 impl Motor {

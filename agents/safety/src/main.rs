@@ -14,6 +14,7 @@
 //! for `scan_timeout_ms` the monitor is blind: it stops the robot moving
 //! (turning allowed), sends no motion command, and reports danger `stop`.
 
+use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_safety::{Judgement, Settings, judge, slew};
 use shm_schemas::payloads::{DangerLevel, SafetyStop, Situation, SonarScan, VelocityCommand};
@@ -40,10 +41,6 @@ struct Safety {
     sent: Option<(f32, f32, u64)>,
     stopping: bool,
     blind: bool,
-}
-
-fn positive(v: &f32) -> Result<(), String> {
-    if v.is_finite() && *v > 0.0 { Ok(()) } else { Err("must be a number > 0".into()) }
 }
 
 impl Safety {

@@ -15,6 +15,7 @@
 //! `artefacts`. A device that vanishes is logged and reopened with
 //! exponential backoff; see `nerve_devlink`.
 
+use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Output, Param, Setup, Task};
 use nerve_devices::{Message, SONAR_NO_ECHO};
 use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
@@ -45,10 +46,6 @@ struct Sonar {
     estimator: RiskEstimator,
     seq: SeqUnwrapper,
     t0: Instant,
-}
-
-fn positive(v: &f64) -> Result<(), String> {
-    if v.is_finite() && *v > 0.0 { Ok(()) } else { Err("must be a positive number".into()) }
 }
 
 impl Agent for Sonar {

@@ -9,6 +9,7 @@
 //! from `v_min` when they come back. After being suspended (a gap of more
 //! than three periods) it also starts again from `v_min`.
 
+use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_wall_follow::{Settings, WallSide, follow};
 use shm_schemas::payloads::{SonarScan, VelocityCommand};
@@ -38,10 +39,6 @@ const ALPHA: f32 = 12.0;
 fn slew(from: f32, to: f32, rate: f32, dt: f32) -> f32 {
     let d = rate * dt.max(0.0);
     to.clamp(from - d, from + d)
-}
-
-fn positive(v: &f32) -> Result<(), String> {
-    if v.is_finite() && *v > 0.0 { Ok(()) } else { Err("must be a number > 0".into()) }
 }
 
 impl Agent for WallFollow {
