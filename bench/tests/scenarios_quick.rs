@@ -1,7 +1,7 @@
-//! End to end, one smoke run per scenario besides `hop` (which has its own
-//! test): `nerve-bench SCENARIO --quick --json` runs, prints a report with the
-//! fields users script against, writes `DIR/<scenario>.json`, and leaves
-//! nothing of its robot in /dev/shm. Values are never checked against
+//! End to end, one smoke run per scenario (jitter aside: it needs
+//! cyclictest): `nerve-bench SCENARIO --quick --json` runs, prints a report
+//! with the fields users script against, writes `DIR/<scenario>.json`, and
+//! leaves nothing of its robot in /dev/shm. Values are never checked against
 //! targets (no timed assertions); only that they were measured.
 //!
 //! Needs the `nerve`, `nerve-ticker` and `nerve-relay` executables built into
@@ -37,6 +37,18 @@ fn run(scenario: &str, extra: &[&str]) -> Value {
     assert_eq!(left, 0, "shared memory of robot left behind ({robot})");
     let _ = std::fs::remove_dir_all(&out_dir);
     report
+}
+
+#[test]
+fn hop_quick_8_bytes_produces_results() {
+    let r = run("hop", &["--payloads", "8", "--count", "50"]);
+    let results = r["results"].as_array().expect("results");
+    for t in ["nerve", "iox2-waitset", "iox2-listener", "uds", "nerve-poll", "iox2-poll"] {
+        let x = results.iter().find(|x| x["transport"] == t && x["size"] == 8).expect("a result per transport");
+        assert!(x["rtt"]["n"].as_u64().unwrap_or(0) > 0, "{t}: no samples");
+    }
+    let ratios = r["ratios"].as_array().expect("ratios");
+    assert!(ratios[0]["nerve_vs_waitset_p50"].as_f64().is_some());
 }
 
 #[test]
