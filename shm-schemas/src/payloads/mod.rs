@@ -8,6 +8,7 @@
 pub mod head;
 pub mod ir;
 pub mod motion;
+pub mod navigation;
 pub mod resources;
 pub mod router;
 pub mod scalar;
@@ -18,6 +19,10 @@ pub mod tick;
 pub use head::{HeadCommand, HeadState};
 pub use ir::IrSighting;
 pub use motion::{GroundTruth, LinguisticCommand, LinguisticTerm, Odometry, SafetyStop, VelocityCommand};
+pub use navigation::{
+    CheckpointSighting, MAX_VIA_POINTS, MissionCode, MissionCommand, PoseCorrection, PoseEstimate, PoseSource, ViaKind,
+    ViaPath,
+};
 pub use resources::{AgentLoad, LoadLevel, MAX_AGENT_LOADS, ResourceReport};
 pub use router::RouterEpoch;
 pub use scalar::Scalar;
@@ -63,6 +68,11 @@ macro_rules! for_each_payload {
         $m!($crate::payloads::Situation);
         $m!($crate::payloads::Mode);
         $m!($crate::payloads::ResourceReport);
+        $m!($crate::payloads::PoseEstimate);
+        $m!($crate::payloads::PoseCorrection);
+        $m!($crate::payloads::CheckpointSighting);
+        $m!($crate::payloads::ViaPath);
+        $m!($crate::payloads::MissionCommand);
     };
 }
 

@@ -1,0 +1,389 @@
+//! Navigation and cooperation (thesis section 4.3, Fig. 4-8 and 4-9): the
+//! robot's pose estimate and its corrections at checkpoints, what the
+//! checkpoint sensor sees, the path of via points robot 1 sends robot 2,
+//! and the mission messages between them.
+//!
+//! * `nerve::PoseEstimate` — the odometry agent's pose in the world frame
+//!   (dead reckoning plus checkpoint corrections), with the count of
+//!   corrections so far;
+//! * `nerve::PoseCorrection` — the checkpoint sensor's corrected pose at the
+//!   instant of an observation (the odometry agent applies it there and
+//!   carries the motion since then over);
+//! * `nerve::CheckpointSighting` — a checkpoint or the target seen: its id,
+//!   the IR transmitters received, range and bearing from the robot, and its
+//!   position and facing direction in the world frame;
+//! * `nerve::ViaPath` — up to [`MAX_VIA_POINTS`] via points in order, the
+//!   last one possibly the target itself;
+//! * `nerve::MissionCommand` — "come" (follow path N), "via point reached",
+//!   "arrived", "resume", "abort".
+//!
+//! Units: metres, radians (counter-clockwise, world frame unless a field
+//! says "robot frame"), seconds; stamps are CLOCK_MONOTONIC nanoseconds of
+//! the robot that made them (they do not compare across robots). Enumerations
+//! travel as integer codes; read them with the `from_code` functions, which
+//! return `None` for a code this build does not know.
+
+use super::Payload;
+use iceoryx2::prelude::ZeroCopySend;
+use serde::Serialize;
+
+/// Where a pose estimate or correction comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[repr(u8)]
+pub enum PoseSource {
+    /// Dead reckoning only since the start pose.
+    DeadReckoning = 1,
+    /// The last change was a checkpoint correction.
+    Checkpoint = 2,
+    /// Set by hand (a parameter or a tool).
+    Manual = 3,
+}
+
+impl PoseSource {
+    /// Every source, in code order.
+    pub const ALL: [PoseSource; 3] = [Self::DeadReckoning, Self::Checkpoint, Self::Manual];
+
+    /// The source of a wire code; `None` for an unknown code.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|s| *s as u8 == code)
+    }
+
+    /// `dead-reckoning`, `checkpoint`, `manual`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::DeadReckoning => "dead-reckoning",
+            Self::Checkpoint => "checkpoint",
+            Self::Manual => "manual",
+        }
+    }
+}
+
+/// [`PoseCorrection::fields`] bit: the position is corrected.
+pub const CORRECTS_POSITION: u8 = 1;
+/// [`PoseCorrection::fields`] bit: the heading is corrected.
+pub const CORRECTS_HEADING: u8 = 2;
+
+/// The robot's pose in the world frame (output `pose` of the `odometry` agent).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[repr(C)]
+#[type_name("nerve::PoseEstimate")]
+pub struct PoseEstimate {
+    /// x, metres, world frame.
+    pub x: f64,
+    /// y, metres, world frame.
+    pub y: f64,
+    /// Heading, radians, (-π, π].
+    pub theta: f64,
+    /// Forward speed, m/s (from the motor's odometry).
+    pub v: f64,
+    /// Turn rate, rad/s.
+    pub omega: f64,
+    /// The instant the pose holds for (the stamp of the motor's report).
+    pub stamp_ns: u64,
+    /// Checkpoint corrections applied since the start.
+    pub corrections: u32,
+    /// A [`PoseSource`] code: what changed the pose last.
+    pub source: u8,
+    /// The checkpoint of the last correction, 0 when none yet.
+    pub last_checkpoint: u8,
+    /// Padding, zero.
+    pub reserved: [u8; 2],
+}
+
+impl Payload for PoseEstimate {}
+
+impl PoseEstimate {
+    /// The source, or `None` for an unknown code.
+    pub fn source(&self) -> Option<PoseSource> {
+        PoseSource::from_code(self.source)
+    }
+}
+
+/// A corrected pose at the instant of an observation (output `correction`
+/// of the `checkpoint` agent, input `correction` of the `odometry` agent).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[repr(C)]
+#[type_name("nerve::PoseCorrection")]
+pub struct PoseCorrection {
+    /// Corrected x at `stamp_ns`, metres, world frame.
+    pub x: f64,
+    /// Corrected y, metres.
+    pub y: f64,
+    /// Corrected heading, radians (equal to the estimate's when
+    /// [`CORRECTS_HEADING`] is not set).
+    pub theta: f64,
+    /// The known position of the checkpoint seen, x, metres, world frame
+    /// (so that the odometry agent can refine the heading from two
+    /// checkpoints, see `nerve-odometry`).
+    pub checkpoint_x: f64,
+    /// The known position of the checkpoint seen, y, metres.
+    pub checkpoint_y: f64,
+    /// The instant of the observation (the camera frame's stamp).
+    pub stamp_ns: u64,
+    /// Range to the checkpoint's centre, metres.
+    pub range_m: f32,
+    /// Bearing of the checkpoint, radians, robot frame, positive left.
+    pub bearing_rad: f32,
+    /// [`CORRECTS_POSITION`] | [`CORRECTS_HEADING`].
+    pub fields: u8,
+    /// A [`PoseSource`] code (normally `Checkpoint`).
+    pub source: u8,
+    /// The checkpoint that was seen.
+    pub checkpoint_id: u8,
+    /// Padding, zero.
+    pub reserved: [u8; 5],
+}
+
+impl Payload for PoseCorrection {}
+
+impl PoseCorrection {
+    /// The source, or `None` for an unknown code.
+    pub fn source(&self) -> Option<PoseSource> {
+        PoseSource::from_code(self.source)
+    }
+}
+
+/// A checkpoint (or the target) seen by the checkpoint sensor (output
+/// `sighting` of the `checkpoint` agent, input `sighting` of the map builder).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[repr(C)]
+#[type_name("nerve::CheckpointSighting")]
+pub struct CheckpointSighting {
+    /// The instant of the observation (the camera frame's stamp).
+    pub stamp_ns: u64,
+    /// The tube's centre, x, metres, world frame (the known position of a
+    /// configured checkpoint; estimated from the pose otherwise).
+    pub x: f64,
+    /// The tube's centre, y, metres.
+    pub y: f64,
+    /// Range from the camera to the tube's centre, metres.
+    pub range_m: f32,
+    /// Bearing of the tube, radians, robot frame, positive left.
+    pub bearing_rad: f32,
+    /// The direction the transmitter(s) received face, radians, world
+    /// frame ("in front of" the checkpoint); when no heading of the tube is
+    /// known, the direction from the tube to the robot.
+    pub facing_rad: f32,
+    /// The checkpoint's IR code, 0 when it was not identified by IR.
+    pub checkpoint_id: u8,
+    /// The IR transmitters received (bit `i`: the one facing `i × 90°`
+    /// from the checkpoint's heading), 0 when none.
+    pub transmitters: u8,
+    /// 1 when the IR receiver identified it.
+    pub from_ir: u8,
+    /// 1 when the range comes from the camera (Appendix A).
+    pub from_camera: u8,
+    /// 1 for the target (the tube upside down).
+    pub is_target: u8,
+    /// Padding, zero.
+    pub reserved: [u8; 7],
+}
+
+impl Payload for CheckpointSighting {}
+
+/// Most via points a [`ViaPath`] carries.
+pub const MAX_VIA_POINTS: usize = 16;
+
+/// What a point of a [`ViaPath`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[repr(u8)]
+pub enum ViaKind {
+    /// A via point in front of a checkpoint (a correction is expected near it).
+    Checkpoint = 1,
+    /// The via point in front of the target.
+    TargetApproach = 2,
+    /// The target itself: stop short of it (the follower keeps a stand-off).
+    Target = 3,
+    /// Any other point (a corner of the path).
+    Waypoint = 4,
+}
+
+impl ViaKind {
+    /// Every kind, in code order.
+    pub const ALL: [ViaKind; 4] = [Self::Checkpoint, Self::TargetApproach, Self::Target, Self::Waypoint];
+
+    /// The kind of a wire code; `None` for an unknown code.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| *k as u8 == code)
+    }
+
+    /// `checkpoint`, `target-approach`, `target`, `waypoint`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Checkpoint => "checkpoint",
+            Self::TargetApproach => "target-approach",
+            Self::Target => "target",
+            Self::Waypoint => "waypoint",
+        }
+    }
+}
+
+/// A path of via points (output `path` of the map builder, carried to
+/// robot 2 by the bridge, input `path` of the target achiever).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[repr(C)]
+#[type_name("nerve::ViaPath")]
+pub struct ViaPath {
+    /// When the path was made (sender's clock).
+    pub stamp_ns: u64,
+    /// Identifies this path; a new path gets a new id (from 1).
+    pub path_id: u32,
+    /// Valid entries of `points`, `kinds` and `checkpoint_ids`.
+    pub count: u32,
+    /// The points in the order to visit, `[x, y]`, metres, world frame.
+    pub points: [[f64; 2]; MAX_VIA_POINTS],
+    /// A [`ViaKind`] code per point.
+    pub kinds: [u8; MAX_VIA_POINTS],
+    /// The checkpoint each point belongs to, 0 for none.
+    pub checkpoint_ids: [u8; MAX_VIA_POINTS],
+}
+
+impl Payload for ViaPath {}
+
+impl ViaPath {
+    /// The valid points with their kind codes and checkpoint ids (`count`
+    /// clamped to [`MAX_VIA_POINTS`]).
+    pub fn entries(&self) -> impl Iterator<Item = ([f64; 2], u8, u8)> + '_ {
+        let n = (self.count as usize).min(MAX_VIA_POINTS);
+        (0..n).map(move |i| (self.points[i], self.kinds[i], self.checkpoint_ids[i]))
+    }
+}
+
+/// What a [`MissionCommand`] says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[repr(u32)]
+pub enum MissionCode {
+    /// Robot 1 to robot 2: come, follow path `path_id`.
+    Come = 1,
+    /// Robot 2: via point `index` of path `path_id` reached.
+    ViaReached = 2,
+    /// Robot 2 to robot 1: the last point of path `path_id` reached.
+    Arrived = 3,
+    /// Resume exploring (robot 1's decision maker, after "arrived").
+    Resume = 4,
+    /// Stop following the path.
+    Abort = 5,
+}
+
+impl MissionCode {
+    /// Every code, in code order.
+    pub const ALL: [MissionCode; 5] = [Self::Come, Self::ViaReached, Self::Arrived, Self::Resume, Self::Abort];
+
+    /// The code of a wire value; `None` for an unknown one.
+    pub fn from_code(code: u32) -> Option<Self> {
+        Self::ALL.into_iter().find(|c| *c as u32 == code)
+    }
+
+    /// `come`, `via-reached`, `arrived`, `resume`, `abort`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Come => "come",
+            Self::ViaReached => "via-reached",
+            Self::Arrived => "arrived",
+            Self::Resume => "resume",
+            Self::Abort => "abort",
+        }
+    }
+}
+
+/// A mission message between the robots' agents (map builder → target
+/// achiever: "come"; target achiever → robot 1: "via-reached", "arrived").
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[repr(C)]
+#[type_name("nerve::MissionCommand")]
+pub struct MissionCommand {
+    /// When it was made (sender's clock).
+    pub stamp_ns: u64,
+    /// Where the sender believed it was, x, metres, world frame.
+    pub x: f64,
+    /// Where the sender believed it was, y, metres.
+    pub y: f64,
+    /// A [`MissionCode`]; read it with [`MissionCommand::code`].
+    pub code: u32,
+    /// The path it is about (0: none).
+    pub path_id: u32,
+    /// The via point it is about (`ViaReached`, `Arrived`), from 0.
+    pub index: u32,
+    /// Padding, zero.
+    pub reserved: u32,
+}
+
+impl Payload for MissionCommand {}
+
+impl MissionCommand {
+    /// A message of `code` about `path_id`.
+    pub fn new(code: MissionCode, path_id: u32, stamp_ns: u64) -> Self {
+        MissionCommand { code: code as u32, path_id, stamp_ns, ..Default::default() }
+    }
+
+    /// The code, or `None` for an unknown one.
+    pub fn code(&self) -> Option<MissionCode> {
+        MissionCode::from_code(self.code)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_is_stable() {
+        assert_eq!(std::mem::size_of::<PoseEstimate>(), 56);
+        assert_eq!(std::mem::align_of::<PoseEstimate>(), 8);
+        assert_eq!(std::mem::offset_of!(PoseEstimate, corrections), 48);
+        assert_eq!(std::mem::offset_of!(PoseEstimate, source), 52);
+        assert_eq!(std::mem::size_of::<PoseCorrection>(), 64);
+        assert_eq!(std::mem::offset_of!(PoseCorrection, stamp_ns), 40);
+        assert_eq!(std::mem::offset_of!(PoseCorrection, range_m), 48);
+        assert_eq!(std::mem::offset_of!(PoseCorrection, fields), 56);
+        assert_eq!(std::mem::size_of::<CheckpointSighting>(), 48);
+        assert_eq!(std::mem::offset_of!(CheckpointSighting, facing_rad), 32);
+        assert_eq!(std::mem::offset_of!(CheckpointSighting, checkpoint_id), 36);
+        assert_eq!(std::mem::offset_of!(CheckpointSighting, is_target), 40);
+        assert_eq!(std::mem::size_of::<ViaPath>(), 16 + 16 * 16 + 32);
+        assert_eq!(std::mem::offset_of!(ViaPath, points), 16);
+        assert_eq!(std::mem::offset_of!(ViaPath, kinds), 272);
+        assert_eq!(std::mem::size_of::<MissionCommand>(), 40);
+        assert_eq!(std::mem::offset_of!(MissionCommand, code), 24);
+        for (name, got) in [
+            ("nerve::PoseEstimate", <PoseEstimate as Payload>::stable_type_name()),
+            ("nerve::PoseCorrection", <PoseCorrection as Payload>::stable_type_name()),
+            ("nerve::CheckpointSighting", <CheckpointSighting as Payload>::stable_type_name()),
+            ("nerve::ViaPath", <ViaPath as Payload>::stable_type_name()),
+            ("nerve::MissionCommand", <MissionCommand as Payload>::stable_type_name()),
+        ] {
+            assert_eq!(got, name);
+        }
+    }
+
+    #[test]
+    fn codes_round_trip_and_unknown_codes_are_none() {
+        for s in PoseSource::ALL {
+            assert_eq!(PoseSource::from_code(s as u8), Some(s));
+        }
+        for k in ViaKind::ALL {
+            assert_eq!(ViaKind::from_code(k as u8), Some(k));
+        }
+        for c in MissionCode::ALL {
+            assert_eq!(MissionCode::from_code(c as u32), Some(c));
+        }
+        assert_eq!(PoseSource::from_code(0), None);
+        assert_eq!(ViaKind::from_code(9), None);
+        assert_eq!(MissionCode::from_code(0), None);
+        let m = MissionCommand::new(MissionCode::Arrived, 3, 7);
+        assert_eq!((m.code(), m.path_id), (Some(MissionCode::Arrived), 3));
+        assert_eq!(MissionCommand { code: 99, ..m }.code(), None);
+        assert_eq!(PoseEstimate { source: 2, ..Default::default() }.source(), Some(PoseSource::Checkpoint));
+    }
+
+    #[test]
+    fn path_entries_clamp_the_count() {
+        let mut p = ViaPath { count: 2, ..Default::default() };
+        p.points[1] = [1.0, 2.0];
+        p.kinds[1] = ViaKind::Target as u8;
+        let e: Vec<_> = p.entries().collect();
+        assert_eq!(e, vec![([0.0, 0.0], 0, 0), ([1.0, 2.0], 3, 0)]);
+        p.count = 1000;
+        assert_eq!(p.entries().count(), MAX_VIA_POINTS);
+    }
+}
