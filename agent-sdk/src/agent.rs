@@ -158,6 +158,13 @@ impl Setup {
         self.params.declare(key, default, Some(Box::new(check)))
     }
 
+    /// Reports read-only figures: `source` is called whenever they are read
+    /// (`nerve param get`, `nerve ps`), from the message-checker thread, so
+    /// it should only read counters the agent keeps (atomics, a short lock).
+    pub fn figures(&mut self, source: impl Fn() -> Vec<(String, String)> + Send + Sync + 'static) {
+        self.params.set_figures(Box::new(source));
+    }
+
     fn check_port(&self, port: &str) -> Result<(), AgentError> {
         validate_port_name(port).map_err(|e| AgentError::Config(e.to_string()))?;
         if self.outputs.iter().any(|p| p.name == port) || self.inputs.iter().any(|p| p.name() == port) {

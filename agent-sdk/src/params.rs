@@ -3,6 +3,11 @@
 //! `nerve param set NAME KEY VALUE`. The message checker parses and checks a
 //! new value with the parameter's type and answers at once; the task sees
 //! the new value at its next read.
+//!
+//! An agent may also report **figures**: read-only values it computes itself
+//! (the bridge's peers and per-topic counters, say). They are read with
+//! `nerve param get` like parameters, refused by `nerve param set`, and
+//! travel in the agent's statistics (`nerve ps --json`, field `figures`).
 
 use std::collections::BTreeMap;
 use std::fmt::Display;
@@ -82,10 +87,14 @@ fn short_type_name<T>() -> &'static str {
     full.rsplit("::").next().unwrap_or(full)
 }
 
-/// The agent's parameters, by name.
+/// A source of figures: called by the message checker when they are read.
+pub type FigureSource = Box<dyn Fn() -> Vec<(String, String)> + Send + Sync>;
+
+/// The agent's parameters, by name, and its read-only figures.
 #[derive(Default)]
 pub struct ParamTable {
     params: BTreeMap<String, Box<dyn DynParam>>,
+    figures: Option<FigureSource>,
 }
 
 impl std::fmt::Debug for ParamTable {
@@ -106,14 +115,40 @@ impl ParamTable {
         Param { value }
     }
 
-    /// The value of `key` as text.
-    pub fn get(&self, key: &str) -> Result<String, String> {
-        self.params.get(key).map(|p| p.get()).ok_or_else(|| self.unknown(key))
+    /// Installs the source of the agent's read-only figures (one per agent;
+    /// a second call replaces the first).
+    pub fn set_figures(&mut self, source: FigureSource) {
+        self.figures = Some(source);
     }
 
-    /// Sets `key` from text, checking it against the parameter's type.
+    /// The agent's figures as (name, value), sorted by name; empty when it reports none.
+    pub fn figures(&self) -> Vec<(String, String)> {
+        let mut v = self.figures.as_ref().map(|f| f()).unwrap_or_default();
+        v.sort();
+        v
+    }
+
+    fn figure(&self, key: &str) -> Option<String> {
+        self.figures.as_ref()?().into_iter().find(|(k, _)| k == key).map(|(_, v)| v)
+    }
+
+    /// The value of parameter or figure `key` as text.
+    pub fn get(&self, key: &str) -> Result<String, String> {
+        match self.params.get(key) {
+            Some(p) => Ok(p.get()),
+            None => self.figure(key).ok_or_else(|| self.unknown(key)),
+        }
+    }
+
+    /// Sets `key` from text, checking it against the parameter's type; a figure is refused.
     pub fn set(&self, key: &str, value: &str) -> Result<(), String> {
-        self.params.get(key).ok_or_else(|| self.unknown(key))?.set(value)
+        match self.params.get(key) {
+            Some(p) => p.set(value),
+            None if self.figure(key).is_some() => {
+                Err(format!("{key:?} is a read-only figure that the agent reports; it cannot be set"))
+            }
+            None => Err(self.unknown(key)),
+        }
     }
 
     /// Every parameter as (name, value).
@@ -156,5 +191,22 @@ mod tests {
         assert!(t.set("gain", "fast").expect_err("not a number").contains("not a valid f64"));
         assert!(t.set("gain", "-1").expect_err("checked").contains(">= 0"));
         assert!(t.get("speed").expect_err("unknown").contains("gain (f64)"));
+    }
+
+    #[test]
+    fn figures_are_read_but_never_set() {
+        let mut t = ParamTable::default();
+        t.declare("gain", 1u32, None);
+        let n = Arc::new(std::sync::atomic::AtomicU64::new(3));
+        let src = n.clone();
+        t.set_figures(Box::new(move || {
+            vec![("z.count".into(), src.load(std::sync::atomic::Ordering::Relaxed).to_string()), ("a".into(), "x".into())]
+        }));
+        assert_eq!(t.get("z.count").as_deref(), Ok("3"));
+        n.store(7, std::sync::atomic::Ordering::Relaxed);
+        assert_eq!(t.get("z.count").as_deref(), Ok("7"), "figures are read live");
+        assert!(t.set("z.count", "1").expect_err("read-only").contains("read-only"));
+        assert_eq!(t.figures(), vec![("a".to_string(), "x".to_string()), ("z.count".to_string(), "7".to_string())]);
+        assert_eq!(t.snapshot(), vec![("gain".to_string(), "1".to_string())], "figures are not parameters");
     }
 }

@@ -37,3 +37,14 @@ pub fn tight_timer_slack() {
     // SAFETY: PR_SET_TIMERSLACK takes a plain integer argument.
     let _ = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) };
 }
+
+/// Puts the calling thread back under the normal scheduler (SCHED_OTHER).
+/// Threads inherit their creator's policy: an agent that starts a library's
+/// own thread pool (a network stack, say) from a real-time thread calls
+/// this first in a thread of its own, so the pool never competes with the
+/// robot's real-time tasks.
+pub fn drop_realtime() {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: pthread_self is always valid; param is a valid sched_param.
+    let _ = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_OTHER, &param) };
+}

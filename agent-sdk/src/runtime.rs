@@ -856,6 +856,7 @@ impl Checker<'_> {
             rss_bytes: rss_bytes(),
             realtime: self.shared.realtime.load(Ordering::Relaxed),
             inputs: self.inputs.iter().flat_map(|i| i.stats(now)).collect(),
+            figures: self.params.figures(),
         }
     }
 }

@@ -200,9 +200,11 @@ impl From<AgentName> for String {
     }
 }
 
-/// Validates a port name: lowercase letters, digits, `-` and `_`, at most 32 bytes.
+/// Validates a port name: lowercase letters, digits, `-`, `_` and `.`, at
+/// most 32 bytes. The dot lets a bridge name an imported port after its
+/// origin (`r1.map.path` for robot r1's `map/path`).
 pub fn validate_port_name(name: &str) -> Result<(), NameError> {
-    check("port", name, FIXED_NAME_CAPACITY, &['-', '_'], "'-' or '_'")?;
+    check("port", name, FIXED_NAME_CAPACITY, &['-', '_', '.'], "'-', '_' or '.'")?;
     if RESERVED_PORT_NAMES.contains(&name) {
         return Err(NameError::Reserved { what: "port", name: name.into() });
     }

@@ -44,4 +44,7 @@ pub struct AgentStats {
     pub realtime: bool,
     /// per input subscription
     pub inputs: Vec<InputStats>,
+    /// read-only figures the agent reports about its own work, (name, value)
+    /// sorted by name: the bridge's peers and per-topic counters, say
+    pub figures: Vec<(String, String)>,
 }

@@ -14,7 +14,7 @@ pub mod router_to_agent;
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 
 /// Version of the control protocol. Bump it on any change to a control type.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// A control message with the protocol version of its sender.
 #[derive(Debug, Serialize, Deserialize)]
@@ -89,6 +89,6 @@ mod tests {
 
     #[test]
     fn garbage_is_malformed() {
-        assert!(matches!(decode::<AgentCommand>(&[1, 0xff, 0xff]), Err(ProtocolError::Malformed(_))));
+        assert!(matches!(decode::<AgentCommand>(&[PROTOCOL_VERSION as u8, 0xff, 0xff]), Err(ProtocolError::Malformed(_))));
     }
 }

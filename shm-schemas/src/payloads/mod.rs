@@ -45,6 +45,31 @@ pub trait Payload: ZeroCopySend + Debug + Copy + Serialize + Send + Sync + 'stat
         // `ZeroCopySend::type_name` concerns implementing it, not calling it.
         unsafe { <Self as ZeroCopySend>::type_name() }
     }
+
+    /// A fingerprint of the layout: two builds whose payloads share the type
+    /// name but differ in size or alignment get different fingerprints, so a
+    /// peer across a bridge can refuse a stale build instead of misreading it.
+    /// (Today the layout is summarised by name, size and alignment; a
+    /// field-by-field schema can refine it without changing callers.)
+    fn layout_fingerprint() -> u64 {
+        layout_fingerprint(Self::stable_type_name(), std::mem::size_of::<Self>(), std::mem::align_of::<Self>())
+    }
+}
+
+/// The fingerprint of a layout given by type name, size and alignment
+/// (64-bit FNV-1a over the three): what [`Payload::layout_fingerprint`] is
+/// made of, and what a tool that knows a type only by these figures compares.
+pub fn layout_fingerprint(type_name: &str, size: usize, align: usize) -> u64 {
+    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+    const PRIME: u64 = 0x0000_0100_0000_01b3;
+    let mut h = OFFSET;
+    let size = size as u64;
+    let align = align as u64;
+    for b in type_name.bytes().chain([0u8]).chain(size.to_le_bytes()).chain(align.to_le_bytes()) {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(PRIME);
+    }
+    h
 }
 
 /// Calls `$m!(Type)` for every payload type this build knows, so that tools
@@ -86,4 +111,18 @@ pub fn known_type_names() -> Vec<&'static str> {
     }
     for_each_payload!(push);
     v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fingerprints_tell_layouts_apart() {
+        let tick = <Tick as Payload>::layout_fingerprint();
+        assert_eq!(tick, layout_fingerprint("nerve::Tick", 16, 8), "stable across builds");
+        assert_ne!(tick, layout_fingerprint("nerve::Tick", 24, 8), "a grown struct differs");
+        assert_ne!(tick, layout_fingerprint("nerve::Tock", 16, 8), "another name differs");
+        assert_ne!(tick, <Scalar as Payload>::layout_fingerprint());
+    }
 }
