@@ -81,6 +81,9 @@ pub enum Command {
     Demo(crate::cmd::demo::DemoCmd),
     /// Run a benchmark scenario (runs `nerve-bench`; see BENCHMARKS.md).
     Bench(crate::cmd::bench::BenchArgs),
+    /// Robots talking to each other: the bridge agents' peers and what crosses.
+    #[command(subcommand)]
+    Bridge(crate::cmd::bridge::BridgeCmd),
 }
 
 /// `nerve launch`

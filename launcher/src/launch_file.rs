@@ -95,7 +95,7 @@ pub struct AgentSpec {
     pub exe: PathBuf,
     /// period, for periodic agents
     pub period: Option<String>,
-    /// agent-specific arguments (after `--`), with `{state}` and `{robot}` expanded
+    /// agent-specific arguments (after `--`), with `{state}`, `{robot}` and `{dir}` expanded
     pub args: Vec<String>,
     /// `KEY=VALUE` parameter settings
     pub params: Vec<String>,
@@ -200,6 +200,12 @@ pub fn expand(s: &str, world: &World) -> String {
     s.replace("{state}", &world.state_dir().display().to_string()).replace("{robot}", world.robot().as_str())
 }
 
+/// Expands `{state}`, `{robot}` and `{dir}` (the launch file's own folder,
+/// so that a file can name its neighbours wherever it is launched from).
+fn expand_in(s: &str, world: &World, dir: &Path) -> String {
+    expand(s, world).replace("{dir}", &dir.display().to_string())
+}
+
 fn param_text(v: &toml::Value) -> Option<String> {
     match v {
         toml::Value::String(s) => Some(s.clone()),
@@ -265,6 +271,8 @@ pub fn load(path: &Path, default_robot: &str) -> Result<(LaunchFile, World), Box
         None => default_robot.to_owned(),
     };
     let world = World::new(&robot)?;
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
 
     let mut agents = Vec::new();
     let mut seen: HashMap<String, usize> = HashMap::new();
@@ -297,7 +305,7 @@ pub fn load(path: &Path, default_robot: &str) -> Result<(LaunchFile, World), Box
                 }
             },
             (None, Some(x)) => {
-                let p = PathBuf::from(expand(x.get_ref(), &world));
+                let p = PathBuf::from(expand_in(x.get_ref(), &world, &dir));
                 match resolve_kind(&p.display().to_string()) {
                     Ok(exe) => (p.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(), exe),
                     Err(_) => {
@@ -321,10 +329,10 @@ pub fn load(path: &Path, default_robot: &str) -> Result<(LaunchFile, World), Box
                 continue;
             }
         };
-        let mut args: Vec<String> = a.args.iter().map(|s| expand(s, &world)).collect();
+        let mut args: Vec<String> = a.args.iter().map(|s| expand_in(s, &world, &dir)).collect();
         if let Some(d) = &a.device {
             args.push("--device".into());
-            args.push(expand(d.get_ref(), &world));
+            args.push(expand_in(d.get_ref(), &world, &dir));
         }
         let mut params = Vec::new();
         for (k, v) in &a.params {

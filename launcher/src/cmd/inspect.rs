@@ -72,6 +72,19 @@ pub fn print_agents(agents: &[AgentView]) {
             ports(&a.outputs)
         );
     }
+    // figures that agents report about their own work (a bridge's peers and topics)
+    for a in agents {
+        let figures: Vec<String> = a
+            .stats
+            .iter()
+            .flat_map(|s| &s.figures)
+            .filter(|(_, v)| !v.is_empty())
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        if !figures.is_empty() {
+            println!("{}: {}", a.name, figures.join(" "));
+        }
+    }
 }
 
 pub fn ps(world: &World, a: PsArgs) -> Result<ExitCode> {

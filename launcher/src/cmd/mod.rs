@@ -1,6 +1,7 @@
 //! One module per family of commands; [`dispatch`] routes the parsed command line.
 
 pub mod bench;
+pub mod bridge;
 pub mod demo;
 pub mod down;
 pub mod drive;
@@ -42,5 +43,6 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Mem(c) => mem::mem(&world, c),
         Command::Cmd(a) => drive::cmd(&world, a),
         Command::Bench(a) => bench::bench(a),
+        Command::Bridge(c) => bridge::bridge(&world, c),
     }
 }

@@ -1,0 +1,514 @@
+//! The bridge's configuration file (`--config FILE`, TOML, strict like launch
+//! files): the Zenoh endpoints and the two lists of what crosses.
+//!
+//! ```toml
+//! listen = ["tcp/127.0.0.1:7447"]      # endpoints this bridge accepts peers on
+//! connect = ["tcp/127.0.0.1:7448"]     # peers it dials (and re-dials after a cut)
+//! multicast_scouting = false           # find peers on the LAN by multicast (off by default)
+//! queue = 256                          # default queue of a reliable export, messages
+//! lease = "2s"                         # a silent link is declared lost after this
+//!
+//! [[export]]                           # a local output port sent to the peers
+//! port = "t1/tick"                     # AGENT/PORT on this robot
+//! type = "nerve::Tick"                 # its payload type
+//! max_hz = 20.0                        # at most 20 messages a second (optional)
+//!
+//! [[export]]
+//! port = "cmd/out"
+//! type = "nerve::Scalar"
+//! reliable = true                      # in order, kept while the link is down
+//! queue = 64                           # overrides the default queue
+//!
+//! [[import]]                           # a remote port published here as a local output
+//! port = "r1/t1/tick"                  # ROBOT/AGENT/PORT on the remote robot
+//! type = "nerve::Tick"
+//! as = "r1.t1.tick"                    # the local port name (this is the default)
+//! ```
+//!
+//! Every problem is reported as `FILE:LINE: what, and what to do`, all of
+//! them at once, before anything starts.
+
+use serde::Deserialize;
+use shm_schemas::names::validate_port_name;
+use shm_schemas::{AgentName, RobotName};
+use std::path::Path;
+use std::time::Duration;
+use toml::Spanned;
+
+/// Largest queue a reliable export may keep (messages).
+pub const MAX_QUEUE: usize = 100_000;
+/// Default queue of a reliable export (messages).
+pub const DEFAULT_QUEUE: usize = 256;
+/// Largest rate limit accepted (messages per second).
+pub const MAX_HZ: f64 = 100_000.0;
+/// Default lease: a link silent for this long is declared lost.
+pub const DEFAULT_LEASE: Duration = Duration::from_secs(2);
+
+/// A configuration that could not be used; the message lists every problem.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read bridge config {path}: {source}")]
+    Read {
+        /// the file
+        path: String,
+        /// why
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file has problems, each `FILE:LINE: what`.
+    #[error("{}\n{} problem(s) in {path}; the bridge did not start", problems.join("\n"), problems.len())]
+    Invalid {
+        /// the file
+        path: String,
+        /// one line per problem
+        problems: Vec<String>,
+    },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    #[serde(default)]
+    listen: Vec<Spanned<String>>,
+    #[serde(default)]
+    connect: Vec<Spanned<String>>,
+    #[serde(default)]
+    multicast_scouting: bool,
+    #[serde(default)]
+    queue: Option<Spanned<i64>>,
+    #[serde(default)]
+    lease: Option<Spanned<String>>,
+    #[serde(default)]
+    export: Vec<RawExport>,
+    #[serde(default)]
+    import: Vec<RawImport>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawExport {
+    port: Spanned<String>,
+    #[serde(rename = "type")]
+    type_name: Spanned<String>,
+    #[serde(default)]
+    reliable: bool,
+    #[serde(default)]
+    max_hz: Option<Spanned<f64>>,
+    #[serde(default)]
+    queue: Option<Spanned<i64>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawImport {
+    port: Spanned<String>,
+    #[serde(rename = "type")]
+    type_name: Spanned<String>,
+    #[serde(default, rename = "as")]
+    local: Option<Spanned<String>>,
+}
+
+/// A local output port sent to the peers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Export {
+    /// the exporting agent
+    pub agent: String,
+    /// its output port
+    pub port: String,
+    /// the payload type name
+    pub type_name: String,
+    /// delivered in order or reported lost (else best effort, newest wins)
+    pub reliable: bool,
+    /// rate limit, messages per second
+    pub max_hz: Option<f64>,
+    /// messages a reliable export keeps while no peer has acknowledged them
+    pub queue: usize,
+}
+
+impl Export {
+    /// `AGENT/PORT`.
+    pub fn origin(&self) -> String {
+        format!("{}/{}", self.agent, self.port)
+    }
+
+    /// The bridge's input port that reads it: `AGENT.PORT`.
+    pub fn input_name(&self) -> String {
+        format!("{}.{}", self.agent, self.port)
+    }
+}
+
+/// A remote port published as one of this bridge's output ports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Import {
+    /// the remote robot
+    pub robot: String,
+    /// the remote agent
+    pub agent: String,
+    /// the remote output port
+    pub port: String,
+    /// the payload type name this bridge expects
+    pub type_name: String,
+    /// the local output port name
+    pub local: String,
+}
+
+impl Import {
+    /// `ROBOT/AGENT/PORT`.
+    pub fn origin(&self) -> String {
+        format!("{}/{}/{}", self.robot, self.agent, self.port)
+    }
+}
+
+/// A checked bridge configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    /// endpoints to listen on
+    pub listen: Vec<String>,
+    /// endpoints to connect to
+    pub connect: Vec<String>,
+    /// multicast scouting on the LAN
+    pub multicast_scouting: bool,
+    /// link lease
+    pub lease: Duration,
+    /// what leaves
+    pub exports: Vec<Export>,
+    /// what arrives
+    pub imports: Vec<Import>,
+}
+
+fn line_of(src: &str, offset: usize) -> usize {
+    src.as_bytes().iter().take(offset).filter(|&&b| b == b'\n').count() + 1
+}
+
+/// Reads and checks a configuration file. `known_type` says whether this
+/// build of the bridge can carry a payload type.
+pub fn load(path: &Path, known_type: &dyn Fn(&str) -> bool) -> Result<Config, ConfigError> {
+    let src = std::fs::read_to_string(path)
+        .map_err(|source| ConfigError::Read { path: path.display().to_string(), source })?;
+    parse(&src, &path.display().to_string(), known_type)
+}
+
+/// Checks a configuration given as text; `file` names it in messages.
+pub fn parse(src: &str, file: &str, known_type: &dyn Fn(&str) -> bool) -> Result<Config, ConfigError> {
+    let invalid = |problems: Vec<String>| ConfigError::Invalid { path: file.into(), problems };
+    let raw: RawConfig = toml::from_str(src).map_err(|e| {
+        let line = e.span().map(|s| line_of(src, s.start)).unwrap_or(1);
+        invalid(vec![format!("{file}:{line}: {}", e.message())])
+    })?;
+    let mut problems = Vec::new();
+    let mut at = |span: std::ops::Range<usize>, msg: String| {
+        problems.push(format!("{file}:{}: {msg}", line_of(src, span.start)))
+    };
+
+    for ep in raw.listen.iter().chain(&raw.connect) {
+        if let Err(e) = check_endpoint(ep.get_ref()) {
+            at(ep.span(), e);
+        }
+    }
+    let default_queue = match &raw.queue {
+        Some(q) => match check_queue(*q.get_ref()) {
+            Ok(n) => n,
+            Err(e) => {
+                at(q.span(), e);
+                DEFAULT_QUEUE
+            }
+        },
+        None => DEFAULT_QUEUE,
+    };
+    let lease = match &raw.lease {
+        Some(l) => match agent_sdk::clock::parse_duration(l.get_ref()) {
+            Ok(d) if (Duration::from_millis(100)..=Duration::from_secs(600)).contains(&d) => d,
+            Ok(_) => {
+                at(l.span(), "lease must be between 100ms and 600s".into());
+                DEFAULT_LEASE
+            }
+            Err(e) => {
+                at(l.span(), format!("lease: {e}"));
+                DEFAULT_LEASE
+            }
+        },
+        None => DEFAULT_LEASE,
+    };
+
+    let mut exports: Vec<Export> = Vec::new();
+    for e in &raw.export {
+        let Some((agent, port)) = e.port.get_ref().split_once('/').filter(|(_, p)| !p.contains('/')) else {
+            at(
+                e.port.span(),
+                format!("export port {:?} must be written AGENT/PORT (a port of this robot)", e.port.get_ref()),
+            );
+            continue;
+        };
+        if let Err(err) = AgentName::new(agent) {
+            at(e.port.span(), format!("export {}: {err}", e.port.get_ref()));
+            continue;
+        }
+        if let Err(err) = validate_port_name(port) {
+            at(e.port.span(), format!("export {}: {err}", e.port.get_ref()));
+            continue;
+        }
+        if !known_type(e.type_name.get_ref()) {
+            at(
+                e.type_name.span(),
+                format!(
+                    "type {:?} is unknown to this bridge; check the spelling (e.g. nerve::Tick) or build a bridge that carries it",
+                    e.type_name.get_ref()
+                ),
+            );
+        }
+        let max_hz = match &e.max_hz {
+            Some(h) if !(h.get_ref().is_finite() && *h.get_ref() > 0.0 && *h.get_ref() <= MAX_HZ) => {
+                at(h.span(), format!("max_hz must be a number above 0 and at most {MAX_HZ}"));
+                None
+            }
+            Some(h) => Some(*h.get_ref()),
+            None => None,
+        };
+        let queue = match &e.queue {
+            Some(q) if !e.reliable => {
+                at(q.span(), "queue applies to reliable exports only; add `reliable = true` or remove it".into());
+                default_queue
+            }
+            Some(q) => check_queue(*q.get_ref()).unwrap_or_else(|msg| {
+                at(q.span(), msg);
+                default_queue
+            }),
+            None => default_queue,
+        };
+        let export = Export {
+            agent: agent.into(),
+            port: port.into(),
+            type_name: e.type_name.get_ref().clone(),
+            reliable: e.reliable,
+            max_hz,
+            queue,
+        };
+        if let Err(err) = validate_port_name(&export.input_name()) {
+            at(
+                e.port.span(),
+                format!("export {}: the bridge's input for it would be {err}; use shorter names", e.port.get_ref()),
+            );
+            continue;
+        }
+        if exports.iter().any(|x| x.origin() == export.origin()) {
+            at(e.port.span(), format!("export {} is listed twice", e.port.get_ref()));
+            continue;
+        }
+        exports.push(export);
+    }
+
+    let mut imports: Vec<Import> = Vec::new();
+    for i in &raw.import {
+        let parts: Vec<&str> = i.port.get_ref().split('/').collect();
+        let [robot, agent, port] = parts[..] else {
+            at(
+                i.port.span(),
+                format!(
+                    "import port {:?} must be written ROBOT/AGENT/PORT (a port of a remote robot)",
+                    i.port.get_ref()
+                ),
+            );
+            continue;
+        };
+        if let Err(err) = RobotName::new(robot) {
+            at(i.port.span(), format!("import {}: {err}", i.port.get_ref()));
+            continue;
+        }
+        if let Err(err) = AgentName::new(agent) {
+            at(i.port.span(), format!("import {}: {err}", i.port.get_ref()));
+            continue;
+        }
+        if let Err(err) = validate_port_name(port) {
+            at(i.port.span(), format!("import {}: {err}", i.port.get_ref()));
+            continue;
+        }
+        if !known_type(i.type_name.get_ref()) {
+            at(
+                i.type_name.span(),
+                format!(
+                    "type {:?} is unknown to this bridge; check the spelling (e.g. nerve::Tick) or build a bridge that carries it",
+                    i.type_name.get_ref()
+                ),
+            );
+        }
+        let (local, span) = match &i.local {
+            Some(l) => (l.get_ref().clone(), l.span()),
+            None => (format!("{robot}.{agent}.{port}"), i.port.span()),
+        };
+        if let Err(err) = validate_port_name(&local) {
+            at(span, format!("import {}: local port {err}; name it with `as = \"...\"`", i.port.get_ref()));
+            continue;
+        }
+        let import = Import {
+            robot: robot.into(),
+            agent: agent.into(),
+            port: port.into(),
+            type_name: i.type_name.get_ref().clone(),
+            local,
+        };
+        if imports.iter().any(|x| x.origin() == import.origin()) {
+            at(i.port.span(), format!("import {} is listed twice", i.port.get_ref()));
+            continue;
+        }
+        if imports.iter().any(|x| x.local == import.local) {
+            at(
+                span,
+                format!(
+                    "two imports would publish on the same local port {:?}; name one with `as = \"...\"`",
+                    import.local
+                ),
+            );
+            continue;
+        }
+        imports.push(import);
+    }
+    if exports.is_empty() && imports.is_empty() {
+        at(0..0, "nothing crosses: list at least one [[export]] or [[import]]".into());
+    }
+    if !problems.is_empty() {
+        return Err(invalid(problems));
+    }
+    Ok(Config {
+        listen: raw.listen.into_iter().map(Spanned::into_inner).collect(),
+        connect: raw.connect.into_iter().map(Spanned::into_inner).collect(),
+        multicast_scouting: raw.multicast_scouting,
+        lease,
+        exports,
+        imports,
+    })
+}
+
+fn check_queue(q: i64) -> Result<usize, String> {
+    usize::try_from(q)
+        .ok()
+        .filter(|n| (1..=MAX_QUEUE).contains(n))
+        .ok_or_else(|| format!("queue must be between 1 and {MAX_QUEUE} messages"))
+}
+
+/// An endpoint this build can use: `tcp/HOST:PORT`.
+fn check_endpoint(ep: &str) -> Result<(), String> {
+    let Some(addr) = ep.strip_prefix("tcp/") else {
+        return Err(format!(
+            "endpoint {ep:?}: this bridge speaks TCP only; write tcp/HOST:PORT (e.g. tcp/127.0.0.1:7447)"
+        ));
+    };
+    let addr = addr.split(['?', '#']).next().unwrap_or(addr);
+    let Some((host, port)) = addr.rsplit_once(':') else {
+        return Err(format!("endpoint {ep:?} has no port; write tcp/HOST:PORT"));
+    };
+    if host.is_empty() || port.parse::<u16>().is_err() {
+        return Err(format!("endpoint {ep:?}: write tcp/HOST:PORT with a port from 0 to 65535"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn known(t: &str) -> bool {
+        matches!(t, "nerve::Tick" | "nerve::Scalar")
+    }
+
+    fn problems(src: &str) -> Vec<String> {
+        match parse(src, "b.toml", &known) {
+            Err(ConfigError::Invalid { problems, .. }) => problems,
+            other => panic!("expected problems, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_full_config_is_read() {
+        let c = parse(
+            r#"
+listen = ["tcp/127.0.0.1:7447"]
+connect = ["tcp/127.0.0.1:7448"]
+queue = 32
+lease = "3s"
+
+[[export]]
+port = "t1/tick"
+type = "nerve::Tick"
+max_hz = 20.0
+
+[[export]]
+port = "cmd/out"
+type = "nerve::Scalar"
+reliable = true
+queue = 8
+
+[[import]]
+port = "r1/t1/tick"
+type = "nerve::Tick"
+
+[[import]]
+port = "r1/cmd/out"
+type = "nerve::Scalar"
+as = "cmd"
+"#,
+            "b.toml",
+            &known,
+        )
+        .expect("valid");
+        assert_eq!(c.listen, vec!["tcp/127.0.0.1:7447"]);
+        assert!(!c.multicast_scouting, "scouting is off unless asked for");
+        assert_eq!(c.lease, Duration::from_secs(3));
+        assert_eq!(c.exports[0].input_name(), "t1.tick");
+        assert_eq!((c.exports[0].reliable, c.exports[0].max_hz, c.exports[0].queue), (false, Some(20.0), 32));
+        assert_eq!((c.exports[1].reliable, c.exports[1].queue), (true, 8));
+        assert_eq!(c.imports[0].local, "r1.t1.tick");
+        assert_eq!(c.imports[0].origin(), "r1/t1/tick");
+        assert_eq!(c.imports[1].local, "cmd");
+    }
+
+    #[test]
+    fn every_problem_is_reported_with_its_line() {
+        let p = problems(
+            r#"listen = ["udp/1.2.3.4:5"]
+[[export]]
+port = "t1"
+type = "nerve::Tick"
+[[export]]
+port = "t1/tick"
+type = "nerve::Tock"
+max_hz = -1.0
+[[import]]
+port = "r1/t1/tick"
+type = "nerve::Tick"
+[[import]]
+port = "r2/t1/tick"
+type = "nerve::Tick"
+as = "r1.t1.tick"
+"#,
+        );
+        assert!(p[0].starts_with("b.toml:1: ") && p[0].contains("TCP only"), "{p:?}");
+        assert!(p.iter().any(|l| l.starts_with("b.toml:3: ") && l.contains("AGENT/PORT")), "{p:?}");
+        assert!(p.iter().any(|l| l.starts_with("b.toml:7: ") && l.contains("nerve::Tock")), "{p:?}");
+        assert!(p.iter().any(|l| l.starts_with("b.toml:8: ") && l.contains("max_hz")), "{p:?}");
+        assert!(p.iter().any(|l| l.starts_with("b.toml:15: ") && l.contains("same local port")), "{p:?}");
+        assert_eq!(p.len(), 5, "{p:?}");
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_queues_are_refused() {
+        let p = problems("[[export]]\nport = \"a/b\"\ntype = \"nerve::Tick\"\nreliabel = true\n");
+        assert!(p[0].starts_with("b.toml:4: ") && p[0].contains("reliabel"), "{p:?}");
+        let p = problems("[[export]]\nport = \"a/b\"\ntype = \"nerve::Tick\"\nqueue = 3\n");
+        assert!(p[0].contains("reliable exports only"), "{p:?}");
+        let p = problems("queue = 0\n[[export]]\nport = \"a/b\"\ntype = \"nerve::Tick\"\n");
+        assert!(p[0].starts_with("b.toml:1: ") && p[0].contains("between 1 and"), "{p:?}");
+        let p = problems("listen = []\n");
+        assert!(p[0].contains("nothing crosses"), "{p:?}");
+    }
+
+    #[test]
+    fn endpoints_are_checked() {
+        assert!(check_endpoint("tcp/127.0.0.1:7447").is_ok());
+        assert!(check_endpoint("tcp/[::1]:7447").is_ok());
+        assert!(check_endpoint("tcp/10.0.0.2:7447#iface=veth0").is_ok());
+        assert!(check_endpoint("tcp/127.0.0.1").is_err());
+        assert!(check_endpoint("tcp/host:99999").is_err());
+        assert!(check_endpoint("quic/127.0.0.1:7447").is_err());
+    }
+}

@@ -1,0 +1,376 @@
+//! Delivery of reliable topics across a link that may be cut: the sender's
+//! [`Outbox`] and the receiver's [`Inbox`]. Pure bookkeeping, no I/O, so
+//! that every case (a cut, an overflow, a restart on either side) is a unit
+//! test.
+//!
+//! The sender numbers each message of a topic (1, 2, ...) and keeps it in a
+//! bounded queue until every importer it has ever seen has acknowledged it.
+//! Importers are known by name (`ROBOT.BRIDGE`) and remembered across a cut,
+//! so what is sent while the link is down stays queued and goes out when the
+//! importer is back. A full queue drops its oldest message and counts it as
+//! lost; the receiver learns of it from the `oldest` field of later frames
+//! and counts it too. Nothing is lost without a count and a log line.
+//!
+//! The receiver delivers in order: a frame after a gap that the sender still
+//! holds is held back (it will be retransmitted), a frame before the next
+//! expected one is a duplicate. A sender that restarts starts a new
+//! `instance`; the receiver then starts again from that run's oldest frame.
+
+use std::collections::{BTreeMap, VecDeque};
+
+/// A queued message of a reliable topic.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Queued {
+    /// sequence number, from 1
+    pub seq: u64,
+    /// CLOCK_REALTIME ns when the sample was taken
+    pub stamp_unix_ns: u64,
+    /// the local sender and its sequence number
+    pub sender: String,
+    /// sequence number on the local port
+    pub origin_seq: u64,
+    /// the payload
+    pub payload: Vec<u8>,
+}
+
+#[derive(Debug, Clone)]
+struct Importer {
+    acked: u64,
+    alive: bool,
+    /// when it last made progress or was last sent what it lacks (ns);
+    /// `None`: it is owed everything after `acked` at once
+    last_tx_ns: Option<u64>,
+}
+
+impl Importer {
+    fn new(alive: bool) -> Self {
+        Importer { acked: 0, alive, last_tx_ns: None }
+    }
+}
+
+/// The sender side of one reliable topic.
+#[derive(Debug)]
+pub struct Outbox {
+    cap: usize,
+    next_seq: u64,
+    queue: VecDeque<Queued>,
+    /// highest sequence number sent at least once
+    sent_upto: u64,
+    importers: BTreeMap<String, Importer>,
+    lost: u64,
+    retransmitted: u64,
+}
+
+/// What [`Outbox::push`] had to drop to make room.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Overflow {
+    /// the sequence number dropped
+    pub seq: u64,
+}
+
+impl Outbox {
+    /// An outbox that keeps at most `cap` (≥ 1) messages.
+    pub fn new(cap: usize) -> Self {
+        Outbox {
+            cap: cap.max(1),
+            next_seq: 1,
+            queue: VecDeque::new(),
+            sent_upto: 0,
+            importers: BTreeMap::new(),
+            lost: 0,
+            retransmitted: 0,
+        }
+    }
+
+    /// Queues a message; returns its sequence number and what was dropped
+    /// to make room, if anything.
+    pub fn push(
+        &mut self,
+        stamp_unix_ns: u64,
+        sender: &str,
+        origin_seq: u64,
+        payload: Vec<u8>,
+    ) -> (u64, Option<Overflow>) {
+        let seq = self.next_seq;
+        self.next_seq = self.next_seq.saturating_add(1);
+        let mut overflow = None;
+        if self.queue.len() >= self.cap {
+            if let Some(old) = self.queue.pop_front() {
+                self.lost = self.lost.saturating_add(1);
+                overflow = Some(Overflow { seq: old.seq });
+            }
+        }
+        self.queue.push_back(Queued { seq, stamp_unix_ns, sender: sender.into(), origin_seq, payload });
+        (seq, overflow)
+    }
+
+    /// The oldest sequence number still held (the next one when empty).
+    pub fn oldest(&self) -> u64 {
+        self.queue.front().map_or(self.next_seq, |q| q.seq)
+    }
+
+    /// Messages queued now.
+    pub fn depth(&self) -> usize {
+        self.queue.len()
+    }
+
+    /// Messages dropped because the queue was full.
+    pub fn lost(&self) -> u64 {
+        self.lost
+    }
+
+    /// Messages sent again after a cut or a missing acknowledgement.
+    pub fn retransmitted(&self) -> u64 {
+        self.retransmitted
+    }
+
+    /// Importers known (ever seen) and alive now.
+    pub fn importers(&self) -> (usize, usize) {
+        (self.importers.len(), self.importers.values().filter(|i| i.alive).count())
+    }
+
+    /// An importer appeared (`alive`) or went away; one that comes back is
+    /// owed what it has not acknowledged at the next [`Outbox::due`].
+    pub fn set_importer(&mut self, who: &str, alive: bool) {
+        let imp = self.importers.entry(who.into()).or_insert_with(|| Importer::new(alive));
+        if alive && !imp.alive {
+            imp.last_tx_ns = None;
+        }
+        imp.alive = alive;
+    }
+
+    /// `who` has delivered everything up to `acked` (at `now_ns`).
+    pub fn ack(&mut self, who: &str, acked: u64, now_ns: u64) {
+        let acked = acked.min(self.sent_upto);
+        let imp = self.importers.entry(who.into()).or_insert_with(|| Importer::new(true));
+        if acked > imp.acked {
+            imp.acked = acked;
+            imp.last_tx_ns = Some(now_ns);
+        }
+        self.trim();
+    }
+
+    /// Drops what every known importer has acknowledged. With no importer
+    /// known yet, everything stays (up to the cap): nobody has it.
+    fn trim(&mut self) {
+        let Some(min) = self.importers.values().map(|i| i.acked).min() else { return };
+        while self.queue.front().is_some_and(|q| q.seq <= min) {
+            self.queue.pop_front();
+        }
+    }
+
+    /// What to send now, in order and each message once: for an alive
+    /// importer that is owed messages and made no progress within `rto_ns`,
+    /// everything after its acknowledgement again; then messages never sent,
+    /// at most `budget` of them (the rate limit).
+    pub fn due(&mut self, now_ns: u64, rto_ns: u64, budget: usize) -> Vec<&Queued> {
+        let first_new = self.sent_upto + 1;
+        let mut from = first_new;
+        for imp in self.importers.values_mut() {
+            let waited = imp.last_tx_ns.is_none_or(|t| now_ns.saturating_sub(t) >= rto_ns);
+            if imp.alive && imp.acked < self.sent_upto && waited {
+                from = from.min(imp.acked + 1);
+                imp.last_tx_ns = Some(now_ns);
+            }
+        }
+        let mut n_new = 0usize;
+        let mut upto = self.sent_upto;
+        let mut out = Vec::new();
+        for q in self.queue.iter().filter(|q| q.seq >= from) {
+            if q.seq >= first_new {
+                if n_new >= budget {
+                    break;
+                }
+                n_new += 1;
+                upto = q.seq;
+            } else {
+                self.retransmitted = self.retransmitted.saturating_add(1);
+            }
+            out.push(q);
+        }
+        if upto > self.sent_upto {
+            self.sent_upto = upto;
+            for imp in self.importers.values_mut().filter(|i| i.alive && i.last_tx_ns.is_none()) {
+                imp.last_tx_ns = Some(now_ns);
+            }
+        }
+        out
+    }
+}
+
+/// What the receiver does with a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    /// Deliver it now; `lost` messages before it will never come.
+    Deliver {
+        /// messages skipped for good since the last delivery (the sender's queue overflowed)
+        lost: u64,
+    },
+    /// Seen already (a retransmission): drop it, acknowledge again.
+    Duplicate,
+    /// A gap the sender can still fill: drop it and wait.
+    Early,
+}
+
+/// The receiver side of one reliable topic.
+#[derive(Debug, Default)]
+pub struct Inbox {
+    instance: Option<u64>,
+    next: u64,
+    /// losses found but not yet reported with a delivery
+    pending_lost: u64,
+}
+
+impl Inbox {
+    /// Judges a frame of run `instance` with sequence number `seq`, sent
+    /// while the sender held `oldest..`.
+    pub fn accept(&mut self, instance: u64, seq: u64, oldest: u64) -> Verdict {
+        if self.instance != Some(instance) {
+            // a new sender (or a restarted one): start from what it holds
+            self.instance = Some(instance);
+            self.next = oldest.max(1);
+            self.pending_lost = 0;
+        }
+        if oldest > self.next {
+            self.pending_lost = self.pending_lost.saturating_add(oldest - self.next);
+            self.next = oldest;
+        }
+        if seq < self.next {
+            return Verdict::Duplicate;
+        }
+        if seq > self.next {
+            return Verdict::Early;
+        }
+        self.next = seq.saturating_add(1);
+        Verdict::Deliver { lost: std::mem::take(&mut self.pending_lost) }
+    }
+
+    /// The highest sequence number delivered in order, or known lost (what
+    /// to acknowledge).
+    pub fn acked(&self) -> u64 {
+        self.next.saturating_sub(1)
+    }
+
+    /// The sender's run this inbox follows.
+    pub fn instance(&self) -> Option<u64> {
+        self.instance
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const RTO: u64 = 100;
+
+    fn seqs(v: Vec<&Queued>) -> Vec<u64> {
+        v.into_iter().map(|q| q.seq).collect()
+    }
+
+    fn push(o: &mut Outbox, n: usize) {
+        for _ in 0..n {
+            o.push(0, "t1", 0, vec![1]);
+        }
+    }
+
+    #[test]
+    fn a_message_stays_until_every_importer_acknowledged_it() {
+        let mut o = Outbox::new(10);
+        push(&mut o, 3);
+        assert_eq!(seqs(o.due(0, RTO, usize::MAX)), vec![1, 2, 3], "sent while nobody listens");
+        o.set_importer("r2.bridge", true);
+        o.set_importer("r3.bridge", true);
+        assert_eq!(seqs(o.due(1, RTO, usize::MAX)), vec![1, 2, 3], "a new importer gets what it missed");
+        o.ack("r2.bridge", 3, 2);
+        assert_eq!(o.depth(), 3, "r3 has not acknowledged");
+        o.ack("r3.bridge", 2, 2);
+        assert_eq!((o.depth(), o.oldest()), (1, 3));
+        o.ack("r3.bridge", 3, 2);
+        assert_eq!((o.depth(), o.oldest()), (0, 4));
+    }
+
+    #[test]
+    fn a_cut_keeps_messages_and_the_return_delivers_them_in_order() {
+        let mut o = Outbox::new(10);
+        o.set_importer("r2.bridge", true);
+        push(&mut o, 2);
+        assert_eq!(seqs(o.due(0, RTO, usize::MAX)), vec![1, 2]);
+        o.ack("r2.bridge", 2, 1);
+        o.set_importer("r2.bridge", false); // the link is cut
+        push(&mut o, 3);
+        assert_eq!(seqs(o.due(10, RTO, usize::MAX)), vec![3, 4, 5], "first try, into the void");
+        assert!(o.due(500, RTO, usize::MAX).is_empty(), "no retransmission to a dead importer");
+        o.set_importer("r2.bridge", true); // back
+        assert_eq!(seqs(o.due(600, RTO, usize::MAX)), vec![3, 4, 5]);
+        assert_eq!(o.retransmitted(), 3);
+        assert!(o.due(650, RTO, usize::MAX).is_empty(), "not again before the timeout");
+        o.ack("r2.bridge", 5, 700);
+        assert!(o.due(900, RTO, usize::MAX).is_empty() && o.depth() == 0);
+
+        let mut i = Inbox::default();
+        for s in 1..=2 {
+            assert_eq!(i.accept(1, s, 1), Verdict::Deliver { lost: 0 });
+        }
+        for s in 3..=5 {
+            assert_eq!(i.accept(1, s, 3), Verdict::Deliver { lost: 0 });
+        }
+        assert_eq!(i.acked(), 5);
+    }
+
+    #[test]
+    fn an_overflow_is_counted_on_both_sides() {
+        let mut o = Outbox::new(3);
+        o.set_importer("r2.bridge", false);
+        let mut dropped = Vec::new();
+        for _ in 0..5 {
+            if let (_, Some(ov)) = o.push(0, "t1", 0, vec![]) {
+                dropped.push(ov.seq);
+            }
+        }
+        assert_eq!((dropped, o.lost(), o.oldest()), (vec![1, 2], 2, 3));
+        let mut i = Inbox::default();
+        assert_eq!(i.accept(9, 1, 1), Verdict::Deliver { lost: 0 }, "it had got 1 before the cut");
+        assert_eq!(i.accept(9, 3, 3), Verdict::Deliver { lost: 1 }, "2 is gone for good");
+        assert_eq!(i.accept(9, 4, 3), Verdict::Deliver { lost: 0 });
+    }
+
+    #[test]
+    fn the_receiver_keeps_order_and_drops_duplicates() {
+        let mut i = Inbox::default();
+        assert_eq!(i.accept(1, 1, 1), Verdict::Deliver { lost: 0 });
+        assert_eq!(i.accept(1, 3, 1), Verdict::Early, "2 is missing but still held");
+        assert_eq!(i.accept(1, 2, 1), Verdict::Deliver { lost: 0 });
+        assert_eq!(i.accept(1, 2, 1), Verdict::Duplicate);
+        assert_eq!(i.accept(1, 3, 1), Verdict::Deliver { lost: 0 });
+        assert_eq!(i.accept(1, 6, 5), Verdict::Early, "4 is lost, 5 still to come");
+        assert_eq!(i.acked(), 4, "the loss of 4 is recorded, 5 is expected");
+        assert_eq!(
+            i.accept(1, 5, 5),
+            Verdict::Deliver { lost: 1 },
+            "the loss is reported once, with the next delivery"
+        );
+        assert_eq!(i.accept(1, 6, 5), Verdict::Deliver { lost: 0 });
+    }
+
+    #[test]
+    fn a_restarted_sender_starts_a_new_run() {
+        let mut i = Inbox::default();
+        for s in 1..=4 {
+            i.accept(1, s, 1);
+        }
+        assert_eq!(i.accept(2, 1, 1), Verdict::Deliver { lost: 0 }, "new instance, from its start");
+        assert_eq!(i.instance(), Some(2));
+        assert_eq!(i.acked(), 1);
+    }
+
+    #[test]
+    fn the_budget_paces_new_messages_but_not_retransmissions() {
+        let mut o = Outbox::new(100);
+        o.set_importer("a", true);
+        push(&mut o, 5);
+        assert_eq!(seqs(o.due(0, RTO, 2)), vec![1, 2]);
+        assert_eq!(seqs(o.due(200, RTO, 1)), vec![1, 2, 3], "1 and 2 unacknowledged: again, plus one new");
+        o.ack("a", 3, 205);
+        assert_eq!(seqs(o.due(210, RTO, 10)), vec![4, 5]);
+    }
+}

@@ -1,0 +1,169 @@
+//! The payload types a bridge can carry, and the typed ports behind them.
+//!
+//! A bridge declares its ports at run time from its configuration, but nerve
+//! ports are typed. A [`Types`] table maps a stable type name to the code
+//! that declares an input or output of that type and moves its bytes. The
+//! `nerve-bridge` program carries every built-in payload
+//! ([`Types::builtin`]); a team with payloads of its own builds its own
+//! bridge in one line: `nerve_bridge::main_with(Types::builtin().with::<MyType>())`.
+//!
+//! Bytes cross as the payload's in-memory representation. That is sound
+//! because every nerve payload is `#[repr(C)]` plain data for which any bit
+//! pattern is a valid value (enums travel as integer codes, names as
+//! length-clamped byte arrays), and the receiver checks the type name, size
+//! and layout fingerprint before it writes a byte.
+
+use agent_sdk::{AgentError, Input, Output, PortError, Setup};
+use shm_schemas::{Payload, for_each_payload};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// What identifies a payload's layout across builds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TypeInfo {
+    /// the stable type name
+    pub name: &'static str,
+    /// size in bytes
+    pub size: usize,
+    /// [`Payload::layout_fingerprint`]
+    pub fingerprint: u64,
+}
+
+/// A sample read from an export input: who sent it, its number, its bytes.
+pub trait ExportTap: Send + Sync {
+    /// Hands every waiting sample to `f` as (sender agent, its sequence number, bytes).
+    fn drain(&self, f: &mut dyn FnMut(&str, u64, &[u8])) -> usize;
+}
+
+/// An import's output port: publishes bytes already checked to be a `T`.
+pub trait ImportSink: Send + Sync {
+    /// Publishes `bytes` (exactly the type's size) as one sample.
+    fn publish(&self, bytes: &[u8]) -> Result<(), PortError>;
+}
+
+type DeclareExport = fn(&mut Setup, &str) -> Result<Box<dyn ExportTap>, AgentError>;
+type DeclareImport = fn(&mut Setup, &str) -> Result<Arc<dyn ImportSink>, AgentError>;
+
+/// How one payload type is carried.
+#[derive(Clone, Copy)]
+pub struct Carrier {
+    /// its layout
+    pub info: TypeInfo,
+    /// declares an input port of this type
+    pub export: DeclareExport,
+    /// declares an output port of this type
+    pub import: DeclareImport,
+}
+
+impl std::fmt::Debug for Carrier {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Carrier").field("info", &self.info).finish()
+    }
+}
+
+/// The payload types a bridge carries, by stable type name.
+#[derive(Debug, Clone, Default)]
+pub struct Types {
+    by_name: BTreeMap<&'static str, Carrier>,
+}
+
+impl Types {
+    /// Every payload type built into nerve (`shm_schemas::for_each_payload!`).
+    pub fn builtin() -> Self {
+        let mut t = Types::default();
+        macro_rules! add {
+            ($ty:ty) => {
+                t = t.with::<$ty>();
+            };
+        }
+        for_each_payload!(add);
+        t
+    }
+
+    /// Adds a payload type of the caller's.
+    pub fn with<T: Payload>(mut self) -> Self {
+        self.by_name.insert(T::stable_type_name(), carrier::<T>());
+        self
+    }
+
+    /// The carrier of a type name.
+    pub fn get(&self, name: &str) -> Option<&Carrier> {
+        self.by_name.get(name)
+    }
+
+    /// Whether this bridge carries `name`.
+    pub fn knows(&self, name: &str) -> bool {
+        self.by_name.contains_key(name)
+    }
+}
+
+fn carrier<T: Payload>() -> Carrier {
+    Carrier {
+        info: TypeInfo {
+            name: T::stable_type_name(),
+            size: std::mem::size_of::<T>(),
+            fingerprint: T::layout_fingerprint(),
+        },
+        export: |setup, port| Ok(Box::new(Tap::<T>(setup.input::<T>(port)?))),
+        import: |setup, port| Ok(Arc::new(Sink::<T>(setup.output::<T>(port)?))),
+    }
+}
+
+struct Tap<T: Payload>(Input<T>);
+
+impl<T: Payload> ExportTap for Tap<T> {
+    fn drain(&self, f: &mut dyn FnMut(&str, u64, &[u8])) -> usize {
+        self.0.drain(|meta, value| {
+            // SAFETY: `value` is a valid `T` for the duration of the call, and
+            // every byte of a nerve payload is plain data (module docs).
+            let bytes =
+                unsafe { std::slice::from_raw_parts((value as *const T).cast::<u8>(), std::mem::size_of::<T>()) };
+            f(meta.sender.as_str(), meta.seq, bytes)
+        })
+    }
+}
+
+struct Sink<T: Payload>(Output<T>);
+
+impl<T: Payload> ImportSink for Sink<T> {
+    fn publish(&self, bytes: &[u8]) -> Result<(), PortError> {
+        if bytes.len() != std::mem::size_of::<T>() {
+            return Err(PortError::Ipc {
+                service: self.0.service().into(),
+                detail: format!(
+                    "{} bytes where {} takes {}",
+                    bytes.len(),
+                    T::stable_type_name(),
+                    std::mem::size_of::<T>()
+                ),
+            });
+        }
+        // SAFETY: exactly size_of::<T>() bytes are copied into the loaned
+        // sample, and any bit pattern is a valid nerve payload (module docs).
+        unsafe {
+            self.0.send_uninit(|slot| {
+                std::ptr::copy_nonoverlapping(bytes.as_ptr(), slot.as_mut_ptr().cast::<u8>(), bytes.len());
+            })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_payload_is_carried() {
+        let t = Types::builtin();
+        for name in shm_schemas::payloads::known_type_names() {
+            let c = t.get(name).expect("carried");
+            assert_eq!(c.info.name, name);
+        }
+        let tick = t.get("nerve::Tick").expect("tick");
+        assert_eq!(
+            (tick.info.size, tick.info.fingerprint),
+            (16, shm_schemas::payloads::layout_fingerprint("nerve::Tick", 16, 8))
+        );
+        assert!(!t.knows("nerve::Nothing"));
+    }
+}
