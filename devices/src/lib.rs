@@ -20,6 +20,8 @@
 //! | IR receiver | device → host | [`IrReport`] |
 //! | arm controller (H2, 3 joints) | host → device | [`ArmCommand`] |
 //! | arm controller (H2, 3 joints) | device → host | [`ArmState`] |
+//! | arm controller (H2, gripper) | host → device | [`GraspCommand`] |
+//! | arm controller (H2, gripper) | device → host | [`GraspState`] |
 //!
 //! The encoder of either side is [`Message::encode`]; the decoder is the
 //! streaming [`FrameDecoder`], which resynchronises after garbage and counts
@@ -37,9 +39,9 @@ pub mod serial;
 
 pub use frame::{DecodeStats, FrameDecoder, Frames, MAX_FRAME_LEN, SYNC, crc16};
 pub use messages::{
-    ARM_RATE_HZ, ArmCommand, ArmState, ENCODER_RATE_HZ, EncoderReport, HEAD_RATE_HZ, HeadCommand, HeadState,
-    IR_RATE_HZ, IrReport, IrSighting, Message, MessageType, SONAR_COUNT, SONAR_NO_ECHO, SONAR_RATE_HZ, SonarScan,
-    WheelCommand,
+    ARM_RATE_HZ, ArmCommand, ArmState, ENCODER_RATE_HZ, EncoderReport, GRASP_NOTHING, GraspAction, GraspCommand,
+    GraspState, GripperPhase, HEAD_RATE_HZ, HeadCommand, HeadState, IR_RATE_HZ, IrReport, IrSighting, Message,
+    MessageType, SONAR_COUNT, SONAR_NO_ECHO, SONAR_RATE_HZ, SonarScan, WheelCommand,
 };
 pub use motor::{DiffDriveGeometry, Odometry, Pose2, wrap_angle};
 pub use serial::{SerialLink, SerialOpenError, open_serial};

@@ -20,8 +20,10 @@ pub const ENCODER_RATE_HZ: f64 = 20.0;
 pub const HEAD_RATE_HZ: f64 = 10.0;
 /// Rate at which the IR receiver sends [`IrReport`], Hz.
 pub const IR_RATE_HZ: f64 = 10.0;
-/// Rate at which the arm controller sends [`ArmState`], Hz.
+/// Rate at which the arm controller sends [`ArmState`] and [`GraspState`], Hz.
 pub const ARM_RATE_HZ: f64 = 10.0;
+/// [`GraspState::held_id`] when the gripper holds nothing.
+pub const GRASP_NOTHING: u8 = 0xFF;
 
 /// The type byte of a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -43,11 +45,15 @@ pub enum MessageType {
     ArmCommand = 0x50,
     /// Arm controller (H2) → host, 10 Hz.
     ArmState = 0x51,
+    /// Host → arm controller (H2): close the gripper on what is in reach, or open it.
+    GraspCommand = 0x52,
+    /// Arm controller (H2) → host, 10 Hz, after each [`ArmState`].
+    GraspState = 0x53,
 }
 
 impl MessageType {
     /// Every message type, for tables and exhaustive tests.
-    pub const ALL: [MessageType; 8] = [
+    pub const ALL: [MessageType; 10] = [
         Self::SonarScan,
         Self::WheelCommand,
         Self::EncoderReport,
@@ -56,6 +62,8 @@ impl MessageType {
         Self::IrReport,
         Self::ArmCommand,
         Self::ArmState,
+        Self::GraspCommand,
+        Self::GraspState,
     ];
     /// The longest payload of any type.
     pub const MAX_PAYLOAD_LEN: usize = 2 + 2 * SONAR_COUNT;
@@ -76,6 +84,8 @@ impl MessageType {
             Self::IrReport => 4,
             Self::ArmCommand => 6,
             Self::ArmState => 8,
+            Self::GraspCommand => 1,
+            Self::GraspState => 6,
         }
     }
 }
@@ -168,6 +178,56 @@ pub struct ArmState {
     pub joints_cdeg: [i16; 3],
 }
 
+/// What the host asks of H2's gripper.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum GraspAction {
+    /// Open the gripper and let go of what it holds.
+    #[default]
+    Release = 0,
+    /// Close the gripper on whatever is within reach of its tip.
+    Grasp = 1,
+}
+
+/// Grasp or release with H2's gripper. The arm controller closes (or
+/// opens) the gripper joint itself; the outcome comes back in
+/// [`GraspState`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct GraspCommand {
+    /// Grasp or release.
+    pub action: GraspAction,
+}
+
+/// The gripper's state, as its controller sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum GripperPhase {
+    /// Open (or opening), holding nothing.
+    #[default]
+    Open = 0,
+    /// Closing after a grasp command; the outcome is not known yet.
+    Closing = 1,
+    /// Closed on an object: [`GraspState::held_id`] names it.
+    Holding = 2,
+    /// Closed on nothing: nothing was within reach when the fingers met.
+    Missed = 3,
+}
+
+/// One report of H2's gripper (sent right after each [`ArmState`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GraspState {
+    /// Wrapping sequence number, the same as the [`ArmState`] it follows.
+    pub seq: u16,
+    /// Open, closing, holding or missed.
+    pub phase: GripperPhase,
+    /// Identification code of the tube held; [`GRASP_NOTHING`] unless holding.
+    pub held_id: u8,
+    /// Distance from the gripper's tip to the nearest graspable tube's
+    /// axis, mm (saturating; `u16::MAX` when there is none). The arm's
+    /// proximity sensor: lets the host see how far it is from a grasp.
+    pub nearest_mm: u16,
+}
+
 /// Any message of any device.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Message {
@@ -187,6 +247,10 @@ pub enum Message {
     ArmCommand(ArmCommand),
     /// See [`ArmState`].
     ArmState(ArmState),
+    /// See [`GraspCommand`].
+    GraspCommand(GraspCommand),
+    /// See [`GraspState`].
+    GraspState(GraspState),
 }
 
 /// Little-endian reader over a payload whose length was checked.
@@ -228,6 +292,8 @@ impl Message {
             Self::IrReport(_) => MessageType::IrReport,
             Self::ArmCommand(_) => MessageType::ArmCommand,
             Self::ArmState(_) => MessageType::ArmState,
+            Self::GraspCommand(_) => MessageType::GraspCommand,
+            Self::GraspState(_) => MessageType::GraspState,
         }
     }
 
@@ -276,6 +342,13 @@ impl Message {
                 for j in m.joints_cdeg {
                     p.extend_from_slice(&j.to_le_bytes());
                 }
+            }
+            Self::GraspCommand(m) => p.push(m.action as u8),
+            Self::GraspState(m) => {
+                p.extend_from_slice(&m.seq.to_le_bytes());
+                p.push(m.phase as u8);
+                p.push(m.held_id);
+                p.extend_from_slice(&m.nearest_mm.to_le_bytes());
             }
         }
         p
@@ -331,6 +404,30 @@ impl Message {
             MessageType::ArmState => {
                 Self::ArmState(ArmState { seq: r.u16(), joints_cdeg: [r.i16(), r.i16(), r.i16()] })
             }
+            MessageType::GraspCommand => {
+                let action = match r.u8() {
+                    0 => GraspAction::Release,
+                    1 => GraspAction::Grasp,
+                    _ => return None,
+                };
+                Self::GraspCommand(GraspCommand { action })
+            }
+            MessageType::GraspState => {
+                let seq = r.u16();
+                let phase = match r.u8() {
+                    0 => GripperPhase::Open,
+                    1 => GripperPhase::Closing,
+                    2 => GripperPhase::Holding,
+                    3 => GripperPhase::Missed,
+                    _ => return None,
+                };
+                let held_id = r.u8();
+                // only a holding gripper names what it holds
+                if (phase == GripperPhase::Holding) != (held_id != GRASP_NOTHING) {
+                    return None;
+                }
+                Self::GraspState(GraspState { seq, phase, held_id, nearest_mm: r.u16() })
+            }
         })
     }
 }
@@ -342,7 +439,18 @@ macro_rules! from_variant {
         }
     )*};
 }
-from_variant!(SonarScan, WheelCommand, EncoderReport, HeadCommand, HeadState, IrReport, ArmCommand, ArmState);
+from_variant!(
+    SonarScan,
+    WheelCommand,
+    EncoderReport,
+    HeadCommand,
+    HeadState,
+    IrReport,
+    ArmCommand,
+    ArmState,
+    GraspCommand,
+    GraspState
+);
 
 #[cfg(test)]
 mod tests {
@@ -355,5 +463,21 @@ mod tests {
             assert_eq!(MessageType::from_u8(t as u8), Some(t));
         }
         assert_eq!(MessageType::from_u8(0x00), None);
+    }
+
+    #[test]
+    fn grasp_messages_round_trip_and_refuse_impossible_values() {
+        let held = GraspState { seq: 7, phase: GripperPhase::Holding, held_id: 9, nearest_mm: 40 };
+        let p = Message::from(held).payload();
+        assert_eq!(p, [7, 0, 2, 9, 40, 0]);
+        assert_eq!(Message::decode_payload(MessageType::GraspState, &p), Some(held.into()));
+        // holding nothing, or naming an object while open, is impossible
+        assert_eq!(Message::decode_payload(MessageType::GraspState, &[7, 0, 2, 0xFF, 0, 0]), None);
+        assert_eq!(Message::decode_payload(MessageType::GraspState, &[7, 0, 0, 3, 0, 0]), None);
+        assert_eq!(Message::decode_payload(MessageType::GraspState, &[7, 0, 4, 0xFF, 0, 0]), None);
+        let grasp = GraspCommand { action: GraspAction::Grasp };
+        assert_eq!(Message::from(grasp).payload(), [1]);
+        assert_eq!(Message::decode_payload(MessageType::GraspCommand, &[1]), Some(grasp.into()));
+        assert_eq!(Message::decode_payload(MessageType::GraspCommand, &[2]), None);
     }
 }

@@ -4,8 +4,9 @@
 
 use nerve_devices::frame::write_frame;
 use nerve_devices::{
-    ArmCommand, ArmState, DecodeStats, EncoderReport, FrameDecoder, HeadCommand, HeadState, IrReport, IrSighting,
-    MAX_FRAME_LEN, Message, SONAR_NO_ECHO, SonarScan, WheelCommand,
+    ArmCommand, ArmState, DecodeStats, EncoderReport, FrameDecoder, GRASP_NOTHING, GraspAction, GraspCommand,
+    GraspState, GripperPhase, HeadCommand, HeadState, IrReport, IrSighting, MAX_FRAME_LEN, Message, SONAR_NO_ECHO,
+    SonarScan, WheelCommand,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -26,6 +27,9 @@ fn samples() -> Vec<Message> {
         IrReport { seq: 3, sighting: Some(IrSighting { checkpoint_id: 4, transmitters: 0b0011 }) }.into(),
         ArmCommand { joints_cdeg: [100, -200, 300] }.into(),
         ArmState { seq: 9, joints_cdeg: [-1, 0, 1] }.into(),
+        GraspCommand { action: GraspAction::Grasp }.into(),
+        GraspState { seq: 9, phase: GripperPhase::Missed, held_id: GRASP_NOTHING, nearest_mm: 1234 }.into(),
+        GraspState { seq: 10, phase: GripperPhase::Holding, held_id: 9, nearest_mm: 35 }.into(),
     ]
 }
 
