@@ -12,9 +12,19 @@
 //! small-angle approximation). Pixels are written row-major, top row first,
 //! 3 bytes R, G, B, straight into the caller's buffer, which may be a
 //! shared-memory slot.
+//!
+//! Every robot has its camera ([`RobotRef::render_camera`]); it sees the
+//! other robots as cylinders in their body colour, never itself.
+//!
+//! A checkpoint tube is two stacked colour bands of equal height; the
+//! renderer projects each band with the pinhole model (focal length
+//! `f = (width / 2) / tan(hfov / 2)` pixels, about 277 for 60°) onto whole
+//! rows, so the pixel distance between the band centres is `f·D / Z` (`D`
+//! the distance between the band centres, `Z` the depth of the tube's
+//! front surface) to within a pixel.
 
 use crate::geom::Vec2;
-use crate::sim::{SimError, Simulation, ray_hit};
+use crate::sim::{RobotId, RobotRef, SimError, Simulation, ray_hit};
 
 /// Frame width, pixels.
 pub const CAMERA_WIDTH: usize = 320;
@@ -32,8 +42,22 @@ fn shade(c: [u8; 3], k: f64) -> [u8; 3] {
     [(f64::from(c[0]) * k).round() as u8, (f64::from(c[1]) * k).round() as u8, (f64::from(c[2]) * k).round() as u8]
 }
 
+/// Focal length of a camera with horizontal field of view `hfov` (radians)
+/// in pixels of the simulator's frames.
+pub fn focal_length_px(hfov: f64) -> f64 {
+    (CAMERA_WIDTH as f64 / 2.0) / (hfov / 2.0).tan()
+}
+
 impl Simulation {
-    /// Renders what the camera sees now into `out` (exactly
+    /// Renders what the first robot's camera sees now into `out` (exactly
+    /// [`CAMERA_FRAME_BYTES`] bytes, RGB24, top row first).
+    pub fn render_camera(&self, out: &mut [u8]) -> Result<(), SimError> {
+        self.robot(RobotId::FIRST).render_camera(out)
+    }
+}
+
+impl RobotRef<'_> {
+    /// Renders what this robot's camera sees now into `out` (exactly
     /// [`CAMERA_FRAME_BYTES`] bytes, RGB24, top row first).
     pub fn render_camera(&self, out: &mut [u8]) -> Result<(), SimError> {
         if out.len() != CAMERA_FRAME_BYTES {
@@ -45,12 +69,13 @@ impl Simulation {
             });
         }
         let (w, h) = (CAMERA_WIDTH as f64, CAMERA_HEIGHT as f64);
-        let cam = Vec2::new(self.pose.x, self.pose.y);
-        let cam_h = self.model.camera_height;
-        let yaw = self.pose.theta + self.head.0;
-        let f = (w / 2.0) / (self.model.camera_hfov / 2.0).tan();
-        let horizon = h / 2.0 + f * self.head.1.tan();
-        let surfaces = self.surfaces();
+        let r = self.r();
+        let cam = Vec2::new(r.pose.x, r.pose.y);
+        let cam_h = r.model.camera_height;
+        let yaw = r.pose.theta + r.head.0;
+        let f = focal_length_px(r.model.camera_hfov);
+        let horizon = h / 2.0 + f * r.head.1.tan();
+        let surfaces = self.sim.surfaces(Some(self.i));
         let mut hits = Vec::with_capacity(surfaces.len());
 
         for col in 0..CAMERA_WIDTH {

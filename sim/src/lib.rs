@@ -4,14 +4,17 @@
 //! the simulator and the real robot:
 //!
 //! * [`world`]: strict TOML world files (walls with doors, boxes, coloured
-//!   and moving objects, checkpoints and the target, start pose);
+//!   and moving objects, checkpoints and the target, one or more robot
+//!   starts with an optional fixed odometry drift);
 //! * [`robot`]: the H1 and H2 models and the noise model;
-//! * [`sim`]: the deterministic fixed-step core — differential drive with
-//!   wheel slip, collisions with a disc robot, ground truth;
+//! * [`sim`]: the deterministic fixed-step core — one world, any number of
+//!   robots ([`RobotId`], [`RobotRef`], [`RobotMut`]), differential drive
+//!   with wheel slip, collisions of disc robots with the world and with each
+//!   other, H2's gripper, ground truth;
 //! * [`sensors`]: sonar ring and IR receiver; [`camera`]: 320x240 RGB
 //!   rendering into a caller's buffer;
 //! * [`pty`] and [`hub`]: each device on its own pseudo-terminal, published
-//!   as a symlink, speaking the `nerve-devices` protocols;
+//!   as a symlink, speaking the `nerve-devices` protocols; one hub per robot;
 //! * [`run`]: the real-time loop of the `nerve-sim` binary; [`truth`]: the
 //!   ground-truth CSV.
 //!
@@ -30,12 +33,12 @@ pub mod sim;
 pub mod truth;
 pub mod world;
 
-pub use camera::{CAMERA_FRAME_BYTES, CAMERA_HEIGHT, CAMERA_WIDTH};
+pub use camera::{CAMERA_FRAME_BYTES, CAMERA_HEIGHT, CAMERA_WIDTH, focal_length_px};
 pub use geom::{Segment, Vec2};
 pub use hub::DeviceHub;
 pub use pty::{DeviceKind, PtyDevice, PtyError, PtyStats};
 pub use robot::{NoiseModel, RobotKind, RobotModel};
 pub use run::{RunError, RunOptions, RunSummary, install_stop_handler, run};
-pub use sim::{SimConfig, SimError, Simulation, Truth};
-pub use truth::{TRUTH_HEADER, TruthError, TruthLog};
-pub use world::{World, WorldError};
+pub use sim::{Graspable, RobotId, RobotMut, RobotRef, SimConfig, SimError, Simulation, Truth};
+pub use truth::{TRUTH_HEADER, TruthError, TruthLog, gripper_word};
+pub use world::{RobotStart, World, WorldError};

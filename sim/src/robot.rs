@@ -5,7 +5,8 @@
 //! * **H2**: two driven wheels, a fixed webcam, an IR receiver, a 3-DOF arm;
 //!   no sonar.
 //!
-//! Both are discs for collisions. Dimensions are plausible for the thesis'
+//! Both are discs for collisions (and for each other's sensors: a robot
+//! is a cylinder of its radius and body height, in its body colour). Dimensions are plausible for the thesis'
 //! platforms, not measured: they are constants here so that every consumer
 //! (simulator, agents, tests) agrees.
 
@@ -71,13 +72,39 @@ pub struct HeadSpec {
     pub speed: f64,
 }
 
-/// The arm.
+/// The arm: a shoulder and an elbow that swing in the horizontal plane,
+/// and a gripper (joint 2: 0 = closed, the upper limit = open).
+///
+/// Seen from above, the shoulder sits `base` metres ahead of the robot's
+/// centre; the upper arm (`links[0]`) turns by the shoulder angle from the
+/// robot's forward axis, the forearm (`links[1]`) by the elbow angle from
+/// the upper arm. The gripper's tip is the end of the forearm. A grasp
+/// holds a target tube when the tube's axis is within `grasp_tolerance` of
+/// the tip as the fingers close.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ArmSpec {
     /// Joint limits (min, max), radians.
     pub limits: [(f64, f64); 3],
     /// Joint speed, rad/s.
     pub speed: f64,
+    /// Shoulder position ahead of the robot's centre, metres.
+    pub base: f64,
+    /// Upper arm and forearm lengths, metres.
+    pub links: [f64; 2],
+    /// Largest distance from the tip to a tube's axis that still grasps it, metres.
+    pub grasp_tolerance: f64,
+}
+
+impl ArmSpec {
+    /// Where the gripper's tip is, in the robot's frame (x forward, y left),
+    /// for joint angles `joints` (radians).
+    pub fn tip(&self, joints: [f64; 3]) -> (f64, f64) {
+        let (a, b) = (joints[0], joints[0] + joints[1]);
+        (
+            self.base + self.links[0] * a.cos() + self.links[1] * b.cos(),
+            self.links[0] * a.sin() + self.links[1] * b.sin(),
+        )
+    }
 }
 
 /// Everything the simulator needs to know about a robot.
@@ -101,6 +128,8 @@ pub struct RobotModel {
     pub head: Option<HeadSpec>,
     /// Arm, if fitted.
     pub arm: Option<ArmSpec>,
+    /// Colour of the body, as other robots' cameras see it.
+    pub body_color: [u8; 3],
     /// Camera height above the floor, metres.
     pub camera_height: f64,
     /// Camera horizontal field of view, radians.
@@ -135,6 +164,7 @@ impl RobotModel {
                 speed: 90f64.to_radians(),
             }),
             arm: None,
+            body_color: [60, 62, 70],
             camera_height: 1.0,
             camera_hfov: 60f64.to_radians(),
             ir_range: 2.0,
@@ -160,7 +190,11 @@ impl RobotModel {
                     (0.0, 60f64.to_radians()),
                 ],
                 speed: 60f64.to_radians(),
+                base: 0.15,
+                links: [0.2, 0.15],
+                grasp_tolerance: 0.1,
             }),
+            body_color: [225, 225, 215],
             camera_height: 0.8,
             camera_hfov: 60f64.to_radians(),
             ir_range: 2.0,

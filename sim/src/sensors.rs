@@ -11,8 +11,11 @@
 //! range. Readings below the minimum range read as the minimum; beyond the
 //! maximum, as [`SONAR_NO_ECHO`].
 //!
+//! Each robot's sensors see the other robots' bodies (sonar echoes, IR
+//! blocked) but not their own.
+//!
 //! **IR**: a checkpoint is received when its centre is within the receiver's
-//! range (2 m), no wall or box is in between, and the robot lies inside the
+//! range (2 m), no wall, box or robot is in between, and the robot lies inside the
 //! emission cone (±50°) of at least one of its four transmitters. The report
 //! names the nearest such checkpoint and the bitmask of transmitters whose
 //! cone holds the robot. A visible checkpoint is missed with
@@ -23,35 +26,67 @@ use rand::Rng;
 use nerve_devices::{IrSighting, SONAR_COUNT, SONAR_NO_ECHO, wrap_angle};
 
 use crate::geom::Vec2;
-use crate::sim::{Simulation, gauss, ray_hit};
+use crate::sim::{RobotId, RobotMut, RobotRef, Simulation, Surface, gauss, ray_hit};
+
+/// True range and angle of incidence along one ray at `height`.
+fn sonar_ray(surfaces: &[Surface], origin: Vec2, dir: Vec2, height: f64) -> Option<(f64, f64)> {
+    surfaces
+        .iter()
+        .filter(|s| s.z[0] <= height && height <= s.z[1])
+        .filter_map(|s| ray_hit(origin, dir, &s.shape))
+        .min_by(|a, b| a.dist.total_cmp(&b.dist))
+        .map(|h| (h.dist, dir.dot(h.normal).abs().clamp(0.0, 1.0).acos()))
+}
+
+/// Whether an opaque surface blocks the straight line from `a` to `b`.
+fn line_blocked(surfaces: &[Surface], a: Vec2, b: Vec2) -> bool {
+    let d = b - a;
+    let len = d.norm();
+    if len == 0.0 {
+        return false;
+    }
+    let dir = d * (1.0 / len);
+    surfaces.iter().filter(|s| s.opaque).filter_map(|s| ray_hit(a, dir, &s.shape)).any(|h| h.dist < len)
+}
 
 impl Simulation {
-    /// True range and angle of incidence along one ray at `height`.
-    fn sonar_ray(&self, origin: Vec2, dir: Vec2, height: f64) -> Option<(f64, f64)> {
-        self.surfaces()
-            .iter()
-            .filter(|s| s.z[0] <= height && height <= s.z[1])
-            .filter_map(|s| ray_hit(origin, dir, &s.shape))
-            .min_by(|a, b| a.dist.total_cmp(&b.dist))
-            .map(|h| (h.dist, dir.dot(h.normal).abs().clamp(0.0, 1.0).acos()))
+    /// The first robot's noise-free sonar ranges; see [`RobotRef::sonar_true_ranges`].
+    pub fn sonar_true_ranges(&self) -> Vec<Option<f64>> {
+        self.robot(RobotId::FIRST).sonar_true_ranges()
     }
+    /// One noisy scan of the first robot's ring; see [`RobotMut::sonar_scan`].
+    pub fn sonar_scan(&mut self) -> [u16; SONAR_COUNT] {
+        self.robot_mut(RobotId::FIRST).sonar_scan()
+    }
+    /// The first robot's noise-free IR sighting; see [`RobotRef::ir_true_sighting`].
+    pub fn ir_true_sighting(&self) -> Option<IrSighting> {
+        self.robot(RobotId::FIRST).ir_true_sighting()
+    }
+    /// One IR reading of the first robot, with dropouts.
+    pub fn ir_sighting(&mut self) -> Option<IrSighting> {
+        self.robot_mut(RobotId::FIRST).ir_sighting()
+    }
+}
 
+impl RobotRef<'_> {
     /// The noise-free range of each sonar, metres (`None`: nothing within
     /// the beam at any distance). Empty for a robot without sonar.
     pub fn sonar_true_ranges(&self) -> Vec<Option<f64>> {
-        let Some(spec) = &self.model.sonar else {
+        let r = self.r();
+        let Some(spec) = &r.model.sonar else {
             return Vec::new();
         };
-        let p = Vec2::new(self.pose.x, self.pose.y);
+        let surfaces = self.sim.surfaces(Some(self.i));
+        let p = Vec2::new(r.pose.x, r.pose.y);
         spec.angles
             .iter()
             .map(|a| {
-                let heading = self.pose.theta + a;
-                let origin = p + Vec2::from_angle(heading) * self.model.radius;
+                let heading = r.pose.theta + a;
+                let origin = p + Vec2::from_angle(heading) * r.model.radius;
                 (-2..=2)
                     .filter_map(|k| {
                         let d = Vec2::from_angle(heading + f64::from(k) * spec.half_beam / 2.0);
-                        self.sonar_ray(origin, d, spec.height)
+                        sonar_ray(&surfaces, origin, d, spec.height)
                     })
                     .map(|(r, _)| r)
                     .min_by(f64::total_cmp)
@@ -59,40 +94,72 @@ impl Simulation {
             .collect()
     }
 
+    /// The noise-free IR sighting: nearest checkpoint in range, in sight,
+    /// with the transmitters facing the robot.
+    pub fn ir_true_sighting(&self) -> Option<IrSighting> {
+        let r = self.r();
+        let surfaces = self.sim.surfaces(Some(self.i));
+        let p = Vec2::new(r.pose.x, r.pose.y);
+        let mut best: Option<(f64, IrSighting)> = None;
+        for c in &self.sim.world.checkpoints {
+            let d = c.position.dist(p);
+            if d > r.model.ir_range || line_blocked(&surfaces, p, c.position) {
+                continue;
+            }
+            let bearing = (p - c.position).angle() - c.heading;
+            let mut mask = 0u8;
+            for i in 0..4 {
+                let facing = f64::from(i) * std::f64::consts::FRAC_PI_2;
+                if wrap_angle(bearing - facing).abs() <= r.model.ir_half_angle {
+                    mask |= 1 << i;
+                }
+            }
+            if mask != 0 && best.is_none_or(|(bd, _)| d < bd) {
+                best = Some((d, IrSighting { checkpoint_id: c.id, transmitters: mask }));
+            }
+        }
+        best.map(|(_, s)| s)
+    }
+}
+
+impl RobotMut<'_> {
     /// One noisy scan of the ring, in mm as the sonar module reports it.
     /// All [`SONAR_NO_ECHO`] for a robot without sonar.
     pub fn sonar_scan(&mut self) -> [u16; SONAR_COUNT] {
         let mut out = [SONAR_NO_ECHO; SONAR_COUNT];
-        let Some(spec) = self.model.sonar.clone() else {
+        let Some(spec) = self.r().model.sonar.clone() else {
             return out;
         };
-        let n = self.cfg.noise;
-        let p = Vec2::new(self.pose.x, self.pose.y);
+        let surfaces = self.sim.surfaces(Some(self.i));
+        let n = self.sim.cfg.noise;
+        let (pose, radius) = (self.r().pose, self.r().model.radius);
+        let p = Vec2::new(pose.x, pose.y);
+        let rng = &mut self.r().rng;
         for (i, a) in spec.angles.iter().enumerate().take(SONAR_COUNT) {
-            let heading = self.pose.theta + a;
-            let origin = p + Vec2::from_angle(heading) * self.model.radius;
+            let heading = pose.theta + a;
+            let origin = p + Vec2::from_angle(heading) * radius;
             // Nearest echo over the beam.
             let best = (-2..=2)
                 .filter_map(|k| {
                     let d = Vec2::from_angle(heading + f64::from(k) * spec.half_beam / 2.0);
-                    self.sonar_ray(origin, d, spec.height)
+                    sonar_ray(&surfaces, origin, d, spec.height)
                 })
                 .min_by(|x, y| x.0.total_cmp(&y.0))
                 // the angle of incidence that matters is the beam axis' one
                 .map(|(r, _)| {
                     let axis = Vec2::from_angle(heading);
-                    let inc =
-                        self.sonar_ray(origin, axis, spec.height).map_or(std::f64::consts::FRAC_PI_2, |(_, inc)| inc);
+                    let inc = sonar_ray(&surfaces, origin, axis, spec.height)
+                        .map_or(std::f64::consts::FRAC_PI_2, |(_, inc)| inc);
                     (r, inc)
                 });
             // Fixed number of draws per sonar keeps runs reproducible.
             let (g, u_spec, u_kind, u_mult, u_spur, u_rand) = (
-                gauss(&mut self.rng),
-                self.rng.random::<f64>(),
-                self.rng.random::<f64>(),
-                self.rng.random::<f64>(),
-                self.rng.random::<f64>(),
-                self.rng.random::<f64>(),
+                gauss(rng),
+                rng.random::<f64>(),
+                rng.random::<f64>(),
+                rng.random::<f64>(),
+                rng.random::<f64>(),
+                rng.random::<f64>(),
             );
             let mut range = match best {
                 None => None,
@@ -117,48 +184,13 @@ impl Simulation {
         out
     }
 
-    /// Whether a wall or box blocks the straight line from `a` to `b`.
-    fn line_blocked(&self, a: Vec2, b: Vec2) -> bool {
-        let d = b - a;
-        let len = d.norm();
-        if len == 0.0 {
-            return false;
-        }
-        let dir = d * (1.0 / len);
-        self.surfaces().iter().filter(|s| s.opaque).filter_map(|s| ray_hit(a, dir, &s.shape)).any(|h| h.dist < len)
-    }
-
-    /// The noise-free IR sighting: nearest checkpoint in range, in sight,
-    /// with the transmitters facing the robot.
-    pub fn ir_true_sighting(&self) -> Option<IrSighting> {
-        let p = Vec2::new(self.pose.x, self.pose.y);
-        let mut best: Option<(f64, IrSighting)> = None;
-        for c in &self.world.checkpoints {
-            let d = c.position.dist(p);
-            if d > self.model.ir_range || self.line_blocked(p, c.position) {
-                continue;
-            }
-            let bearing = (p - c.position).angle() - c.heading;
-            let mut mask = 0u8;
-            for i in 0..4 {
-                let facing = f64::from(i) * std::f64::consts::FRAC_PI_2;
-                if wrap_angle(bearing - facing).abs() <= self.model.ir_half_angle {
-                    mask |= 1 << i;
-                }
-            }
-            if mask != 0 && best.is_none_or(|(bd, _)| d < bd) {
-                best = Some((d, IrSighting { checkpoint_id: c.id, transmitters: mask }));
-            }
-        }
-        best.map(|(_, s)| s)
-    }
-
     /// One IR receiver reading, with dropouts.
     pub fn ir_sighting(&mut self) -> Option<IrSighting> {
-        let u: f64 = self.rng.random();
-        if u < self.cfg.noise.ir_dropout_prob {
+        let dropout = self.sim.cfg.noise.ir_dropout_prob;
+        let u: f64 = self.r().rng.random();
+        if u < dropout {
             return None;
         }
-        self.ir_true_sighting()
+        self.as_ref().ir_true_sighting()
     }
 }

@@ -11,6 +11,19 @@
 //! x = 1.0
 //! y = 1.0
 //! heading_deg = 0.0
+//! # wheel_bias = [0.0, -0.004]  # optional fixed drift (replaces the drawn bias)
+//!
+//! # or, for several robots in one world, one table per robot, in order
+//! # (the first is the simulator's own robot, the next ones are named by
+//! # `--extra-robot` on its command line):
+//! # [[robot]]
+//! # name = "robot 1"
+//! # x = 0.0
+//! # y = 0.0
+//! # [[robot]]
+//! # name = "robot 2"
+//! # x = -4.0
+//! # y = 0.0
 //!
 //! [[wall]]                      # a wall segment, optionally with door openings
 //! from = [0.0, 0.0]
@@ -36,7 +49,8 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
+use serde::de::value::{MapAccessDeserializer, SeqAccessDeserializer};
+use serde::{Deserialize, Deserializer};
 
 use crate::geom::{Segment, Vec2};
 use nerve_devices::Pose2;
@@ -103,7 +117,7 @@ fn default_tube_z() -> [f64; 2] {
 struct WorldFile {
     #[serde(default)]
     name: Option<String>,
-    robot: RobotStartFile,
+    robot: RobotStartsFile,
     #[serde(default)]
     wall: Vec<WallFile>,
     #[serde(default, rename = "box")]
@@ -117,10 +131,39 @@ struct WorldFile {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RobotStartFile {
+    #[serde(default)]
+    name: Option<String>,
     x: f64,
     y: f64,
     #[serde(default)]
     heading_deg: f64,
+    #[serde(default)]
+    wheel_bias: Option<[f64; 2]>,
+}
+
+/// `[robot]` (one robot, as world files always had) or `[[robot]]` (one
+/// table per robot). Decided by what the file holds, so that the parser's
+/// own errors — unknown key, line and column — come through unchanged.
+#[derive(Debug)]
+struct RobotStartsFile(Vec<RobotStartFile>);
+
+impl<'de> Deserialize<'de> for RobotStartsFile {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct OneOrMany;
+        impl<'de> serde::de::Visitor<'de> for OneOrMany {
+            type Value = RobotStartsFile;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a [robot] table or one [[robot]] table per robot")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<Self::Value, A::Error> {
+                RobotStartFile::deserialize(MapAccessDeserializer::new(map)).map(|r| RobotStartsFile(vec![r]))
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, seq: A) -> Result<Self::Value, A::Error> {
+                Vec::<RobotStartFile>::deserialize(SeqAccessDeserializer::new(seq)).map(RobotStartsFile)
+            }
+        }
+        d.deserialize_any(OneOrMany)
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -327,6 +370,34 @@ pub struct Checkpoint {
     pub z: [f64; 2],
 }
 
+impl Checkpoint {
+    /// Heights of the centres of the lower and the upper colour band,
+    /// metres: the tube is two bands of equal height, stacked.
+    pub fn band_centres(&self) -> (f64, f64) {
+        let h = (self.z[1] - self.z[0]) / 4.0;
+        (self.z[0] + h, self.z[1] - h)
+    }
+
+    /// Distance between the centres of the two colour bands, metres: the
+    /// known length `D` of the thesis' Appendix A.
+    pub fn band_spacing(&self) -> f64 {
+        (self.z[1] - self.z[0]) / 2.0
+    }
+}
+
+/// Where one robot starts, and its fixed odometry drift if the world sets one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotStart {
+    /// A label for logs (`[[robot]] name`), if given.
+    pub name: Option<String>,
+    /// Start pose.
+    pub pose: Pose2,
+    /// Relative error of each wheel's effective radius, `[left, right]`:
+    /// the ground moves by the counted travel × (1 + bias). Replaces the
+    /// bias drawn per run; `None` keeps the drawn one.
+    pub wheel_bias: Option<[f64; 2]>,
+}
+
 /// A validated world.
 #[derive(Debug, Clone, PartialEq)]
 pub struct World {
@@ -342,8 +413,11 @@ pub struct World {
     pub objects: Vec<ColoredObject>,
     /// Checkpoints and the target.
     pub checkpoints: Vec<Checkpoint>,
-    /// Robot start pose.
+    /// Start pose of the first robot (`robots[0].pose`).
     pub start: Pose2,
+    /// Every robot's start, in file order; never empty. The first is the
+    /// simulator's own robot.
+    pub robots: Vec<RobotStart>,
 }
 
 fn v(p: [f64; 2]) -> Vec2 {
@@ -373,9 +447,29 @@ impl World {
             }
         };
 
-        let r = &file.robot;
-        finite("[robot]", &[r.x, r.y, r.heading_deg])?;
-        let start = Pose2 { x: r.x, y: r.y, theta: nerve_devices::wrap_angle(r.heading_deg.to_radians()) };
+        if file.robot.0.is_empty() {
+            return Err(bad("no robot: add a [robot] table (or [[robot]] tables) with its start x and y".into()));
+        }
+        let mut robots = Vec::new();
+        for (i, r) in file.robot.0.iter().enumerate() {
+            let who = match &r.name {
+                Some(name) => format!("robot {} (\"{name}\")", i + 1),
+                None => format!("robot {}", i + 1),
+            };
+            finite(&who, &[r.x, r.y, r.heading_deg])?;
+            if let Some(b) = r.wheel_bias {
+                finite(&who, &b)?;
+                if b.iter().any(|x| x.abs() >= 0.5) {
+                    return Err(bad(format!(
+                        "{who}: wheel_bias {b:?} is a relative error of each wheel's radius; \
+                         use small values such as [0.0, -0.004] (each within ±0.5)"
+                    )));
+                }
+            }
+            let pose = Pose2 { x: r.x, y: r.y, theta: nerve_devices::wrap_angle(r.heading_deg.to_radians()) };
+            robots.push(RobotStart { name: r.name.clone(), pose, wheel_bias: r.wheel_bias });
+        }
+        let start = robots[0].pose;
 
         let mut walls = Vec::new();
         for (i, w) in file.wall.iter().enumerate() {
@@ -515,6 +609,7 @@ impl World {
             objects,
             checkpoints,
             start,
+            robots,
         })
     }
 }
@@ -551,6 +646,36 @@ mod tests {
         let e =
             parse("[robot]\nx=1\ny=1\n[[object]]\nname=\"r\"\ncolor=[1,2,3]\nradius=0.1\n").expect_err("no position");
         assert!(e.to_string().contains("exactly one of"), "{e}");
+    }
+
+    #[test]
+    fn one_robot_or_several() {
+        let w = parse("[robot]\nx=1\ny=2\nheading_deg=90\nwheel_bias=[0.0,-0.004]\n").expect("valid");
+        assert_eq!(w.robots.len(), 1);
+        assert_eq!(w.robots[0].wheel_bias, Some([0.0, -0.004]));
+        assert_eq!(w.start, w.robots[0].pose);
+        let w = parse("[[robot]]\nname=\"r1\"\nx=0\ny=0\n[[robot]]\nx=-4\ny=0\nheading_deg=180\n").expect("valid");
+        assert_eq!(w.robots.len(), 2);
+        assert_eq!(w.robots[0].name.as_deref(), Some("r1"));
+        assert!((w.robots[1].pose.x + 4.0).abs() < 1e-12 && w.robots[1].wheel_bias.is_none());
+        assert_eq!((w.start.x, w.start.y), (0.0, 0.0));
+        // the parser's own message, with the line, for a misspelt key in the second robot
+        let e = parse("[[robot]]\nx=0\ny=0\n[[robot]]\nx=1\ny=0\nheadng_deg=3\n").expect_err("typo");
+        let msg = e.to_string();
+        assert!(msg.contains("t.toml") && msg.contains("headng_deg") && msg.contains("line 7"), "{msg}");
+        let e = parse("[robot]\nx=0\ny=0\nwheel_bias=[0.0,0.7]\n").expect_err("bias");
+        assert!(e.to_string().contains("robot 1") && e.to_string().contains("wheel_bias"), "{e}");
+        let e = parse("robot=[]\n").expect_err("no robot");
+        assert!(e.to_string().contains("no robot"), "{e}");
+    }
+
+    #[test]
+    fn band_centres_are_a_quarter_in() {
+        let w = parse("[robot]\nx=0\ny=0\n[[checkpoint]]\nid=1\nposition=[1,1]\nz=[0.6,1.0]\n").expect("valid");
+        let c = &w.checkpoints[0];
+        let (lo, hi) = c.band_centres();
+        assert!((lo - 0.7).abs() < 1e-12 && (hi - 0.9).abs() < 1e-12);
+        assert!((c.band_spacing() - 0.2).abs() < 1e-12);
     }
 
     #[test]
