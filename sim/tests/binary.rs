@@ -3,7 +3,8 @@
 //! publishes the sonar pty, which delivers 12-range frames at 4 Hz of
 //! simulated time; it accepts a wheel command after which the encoder counts
 //! change; SIGTERM stops it cleanly (links removed, truth log written, no
-//! camera ring left).
+//! camera ring left); a second robot in the same world is served to its
+//! own robot (devices, camera ring, truth).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -186,5 +187,124 @@ fn bad_world_file_is_reported_with_its_name() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("broken.toml") && err.contains("speed"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The last row's `x` of a truth log, once it has rows.
+fn last_x(csv: &Path) -> Option<f64> {
+    let text = std::fs::read_to_string(csv).ok()?;
+    let last = text.lines().skip(1).filter(|l| l.split(',').count() >= 19).last()?;
+    last.split(',').nth(1)?.parse().ok()
+}
+
+#[test]
+fn two_robots_in_one_world_each_served_to_its_own_robot() {
+    let pid = std::process::id();
+    let (r1, r2) = (format!("simtwo1-{pid}"), format!("simtwo2-{pid}"));
+    let (_shm1, _shm2) = (ShmGuard(r1.clone()), ShmGuard(r2.clone()));
+    let dir = std::env::temp_dir().join(format!("nerve-sim-two-{pid}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("tmp dir");
+    let (dev1, dev2) = (dir.join("dev1"), dir.join("dev2"));
+    let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/cooperate.toml");
+    let mut sim = Sim {
+        child: Command::new(env!("CARGO_BIN_EXE_nerve-sim"))
+            .args(["--robot", &r1, "--no-realtime", "--log-level", "warn", "--"])
+            .env("NERVE_HOME", &dir)
+            .arg("--world")
+            .arg(&world)
+            .args(["--robot-model", "h1", "--seed", "4", "--duration", "600"])
+            .arg("--dev-dir")
+            .arg(&dev1)
+            .arg("--truth")
+            .arg(dir.join("truth.csv"))
+            .arg("--extra-robot")
+            .arg(format!("{r2}:h2:{}", dev2.display()))
+            .stdin(Stdio::null())
+            .spawn()
+            .expect("start nerve-sim"),
+    };
+    for name in ["sonar", "motor", "head", "ir"] {
+        wait_for(&dev1.join(name));
+    }
+    for name in ["motor", "ir", "arm"] {
+        wait_for(&dev2.join(name));
+    }
+    assert!(std::fs::symlink_metadata(dev2.join("sonar")).is_err(), "robot 2 (H2) has no sonar");
+    let ring2 = format!("/dev/shm/nerve_{r2}_stm_simcam");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while std::fs::metadata(&ring2).is_err() {
+        assert!(Instant::now() < deadline, "robot 2's camera ring {ring2} never appeared");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+
+    // robot 2's motor moves robot 2 only
+    let mut motor2 = SerialLink::open(&dev2.join("motor")).expect("open robot 2's motor");
+    assert!(matches!(motor2.recv(Duration::from_secs(10)).expect("read"), Some(Message::EncoderReport(_))));
+    motor2.send(&WheelCommand { left_mm_s: 300, right_mm_s: 300 }.into()).expect("send");
+    let (truth1, truth2) = (dir.join("truth.csv"), dir.join(format!("truth-{r2}.csv")));
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        if last_x(&truth2).is_some_and(|x| x > -3.5) {
+            break;
+        }
+        assert!(Instant::now() < deadline, "robot 2 never moved: {:?}", last_x(&truth2));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    drop(motor2);
+
+    let pid = nix::unistd::Pid::from_raw(sim.child.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).expect("SIGTERM");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(s) = sim.child.try_wait().expect("wait") {
+            break s;
+        }
+        assert!(Instant::now() < deadline, "nerve-sim did not stop on SIGTERM");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(status.success(), "exit status {status}");
+    let x1 = last_x(&truth1).expect("robot 1's truth");
+    assert!(x1.abs() < 1e-3, "robot 1 was not commanded and stayed at x = 0: {x1}");
+    assert!(last_x(&truth2).is_some_and(|x| x > -3.5));
+    for name in ["motor", "ir", "arm"] {
+        assert!(std::fs::symlink_metadata(dev2.join(name)).is_err(), "robot 2's {name} link removed");
+    }
+    assert!(std::fs::metadata(&ring2).is_err(), "{ring2} removed at stop");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_extra_robot_without_a_start_is_refused() {
+    let robot = format!("simnostart-{}", std::process::id());
+    let _shm = ShmGuard(robot.clone());
+    let dir = std::env::temp_dir().join(format!("nerve-sim-nostart-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("tmp dir");
+    let out = Command::new(env!("CARGO_BIN_EXE_nerve-sim"))
+        .args(["--robot", &robot, "--no-realtime", "--"])
+        .env("NERVE_HOME", &dir)
+        .arg("--world")
+        .arg(world())
+        .arg("--dev-dir")
+        .arg(dir.join("dev"))
+        .args(["--extra-robot", "other-robot:h2"])
+        .output()
+        .expect("run nerve-sim");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("other-robot") && err.contains("[[robot]]") && err.contains("test-room.toml"), "{err}");
+    let out = Command::new(env!("CARGO_BIN_EXE_nerve-sim"))
+        .args(["--robot", &robot, "--no-realtime", "--"])
+        .env("NERVE_HOME", &dir)
+        .arg("--world")
+        .arg(world())
+        .arg("--dev-dir")
+        .arg(dir.join("dev"))
+        .args(["--extra-robot", "Bad_Name:h2"])
+        .output()
+        .expect("run nerve-sim");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("Bad_Name"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
