@@ -298,7 +298,7 @@ impl Simulation {
         };
         let p = Vec2::new(pose.x, pose.y);
         let radius = robot.model.radius;
-        if self.clearance_for(i, p) < radius || self.inside_box(p) {
+        if self.clearance_with(i, robot.model.body_height, p) < radius || self.inside_box(p) {
             return Err(SimError::StartBlocked {
                 world: self.world.source.display().to_string(),
                 x: pose.x,
@@ -532,10 +532,15 @@ impl Simulation {
     }
 
     /// Distance from `p` to the nearest solid thing robot `i` can bump
-    /// into (including the other robots' bodies, but not its own). For a
-    /// robot not added yet (`i` = the robot count), every robot counts.
+    /// into (including the other robots' bodies, but not its own).
     pub(crate) fn clearance_for(&self, i: usize, p: Vec2) -> f64 {
         let body = self.robots.get(i).map_or(f64::INFINITY, |r| r.model.body_height);
+        self.clearance_with(i, body, p)
+    }
+
+    /// [`Self::clearance_for`] for a body `body_height` high; for a robot
+    /// not added yet (`i` = the robot count), every robot counts.
+    fn clearance_with(&self, i: usize, body: f64, p: Vec2) -> f64 {
         let world = self
             .solid_shapes(body)
             .map(|s| match s {
