@@ -1,0 +1,570 @@
+//! The map builder of robot 1 (thesis section 4.3.2.2, Fig. 4-8) as a
+//! library: it records the checkpoints and the target as the robot meets
+//! them, marks a via point in front of each, orders them into a path for
+//! robot 2, and remembers where the robot has been.
+//!
+//! **Landmarks** ([`MapBuilder::on_sighting`]). A sighting with an IR code
+//! is the checkpoint of that code; the target (the tube upside down) is
+//! matched by position (within `merge_m`). Positions are averaged over the
+//! sightings (a known checkpoint's is its known position anyway). A
+//! landmark counts once it was seen `min_sightings` times, so that a single
+//! misread frame does not enter the map.
+//!
+//! **Via points** ("Step 2: mark via points between the robot and
+//! checkpoints (or the final target), 1.6 m from them"). In front of a
+//! checkpoint means along the direction the IR transmitter seen faces; a
+//! checkpoint passed by is seen by several transmitters in turn, and the
+//! one received most often wins. The target's transmitters are not known in
+//! advance, so its via point lies toward where the robot saw it from (the
+//! circular mean of those directions).
+//!
+//! **The path** ([`MapBuilder::path`]; "Step 3: connect via points and
+//! target point according to the sequence of their relative location").
+//! The via points in the order robot 1 first saw their landmarks — an order
+//! robot 1 has driven, so free of walls — then the target's via point and
+//! the target itself. A via point that is a detour (going through it is
+//! more than `detour_factor` times longer than going past it) is left out.
+//!
+//! **Where the robot has been** ([`VisitedGrid`]): a coarse grid of cells
+//! with the times the robot entered and left them.
+//! [`VisitedGrid::visited_before`] says whether a place was passed before
+//! (left at least `revisit_after` ago and now reached again — the robot is
+//! going round in circles), [`VisitedGrid::visited_ahead`] how much of what
+//! lies ahead in a direction was visited, for exploration that prefers new
+//! space.
+
+#![cfg_attr(test, allow(clippy::unwrap_used))]
+
+use shm_schemas::payloads::{CheckpointSighting, MAX_VIA_POINTS, ViaKind, ViaPath};
+use std::collections::HashMap;
+use std::f64::consts::{FRAC_PI_2, PI};
+
+/// A planar pose.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pose {
+    /// x, metres.
+    pub x: f64,
+    /// y, metres.
+    pub y: f64,
+    /// Heading, radians.
+    pub theta: f64,
+}
+
+/// Settings (the agent's parameters).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    /// Distance of a via point in front of its landmark, metres (the thesis: 1.6).
+    pub via_distance_m: f64,
+    /// Target sightings closer than this are the same target, metres.
+    pub merge_m: f64,
+    /// Sightings before a landmark counts.
+    pub min_sightings: u32,
+    /// A via point is left out when the path through it is longer than
+    /// this times the path past it (0: never).
+    pub detour_factor: f64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings { via_distance_m: 1.6, merge_m: 1.0, min_sightings: 3, detour_factor: 2.0 }
+    }
+}
+
+/// A recorded landmark.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Landmark {
+    /// IR code, 0 when not known.
+    pub id: u8,
+    /// The target (upside down).
+    pub is_target: bool,
+    /// Mean position, metres, world frame.
+    pub x: f64,
+    /// Mean position, metres.
+    pub y: f64,
+    /// Sightings so far.
+    pub sightings: u32,
+    /// Order of first sighting (0 first).
+    pub order: u32,
+    /// Sightings per transmitter direction (bit i), with the direction it faces.
+    transmitter_votes: [(u32, f64); 4],
+    /// Sum of unit vectors toward where the robot saw it from (no transmitter known).
+    seen_from: (f64, f64),
+}
+
+impl Landmark {
+    /// The direction "in front of" the landmark, radians, world frame.
+    pub fn facing(&self) -> f64 {
+        let best = self.transmitter_votes.iter().filter(|(n, _)| *n > 0).max_by_key(|(n, _)| *n);
+        match best {
+            Some((_, dir)) => *dir,
+            None => self.seen_from.1.atan2(self.seen_from.0),
+        }
+    }
+
+    /// Its via point: `distance` in front of it.
+    pub fn via_point(&self, distance: f64) -> (f64, f64) {
+        let f = self.facing();
+        (self.x + distance * f.cos(), self.y + distance * f.sin())
+    }
+}
+
+/// What a sighting did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SightingEvent {
+    /// Ignored (nonsense values, or no id and not the target).
+    Ignored,
+    /// A landmark seen for the first time (not counted yet).
+    New,
+    /// A known landmark seen again.
+    Again,
+    /// A landmark just reached `min_sightings`: it now counts.
+    Confirmed {
+        /// Its IR code.
+        id: u8,
+        /// Whether it is the target.
+        is_target: bool,
+    },
+}
+
+/// The recorded landmarks and the path between them.
+#[derive(Debug, Clone, Default)]
+pub struct MapBuilder {
+    settings: Settings,
+    landmarks: Vec<Landmark>,
+}
+
+/// Which transmitter directions a sighting reports: bit `i` faces
+/// `facing − (sector − i)·90°`, `sector` being the mean of the bits set
+/// (the sighting's `facing_rad` is the direction of that mean).
+fn transmitter_directions(transmitters: u8, facing: f64) -> Vec<(usize, f64)> {
+    let m = transmitters & 0x0F;
+    let bits: Vec<usize> = (0..4).filter(|i| m & (1 << i) != 0).collect();
+    let sector = match bits.as_slice() {
+        [a] => *a as f64,
+        [0, 3] => -0.5, // between 3 (= -1) and 0
+        [a, b] if b - a == 1 => *a as f64 + 0.5,
+        _ => return Vec::new(),
+    };
+    bits.iter()
+        .map(|&i| {
+            let i_f = if sector < 0.0 && i == 3 { -1.0 } else { i as f64 };
+            (i, facing - (sector - i_f) * FRAC_PI_2)
+        })
+        .collect()
+}
+
+impl MapBuilder {
+    /// An empty map.
+    pub fn new(settings: Settings) -> Self {
+        MapBuilder { settings, landmarks: Vec::new() }
+    }
+
+    /// Changes the settings.
+    pub fn set_settings(&mut self, s: Settings) {
+        self.settings = s;
+    }
+
+    /// The landmarks, counted or not, in the order first seen.
+    pub fn landmarks(&self) -> &[Landmark] {
+        &self.landmarks
+    }
+
+    /// The landmarks that count (seen `min_sightings` times).
+    pub fn confirmed(&self) -> impl Iterator<Item = &Landmark> {
+        self.landmarks.iter().filter(|l| l.sightings >= self.settings.min_sightings.max(1))
+    }
+
+    /// The confirmed target, if any.
+    pub fn target(&self) -> Option<&Landmark> {
+        self.confirmed().find(|l| l.is_target)
+    }
+
+    /// Records a sighting; `robot` is where the robot was (for the
+    /// direction it saw the landmark from when no transmitter says it).
+    pub fn on_sighting(&mut self, s: &CheckpointSighting, robot: Option<Pose>) -> SightingEvent {
+        let finite = s.x.is_finite() && s.y.is_finite() && s.facing_rad.is_finite();
+        let is_target = s.is_target == 1;
+        if !finite || (s.checkpoint_id == 0 && !is_target) {
+            return SightingEvent::Ignored;
+        }
+        let merge = self.settings.merge_m;
+        let idx = self.landmarks.iter().position(|l| {
+            l.is_target == is_target
+                && if s.checkpoint_id != 0 && l.id != 0 {
+                    l.id == s.checkpoint_id
+                } else {
+                    (l.x - s.x).hypot(l.y - s.y) <= merge
+                }
+        });
+        let (idx, event) = match idx {
+            Some(i) => (i, SightingEvent::Again),
+            None => {
+                let order = self.landmarks.len() as u32;
+                self.landmarks.push(Landmark {
+                    id: s.checkpoint_id,
+                    is_target,
+                    x: s.x,
+                    y: s.y,
+                    sightings: 0,
+                    order,
+                    transmitter_votes: [(0, 0.0); 4],
+                    seen_from: (0.0, 0.0),
+                });
+                (self.landmarks.len() - 1, SightingEvent::New)
+            }
+        };
+        let min = self.settings.min_sightings.max(1);
+        let l = &mut self.landmarks[idx];
+        let n = f64::from(l.sightings);
+        l.x = (l.x * n + s.x) / (n + 1.0);
+        l.y = (l.y * n + s.y) / (n + 1.0);
+        l.sightings = l.sightings.saturating_add(1);
+        if l.id == 0 {
+            l.id = s.checkpoint_id;
+        }
+        let dirs = if s.from_ir == 1 && !is_target {
+            transmitter_directions(s.transmitters, f64::from(s.facing_rad))
+        } else {
+            vec![]
+        };
+        for (i, dir) in &dirs {
+            l.transmitter_votes[*i].0 += 1;
+            l.transmitter_votes[*i].1 = *dir;
+        }
+        // where the robot saw it from
+        let from = match robot {
+            Some(r) => (r.x - l.x, r.y - l.y),
+            None => (f64::from(s.facing_rad).cos(), f64::from(s.facing_rad).sin()),
+        };
+        let norm = from.0.hypot(from.1);
+        if norm > 1e-9 {
+            l.seen_from.0 += from.0 / norm;
+            l.seen_from.1 += from.1 / norm;
+        }
+        if l.sightings == min {
+            return SightingEvent::Confirmed { id: l.id, is_target: l.is_target };
+        }
+        event
+    }
+
+    /// The path for robot 2: via points of the confirmed checkpoints in the
+    /// order first seen (detours left out), then the target's via point and
+    /// the target. `None` until a target is confirmed.
+    pub fn path(&self, path_id: u32, stamp_ns: u64) -> Option<ViaPath> {
+        let target = self.target()?;
+        let dist = self.settings.via_distance_m;
+        let mut pts: Vec<([f64; 2], ViaKind, u8)> = self
+            .confirmed()
+            .filter(|l| !l.is_target)
+            .map(|l| {
+                let v = l.via_point(dist);
+                ([v.0, v.1], ViaKind::Checkpoint, l.id)
+            })
+            .collect();
+        let tv = target.via_point(dist);
+        pts.push(([tv.0, tv.1], ViaKind::TargetApproach, target.id));
+        pts.push(([target.x, target.y], ViaKind::Target, target.id));
+        // leave out detours (never the last two)
+        if self.settings.detour_factor > 0.0 {
+            let mut i = 1;
+            while i + 2 < pts.len() {
+                let (a, b, c) = (pts[i - 1].0, pts[i].0, pts[i + 1].0);
+                let d = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
+                if d(a, b) + d(b, c) > self.settings.detour_factor * d(a, c).max(1e-6) {
+                    pts.remove(i);
+                } else {
+                    i += 1;
+                }
+            }
+        }
+        // keep the last MAX_VIA_POINTS (the target's end of the path matters most)
+        let skip = pts.len().saturating_sub(MAX_VIA_POINTS);
+        let mut path = ViaPath { stamp_ns, path_id, ..Default::default() };
+        for (k, (p, kind, id)) in pts.iter().skip(skip).enumerate() {
+            path.points[k] = *p;
+            path.kinds[k] = *kind as u8;
+            path.checkpoint_ids[k] = *id;
+            path.count = k as u32 + 1;
+        }
+        Some(path)
+    }
+}
+
+/// A cell of the [`VisitedGrid`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Cell {
+    /// Times the robot entered it.
+    pub entries: u32,
+    /// When it last entered it, ns.
+    pub last_enter_ns: u64,
+    /// When it last left it, ns (`None` while it never left).
+    pub last_leave_ns: Option<u64>,
+}
+
+/// Where the robot has been: a coarse grid.
+#[derive(Debug, Clone)]
+pub struct VisitedGrid {
+    cell_m: f64,
+    revisit_after_ns: u64,
+    max_cells: usize,
+    cells: HashMap<(i64, i64), Cell>,
+    current: Option<(i64, i64)>,
+    full: bool,
+}
+
+impl VisitedGrid {
+    /// A grid of `cell_m` cells; a place left at least `revisit_after_ns`
+    /// ago counts as visited before. At most `max_cells` cells are kept.
+    pub fn new(cell_m: f64, revisit_after_ns: u64, max_cells: usize) -> Self {
+        VisitedGrid {
+            cell_m: if cell_m.is_finite() && cell_m > 0.01 { cell_m } else { 0.5 },
+            revisit_after_ns,
+            max_cells,
+            cells: HashMap::new(),
+            current: None,
+            full: false,
+        }
+    }
+
+    fn key(&self, x: f64, y: f64) -> Option<(i64, i64)> {
+        let (i, j) = ((x / self.cell_m).floor(), (y / self.cell_m).floor());
+        // beyond ±1e9 cells is nonsense (and would not fit an i64 exactly)
+        (i.abs() < 1e9 && j.abs() < 1e9).then_some((i as i64, j as i64))
+    }
+
+    /// The robot is at `(x, y)` at `now_ns`.
+    pub fn visit(&mut self, x: f64, y: f64, now_ns: u64) {
+        let Some(k) = self.key(x, y) else { return };
+        if self.current == Some(k) {
+            return;
+        }
+        if let Some(c) = self.current.and_then(|c| self.cells.get_mut(&c)) {
+            c.last_leave_ns = Some(now_ns);
+        }
+        if !self.cells.contains_key(&k) && self.cells.len() >= self.max_cells {
+            self.full = true;
+            self.current = None;
+            return;
+        }
+        let c = self.cells.entry(k).or_default();
+        c.entries = c.entries.saturating_add(1);
+        c.last_enter_ns = now_ns;
+        self.current = Some(k);
+    }
+
+    /// The cell at `(x, y)`, if the robot was ever there.
+    pub fn cell(&self, x: f64, y: f64) -> Option<&Cell> {
+        self.key(x, y).and_then(|k| self.cells.get(&k))
+    }
+
+    /// Whether the place `(x, y)` was already visited: a cell within
+    /// `radius_m` of it that the robot left at least `revisit_after` before
+    /// `now_ns` (so the cells just behind a robot passing for the first
+    /// time do not count).
+    pub fn visited_before(&self, x: f64, y: f64, radius_m: f64, now_ns: u64) -> bool {
+        let Some((ci, cj)) = self.key(x, y) else { return false };
+        let r = (radius_m.max(0.0) / self.cell_m).ceil() as i64;
+        for di in -r..=r {
+            for dj in -r..=r {
+                let Some(c) = self.cells.get(&(ci + di, cj + dj)) else { continue };
+                if c.last_leave_ns.is_some_and(|t| now_ns.saturating_sub(t) >= self.revisit_after_ns) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// The fraction (0 … 1) of points along `distance_m` ahead of `pose`
+    /// in direction `pose.theta + angle` that fall in visited cells.
+    pub fn visited_ahead(&self, pose: &Pose, angle: f64, distance_m: f64) -> f64 {
+        let n = ((distance_m / self.cell_m).ceil() as usize).clamp(1, 1000);
+        let a = pose.theta + angle;
+        let hits = (1..=n)
+            .filter(|k| {
+                let d = distance_m * *k as f64 / n as f64;
+                self.key(pose.x + d * a.cos(), pose.y + d * a.sin()).is_some_and(|key| self.cells.contains_key(&key))
+            })
+            .count();
+        hits as f64 / n as f64
+    }
+
+    /// Cells visited.
+    pub fn len(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// No cell visited yet.
+    pub fn is_empty(&self) -> bool {
+        self.cells.is_empty()
+    }
+
+    /// The grid reached `max_cells` (new places are no longer recorded).
+    pub fn is_full(&self) -> bool {
+        self.full
+    }
+}
+
+/// Wraps an angle into (−π, π].
+pub fn wrap(a: f64) -> f64 {
+    let r = (a + PI).rem_euclid(2.0 * PI) - PI;
+    if r <= -PI { r + 2.0 * PI } else { r }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: f64, b: f64, tol: f64) -> bool {
+        (a - b).abs() <= tol
+    }
+
+    /// A sighting of checkpoint `id` at `(x, y)` whose transmitter 0 faces
+    /// −90°, received through transmitter mask `tx`.
+    fn cp(id: u8, x: f64, y: f64, tx: u8) -> CheckpointSighting {
+        let sector = match tx {
+            0b0001 => 0.0,
+            0b0011 => 0.5,
+            0b0010 => 1.0,
+            0b1001 => -0.5,
+            0b1000 => 3.0,
+            _ => 0.0,
+        };
+        CheckpointSighting {
+            x,
+            y,
+            checkpoint_id: id,
+            transmitters: tx,
+            from_ir: 1,
+            from_camera: 1,
+            facing_rad: wrap(-FRAC_PI_2 + sector * FRAC_PI_2) as f32,
+            ..Default::default()
+        }
+    }
+
+    fn target(x: f64, y: f64) -> CheckpointSighting {
+        CheckpointSighting { x, y, is_target: 1, from_camera: 1, ..Default::default() }
+    }
+
+    #[test]
+    fn transmitter_directions_from_the_cone_centre() {
+        let d = transmitter_directions(0b0011, 0.25 * PI);
+        assert_eq!(d.len(), 2);
+        assert!(close(d[0].1, 0.0, 1e-12) && close(d[1].1, FRAC_PI_2, 1e-12), "{d:?}");
+        let d = transmitter_directions(0b1001, -0.25 * PI);
+        assert!(close(d[0].1, 0.0, 1e-12) && close(wrap(d[1].1), -FRAC_PI_2, 1e-12), "{d:?}");
+        assert!(transmitter_directions(0b0101, 0.0).is_empty());
+    }
+
+    #[test]
+    fn the_corridor_of_the_thesis_gives_its_path() {
+        let mut m = MapBuilder::new(Settings::default());
+        let robot = |x: f64| Some(Pose { x, y: 0.0, theta: 0.0 });
+        // robot 1 drives along y = 0 and passes the checkpoints: transmitters 3+0, then 0
+        for (id, x) in [(1u8, 1.2), (2, 6.0), (3, 10.8)] {
+            assert_eq!(m.on_sighting(&cp(id, x, 1.2, 0b1001), robot(x - 1.2)), SightingEvent::New);
+            for _ in 0..4 {
+                m.on_sighting(&cp(id, x, 1.2, 0b0001), robot(x));
+            }
+        }
+        assert!(m.path(1, 0).is_none(), "no target yet");
+        // a misread id-less upright tube is ignored
+        assert_eq!(m.on_sighting(&CheckpointSighting::default(), robot(11.0)), SightingEvent::Ignored);
+        // the target, seen from the north (robot at (12.8, -1.2)), position a little noisy
+        let r2 = Some(Pose { x: 12.8, y: -1.2, theta: -FRAC_PI_2 });
+        let mut confirmed = false;
+        for k in 0..5 {
+            let e = m.on_sighting(&target(12.8 + 0.02 * (k as f64 - 2.0), -3.0), r2);
+            confirmed |= e == SightingEvent::Confirmed { id: 0, is_target: true };
+        }
+        assert!(confirmed);
+        let p = m.path(7, 42).unwrap();
+        assert_eq!((p.path_id, p.stamp_ns, p.count), (7, 42, 5));
+        let e: Vec<_> = p.entries().collect();
+        let want = [
+            ([1.2, -0.4], 1, 1),
+            ([6.0, -0.4], 1, 2),
+            ([10.8, -0.4], 1, 3),
+            ([12.8, -1.4], 2, 0),
+            ([12.8, -3.0], 3, 0),
+        ];
+        for (got, want) in e.iter().zip(want) {
+            // the target's position and the direction it was seen from are means of noisy sightings
+            assert!(close(got.0[0], want.0[0], 0.03) && close(got.0[1], want.0[1], 0.03), "{got:?} vs {want:?}");
+            assert_eq!((got.1, got.2), (want.1, want.2));
+        }
+    }
+
+    #[test]
+    fn a_checkpoint_behind_the_target_is_a_detour_left_out() {
+        let mut m = MapBuilder::new(Settings { min_sightings: 1, ..Settings::default() });
+        for (id, x) in [(1u8, 1.2), (2, 6.0), (3, 10.8), (4, 15.6)] {
+            m.on_sighting(&cp(id, x, 1.2, 0b0001), None);
+        }
+        m.on_sighting(&target(12.8, -3.0), Some(Pose { x: 12.8, y: -1.2, theta: 0.0 }));
+        let p = m.path(1, 0).unwrap();
+        let ids: Vec<u8> = p.entries().map(|e| e.2).collect();
+        assert_eq!(ids, vec![1, 2, 3, 0, 0], "checkpoint 4 lies past the target's turn");
+        // with detours allowed it stays
+        m.set_settings(Settings { min_sightings: 1, detour_factor: 0.0, ..Settings::default() });
+        assert_eq!(m.path(1, 0).unwrap().count, 6);
+    }
+
+    #[test]
+    fn unconfirmed_landmarks_do_not_count_and_nonsense_is_ignored() {
+        let mut m = MapBuilder::new(Settings::default());
+        m.on_sighting(&target(3.0, 3.0), None);
+        m.on_sighting(&target(9.0, 9.0), None);
+        assert_eq!(m.landmarks().len(), 2, "far apart: two targets");
+        assert!(m.target().is_none());
+        let bad = CheckpointSighting { x: f64::NAN, ..cp(1, 0.0, 0.0, 1) };
+        assert_eq!(m.on_sighting(&bad, None), SightingEvent::Ignored);
+    }
+
+    #[test]
+    fn the_grid_knows_a_place_passed_before() {
+        let s = 1_000_000_000u64;
+        let mut g = VisitedGrid::new(0.5, 20 * s, 10_000);
+        // a lap around a 4 x 4 m box at 0.5 m/s, one point per second
+        let mut t = 0;
+        let mut lap = Vec::new();
+        for k in 0..8 {
+            lap.push((k as f64 * 0.5, 0.0));
+        }
+        for k in 0..8 {
+            lap.push((4.0, k as f64 * 0.5));
+        }
+        for k in 0..8 {
+            lap.push((4.0 - k as f64 * 0.5, 4.0));
+        }
+        for k in 0..8 {
+            lap.push((0.0, 4.0 - k as f64 * 0.5));
+        }
+        for &(x, y) in &lap {
+            g.visit(x, y, t);
+            // during the first lap nothing was passed before, until the lap closes near the start
+            if x.hypot(y) > 1.0 {
+                assert!(!g.visited_before(x + 0.01, y + 0.01, 0.3, t), "({x}, {y}) at {t}");
+            }
+            t += s;
+        }
+        // back at the start after 32 s: passed before
+        g.visit(0.1, 0.1, t);
+        assert!(g.visited_before(0.1, 0.1, 0.3, t));
+        assert_eq!(g.cell(0.1, 0.1).map(|c| c.entries), Some(2));
+        // a place never visited
+        assert!(!g.visited_before(10.0, 10.0, 0.3, t));
+        // looking ahead along the box's side: visited; away from it: new
+        let at = Pose { x: 0.1, y: 0.1, theta: 0.0 };
+        assert!(g.visited_ahead(&at, 0.0, 3.0) > 0.9);
+        assert!(g.visited_ahead(&at, PI, 3.0) < 0.1);
+        // the grid is bounded
+        let mut small = VisitedGrid::new(0.5, s, 3);
+        for k in 0..10 {
+            small.visit(k as f64, 0.0, k);
+        }
+        assert_eq!(small.len(), 3);
+        assert!(small.is_full());
+        small.visit(f64::NAN, 0.0, 99);
+    }
+}

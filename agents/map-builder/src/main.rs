@@ -1,0 +1,272 @@
+//! `map-builder`: robot 1's map builder (thesis section 4.3.2.2, Fig. 4-8).
+//! Periodic (default 200 ms).
+//!
+//! Inputs:
+//! * `pose` (`nerve::PoseEstimate`): the odometry agent's `pose`;
+//! * `sighting` (`nerve::CheckpointSighting`): the checkpoint agent's `sighting`;
+//! * `mission_in` (`nerve::MissionCommand`): robot 2's reports ("via-reached",
+//!   "arrived"), through the bridge.
+//!
+//! Outputs:
+//! * `path` (`nerve::ViaPath`): the via points for robot 2, once the target
+//!   is confirmed; repeated every `republish_ms` until robot 2 arrives (the
+//!   receiver keys on `path_id`), for the bridge to carry;
+//! * `mission` (`nerve::MissionCommand`): "come" with the path, repeated
+//!   with it; "resume" once robot 2 reports "arrived" (for robot 1's decision
+//!   maker: explore again);
+//! * `revisit` (`nerve::Scalar`): every cycle, 1 when the robot is at a
+//!   place it passed before (it is going round in circles), else 0.
+//!
+//! The algorithm is the library `nerve_map_builder`. Parameters:
+//! `via_distance_m` (1.6), `merge_m` (1.0), `min_sightings` (3),
+//! `detour_factor` (2.0), `republish_ms` (1000), `cell_m` (0.5; read at
+//! start), `revisit_after_s` (30; read at start), `revisit_radius_m` (0.5);
+//! read-only figures `landmarks`, `confirmed`, `cells`, `paths_sent`.
+
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
+use nerve_map_builder::{MapBuilder, Pose, Settings, SightingEvent, VisitedGrid};
+use shm_schemas::payloads::{CheckpointSighting, MissionCode, MissionCommand, PoseEstimate, Scalar, ViaKind, ViaPath};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+/// A pose older than this is not used, ns.
+const POSE_FRESH_NS: u64 = 1_000_000_000;
+/// Most cells the visited grid keeps (0.5 m cells: a 100 m × 100 m area).
+const MAX_CELLS: usize = 40_000;
+
+#[derive(Debug, Default)]
+struct Figures {
+    landmarks: AtomicU64,
+    confirmed: AtomicU64,
+    cells: AtomicU64,
+    paths_sent: AtomicU64,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Mission {
+    /// No target yet (or robot 2 has arrived at the last one).
+    Exploring,
+    /// The path was sent; waiting for "arrived".
+    Sent { path: Box<ViaPath>, last_sent_ns: u64 },
+    /// Robot 2 arrived at the target of `path_id`.
+    Done { path_id: u32 },
+}
+
+struct MapBuilderAgent {
+    pose: Input<PoseEstimate>,
+    sighting: Input<CheckpointSighting>,
+    mission_in: Input<MissionCommand>,
+    path_out: Output<ViaPath>,
+    mission_out: Output<MissionCommand>,
+    revisit_out: Output<Scalar>,
+    via_distance_m: Param<f64>,
+    merge_m: Param<f64>,
+    min_sightings: Param<u32>,
+    detour_factor: Param<f64>,
+    republish_ms: Param<u64>,
+    revisit_radius_m: Param<f64>,
+    map: MapBuilder,
+    grid: VisitedGrid,
+    figures: Arc<Figures>,
+    last_pose: Option<PoseEstimate>,
+    mission: Mission,
+    next_path_id: u32,
+    was_revisiting: bool,
+}
+
+fn in_range(lo: f64, hi: f64) -> impl Fn(&f64) -> Result<(), String> + Send + Sync + 'static {
+    move |v| if (lo..=hi).contains(v) { Ok(()) } else { Err(format!("{v} is outside {lo} … {hi}")) }
+}
+
+impl MapBuilderAgent {
+    fn settings(&self) -> Settings {
+        Settings {
+            via_distance_m: self.via_distance_m.get(),
+            merge_m: self.merge_m.get(),
+            min_sightings: self.min_sightings.get(),
+            detour_factor: self.detour_factor.get(),
+        }
+    }
+
+    fn send_path(&mut self, path: &ViaPath, now: u64) -> Result<(), AgentError> {
+        self.path_out.send(ViaPath { stamp_ns: now, ..*path })?;
+        let mut come = MissionCommand::new(MissionCode::Come, path.path_id, now);
+        if let Some(p) = self.last_pose {
+            (come.x, come.y) = (p.x, p.y);
+        }
+        self.mission_out.send(come)?;
+        self.figures.paths_sent.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+}
+
+impl Agent for MapBuilderAgent {
+    const KIND: &'static str = "map-builder";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_millis(200))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let d = Settings::default();
+        let cell_m = setup.param_checked("cell_m", 0.5, in_range(0.1, 5.0));
+        let revisit_after_s = setup.param_checked("revisit_after_s", 30.0, in_range(0.0, 3600.0));
+        let figures = Arc::new(Figures::default());
+        let f2 = figures.clone();
+        setup.figures(move || {
+            let g = |a: &AtomicU64| a.load(Ordering::Relaxed).to_string();
+            vec![
+                ("landmarks".into(), g(&f2.landmarks)),
+                ("confirmed".into(), g(&f2.confirmed)),
+                ("cells".into(), g(&f2.cells)),
+                ("paths_sent".into(), g(&f2.paths_sent)),
+            ]
+        });
+        Ok(MapBuilderAgent {
+            pose: setup.input("pose")?,
+            sighting: setup.input("sighting")?,
+            mission_in: setup.input("mission_in")?,
+            path_out: setup.output("path")?,
+            mission_out: setup.output("mission")?,
+            revisit_out: setup.output("revisit")?,
+            via_distance_m: setup.param_checked("via_distance_m", d.via_distance_m, in_range(0.0, 10.0)),
+            merge_m: setup.param_checked("merge_m", d.merge_m, in_range(0.01, 10.0)),
+            min_sightings: setup.param_checked("min_sightings", d.min_sightings, |v| {
+                if *v >= 1 { Ok(()) } else { Err("min_sightings is at least 1".into()) }
+            }),
+            detour_factor: setup.param_checked("detour_factor", d.detour_factor, |v| {
+                if *v == 0.0 || (1.0..=100.0).contains(v) { Ok(()) } else { Err("0 (off) or 1 … 100".into()) }
+            }),
+            republish_ms: setup.param_checked("republish_ms", 1000u64, |v| {
+                if *v >= 50 { Ok(()) } else { Err("republish_ms is at least 50".into()) }
+            }),
+            revisit_radius_m: setup.param_checked("revisit_radius_m", 0.5, in_range(0.0, 10.0)),
+            map: MapBuilder::new(d),
+            grid: VisitedGrid::new(cell_m.get(), (revisit_after_s.get() * 1e9) as u64, MAX_CELLS),
+            figures,
+            last_pose: None,
+            mission: Mission::Exploring,
+            next_path_id: 1,
+            was_revisiting: false,
+        })
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        let now = ctx.now_ns();
+        let s = self.settings();
+        self.map.set_settings(s);
+        // where the robot is and has been
+        let mut poses = Vec::new();
+        self.pose.drain(|_, p| poses.push(*p));
+        for p in poses.iter().filter(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite()) {
+            self.grid.visit(p.x, p.y, p.stamp_ns);
+            if self.last_pose.is_none_or(|l| p.stamp_ns >= l.stamp_ns) {
+                self.last_pose = Some(*p);
+            }
+        }
+        let pose = self.last_pose.filter(|p| now.saturating_sub(p.stamp_ns) <= POSE_FRESH_NS).map(|p| Pose {
+            x: p.x,
+            y: p.y,
+            theta: p.theta,
+        });
+        // landmarks
+        let mut sightings = Vec::new();
+        self.sighting.drain(|_, s| sightings.push(*s));
+        for sg in &sightings {
+            match self.map.on_sighting(sg, pose) {
+                SightingEvent::Confirmed { id, is_target } => {
+                    let l = self.map.landmarks().iter().find(|l| l.id == id && l.is_target == is_target);
+                    let (x, y, via) = l.map_or((0.0, 0.0, (0.0, 0.0)), |l| (l.x, l.y, l.via_point(s.via_distance_m)));
+                    tracing::info!(
+                        id,
+                        is_target,
+                        x,
+                        y,
+                        via_x = via.0,
+                        via_y = via.1,
+                        "{} recorded",
+                        if is_target { "target" } else { "checkpoint" }
+                    );
+                }
+                SightingEvent::Ignored | SightingEvent::New | SightingEvent::Again => {}
+            }
+        }
+        self.figures.landmarks.store(self.map.landmarks().len() as u64, Ordering::Relaxed);
+        self.figures.confirmed.store(self.map.confirmed().count() as u64, Ordering::Relaxed);
+        self.figures.cells.store(self.grid.len() as u64, Ordering::Relaxed);
+        // robot 2's reports
+        let mut reports = Vec::new();
+        self.mission_in.drain(|m, c| reports.push((m.sender.to_string(), *c)));
+        for (sender, r) in &reports {
+            match (r.code(), &self.mission) {
+                (Some(MissionCode::ViaReached), _) => {
+                    tracing::info!(path = r.path_id, index = r.index, x = r.x, y = r.y, %sender, "robot 2 reached a via point");
+                }
+                (Some(MissionCode::Arrived), Mission::Sent { path, .. }) if r.path_id == path.path_id => {
+                    tracing::info!(path = r.path_id, x = r.x, y = r.y, %sender, "robot 2 arrived: resume exploring");
+                    self.mission_out.send(MissionCommand::new(MissionCode::Resume, r.path_id, now))?;
+                    self.mission = Mission::Done { path_id: r.path_id };
+                }
+                (Some(MissionCode::Arrived), _) => {
+                    tracing::debug!(path = r.path_id, "arrived for a path not in progress; ignored");
+                }
+                (Some(code), _) => {
+                    tracing::debug!(code = code.name(), %sender, "mission message not for the map builder")
+                }
+                (None, _) => tracing::warn!(code = r.code, %sender, "mission message of unknown code; ignored"),
+            }
+        }
+        // the path, once a target is confirmed
+        match &self.mission {
+            Mission::Exploring => {
+                if let Some(path) = self.map.path(self.next_path_id, now) {
+                    self.next_path_id = self.next_path_id.saturating_add(1);
+                    let pts: Vec<String> = path
+                        .entries()
+                        .map(|(p, k, id)| {
+                            let kind = ViaKind::from_code(k).map_or("?", |k| k.name());
+                            format!("({:.2}, {:.2}) {kind} {id}", p[0], p[1])
+                        })
+                        .collect();
+                    tracing::info!(
+                        path = path.path_id,
+                        points = path.count,
+                        "target found: path sent: {}",
+                        pts.join(" -> ")
+                    );
+                    self.send_path(&path, now)?;
+                    self.mission = Mission::Sent { path: Box::new(path), last_sent_ns: now };
+                }
+            }
+            Mission::Sent { path, last_sent_ns } => {
+                if now.saturating_sub(*last_sent_ns) >= self.republish_ms.get().saturating_mul(1_000_000) {
+                    let path = **path;
+                    self.send_path(&path, now)?;
+                    self.mission = Mission::Sent { path: Box::new(path), last_sent_ns: now };
+                }
+            }
+            Mission::Done { .. } => {}
+        }
+        // going round in circles?
+        if let Some(p) = pose {
+            let at = self.last_pose.map_or(now, |l| l.stamp_ns);
+            let again = self.grid.visited_before(p.x, p.y, self.revisit_radius_m.get(), at);
+            if again != self.was_revisiting {
+                tracing::info!(
+                    x = p.x,
+                    y = p.y,
+                    "{}",
+                    if again { "back at a place passed before" } else { "in new space" }
+                );
+                self.was_revisiting = again;
+            }
+            self.revisit_out.send(Scalar { value: if again { 1.0 } else { 0.0 }, stamp_ns: now })?;
+        }
+        Ok(())
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<MapBuilderAgent>()
+}
