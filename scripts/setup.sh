@@ -11,6 +11,7 @@ need=()
 command -v socat >/dev/null || need+=(socat)                       # linked pty pairs for serial work by hand
 command -v systemd-analyze >/dev/null || need+=(systemd)           # `systemd-analyze verify` of the unit files
 ls /usr/lib/llvm-*/lib/libclang*.so >/dev/null 2>&1 || need+=(libclang-dev)  # bindgen for the v4l camera backend
+command -v ip >/dev/null || need+=(iproute2)                       # network namespaces and veth pairs of the bridge tests
 if [ "${1:-}" = "--bench" ]; then
     command -v cyclictest >/dev/null || need+=(rt-tests)           # `nerve bench jitter`
     command -v ddsperf >/dev/null || need+=(cyclonedds-tools)      # `nerve bench hop`: Cyclone DDS

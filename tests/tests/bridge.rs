@@ -1,0 +1,471 @@
+//! Two robots talking through their bridge agents: real processes, real
+//! iceoryx2 shared memory on each side, real Zenoh sessions between them —
+//! over loopback, and across a veth pair between two network namespaces
+//! that the test creates, cuts and removes.
+
+use nerve_tests::{Robot, alive, bin_dir, reap, sigkill, wait_until};
+use serde_json::Value;
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+/// A TCP port free on 127.0.0.1 now.
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("a free port")
+}
+
+/// The figures of agent `name` of robot `r`, by key.
+fn figures(r: &Robot, name: &str) -> std::collections::BTreeMap<String, String> {
+    let a = r.agent(name).unwrap_or_else(|| panic!("agent {name} not in ps of {}", r.name));
+    a["stats"]["figures"]
+        .as_array()
+        .map(|v| v.iter().filter_map(|p| Some((p[0].as_str()?.to_owned(), p[1].as_str()?.to_owned()))).collect())
+        .unwrap_or_default()
+}
+
+fn figure_u64(r: &Robot, agent: &str, key: &str) -> u64 {
+    figures(r, agent).get(key).and_then(|v| v.parse().ok()).unwrap_or(0)
+}
+
+fn write(dir: &Path, name: &str, body: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, body).expect("write file");
+    p
+}
+
+/// `nerve launch FILE` for `r`, optionally inside network namespace `netns`.
+fn launch(r: &Robot, file: &Path, netns: Option<&str>) {
+    let out = match netns {
+        None => r.command("nerve").arg("launch").arg(file).output(),
+        Some(ns) => Command::new("ip")
+            .args(["netns", "exec", ns])
+            .arg(bin_dir().join("nerve"))
+            .arg("launch")
+            .arg(file)
+            .env("NERVE_ROBOT", &r.name)
+            .env("NERVE_HOME", &r.home)
+            .env_remove("RUST_LOG")
+            .output(),
+    }
+    .expect("run nerve launch");
+    assert!(out.status.success(), "launch of {} failed: {}", r.name, String::from_utf8_lossy(&out.stderr));
+}
+
+/// Robots A and B on loopback: A exports its ticker t1 (best effort) and t3
+/// (imported by B with the wrong type), B exports its command ticker
+/// (reliable). A's t2 is not listed anywhere; B imports it anyway to show
+/// that nothing arrives. A's t5 is exported but starts only later (hot add).
+fn two_robots() -> (Robot, Robot) {
+    let (a, b) = (Robot::new("bra"), Robot::new("brb"));
+    let port = free_port();
+    let a_cfg = write(
+        &a.home,
+        "bridge.toml",
+        &format!(
+            r#"listen = ["tcp/127.0.0.1:{port}"]
+lease = "1s"
+[[export]]
+port = "t1/tick"
+type = "nerve::Tick"
+[[export]]
+port = "t3/tick"
+type = "nerve::Tick"
+[[export]]
+port = "t5/tick"
+type = "nerve::Tick"
+[[import]]
+port = "{b}/cmd/tick"
+type = "nerve::Tick"
+as = "cmd"
+"#,
+            b = b.name
+        ),
+    );
+    let b_cfg = write(
+        &b.home,
+        "bridge.toml",
+        &format!(
+            r#"connect = ["tcp/127.0.0.1:{port}"]
+lease = "1s"
+[[export]]
+port = "cmd/tick"
+type = "nerve::Tick"
+reliable = true
+queue = 500
+[[import]]
+port = "{a}/t1/tick"
+type = "nerve::Tick"
+as = "t1"
+[[import]]
+port = "{a}/t2/tick"
+type = "nerve::Tick"
+as = "t2"
+[[import]]
+port = "{a}/t3/tick"
+type = "nerve::Scalar"
+as = "t3"
+[[import]]
+port = "{a}/t5/tick"
+type = "nerve::Tick"
+as = "t5"
+"#,
+            a = a.name
+        ),
+    );
+    let a_launch = a.launch_file(
+        "a.toml",
+        &format!(
+            r#"robot = "x"
+[[agent]]
+name = "t1"
+kind = "ticker"
+period = "20ms"
+[[agent]]
+name = "t2"
+kind = "ticker"
+period = "20ms"
+[[agent]]
+name = "t3"
+kind = "ticker"
+period = "50ms"
+[[agent]]
+name = "bridge"
+kind = "bridge"
+args = ["--config", "{}"]
+restart = "on-failure"
+backoff = "100ms"
+[[agent]]
+name = "r1"
+kind = "relay"
+[[connect]]
+from = "bridge/cmd"
+to = "r1/in"
+"#,
+            a_cfg.display()
+        ),
+    );
+    let b_launch = b.launch_file(
+        "b.toml",
+        &format!(
+            r#"robot = "x"
+[[agent]]
+name = "cmd"
+kind = "ticker"
+period = "100ms"
+[[agent]]
+name = "bridge"
+kind = "bridge"
+args = ["--config", "{}"]
+restart = "on-failure"
+backoff = "100ms"
+[[agent]]
+name = "r1"
+kind = "relay"
+[[connect]]
+from = "bridge/t1"
+to = "r1/in"
+"#,
+            b_cfg.display()
+        ),
+    );
+    launch(&a, &a_launch, None);
+    launch(&b, &b_launch, None);
+    (a, b)
+}
+
+/// An exported port reaches the other robot's agent through `nerve connect`;
+/// an unlisted one does not cross; a type mismatch is refused with both type
+/// names; rewiring and hot-adding on either side work while the bridge runs;
+/// `nerve bridge status` shows the peer and the topics.
+#[test]
+fn bridged_robots_exchange_only_what_is_listed() {
+    let (a, b) = two_robots();
+    // A's ticks arrive at B's relay, through B's bridge output
+    let ticks = b.echo("r1/out", 3);
+    assert_eq!(ticks.len(), 3, "{ticks:?}");
+    // the exports were wired through A's router: nerve graph shows them
+    let g = a.graph();
+    let edges: Vec<String> = g["connections"]
+        .as_array()
+        .map(|c| {
+            c.iter()
+                .map(|e| format!("{} -> {}", e["from"].as_str().unwrap_or("?"), e["to"].as_str().unwrap_or("?")))
+                .collect()
+        })
+        .unwrap_or_default();
+    assert!(edges.contains(&"t1/tick -> bridge/t1.tick".to_string()), "{edges:?}");
+    // B's reliable commands arrive at A
+    assert_eq!(a.echo("r1/out", 2).len(), 2);
+    assert!(wait_until(Duration::from_secs(10), || figure_u64(&b, "bridge", "export.cmd/tick.importers") == 1));
+
+    // t2 is not exported by A: nothing arrives on B's import of it
+    assert!(wait_until(Duration::from_secs(10), || figure_u64(
+        &b,
+        "bridge",
+        &format!("import.{}/t1/tick.msgs_in", a.name)
+    ) > 50));
+    assert_eq!(figure_u64(&b, "bridge", &format!("import.{}/t2/tick.msgs_in", a.name)), 0, "an unlisted port crossed");
+
+    // t3 crosses as nerve::Tick but B expects nerve::Scalar: refused, counted, both names said
+    let key = format!("import.{}/t3/tick", a.name);
+    assert!(wait_until(Duration::from_secs(10), || figure_u64(&b, "bridge", &format!("{key}.refused")) > 0));
+    let err = figures(&b, "bridge").get(&format!("{key}.error")).cloned().unwrap_or_default();
+    assert!(err.contains("nerve::Tick") && err.contains("nerve::Scalar"), "{err}");
+    assert_eq!(figure_u64(&b, "bridge", &format!("{key}.msgs_in")), 0);
+
+    // rewiring on B while the bridge runs: a hot-added relay takes A's ticks
+    b.ok(&["start", "relay", "--name", "r2"]);
+    b.ok(&["connect", "bridge/t1", "r2/in"]);
+    assert_eq!(b.echo("r2/out", 2).len(), 2);
+    b.ok(&["disconnect", "bridge/t1", "r1/in"]);
+    // hot add on A: t5 is exported but was not running; the bridge wires it once it registers
+    a.ok(&["start", "ticker", "--name", "t5", "--period", "20ms"]);
+    b.ok(&["start", "relay", "--name", "r5"]);
+    b.ok(&["connect", "bridge/t5", "r5/in"]);
+    assert_eq!(b.echo("r5/out", 2).len(), 2, "a port hot-added on A crosses");
+
+    // the status command names the peer and the topics
+    let status = b.ok(&["bridge", "status"]);
+    assert!(status.contains(&format!("{}/bridge", a.name)) && status.contains("cmd/tick"), "{status}");
+    let json: Value = serde_json::from_str(&b.ok(&["bridge", "status", "--json"])).expect("status json");
+    assert_eq!(json[0]["peers"][0], format!("{}/bridge", a.name));
+    a.down_and_check_clean();
+    b.down_and_check_clean();
+}
+
+/// SIGKILL of a bridge: its robot runs on, the supervisor restarts it, the
+/// link comes back, and `nerve down` leaves nothing in /dev/shm.
+#[test]
+fn a_killed_bridge_is_restarted_and_the_link_comes_back() {
+    let (a, b) = two_robots();
+    assert_eq!(b.echo("r1/out", 2).len(), 2);
+    let old = a.pid("bridge");
+    let t1_cycles = |r: &Robot| r.agent("t1").and_then(|v| v["stats"]["cycles"].as_u64()).unwrap_or(0);
+    sigkill(old);
+    let before = t1_cycles(&a);
+    assert!(
+        wait_until(Duration::from_secs(10), || {
+            reap();
+            a.agent("bridge").and_then(|v| v["pid"].as_u64()).is_some_and(|p| p as u32 != old && alive(p as u32))
+        }),
+        "the bridge was not restarted"
+    );
+    assert!(t1_cycles(&a) > before, "robot A stopped while its bridge was dead");
+    // the restarted bridge is wired again and B receives again
+    let n = figure_u64(&b, "bridge", &format!("import.{}/t1/tick.msgs_in", a.name));
+    assert!(
+        wait_until(Duration::from_secs(15), || figure_u64(&b, "bridge", &format!("import.{}/t1/tick.msgs_in", a.name))
+            > n + 20),
+        "no data across the link after the restart"
+    );
+    assert_eq!(b.echo("r1/out", 2).len(), 2);
+    // and B's reliable commands reach the new bridge of A
+    assert_eq!(a.echo("r1/out", 2).len(), 2);
+    a.down_and_check_clean();
+    b.down_and_check_clean();
+}
+
+/// A network namespace pair joined by a veth pair, removed on drop.
+struct Netns {
+    a: String,
+    b: String,
+    veth_a: String,
+}
+
+impl Netns {
+    /// Creates the namespaces and the link, or says why it cannot.
+    fn create(tag: u32) -> Result<Netns, String> {
+        let id = std::process::id() % 10_000;
+        let n = Netns { a: format!("nvb{id}a{tag}"), b: format!("nvb{id}b{tag}"), veth_a: format!("nv{id}a{tag}") };
+        let veth_b = format!("nv{id}b{tag}");
+        let run = |args: &[&str]| -> Result<(), String> {
+            let out = Command::new("ip").args(args).output().map_err(|e| format!("ip: {e}"))?;
+            if out.status.success() {
+                Ok(())
+            } else {
+                Err(format!("ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr).trim()))
+            }
+        };
+        run(&["netns", "add", &n.a])?;
+        run(&["netns", "add", &n.b])?;
+        run(&["link", "add", &n.veth_a, "type", "veth", "peer", "name", &veth_b])?;
+        run(&["link", "set", &n.veth_a, "netns", &n.a])?;
+        run(&["link", "set", &veth_b, "netns", &n.b])?;
+        run(&["-n", &n.a, "addr", "add", "10.231.7.1/30", "dev", &n.veth_a])?;
+        run(&["-n", &n.b, "addr", "add", "10.231.7.2/30", "dev", &veth_b])?;
+        for (ns, dev) in [(&n.a, &n.veth_a), (&n.b, &veth_b)] {
+            run(&["-n", ns, "link", "set", dev, "up"])?;
+            run(&["-n", ns, "link", "set", "lo", "up"])?;
+        }
+        Ok(n)
+    }
+
+    fn set_link(&self, up: bool) {
+        let st = Command::new("ip")
+            .args(["-n", &self.a, "link", "set", &self.veth_a, if up { "up" } else { "down" }])
+            .status()
+            .expect("ip link set");
+        assert!(st.success());
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        // deleting a namespace deletes the veth end in it, and so the pair
+        for ns in [&self.a, &self.b] {
+            let _ = Command::new("ip").args(["netns", "del", ns]).status();
+        }
+    }
+}
+
+/// A real network link: robots A and B in two network namespaces joined by a
+/// veth pair. The test cuts the link for 4 s (longer than the lease) and
+/// restores it: each robot keeps running; reliable messages sent during the
+/// cut arrive after it, with none lost when the queue holds them and the
+/// overflow counted when it does not; the best-effort stream resumes. Where
+/// namespaces are not permitted it says so and makes the same checks over
+/// loopback by stopping and restarting the importing bridge.
+#[test]
+fn a_cut_link_loses_nothing_reliable_and_streams_resume() {
+    let (a, b) = (Robot::new("cuta"), Robot::new("cutb"));
+    let netns = match Netns::create(0) {
+        Ok(n) => Some(n),
+        Err(e) => {
+            eprintln!("network namespaces are not permitted here ({e}); cutting the link by stopping a bridge instead");
+            None
+        }
+    };
+    let port = free_port();
+    let (listen, connect) = match netns {
+        Some(_) => ("tcp/10.231.7.1:7447".to_string(), "tcp/10.231.7.1:7447".to_string()),
+        None => (format!("tcp/127.0.0.1:{port}"), format!("tcp/127.0.0.1:{port}")),
+    };
+    let a_cfg = write(
+        &a.home,
+        "bridge.toml",
+        &format!(
+            "listen = [\"{listen}\"]\nlease = \"1s\"\n[[export]]\nport = \"t1/tick\"\ntype = \"nerve::Tick\"\n\
+             [[import]]\nport = \"{b}/cmd/tick\"\ntype = \"nerve::Tick\"\nas = \"cmd\"\n\
+             [[import]]\nport = \"{b}/small/tick\"\ntype = \"nerve::Tick\"\nas = \"small\"\n",
+            b = b.name
+        ),
+    );
+    let b_cfg = write(
+        &b.home,
+        "bridge.toml",
+        &format!(
+            "connect = [\"{connect}\"]\nlease = \"1s\"\n\
+             [[export]]\nport = \"cmd/tick\"\ntype = \"nerve::Tick\"\nreliable = true\nqueue = 1000\n\
+             [[export]]\nport = \"small/tick\"\ntype = \"nerve::Tick\"\nreliable = true\nqueue = 5\n\
+             [[import]]\nport = \"{a}/t1/tick\"\ntype = \"nerve::Tick\"\nas = \"t1\"\n",
+            a = a.name
+        ),
+    );
+    let agent =
+        |name: &str, kind: &str, extra: &str| format!("[[agent]]\nname = \"{name}\"\nkind = \"{kind}\"\n{extra}\n");
+    let a_launch = a.launch_file(
+        "a.toml",
+        &format!(
+            "robot = \"x\"\n{}{}",
+            agent("t1", "ticker", "period = \"20ms\""),
+            agent(
+                "bridge",
+                "bridge",
+                &format!("args = [\"--config\", \"{}\"]\nrestart = \"on-failure\"", a_cfg.display())
+            )
+        ),
+    );
+    let b_launch = b.launch_file(
+        "b.toml",
+        &format!(
+            "robot = \"x\"\n{}{}{}",
+            agent("cmd", "ticker", "period = \"100ms\""),
+            agent("small", "ticker", "period = \"100ms\""),
+            agent(
+                "bridge",
+                "bridge",
+                &format!("args = [\"--config\", \"{}\"]\nrestart = \"on-failure\"", b_cfg.display())
+            )
+        ),
+    );
+    launch(&a, &a_launch, netns.as_ref().map(|n| n.a.as_str()));
+    launch(&b, &b_launch, netns.as_ref().map(|n| n.b.as_str()));
+
+    let cmd_in = format!("import.{}/cmd/tick", b.name);
+    let small_in = format!("import.{}/small/tick", b.name);
+    let t1_in = format!("import.{}/t1/tick", a.name);
+    assert!(
+        wait_until(Duration::from_secs(20), || figure_u64(&a, "bridge", &format!("{cmd_in}.msgs_in")) >= 5
+            && figure_u64(&b, "bridge", &format!("{t1_in}.msgs_in")) >= 20),
+        "the link did not come up: A {:?} / B {:?}",
+        figures(&a, "bridge"),
+        figures(&b, "bridge")
+    );
+    let cycles = |r: &Robot, n: &str| r.agent(n).and_then(|v| v["stats"]["cycles"].as_u64()).unwrap_or(0);
+    let (a_t1, b_cmd) = (cycles(&a, "t1"), cycles(&b, "cmd"));
+
+    // the cut
+    match &netns {
+        Some(n) => n.set_link(false),
+        None => {
+            a.ok(&["stop", "bridge"]);
+        }
+    }
+    std::thread::sleep(Duration::from_secs(4));
+    assert!(cycles(&a, "t1") > a_t1 + 100 && cycles(&b, "cmd") > b_cmd + 20, "a robot stopped during the cut");
+    assert!(
+        figure_u64(&b, "bridge", "export.cmd/tick.queue") >= 20,
+        "B queues its commands while the link is down: {:?}",
+        figures(&b, "bridge")
+    );
+    let sent_during_cut = cycles(&b, "cmd");
+    match &netns {
+        Some(n) => n.set_link(true),
+        None => {
+            let cfg = a_cfg.display().to_string();
+            a.ok(&["start", "bridge", "--name", "bridge", "--", "--config", &cfg]);
+        }
+    }
+
+    // everything queued arrives, in order (the receiver delivers only in order), nothing reliable lost
+    assert!(
+        wait_until(Duration::from_secs(20), || figure_u64(&b, "bridge", "export.cmd/tick.queue") <= 2),
+        "B's queue did not drain after the link came back: {:?}",
+        figures(&b, "bridge")
+    );
+    assert!(
+        wait_until(Duration::from_secs(10), || figure_u64(&a, "bridge", &format!("{cmd_in}.msgs_in"))
+            >= sent_during_cut.saturating_sub(b_cmd).saturating_sub(5)),
+        "the commands sent during the cut did not all arrive: {:?}",
+        figures(&a, "bridge")
+    );
+    assert_eq!(figure_u64(&a, "bridge", &format!("{cmd_in}.lost")), 0, "{:?}", figures(&a, "bridge"));
+    // the small queue overflowed: counted on both sides, and said in B's log
+    assert!(figure_u64(&b, "bridge", "export.small/tick.lost") >= 20, "{:?}", figures(&b, "bridge"));
+    assert!(
+        wait_until(Duration::from_secs(10), || figure_u64(&a, "bridge", &format!("{small_in}.lost")) >= 20),
+        "the receiver did not count the overflow: {:?}",
+        figures(&a, "bridge")
+    );
+    let log = b.ok(&["logs", "bridge"]);
+    assert!(log.contains("reliable queue full"), "no log line for the overflow");
+    // the best-effort stream resumes
+    let n = figure_u64(&b, "bridge", &format!("{t1_in}.msgs_in"));
+    assert!(
+        wait_until(Duration::from_secs(10), || figure_u64(&b, "bridge", &format!("{t1_in}.msgs_in")) > n + 20),
+        "the stream did not resume"
+    );
+    eprintln!(
+        "cut of 4 s over {}: commands during the cut {}, delivered {} (lost {}); small queue lost {} at B, {} counted at A",
+        if netns.is_some() { "a veth pair" } else { "loopback (bridge stopped)" },
+        sent_during_cut - b_cmd,
+        figure_u64(&a, "bridge", &format!("{cmd_in}.msgs_in")),
+        figure_u64(&a, "bridge", &format!("{cmd_in}.lost")),
+        figure_u64(&b, "bridge", "export.small/tick.lost"),
+        figure_u64(&a, "bridge", &format!("{small_in}.lost")),
+    );
+    a.down_and_check_clean();
+    b.down_and_check_clean();
+    drop(netns);
+}
