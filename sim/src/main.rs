@@ -360,7 +360,7 @@ impl Agent for SimAgent {
             Some(setup.ring_output("frames", RingSpec::new(8, CAMERA_FRAME_BYTES).named(&args.camera_ring))?)
         };
         let read_only = |_: &u64| Err::<(), String>("read-only: kept by the simulator".into());
-        Ok(SimAgent {
+        let mut agent = SimAgent {
             truth_out: setup.output("truth")?,
             camera,
             sim_time: setup.param_checked("sim_time", 0.0, |_: &f64| Err("read-only: kept by the simulator".into())),
@@ -375,15 +375,13 @@ impl Agent for SimAgent {
             extras,
             figures,
             next_figures: 0.0,
-        })
-        .and_then(|mut agent| {
-            if let Some(w) = world {
-                // refuse a blocked or missing start now, while `nerve start` reports errors
-                agent.build(w.clone(), 0.01)?;
-                agent.world = Some(w);
-            }
-            Ok(agent)
-        })
+        };
+        if let Some(w) = world {
+            // refuse a blocked or missing start now, while `nerve start` reports errors
+            agent.build(w.clone(), 0.01)?;
+            agent.world = Some(w);
+        }
+        Ok(agent)
     }
 
     fn start(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
