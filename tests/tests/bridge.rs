@@ -469,3 +469,27 @@ fn a_cut_link_loses_nothing_reliable_and_streams_resume() {
     b.down_and_check_clean();
     drop(netns);
 }
+
+/// The example of the README (launch/bridge-a.toml, launch/bridge-b.toml and
+/// their bridge configs), with this test's robot names and a free port.
+#[test]
+fn the_example_pair_of_launch_files_runs() {
+    let (a, b) = (Robot::new("exa"), Robot::new("exb"));
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("launch");
+    let port = free_port().to_string();
+    let dir = a.home.join("example");
+    std::fs::create_dir_all(&dir).expect("example dir");
+    for f in ["bridge-a.toml", "bridge-b.toml", "bridge-a.zenoh.toml", "bridge-b.zenoh.toml"] {
+        let text = std::fs::read_to_string(repo.join(f)).expect("example file");
+        let text = text.replace("bridge-a", &a.name).replace("bridge-b", &b.name).replace("7447", &port);
+        // the launch files name their configs through {dir}: rename them alike
+        let name = f.replace("bridge-a", &a.name).replace("bridge-b", &b.name);
+        std::fs::write(dir.join(name), text).expect("write example");
+    }
+    launch(&a, &dir.join(format!("{}.toml", a.name)), None);
+    launch(&b, &dir.join(format!("{}.toml", b.name)), None);
+    assert_eq!(b.echo("r1/out", 3).len(), 3, "robot A's ticks reach robot B");
+    assert_eq!(a.echo("r1/out", 1).len(), 1, "robot B's commands reach robot A");
+    a.down_and_check_clean();
+    b.down_and_check_clean();
+}
