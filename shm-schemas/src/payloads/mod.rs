@@ -23,6 +23,7 @@ pub use navigation::{
     CheckpointSighting, MAX_VIA_POINTS, MissionCode, MissionCommand, PoseCorrection, PoseEstimate, PoseSource, ViaKind,
     ViaPath,
 };
+pub use navigation::{ArmGraspState, GraspAction, GraspMiss, GraspPhase, GraspRequest, HELD_NOTHING};
 pub use resources::{AgentLoad, LoadLevel, MAX_AGENT_LOADS, ResourceReport};
 pub use router::RouterEpoch;
 pub use scalar::Scalar;
@@ -98,6 +99,8 @@ macro_rules! for_each_payload {
         $m!($crate::payloads::CheckpointSighting);
         $m!($crate::payloads::ViaPath);
         $m!($crate::payloads::MissionCommand);
+        $m!($crate::payloads::GraspRequest);
+        $m!($crate::payloads::ArmGraspState);
     };
 }
 

@@ -387,3 +387,232 @@ mod tests {
         assert_eq!(p.entries().count(), MAX_VIA_POINTS);
     }
 }
+
+// ---- the grasp (H2's arm; appended with the arm agent) ----
+
+/// What a [`GraspRequest`] asks of the arm agent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[repr(u8)]
+pub enum GraspAction {
+    /// Reach for the target and close the gripper on it.
+    Grasp = 1,
+    /// Open the gripper, let go and fold the arm back.
+    Release = 2,
+}
+
+impl GraspAction {
+    /// Every action, in code order.
+    pub const ALL: [GraspAction; 2] = [Self::Grasp, Self::Release];
+
+    /// The action of a wire code; `None` for an unknown code.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|a| *a as u8 == code)
+    }
+
+    /// `grasp`, `release`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Grasp => "grasp",
+            Self::Release => "release",
+        }
+    }
+}
+
+/// A request to the arm agent (input `cmd` of the `arm` agent; robot 2's
+/// mission agent sends it at the target).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[repr(C)]
+#[type_name("nerve::GraspRequest")]
+pub struct GraspRequest {
+    /// When it was made.
+    pub stamp_ns: u64,
+    /// Where the sender believes the target's axis is, x, metres, robot
+    /// frame (forward); meaningful when `has_point` is 1.
+    pub x: f64,
+    /// Where the sender believes the target's axis is, y, metres, robot
+    /// frame (left).
+    pub y: f64,
+    /// Identifies the request (from 1); the arm's [`ArmGraspState`] echoes it.
+    pub request_id: u32,
+    /// A [`GraspAction`] code; read it with [`GraspRequest::action`].
+    pub action: u8,
+    /// 1 when `x`, `y` hold a guess of where the target is.
+    pub has_point: u8,
+    /// Padding, zero.
+    pub reserved: [u8; 2],
+}
+
+impl Payload for GraspRequest {}
+
+impl GraspRequest {
+    /// The action, or `None` for an unknown code.
+    pub fn action(&self) -> Option<GraspAction> {
+        GraspAction::from_code(self.action)
+    }
+}
+
+/// Where a grasp stands, as the arm agent reports it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[repr(u8)]
+pub enum GraspPhase {
+    /// Open, holding nothing, no grasp under way.
+    Open = 0,
+    /// Opening, probing or reaching: the arm moves.
+    Moving = 1,
+    /// Closing on the target; the outcome is not known yet.
+    Closing = 2,
+    /// Closed on the target: `held_id` names it.
+    Holding = 3,
+    /// The grasp failed: `reason` says why.
+    Missed = 4,
+}
+
+impl GraspPhase {
+    /// Every phase, in code order.
+    pub const ALL: [GraspPhase; 5] = [Self::Open, Self::Moving, Self::Closing, Self::Holding, Self::Missed];
+
+    /// The phase of a wire code; `None` for an unknown code.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|p| *p as u8 == code)
+    }
+
+    /// `open`, `moving`, `closing`, `holding`, `missed`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Open => "open",
+            Self::Moving => "moving",
+            Self::Closing => "closing",
+            Self::Holding => "holding",
+            Self::Missed => "missed",
+        }
+    }
+
+    /// Whether the grasp is decided (holding or missed).
+    pub fn is_final(self) -> bool {
+        matches!(self, Self::Holding | Self::Missed)
+    }
+}
+
+/// Why a grasp missed ([`ArmGraspState::reason`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[repr(u8)]
+pub enum GraspMiss {
+    /// Not missed.
+    None = 0,
+    /// The gripper closed on nothing.
+    ClosedEmpty = 1,
+    /// The proximity sensor located no target within the arm's reach.
+    OutOfReach = 2,
+    /// The arm board reported no target at all.
+    NoTarget = 3,
+    /// The arm did not reach its set-point, or the board did not answer, in time.
+    Timeout = 4,
+    /// The arm board vanished during the grasp.
+    DeviceLost = 5,
+    /// A release (or a new request) ended the grasp.
+    Cancelled = 6,
+}
+
+impl GraspMiss {
+    /// Every reason, in code order.
+    pub const ALL: [GraspMiss; 7] = [
+        Self::None,
+        Self::ClosedEmpty,
+        Self::OutOfReach,
+        Self::NoTarget,
+        Self::Timeout,
+        Self::DeviceLost,
+        Self::Cancelled,
+    ];
+
+    /// The reason of a wire code; `None` for an unknown code.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|r| *r as u8 == code)
+    }
+
+    /// `none`, `closed-empty`, `out-of-reach`, `no-target`, `timeout`, `device-lost`, `cancelled`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::ClosedEmpty => "closed-empty",
+            Self::OutOfReach => "out-of-reach",
+            Self::NoTarget => "no-target",
+            Self::Timeout => "timeout",
+            Self::DeviceLost => "device-lost",
+            Self::Cancelled => "cancelled",
+        }
+    }
+}
+
+/// [`ArmGraspState::held_id`] when nothing is held.
+pub const HELD_NOTHING: u8 = 0xFF;
+
+/// The arm agent's report (output `state` of the `arm` agent), 10 Hz and
+/// at every change of phase.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[repr(C)]
+#[type_name("nerve::ArmGraspState")]
+pub struct ArmGraspState {
+    /// When the board's report was read.
+    pub stamp_ns: u64,
+    /// Measured joints (shoulder, elbow, gripper), radians.
+    pub joints_rad: [f32; 3],
+    /// Distance from the gripper's tip to the nearest target's axis,
+    /// metres; negative when the board sees none.
+    pub nearest_m: f32,
+    /// The request this state belongs to (0: none yet).
+    pub request_id: u32,
+    /// A [`GraspPhase`] code; read it with [`ArmGraspState::phase`].
+    pub phase: u8,
+    /// The held tube's id while holding, [`HELD_NOTHING`] otherwise.
+    pub held_id: u8,
+    /// A [`GraspMiss`] code (`missed` only).
+    pub reason: u8,
+    /// 1 while the arm board is connected.
+    pub connected: u8,
+}
+
+impl Payload for ArmGraspState {}
+
+impl ArmGraspState {
+    /// The phase, or `None` for an unknown code.
+    pub fn phase(&self) -> Option<GraspPhase> {
+        GraspPhase::from_code(self.phase)
+    }
+
+    /// The reason of a miss, or `None` for an unknown code.
+    pub fn reason(&self) -> Option<GraspMiss> {
+        GraspMiss::from_code(self.reason)
+    }
+}
+
+#[cfg(test)]
+mod grasp_tests {
+    use super::*;
+
+    #[test]
+    fn grasp_layout_is_stable_and_codes_round_trip() {
+        assert_eq!(std::mem::size_of::<GraspRequest>(), 32);
+        assert_eq!(std::mem::offset_of!(GraspRequest, request_id), 24);
+        assert_eq!(std::mem::offset_of!(GraspRequest, action), 28);
+        assert_eq!(std::mem::size_of::<ArmGraspState>(), 32);
+        assert_eq!(std::mem::align_of::<ArmGraspState>(), 8);
+        assert_eq!(std::mem::offset_of!(ArmGraspState, request_id), 24);
+        assert_eq!(std::mem::offset_of!(ArmGraspState, phase), 28);
+        assert_eq!(<GraspRequest as Payload>::stable_type_name(), "nerve::GraspRequest");
+        assert_eq!(<ArmGraspState as Payload>::stable_type_name(), "nerve::ArmGraspState");
+        for a in GraspAction::ALL {
+            assert_eq!(GraspAction::from_code(a as u8), Some(a));
+        }
+        for p in GraspPhase::ALL {
+            assert_eq!(GraspPhase::from_code(p as u8), Some(p));
+        }
+        for r in GraspMiss::ALL {
+            assert_eq!(GraspMiss::from_code(r as u8), Some(r));
+        }
+        assert_eq!(GraspAction::from_code(0), None);
+        assert_eq!(GraspPhase::from_code(9), None);
+        assert_eq!(GraspMiss::from_code(99), None);
+        assert!(GraspPhase::Missed.is_final() && !GraspPhase::Closing.is_final());
+    }
+}
