@@ -28,7 +28,7 @@ use std::time::Duration;
 #[derive(Debug, Parser)]
 #[command(no_binary_name = true)]
 struct BenchAgentArgs {
-    /// payload size in bytes (8, 230400 or 6220800)
+    /// payload size in bytes (8, 4096, 230400 or 6220800)
     #[arg(long, default_value_t = 8)]
     size: usize,
     /// ping: round trips per batch
@@ -379,6 +379,6 @@ pub fn run_agent(which: &str, args: Vec<String>) -> ExitCode {
 }
 
 fn bad_size(size: usize) -> ExitCode {
-    eprintln!("error: no payload of {size} bytes; use 8, 230400 or 6220800");
+    eprintln!("error: no payload of {size} bytes; use 8, 4096, 230400 or 6220800");
     ExitCode::from(2)
 }

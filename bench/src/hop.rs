@@ -250,10 +250,11 @@ impl Pinger for NervePing {
     }
 }
 
-/// The short form of a payload size in agent names: `8`, `230k`, `6m`.
+/// The short form of a payload size in agent names: `8`, `4k`, `230k`, `6m`.
 pub(crate) fn size_tag(size: usize) -> &'static str {
     match size {
         8 => "8",
+        4096 => "4k",
         230_400 => "230k",
         _ => "6m",
     }

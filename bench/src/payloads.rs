@@ -1,5 +1,6 @@
-//! The payloads the hop benchmark sends: 8 bytes, one 320x240 RGB frame
-//! (230,400 B) and one 1920x1080 RGB frame (6,220,800 B).
+//! The payloads the benchmarks send: 8 bytes, one 320x240 RGB frame
+//! (230,400 B) and one 1920x1080 RGB frame (6,220,800 B) for `hop`, and a
+//! 4 KB message beside 8 B and 230 KB for `bridge`.
 //!
 //! Each is `#[repr(C)]` + `ZeroCopySend` with a stable `nerve::bench::*`
 //! type name and implements [`shm_schemas::Payload`], so the same type
@@ -109,6 +110,7 @@ macro_rules! frame {
 }
 
 frame!(Frame230k, "nerve::bench::Frame230k", 320 * 240 * 3, "230 KB", "One 320x240 RGB frame (230,400 B).");
+frame!(Frame4k, "nerve::bench::Frame4k", 4096, "4 KB", "A 4 KB message (4,096 B), between a command and a frame.");
 frame!(Frame1080p, "nerve::bench::Frame1080p", 1920 * 1080 * 3, "6.2 MB", "One 1920x1080 RGB frame (6,220,800 B).");
 
 /// The payload sizes the hop benchmark knows, in bytes.
@@ -118,6 +120,7 @@ pub const SIZES: [usize; 3] = [8, 320 * 240 * 3, 1920 * 1080 * 3];
 pub fn label(size: usize) -> &'static str {
     match size {
         8 => Small8::LABEL,
+        4096 => Frame4k::LABEL,
         230_400 => Frame230k::LABEL,
         6_220_800 => Frame1080p::LABEL,
         _ => "?",
@@ -131,6 +134,10 @@ macro_rules! with_payload {
         match $size {
             8 => {
                 type $t = $crate::payloads::Small8;
+                $body
+            }
+            4096 => {
+                type $t = $crate::payloads::Frame4k;
                 $body
             }
             230_400 => {
@@ -153,6 +160,7 @@ mod tests {
     #[test]
     fn sizes_and_names() {
         assert_eq!(std::mem::size_of::<Small8>(), 8);
+        assert_eq!(std::mem::size_of::<Frame4k>(), 4096);
         assert_eq!(std::mem::size_of::<Frame230k>(), 230_400);
         assert_eq!(std::mem::size_of::<Frame1080p>(), 6_220_800);
         assert_eq!(Frame230k::stable_type_name(), "nerve::bench::Frame230k");

@@ -37,6 +37,11 @@ impl ChildGuard {
         Ok(ChildGuard { name: name.into(), child })
     }
 
+    /// The child's stdin, when piped.
+    pub fn stdin(&mut self) -> Option<std::process::ChildStdin> {
+        self.child.stdin.take()
+    }
+
     /// The child's stdout, when piped.
     pub fn stdout(&mut self) -> Option<std::process::ChildStdout> {
         self.child.stdout.take()
