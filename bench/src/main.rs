@@ -4,12 +4,15 @@
 //! nerve-bench hop    [--quick] [--json] [--out DIR] [--payloads 8,230400,6220800] [--rounds N]
 //! nerve-bench jitter [--quick] [--json] [--out DIR] [--rates 1000,100] [--seconds S] [--rounds N]
 //! nerve-bench control [--quick] [--json] [--out DIR] [--rounds N] [--launch 10,50]
+//! nerve-bench bridge [--quick] [--json] [--out DIR] [--payloads 8,4096,230400] [--rounds N]
 //! ```
 //!
 //! * `hop`: one-hop round-trip latency, event-driven, nerve SDK agents
 //!   against raw iceoryx2 (WaitSet and listener) and a Unix socket.
 //! * `jitter`: lateness of a periodic SDK agent against `cyclictest`.
 //! * `control`: hot-add, rewire and launch latencies of the control plane.
+//! * `bridge`: one way across the Zenoh bridge agent against raw Zenoh, and
+//!   the cost of a bridge on the local one-hop round trip.
 //!
 //! Results go to `DIR/<scenario>.json` (and `DIR/hop-latency.png`); the
 //! tables are printed as markdown on stdout, or the JSON with `--json`.
@@ -18,9 +21,13 @@
 //!
 //! The same executable also runs the processes of the benchmarks, through
 //! hidden subcommands: `__agent-ping`, `__agent-pong`, `__agent-jitter` (SDK
-//! agents), `__raw-pong`, `__uds-pong` and `__busy`.
+//! agents), `__raw-pong`, `__uds-pong` and `__busy`; for `bridge`,
+//! `__agent-bsend`, `__agent-bsink`, `__bridge` (the bridge agent, carrying
+//! the benchmark's payloads), `__zenoh-pub` and `__zenoh-sub`.
 
 mod agents;
+mod bridge;
+mod bridge_agents;
 mod control;
 mod dds;
 mod hop;
@@ -36,6 +43,7 @@ mod raw;
 mod scale;
 mod stats;
 mod uds;
+mod zenoh_raw;
 
 use anyhow::{Context as _, Result};
 use clap::{Parser, Subcommand};
@@ -141,6 +149,29 @@ enum Scenario {
         #[arg(long)]
         max_seconds: Option<f64>,
     },
+    /// The Zenoh bridge: one way across it vs raw Zenoh (8 B, 4 KB, 230 KB), and its cost on the local round trip.
+    Bridge {
+        #[command(flatten)]
+        common: Common,
+        /// Payload sizes in bytes.
+        #[arg(long, value_delimiter = ',', default_values_t = bridge::SIZES)]
+        payloads: Vec<usize>,
+        /// Measured rounds (each system one batch per round and size, interleaved).
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// One-way samples per latency batch.
+        #[arg(long)]
+        count: Option<usize>,
+        /// Microseconds between two samples of a latency batch.
+        #[arg(long, default_value_t = 5000)]
+        interval_us: u64,
+        /// Longest back-to-back throughput batch, ms.
+        #[arg(long)]
+        tput_ms: Option<u64>,
+        /// Round trips per local batch.
+        #[arg(long)]
+        hop_count: Option<usize>,
+    },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
         #[command(flatten)]
@@ -168,6 +199,10 @@ fn main() -> ExitCode {
             "__raw-pong" => return raw::pong_main(rest),
             "__uds-pong" => return uds::pong_main(rest),
             "__busy" => return jitter::busy_main(),
+            "__agent-bsend" | "__agent-bsink" => return bridge_agents::run_agent(&first, rest),
+            "__bridge" => return bridge_agents::bridge_main(rest),
+            "__zenoh-pub" => return zenoh_raw::pub_main(rest),
+            "__zenoh-sub" => return zenoh_raw::sub_main(rest),
             "__agent-img-writer" | "__agent-img-reader" => return images::run_agent(&first, rest),
             "__img-iox2-reader" => return images::iox2_reader_main(rest),
             "__img-uds-reader" => return images::uds_reader_main(rest),
@@ -183,6 +218,9 @@ fn main() -> ExitCode {
         }
     }
 }
+
+/// Fewest samples per batch: more than the ones dropped at its start.
+const DISCARD_MIN: usize = 10;
 
 fn write_json(out: &std::path::Path, name: &str, value: &impl serde::Serialize) -> Result<PathBuf> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
@@ -301,6 +339,29 @@ fn run(cli: Cli) -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
             } else {
                 images::print_tables(&report);
+            }
+        }
+        Scenario::Bridge { common, payloads, rounds, count, interval_us, tput_ms, hop_count } => {
+            let opts = bridge::BridgeOpts {
+                quick: common.quick,
+                sizes: payloads,
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 5 }).max(1),
+                count: count.unwrap_or(if common.quick { 30 } else { 300 }).max(DISCARD_MIN),
+                interval_us: interval_us.max(1),
+                tput_ms: tput_ms.unwrap_or(if common.quick { 150 } else { 500 }).max(1),
+                hop_count: hop_count.unwrap_or(if common.quick { 100 } else { 2000 }).max(DISCARD_MIN),
+                verbose: common.verbose,
+                work: common.out.join(format!("bridge-work-{}", std::process::id())),
+            };
+            let report = bridge::run(&opts);
+            let _ = std::fs::remove_dir_all(&opts.work);
+            let report = report?;
+            let json = write_json(&common.out, "bridge.json", &report)?;
+            eprintln!("bridge: results in {} ({:.0} s)", json.display(), report.seconds);
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
+            } else {
+                bridge::print_tables(&report);
             }
         }
         Scenario::Jitter { common, rates, seconds, rounds } => {

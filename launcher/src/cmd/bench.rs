@@ -16,7 +16,7 @@ use std::process::{Command, ExitCode};
 /// The program that holds the scenarios.
 const BENCH_PROGRAM: &str = "nerve-bench";
 
-/// The benchmark scenarios (issue 7 of the project).
+/// The benchmark scenarios (issue 7 of the project; `bridge`: issue 11).
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum Scenario {
     /// One hop: nerve ports vs raw iceoryx2 vs a Unix socket vs Cyclone DDS (ddsperf), 8 B to 1080p.
@@ -31,6 +31,8 @@ pub enum Scenario {
     Control,
     /// 100 agents at 10 Hz: CPU, router CPU, memory per agent, `nerve ps` time.
     Scale,
+    /// The Zenoh bridge: one way across it vs raw Zenoh, and its cost on the local round trip.
+    Bridge,
 }
 
 /// `nerve bench`
