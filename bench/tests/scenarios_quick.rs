@@ -1,7 +1,7 @@
 //! End to end, one smoke run per scenario (jitter aside: it needs
 //! cyclictest): `nerve-bench SCENARIO --quick --json` runs, prints a report
 //! with the fields users script against, writes `DIR/<scenario>.json`, and
-//! leaves nothing of its robot in /dev/shm. Values are never checked against
+//! leaves nothing of its robots in /dev/shm. Values are never checked against
 //! targets (no timed assertions); only that they were measured.
 //!
 //! Needs the `nerve`, `nerve-ticker` and `nerve-relay` executables built into
@@ -25,16 +25,18 @@ fn run(scenario: &str, extra: &[&str]) -> Value {
     assert!(out.status.success(), "nerve-bench {scenario} failed: {stderr}");
     let report: Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON");
     assert!(out_dir.join(format!("{scenario}.json")).is_file(), "no {scenario}.json");
-    let robot = stderr
-        .split_whitespace()
-        .skip_while(|w| *w != "robot")
-        .nth(1)
-        .map(|r| format!("nerve_{r}_"))
-        .expect("the robot name is reported");
-    let left = std::fs::read_dir("/dev/shm")
-        .map(|rd| rd.filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().starts_with(&robot)).count())
-        .unwrap_or(0);
-    assert_eq!(left, 0, "shared memory of robot left behind ({robot})");
+    // every robot the run names on its first line ("robot b123a and robot b123b")
+    let first = stderr.lines().find(|l| l.contains("robot ")).expect("the robot name is reported");
+    let words: Vec<&str> = first.split_whitespace().collect();
+    let robots: Vec<String> =
+        words.windows(2).filter(|w| w[0] == "robot").map(|w| format!("nerve_{}_", w[1])).collect();
+    assert!(!robots.is_empty(), "the robot name is reported: {first}");
+    for robot in &robots {
+        let left = std::fs::read_dir("/dev/shm")
+            .map(|rd| rd.filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().starts_with(robot)).count())
+            .unwrap_or(0);
+        assert_eq!(left, 0, "shared memory of robot left behind ({robot})");
+    }
     let _ = std::fs::remove_dir_all(&out_dir);
     report
 }
@@ -90,4 +92,42 @@ fn images_quick_reads_every_frame_intact() {
         }
     }
     assert!(!r["scaling"].as_array().expect("scaling").is_empty());
+}
+
+#[test]
+fn bridge_quick_measures_both_paths_and_the_local_cost() {
+    let r = run("bridge", &["--payloads", "8,4096", "--count", "20", "--hop-count", "50"]);
+    let oneway = r["oneway"].as_array().expect("oneway");
+    for size in [8, 4096] {
+        for system in ["bridge", "zenoh"] {
+            let x = oneway
+                .iter()
+                .find(|x| x["system"] == system && x["size"] == size)
+                .unwrap_or_else(|| panic!("no one-way result for {system} at {size} B"));
+            assert!(x["latency"]["n"].as_u64().unwrap_or(0) > 0, "{system} {size}: nothing crossed");
+            let t = r["throughput"]
+                .as_array()
+                .expect("throughput")
+                .iter()
+                .find(|x| x["system"] == system && x["size"] == size)
+                .unwrap_or_else(|| panic!("no throughput for {system} at {size} B"));
+            assert!(t["delivered_per_s"].as_f64().unwrap_or(0.0) > 0.0, "{system} {size}: nothing delivered");
+        }
+        for system in ["alone", "bridged", "bridged-100hz"] {
+            let x = r["local"]
+                .as_array()
+                .expect("local")
+                .iter()
+                .find(|x| x["system"] == system && x["size"] == size)
+                .unwrap_or_else(|| panic!("no round trip for {system} at {size} B"));
+            assert!(x["rtt"]["n"].as_u64().unwrap_or(0) > 0, "{system} {size}: no round trips");
+        }
+    }
+    let ow = &r["oneway_ratios"][0];
+    assert!(ow["bridge_vs_zenoh_p50"].as_f64().is_some_and(|v| v > 0.0));
+    assert!(ow["target_met"].is_boolean());
+    let lo = &r["local_ratios"][0];
+    assert!(lo["bridged_vs_alone_p50"].as_f64().is_some_and(|v| v > 0.0));
+    assert!(lo["target_met"].is_boolean());
+    assert_eq!(r["bridge_status"].as_array().map(Vec::len), Some(2), "both bridges reported their figures");
 }
