@@ -1,0 +1,493 @@
+//! The target-achieving agent of robot 2 (thesis section 4.3.2.3, Fig. 4-9
+//! and 4-10) as a library: follow a path of via points one after another.
+//!
+//! "Calculate the differential angle and distance between the robot and the
+//! target coordinate. If the angle is more than ±10 degrees, the robot will
+//! stop and rotate in order to face the target. Otherwise, the robot will
+//! approach to the target" — and "robot 2 would not adjust its direction if
+//! the angular error were within ±1 degree, in order to avoid motion
+//! fluctuation", which gives the U-shaped approach of Fig. 4-10.
+//!
+//! [`Follower::step`], per cycle, with the pose estimate:
+//!
+//! * **rotate** in place (v = 0) while the heading error exceeds
+//!   `rotate_above` (10°), until it is within `rotate_until` (2°); the turn
+//!   rate falls with the error near the end so that it does not overshoot;
+//! * **drive** otherwise, at `v_cruise` (slower near the last point), turning
+//!   `ω = k_heading·error` — but not at all while the error is within
+//!   `deadband` (1°);
+//! * a via point is **reached** within `reach_m`, or when it was passed by
+//!   (within `pass_m` and behind the robot), then the next one is taken; the
+//!   last one is reached within `final_reach_m`, or, when it is the target
+//!   itself (kind `target`), at `standoff_m` from it (the arm's reach), and
+//!   the robot stops: **arrived**.
+//!
+//! Commands are rate-limited (`accel`, `alpha`) so that the motor agent,
+//! which refuses jumps, accepts every one.
+
+#![cfg_attr(test, allow(clippy::unwrap_used))]
+
+use shm_schemas::payloads::{MAX_VIA_POINTS, ViaKind, ViaPath};
+use std::f64::consts::PI;
+
+/// A planar pose.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pose {
+    /// x, metres.
+    pub x: f64,
+    /// y, metres.
+    pub y: f64,
+    /// Heading, radians.
+    pub theta: f64,
+}
+
+/// Wraps an angle into (−π, π].
+pub fn wrap(a: f64) -> f64 {
+    let r = (a + PI).rem_euclid(2.0 * PI) - PI;
+    if r <= -PI { r + 2.0 * PI } else { r }
+}
+
+/// Settings (the agent's parameters).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    /// Rotate in place above this heading error, radians (the thesis: 10°).
+    pub rotate_above: f64,
+    /// Stop rotating within this error, radians.
+    pub rotate_until: f64,
+    /// Do not steer within this error while driving, radians (the thesis: 1°).
+    pub deadband: f64,
+    /// Forward speed, m/s.
+    pub v_cruise: f64,
+    /// Least forward speed near the last point, m/s.
+    pub v_min: f64,
+    /// Slow down within this distance of the last point, metres.
+    pub slow_within_m: f64,
+    /// Turn rate when rotating in place, rad/s.
+    pub omega_turn: f64,
+    /// Steering gain while driving, 1/s.
+    pub k_heading: f64,
+    /// Largest turn rate while driving, rad/s.
+    pub omega_drive_max: f64,
+    /// A via point is reached within this, metres.
+    pub reach_m: f64,
+    /// A via point behind the robot within this is passed by, metres.
+    pub pass_m: f64,
+    /// The last point is reached within this, metres.
+    pub final_reach_m: f64,
+    /// Distance kept from a last point of kind `target`, metres.
+    pub standoff_m: f64,
+    /// Speed changes, m/s².
+    pub accel: f64,
+    /// Turn-rate changes, rad/s².
+    pub alpha: f64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            rotate_above: 10f64.to_radians(),
+            rotate_until: 2f64.to_radians(),
+            deadband: 1f64.to_radians(),
+            v_cruise: 0.3,
+            v_min: 0.06,
+            slow_within_m: 0.8,
+            omega_turn: 0.6,
+            k_heading: 1.2,
+            omega_drive_max: 0.5,
+            reach_m: 0.25,
+            pass_m: 0.6,
+            final_reach_m: 0.1,
+            standoff_m: 0.35,
+            accel: 1.0,
+            alpha: 4.0,
+        }
+    }
+}
+
+/// Why a path cannot be followed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PathError {
+    /// No points.
+    #[error("path {path_id} has no points")]
+    Empty {
+        /// The path.
+        path_id: u32,
+    },
+    /// More points than a path holds.
+    #[error("path {path_id} says it has {count} points, a path holds at most {max}; is the sender of another build?")]
+    TooLong {
+        /// The path.
+        path_id: u32,
+        /// Its count.
+        count: u32,
+        /// The most.
+        max: usize,
+    },
+    /// A point that is not a number or of an unknown kind.
+    #[error("path {path_id}, point {index}: {problem}")]
+    BadPoint {
+        /// The path.
+        path_id: u32,
+        /// The point.
+        index: usize,
+        /// What is wrong.
+        problem: String,
+    },
+}
+
+/// A point to reach.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Via {
+    /// x, metres.
+    pub x: f64,
+    /// y, metres.
+    pub y: f64,
+    /// What it is.
+    pub kind: ViaKind,
+    /// The checkpoint it belongs to, 0 for none.
+    pub checkpoint: u8,
+}
+
+/// Checks a path and returns its points.
+pub fn read_path(p: &ViaPath) -> Result<Vec<Via>, PathError> {
+    let path_id = p.path_id;
+    if p.count == 0 {
+        return Err(PathError::Empty { path_id });
+    }
+    if p.count as usize > MAX_VIA_POINTS {
+        return Err(PathError::TooLong { path_id, count: p.count, max: MAX_VIA_POINTS });
+    }
+    p.entries()
+        .enumerate()
+        .map(|(index, (pt, kind, checkpoint))| {
+            if !(pt[0].is_finite() && pt[1].is_finite()) {
+                return Err(PathError::BadPoint { path_id, index, problem: "not a number".into() });
+            }
+            let kind = ViaKind::from_code(kind).ok_or_else(|| PathError::BadPoint {
+                path_id,
+                index,
+                problem: format!("unknown kind code {kind}"),
+            })?;
+            Ok(Via { x: pt[0], y: pt[1], kind, checkpoint })
+        })
+        .collect()
+}
+
+/// What the follower is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// No path.
+    Idle,
+    /// Rotating in place to face the next point.
+    Rotating,
+    /// Driving toward it.
+    Driving,
+    /// The last point is reached.
+    Arrived,
+}
+
+/// What a step reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Event {
+    /// Point `index` (not the last) was reached, at `distance_m` from it.
+    Reached {
+        /// Its index.
+        index: usize,
+        /// How far from it.
+        distance_m: f64,
+    },
+    /// The last point (`index`) was reached.
+    Arrived {
+        /// Its index.
+        index: usize,
+        /// How far from it.
+        distance_m: f64,
+    },
+}
+
+/// The output of one step.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Step {
+    /// Forward speed, m/s.
+    pub v: f64,
+    /// Turn rate, rad/s.
+    pub omega: f64,
+    /// Heading error to the current point, radians.
+    pub error: f64,
+    /// What happened.
+    pub events: Vec<Event>,
+}
+
+/// The via-point follower.
+#[derive(Debug, Clone)]
+pub struct Follower {
+    settings: Settings,
+    points: Vec<Via>,
+    path_id: u32,
+    index: usize,
+    phase: Phase,
+    sent: (f64, f64),
+}
+
+fn slew(from: f64, to: f64, rate: f64, dt: f64) -> f64 {
+    let d = rate * dt.max(0.0);
+    to.clamp(from - d, from + d)
+}
+
+impl Follower {
+    /// A follower without a path.
+    pub fn new(settings: Settings) -> Self {
+        Follower { settings, points: Vec::new(), path_id: 0, index: 0, phase: Phase::Idle, sent: (0.0, 0.0) }
+    }
+
+    /// Changes the settings.
+    pub fn set_settings(&mut self, s: Settings) {
+        self.settings = s;
+    }
+
+    /// Starts following `path` from its first point.
+    pub fn follow(&mut self, path: &ViaPath) -> Result<(), PathError> {
+        self.points = read_path(path)?;
+        self.path_id = path.path_id;
+        self.index = 0;
+        self.phase = Phase::Driving;
+        Ok(())
+    }
+
+    /// Stops following (the robot stops).
+    pub fn abort(&mut self) {
+        self.points.clear();
+        self.phase = Phase::Idle;
+    }
+
+    /// The path followed (0: none).
+    pub fn path_id(&self) -> u32 {
+        self.path_id
+    }
+
+    /// The point being approached.
+    pub fn index(&self) -> usize {
+        self.index
+    }
+
+    /// The phase.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// The points of the path.
+    pub fn points(&self) -> &[Via] {
+        &self.points
+    }
+
+    fn is_last(&self) -> bool {
+        self.index + 1 >= self.points.len()
+    }
+
+    /// One cycle of `dt` seconds at `pose`.
+    pub fn step(&mut self, pose: &Pose, dt: f64) -> Step {
+        let s = self.settings;
+        let mut out = Step::default();
+        let (mut v, mut omega) = (0.0, 0.0);
+        if matches!(self.phase, Phase::Rotating | Phase::Driving) && pose.x.is_finite() && pose.y.is_finite() {
+            // advance past the points reached
+            while let Some(p) = self.points.get(self.index).copied() {
+                let (dx, dy) = (p.x - pose.x, p.y - pose.y);
+                let dist = dx.hypot(dy);
+                let err = wrap(dy.atan2(dx) - pose.theta);
+                let last = self.is_last();
+                let reached = if last {
+                    if p.kind == ViaKind::Target { dist <= s.standoff_m } else { dist <= s.final_reach_m }
+                } else {
+                    dist <= s.reach_m || (dist <= s.pass_m && err.abs() > PI / 2.0)
+                };
+                if !reached {
+                    break;
+                }
+                if last {
+                    out.events.push(Event::Arrived { index: self.index, distance_m: dist });
+                    self.phase = Phase::Arrived;
+                    break;
+                }
+                out.events.push(Event::Reached { index: self.index, distance_m: dist });
+                self.index += 1;
+                self.phase = Phase::Driving;
+            }
+        }
+        if matches!(self.phase, Phase::Rotating | Phase::Driving) {
+            if let Some(p) = self.points.get(self.index).copied() {
+                let (dx, dy) = (p.x - pose.x, p.y - pose.y);
+                let dist = dx.hypot(dy);
+                let err = wrap(dy.atan2(dx) - pose.theta);
+                out.error = err;
+                if self.phase == Phase::Rotating && err.abs() <= s.rotate_until {
+                    self.phase = Phase::Driving;
+                } else if self.phase == Phase::Driving && err.abs() > s.rotate_above {
+                    self.phase = Phase::Rotating;
+                }
+                match self.phase {
+                    Phase::Rotating => {
+                        // slower near the end: ω ≥ 0.15 rad/s, ≤ omega_turn
+                        let w = (2.0 * err.abs()).clamp(0.15, s.omega_turn.max(0.15));
+                        omega = w.copysign(err);
+                    }
+                    _ => {
+                        let to_go = if self.is_last() {
+                            let stop_at = if p.kind == ViaKind::Target { s.standoff_m } else { 0.0 };
+                            (dist - stop_at).max(0.0)
+                        } else {
+                            f64::INFINITY
+                        };
+                        v = if to_go < s.slow_within_m {
+                            (s.v_cruise * to_go / s.slow_within_m.max(1e-6)).max(s.v_min)
+                        } else {
+                            s.v_cruise
+                        };
+                        omega = if err.abs() <= s.deadband {
+                            0.0
+                        } else {
+                            (s.k_heading * err).clamp(-s.omega_drive_max, s.omega_drive_max)
+                        };
+                    }
+                }
+            }
+        }
+        // rate limits, from what was sent last
+        let (v0, w0) = self.sent;
+        let v = slew(v0, v, s.accel, dt);
+        let omega = slew(w0, omega, s.alpha, dt);
+        self.sent = (v, omega);
+        out.v = v;
+        out.omega = omega;
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn path(points: &[(f64, f64, ViaKind)]) -> ViaPath {
+        let mut p = ViaPath { path_id: 1, count: points.len() as u32, ..Default::default() };
+        for (i, (x, y, k)) in points.iter().enumerate() {
+            p.points[i] = [*x, *y];
+            p.kinds[i] = *k as u8;
+        }
+        p
+    }
+
+    /// A step with the rate limits out of the way (many cycles at the same pose).
+    fn settle(f: &mut Follower, pose: &Pose) -> Step {
+        let mut s = f.step(pose, 0.05);
+        for _ in 0..40 {
+            s = f.step(pose, 0.05);
+        }
+        s
+    }
+
+    #[test]
+    fn the_rules_of_fig_4_10() {
+        let mut f = Follower::new(Settings::default());
+        f.follow(&path(&[(10.0, 0.0, ViaKind::Waypoint)])).unwrap();
+        // 20° off: stop and rotate toward it (to the right)
+        let s = settle(&mut f, &Pose { x: 0.0, y: 0.0, theta: 20f64.to_radians() });
+        assert_eq!((f.phase(), s.v), (Phase::Rotating, 0.0));
+        assert!(s.omega < 0.0, "{s:?}");
+        // rotating goes on under 10° until 2°
+        let s = settle(&mut f, &Pose { x: 0.0, y: 0.0, theta: 5f64.to_radians() });
+        assert_eq!((f.phase(), s.v), (Phase::Rotating, 0.0));
+        // 1.5° off: facing it; drive on, steering a little
+        let s = settle(&mut f, &Pose { x: 0.0, y: 0.0, theta: 1.5f64.to_radians() });
+        assert_eq!(f.phase(), Phase::Driving);
+        assert!(s.v > 0.25 && s.omega < 0.0, "{s:?}");
+        // 8° off while driving: steer, do not stop
+        let s = settle(&mut f, &Pose { x: 0.0, y: 0.0, theta: 8f64.to_radians() });
+        assert_eq!(f.phase(), Phase::Driving);
+        assert!(s.v > 0.25 && s.omega < 0.0, "{s:?}");
+        // 0.5° off: not worth a correction
+        let s = settle(&mut f, &Pose { x: 0.0, y: 0.0, theta: 0.5f64.to_radians() });
+        assert_eq!((s.omega, f.phase()), (0.0, Phase::Driving));
+        assert!((s.v - 0.3).abs() < 1e-9);
+    }
+
+    #[test]
+    fn commands_are_rate_limited_for_the_motor() {
+        let mut f = Follower::new(Settings::default());
+        f.follow(&path(&[(10.0, 0.0, ViaKind::Waypoint)])).unwrap();
+        let s = f.step(&Pose::default(), 0.05);
+        // 1 m/s² × 50 ms
+        assert!((s.v - 0.05).abs() < 1e-9, "{s:?}");
+        let s = f.step(&Pose::default(), 0.05);
+        assert!((s.v - 0.10).abs() < 1e-9, "{s:?}");
+    }
+
+    #[test]
+    fn bad_paths_are_refused() {
+        let mut f = Follower::new(Settings::default());
+        assert!(matches!(f.follow(&ViaPath::default()), Err(PathError::Empty { .. })));
+        let mut p = path(&[(1.0, 0.0, ViaKind::Target)]);
+        p.count = 99;
+        assert!(matches!(f.follow(&p), Err(PathError::TooLong { .. })));
+        let mut p = path(&[(f64::NAN, 0.0, ViaKind::Target)]);
+        assert!(matches!(f.follow(&p), Err(PathError::BadPoint { index: 0, .. })));
+        p.points[0] = [1.0, 1.0];
+        p.kinds[0] = 77;
+        assert!(f.follow(&p).unwrap_err().to_string().contains("kind code 77"));
+        assert_eq!(f.phase(), Phase::Idle);
+        // idle: no motion
+        let s = f.step(&Pose::default(), 0.05);
+        assert_eq!((s.v, s.omega), (0.0, 0.0));
+    }
+
+    /// A unicycle driven by the follower from robot 2's start, through the
+    /// via points of three checkpoints and the target's, to the target of
+    /// the thesis' corridor (Fig. 4-10).
+    #[test]
+    fn reaches_the_target_through_three_via_points() {
+        let vias = [
+            (1.2, -0.4, ViaKind::Checkpoint),
+            (6.0, -0.4, ViaKind::Checkpoint),
+            (10.8, -0.4, ViaKind::Checkpoint),
+            (12.8, -1.4, ViaKind::TargetApproach),
+            (12.8, -3.0, ViaKind::Target),
+        ];
+        let mut f = Follower::new(Settings::default());
+        f.follow(&path(&vias)).unwrap();
+        let mut pose = Pose { x: -4.0, y: 0.0, theta: 0.3 };
+        let dt = 0.05;
+        let (mut reached, mut arrived) = (Vec::new(), None);
+        let mut rotated_in_place = 0;
+        let mut t = 0.0;
+        while t < 300.0 && arrived.is_none() {
+            let s = f.step(&pose, dt);
+            for e in &s.events {
+                match e {
+                    Event::Reached { index, distance_m } => reached.push((*index, *distance_m)),
+                    Event::Arrived { index, distance_m } => arrived = Some((*index, *distance_m, t)),
+                }
+            }
+            if s.v == 0.0 && s.omega != 0.0 {
+                rotated_in_place += 1;
+            }
+            // the robot: exact unicycle
+            pose.theta = wrap(pose.theta + s.omega * dt);
+            pose.x += s.v * dt * pose.theta.cos();
+            pose.y += s.v * dt * pose.theta.sin();
+            t += dt;
+        }
+        let (index, dist, when) = arrived.expect("arrived");
+        assert_eq!(index, 4);
+        assert_eq!(reached.iter().map(|r| r.0).collect::<Vec<_>>(), vec![0, 1, 2, 3]);
+        assert!(reached.iter().all(|r| r.1 <= 0.6), "{reached:?}");
+        let to_target = (pose.x - 12.8).hypot(pose.y + 3.0);
+        assert!((0.25..=0.5).contains(&to_target), "stopped {to_target} m from the target (arrived at {dist})");
+        assert!(rotated_in_place > 0, "the right turn after via point 3 is a rotation in place");
+        assert!(when < 150.0, "took {when} s for about 19 m at 0.3 m/s");
+        // once arrived it stays stopped
+        let mut s = f.step(&pose, dt);
+        for _ in 0..20 {
+            s = f.step(&pose, dt);
+        }
+        assert_eq!((s.v, s.omega, f.phase()), (0.0, 0.0, Phase::Arrived));
+    }
+}

@@ -1,0 +1,247 @@
+//! `target`: robot 2's target-achieving agent (thesis section 4.3.2.3,
+//! Fig. 4-9). Periodic (default 50 ms).
+//!
+//! Inputs:
+//! * `pose` (`nerve::PoseEstimate`): the odometry agent's `pose`;
+//! * `path` (`nerve::ViaPath`): robot 1's map builder's `path`, through the bridge;
+//! * `mission_in` (`nerve::MissionCommand`): `come` (follow path N; needs
+//!   that path), `abort` (stop), through the bridge.
+//!
+//! Outputs:
+//! * `cmd` (`nerve::VelocityCommand`): to the motor's `cmd` while following
+//!   and for a second after arriving (zero), nothing otherwise;
+//! * `mission` (`nerve::MissionCommand`): `via-reached` for each via point,
+//!   `arrived` at the last one (repeated every `report_ms` until a new path
+//!   comes) — to robot 1 through the bridge, and to robot 2's decision maker
+//!   (grasp).
+//!
+//! The algorithm is the library `nerve_target`. Parameters: `v_cruise`
+//! (0.3 m/s), `rotate_above_deg` (10), `deadband_deg` (1), `reach_m` (0.25),
+//! `standoff_m` (0.35), `auto_start` (false: wait for `come`), `report_ms`
+//! (2000).
+
+use agent_sdk::params::positive;
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
+use nerve_target::{Event, Follower, Phase, Pose, Settings};
+use shm_schemas::payloads::{MissionCode, MissionCommand, PoseEstimate, VelocityCommand, ViaPath};
+use std::time::Duration;
+
+/// A pose older than this is not followed: the robot stops, ns.
+const POSE_FRESH_NS: u64 = 500_000_000;
+/// Zero commands are sent this long after arriving, ns.
+const HOLD_AFTER_ARRIVAL_NS: u64 = 1_000_000_000;
+
+struct Target {
+    pose: Input<PoseEstimate>,
+    path: Input<ViaPath>,
+    mission_in: Input<MissionCommand>,
+    cmd: Output<VelocityCommand>,
+    mission: Output<MissionCommand>,
+    v_cruise: Param<f64>,
+    rotate_above_deg: Param<f64>,
+    deadband_deg: Param<f64>,
+    reach_m: Param<f64>,
+    standoff_m: Param<f64>,
+    auto_start: Param<bool>,
+    report_ms: Param<u64>,
+    follower: Follower,
+    latest_path: Option<ViaPath>,
+    come_for: Option<u32>,
+    finished: Option<u32>,
+    last_pose: Option<PoseEstimate>,
+    arrived_at: Option<(u64, u64, usize)>,
+    last_step_ns: Option<u64>,
+    blind: bool,
+}
+
+fn in_range(lo: f64, hi: f64) -> impl Fn(&f64) -> Result<(), String> + Send + Sync + 'static {
+    move |v| if (lo..=hi).contains(v) { Ok(()) } else { Err(format!("{v} is outside {lo} … {hi}")) }
+}
+
+impl Target {
+    fn settings(&self) -> Settings {
+        Settings {
+            v_cruise: self.v_cruise.get(),
+            rotate_above: self.rotate_above_deg.get().to_radians(),
+            deadband: self.deadband_deg.get().to_radians(),
+            reach_m: self.reach_m.get(),
+            standoff_m: self.standoff_m.get(),
+            ..Settings::default()
+        }
+    }
+
+    fn report(&self, code: MissionCode, index: usize, now: u64) -> Result<(), AgentError> {
+        let mut m = MissionCommand::new(code, self.follower.path_id(), now);
+        m.index = index as u32;
+        if let Some(p) = self.last_pose {
+            (m.x, m.y) = (p.x, p.y);
+        }
+        self.mission.send(m)?;
+        Ok(())
+    }
+
+    fn start_if_asked(&mut self) {
+        let Some(path) = self.latest_path else { return };
+        let asked = self.auto_start.get() || self.come_for == Some(path.path_id);
+        let new = self.follower.path_id() != path.path_id && self.finished != Some(path.path_id);
+        if !(asked && new) {
+            return;
+        }
+        match self.follower.follow(&path) {
+            Ok(()) => {
+                let pts: Vec<String> = self
+                    .follower
+                    .points()
+                    .iter()
+                    .map(|p| format!("({:.2}, {:.2}) {}", p.x, p.y, p.kind.name()))
+                    .collect();
+                tracing::info!(path = path.path_id, points = pts.len(), "following: {}", pts.join(" -> "));
+                self.arrived_at = None;
+            }
+            Err(e) => tracing::warn!(path = path.path_id, "refused: {e}"),
+        }
+    }
+}
+
+impl Agent for Target {
+    const KIND: &'static str = "target";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_millis(50))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let d = Settings::default();
+        Ok(Target {
+            pose: setup.input("pose")?,
+            path: setup.input("path")?,
+            mission_in: setup.input("mission_in")?,
+            cmd: setup.output("cmd")?,
+            mission: setup.output("mission")?,
+            v_cruise: setup.param_checked("v_cruise", d.v_cruise, in_range(0.01, 0.6)),
+            rotate_above_deg: setup.param_checked("rotate_above_deg", 10.0, in_range(1.0, 90.0)),
+            deadband_deg: setup.param_checked("deadband_deg", 1.0, in_range(0.0, 10.0)),
+            reach_m: setup.param_checked("reach_m", d.reach_m, positive),
+            standoff_m: setup.param_checked("standoff_m", d.standoff_m, in_range(0.0, 2.0)),
+            auto_start: setup.param("auto_start", false),
+            report_ms: setup.param_checked("report_ms", 2000u64, |v| {
+                if *v >= 100 { Ok(()) } else { Err("report_ms is at least 100".into()) }
+            }),
+            follower: Follower::new(d),
+            latest_path: None,
+            come_for: None,
+            finished: None,
+            last_pose: None,
+            arrived_at: None,
+            last_step_ns: None,
+            blind: false,
+        })
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        let now = ctx.now_ns();
+        let dt = self.last_step_ns.map_or(0.05, |t| (now.saturating_sub(t) as f64 / 1e9).clamp(0.0, 0.2));
+        self.last_step_ns = Some(now);
+        self.follower.set_settings(self.settings());
+        if let Some((_, p)) = self.pose.latest() {
+            self.last_pose = Some(p);
+        }
+        let mut paths = Vec::new();
+        self.path.drain(|_, p| paths.push(*p));
+        for p in paths {
+            if self.latest_path.is_none_or(|l| l.path_id != p.path_id) {
+                tracing::info!(path = p.path_id, points = p.count, "path received");
+            }
+            self.latest_path = Some(p);
+        }
+        let mut orders = Vec::new();
+        self.mission_in.drain(|m, c| orders.push((m.sender.to_string(), *c)));
+        for (sender, o) in orders {
+            match o.code() {
+                Some(MissionCode::Come) => {
+                    if self.come_for != Some(o.path_id) {
+                        tracing::info!(path = o.path_id, %sender, "come");
+                    }
+                    self.come_for = Some(o.path_id);
+                }
+                Some(MissionCode::Abort) => {
+                    tracing::info!(%sender, "abort: stop following");
+                    self.follower.abort();
+                    self.come_for = None;
+                    self.cmd.send(VelocityCommand { v: 0.0, omega: 0.0, stamp_ns: now })?;
+                }
+                Some(c) => tracing::debug!(code = c.name(), %sender, "mission message not for the target achiever"),
+                None => tracing::warn!(code = o.code, %sender, "mission message of unknown code; ignored"),
+            }
+        }
+        self.start_if_asked();
+
+        match self.follower.phase() {
+            Phase::Idle => Ok(()),
+            Phase::Arrived => {
+                if let Some((at, last_report, index)) = self.arrived_at {
+                    if now.saturating_sub(at) <= HOLD_AFTER_ARRIVAL_NS {
+                        self.cmd.send(VelocityCommand { v: 0.0, omega: 0.0, stamp_ns: now })?;
+                    }
+                    if now.saturating_sub(last_report) >= self.report_ms.get().saturating_mul(1_000_000) {
+                        self.report(MissionCode::Arrived, index, now)?;
+                        self.arrived_at = Some((at, now, index));
+                    }
+                }
+                Ok(())
+            }
+            Phase::Rotating | Phase::Driving => {
+                let fresh = self.last_pose.filter(|p| {
+                    now.saturating_sub(p.stamp_ns) <= POSE_FRESH_NS && p.x.is_finite() && p.theta.is_finite()
+                });
+                let Some(p) = fresh else {
+                    if !self.blind {
+                        tracing::warn!("no fresh pose: stopped; connect odometry/pose target/pose");
+                        self.blind = true;
+                    }
+                    self.cmd.send(VelocityCommand { v: 0.0, omega: 0.0, stamp_ns: now })?;
+                    return Ok(());
+                };
+                if self.blind {
+                    tracing::info!("pose back: following again");
+                    self.blind = false;
+                }
+                let s = self.follower.step(&Pose { x: p.x, y: p.y, theta: p.theta }, dt);
+                for e in &s.events {
+                    match *e {
+                        Event::Reached { index, distance_m } => {
+                            tracing::info!(
+                                path = self.follower.path_id(),
+                                index,
+                                distance_m,
+                                x = p.x,
+                                y = p.y,
+                                "via point reached"
+                            );
+                            self.report(MissionCode::ViaReached, index, now)?;
+                        }
+                        Event::Arrived { index, distance_m } => {
+                            tracing::info!(
+                                path = self.follower.path_id(),
+                                index,
+                                distance_m,
+                                x = p.x,
+                                y = p.y,
+                                "arrived"
+                            );
+                            self.report(MissionCode::Arrived, index, now)?;
+                            self.arrived_at = Some((now, now, index));
+                            self.finished = Some(self.follower.path_id());
+                        }
+                    }
+                }
+                self.cmd.send(VelocityCommand { v: s.v, omega: s.omega, stamp_ns: now })?;
+                Ok(())
+            }
+        }
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<Target>()
+}
