@@ -228,8 +228,14 @@ pub fn describe(exe: &Path, params: &[String], args: &[String]) -> Result<Descri
     }
     let out = cmd.env_remove("NOTIFY_SOCKET").output().map_err(|e| format!("cannot run {}: {e}", exe.display()))?;
     if !out.status.success() {
+        // the agent's last error, with the lines that follow it (a config
+        // file's own problems, one per line)
         let err = String::from_utf8_lossy(&out.stderr);
-        let msg = err.lines().rfind(|l| l.starts_with("error")).unwrap_or(err.trim());
+        let lines: Vec<&str> = err.lines().collect();
+        let msg = match lines.iter().rposition(|l| l.starts_with("error")) {
+            Some(i) => lines[i..].join("\n"),
+            None => err.trim().to_owned(),
+        };
         return Err(msg.trim_start_matches("error: ").to_owned());
     }
     let d: Description = serde_json::from_slice(&out.stdout).map_err(|e| {

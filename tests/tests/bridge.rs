@@ -493,3 +493,31 @@ fn the_example_pair_of_launch_files_runs() {
     a.down_and_check_clean();
     b.down_and_check_clean();
 }
+
+/// A bad bridge configuration stops `nerve launch` before anything starts,
+/// with every problem of the configuration file and its line.
+#[test]
+fn a_bad_bridge_config_is_refused_by_the_launch_check() {
+    let r = Robot::new("brbad");
+    let cfg = write(
+        &r.home,
+        "bridge.toml",
+        "listen = [\"udp/127.0.0.1:1\"]\n[[export]]\nport = \"t1/tick\"\ntype = \"nerve::Tock\"\n",
+    );
+    let file = r.launch_file(
+        "l.toml",
+        &format!(
+            "robot = \"x\"\n[[agent]]\nname = \"bridge\"\nkind = \"bridge\"\nargs = [\"--config\", \"{}\"]\n",
+            cfg.display()
+        ),
+    );
+    let out = r.command("nerve").arg("launch").arg(&file).output().expect("launch");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("bridge.toml:1: ") && err.contains("TCP only"), "{err}");
+    assert!(err.contains("bridge.toml:4: ") && err.contains("nerve::Tock"), "{err}");
+    assert!(err.contains("nothing was started"), "{err}");
+    let ps = r.nerve(&["ps", "--json"]);
+    let listed = String::from_utf8_lossy(&ps.stdout).trim().to_owned();
+    assert!(!ps.status.success() || listed == "[]", "an agent was started: {listed}");
+}
