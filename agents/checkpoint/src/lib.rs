@@ -7,6 +7,7 @@
 //!   pixel distance `d`, the tube's column, which way up it stands;
 //! * [`locate`]: range and bearing of a tube, which checkpoint the IR code
 //!   names, and the robot's corrected pose;
+//! * [`sensor`]: the work on one frame — sightings and the correction to send;
 //! * [`config`]: the calibration file and the sensor configuration (camera,
 //!   colours, IR cones, known checkpoints), strict TOML.
 //!
@@ -19,3 +20,4 @@ pub mod appendix_a;
 pub mod bands;
 pub mod config;
 pub mod locate;
+pub mod sensor;

@@ -31,10 +31,9 @@ use clap::Parser;
 use nerve_checkpoint::appendix_a::Model;
 use nerve_checkpoint::bands::{Pixels, Tube, TubeFinder};
 use nerve_checkpoint::config::{Calibration, SensorConfig};
-use nerve_checkpoint::locate::{self, Camera, Observation, Pose, correct_pose, ir_cone, observe, place, wrap};
-use shm_schemas::payloads::navigation::{CORRECTS_HEADING, CORRECTS_POSITION};
-use shm_schemas::payloads::{CheckpointSighting, HeadState, IrSighting, PoseCorrection, PoseEstimate, PoseSource};
-use std::collections::BTreeMap;
+use nerve_checkpoint::locate::{Pose, wrap};
+use nerve_checkpoint::sensor::{FrameInput, Sensor, SensorSettings};
+use shm_schemas::payloads::{CheckpointSighting, HeadState, IrSighting, PoseCorrection, PoseEstimate};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -81,14 +80,12 @@ struct Checkpoint {
     range_max_m: Param<f64>,
     interval_ms: Param<u64>,
     ir_margin_deg: Param<f64>,
-    config: SensorConfig,
-    model: Model,
+    sensor: Sensor,
     finder: TubeFinder,
     counters: Arc<Counters>,
     last_ir: Option<IrSighting>,
     last_pose: Option<PoseEstimate>,
     pan: Option<(f64, u64)>,
-    last_correction: BTreeMap<u8, u64>,
     warned_no_pose: bool,
 }
 
@@ -96,176 +93,76 @@ fn in_range(lo: f64, hi: f64) -> impl Fn(&f64) -> Result<(), String> + Send + Sy
     move |v| if (lo..=hi).contains(v) { Ok(()) } else { Err(format!("{v} is outside {lo} … {hi}")) }
 }
 
-/// A tube measured in this frame.
-struct Seen {
-    tube: Tube,
-    obs: Observation,
-}
-
 impl Checkpoint {
-    fn fresh_pose(&self, now: u64) -> Option<(Pose, PoseEstimate)> {
+    fn settings(&self) -> SensorSettings {
+        SensorSettings {
+            correct: self.correct.get(),
+            ir_fresh_ns: self.ir_fresh_ms.get().saturating_mul(1_000_000),
+            gate_m: self.gate_m.get(),
+            max_jump_m: self.max_jump_m.get(),
+            range_min_m: self.range_min_m.get(),
+            range_max_m: self.range_max_m.get(),
+            interval_ns: self.interval_ms.get().saturating_mul(1_000_000),
+            ir_margin_rad: self.ir_margin_deg.get().to_radians(),
+        }
+    }
+
+    fn fresh_pose(&self, now: u64) -> Option<Pose> {
         let p = self.last_pose?;
         (now.saturating_sub(p.stamp_ns) <= POSE_FRESH_NS && p.x.is_finite() && p.y.is_finite() && p.theta.is_finite())
-            .then_some((Pose { x: p.x, y: p.y, theta: p.theta }, p))
-    }
-
-    fn fresh_ir(&self, now: u64) -> Option<IrSighting> {
-        let s = self.last_ir?;
-        let fresh = now.saturating_sub(s.stamp_ns) <= self.ir_fresh_ms.get().saturating_mul(1_000_000);
-        (fresh && s.seen == 1 && s.checkpoint_id != 0).then_some(s)
-    }
-
-    fn reject(&self, why: &str, id: u8) {
-        let n = self.counters.rejected.fetch_add(1, Ordering::Relaxed) + 1;
-        if n.is_power_of_two() {
-            tracing::warn!(checkpoint = id, rejected = n, "correction rejected: {why}");
-        }
+            .then_some(Pose { x: p.x, y: p.y, theta: p.theta })
     }
 
     /// Handles the tubes of one frame taken at `stamp`, `width` pixels wide.
     fn on_frame(&mut self, tubes: &[Tube], width: usize, stamp: u64, now: u64) -> Result<(), AgentError> {
-        let camera = Camera { width_px: width as f64, hfov_rad: self.config.camera.hfov_deg.to_radians() };
-        let pan = self.pan.filter(|(_, t)| now.saturating_sub(*t) <= HEAD_FRESH_NS).map_or(0.0, |(p, _)| p);
-        let (rmin, rmax) = (self.range_min_m.get(), self.range_max_m.get());
-        let seen: Vec<Seen> = tubes
-            .iter()
-            .filter(|t| !t.clipped)
-            .filter_map(|t| observe(t, &camera, &self.model, pan, self.config.tube.radius_m).ok().map(|o| (t, o)))
-            .filter(|(_, o)| o.range_m >= rmin && o.range_m <= rmax)
-            .map(|(t, o)| Seen { tube: *t, obs: o })
-            .collect();
-        self.counters.tubes.fetch_add(seen.len() as u64, Ordering::Relaxed);
-        if seen.is_empty() {
-            return Ok(());
-        }
         let pose = self.fresh_pose(now);
-        if pose.is_none() && !self.warned_no_pose {
+        if pose.is_none() && !tubes.is_empty() && !self.warned_no_pose {
             tracing::warn!(
                 "no fresh pose on input `pose`: tubes are reported only when the IR names a known checkpoint, \
                  and no correction is made; connect odometry/pose checkpoint/pose"
             );
             self.warned_no_pose = true;
         }
-        let ir = self.fresh_ir(now);
-        let half_angle = self.config.ir.half_angle_deg.to_radians();
-        // which tube the IR code names
-        let named: Option<(usize, u8)> = ir.and_then(|s| {
-            let id = s.checkpoint_id;
-            if let Some(k) = self.config.checkpoint(id) {
-                let obs: Vec<Observation> = seen.iter().map(|s| s.obs).collect();
-                let i = match &pose {
-                    Some((p, _)) => locate::identify(p, &obs, (k.position[0], k.position[1]), self.max_jump_m.get()),
-                    // no pose: the nearest upright tube
-                    None => (0..seen.len())
-                        .filter(|i| seen[*i].obs.upright)
-                        .min_by(|a, b| seen[*a].obs.range_m.total_cmp(&seen[*b].obs.range_m)),
-                };
-                i.map(|i| (i, id))
-            } else if self.config.target_ids.contains(&id) {
-                (0..seen.len())
-                    .filter(|i| !seen[*i].obs.upright)
-                    .min_by(|a, b| seen[*a].obs.range_m.total_cmp(&seen[*b].obs.range_m))
-                    .map(|i| (i, id))
-            } else {
-                None
-            }
-        });
-        for (i, s) in seen.iter().enumerate() {
-            let by_ir = named.filter(|(n, _)| *n == i).map(|(_, id)| id);
-            let placed = pose.as_ref().map(|(p, _)| place(p, &s.obs));
-            let phi = pose.as_ref().map(|(p, _)| wrap(p.theta + s.obs.bearing_rad + std::f64::consts::PI));
-            // identity: by IR, else a known checkpoint where the tube falls
-            let by_map = || -> Option<u8> {
-                let (x, y) = placed?;
-                if !s.obs.upright {
-                    return None;
-                }
-                self.config
-                    .checkpoints
-                    .iter()
-                    .map(|k| (k.id, (k.position[0] - x).hypot(k.position[1] - y)))
-                    .filter(|(_, d)| *d <= self.gate_m.get())
-                    .min_by(|a, b| a.1.total_cmp(&b.1))
-                    .map(|(id, _)| id)
-            };
-            let id = by_ir.or_else(by_map).unwrap_or(0);
-            let known = self.config.checkpoint(id).filter(|_| s.obs.upright);
-            let (x, y) = match (known, placed) {
-                (Some(k), _) => (k.position[0], k.position[1]),
-                (None, Some(xy)) => xy,
-                (None, None) => continue, // nowhere to put it
-            };
-            let cone = match (by_ir, known, ir) {
-                (Some(_), Some(k), Some(irs)) => ir_cone(k.heading_deg.to_radians(), irs.transmitters, half_angle),
-                _ => None,
-            };
-            let facing = cone.map(|c| c.centre).or(phi).unwrap_or(0.0);
-            let transmitters = if by_ir.is_some() { ir.map_or(0, |s| s.transmitters) } else { 0 };
-            self.sighting_out.send(CheckpointSighting {
-                stamp_ns: stamp,
-                x,
-                y,
-                range_m: s.obs.range_m as f32,
-                bearing_rad: s.obs.bearing_rad as f32,
-                facing_rad: facing as f32,
-                checkpoint_id: id,
-                transmitters,
-                from_ir: u8::from(by_ir.is_some()),
-                from_camera: 1,
-                is_target: u8::from(!s.obs.upright),
-                reserved: [0; 7],
-            })?;
+        let input = FrameInput {
+            tubes,
+            width_px: width,
+            stamp_ns: stamp,
+            now_ns: now,
+            pose,
+            ir: self.last_ir,
+            pan_rad: self.pan.filter(|(_, t)| now.saturating_sub(*t) <= HEAD_FRESH_NS).map_or(0.0, |(p, _)| p),
+        };
+        let out = self.sensor.frame(&input, &self.settings());
+        self.counters.tubes.fetch_add(out.ranged as u64, Ordering::Relaxed);
+        for sg in &out.sightings {
+            self.sighting_out.send(*sg)?;
             self.counters.sightings.fetch_add(1, Ordering::Relaxed);
             tracing::debug!(
-                checkpoint = id,
-                range = s.obs.range_m,
-                bearing = s.obs.bearing_rad,
-                d_px = s.tube.d_px,
+                checkpoint = sg.checkpoint_id,
+                target = sg.is_target,
+                range_m = sg.range_m,
+                bearing_rad = sg.bearing_rad,
                 "tube seen"
             );
-
-            // the correction: a known checkpoint named by the IR code, with a pose to correct
-            let (Some(k), Some(_), Some((est, _))) = (known, by_ir, pose.as_ref()) else { continue };
-            if !self.correct.get() {
-                continue;
+        }
+        for (id, why) in &out.rejected {
+            let n = self.counters.rejected.fetch_add(1, Ordering::Relaxed) + 1;
+            if n.is_power_of_two() {
+                tracing::warn!(checkpoint = id, rejected = n, "correction rejected: {why}");
             }
-            let interval = self.interval_ms.get().saturating_mul(1_000_000);
-            if self.last_correction.get(&id).is_some_and(|t| stamp.saturating_sub(*t) < interval) {
-                continue;
-            }
-            let c =
-                correct_pose(est, (k.position[0], k.position[1]), &s.obs, cone, self.ir_margin_deg.get().to_radians());
-            let jump = (c.pose.x - est.x).hypot(c.pose.y - est.y);
-            if jump > self.max_jump_m.get() {
-                self.reject(&format!("it would move the pose {jump:.2} m (max_jump_m {})", self.max_jump_m.get()), id);
-                continue;
-            }
-            self.last_correction.insert(id, stamp);
-            let fields = CORRECTS_POSITION | if c.heading_corrected { CORRECTS_HEADING } else { 0 };
-            self.correction_out.send(PoseCorrection {
-                x: c.pose.x,
-                y: c.pose.y,
-                theta: c.pose.theta,
-                checkpoint_x: k.position[0],
-                checkpoint_y: k.position[1],
-                stamp_ns: stamp,
-                range_m: s.obs.range_m as f32,
-                bearing_rad: s.obs.bearing_rad as f32,
-                fields,
-                source: PoseSource::Checkpoint as u8,
-                checkpoint_id: id,
-                reserved: [0; 5],
-            })?;
+        }
+        if let Some(c) = out.correction {
+            self.correction_out.send(c.payload)?;
             let n = self.counters.corrections.fetch_add(1, Ordering::Relaxed) + 1;
             tracing::info!(
-                checkpoint = id,
+                checkpoint = c.payload.checkpoint_id,
                 corrections = n,
-                dx = c.pose.x - est.x,
-                dy = c.pose.y - est.y,
-                dtheta_deg = wrap(c.pose.theta - est.theta).to_degrees(),
-                range_m = s.obs.range_m,
-                bearing_deg = s.obs.bearing_rad.to_degrees(),
-                heading_corrected = c.heading_corrected,
+                dx = c.payload.x - c.from.x,
+                dy = c.payload.y - c.from.y,
+                dtheta_deg = wrap(c.payload.theta - c.from.theta).to_degrees(),
+                range_m = c.payload.range_m,
+                bearing_deg = f64::from(c.payload.bearing_rad).to_degrees(),
+                heading_corrected = c.correction.heading_corrected,
                 "pose correction sent"
             );
         }
@@ -337,14 +234,12 @@ impl Agent for Checkpoint {
             range_max_m: setup.param_checked("range_max_m", 3.5, in_range(0.0, 20.0)),
             interval_ms: setup.param("correction_interval_ms", 500u64),
             ir_margin_deg: setup.param_checked("ir_margin_deg", 5.0, in_range(0.0, 45.0)),
-            config,
-            model,
+            sensor: Sensor::new(config, model),
             finder: TubeFinder::default(),
             counters,
             last_ir: None,
             last_pose: None,
             pan: None,
-            last_correction: BTreeMap::new(),
             warned_no_pose: false,
         })
     }
@@ -362,7 +257,8 @@ impl Agent for Checkpoint {
                 self.pan = Some((h.pan_rad, now));
             }
         }
-        let (finder, colors, min_px) = (&mut self.finder, self.config.tube.colors(), self.min_pixels.get() as usize);
+        let (finder, colors, min_px) =
+            (&mut self.finder, self.sensor.config().tube.colors(), self.min_pixels.get() as usize);
         let read = self.frames.latest_with(|meta, px| {
             let format = match meta.format() {
                 Some(PixelFormat::Rgb8) => Pixels::Rgb8,
