@@ -43,8 +43,31 @@ pub fn format_duration(d: Duration) -> String {
     }
 }
 
+/// The longest duration nerve takes anywhere (periods, back-offs, windows,
+/// leases): one day. Longer values are typos or attacks, and their
+/// nanoseconds would come close to overflowing deadline arithmetic.
+pub const MAX_DURATION: Duration = Duration::from_secs(86_400);
+
+/// Nanoseconds of `d`, saturating at `u64::MAX` (never wrapping).
+pub fn nanos(d: Duration) -> u64 {
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)
+}
+
+/// Seconds given on a command line (`--grace 2`, `--timeout 0.5`): finite,
+/// not negative, at most [`MAX_DURATION`]; a clap value parser.
+pub fn parse_seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if !v.is_finite() || v < 0.0 {
+        return Err(format!("{s:?}: give a number of seconds from 0 to {}", MAX_DURATION.as_secs()));
+    }
+    if v > MAX_DURATION.as_secs_f64() {
+        return Err(format!("{s:?} is longer than nerve accepts ({} s, one day)", MAX_DURATION.as_secs()));
+    }
+    Ok(v)
+}
+
 /// Parses a period such as `10ms`, `1s`, `250us`, `100hz`, `2.5ms` or a bare
-/// number of milliseconds.
+/// number of milliseconds; from 10 µs to [`MAX_DURATION`].
 pub fn parse_duration(s: &str) -> Result<Duration, String> {
     let t = s.trim().to_ascii_lowercase();
     let split = t.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(t.len());
@@ -63,7 +86,10 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
         "min" => value * 60.0,
         _ => return Err(format!("{s:?}: unknown unit {unit:?}; use ns, us, ms, s, min or hz")),
     };
-    let d = Duration::from_secs_f64(secs);
+    let d = Duration::try_from_secs_f64(secs)
+        .ok()
+        .filter(|d| *d <= MAX_DURATION)
+        .ok_or_else(|| format!("{s:?} is longer than the longest duration nerve accepts (1 day); check the unit"))?;
     if d < Duration::from_micros(10) {
         return Err(format!("{s:?} is shorter than the shortest period nerve runs (10us)"));
     }
@@ -73,6 +99,20 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn absurd_durations_are_refused_not_wrapped() {
+        for bad in ["18446744074s", "18446744073s", "99999999999999999999ms", "2days", "1e400s", "inf", "nan"] {
+            assert!(parse_duration(bad).is_err(), "{bad} was accepted");
+        }
+        assert_eq!(parse_duration("86400s"), Ok(MAX_DURATION));
+        assert!(parse_duration("86401s").expect_err("too long").contains("1 day"));
+        assert_eq!(nanos(Duration::MAX), u64::MAX);
+        for bad in ["inf", "-1", "nan", "1e9", "x"] {
+            assert!(parse_seconds(bad).is_err(), "{bad} was accepted");
+        }
+        assert_eq!(parse_seconds("2.5"), Ok(2.5));
+    }
 
     #[test]
     fn parses_periods() {

@@ -201,12 +201,17 @@ struct Subscription<T: Payload> {
     rate: RateMeter,
 }
 
+/// Samples lost between `last_seq` and `seq` on one sender's port. A sender
+/// is another process: its numbers are not trusted, so nothing here can
+/// overflow, and a number going backwards (a restarted sender) loses nothing.
+fn gap(last_seq: u64, seq: u64) -> u64 {
+    if last_seq == 0 { 0 } else { seq.saturating_sub(last_seq.saturating_add(1)) }
+}
+
 impl<T: Payload> Subscription<T> {
     fn account(&mut self, h: &SampleHeader, now: u64) {
-        self.received += 1;
-        if self.last_seq != 0 && h.seq > self.last_seq + 1 {
-            self.dropped += h.seq - self.last_seq - 1;
-        }
+        self.received = self.received.saturating_add(1);
+        self.dropped = self.dropped.saturating_add(gap(self.last_seq, h.seq));
         self.last_seq = h.seq;
         self.last_ns = Some(now);
         self.rate.record(now);
@@ -390,5 +395,21 @@ impl<T: Payload> DynInput for InputInner<T> {
                 dropped: s.dropped,
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::gap;
+
+    #[test]
+    fn gaps_are_counted_without_overflow() {
+        assert_eq!(gap(0, 5), 0, "the first sample starts the count");
+        assert_eq!(gap(5, 6), 0);
+        assert_eq!(gap(5, 9), 3);
+        assert_eq!(gap(9, 2), 0, "a restarted sender counts again from its own start");
+        assert_eq!(gap(u64::MAX, 1), 0, "a hostile u64::MAX does not overflow (review R9)");
+        assert_eq!(gap(1, u64::MAX), u64::MAX - 2);
+        assert_eq!(gap(u64::MAX - 1, u64::MAX), 0);
     }
 }

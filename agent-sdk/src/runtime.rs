@@ -148,7 +148,7 @@ fn describe<A: Agent>(args: &CommonArgs) -> Result<String, String> {
     let agent = A::new(&mut setup).map_err(|e| format!("{} could not be set up: {e}", A::KIND))?;
     apply_params(&setup.params, &args.params)?;
     let (task, default_period_ns) = match A::task() {
-        Task::Periodic(p) => (TaskKind::Periodic, Some(p.as_nanos() as u64)),
+        Task::Periodic(p) => (TaskKind::Periodic, Some(crate::clock::nanos(p))),
         Task::EventDriven => (TaskKind::EventDriven, None),
     };
     let d = Description {
@@ -243,7 +243,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     apply_params(&params, &args.params)?;
 
     let shared = Arc::new(Shared {
-        period_ns: AtomicU64::new(period.map(|p| p.as_nanos() as u64).unwrap_or(0)),
+        period_ns: AtomicU64::new(period.map(crate::clock::nanos).unwrap_or(0)),
         suspended: AtomicBool::new(args.suspended),
         stop: AtomicBool::new(false),
         generation: AtomicU64::new(0),
@@ -262,7 +262,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
             Task::Periodic(_) => TaskKind::Periodic,
             Task::EventDriven => TaskKind::EventDriven,
         },
-        period_ns: period.map(|p| p.as_nanos() as u64),
+        period_ns: period.map(crate::clock::nanos),
         inputs: inputs.iter().map(|i| PortSpec { name: i.name().into(), type_name: i.type_name().into() }).collect(),
         outputs,
         log_file: readiness.pid_file().map(|_| world.log_file(name).display().to_string()),
@@ -397,9 +397,12 @@ const SLEEP_CHUNK_NS: u64 = 50_000_000;
 
 fn periodic_loop<A: Agent>(agent: &mut A, sh: &Shared, ctx: &mut Context) {
     let mut period = sh.period_ns.load(Ordering::Acquire).max(1);
-    let mut next = now_ns() + period;
+    let mut last = now_ns();
+    let mut next = last.saturating_add(period);
     loop {
-        // sleep to the absolute deadline, in chunks, watching stop and suspend
+        // sleep to the absolute deadline, in chunks, watching stop, suspend
+        // and a new period (which counts from the last cycle, at once: a
+        // long period in force does not delay a shorter one)
         loop {
             if sh.stopping() {
                 return;
@@ -407,11 +410,17 @@ fn periodic_loop<A: Agent>(agent: &mut A, sh: &Shared, ctx: &mut Context) {
             if sh.suspended.load(Ordering::Acquire) {
                 break;
             }
+            let new_period = sh.period_ns.load(Ordering::Acquire).max(1);
+            if new_period != period {
+                period = new_period;
+                next = last.saturating_add(period);
+                sh.figures().lateness.reset();
+            }
             let now = now_ns();
             if now >= next {
                 break;
             }
-            sleep_until_ns(next.min(now + SLEEP_CHUNK_NS));
+            sleep_until_ns(next.min(now.saturating_add(SLEEP_CHUNK_NS)));
         }
         if sh.suspended.load(Ordering::Acquire) {
             wait_while_suspended(sh);
@@ -419,10 +428,12 @@ fn periodic_loop<A: Agent>(agent: &mut A, sh: &Shared, ctx: &mut Context) {
                 return;
             }
             period = sh.period_ns.load(Ordering::Acquire).max(1);
-            next = now_ns() + period;
+            last = now_ns();
+            next = last.saturating_add(period);
             continue;
         }
         let woke = now_ns();
+        last = woke;
         ctx.now_ns = woke;
         ctx.period = Some(Duration::from_nanos(period));
         run_step(agent, sh, ctx);
@@ -437,17 +448,16 @@ fn periodic_loop<A: Agent>(agent: &mut A, sh: &Shared, ctx: &mut Context) {
         let new_period = sh.period_ns.load(Ordering::Acquire).max(1);
         if new_period != period {
             period = new_period;
-            next = woke + period;
+            next = woke.saturating_add(period);
             sh.figures().lateness.reset();
             continue;
         }
-        next += period;
+        next = next.saturating_add(period);
         if done > next {
             // the work ran past the next deadline: count it and skip the missed deadlines
             sh.figures().overruns += 1;
-            while next <= done {
-                next += period;
-            }
+            let missed = (done - next) / period + 1;
+            next = next.saturating_add(missed.saturating_mul(period));
         }
     }
 }
@@ -806,6 +816,9 @@ impl Checker<'_> {
             AgentCommand::SetPeriod { period_ns } => match self.task_kind {
                 Task::EventDriven => AgentReply::Error("this agent is event-driven; it has no period".into()),
                 Task::Periodic(_) if period_ns < 10_000 => AgentReply::Error("a period must be at least 10us".into()),
+                Task::Periodic(_) if period_ns > crate::clock::nanos(crate::clock::MAX_DURATION) => {
+                    AgentReply::Error("a period must be at most 1 day".into())
+                }
                 Task::Periodic(_) => {
                     self.shared.period_ns.store(period_ns, Ordering::Release);
                     self.shared.poke();

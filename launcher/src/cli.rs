@@ -213,7 +213,7 @@ pub struct EchoArgs {
     #[arg(long)]
     pub json: bool,
     /// Give up after this many seconds without a sample (default: wait for ever).
-    #[arg(long)]
+    #[arg(long, value_parser = agent_sdk::clock::parse_seconds)]
     pub timeout: Option<f64>,
 }
 
@@ -223,7 +223,7 @@ pub struct HzArgs {
     /// Output port, AGENT/PORT.
     pub port: String,
     /// Seconds per report.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub window: f64,
     /// Exit after this many reports.
     #[arg(long)]
@@ -237,6 +237,6 @@ pub struct HzArgs {
 #[derive(Debug, Args)]
 pub struct DownArgs {
     /// Seconds to wait for a clean stop before SIGTERM, and again before SIGKILL.
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, default_value_t = 3.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub grace: f64,
 }

@@ -115,6 +115,42 @@ fn period_change_and_suspend_resume() {
     r.down_and_check_clean();
 }
 
+/// `nerve rate` takes effect at once: a shorter period does not wait for
+/// the long sleep in force to end, and an absurd period is refused, not
+/// wrapped (review F3a, R7).
+#[test]
+fn a_new_period_takes_effect_at_once_and_absurd_ones_are_refused() {
+    let r = Robot::new("ratebig");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    assert!(!r.echo("t1/tick", 1).is_empty());
+    r.ok(&["rate", "t1", "30s"]);
+    std::thread::sleep(Duration::from_millis(300));
+    let cycles = |r: &Robot| r.agent("t1").and_then(|a| a["stats"]["cycles"].as_u64()).unwrap_or(0);
+    let before = cycles(&r);
+    r.ok(&["rate", "t1", "10ms"]);
+    assert!(
+        wait_until(Duration::from_secs(3), || cycles(&r) > before + 20),
+        "the 10 ms period waited for the 30 s sleep (cycles {} -> {})",
+        before,
+        cycles(&r)
+    );
+    for bad in ["18446744074s", "99999999999999999999ms", "2days"] {
+        let err = r.fails(&["rate", "t1", bad]);
+        assert!(err.contains("1 day") || err.contains("unknown unit"), "{bad}: {err}");
+    }
+    assert_eq!(r.agent("t1").and_then(|a| a["period_ns"].as_u64()), Some(10_000_000));
+    for (args, what) in [
+        (vec!["echo", "t1/tick", "--timeout", "nan"], "nan"),
+        (vec!["echo", "t1/tick", "--timeout", "-1"], "-1"),
+        (vec!["down", "--grace", "inf"], "inf"),
+    ] {
+        let out = r.nerve(&args);
+        assert_eq!(out.status.code(), Some(2), "{what}: {}", String::from_utf8_lossy(&out.stderr));
+    }
+    r.down_and_check_clean();
+}
+
 /// An agent added while others run joins the graph.
 #[test]
 fn hot_added_agent_joins_graph() {

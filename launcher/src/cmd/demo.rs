@@ -64,7 +64,7 @@ pub struct ExploreArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Stop after this many seconds of simulated time.
-    #[arg(long, default_value_t = 140.0)]
+    #[arg(long, default_value_t = 140.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub time_limit: f64,
     /// Launch file to derive the run's from [default: launch/explore.toml].
     #[arg(long)]
@@ -73,10 +73,10 @@ pub struct ExploreArgs {
     #[arg(long, default_value_t = Criteria::default().target_reach_m)]
     pub reach: f64,
     /// Seconds the robot must stay at the target before the run ends.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub hold: f64,
     /// Seconds between progress lines.
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, default_value_t = 3.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub progress: f64,
 }
 

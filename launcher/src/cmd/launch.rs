@@ -232,8 +232,8 @@ fn bring_up(world: &World, file: &LaunchFile) -> Result<BroughtUp> {
                 argv: spec.argv(world.robot().as_str()),
                 policy: policy(spec.restart),
                 max_restarts: spec.max_restarts,
-                window_ns: spec.restart_window.as_nanos() as u64,
-                backoff_ns: spec.backoff.as_nanos() as u64,
+                window_ns: agent_sdk::clock::nanos(spec.restart_window),
+                backoff_ns: agent_sdk::clock::nanos(spec.backoff),
                 importance: spec.importance,
             }))
             .with_context(|| format!("the router refused to supervise {}", spec.name))?;

@@ -32,7 +32,7 @@ pub fn disconnect(world: &World, a: WireArgs) -> Result<ExitCode> {
 
 pub fn rate(world: &World, name: &str, period: &str) -> Result<ExitCode> {
     let d = agent_sdk::clock::parse_duration(period).map_err(anyhow::Error::msg)?;
-    RouterSession::open(world)?.ok(CliRequest::Rate { name: name.into(), period_ns: d.as_nanos() as u64 })?;
+    RouterSession::open(world)?.ok(CliRequest::Rate { name: name.into(), period_ns: agent_sdk::clock::nanos(d) })?;
     println!("{name}: period {}", agent_sdk::clock::format_duration(d));
     Ok(ExitCode::SUCCESS)
 }
