@@ -22,7 +22,8 @@
 //! target point according to the sequence of their relative location").
 //! The via points in the order robot 1 first saw their landmarks — an order
 //! robot 1 has driven, so free of walls — then the target's via point and
-//! the target itself. A via point that is a detour (going through it is
+//! the target itself, each with the position of its landmark (for the
+//! follower to look at). A via point that is a detour (going through it is
 //! more than `detour_factor` times longer than going past it) is left out.
 //!
 //! **Where the robot has been** ([`VisitedGrid`]): a coarse grid of cells
@@ -253,17 +254,18 @@ impl MapBuilder {
     pub fn path(&self, path_id: u32, stamp_ns: u64) -> Option<ViaPath> {
         let target = self.target()?;
         let dist = self.settings.via_distance_m;
-        let mut pts: Vec<([f64; 2], ViaKind, u8)> = self
+        let mut pts: Vec<([f64; 2], ViaKind, u8, [f64; 2])> = self
             .confirmed()
             .filter(|l| !l.is_target)
             .map(|l| {
                 let v = l.via_point(dist);
-                ([v.0, v.1], ViaKind::Checkpoint, l.id)
+                ([v.0, v.1], ViaKind::Checkpoint, l.id, [l.x, l.y])
             })
             .collect();
         let tv = target.via_point(dist);
-        pts.push(([tv.0, tv.1], ViaKind::TargetApproach, target.id));
-        pts.push(([target.x, target.y], ViaKind::Target, target.id));
+        let t = [target.x, target.y];
+        pts.push(([tv.0, tv.1], ViaKind::TargetApproach, target.id, t));
+        pts.push((t, ViaKind::Target, target.id, t));
         // leave out detours (never the last two)
         if self.settings.detour_factor > 0.0 {
             let mut i = 1;
@@ -280,8 +282,9 @@ impl MapBuilder {
         // keep the last MAX_VIA_POINTS (the target's end of the path matters most)
         let skip = pts.len().saturating_sub(MAX_VIA_POINTS);
         let mut path = ViaPath { stamp_ns, path_id, ..Default::default() };
-        for (k, (p, kind, id)) in pts.iter().skip(skip).enumerate() {
+        for (k, (p, kind, id, landmark)) in pts.iter().skip(skip).enumerate() {
             path.points[k] = *p;
+            path.landmarks[k] = *landmark;
             path.kinds[k] = *kind as u8;
             path.checkpoint_ids[k] = *id;
             path.count = k as u32 + 1;
@@ -480,6 +483,8 @@ mod tests {
         assert!(confirmed);
         let p = m.path(7, 42).unwrap();
         assert_eq!((p.path_id, p.stamp_ns, p.count), (7, 42, 5));
+        assert_eq!(p.landmarks[1], [6.0, 1.2]);
+        assert!((p.landmarks[3][1] + 3.0).abs() < 0.03, "the target approach looks at the target");
         let e: Vec<_> = p.entries().collect();
         let want = [
             ([1.2, -0.4], 1, 1),

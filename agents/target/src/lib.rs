@@ -20,7 +20,14 @@
 //!   (within `pass_m` and behind the robot), then the next one is taken; the
 //!   last one is reached within `final_reach_m`, or, when it is the target
 //!   itself (kind `target`), at `standoff_m` from it (the arm's reach), and
-//!   the robot stops: **arrived**.
+//!   the robot stops: **arrived**;
+//! * at a via point of a checkpoint it **looks** at the checkpoint (turns
+//!   to face the landmark the path gives for it) and waits, still, until
+//!   the odometry reports a correction by that checkpoint
+//!   ([`Follower::correction_seen`]) or `look_timeout_s` passes — "it
+//!   adjusted its coordinate using the checkpoint, and continued to move
+//!   toward via point 2" (a fixed camera sees a checkpoint 1.6 m to the
+//!   side only when it turns to it).
 //!
 //! Commands are rate-limited (`accel`, `alpha`) so that the motor agent,
 //! which refuses jumps, accepts every one.
@@ -80,6 +87,10 @@ pub struct Settings {
     pub accel: f64,
     /// Turn-rate changes, rad/s².
     pub alpha: f64,
+    /// Look at the checkpoint at its via point, for a correction.
+    pub look_at_checkpoints: bool,
+    /// Longest wait for that correction, seconds.
+    pub look_timeout_s: f64,
 }
 
 impl Default for Settings {
@@ -100,6 +111,8 @@ impl Default for Settings {
             standoff_m: 0.35,
             accel: 1.0,
             alpha: 4.0,
+            look_at_checkpoints: true,
+            look_timeout_s: 6.0,
         }
     }
 }
@@ -146,6 +159,8 @@ pub struct Via {
     pub kind: ViaKind,
     /// The checkpoint it belongs to, 0 for none.
     pub checkpoint: u8,
+    /// The landmark it belongs to (to look at), metres, world frame.
+    pub landmark: (f64, f64),
 }
 
 /// Checks a path and returns its points.
@@ -160,7 +175,8 @@ pub fn read_path(p: &ViaPath) -> Result<Vec<Via>, PathError> {
     p.entries()
         .enumerate()
         .map(|(index, (pt, kind, checkpoint))| {
-            if !(pt[0].is_finite() && pt[1].is_finite()) {
+            let lm = p.landmarks[index];
+            if !(pt[0].is_finite() && pt[1].is_finite() && lm[0].is_finite() && lm[1].is_finite()) {
                 return Err(PathError::BadPoint { path_id, index, problem: "not a number".into() });
             }
             let kind = ViaKind::from_code(kind).ok_or_else(|| PathError::BadPoint {
@@ -168,7 +184,7 @@ pub fn read_path(p: &ViaPath) -> Result<Vec<Via>, PathError> {
                 index,
                 problem: format!("unknown kind code {kind}"),
             })?;
-            Ok(Via { x: pt[0], y: pt[1], kind, checkpoint })
+            Ok(Via { x: pt[0], y: pt[1], kind, checkpoint, landmark: (lm[0], lm[1]) })
         })
         .collect()
 }
@@ -182,6 +198,8 @@ pub enum Phase {
     Rotating,
     /// Driving toward it.
     Driving,
+    /// At a checkpoint's via point: facing the checkpoint, waiting for a correction.
+    Looking,
     /// The last point is reached.
     Arrived,
 }
@@ -227,6 +245,15 @@ pub struct Follower {
     index: usize,
     phase: Phase,
     sent: (f64, f64),
+    look: Option<Look>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Look {
+    checkpoint: u8,
+    at: (f64, f64),
+    elapsed_s: f64,
+    corrected: bool,
 }
 
 fn slew(from: f64, to: f64, rate: f64, dt: f64) -> f64 {
@@ -237,7 +264,15 @@ fn slew(from: f64, to: f64, rate: f64, dt: f64) -> f64 {
 impl Follower {
     /// A follower without a path.
     pub fn new(settings: Settings) -> Self {
-        Follower { settings, points: Vec::new(), path_id: 0, index: 0, phase: Phase::Idle, sent: (0.0, 0.0) }
+        Follower {
+            settings,
+            points: Vec::new(),
+            path_id: 0,
+            index: 0,
+            phase: Phase::Idle,
+            sent: (0.0, 0.0),
+            look: None,
+        }
     }
 
     /// Changes the settings.
@@ -251,13 +286,22 @@ impl Follower {
         self.path_id = path.path_id;
         self.index = 0;
         self.phase = Phase::Driving;
+        self.look = None;
         Ok(())
+    }
+
+    /// The odometry applied a correction by `checkpoint`: a look at it ends.
+    pub fn correction_seen(&mut self, checkpoint: u8) {
+        if let Some(l) = self.look.as_mut().filter(|l| l.checkpoint == checkpoint) {
+            l.corrected = true;
+        }
     }
 
     /// Stops following (the robot stops).
     pub fn abort(&mut self) {
         self.points.clear();
         self.phase = Phase::Idle;
+        self.look = None;
     }
 
     /// The path followed (0: none).
@@ -289,6 +333,22 @@ impl Follower {
         let s = self.settings;
         let mut out = Step::default();
         let (mut v, mut omega) = (0.0, 0.0);
+        if self.phase == Phase::Looking {
+            match self.look.as_mut() {
+                Some(l) if !l.corrected && l.elapsed_s < s.look_timeout_s => {
+                    l.elapsed_s += dt.max(0.0);
+                    let err = wrap((l.at.1 - pose.y).atan2(l.at.0 - pose.x) - pose.theta);
+                    out.error = err;
+                    if err.abs() > s.rotate_until {
+                        omega = (2.0 * err.abs()).clamp(0.15, s.omega_turn.max(0.15)).copysign(err);
+                    }
+                }
+                _ => {
+                    self.look = None;
+                    self.phase = Phase::Driving;
+                }
+            }
+        }
         if matches!(self.phase, Phase::Rotating | Phase::Driving) && pose.x.is_finite() && pose.y.is_finite() {
             // advance past the points reached
             while let Some(p) = self.points.get(self.index).copied() {
@@ -312,6 +372,12 @@ impl Follower {
                 out.events.push(Event::Reached { index: self.index, distance_m: dist });
                 self.index += 1;
                 self.phase = Phase::Driving;
+                if s.look_at_checkpoints && p.kind == ViaKind::Checkpoint && p.checkpoint != 0 {
+                    self.look =
+                        Some(Look { checkpoint: p.checkpoint, at: p.landmark, elapsed_s: 0.0, corrected: false });
+                    self.phase = Phase::Looking;
+                    break;
+                }
             }
         }
         if matches!(self.phase, Phase::Rotating | Phase::Driving) {
@@ -489,5 +555,47 @@ mod tests {
             s = f.step(&pose, dt);
         }
         assert_eq!((s.v, s.omega, f.phase()), (0.0, 0.0, Phase::Arrived));
+    }
+
+    #[test]
+    fn at_a_checkpoints_via_point_it_looks_and_waits_for_the_correction() {
+        let mut p = path(&[(2.0, 0.0, ViaKind::Checkpoint), (4.0, 0.0, ViaKind::Waypoint)]);
+        p.checkpoint_ids[0] = 1;
+        p.landmarks[0] = [2.0, 1.6]; // the checkpoint, to the left of its via point
+        p.landmarks[1] = [4.0, 0.0];
+        let mut f = Follower::new(Settings::default());
+        f.follow(&p).unwrap();
+        let mut pose = Pose { x: 1.9, y: 0.0, theta: 0.0 };
+        let s = f.step(&pose, 0.05);
+        assert!(matches!(s.events[..], [Event::Reached { index: 0, .. }]));
+        assert_eq!(f.phase(), Phase::Looking);
+        // it turns left to face the checkpoint (within the 6 s it waits)
+        for _ in 0..110 {
+            let s = f.step(&pose, 0.05);
+            pose.theta = wrap(pose.theta + s.omega * 0.05);
+            pose.x += s.v * 0.05 * pose.theta.cos();
+        }
+        let want = 1.6f64.atan2(0.1);
+        assert!((pose.theta - want).abs() < 3f64.to_radians(), "facing {}°", pose.theta.to_degrees());
+        assert_eq!(f.phase(), Phase::Looking);
+        // a correction by another checkpoint does not end the look; by this one it does
+        let mut f = Follower::new(Settings::default());
+        f.follow(&p).unwrap();
+        let pose = Pose { x: 1.9, y: 0.0, theta: PI / 2.0 };
+        f.step(&pose, 0.05);
+        f.correction_seen(2);
+        f.step(&pose, 0.05);
+        assert_eq!(f.phase(), Phase::Looking);
+        f.correction_seen(1);
+        f.step(&pose, 0.05);
+        assert_eq!(f.phase(), Phase::Rotating, "on to the next point (behind its right shoulder)");
+        assert_eq!(f.index(), 1);
+        // without a correction the look ends after the timeout
+        let mut f = Follower::new(Settings { look_timeout_s: 1.0, ..Settings::default() });
+        f.follow(&p).unwrap();
+        for _ in 0..22 {
+            f.step(&pose, 0.05);
+        }
+        assert_ne!(f.phase(), Phase::Looking);
     }
 }

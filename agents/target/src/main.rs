@@ -18,7 +18,9 @@
 //! The algorithm is the library `nerve_target`. Parameters: `v_cruise`
 //! (0.3 m/s), `rotate_above_deg` (10), `deadband_deg` (1), `reach_m` (0.25),
 //! `standoff_m` (0.35), `auto_start` (false: wait for `come`), `report_ms`
-//! (2000).
+//! (2000), `look_at_checkpoints` (true: at a checkpoint's via point, face
+//! the checkpoint until the odometry reports its correction), `look_timeout_s`
+//! (6).
 
 use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
@@ -44,7 +46,10 @@ struct Target {
     standoff_m: Param<f64>,
     auto_start: Param<bool>,
     report_ms: Param<u64>,
+    look: Param<bool>,
+    look_timeout_s: Param<f64>,
     follower: Follower,
+    corrections_seen: Option<u32>,
     latest_path: Option<ViaPath>,
     come_for: Option<u32>,
     finished: Option<u32>,
@@ -66,6 +71,8 @@ impl Target {
             deadband: self.deadband_deg.get().to_radians(),
             reach_m: self.reach_m.get(),
             standoff_m: self.standoff_m.get(),
+            look_at_checkpoints: self.look.get(),
+            look_timeout_s: self.look_timeout_s.get(),
             ..Settings::default()
         }
     }
@@ -127,7 +134,10 @@ impl Agent for Target {
             report_ms: setup.param_checked("report_ms", 2000u64, |v| {
                 if *v >= 100 { Ok(()) } else { Err("report_ms is at least 100".into()) }
             }),
+            look: setup.param("look_at_checkpoints", d.look_at_checkpoints),
+            look_timeout_s: setup.param_checked("look_timeout_s", d.look_timeout_s, in_range(0.0, 60.0)),
             follower: Follower::new(d),
+            corrections_seen: None,
             latest_path: None,
             come_for: None,
             finished: None,
@@ -144,6 +154,11 @@ impl Agent for Target {
         self.last_step_ns = Some(now);
         self.follower.set_settings(self.settings());
         if let Some((_, p)) = self.pose.latest() {
+            // a new correction by a checkpoint ends a look at it
+            if self.corrections_seen.is_some_and(|n| p.corrections > n) {
+                self.follower.correction_seen(p.last_checkpoint);
+            }
+            self.corrections_seen = Some(p.corrections);
             self.last_pose = Some(p);
         }
         let mut paths = Vec::new();
@@ -190,7 +205,7 @@ impl Agent for Target {
                 }
                 Ok(())
             }
-            Phase::Rotating | Phase::Driving => {
+            Phase::Rotating | Phase::Driving | Phase::Looking => {
                 let fresh = self.last_pose.filter(|p| {
                     now.saturating_sub(p.stamp_ns) <= POSE_FRESH_NS && p.x.is_finite() && p.theta.is_finite()
                 });

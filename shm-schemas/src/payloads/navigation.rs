@@ -232,6 +232,10 @@ pub struct ViaPath {
     pub count: u32,
     /// The points in the order to visit, `[x, y]`, metres, world frame.
     pub points: [[f64; 2]; MAX_VIA_POINTS],
+    /// The landmark each point belongs to (the checkpoint's or the
+    /// target's position, `[x, y]`, world frame), for the follower to look
+    /// at and localise by; the point itself when it belongs to none.
+    pub landmarks: [[f64; 2]; MAX_VIA_POINTS],
     /// A [`ViaKind`] code per point.
     pub kinds: [u8; MAX_VIA_POINTS],
     /// The checkpoint each point belongs to, 0 for none.
@@ -242,7 +246,7 @@ impl Payload for ViaPath {}
 
 impl ViaPath {
     /// The valid points with their kind codes and checkpoint ids (`count`
-    /// clamped to [`MAX_VIA_POINTS`]).
+    /// clamped to [`MAX_VIA_POINTS`]); their landmarks are in `landmarks`.
     pub fn entries(&self) -> impl Iterator<Item = ([f64; 2], u8, u8)> + '_ {
         let n = (self.count as usize).min(MAX_VIA_POINTS);
         (0..n).map(move |i| (self.points[i], self.kinds[i], self.checkpoint_ids[i]))
@@ -340,9 +344,10 @@ mod tests {
         assert_eq!(std::mem::offset_of!(CheckpointSighting, facing_rad), 32);
         assert_eq!(std::mem::offset_of!(CheckpointSighting, checkpoint_id), 36);
         assert_eq!(std::mem::offset_of!(CheckpointSighting, is_target), 40);
-        assert_eq!(std::mem::size_of::<ViaPath>(), 16 + 16 * 16 + 32);
+        assert_eq!(std::mem::size_of::<ViaPath>(), 16 + 2 * 16 * 16 + 32);
         assert_eq!(std::mem::offset_of!(ViaPath, points), 16);
-        assert_eq!(std::mem::offset_of!(ViaPath, kinds), 272);
+        assert_eq!(std::mem::offset_of!(ViaPath, landmarks), 272);
+        assert_eq!(std::mem::offset_of!(ViaPath, kinds), 528);
         assert_eq!(std::mem::size_of::<MissionCommand>(), 40);
         assert_eq!(std::mem::offset_of!(MissionCommand, code), 24);
         for (name, got) in [
