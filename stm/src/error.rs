@@ -120,6 +120,21 @@ pub enum OpenError {
         /// the file
         path: PathBuf,
     },
+    /// The file belongs to another user, or others may write it: its frames
+    /// cannot be trusted.
+    #[error(
+        "refusing to read ring file {path}: it belongs to uid {owner} with mode {mode:04o}, but a ring must belong to this user (uid {me}) and be writable by nobody else, or another user could feed it fake frames. If the file is stale, remove it (as its owner, or root); if someone else holds this ring's name, find out who (`ls -l {path}`) or run the robot under another name"
+    )]
+    Untrusted {
+        /// the file
+        path: PathBuf,
+        /// the file's owner
+        owner: u32,
+        /// the file's permission bits
+        mode: u32,
+        /// our effective uid
+        me: u32,
+    },
     /// The writer is still initialising the ring.
     #[error("ring file {path} is still being created by its writer; retry in a moment")]
     NotReady {

@@ -54,7 +54,7 @@ pub use name::{RING_ID_PREFIX, RING_NAME_MAX_LEN, RingName, RingNameError};
 pub use reader::{Frame, FrameMeta, RingReader};
 pub use shm_schemas::ring::{PixelFormat, RingNotice};
 pub use sys::monotonic_ns;
-pub use writer::{MAX_SLOTS, MIN_SLOTS, RingWriter};
+pub use writer::{MAX_SLOT_CAPACITY, MAX_SLOTS, MIN_SLOTS, RingWriter};
 
 use std::path::PathBuf;
 

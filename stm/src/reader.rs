@@ -29,6 +29,7 @@ use crate::RingOptions;
 use crate::error::{OpenError, ReadError};
 use crate::name::RingName;
 use crate::sys::{Geometry, Mapping, pid_alive, slot_header, slot_payload};
+use crate::writer::{MAX_SLOT_CAPACITY, MAX_SLOTS};
 use serde::Serialize;
 use shm_schemas::RobotName;
 use shm_schemas::ring::{PixelFormat, RING_HEADER_SIZE, RING_LAYOUT_VERSION, RING_MAGIC};
@@ -75,6 +76,17 @@ pub struct Frame {
     pub meta: FrameMeta,
     /// Its bytes.
     pub data: Vec<u8>,
+}
+
+/// Refuses a ring file that another user owns or that group or others may
+/// write: whoever can write it can feed readers fake frames (a fake target
+/// for the tracker) or truncate it under them.
+pub(crate) fn check_trusted(meta: &std::fs::Metadata, euid: u32, path: &Path) -> Result<(), OpenError> {
+    let mode = meta.mode() & 0o7777;
+    if meta.uid() != euid || mode & 0o022 != 0 {
+        return Err(OpenError::Untrusted { path: path.to_owned(), owner: meta.uid(), mode, me: euid });
+    }
+    Ok(())
 }
 
 /// A read-only view of a ring, mapped once. `Send + Sync`: one reader may
@@ -127,8 +139,22 @@ impl RingReader {
         if !meta.file_type().is_file() {
             return Err(not_a_ring("not a regular file"));
         }
+        check_trusted(&meta, nix::unistd::geteuid().as_raw(), path)?;
         if meta.len() < u64::from(RING_HEADER_SIZE) {
             return Err(OpenError::NotReady { path: path.to_owned() });
+        }
+        // A writer reserves every page of its ring up front, so a ring is
+        // never larger than its file system: a larger file is a sparse one
+        // that no writer made, and mapping it would only serve to fault in
+        // pages that tmpfs cannot supply.
+        if let Ok(vfs) = nix::sys::statvfs::fstatvfs(file) {
+            let fs_bytes = vfs.blocks().saturating_mul(vfs.fragment_size());
+            if fs_bytes > 0 && meta.len() > fs_bytes {
+                return Err(not_a_ring(&format!(
+                    "the file has {} bytes, more than its whole file system ({fs_bytes} bytes): a sparse file no ring writer made",
+                    meta.len()
+                )));
+            }
         }
         let len = usize::try_from(meta.len()).map_err(|_| not_a_ring("file too large"))?;
         let map = Mapping::new(file, len, false).map_err(|e| OpenError::Os {
@@ -150,7 +176,12 @@ impl RingReader {
         if h.layout_version != RING_LAYOUT_VERSION {
             return Err(not_a_ring(&format!("it has layout version {}", h.layout_version)));
         }
-        let geo = Geometry::from_header(h, map.len()).ok_or_else(|| not_a_ring("its header contradicts its size"))?;
+        let geo = Geometry::from_header(h, map.len()).ok_or_else(|| {
+            not_a_ring(&format!(
+                "its header ({} slots of {} bytes, stride {}, header {} bytes) contradicts its size of {} bytes or exceeds the limits ({MAX_SLOTS} slots of {MAX_SLOT_CAPACITY} bytes)",
+                h.slot_count, h.slot_capacity, h.slot_stride, h.header_size, map.len()
+            ))
+        })?;
         let name = RingName::parse(h.name.as_str()).map_err(|e| not_a_ring(&format!("bad name in header: {e}")))?;
         tracing::debug!(ring = %name, path = %path.display(), slots = geo.slot_count, "ring opened for reading");
         Ok(RingReader { map, geo, name, path: path.to_owned(), dev_ino: (meta.dev(), meta.ino()) })

@@ -67,6 +67,10 @@ impl Drop for Mapping {
     }
 }
 
+/// Largest ring header a reader accepts (this layout writes
+/// [`shm_schemas::ring::RING_HEADER_SIZE`]).
+pub(crate) const MAX_HEADER_SIZE: u64 = 1 << 16;
+
 /// The geometry of a ring, as read from (or written to) its header, checked
 /// against the size of the mapping so that slot views stay in bounds.
 #[derive(Debug, Clone, Copy)]
@@ -97,6 +101,7 @@ impl Geometry {
     /// The geometry stored in a header, if it is self-consistent and fits in
     /// `mapped` bytes.
     pub(crate) fn from_header(h: &RingHeader, mapped: usize) -> Option<Self> {
+        use crate::writer::{MAX_SLOT_CAPACITY, MAX_SLOTS};
         use shm_schemas::ring::{SLOT_ALIGN, SLOT_HEADER_SIZE};
         let g = Geometry {
             header_size: u64::from(h.header_size),
@@ -104,10 +109,17 @@ impl Geometry {
             slot_capacity: h.slot_capacity,
             slot_stride: h.slot_stride,
         };
+        // Every size is bounded before it is used: the header may come from a
+        // corrupt or hostile file, and readers size allocations and scans by
+        // it (`stamps()` walks every slot).
         let ok = h.slot_header_size == SLOT_HEADER_SIZE
             && g.header_size >= std::mem::size_of::<RingHeader>() as u64
+            && g.header_size <= MAX_HEADER_SIZE
             && g.header_size % SLOT_ALIGN == 0
             && g.slot_count >= 1
+            && g.slot_count <= MAX_SLOTS
+            && g.slot_capacity <= MAX_SLOT_CAPACITY
+            && g.slot_stride <= MAX_SLOT_CAPACITY + SLOT_ALIGN + u64::from(SLOT_HEADER_SIZE)
             && g.slot_stride % SLOT_ALIGN == 0
             && g.slot_stride >= g.slot_capacity.checked_add(u64::from(SLOT_HEADER_SIZE))?
             && g.file_len()? <= mapped as u64;
@@ -188,4 +200,70 @@ pub(crate) fn pid_alive(pid: u32) -> bool {
 /// This process's pid.
 pub(crate) fn my_pid() -> u32 {
     std::process::id()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Geometry, MAX_HEADER_SIZE};
+    use crate::name::RingName;
+    use crate::writer::{MAX_SLOT_CAPACITY, MAX_SLOTS};
+    use shm_schemas::ring::{RING_HEADER_SIZE, RING_LAYOUT_VERSION, RingHeader, SLOT_HEADER_SIZE};
+    use std::sync::atomic::{AtomicU32, AtomicU64};
+
+    /// A header as a writer of `g` stores it.
+    fn header(g: &Geometry) -> RingHeader {
+        RingHeader {
+            magic: AtomicU64::new(0),
+            layout_version: RING_LAYOUT_VERSION,
+            header_size: g.header_size as u32,
+            slot_count: g.slot_count,
+            slot_header_size: SLOT_HEADER_SIZE,
+            slot_capacity: g.slot_capacity,
+            slot_stride: g.slot_stride,
+            name: RingName::parse("t").expect("name").to_fixed(),
+            name_kind: 0,
+            name_id: 0,
+            created_realtime_ns: 0,
+            created_monotonic_ns: 0,
+            writer_pid: AtomicU32::new(0),
+            reserved0: 0,
+            last_seq: AtomicU64::new(0),
+            writer_generation: AtomicU64::new(0),
+            reserved: [0; 16],
+        }
+    }
+
+    /// A mapping "large enough" for any header: only the bounds can refuse.
+    const HUGE: usize = isize::MAX as usize;
+
+    #[test]
+    fn header_sizes_are_bounded_before_use() {
+        let ok = Geometry::new(4, 100).expect("geometry");
+        assert!(Geometry::from_header(&header(&ok), HUGE).is_some());
+        let max = Geometry::new(MAX_SLOTS, MAX_SLOT_CAPACITY).expect("largest geometry");
+        assert!(Geometry::from_header(&header(&max), HUGE).is_some(), "the largest ring a writer makes is readable");
+
+        // a hostile header declaring 2^32-1 slots in a sparse file
+        let many = Geometry::new(u32::MAX, 1).expect("geometry");
+        assert!(Geometry::from_header(&header(&many), HUGE).is_none(), "slot_count is capped at MAX_SLOTS");
+        let one_more = Geometry::new(MAX_SLOTS + 1, 1).expect("geometry");
+        assert!(Geometry::from_header(&header(&one_more), HUGE).is_none());
+
+        // absurd slot capacity (and a stride to match)
+        let big = Geometry::new(2, MAX_SLOT_CAPACITY + 1).expect("geometry");
+        assert!(Geometry::from_header(&header(&big), HUGE).is_none(), "slot_capacity is capped");
+        let big = Geometry::new(2, 1 << 50).expect("geometry");
+        assert!(Geometry::from_header(&header(&big), HUGE).is_none());
+
+        // a stride far beyond what the capacity needs
+        let mut wide = header(&ok);
+        wide.slot_stride = 1 << 50;
+        assert!(Geometry::from_header(&wide, HUGE).is_none(), "slot_stride is capped");
+
+        // a header size far beyond the layout's
+        let mut tall = header(&ok);
+        tall.header_size = (MAX_HEADER_SIZE + 64) as u32;
+        assert!(Geometry::from_header(&tall, HUGE).is_none(), "header_size is capped");
+        assert!(u64::from(RING_HEADER_SIZE) <= MAX_HEADER_SIZE);
+    }
 }

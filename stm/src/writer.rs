@@ -48,6 +48,9 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering, fence};
 pub const MIN_SLOTS: u32 = 2;
 /// Most slots of a ring.
 pub const MAX_SLOTS: u32 = 1 << 20;
+/// Largest slot capacity of a ring, in bytes (1 GiB: a 8K RGB frame is 100 MB).
+/// Readers refuse a ring whose header claims more.
+pub const MAX_SLOT_CAPACITY: u64 = 1 << 30;
 
 /// The one process that stores frames into a ring.
 ///
@@ -92,8 +95,13 @@ impl RingWriter {
                 ),
             });
         }
-        if slot_capacity == 0 {
-            return Err(CreateError::BadGeometry { ring, why: "slot capacity is 0 bytes; give at least 1".into() });
+        if slot_capacity == 0 || slot_capacity as u64 > MAX_SLOT_CAPACITY {
+            return Err(CreateError::BadGeometry {
+                ring,
+                why: format!(
+                    "slot capacity of {slot_capacity} bytes asked for; a slot holds 1 to {MAX_SLOT_CAPACITY} bytes"
+                ),
+            });
         }
         let geo = Geometry::new(slots, slot_capacity as u64).ok_or_else(|| CreateError::BadGeometry {
             ring: ring.clone(),

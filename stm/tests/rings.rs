@@ -501,8 +501,14 @@ fn geometry_is_checked() {
         RingWriter::create_with(&guard.opts(), &robot, &name("one"), 1, 100),
         Err(CreateError::BadGeometry { .. })
     ));
+    // slots larger than any reader accepts are refused up front
+    let e =
+        RingWriter::create_with(&guard.opts(), &robot, &name("big"), 2, (nerve_stm::MAX_SLOT_CAPACITY + 1) as usize)
+            .expect_err("slot too large");
+    assert!(matches!(e, CreateError::BadGeometry { .. }) && e.to_string().contains("1 to 1073741824 bytes"), "{e}");
     // far more than the file system holds: refused up front, no file left
-    let e = RingWriter::create_with(&guard.opts(), &robot, &name("huge"), 1024, 1 << 40).expect_err("no space");
+    let cap = nerve_stm::MAX_SLOT_CAPACITY as usize;
+    let e = RingWriter::create_with(&guard.opts(), &robot, &name("huge"), 1024, cap).expect_err("no space");
     assert!(matches!(e, CreateError::NoSpace { .. }), "{e}");
     assert!(e.to_string().contains("SIGBUS"), "{e}");
     match RingReader::open_with(&guard.opts(), &robot, &name("huge")) {
@@ -630,4 +636,84 @@ fn dump_png_writes_viewable_images() {
     assert!(matches!(dump_png(&r, FrameSelector::Latest, &p), Err(nerve_stm::DumpError::NotAnImage { .. })));
     assert_eq!(r.last_seq(), Some(n_raw.seq));
     assert!(!p.exists());
+}
+
+/// Writes `value` at byte `offset` of `path` (tampering with a ring file).
+fn poke(path: &Path, offset: usize, value: &[u8]) {
+    use std::os::unix::fs::FileExt;
+    let f = std::fs::OpenOptions::new().write(true).open(path).expect("open ring file for tampering");
+    f.write_all_at(value, offset as u64).expect("tamper");
+}
+
+#[test]
+fn foreign_or_writable_ring_files_are_refused() {
+    use std::os::unix::fs::PermissionsExt;
+    let robot = unique_robot();
+    let guard = ShmGuard::own_dir(&robot);
+    let ring = name("cam");
+    let mut w = RingWriter::create_with(&guard.opts(), &robot, &ring, 2, 16).expect("create");
+    w.write(FrameDesc::raw(), b"frame").expect("write");
+    let path = w.path().to_owned();
+    drop(w);
+    assert!(RingReader::open_with(&guard.opts(), &robot, &ring).is_ok(), "our own 0600 ring reads");
+
+    // world-writable: anyone could feed fake frames
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o666)).expect("chmod");
+    let e = RingReader::open_with(&guard.opts(), &robot, &ring).expect_err("a world-writable ring is refused");
+    assert!(matches!(e, OpenError::Untrusted { mode: 0o666, .. }), "{e}");
+    let msg = e.to_string();
+    assert!(msg.contains(&path.display().to_string()) && msg.contains("0666") && msg.contains("remove it"), "{msg}");
+    // group-writable too
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o620)).expect("chmod");
+    assert!(matches!(RingReader::open_path(&path), Err(OpenError::Untrusted { .. })));
+    // `nerve mem list` lists it with the reason instead of reading it
+    let listed = list_rings_with(&guard.opts(), &robot).expect("list");
+    assert!(matches!(listed[0].info, Err(OpenError::Untrusted { .. })), "{:?}", listed[0].info);
+
+    // another user's file (needs root to make one)
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).expect("chmod");
+    if nix::unistd::geteuid().is_root() {
+        std::os::unix::fs::chown(&path, Some(65534), Some(65534)).expect("chown to nobody");
+        let e = RingReader::open_path(&path).expect_err("a foreign ring is refused");
+        assert!(matches!(e, OpenError::Untrusted { owner: 65534, me: 0, .. }), "{e}");
+        assert!(e.to_string().contains("uid 65534"), "{e}");
+    }
+}
+
+#[test]
+fn hostile_ring_headers_are_refused_before_mapping_or_allocating() {
+    use shm_schemas::ring::RingHeader;
+    use std::mem::offset_of;
+    let robot = unique_robot();
+    let guard = ShmGuard::own_dir(&robot);
+    let ring = name("cam");
+    let w = RingWriter::create_with(&guard.opts(), &robot, &ring, 2, 64).expect("create");
+    let path = w.path().to_owned();
+    drop(w);
+    let stride: u64 = 128; // 64 bytes of payload + 64 of slot header
+
+    // 2^32-1 slots declared, in a sparse file as large as they say
+    poke(&path, offset_of!(RingHeader, slot_count), &u32::MAX.to_ne_bytes());
+    let f = std::fs::OpenOptions::new().write(true).open(&path).expect("open");
+    f.set_len(4096 + stride * u64::from(u32::MAX)).expect("sparse file");
+    let e = RingReader::open_path(&path).expect_err("2^32-1 slots are refused");
+    assert!(matches!(e, OpenError::NotARing { .. }), "{e}");
+    let listed = list_rings_with(&guard.opts(), &robot).expect("list");
+    assert!(matches!(listed[0].info, Err(OpenError::NotARing { .. })), "{:?}", listed[0].info);
+
+    // one slot more than MAX_SLOTS, in a file of that size (fits tmpfs: sparse)
+    let slots = nerve_stm::MAX_SLOTS + 1;
+    poke(&path, offset_of!(RingHeader, slot_count), &slots.to_ne_bytes());
+    f.set_len(4096 + stride * u64::from(slots)).expect("sparse file");
+    let e = RingReader::open_path(&path).expect_err("more than MAX_SLOTS slots are refused");
+    assert!(matches!(e, OpenError::NotARing { .. }), "{e}");
+
+    // an absurd slot capacity and stride, in a file of that size
+    let cap = nerve_stm::MAX_SLOT_CAPACITY * 2;
+    poke(&path, offset_of!(RingHeader, slot_count), &2u32.to_ne_bytes());
+    poke(&path, offset_of!(RingHeader, slot_capacity), &cap.to_ne_bytes());
+    poke(&path, offset_of!(RingHeader, slot_stride), &(cap + 64).to_ne_bytes());
+    f.set_len(4096 + 2 * (cap + 64)).expect("sparse file");
+    let e = RingReader::open_path(&path).expect_err("an absurd slot capacity is refused");
+    assert!(matches!(e, OpenError::NotARing { .. }), "{e}");
 }
