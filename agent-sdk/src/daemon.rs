@@ -45,10 +45,67 @@ impl Readiness {
 
 impl Drop for Readiness {
     fn drop(&mut self) {
+        // remove the pid file only while it still names this process: a
+        // file that another process wrote since is not ours to delete
         if let Some(p) = &self.pid_file {
-            let _ = std::fs::remove_file(p);
+            if read_pid(p) == Some(std::process::id()) {
+                let _ = std::fs::remove_file(p);
+            }
         }
     }
+}
+
+/// The pid recorded in a pid file.
+pub fn read_pid(path: &Path) -> Option<u32> {
+    std::fs::read_to_string(path).ok()?.trim().parse().ok()
+}
+
+/// Whether `pid` is a live (not zombie) nerve process: its command name
+/// starts with `nerve`, so a pid reused by an unrelated program since does
+/// not count.
+pub fn nerve_process_alive(pid: u32) -> bool {
+    let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else { return false };
+    let (Some(open), Some(close)) = (stat.find('('), stat.rfind(')')) else { return false };
+    let comm = &stat[open + 1..close];
+    let state = stat[close + 1..].split_whitespace().next().unwrap_or("Z");
+    comm.starts_with("nerve") && state != "Z"
+}
+
+/// Creates `path` for this process, exclusively, without following a
+/// symlink, readable by its owner only. A pid file left by a dead process is
+/// replaced; one of a live nerve process is an error naming it.
+pub fn create_pid_file(path: &Path) -> Result<(), String> {
+    use std::os::unix::fs::OpenOptionsExt;
+    for _ in 0..2 {
+        let open = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .mode(0o600)
+            .custom_flags(libc::O_NOFOLLOW)
+            .open(path);
+        match open {
+            Ok(mut f) => {
+                return f
+                    .write_all(format!("{}\n", std::process::id()).as_bytes())
+                    .map_err(|e| format!("cannot write pid file {}: {e}", path.display()));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => match read_pid(path) {
+                Some(pid) if nerve_process_alive(pid) => {
+                    return Err(format!(
+                        "already running as pid {pid} (pid file {}); stop it first, or choose another --name",
+                        path.display()
+                    ));
+                }
+                _ => {
+                    // a dead process's file (or not a pid file at all): replace it
+                    std::fs::remove_file(path)
+                        .map_err(|e| format!("cannot replace stale pid file {}: {e}", path.display()))?;
+                }
+            },
+            Err(e) => return Err(format!("cannot create pid file {}: {e}", path.display())),
+        }
+    }
+    Err(format!("pid file {} keeps reappearing; another process is starting under this name", path.display()))
 }
 
 /// Detaches the process: double fork, new session, stdin from /dev/null,
@@ -86,14 +143,21 @@ pub fn daemonize(log: &Path, pid_file: &Path) -> std::io::Result<Readiness> {
         ForkResult::Parent { .. } => std::process::exit(0),
         ForkResult::Child => {}
     }
+    let mut pipe = std::fs::File::from(wr);
+    if let Err(msg) = create_pid_file(pid_file) {
+        let _ = write!(pipe, "E{msg}");
+        std::process::exit(1);
+    }
     let devnull = std::fs::File::open("/dev/null")?;
-    let logf = std::fs::OpenOptions::new().create(true).append(true).open(log)?;
+    let logf = {
+        use std::os::unix::fs::OpenOptionsExt;
+        std::fs::OpenOptions::new().create(true).append(true).mode(0o600).custom_flags(libc::O_NOFOLLOW).open(log)?
+    };
     nix::unistd::dup2_stdin(&devnull)?;
     nix::unistd::dup2_stdout(&logf)?;
     nix::unistd::dup2_stderr(&logf)?;
     let _ = logf.as_raw_fd();
-    std::fs::write(pid_file, format!("{}\n", std::process::id()))?;
-    Ok(Readiness { pipe: Some(std::fs::File::from(wr)), pid_file: Some(pid_file.to_path_buf()) })
+    Ok(Readiness { pipe: Some(pipe), pid_file: Some(pid_file.to_path_buf()) })
 }
 
 /// Sets up `tracing` for a nerve process: `--log-level` when given, else
@@ -170,4 +234,38 @@ pub fn watchdog_interval() -> Option<std::time::Duration> {
         }
     }
     (usec > 0).then(|| std::time::Duration::from_micros(usec))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_pid_file_is_exclusive_and_removed_only_by_its_owner() {
+        let dir = std::env::temp_dir().join(format!("nerve-pid-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("dir");
+        let p = dir.join("t1.pid");
+        // a stale file of a dead process is replaced
+        std::fs::write(&p, "999999999\n").expect("stale");
+        create_pid_file(&p).expect("replaces a stale pid file");
+        assert_eq!(read_pid(&p), Some(std::process::id()));
+        // the file now names another process: dropping our handle leaves it (review R15)
+        let ours = Readiness { pipe: None, pid_file: Some(p.clone()) };
+        std::fs::write(&p, "1\n").expect("another process's file");
+        drop(ours);
+        assert_eq!(read_pid(&p), Some(1), "a pid file naming another process was deleted");
+        // while it names us, it is ours to remove
+        std::fs::write(&p, format!("{}\n", std::process::id())).expect("ours");
+        drop(Readiness { pipe: None, pid_file: Some(p.clone()) });
+        assert!(!p.exists());
+        // a symlink is never followed
+        let target = dir.join("target");
+        std::fs::write(&target, "keep").expect("target");
+        let link = dir.join("l.pid");
+        std::os::unix::fs::symlink(&target, &link).expect("symlink");
+        create_pid_file(&link).expect("the link is replaced by a file");
+        assert_eq!(std::fs::read_to_string(&target).ok().as_deref(), Some("keep"), "wrote through a symlink");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -151,6 +151,35 @@ fn a_new_period_takes_effect_at_once_and_absurd_ones_are_refused() {
     r.down_and_check_clean();
 }
 
+/// A rejected duplicate leaves the live agent's pid file alone, so `nerve
+/// down` still stops the agent with the router gone (review R15, F3f).
+#[test]
+fn a_rejected_duplicate_keeps_the_live_agents_pid_file() {
+    let r = Robot::new("dup");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    let pid = r.pid("t1");
+    let pids = r.home.join(&r.name).join("pids");
+    let read = |f: &str| std::fs::read_to_string(pids.join(f)).ok().and_then(|s| s.trim().parse::<u32>().ok());
+    let router = read("router.pid").expect("router pid file");
+    nerve_tests::sigkill(router);
+    assert!(wait_until(Duration::from_secs(5), || {
+        nerve_tests::reap();
+        !nerve_tests::alive(router)
+    }));
+    let err = r.fails(&["start", "ticker", "--name", "t1"]);
+    assert!(err.contains("already running"), "{err}");
+    assert_eq!(read("t1.pid"), Some(pid), "the duplicate removed or replaced the live agent's pid file");
+    r.down_and_check_clean();
+    assert!(
+        wait_until(Duration::from_secs(5), || {
+            nerve_tests::reap();
+            !nerve_tests::alive(pid)
+        }),
+        "nerve down left t1 running"
+    );
+}
+
 /// An agent added while others run joins the graph.
 #[test]
 fn hot_added_agent_joins_graph() {
