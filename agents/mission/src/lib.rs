@@ -1,0 +1,729 @@
+//! The command sender and receiver of the cooperation experiment (thesis
+//! section 4.3.2, Fig. 4-8 and 4-9) as a library: one pure state machine
+//! per robot, fed with what arrives and a clock, answering with what to
+//! send. The agent (`src/main.rs`) only moves samples.
+//!
+//! Robot 1, the **explorer** ([`Explorer`]): "when the target is found, …
+//! the decision maker will launch the command sender and ask the robot 2 to
+//! come for the target. It will then wait for the arrival of robot 2. If
+//! robot 2 finds the target, the command receiver will get the response
+//! from robot 2 and resume exploring the area."
+//!
+//! ```text
+//! exploring ──map builder's path──> found ──decision maker in `wait`──> sent ──"arrived"──> done
+//!   (target: none)                 (target: close: stop)      path + "come",     "resume" to robot 2
+//!                                                             again every resend  (target: none: explore)
+//! ```
+//!
+//! Robot 2, the **executor** ([`Executor`]): "once the map data and the
+//! command from robot 1 are received, the target-achieving agent will be
+//! executed … When robot 2 arrives the final target, it will give its
+//! control to the external control module to execute a special actuation
+//! function, for example, grasping. Meanwhile, robot 2 will inform robot 1
+//! to start exploration again."
+//!
+//! ```text
+//! waiting ──path + "come"──> following ──target achiever: "arrived"──> grasping ──arm: holding/missed──> done
+//!                            path + "come" to the target achiever      grasp request      "arrived" to robot 1,
+//!                            "via-reached" forwarded to robot 1        (a path without    again every resend
+//!                                                                       a target: no grasp) until robot 1's "resume"
+//! ```
+//!
+//! **Over a link that fails.** The bridge carries these messages reliably,
+//! but a bridge restarted mid-run loses what it held, and either agent may
+//! be restarted. So each side repeats its last word every `resend` until
+//! the other answers: robot 1 repeats the path and "come" until "arrived";
+//! robot 2 repeats "arrived" until "resume". Both key on `path_id`, so a
+//! repetition is harmless.
+
+#![cfg_attr(test, allow(clippy::unwrap_used))]
+
+use shm_schemas::payloads::{
+    ArmGraspState, GraspAction, GraspPhase, GraspRequest, MissionCode, MissionCommand, TargetState, ViaKind, ViaPath,
+};
+
+/// Which robot an agent speaks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// Robot 1: explores, finds the target, sends the path, waits.
+    Explorer,
+    /// Robot 2: waits, follows the path, grasps, reports.
+    Executor,
+}
+
+impl Role {
+    /// `explorer` or `executor`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Role::Explorer => "explorer",
+            Role::Executor => "executor",
+        }
+    }
+
+    /// The role named `s`.
+    pub fn parse(s: &str) -> Result<Role, MissionError> {
+        match s {
+            "explorer" => Ok(Role::Explorer),
+            "executor" => Ok(Role::Executor),
+            other => Err(MissionError::UnknownRole(other.to_owned())),
+        }
+    }
+}
+
+/// What the mission agent refuses.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MissionError {
+    /// `--role` names no role.
+    #[error(
+        "unknown role {0:?}: give `-- --role explorer` (robot 1: sends the path) or `-- --role executor` (robot 2: follows it)"
+    )]
+    UnknownRole(String),
+    /// A path that cannot be followed.
+    #[error("path {path_id} has {count} points; a path to follow has 1 … 16")]
+    BadPath {
+        /// the path
+        path_id: u32,
+        /// its count
+        count: u32,
+    },
+}
+
+/// Whether `path` can be sent or followed: an id and 1 … 16 finite points.
+pub fn check_path(path: &ViaPath) -> Result<(), MissionError> {
+    let n = path.count as usize;
+    let finite = path.entries().all(|(p, _, _)| p[0].is_finite() && p[1].is_finite());
+    if path.path_id == 0 || n == 0 || n > shm_schemas::payloads::MAX_VIA_POINTS || !finite {
+        return Err(MissionError::BadPath { path_id: path.path_id, count: path.count });
+    }
+    Ok(())
+}
+
+/// A message to the other robot or to a local agent.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Send {
+    /// The path (explorer: to robot 2; executor: to the target achiever).
+    Path(Box<ViaPath>),
+    /// An order (explorer: "come", "resume" to robot 2; executor: "come",
+    /// "abort" to the target achiever).
+    Order(MissionCommand),
+    /// A report to robot 1 (executor only): "via-reached", "arrived".
+    Report(MissionCommand),
+    /// A request to the arm (executor only).
+    Grasp(GraspRequest),
+}
+
+/// What the explorer is doing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ExplorerPhase {
+    /// No target yet, or robot 2 came to the last one: explore.
+    Exploring,
+    /// The map builder has a path; waiting for the decision maker to stop.
+    Found {
+        /// the path
+        path_id: u32,
+    },
+    /// Path and "come" sent; waiting for "arrived".
+    Sent {
+        /// the path
+        path_id: u32,
+    },
+    /// Robot 2 reported "arrived" for this path.
+    Done {
+        /// the path
+        path_id: u32,
+    },
+}
+
+/// Robot 1's side; see the module documentation.
+#[derive(Debug, Clone)]
+pub struct Explorer {
+    /// The decision maker's mode in which the path goes out (`""`: at once).
+    pub wait_mode: String,
+    /// Repeat the path and "come" this often while waiting, ns.
+    pub resend_ns: u64,
+    phase: ExplorerPhase,
+    path: Option<ViaPath>,
+    mode: Option<String>,
+    last_sent_ns: u64,
+}
+
+impl Explorer {
+    /// An explorer that sends in mode `wait_mode` and repeats every `resend_ns`.
+    pub fn new(wait_mode: &str, resend_ns: u64) -> Self {
+        Explorer {
+            wait_mode: wait_mode.to_owned(),
+            resend_ns,
+            phase: ExplorerPhase::Exploring,
+            path: None,
+            mode: None,
+            last_sent_ns: 0,
+        }
+    }
+
+    /// The phase.
+    pub fn phase(&self) -> ExplorerPhase {
+        self.phase
+    }
+
+    /// What to tell the decision maker: the target is `close` (stop and
+    /// wait) from the path found until robot 2 arrives, `none` otherwise.
+    pub fn target_state(&self) -> TargetState {
+        match self.phase {
+            ExplorerPhase::Found { .. } | ExplorerPhase::Sent { .. } => TargetState::Close,
+            ExplorerPhase::Exploring | ExplorerPhase::Done { .. } => TargetState::None,
+        }
+    }
+
+    /// The map builder's path. A path already taken (same id; the map
+    /// builder repeats it) changes nothing; a new one while exploring or
+    /// done starts a mission; a bad one is refused.
+    pub fn on_path(&mut self, path: &ViaPath) -> Result<bool, MissionError> {
+        check_path(path)?;
+        let busy = match self.phase {
+            ExplorerPhase::Exploring => None,
+            ExplorerPhase::Done { path_id } => Some(path_id),
+            ExplorerPhase::Found { path_id } | ExplorerPhase::Sent { path_id } => {
+                if path_id == path.path_id {
+                    // the same path again, perhaps with more points: keep the newest
+                    self.path = Some(*path);
+                }
+                return Ok(false);
+            }
+        };
+        if busy == Some(path.path_id) {
+            return Ok(false);
+        }
+        self.path = Some(*path);
+        self.phase = ExplorerPhase::Found { path_id: path.path_id };
+        Ok(true)
+    }
+
+    /// The decision maker's mode.
+    pub fn on_mode(&mut self, name: &str) {
+        self.mode = Some(name.to_owned());
+    }
+
+    /// A report from robot 2. Returns the messages to send: "resume" for an
+    /// "arrived" of the path in progress (or of the one done: the first
+    /// "resume" may have been lost).
+    pub fn on_report(&mut self, r: &MissionCommand, now_ns: u64) -> Vec<Send> {
+        match (r.code(), self.phase) {
+            (Some(MissionCode::Arrived), ExplorerPhase::Sent { path_id } | ExplorerPhase::Found { path_id })
+                if r.path_id == path_id =>
+            {
+                self.phase = ExplorerPhase::Done { path_id };
+                vec![Send::Order(MissionCommand::new(MissionCode::Resume, path_id, now_ns))]
+            }
+            (Some(MissionCode::Arrived), ExplorerPhase::Done { path_id }) if r.path_id == path_id => {
+                vec![Send::Order(MissionCommand::new(MissionCode::Resume, path_id, now_ns))]
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// The clock: sends the path and "come" once the decision maker has
+    /// stopped the robot, and again every `resend_ns` until "arrived".
+    pub fn tick(&mut self, now_ns: u64) -> Vec<Send> {
+        let Some(path) = self.path else { return Vec::new() };
+        let due = match self.phase {
+            ExplorerPhase::Found { .. } => {
+                self.wait_mode.is_empty() || self.mode.as_deref() == Some(self.wait_mode.as_str())
+            }
+            ExplorerPhase::Sent { .. } => now_ns.saturating_sub(self.last_sent_ns) >= self.resend_ns,
+            ExplorerPhase::Exploring | ExplorerPhase::Done { .. } => false,
+        };
+        if !due {
+            return Vec::new();
+        }
+        self.phase = ExplorerPhase::Sent { path_id: path.path_id };
+        self.last_sent_ns = now_ns;
+        vec![
+            Send::Path(Box::new(ViaPath { stamp_ns: now_ns, ..path })),
+            Send::Order(MissionCommand::new(MissionCode::Come, path.path_id, now_ns)),
+        ]
+    }
+}
+
+/// What the executor is doing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ExecutorPhase {
+    /// No path to follow.
+    Waiting,
+    /// The target achiever follows this path.
+    Following {
+        /// the path
+        path_id: u32,
+    },
+    /// At the last point of a path ending at the target; the arm grasps.
+    Grasping {
+        /// the path
+        path_id: u32,
+        /// the grasp request
+        request_id: u32,
+    },
+    /// Arrived (and grasped, or not): "arrived" reported until "resume".
+    Done {
+        /// the path
+        path_id: u32,
+        /// whether robot 1 answered "resume"
+        acknowledged: bool,
+    },
+}
+
+/// How the grasp at the end of a path went.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GraspOutcome {
+    /// The path did not end at a target: nothing to grasp.
+    NotAsked,
+    /// The arm holds the target.
+    Held,
+    /// The arm missed (its state says why).
+    Missed,
+    /// The arm did not answer in time.
+    NoAnswer,
+}
+
+/// Robot 2's side; see the module documentation.
+#[derive(Debug, Clone)]
+pub struct Executor {
+    /// Repeat the path and "come" to the target achiever, and "arrived" to
+    /// robot 1, this often, ns.
+    pub resend_ns: u64,
+    /// Give up waiting for the arm after this long, ns.
+    pub grasp_timeout_ns: u64,
+    /// Whether to grasp at a path's target.
+    pub grasp: bool,
+    phase: ExecutorPhase,
+    paths: Vec<ViaPath>,
+    come_for: Option<u32>,
+    /// Done and acknowledged paths are not followed again.
+    finished: Vec<u32>,
+    pose: Option<(f64, f64, f64)>,
+    last_sent_ns: u64,
+    since_ns: u64,
+    arrived_index: u32,
+    next_request: u32,
+    outcome: Option<GraspOutcome>,
+}
+
+impl Executor {
+    /// An executor that repeats every `resend_ns` and waits `grasp_timeout_ns` for the arm.
+    pub fn new(resend_ns: u64, grasp_timeout_ns: u64) -> Self {
+        Executor {
+            resend_ns,
+            grasp_timeout_ns,
+            grasp: true,
+            phase: ExecutorPhase::Waiting,
+            paths: Vec::new(),
+            come_for: None,
+            finished: Vec::new(),
+            pose: None,
+            last_sent_ns: 0,
+            since_ns: 0,
+            arrived_index: 0,
+            next_request: 1,
+            outcome: None,
+        }
+    }
+
+    /// The phase.
+    pub fn phase(&self) -> ExecutorPhase {
+        self.phase
+    }
+
+    /// How the last grasp went, once decided.
+    pub fn outcome(&self) -> Option<GraspOutcome> {
+        self.outcome
+    }
+
+    /// What to tell the decision maker: `none` while waiting or done,
+    /// `seen` while following (the target achiever drives), `close` while
+    /// grasping (stand still).
+    pub fn target_state(&self) -> TargetState {
+        match self.phase {
+            ExecutorPhase::Waiting | ExecutorPhase::Done { .. } => TargetState::None,
+            ExecutorPhase::Following { .. } => TargetState::Seen,
+            ExecutorPhase::Grasping { .. } => TargetState::Close,
+        }
+    }
+
+    /// The robot's pose (world frame), for the arm's guess.
+    pub fn on_pose(&mut self, x: f64, y: f64, theta: f64) {
+        if x.is_finite() && y.is_finite() && theta.is_finite() {
+            self.pose = Some((x, y, theta));
+        }
+    }
+
+    /// A path from robot 1 (kept by id; the last few only).
+    pub fn on_path(&mut self, path: &ViaPath, now_ns: u64) -> Result<Vec<Send>, MissionError> {
+        check_path(path)?;
+        self.paths.retain(|p| p.path_id != path.path_id);
+        self.paths.push(*path);
+        if self.paths.len() > 4 {
+            self.paths.remove(0);
+        }
+        Ok(self.start_if_ready(now_ns))
+    }
+
+    /// An order from robot 1: "come", "resume" (the answer to "arrived"), "abort".
+    pub fn on_order(&mut self, o: &MissionCommand, now_ns: u64) -> Vec<Send> {
+        match o.code() {
+            Some(MissionCode::Come) => {
+                self.come_for = Some(o.path_id);
+                self.start_if_ready(now_ns)
+            }
+            Some(MissionCode::Resume) => {
+                if let ExecutorPhase::Done { path_id, .. } = self.phase
+                    && path_id == o.path_id
+                {
+                    self.phase = ExecutorPhase::Done { path_id, acknowledged: true };
+                }
+                Vec::new()
+            }
+            Some(MissionCode::Abort) => {
+                self.come_for = None;
+                let path_id = match self.phase {
+                    ExecutorPhase::Following { path_id } | ExecutorPhase::Grasping { path_id, .. } => path_id,
+                    _ => return Vec::new(),
+                };
+                self.phase = ExecutorPhase::Waiting;
+                vec![Send::Order(MissionCommand::new(MissionCode::Abort, path_id, now_ns))]
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// The target achiever's report: "via-reached" goes on to robot 1;
+    /// "arrived" at the last point starts the grasp (or ends the mission).
+    pub fn on_progress(&mut self, r: &MissionCommand, now_ns: u64) -> Vec<Send> {
+        let ExecutorPhase::Following { path_id } = self.phase else { return Vec::new() };
+        if r.path_id != path_id {
+            return Vec::new();
+        }
+        match r.code() {
+            Some(MissionCode::ViaReached) => vec![Send::Report(*r)],
+            Some(MissionCode::Arrived) => {
+                self.arrived_index = r.index;
+                let target = self.path(path_id).and_then(target_of);
+                match target {
+                    Some(t) if self.grasp => {
+                        let request_id = self.next_request;
+                        self.next_request = self.next_request.wrapping_add(1).max(1);
+                        self.phase = ExecutorPhase::Grasping { path_id, request_id };
+                        self.since_ns = now_ns;
+                        vec![Send::Grasp(self.grasp_request(request_id, t, now_ns))]
+                    }
+                    _ => {
+                        self.outcome = Some(GraspOutcome::NotAsked);
+                        self.finish(path_id, now_ns)
+                    }
+                }
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// The arm's state: a final phase of the request under way ends the grasp.
+    pub fn on_arm(&mut self, s: &ArmGraspState, now_ns: u64) -> Vec<Send> {
+        let ExecutorPhase::Grasping { path_id, request_id } = self.phase else { return Vec::new() };
+        if s.request_id != request_id {
+            return Vec::new();
+        }
+        match s.phase() {
+            Some(GraspPhase::Holding) => {
+                self.outcome = Some(GraspOutcome::Held);
+                self.finish(path_id, now_ns)
+            }
+            Some(GraspPhase::Missed) => {
+                self.outcome = Some(GraspOutcome::Missed);
+                self.finish(path_id, now_ns)
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// The clock: repeats the path and "come" to the target achiever, the
+    /// grasp request to the arm, "arrived" to robot 1 until "resume"; gives
+    /// up on a silent arm.
+    pub fn tick(&mut self, now_ns: u64) -> Vec<Send> {
+        let due = now_ns.saturating_sub(self.last_sent_ns) >= self.resend_ns;
+        match self.phase {
+            ExecutorPhase::Waiting | ExecutorPhase::Done { acknowledged: true, .. } => Vec::new(),
+            ExecutorPhase::Following { path_id } if due => {
+                self.last_sent_ns = now_ns;
+                self.follow_orders(path_id, now_ns)
+            }
+            ExecutorPhase::Grasping { path_id, .. }
+                if now_ns.saturating_sub(self.since_ns) >= self.grasp_timeout_ns =>
+            {
+                self.outcome = Some(GraspOutcome::NoAnswer);
+                self.finish(path_id, now_ns)
+            }
+            ExecutorPhase::Grasping { path_id, request_id } if due => {
+                self.last_sent_ns = now_ns;
+                match self.path(path_id).and_then(target_of) {
+                    Some(t) => vec![Send::Grasp(self.grasp_request(request_id, t, now_ns))],
+                    None => Vec::new(),
+                }
+            }
+            ExecutorPhase::Done { path_id, acknowledged: false } if due => {
+                self.last_sent_ns = now_ns;
+                vec![Send::Report(self.arrived(path_id, now_ns))]
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    fn path(&self, path_id: u32) -> Option<&ViaPath> {
+        self.paths.iter().find(|p| p.path_id == path_id)
+    }
+
+    fn start_if_ready(&mut self, now_ns: u64) -> Vec<Send> {
+        let Some(id) = self.come_for else { return Vec::new() };
+        let busy = match self.phase {
+            ExecutorPhase::Waiting => false,
+            ExecutorPhase::Following { path_id } | ExecutorPhase::Grasping { path_id, .. } => path_id == id,
+            ExecutorPhase::Done { path_id, .. } => path_id == id,
+        };
+        if busy || self.finished.contains(&id) || self.path(id).is_none() {
+            return Vec::new();
+        }
+        self.phase = ExecutorPhase::Following { path_id: id };
+        self.outcome = None;
+        self.last_sent_ns = now_ns;
+        self.follow_orders(id, now_ns)
+    }
+
+    fn follow_orders(&self, path_id: u32, now_ns: u64) -> Vec<Send> {
+        match self.path(path_id) {
+            Some(p) => vec![
+                Send::Path(Box::new(ViaPath { stamp_ns: now_ns, ..*p })),
+                Send::Order(MissionCommand::new(MissionCode::Come, path_id, now_ns)),
+            ],
+            None => Vec::new(),
+        }
+    }
+
+    fn finish(&mut self, path_id: u32, now_ns: u64) -> Vec<Send> {
+        self.phase = ExecutorPhase::Done { path_id, acknowledged: false };
+        if !self.finished.contains(&path_id) {
+            self.finished.push(path_id);
+            if self.finished.len() > 16 {
+                self.finished.remove(0);
+            }
+        }
+        self.last_sent_ns = now_ns;
+        vec![Send::Report(self.arrived(path_id, now_ns))]
+    }
+
+    fn arrived(&self, path_id: u32, now_ns: u64) -> MissionCommand {
+        let mut m = MissionCommand::new(MissionCode::Arrived, path_id, now_ns);
+        m.index = self.arrived_index;
+        if let Some((x, y, _)) = self.pose {
+            (m.x, m.y) = (x, y);
+        }
+        m
+    }
+
+    /// A grasp request with the target's position in the robot's frame
+    /// when the pose is known.
+    fn grasp_request(&self, request_id: u32, target: [f64; 2], now_ns: u64) -> GraspRequest {
+        let mut g =
+            GraspRequest { stamp_ns: now_ns, request_id, action: GraspAction::Grasp as u8, ..Default::default() };
+        if let Some((x, y, th)) = self.pose {
+            let (dx, dy) = (target[0] - x, target[1] - y);
+            let (s, c) = th.sin_cos();
+            (g.x, g.y, g.has_point) = (c * dx + s * dy, -s * dx + c * dy, 1);
+        }
+        g
+    }
+}
+
+/// The target of a path: its last point when that is of kind `target`.
+pub fn target_of(path: &ViaPath) -> Option<[f64; 2]> {
+    let (p, kind, _) = path.entries().last()?;
+    (ViaKind::from_code(kind) == Some(ViaKind::Target)).then_some(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use shm_schemas::payloads::GraspMiss;
+
+    const S: u64 = 1_000_000_000;
+
+    fn path(id: u32, pts: &[([f64; 2], ViaKind)]) -> ViaPath {
+        let mut p = ViaPath { path_id: id, count: pts.len() as u32, ..Default::default() };
+        for (i, (xy, k)) in pts.iter().enumerate() {
+            p.points[i] = *xy;
+            p.kinds[i] = *k as u8;
+        }
+        p
+    }
+
+    fn corridor() -> ViaPath {
+        path(
+            1,
+            &[
+                ([1.2, -0.4], ViaKind::Checkpoint),
+                ([12.8, -1.4], ViaKind::TargetApproach),
+                ([12.8, -3.0], ViaKind::Target),
+            ],
+        )
+    }
+
+    fn codes(sends: &[Send]) -> Vec<String> {
+        sends
+            .iter()
+            .map(|s| match s {
+                Send::Path(p) => format!("path {}", p.path_id),
+                Send::Order(o) => format!("order {} {}", o.code().map_or("?", |c| c.name()), o.path_id),
+                Send::Report(r) => format!("report {} {}", r.code().map_or("?", |c| c.name()), r.path_id),
+                Send::Grasp(g) => format!("grasp {}", g.request_id),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn roles_parse_and_bad_ones_say_what_to_give() {
+        assert_eq!(Role::parse("explorer"), Ok(Role::Explorer));
+        assert_eq!(Role::parse(Role::Executor.name()), Ok(Role::Executor));
+        let e = Role::parse("robot1").unwrap_err().to_string();
+        assert!(e.contains("--role explorer") && e.contains("executor"), "{e}");
+    }
+
+    #[test]
+    fn explorer_waits_for_the_decision_maker_then_sends_until_arrived() {
+        let mut ex = Explorer::new("wait", 2 * S);
+        assert!(ex.tick(0).is_empty());
+        assert_eq!(ex.target_state(), TargetState::None);
+        assert!(ex.on_path(&corridor()).unwrap());
+        assert_eq!(ex.target_state(), TargetState::Close, "stop: the target is found");
+        ex.on_mode("explore");
+        assert!(ex.tick(S).is_empty(), "the robot has not stopped yet");
+        ex.on_mode("wait");
+        assert_eq!(codes(&ex.tick(S)), ["path 1", "order come 1"]);
+        assert!(ex.tick(2 * S).is_empty());
+        assert!(!ex.on_path(&corridor()).unwrap(), "the map builder repeats its path: nothing new");
+        assert_eq!(codes(&ex.tick(3 * S)), ["path 1", "order come 1"], "repeated while robot 2 is silent");
+        // a via point reached changes nothing; "arrived" of another path neither
+        let mut via = MissionCommand::new(MissionCode::ViaReached, 1, 0);
+        via.index = 0;
+        assert!(ex.on_report(&via, 4 * S).is_empty());
+        assert!(ex.on_report(&MissionCommand::new(MissionCode::Arrived, 7, 0), 4 * S).is_empty());
+        assert_eq!(codes(&ex.on_report(&MissionCommand::new(MissionCode::Arrived, 1, 0), 5 * S)), ["order resume 1"]);
+        assert_eq!(ex.phase(), ExplorerPhase::Done { path_id: 1 });
+        assert_eq!(ex.target_state(), TargetState::None, "explore again");
+        assert!(ex.tick(9 * S).is_empty(), "nothing more is sent");
+        // "arrived" again (our "resume" was lost): answered again
+        assert_eq!(codes(&ex.on_report(&MissionCommand::new(MissionCode::Arrived, 1, 0), 9 * S)), ["order resume 1"]);
+        // the map builder's old path again: no new mission; a new one: yes
+        assert!(!ex.on_path(&corridor()).unwrap());
+        let mut p2 = corridor();
+        p2.path_id = 2;
+        assert!(ex.on_path(&p2).unwrap());
+    }
+
+    #[test]
+    fn explorer_without_a_decision_maker_sends_at_once_and_refuses_bad_paths() {
+        let mut ex = Explorer::new("", S);
+        assert!(ex.on_path(&ViaPath { path_id: 3, count: 0, ..Default::default() }).is_err());
+        assert!(ex.on_path(&ViaPath { path_id: 3, count: 99, ..Default::default() }).is_err());
+        let mut nan = corridor();
+        nan.points[0][0] = f64::NAN;
+        assert!(ex.on_path(&nan).is_err());
+        assert!(ex.on_path(&path(0, &[([1.0, 1.0], ViaKind::Waypoint)])).is_err(), "path id 0 is none");
+        assert_eq!(ex.phase(), ExplorerPhase::Exploring);
+        ex.on_path(&corridor()).unwrap();
+        assert_eq!(codes(&ex.tick(0)), ["path 1", "order come 1"]);
+    }
+
+    fn arm_state(request_id: u32, phase: GraspPhase) -> ArmGraspState {
+        ArmGraspState { request_id, phase: phase as u8, reason: GraspMiss::None as u8, ..Default::default() }
+    }
+
+    #[test]
+    fn executor_follows_grasps_and_reports_until_resumed() {
+        let mut x = Executor::new(2 * S, 20 * S);
+        assert_eq!(x.target_state(), TargetState::None);
+        // "come" may overtake the path: it waits for it
+        assert!(x.on_order(&MissionCommand::new(MissionCode::Come, 1, 0), 0).is_empty());
+        assert_eq!(codes(&x.on_path(&corridor(), 0).unwrap()), ["path 1", "order come 1"]);
+        assert_eq!(x.phase(), ExecutorPhase::Following { path_id: 1 });
+        assert_eq!(x.target_state(), TargetState::Seen);
+        // repeated by robot 1: nothing new
+        assert!(x.on_path(&corridor(), S).unwrap().is_empty());
+        assert!(x.on_order(&MissionCommand::new(MissionCode::Come, 1, 0), S).is_empty());
+        assert_eq!(codes(&x.tick(2 * S)), ["path 1", "order come 1"], "repeated to the target achiever");
+        let mut via = MissionCommand::new(MissionCode::ViaReached, 1, 0);
+        via.index = 1;
+        assert_eq!(codes(&x.on_progress(&via, 3 * S)), ["report via-reached 1"]);
+        // at the last point, facing the target 0.4 m ahead and a little left
+        x.on_pose(12.8, -2.6, -std::f64::consts::FRAC_PI_2);
+        let mut arrived = MissionCommand::new(MissionCode::Arrived, 1, 0);
+        arrived.index = 2;
+        let s = x.on_progress(&arrived, 4 * S);
+        assert_eq!(codes(&s), ["grasp 1"]);
+        let Send::Grasp(g) = s[0].clone() else { unreachable!() };
+        assert_eq!((g.action(), g.has_point), (Some(GraspAction::Grasp), 1));
+        assert!((g.x - 0.4).abs() < 1e-9 && g.y.abs() < 1e-9, "robot frame: ({}, {})", g.x, g.y);
+        assert_eq!(x.target_state(), TargetState::Close);
+        assert!(x.on_arm(&arm_state(1, GraspPhase::Moving), 5 * S).is_empty());
+        assert!(x.on_arm(&arm_state(9, GraspPhase::Holding), 5 * S).is_empty(), "another request");
+        assert_eq!(codes(&x.tick(6 * S)), ["grasp 1"], "the request is repeated (the arm may have restarted)");
+        let s = x.on_arm(&arm_state(1, GraspPhase::Holding), 7 * S);
+        assert_eq!(codes(&s), ["report arrived 1"]);
+        let Send::Report(r) = s[0].clone() else { unreachable!() };
+        assert_eq!((r.index, r.x, r.y), (2, 12.8, -2.6));
+        assert_eq!(x.outcome(), Some(GraspOutcome::Held));
+        assert_eq!(codes(&x.tick(9 * S)), ["report arrived 1"], "until robot 1 answers");
+        x.on_order(&MissionCommand::new(MissionCode::Resume, 1, 0), 10 * S);
+        assert_eq!(x.phase(), ExecutorPhase::Done { path_id: 1, acknowledged: true });
+        assert!(x.tick(20 * S).is_empty());
+        // the same path again is not followed again
+        assert!(x.on_path(&corridor(), 21 * S).unwrap().is_empty());
+    }
+
+    #[test]
+    fn executor_without_a_target_or_an_arm_still_reports() {
+        let mut x = Executor::new(2 * S, 20 * S);
+        x.on_path(&path(5, &[([1.0, 0.0], ViaKind::Waypoint)]), 0).unwrap();
+        assert_eq!(codes(&x.on_order(&MissionCommand::new(MissionCode::Come, 5, 0), 0)), ["path 5", "order come 5"]);
+        let s = x.on_progress(&MissionCommand::new(MissionCode::Arrived, 5, 0), S);
+        assert_eq!(codes(&s), ["report arrived 5"], "no target at the end: nothing to grasp");
+        assert_eq!(x.outcome(), Some(GraspOutcome::NotAsked));
+
+        // a silent arm: arrived after the timeout
+        let mut x = Executor::new(2 * S, 10 * S);
+        x.on_path(&corridor(), 0).unwrap();
+        x.on_order(&MissionCommand::new(MissionCode::Come, 1, 0), 0);
+        assert_eq!(codes(&x.on_progress(&MissionCommand::new(MissionCode::Arrived, 1, 0), S)), ["grasp 1"]);
+        assert_eq!(codes(&x.tick(3 * S)), ["grasp 1"]);
+        assert_eq!(codes(&x.tick(11 * S)), ["report arrived 1"]);
+        assert_eq!(x.outcome(), Some(GraspOutcome::NoAnswer));
+    }
+
+    #[test]
+    fn executor_abort_stops_the_target_achiever_and_a_miss_is_reported_too() {
+        let mut x = Executor::new(2 * S, 20 * S);
+        x.on_path(&corridor(), 0).unwrap();
+        x.on_order(&MissionCommand::new(MissionCode::Come, 1, 0), 0);
+        assert_eq!(codes(&x.on_order(&MissionCommand::new(MissionCode::Abort, 1, 0), S)), ["order abort 1"]);
+        assert_eq!(x.phase(), ExecutorPhase::Waiting);
+        assert!(x.tick(5 * S).is_empty());
+        // "come" again: follows again; the arm misses: still "arrived"
+        x.on_order(&MissionCommand::new(MissionCode::Come, 1, 0), 6 * S);
+        assert_eq!(x.phase(), ExecutorPhase::Following { path_id: 1 });
+        x.on_progress(&MissionCommand::new(MissionCode::Arrived, 1, 0), 7 * S);
+        let miss = ArmGraspState { reason: GraspMiss::OutOfReach as u8, ..arm_state(1, GraspPhase::Missed) };
+        assert_eq!(codes(&x.on_arm(&miss, 8 * S)), ["report arrived 1"]);
+        assert_eq!(x.outcome(), Some(GraspOutcome::Missed));
+    }
+
+    #[test]
+    fn target_of_is_the_last_point_of_kind_target() {
+        assert_eq!(target_of(&corridor()), Some([12.8, -3.0]));
+        assert_eq!(target_of(&path(2, &[([1.0, 2.0], ViaKind::TargetApproach)])), None);
+        assert_eq!(target_of(&ViaPath::default()), None);
+    }
+}

@@ -1,0 +1,364 @@
+//! `mission`: the command sender and receiver of the cooperation experiment
+//! (thesis section 4.3.2, Fig. 4-8 and 4-9), one agent kind for both
+//! robots, `-- --role explorer` on robot 1 and `-- --role executor` on
+//! robot 2. The two meet only through their bridges; the logic is the
+//! library `nerve_mission`. Periodic (default 100 ms).
+//!
+//! Explorer (robot 1). Inputs: `path` (`nerve::ViaPath`, the map builder's
+//! `path`), `mode` (`nerve::Mode`, the decision maker's `mode`), `report`
+//! (`nerve::MissionCommand`, robot 2's `report` through the bridge).
+//! Outputs: `path` and `order` ("come", "resume"; to robot 2 through the
+//! bridge), `situation` (`nerve::Situation`: target `close` from the path
+//! found until robot 2 arrives, else `none`; to the decision maker).
+//!
+//! Executor (robot 2). Inputs: `path` and `order` (robot 1's, through the
+//! bridge), `progress` (`nerve::MissionCommand`, the target achiever's
+//! `mission`), `arm` (`nerve::ArmGraspState`, the arm's `state`), `pose`
+//! (`nerve::PoseEstimate`, the odometry's `pose`: the arm's guess). Outputs:
+//! `path` and `order` (to the target achiever's `path` and `mission_in`),
+//! `grasp` (`nerve::GraspRequest`, to the arm's `cmd`), `report`
+//! ("via-reached", "arrived"; to robot 1 through the bridge), `situation`
+//! (target `seen` while following, `close` while grasping, else `none`).
+//!
+//! Parameters: `resend_ms` (2000: repeat the last word until answered);
+//! explorer `wait_mode` (`wait`: the decision maker's mode in which the path
+//! goes out; empty: at once); executor `grasp` (true), `grasp_timeout_ms`
+//! (30000). Read-only figures: `phase`, `path_id`, `sent`, `received`,
+//! `refused`, and the executor's `grasp`.
+
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
+use nerve_mission::{Executor, ExecutorPhase, Explorer, ExplorerPhase, Role, Send};
+use shm_schemas::payloads::{
+    ArmGraspState, GraspRequest, MissionCommand, Mode, PoseEstimate, Situation, ViaKind, ViaPath,
+};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// Arguments after `--`.
+#[derive(Debug, clap::Parser)]
+struct Args {
+    /// `explorer` (robot 1: sends the path, waits) or `executor` (robot 2: follows, grasps, reports).
+    #[arg(long)]
+    role: String,
+}
+
+/// What `nerve ps` shows.
+#[derive(Debug, Default, Clone)]
+struct Figures {
+    phase: String,
+    path_id: u32,
+    sent: u64,
+    received: u64,
+    refused: u64,
+    grasp: String,
+}
+
+/// Ports and state of one role (one value per agent: the size difference does not matter).
+#[allow(clippy::large_enum_variant)]
+enum Side {
+    Explorer {
+        path_in: Input<ViaPath>,
+        mode: Input<Mode>,
+        report: Input<MissionCommand>,
+        wait_mode: Param<String>,
+        logic: Explorer,
+    },
+    Executor {
+        path_in: Input<ViaPath>,
+        order_in: Input<MissionCommand>,
+        progress: Input<MissionCommand>,
+        arm: Input<ArmGraspState>,
+        pose: Input<PoseEstimate>,
+        grasp_out: Output<GraspRequest>,
+        report_out: Output<MissionCommand>,
+        grasp: Param<bool>,
+        grasp_timeout_ms: Param<u64>,
+        logic: Executor,
+    },
+}
+
+struct Mission {
+    role: Role,
+    side: Side,
+    path_out: Output<ViaPath>,
+    order_out: Output<MissionCommand>,
+    situation: Output<Situation>,
+    resend_ms: Param<u64>,
+    figures: Arc<Mutex<Figures>>,
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+fn describe_path(p: &ViaPath) -> String {
+    p.entries()
+        .map(|(xy, k, _)| format!("({:.2}, {:.2}) {}", xy[0], xy[1], ViaKind::from_code(k).map_or("?", |k| k.name())))
+        .collect::<Vec<_>>()
+        .join(" -> ")
+}
+
+impl Mission {
+    /// Sends what the logic asked for on the ports of this role.
+    fn send(&mut self, sends: Vec<Send>) -> Result<(), AgentError> {
+        for s in sends {
+            match (&self.side, s) {
+                (_, Send::Path(p)) => self.path_out.send(*p)?,
+                (_, Send::Order(o)) => self.order_out.send(o)?,
+                (Side::Executor { report_out, .. }, Send::Report(r)) => report_out.send(r)?,
+                (Side::Executor { grasp_out, .. }, Send::Grasp(g)) => grasp_out.send(g)?,
+                (Side::Explorer { .. }, s) => {
+                    tracing::error!(send = ?s, "the explorer has no port for this; a bug in nerve_mission");
+                    continue;
+                }
+            }
+            lock(&self.figures).sent += 1;
+        }
+        Ok(())
+    }
+
+    fn step_explorer(&mut self, now: u64) -> Result<(), AgentError> {
+        let Side::Explorer { path_in, mode, report, wait_mode, logic } = &mut self.side else { return Ok(()) };
+        logic.wait_mode = wait_mode.get();
+        logic.resend_ns = self.resend_ms.get().saturating_mul(1_000_000);
+        if let Some((_, m)) = mode.latest() {
+            logic.on_mode(m.name.as_str());
+        }
+        let mut paths = Vec::new();
+        path_in.drain(|_, p| paths.push(*p));
+        let mut sends = Vec::new();
+        let mut figs = Figures::default();
+        for p in &paths {
+            match logic.on_path(p) {
+                Ok(true) => tracing::info!(
+                    path = p.path_id,
+                    points = p.count,
+                    wait_mode = %logic.wait_mode,
+                    "target found: path {} to send once the decision maker stops the robot: {}",
+                    p.path_id,
+                    describe_path(p)
+                ),
+                Ok(false) => {}
+                Err(e) => {
+                    figs.refused += 1;
+                    tracing::warn!(path = p.path_id, "path refused: {e}");
+                }
+            }
+        }
+        let mut reports = Vec::new();
+        report.drain(|m, r| reports.push((m.sender.to_string(), *r)));
+        figs.received += reports.len() as u64;
+        for (sender, r) in &reports {
+            let before = logic.phase();
+            let out = logic.on_report(r, now);
+            match (r.code(), before, logic.phase()) {
+                (Some(code), ExplorerPhase::Sent { .. }, ExplorerPhase::Done { path_id }) => tracing::info!(
+                    path = path_id,
+                    code = code.name(),
+                    x = r.x,
+                    y = r.y,
+                    %sender,
+                    "robot 2 arrived: resume exploring"
+                ),
+                (Some(code), ..) => {
+                    tracing::debug!(path = r.path_id, index = r.index, code = code.name(), %sender, "robot 2 reports")
+                }
+                (None, ..) => tracing::warn!(code = r.code, %sender, "report of unknown code; ignored"),
+            }
+            sends.extend(out);
+        }
+        let before = logic.phase();
+        let out = logic.tick(now);
+        if let (ExplorerPhase::Found { path_id }, ExplorerPhase::Sent { .. }) = (before, logic.phase()) {
+            tracing::info!(path = path_id, "path and \"come\" sent to robot 2; waiting for it to arrive");
+        }
+        sends.extend(out);
+        let target = logic.target_state();
+        let (phase, path_id) = match logic.phase() {
+            ExplorerPhase::Exploring => ("exploring", 0),
+            ExplorerPhase::Found { path_id } => ("found", path_id),
+            ExplorerPhase::Sent { path_id } => ("sent", path_id),
+            ExplorerPhase::Done { path_id } => ("done", path_id),
+        };
+        {
+            let mut f = lock(&self.figures);
+            f.phase = phase.into();
+            f.path_id = path_id;
+            f.received += figs.received;
+            f.refused += figs.refused;
+        }
+        self.situation.send(Situation::target(target, 0.0, 0.0, now))?;
+        self.send(sends)
+    }
+
+    fn step_executor(&mut self, now: u64) -> Result<(), AgentError> {
+        let Side::Executor { path_in, order_in, progress, arm, pose, grasp, grasp_timeout_ms, logic, .. } =
+            &mut self.side
+        else {
+            return Ok(());
+        };
+        logic.resend_ns = self.resend_ms.get().saturating_mul(1_000_000);
+        logic.grasp = grasp.get();
+        logic.grasp_timeout_ns = grasp_timeout_ms.get().saturating_mul(1_000_000);
+        if let Some((_, p)) = pose.latest() {
+            logic.on_pose(p.x, p.y, p.theta);
+        }
+        let mut sends = Vec::new();
+        let mut figs = Figures::default();
+        let before = logic.phase();
+        let mut paths = Vec::new();
+        path_in.drain(|_, p| paths.push(*p));
+        figs.received += paths.len() as u64;
+        for p in &paths {
+            match logic.on_path(p, now) {
+                Ok(s) => sends.extend(s),
+                Err(e) => {
+                    figs.refused += 1;
+                    tracing::warn!(path = p.path_id, "path from robot 1 refused: {e}");
+                }
+            }
+        }
+        let mut orders = Vec::new();
+        order_in.drain(|m, o| orders.push((m.sender.to_string(), *o)));
+        figs.received += orders.len() as u64;
+        for (sender, o) in &orders {
+            match o.code() {
+                Some(_) => sends.extend(logic.on_order(o, now)),
+                None => tracing::warn!(code = o.code, %sender, "order of unknown code; ignored"),
+            }
+        }
+        let mut reports = Vec::new();
+        progress.drain(|_, r| reports.push(*r));
+        for r in &reports {
+            sends.extend(logic.on_progress(r, now));
+        }
+        let mut states = Vec::new();
+        arm.drain(|_, s| states.push(*s));
+        for s in &states {
+            sends.extend(logic.on_arm(s, now));
+        }
+        sends.extend(logic.tick(now));
+        let after = logic.phase();
+        if after != before {
+            match after {
+                ExecutorPhase::Following { path_id } => {
+                    let desc = paths.iter().rev().find(|p| p.path_id == path_id).map(describe_path).unwrap_or_default();
+                    tracing::info!(path = path_id, "come: following path {path_id}: {desc}");
+                }
+                ExecutorPhase::Grasping { path_id, request_id } => {
+                    tracing::info!(path = path_id, request = request_id, "at the target: grasping")
+                }
+                ExecutorPhase::Done { path_id, acknowledged: false } => tracing::info!(
+                    path = path_id,
+                    grasp = ?logic.outcome(),
+                    "arrived: reporting to robot 1 until it answers"
+                ),
+                ExecutorPhase::Done { path_id, acknowledged: true } => {
+                    tracing::info!(path = path_id, "robot 1 resumed exploring")
+                }
+                ExecutorPhase::Waiting => tracing::info!("aborted: waiting"),
+            }
+        }
+        let target = logic.target_state();
+        let (phase, path_id) = match after {
+            ExecutorPhase::Waiting => ("waiting", 0),
+            ExecutorPhase::Following { path_id } => ("following", path_id),
+            ExecutorPhase::Grasping { path_id, .. } => ("grasping", path_id),
+            ExecutorPhase::Done { path_id, .. } => ("done", path_id),
+        };
+        {
+            let mut f = lock(&self.figures);
+            f.phase = phase.into();
+            f.path_id = path_id;
+            f.received += figs.received;
+            f.refused += figs.refused;
+            f.grasp = logic.outcome().map_or_else(String::new, |o| format!("{o:?}").to_lowercase());
+        }
+        self.situation.send(Situation::target(target, 0.0, 0.0, now))?;
+        self.send(sends)
+    }
+}
+
+impl Agent for Mission {
+    const KIND: &'static str = "mission";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_millis(100))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
+        let role = Role::parse(&args.role).map_err(|e| AgentError::Config(e.to_string()))?;
+        let resend_ms = setup.param_checked("resend_ms", 2000u64, |v| {
+            if (100..=60_000).contains(v) { Ok(()) } else { Err("resend_ms is 100 … 60000".into()) }
+        });
+        let side = match role {
+            Role::Explorer => {
+                let wait_mode = setup.param("wait_mode", "wait".to_owned());
+                Side::Explorer {
+                    path_in: setup.input("path")?,
+                    mode: setup.input("mode")?,
+                    report: setup.input("report")?,
+                    logic: Explorer::new(&wait_mode.get(), 2_000_000_000),
+                    wait_mode,
+                }
+            }
+            Role::Executor => Side::Executor {
+                path_in: setup.input("path")?,
+                order_in: setup.input("order")?,
+                progress: setup.input("progress")?,
+                arm: setup.input("arm")?,
+                pose: setup.input("pose")?,
+                grasp_out: setup.output("grasp")?,
+                report_out: setup.output("report")?,
+                grasp: setup.param("grasp", true),
+                grasp_timeout_ms: setup.param_checked("grasp_timeout_ms", 30_000u64, |v| {
+                    if (1000..=600_000).contains(v) {
+                        Ok(())
+                    } else {
+                        Err("grasp_timeout_ms is 1000 … 600000".into())
+                    }
+                }),
+                logic: Executor::new(2_000_000_000, 30_000_000_000),
+            },
+        };
+        let figures = Arc::new(Mutex::new(Figures::default()));
+        let f2 = figures.clone();
+        setup.figures(move || {
+            let f = lock(&f2).clone();
+            let mut v = vec![
+                ("role".into(), role.name().to_owned()),
+                ("phase".into(), f.phase),
+                ("path_id".into(), f.path_id.to_string()),
+                ("sent".into(), f.sent.to_string()),
+                ("received".into(), f.received.to_string()),
+                ("refused".into(), f.refused.to_string()),
+            ];
+            if role == Role::Executor {
+                v.push(("grasp".into(), f.grasp));
+            }
+            v
+        });
+        Ok(Mission {
+            role,
+            side,
+            path_out: setup.output("path")?,
+            order_out: setup.output("order")?,
+            situation: setup.output("situation")?,
+            resend_ms,
+            figures,
+        })
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        let now = ctx.now_ns();
+        match self.role {
+            Role::Explorer => self.step_explorer(now),
+            Role::Executor => self.step_executor(now),
+        }
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<Mission>()
+}
