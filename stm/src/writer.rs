@@ -110,7 +110,7 @@ impl RingWriter {
         let path = name.path_in(&opts.base_dir, robot);
         let file = open_rw(&path, true, opts).map_err(|e| os("cannot create", &path, e))?;
         let file = take_lock(file, &path, &ring)?;
-        Self::init_or_reopen(opts, file, path, *name, Some(geo))
+        Self::init_or_reopen(opts, file, path, *name, Some(geo), false)
     }
 
     /// Re-opens an existing ring of `robot` in `/dev/shm` with the geometry
@@ -129,7 +129,7 @@ impl RingWriter {
             Err(e) => return Err(os("cannot open", &path, e)),
         };
         let file = take_lock(file, &path, &ring)?;
-        Self::init_or_reopen(opts, file, path, *name, None)
+        Self::init_or_reopen(opts, file, path, *name, None, false)
     }
 
     fn init_or_reopen(
@@ -138,6 +138,7 @@ impl RingWriter {
         path: PathBuf,
         name: RingName,
         want: Option<Geometry>,
+        recreated: bool,
     ) -> Result<Self, CreateError> {
         let ring = name.to_string();
         let meta = file.metadata().map_err(|e| os("cannot stat", &path, e))?;
@@ -178,7 +179,26 @@ impl RingWriter {
                         capacity: w.slot_capacity,
                     });
                 }
-                return Ok(Self::start(map, found, name, path, file));
+                match plausible_state(&map, &found) {
+                    Ok(()) => return Ok(Self::start(map, found, name, path, file)),
+                    Err(why) if !recreated => {
+                        // Continuing would overflow the sequence arithmetic
+                        // or hand out numbers readers already saw. Replace
+                        // the file (a new inode: readers that mapped the old
+                        // one keep it until they notice it is stale).
+                        tracing::warn!(
+                            ring = %ring, path = %path.display(),
+                            "ring state is implausible ({why}); recreating the ring with the same geometry, its frames are lost"
+                        );
+                        drop(map);
+                        std::fs::remove_file(&path).map_err(|e| os("cannot remove the implausible ring", &path, e))?;
+                        drop(file);
+                        let file = open_rw(&path, true, opts).map_err(|e| os("cannot create", &path, e))?;
+                        let file = take_lock(file, &path, &ring)?;
+                        return Self::init_or_reopen(opts, file, path, name, Some(found), true);
+                    }
+                    Err(why) => return Err(not_a_ring(&path, &format!("its state is implausible: {why}"))),
+                }
             }
             if magic != 0 {
                 return Err(not_a_ring(&path, "unknown magic number"));
@@ -363,6 +383,58 @@ impl Drop for RingWriter {
         let _ = self.map.header().writer_pid.compare_exchange(my_pid(), 0, Ordering::Relaxed, Ordering::Relaxed);
         tracing::debug!(ring = %self.name, "ring writer closed");
     }
+}
+
+/// Largest sequence number a reopened ring may continue from: far beyond
+/// any real ring (2^62 frames at 1 MHz is 146 000 years), and far enough
+/// from 2^63 that `2 * seq` never overflows.
+pub(crate) const MAX_SEQ: u64 = 1 << 62;
+
+/// Whether the shared state of an existing ring (last_seq and the slot lock
+/// words) is one a writer could have left, so that continuing it is safe.
+///
+/// A writer stores frames 1, 2, 3, ... in slot `seq % slots`; so a nonzero
+/// lock word `2*seq` (complete) or `2*seq - 1` (being written when the
+/// writer died) sits in slot `seq % slots`, the complete frames are the last
+/// `slots` ones, a half-written frame is the one after them, and last_seq
+/// is the newest complete frame or the one before it (a writer that died
+/// between completing the slot and announcing it).
+fn plausible_state(map: &Mapping, geo: &Geometry) -> Result<(), String> {
+    let last_seq = map.header().last_seq.load(Ordering::Relaxed);
+    if last_seq >= MAX_SEQ {
+        return Err(format!("last_seq {last_seq} is at least 2^62"));
+    }
+    let mut newest = 0u64;
+    let mut words = Vec::new();
+    for i in 0..geo.slot_count {
+        // SAFETY: geometry validated against the mapping, i in range.
+        let l = unsafe { slot_header(map, geo, i) }.lock.load(Ordering::Relaxed);
+        if l == 0 {
+            continue;
+        }
+        let seq = l.div_ceil(2);
+        if seq >= MAX_SEQ {
+            return Err(format!("slot {i} has lock word {l} (frame {seq}, at least 2^62)"));
+        }
+        if geo.slot_of(seq) != i {
+            return Err(format!("slot {i} has lock word {l}, but frame {seq} belongs in slot {}", geo.slot_of(seq)));
+        }
+        if l % 2 == 0 {
+            newest = newest.max(seq);
+        }
+        words.push((i, l, seq));
+    }
+    let window = u64::from(geo.slot_count);
+    for (i, l, seq) in words {
+        let ok = if l % 2 == 0 { seq + window > newest } else { seq == newest + 1 };
+        if !ok {
+            return Err(format!("slot {i} has lock word {l} (frame {seq}) but the newest complete frame is {newest}"));
+        }
+    }
+    if last_seq > newest || last_seq + 1 < newest {
+        return Err(format!("last_seq {last_seq} does not match the newest complete frame {newest}"));
+    }
+    Ok(())
 }
 
 fn os(what: &'static str, path: &Path, source: std::io::Error) -> CreateError {

@@ -717,3 +717,57 @@ fn hostile_ring_headers_are_refused_before_mapping_or_allocating() {
     let e = RingReader::open_path(&path).expect_err("an absurd slot capacity is refused");
     assert!(matches!(e, OpenError::NotARing { .. }), "{e}");
 }
+
+#[test]
+fn implausible_ring_state_is_recreated_on_reopen() {
+    use shm_schemas::ring::{RingHeader, SlotHeader};
+    use std::mem::offset_of;
+    use std::os::unix::fs::MetadataExt;
+    let robot = unique_robot();
+    let guard = ShmGuard::own_dir(&robot);
+    let ring = name("cam");
+    let stride = 64 + 64; // a slot of 8 bytes padded to 64, plus its header
+    let lock_of = |slot: usize| 4096 + slot * stride + offset_of!(SlotHeader, lock);
+    let fresh = || {
+        let mut w = RingWriter::create_with(&guard.opts(), &robot, &ring, 4, 8).expect("create");
+        for seq in 1..=3u64 {
+            w.write(FrameDesc::raw(), &seq.to_le_bytes()).expect("write");
+        }
+        let (path, ino) = (w.path().to_owned(), std::fs::metadata(w.path()).expect("stat").ino());
+        drop(w);
+        (path, ino)
+    };
+
+    // a plausible ring continues where it stopped
+    let (path, ino) = fresh();
+    let w = RingWriter::create_with(&guard.opts(), &robot, &ring, 4, 8).expect("reopen");
+    assert_eq!((w.next_seq(), std::fs::metadata(&path).expect("stat").ino()), (4, ino));
+    drop(w);
+
+    let cases: [(&str, usize, u64); 4] = [
+        ("last_seq at 2^63 (2*seq overflows)", offset_of!(RingHeader, last_seq), 1 << 63),
+        ("last_seq at 2^62", offset_of!(RingHeader, last_seq), 1 << 62),
+        ("a lock word near u64::MAX", lock_of(1), u64::MAX - 1),
+        ("frame 6 in slot 1 of 4", lock_of(1), 12),
+    ];
+    for (what, offset, value) in cases {
+        let (path, ino) = fresh();
+        poke(&path, offset, &value.to_ne_bytes());
+        let reader_of_old = RingReader::open_path(&path).expect("open the tampered ring");
+        let mut w = RingWriter::create_with(&guard.opts(), &robot, &ring, 4, 8)
+            .unwrap_or_else(|e| panic!("{what}: an implausible ring is recreated, not refused: {e}"));
+        assert_eq!(w.next_seq(), 1, "{what}: the recreated ring starts over");
+        assert_ne!(std::fs::metadata(&path).expect("stat").ino(), ino, "{what}: a new file");
+        assert!(reader_of_old.is_stale(), "{what}: old readers notice the replacement");
+        let n = w.write(FrameDesc::raw(), b"fresh").expect("write");
+        let r = RingReader::open_path(&path).expect("open the new ring");
+        assert_eq!(r.read(n.seq).expect("read").data, b"fresh", "{what}");
+        drop(w);
+        // open_existing recreates it too (with the geometry in the file)
+        poke(&path, offset, &value.to_ne_bytes());
+        let w = RingWriter::open_existing_with(&guard.opts(), &robot, &ring).expect("open existing");
+        assert_eq!((w.next_seq(), w.slot_count(), w.slot_capacity()), (1, 4, 8), "{what}");
+        drop(w);
+        std::fs::remove_file(&path).expect("remove");
+    }
+}
