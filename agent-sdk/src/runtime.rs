@@ -290,6 +290,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     let name_owned = name.to_owned();
     let want_rt = !args.no_realtime;
     let prio = args.priority;
+    let (started_tx, started_rx) = std::sync::mpsc::channel::<Result<(), String>>();
     let handle = std::thread::Builder::new()
         .name("task".into())
         .spawn(move || {
@@ -303,11 +304,26 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
                     ),
                 }
             }
-            task_main(agent, &name_owned, &task_shared, &task_inputs, wake_listener, task_kind)
+            task_main(agent, &name_owned, &task_shared, &task_inputs, wake_listener, task_kind, started_tx)
         })
         .map_err(|e| format!("cannot start the task thread: {e}"))?;
     if want_rt {
         let _ = rt::set_thread_fifo((prio + 1).min(99));
+    }
+    // ready only once the agent's own `start` worked (devices opened, a
+    // network session up): a failed start is a failed `nerve start`, and an
+    // exit without leaving the router, so supervision counts it as a failure
+    match started_rx.recv_timeout(START_TIMEOUT) {
+        Ok(Ok(())) => stage("agent started"),
+        Ok(Err(e)) => {
+            let _ = handle.join();
+            return Err(format!("{} {name:?} could not start: {e}", A::KIND));
+        }
+        Err(_) if handle.is_finished() => return Err(format!("{} {name:?} stopped while starting", A::KIND)),
+        Err(_) => tracing::warn!(
+            "the agent's start has not finished after {} s; reporting ready anyway",
+            START_TIMEOUT.as_secs()
+        ),
     }
 
     let startup_msg = format!("{name} started (pid {}, robot {})", std::process::id(), world.robot());
@@ -344,6 +360,10 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     Ok(())
 }
 
+/// How long the start-up waits for the agent's own `start` before it
+/// reports ready anyway.
+const START_TIMEOUT: Duration = Duration::from_secs(60);
+
 fn task_main<A: Agent>(
     mut agent: A,
     name: &str,
@@ -351,13 +371,16 @@ fn task_main<A: Agent>(
     inputs: &[Arc<dyn DynInput>],
     wake: Listener<Ipc>,
     kind: Task,
+    started: std::sync::mpsc::Sender<Result<(), String>>,
 ) {
     let mut ctx = Context { name: name.to_owned(), cycle: 0, now_ns: now_ns(), period: None, stop: false };
     if let Err(e) = agent.start(&mut ctx) {
         tracing::error!("start failed: {e}; stopping");
         sh.stop.store(true, Ordering::Release);
+        let _ = started.send(Err(e.to_string()));
         return;
     }
+    let _ = started.send(Ok(()));
     match kind {
         Task::Periodic(_) => periodic_loop(&mut agent, sh, &mut ctx),
         Task::EventDriven => event_loop(&mut agent, sh, inputs, &wake, &mut ctx),

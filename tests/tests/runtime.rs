@@ -180,6 +180,18 @@ fn a_rejected_duplicate_keeps_the_live_agents_pid_file() {
     );
 }
 
+/// An agent whose own `start` fails makes `nerve start` fail with its
+/// reason, instead of saying "started" and vanishing (review R19).
+#[test]
+fn a_failed_start_is_a_failed_nerve_start() {
+    let r = Robot::new("failst");
+    r.router();
+    let err = r.fails(&["start", "testagent", "--name", "bad", "--", "--mode", "fail-start"]);
+    assert!(err.contains("could not start") && err.contains("/dev/ttyNOPE"), "{err}");
+    assert!(r.agent("bad").is_none_or(|a| a["state"] != "running"), "listed as running");
+    r.down_and_check_clean();
+}
+
 /// An agent added while others run joins the graph.
 #[test]
 fn hot_added_agent_joins_graph() {

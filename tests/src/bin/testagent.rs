@@ -9,7 +9,8 @@
 //! * `stubborn`: ignores SIGTERM and never finishes a step (must be SIGKILLed);
 //! * `hang`: its task blocks for ever in the first step (a hung agent; the
 //!   message checker still answers, but the watchdog pings stop);
-//! * `burn`: burns CPU in every step (for resource tests).
+//! * `burn`: burns CPU in every step (for resource tests);
+//! * `fail-start`: its `start` fails (a device that cannot be opened).
 
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
 use shm_schemas::payloads::Scalar;
@@ -22,6 +23,7 @@ enum Mode {
     Stubborn,
     Hang,
     Burn,
+    FailStart,
 }
 
 struct TestAgent {
@@ -47,9 +49,10 @@ impl Agent for TestAgent {
                 "stubborn" => Mode::Stubborn,
                 "hang" => Mode::Hang,
                 "burn" => Mode::Burn,
+                "fail-start" => Mode::FailStart,
                 other => {
                     return Err(AgentError::Config(format!(
-                        "unknown mode {other:?}; use scalar, crash, stubborn, hang or burn"
+                        "unknown mode {other:?}; use scalar, crash, stubborn, hang, burn or fail-start"
                     )));
                 }
             },
@@ -58,9 +61,16 @@ impl Agent for TestAgent {
         Ok(TestAgent { mode, input: setup.input("in")?, out: setup.output("value")?, n: 0.0 })
     }
 
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        if self.mode == Mode::FailStart {
+            return Err(AgentError::Device("cannot open /dev/ttyNOPE: no such device".into()));
+        }
+        Ok(())
+    }
+
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
         match self.mode {
-            Mode::Scalar => {}
+            Mode::Scalar | Mode::FailStart => {}
             Mode::Crash => std::process::abort(),
             Mode::Stubborn => {
                 // SAFETY: setting a signal disposition to SIG_IGN is always sound.
