@@ -307,6 +307,11 @@ fn bad_requests_are_refused_clearly() {
     assert!(e.contains("unknown agent kind"), "{e}");
     let e = r.fails(&["start", "ticker", "--name", "Bad Name"]);
     assert!(e.contains("lowercase"), "{e}");
+    // programs that are not agents say so (review F3c): rc 0 and silence before
+    let e = r.fails(&["start", "/bin/true", "--name", "zz"]);
+    assert!(e.contains("not a nerve agent"), "{e}");
+    let e = r.fails(&["start", "/bin/false", "--name", "zz"]);
+    assert!(e.contains("is it a nerve agent?"), "{e}");
     let e = r.fails(&["disconnect", "t1/tick", "r1/in"]);
     assert!(e.contains("not connected"), "{e}");
     r.down_and_check_clean();

@@ -55,10 +55,30 @@ pub fn start(world: &World, a: StartArgs) -> Result<ExitCode> {
     if !a.args.is_empty() {
         cmd.arg("--").args(&a.args);
     }
-    let status = cmd.stdin(Stdio::null()).status().with_context(|| format!("cannot run {}", exe.display()))?;
-    if !status.success() {
-        // the agent printed why on stderr
+    let out = cmd.stdin(Stdio::null()).output().with_context(|| format!("cannot run {}", exe.display()))?;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    print!("{stdout}");
+    eprint!("{stderr}");
+    // an agent's start-up says "NAME started (pid N, robot R)" or why it failed
+    let said_started = stdout.lines().any(|l| l.starts_with(&format!("{} started (pid ", a.name)));
+    if !out.status.success() {
+        if stderr.trim().is_empty() {
+            bail!(
+                "{} exited with {} without a word: is it a nerve agent? (agents are built on agent-sdk; try `{} --describe`)",
+                exe.display(),
+                out.status,
+                exe.display()
+            );
+        }
         return Ok(ExitCode::from(1));
+    }
+    if !said_started {
+        bail!(
+            "{} exited without starting an agent: it is not a nerve agent, or it ignored --daemon (agents are built on agent-sdk; try `{} --describe`)",
+            exe.display(),
+            exe.display()
+        );
     }
     Ok(ExitCode::SUCCESS)
 }
