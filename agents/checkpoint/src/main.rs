@@ -16,9 +16,10 @@
 //!   `range_max_m`): id, IR transmitters, range, bearing, world position and
 //!   facing direction, target or not;
 //! * `correction` (`nerve::PoseCorrection`): the corrected pose at the
-//!   frame's instant, when a known checkpoint named by a fresh IR code is
-//!   seen (at most every `correction_interval_ms` per checkpoint; never when
-//!   parameter `correct` is false — the run "without checkpoints").
+//!   frame's instant, when a known checkpoint is seen, named by a fresh IR
+//!   code or (unless `require_ir`) by where its tube falls (at most every
+//!   `correction_interval_ms` per checkpoint; never when parameter `correct`
+//!   is false — the run "without checkpoints").
 //!
 //! Arguments after `--`: `--config FILE` (camera, colours, IR cones, known
 //! checkpoints; see `nerve_checkpoint::config`) and `--calibration FILE`
@@ -80,6 +81,7 @@ struct Checkpoint {
     range_max_m: Param<f64>,
     interval_ms: Param<u64>,
     ir_margin_deg: Param<f64>,
+    require_ir: Param<bool>,
     sensor: Sensor,
     finder: TubeFinder,
     counters: Arc<Counters>,
@@ -104,6 +106,7 @@ impl Checkpoint {
             range_max_m: self.range_max_m.get(),
             interval_ns: self.interval_ms.get().saturating_mul(1_000_000),
             ir_margin_rad: self.ir_margin_deg.get().to_radians(),
+            require_ir: self.require_ir.get(),
         }
     }
 
@@ -228,12 +231,13 @@ impl Agent for Checkpoint {
             }),
             correct: setup.param("correct", true),
             ir_fresh_ms: setup.param("ir_fresh_ms", 400u64),
-            gate_m: setup.param_checked("gate_m", 0.8, in_range(0.0, 10.0)),
+            gate_m: setup.param_checked("gate_m", 1.5, in_range(0.0, 10.0)),
             max_jump_m: setup.param_checked("max_jump_m", 2.5, in_range(0.0, 50.0)),
             range_min_m: setup.param_checked("range_min_m", 0.5, in_range(0.0, 20.0)),
             range_max_m: setup.param_checked("range_max_m", 3.5, in_range(0.0, 20.0)),
             interval_ms: setup.param("correction_interval_ms", 500u64),
             ir_margin_deg: setup.param_checked("ir_margin_deg", 5.0, in_range(0.0, 45.0)),
+            require_ir: setup.param("require_ir", false),
             sensor: Sensor::new(config, model),
             finder: TubeFinder::default(),
             counters,

@@ -14,8 +14,11 @@
 //!    checkpoint within `gate_m` of where it falls, else 0), world position
 //!    (the known one for a known checkpoint), facing direction (the IR
 //!    cone's centre, else the direction from the tube to the robot);
-//! 4. the tube the IR names, if it is a known checkpoint and a pose is
-//!    known, corrects the pose — unless corrections are off, the last one
+//! 4. the tube the IR names — or, unless `require_ir`, a tube named by
+//!    where it falls (the only known checkpoint within `gate_m`, none other
+//!    within twice that; the IR's range, 2 m, is shorter than the camera's)
+//!    — if it is a known checkpoint and a pose is known, corrects the pose
+//!    (bounded by the IR cone when the IR named it) — unless corrections are off, the last one
 //!    of that checkpoint is more recent than `interval`, or the correction
 //!    would move the pose more than `max_jump_m` (rejected, with the reason).
 
@@ -48,6 +51,9 @@ pub struct SensorSettings {
     pub interval_ns: u64,
     /// Slack of the IR cone, radians.
     pub ir_margin_rad: f64,
+    /// Correct only by checkpoints the IR names (not by those named by
+    /// where their tube falls).
+    pub require_ir: bool,
 }
 
 impl Default for SensorSettings {
@@ -55,12 +61,13 @@ impl Default for SensorSettings {
         SensorSettings {
             correct: true,
             ir_fresh_ns: 400_000_000,
-            gate_m: 0.8,
+            gate_m: 1.5,
             max_jump_m: 2.5,
             range_min_m: 0.5,
             range_max_m: 3.5,
             interval_ns: 500_000_000,
             ir_margin_rad: 5f64.to_radians(),
+            require_ir: false,
         }
     }
 }
@@ -170,20 +177,27 @@ impl Sensor {
             let by_ir = named.filter(|(n, _)| *n == i).map(|(_, id)| id);
             let placed = f.pose.as_ref().map(|p| place(p, o));
             let phi = f.pose.as_ref().map(|p| wrap(p.theta + o.bearing_rad + PI));
+            // by where it falls: the one known checkpoint within gate_m, no other within twice that
             let by_map = || -> Option<u8> {
                 let (x, y) = placed?;
                 if !o.upright {
                     return None;
                 }
-                self.config
+                let mut near: Vec<(u8, f64)> = self
+                    .config
                     .checkpoints
                     .iter()
                     .map(|k| (k.id, (k.position[0] - x).hypot(k.position[1] - y)))
-                    .filter(|(_, d)| *d <= s.gate_m)
-                    .min_by(|a, b| a.1.total_cmp(&b.1))
-                    .map(|(id, _)| id)
+                    .filter(|(_, d)| *d <= 2.0 * s.gate_m)
+                    .collect();
+                near.sort_by(|a, b| a.1.total_cmp(&b.1));
+                match near.as_slice() {
+                    [(id, d)] if *d <= s.gate_m => Some(*id),
+                    _ => None,
+                }
             };
-            let id = by_ir.or_else(by_map).unwrap_or(0);
+            let by_pos = if by_ir.is_none() { by_map() } else { None };
+            let id = by_ir.or(by_pos).unwrap_or(0);
             let known = self.config.checkpoint(id).filter(|_| o.upright).copied();
             let (x, y) = match (known, placed) {
                 (Some(k), _) => (k.position[0], k.position[1]),
@@ -209,9 +223,11 @@ impl Sensor {
                 reserved: [0; 7],
             });
 
-            // the correction: a known checkpoint the IR names, and a pose to correct
-            let (Some(k), Some(_), Some(est)) = (known, by_ir, f.pose) else { continue };
-            if !s.correct || out.correction.is_some() {
+            // the correction: a known checkpoint the IR names (or, unless
+            // require_ir, its position alone does), and a pose to correct
+            let (Some(k), Some(est)) = (known, f.pose) else { continue };
+            let named = by_ir.is_some() || (by_pos.is_some() && !s.require_ir);
+            if !named || !s.correct || out.correction.is_some() {
                 continue;
             }
             if self.last_correction.get(&id).is_some_and(|t| f.stamp_ns.saturating_sub(*t) < s.interval_ns) {
@@ -328,7 +344,7 @@ mod tests {
     }
 
     #[test]
-    fn without_a_fresh_ir_code_the_tube_is_named_by_position_and_corrects_nothing() {
+    fn without_a_fresh_ir_code_the_tube_is_named_by_position() {
         let truth = Pose { x: 4.5, y: -0.2, theta: 0.3 };
         let tubes = [tube_of(&truth, (6.0, 1.2), true)];
         let f = FrameInput {
@@ -343,7 +359,11 @@ mod tests {
         let out = sensor().frame(&f, &SensorSettings::default());
         assert_eq!(out.sightings.len(), 1);
         assert_eq!((out.sightings[0].checkpoint_id, out.sightings[0].from_ir), (2, 0));
-        assert!(out.correction.is_none());
+        let c = out.correction.expect("named by position: a correction");
+        assert!((c.payload.x - truth.x).abs() < 0.02 && (c.payload.y - truth.y).abs() < 0.02, "{c:?}");
+        // unless the IR is required
+        let strict = SensorSettings { require_ir: true, ..SensorSettings::default() };
+        assert!(sensor().frame(&f, &strict).correction.is_none());
         // no pose and no IR: nowhere to put it
         let out = sensor().frame(&FrameInput { pose: None, ..f }, &SensorSettings::default());
         assert!(out.sightings.is_empty());

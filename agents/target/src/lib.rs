@@ -22,7 +22,8 @@
 //!   itself (kind `target`), at `standoff_m` from it (the arm's reach), and
 //!   the robot stops: **arrived**;
 //! * at a via point of a checkpoint it **looks** at the checkpoint (turns
-//!   to face the landmark the path gives for it) and waits, still, until
+//!   to face the landmark the path gives for it, when that lies 0.3 … 3 m
+//!   from the via point) and waits, still, until
 //!   the odometry reports a correction by that checkpoint
 //!   ([`Follower::correction_seen`]) or `look_timeout_s` passes — "it
 //!   adjusted its coordinate using the checkpoint, and continued to move
@@ -372,7 +373,11 @@ impl Follower {
                 out.events.push(Event::Reached { index: self.index, distance_m: dist });
                 self.index += 1;
                 self.phase = Phase::Driving;
-                if s.look_at_checkpoints && p.kind == ViaKind::Checkpoint && p.checkpoint != 0 {
+                // a landmark the camera can range from here (a path without
+                // landmarks, all zeros, is not looked at)
+                let lm_dist = (p.landmark.0 - p.x).hypot(p.landmark.1 - p.y);
+                let lookable = (0.3..=3.0).contains(&lm_dist);
+                if s.look_at_checkpoints && p.kind == ViaKind::Checkpoint && p.checkpoint != 0 && lookable {
                     self.look =
                         Some(Look { checkpoint: p.checkpoint, at: p.landmark, elapsed_s: 0.0, corrected: false });
                     self.phase = Phase::Looking;
@@ -590,6 +595,15 @@ mod tests {
         f.step(&pose, 0.05);
         assert_eq!(f.phase(), Phase::Rotating, "on to the next point (behind its right shoulder)");
         assert_eq!(f.index(), 1);
+        // a path without landmarks (all zeros, far from the via point): no look
+        let mut bare = p;
+        bare.landmarks = [[0.0; 2]; MAX_VIA_POINTS];
+        bare.points[0] = [5.0, 0.0];
+        bare.points[1] = [8.0, 0.0];
+        let mut f = Follower::new(Settings::default());
+        f.follow(&bare).unwrap();
+        f.step(&Pose { x: 4.9, y: 0.0, theta: 0.0 }, 0.05);
+        assert_eq!((f.index(), f.phase()), (1, Phase::Driving));
         // without a correction the look ends after the timeout
         let mut f = Follower::new(Settings { look_timeout_s: 1.0, ..Settings::default() });
         f.follow(&p).unwrap();
