@@ -4,14 +4,14 @@
 //! robot 2. The two meet only through their bridges; the logic is the
 //! library `nerve_mission`. Periodic (default 100 ms).
 //!
-//! Explorer (robot 1). Inputs: `path` (`nerve::ViaPath`, the map builder's
+//! Explorer (robot 1). Inputs: `path_in` (`nerve::ViaPath`, the map builder's
 //! `path`), `mode` (`nerve::Mode`, the decision maker's `mode`), `report`
 //! (`nerve::MissionCommand`, robot 2's `report` through the bridge).
 //! Outputs: `path` and `order` ("come", "resume"; to robot 2 through the
 //! bridge), `situation` (`nerve::Situation`: target `close` from the path
 //! found until robot 2 arrives, else `none`; to the decision maker).
 //!
-//! Executor (robot 2). Inputs: `path` and `order` (robot 1's, through the
+//! Executor (robot 2). Inputs: `path_in` and `order_in` (robot 1's, through the
 //! bridge), `progress` (`nerve::MissionCommand`, the target achiever's
 //! `mission`), `arm` (`nerve::ArmGraspState`, the arm's `state`), `pose`
 //! (`nerve::PoseEstimate`, the odometry's `pose`: the arm's guess). Outputs:
@@ -264,7 +264,8 @@ impl Mission {
             ExecutorPhase::Waiting => ("waiting", 0),
             ExecutorPhase::Following { path_id } => ("following", path_id),
             ExecutorPhase::Grasping { path_id, .. } => ("grasping", path_id),
-            ExecutorPhase::Done { path_id, .. } => ("done", path_id),
+            ExecutorPhase::Done { path_id, acknowledged: false } => ("arrived", path_id),
+            ExecutorPhase::Done { path_id, acknowledged: true } => ("done", path_id),
         };
         {
             let mut f = lock(&self.figures);
@@ -296,7 +297,7 @@ impl Agent for Mission {
             Role::Explorer => {
                 let wait_mode = setup.param("wait_mode", "wait".to_owned());
                 Side::Explorer {
-                    path_in: setup.input("path")?,
+                    path_in: setup.input("path_in")?,
                     mode: setup.input("mode")?,
                     report: setup.input("report")?,
                     logic: Explorer::new(&wait_mode.get(), 2_000_000_000),
@@ -304,8 +305,8 @@ impl Agent for Mission {
                 }
             }
             Role::Executor => Side::Executor {
-                path_in: setup.input("path")?,
-                order_in: setup.input("order")?,
+                path_in: setup.input("path_in")?,
+                order_in: setup.input("order_in")?,
                 progress: setup.input("progress")?,
                 arm: setup.input("arm")?,
                 pose: setup.input("pose")?,

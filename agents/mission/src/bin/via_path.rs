@@ -8,7 +8,7 @@
 //!
 //! ```sh
 //! nerve start via-path --name plan -- --points "-3,0;-2.4,0,target"
-//! nerve connect plan/path mission/path
+//! nerve connect plan/path mission/path_in
 //! ```
 
 use agent_sdk::{Agent, AgentError, Context, Output, Param, Setup, Task};
