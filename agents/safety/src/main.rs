@@ -14,11 +14,92 @@
 //! for `scan_timeout_ms` the monitor is blind: it stops the robot moving
 //! (turning allowed), sends no motion command, and reports danger `stop`.
 
-use agent_sdk::params::positive;
+use agent_sdk::params::ParamTable;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_safety::{Judgement, Settings, judge, slew};
 use shm_schemas::payloads::{DangerLevel, SafetyStop, Situation, SonarScan, VelocityCommand};
+use std::fmt::Display;
+use std::str::FromStr;
 use std::time::Duration;
+
+/// Where parameters are declared: the agent's [`Setup`], or a bare
+/// [`ParamTable`] in the tests, so that both see the same checks.
+trait Declare {
+    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display;
+}
+
+impl Declare for Setup {
+    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display,
+    {
+        self.param_checked(key, default, check)
+    }
+}
+
+impl Declare for ParamTable {
+    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display,
+    {
+        self.declare(key, default, Some(Box::new(check)))
+    }
+}
+
+/// A check that `v` is a finite number in `(0, hi]`; the refusal names the range.
+fn in_range_above_zero(key: &str, v: f32, hi: f32, unit: &str) -> Result<(), String> {
+    if v.is_finite() && v > 0.0 && v <= hi {
+        Ok(())
+    } else {
+        Err(format!("{key} is in (0, {hi}] {unit}").trim_end().to_owned())
+    }
+}
+
+/// The largest distance thresholds, m: beyond the sonar's range.
+const DIST_MAX: f32 = 10.0;
+/// The largest speed, m/s: the board's limit.
+const CRUISE_MAX: f32 = 0.8;
+/// The largest turn rate, rad/s: the motor's limit.
+const OMEGA_MAX: f32 = 2.0;
+/// Scan timeout bounds, ms: under 100 ms a scan period would count as
+/// silence; over 10 s a dead sonar would count as alive for too long.
+const TIMEOUT_MS: std::ops::RangeInclusive<u64> = 100..=10_000;
+
+/// The monitor's parameters, each bounded above and below.
+struct Params {
+    slow_dist: Param<f32>,
+    stop_dist: Param<f32>,
+    cruise: Param<f32>,
+    omega_max: Param<f32>,
+    risk_stop: Param<f32>,
+    timeout_ms: Param<u64>,
+}
+
+impl Params {
+    fn declare(d: &mut impl Declare) -> Self {
+        let s = Settings::default();
+        Params {
+            slow_dist: d.checked("slow_dist", s.slow_dist, |v| in_range_above_zero("slow_dist", *v, DIST_MAX, "m")),
+            stop_dist: d.checked("stop_dist", s.stop_dist, |v| in_range_above_zero("stop_dist", *v, DIST_MAX, "m")),
+            cruise: d.checked("cruise", s.cruise, |v| in_range_above_zero("cruise", *v, CRUISE_MAX, "m/s")),
+            omega_max: d
+                .checked("omega_max", s.omega_max, |v| in_range_above_zero("omega_max", *v, OMEGA_MAX, "rad/s")),
+            risk_stop: d.checked("risk_stop", s.risk_stop, |v| in_range_above_zero("risk_stop", *v, 1.0, "")),
+            timeout_ms: d.checked("scan_timeout_ms", 1000u64, |v| {
+                if TIMEOUT_MS.contains(v) {
+                    Ok(())
+                } else {
+                    Err(format!("scan_timeout_ms is in [{}, {}] ms", TIMEOUT_MS.start(), TIMEOUT_MS.end()))
+                }
+            }),
+        }
+    }
+}
 
 /// Speed changes the monitor asks for are limited to this, m/s² (the motor refuses jumps over 5).
 const ACCEL: f32 = 3.0;
@@ -56,7 +137,7 @@ impl Safety {
     }
 
     fn send_stop(&mut self, active: bool, why: &str, now: u64, period: Duration) -> Result<(), AgentError> {
-        let hold_ms = (period.as_millis() as u32).saturating_mul(4).max(500);
+        let hold_ms = u32::try_from(period.as_millis()).unwrap_or(u32::MAX).saturating_mul(4).max(500);
         if active || self.stopping {
             self.stop.send(SafetyStop {
                 active: u8::from(active),
@@ -86,22 +167,22 @@ impl Agent for Safety {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let d = Settings::default();
+        let scan = setup.input("scan")?;
+        let cmd = setup.output("cmd")?;
+        let stop = setup.output("stop")?;
+        let situation = setup.output("situation")?;
+        let Params { slow_dist, stop_dist, cruise, omega_max, risk_stop, timeout_ms } = Params::declare(setup);
         Ok(Safety {
-            scan: setup.input("scan")?,
-            cmd: setup.output("cmd")?,
-            stop: setup.output("stop")?,
-            situation: setup.output("situation")?,
-            slow_dist: setup.param_checked("slow_dist", d.slow_dist, positive),
-            stop_dist: setup.param_checked("stop_dist", d.stop_dist, positive),
-            cruise: setup.param_checked("cruise", d.cruise, positive),
-            omega_max: setup.param_checked("omega_max", d.omega_max, positive),
-            risk_stop: setup.param_checked("risk_stop", d.risk_stop, |v| {
-                if (0.0..=1.0).contains(v) && *v > 0.0 { Ok(()) } else { Err("risk_stop is in (0, 1]".into()) }
-            }),
-            timeout_ms: setup.param_checked("scan_timeout_ms", 1000u64, |v| {
-                if *v >= 100 { Ok(()) } else { Err("scan_timeout_ms is at least 100".into()) }
-            }),
+            scan,
+            cmd,
+            stop,
+            situation,
+            slow_dist,
+            stop_dist,
+            cruise,
+            omega_max,
+            risk_stop,
+            timeout_ms,
             last: None,
             last_scan_ns: None,
             sent: None,
@@ -124,7 +205,8 @@ impl Agent for Safety {
             self.last = Some(judge(&scan, &s, self.last.as_ref()));
             self.last_scan_ns = Some(now);
         }
-        let fresh = self.last_scan_ns.is_some_and(|t| now.saturating_sub(t) <= self.timeout_ms.get() * 1_000_000);
+        let fresh =
+            self.last_scan_ns.is_some_and(|t| now.saturating_sub(t) <= self.timeout_ms.get().saturating_mul(1_000_000));
         let Some(j) = self.last.filter(|_| fresh) else {
             // blind: no scan yet, or the sonar went silent
             if !self.blind {
@@ -163,4 +245,36 @@ impl Agent for Safety {
 
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<Safety>()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_numeric_parameter_is_bounded_above_and_says_its_range() {
+        let mut t = ParamTable::default();
+        let _p = Params::declare(&mut t);
+        let keys: Vec<String> = t.snapshot().into_iter().map(|(k, _)| k).collect();
+        assert_eq!(keys.len(), 6, "{keys:?}");
+        for key in &keys {
+            // values of the parameter's type, refused by its range
+            for absurd in ["18446744073709551615", "0"] {
+                let e = t.set(key, absurd).expect_err(&format!("{key} = {absurd} must be refused"));
+                assert!(e.contains(key.as_str()) && e.contains(" is in ") && e.contains(']'), "{key} = {absurd}: {e}");
+            }
+            // refused by the range or by the type
+            for absurd in ["1e30", "-1", "NaN", "inf"] {
+                assert!(t.set(key, absurd).is_err(), "{key} = {absurd} must be refused");
+            }
+        }
+        // the defaults and the edges are accepted
+        let d = Settings::default();
+        assert_eq!(t.get("slow_dist").as_deref(), Ok(d.slow_dist.to_string().as_str()));
+        for (key, ok) in
+            [("scan_timeout_ms", "100"), ("scan_timeout_ms", "10000"), ("cruise", "0.8"), ("risk_stop", "1")]
+        {
+            t.set(key, ok).unwrap_or_else(|e| panic!("{key} = {ok}: {e}"));
+        }
+    }
 }

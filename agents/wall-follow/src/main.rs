@@ -9,11 +9,88 @@
 //! from `v_min` when they come back. After being suspended (a gap of more
 //! than three periods) it also starts again from `v_min`.
 
-use agent_sdk::params::positive;
+use agent_sdk::params::ParamTable;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_wall_follow::{Settings, WallSide, follow};
 use shm_schemas::payloads::{SonarScan, VelocityCommand};
+use std::fmt::Display;
+use std::str::FromStr;
 use std::time::Duration;
+
+/// Where parameters are declared: the agent's [`Setup`], or a bare
+/// [`ParamTable`] in the tests, so that both see the same checks.
+trait Declare {
+    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display;
+}
+
+impl Declare for Setup {
+    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display,
+    {
+        self.param_checked(key, default, check)
+    }
+}
+
+impl Declare for ParamTable {
+    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display,
+    {
+        self.declare(key, default, Some(Box::new(check)))
+    }
+}
+
+/// A check that `v` is a finite number in `(0, hi]`; the refusal names the range.
+fn in_range_above_zero(key: &str, v: f32, hi: f32, unit: &str) -> Result<(), String> {
+    if v.is_finite() && v > 0.0 && v <= hi { Ok(()) } else { Err(format!("{key} is in (0, {hi}] {unit}")) }
+}
+
+/// The farthest wall to keep to, m: beyond it the sonar sees no wall.
+const TARGET_MAX: f32 = 2.0;
+/// The fastest speed, m/s: the board's limit.
+const V_MAX: f32 = 0.8;
+/// The largest speed-up rate, m/s²: the motor refuses jumps over 5.
+const ACCEL_MAX: f32 = 5.0;
+/// Scan timeout bounds, ms: under 100 ms a scan period would count as
+/// silence; over 10 s the robot would follow a wall it no longer sees.
+const TIMEOUT_MS: std::ops::RangeInclusive<u64> = 100..=10_000;
+
+/// The follower's parameters, each number bounded above and below.
+struct Params {
+    target: Param<f32>,
+    v_max: Param<f32>,
+    accel: Param<f32>,
+    side: Param<String>,
+    timeout_ms: Param<u64>,
+}
+
+impl Params {
+    fn declare(d: &mut impl Declare) -> Self {
+        let s = Settings::default();
+        Params {
+            target: d.checked("target", s.target, |v| in_range_above_zero("target", *v, TARGET_MAX, "m")),
+            v_max: d.checked("v_max", s.v_max, |v| in_range_above_zero("v_max", *v, V_MAX, "m/s")),
+            accel: d.checked("accel", s.accel, |v| in_range_above_zero("accel", *v, ACCEL_MAX, "m/s²")),
+            side: d.checked("side", "auto".to_owned(), |v| match v.as_str() {
+                "auto" | "left" | "right" => Ok(()),
+                _ => Err("side is auto, left or right".into()),
+            }),
+            timeout_ms: d.checked("scan_timeout_ms", 1000u64, |v| {
+                if TIMEOUT_MS.contains(v) {
+                    Ok(())
+                } else {
+                    Err(format!("scan_timeout_ms is in [{}, {}] ms", TIMEOUT_MS.start(), TIMEOUT_MS.end()))
+                }
+            }),
+        }
+    }
+}
 
 struct WallFollow {
     scan: Input<SonarScan>,
@@ -49,22 +126,17 @@ impl Agent for WallFollow {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let d = Settings::default();
+        let scan = setup.input("scan")?;
+        let cmd = setup.output("cmd")?;
+        let Params { target, v_max, accel, side, timeout_ms } = Params::declare(setup);
         Ok(WallFollow {
-            scan: setup.input("scan")?,
-            cmd: setup.output("cmd")?,
-            target: setup.param_checked("target", d.target, positive),
-            v_max: setup.param_checked("v_max", d.v_max, |v| {
-                if v.is_finite() && *v > 0.0 && *v <= 0.8 { Ok(()) } else { Err("v_max is in (0, 0.8] m/s".into()) }
-            }),
-            accel: setup.param_checked("accel", d.accel, positive),
-            side: setup.param_checked("side", "auto".to_owned(), |v| match v.as_str() {
-                "auto" | "left" | "right" => Ok(()),
-                _ => Err("side is auto, left or right".into()),
-            }),
-            timeout_ms: setup.param_checked("scan_timeout_ms", 1000u64, |v| {
-                if *v >= 100 { Ok(()) } else { Err("scan_timeout_ms is at least 100".into()) }
-            }),
+            scan,
+            cmd,
+            target,
+            v_max,
+            accel,
+            side,
+            timeout_ms,
             last_scan: None,
             last_step_ns: None,
             rising: 0.0,
@@ -85,7 +157,8 @@ impl Agent for WallFollow {
         if let Some((_, scan)) = self.scan.latest() {
             self.last_scan = Some((now, scan));
         }
-        let fresh = self.last_scan.filter(|(t, _)| now.saturating_sub(*t) <= self.timeout_ms.get() * 1_000_000);
+        let fresh =
+            self.last_scan.filter(|(t, _)| now.saturating_sub(*t) <= self.timeout_ms.get().saturating_mul(1_000_000));
         let Some((_, scan)) = fresh else {
             if !self.silent && self.last_scan.is_some() {
                 tracing::warn!("no sonar scan for {} ms: sending no command", self.timeout_ms.get());
@@ -116,7 +189,8 @@ impl Agent for WallFollow {
         }
         self.wall = c.side;
         self.rising = c.rising;
-        let (v0, w0, t0) = self.sent.unwrap_or((0.0, 0.0, now.saturating_sub(period.as_nanos() as u64)));
+        let (v0, w0, t0) =
+            self.sent.unwrap_or((0.0, 0.0, now.saturating_sub(u64::try_from(period.as_nanos()).unwrap_or(u64::MAX))));
         let since = now.saturating_sub(t0) as f32 / 1e9;
         let (v, omega) = (slew(v0, c.v, ACCEL, since), slew(w0, c.omega, ALPHA, since));
         self.sent = Some((v, omega, now));
@@ -127,4 +201,32 @@ impl Agent for WallFollow {
 
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<WallFollow>()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_numeric_parameter_is_bounded_above_and_says_its_range() {
+        let mut t = ParamTable::default();
+        let _p = Params::declare(&mut t);
+        let keys: Vec<String> = t.snapshot().into_iter().map(|(k, _)| k).filter(|k| k != "side").collect();
+        assert_eq!(keys.len(), 4, "{keys:?}");
+        for key in &keys {
+            // values of the parameter's type, refused by its range
+            for absurd in ["18446744073709551615", "0"] {
+                let e = t.set(key, absurd).expect_err(&format!("{key} = {absurd} must be refused"));
+                assert!(e.contains(key.as_str()) && e.contains(" is in ") && e.contains(']'), "{key} = {absurd}: {e}");
+            }
+            // refused by the range or by the type
+            for absurd in ["1e30", "-1", "NaN", "inf"] {
+                assert!(t.set(key, absurd).is_err(), "{key} = {absurd} must be refused");
+            }
+        }
+        assert!(t.set("side", "up").is_err());
+        for (key, ok) in [("scan_timeout_ms", "100"), ("scan_timeout_ms", "10000"), ("v_max", "0.8"), ("target", "2")] {
+            t.set(key, ok).unwrap_or_else(|e| panic!("{key} = {ok}: {e}"));
+        }
+    }
 }
