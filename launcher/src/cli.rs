@@ -9,6 +9,9 @@ pub struct Cli {
     /// Robot (isolated world) to work on.
     #[arg(long, global = true, env = "NERVE_ROBOT", default_value = agent_sdk::world::DEFAULT_ROBOT)]
     pub robot: String,
+    /// Whether `robot` was given (`--robot` or `NERVE_ROBOT`), not defaulted.
+    #[arg(skip)]
+    pub robot_explicit: bool,
     /// The command.
     #[command(subcommand)]
     pub command: Command,

@@ -251,9 +251,15 @@ pub fn describe(exe: &Path, params: &[String], args: &[String]) -> Result<Descri
     Ok(d)
 }
 
-/// Reads and checks a launch file for `world` (the robot the file runs on).
-/// `world_for` gets the robot name (from the file, else the command line).
-pub fn load(path: &Path, default_robot: &str) -> Result<(LaunchFile, World), Box<dyn std::error::Error + Send + Sync>> {
+/// Reads and checks a launch file for `world` (the robot the file runs on):
+/// `cli_robot` when it was named explicitly (`--robot`, `NERVE_ROBOT`), else
+/// the file's `robot`, else `cli_robot` (the default).
+pub fn load(
+    path: &Path,
+    cli_robot: &str,
+    explicit: bool,
+) -> Result<(LaunchFile, World), Box<dyn std::error::Error + Send + Sync>> {
+    let default_robot = cli_robot;
     let src = std::fs::read_to_string(path).map_err(|e| format!("cannot read launch file {}: {e}", path.display()))?;
     let fail = |errors| Box::new(LaunchErrors { path: path.to_path_buf(), errors });
     let raw: RawFile = match toml::from_str(&src) {
@@ -267,6 +273,16 @@ pub fn load(path: &Path, default_robot: &str) -> Result<(LaunchFile, World), Box
     };
     let mut cx = Ctx { src: &src, errors: Vec::new() };
     let robot = match &raw.robot {
+        Some(r) if explicit => {
+            if r.get_ref() != cli_robot {
+                eprintln!(
+                    "note: {} names robot {:?}; launching on robot {cli_robot:?} as the command line says",
+                    path.display(),
+                    r.get_ref()
+                );
+            }
+            cli_robot.to_owned()
+        }
         Some(r) => match RobotName::new(r.get_ref()) {
             Ok(_) => r.get_ref().clone(),
             Err(e) => {

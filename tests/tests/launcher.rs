@@ -45,6 +45,22 @@ fn launch_pipeline_then_down_leaves_nothing() {
     }
 }
 
+/// The robot named on the command line wins over the launch file's: two
+/// people (or tests) launching `launch/pipeline.toml` get two robots, and
+/// `nerve down` under the name they gave stops it (review F, intro).
+#[test]
+fn the_robot_named_on_the_command_line_wins() {
+    let r = Robot::new("clirob");
+    let file = r.home.join("pipeline.toml");
+    std::fs::write(&file, pipeline()).expect("copy of launch/pipeline.toml, robot line and all");
+    let out = r.command("nerve").arg("launch").arg(&file).output().expect("launch");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("names robot \"pipeline\"") && err.contains(&r.name), "{err}");
+    assert_eq!(r.ps().len(), 3, "the agents run on the robot given on the command line");
+    r.down_and_check_clean();
+}
+
 /// Every kind of bad launch file is refused with file and line, and nothing starts.
 #[test]
 fn bad_launch_files_are_refused_with_file_and_line() {

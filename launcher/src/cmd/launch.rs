@@ -51,9 +51,9 @@ fn policy(p: RestartPolicy) -> proto::RestartPolicy {
     }
 }
 
-pub fn launch(cli_robot: &str, a: LaunchArgs) -> Result<ExitCode> {
+pub fn launch(cli_robot: &str, explicit: bool, a: LaunchArgs) -> Result<ExitCode> {
     let t0 = Instant::now();
-    let (file, world) = match launch_file::load(&a.file, cli_robot) {
+    let (file, world) = match launch_file::load(&a.file, cli_robot, explicit) {
         Ok(x) => x,
         Err(e) => {
             eprintln!("{e}");
@@ -194,7 +194,7 @@ fn follow(world: &World, file: &LaunchFile) -> Result<()> {
 /// Unlike [`launch`], any failure — an invalid file, an agent that did not
 /// start or register, a connection refused — is an error. Used by `nerve demo`.
 pub(crate) fn launch_robot(robot: &str, path: &std::path::Path) -> Result<World> {
-    let (file, world) = launch_file::load(path, robot).map_err(|e| anyhow!("{e}"))?;
+    let (file, world) = launch_file::load(path, robot, false).map_err(|e| anyhow!("{e}"))?;
     world.ensure_state_dirs()?;
     let up = bring_up(&world, &file)?;
     if up.failed > 0 {

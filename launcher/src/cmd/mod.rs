@@ -36,7 +36,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Echo(a) => echo::echo(&world, a),
         Command::Hz(a) => echo::hz(&world, a),
         Command::Down(a) => down::down(&world, a),
-        Command::Launch(a) => launch::launch(&cli.robot, a),
+        Command::Launch(a) => launch::launch(&cli.robot, cli.robot_explicit, a),
         Command::Logs(a) => logs::logs(&world, a),
         Command::Exec(a) => start::exec(&world, a),
         Command::Demo(c) => demo::demo(&cli.robot, c),
