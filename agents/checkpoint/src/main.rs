@@ -14,7 +14,8 @@
 //! * `sighting` (`nerve::CheckpointSighting`): each tube seen with a
 //!   trusted range (not cut by the frame's border, within `range_min_m` …
 //!   `range_max_m`): id, IR transmitters, range, bearing, world position and
-//!   facing direction, target or not;
+//!   facing direction, target or not; and a known checkpoint the IR names
+//!   but no ranged tube shows, without range (`from_camera = 0`);
 //! * `correction` (`nerve::PoseCorrection`): the corrected pose at the
 //!   frame's instant, when a known checkpoint is seen, named by a fresh IR
 //!   code or (unless `require_ir`) by where its tube falls (at most every

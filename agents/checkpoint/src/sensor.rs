@@ -10,7 +10,9 @@
 //! 2. a fresh IR code of a known checkpoint names the upright tube placed
 //!    nearest its known position (within `max_jump_m`); a fresh IR code of
 //!    a target names the nearest upside-down tube;
-//! 3. every ranged tube becomes a sighting: id (IR, else the known
+//! 3. a known checkpoint the IR names but no ranged tube shows becomes a
+//!    sighting without range (`from_camera = 0`, range and bearing 0);
+//!    every ranged tube becomes a sighting: id (IR, else the known
 //!    checkpoint within `gate_m` of where it falls, else 0), world position
 //!    (the known one for a known checkpoint), facing direction (the IR
 //!    cone's centre, else the direction from the tube to the robot);
@@ -146,9 +148,6 @@ impl Sensor {
             .filter(|o| o.range_m >= s.range_min_m && o.range_m <= s.range_max_m)
             .collect();
         out.ranged = seen.len();
-        if seen.is_empty() {
-            return out;
-        }
         let ir = f
             .ir
             .filter(|r| r.seen == 1 && r.checkpoint_id != 0 && f.now_ns.saturating_sub(r.stamp_ns) <= s.ir_fresh_ns);
@@ -173,6 +172,27 @@ impl Sensor {
             };
             i.map(|i| (i, id))
         });
+        // a known checkpoint the IR names but the camera does not range (it
+        // is to the side, or nearer than the camera's range): reported
+        // without range, so that the map builder records it all the same
+        if let (Some(r), None) = (ir, named) {
+            let cone = self
+                .config
+                .checkpoint(r.checkpoint_id)
+                .and_then(|k| ir_cone(k.heading_deg.to_radians(), r.transmitters, half_angle).map(|c| (*k, c)));
+            if let Some((k, c)) = cone {
+                out.sightings.push(CheckpointSighting {
+                    stamp_ns: f.stamp_ns,
+                    x: k.position[0],
+                    y: k.position[1],
+                    facing_rad: c.centre as f32,
+                    checkpoint_id: k.id,
+                    transmitters: r.transmitters,
+                    from_ir: 1,
+                    ..Default::default()
+                });
+            }
+        }
         for (i, o) in seen.iter().enumerate() {
             let by_ir = named.filter(|(n, _)| *n == i).map(|(_, id)| id);
             let placed = f.pose.as_ref().map(|p| place(p, o));
@@ -370,6 +390,29 @@ mod tests {
     }
 
     #[test]
+    fn a_checkpoint_heard_but_not_seen_is_reported_without_range() {
+        let f = FrameInput {
+            tubes: &[],
+            width_px: 320,
+            stamp_ns: 7,
+            now_ns: 7,
+            pose: None,
+            ir: Some(ir(2, 0b0011, 7)),
+            pan_rad: 0.0,
+        };
+        let out = sensor().frame(&f, &SensorSettings::default());
+        assert_eq!(out.sightings.len(), 1);
+        let sg = out.sightings[0];
+        assert_eq!((sg.checkpoint_id, sg.from_ir, sg.from_camera, sg.x, sg.y, sg.range_m), (2, 1, 0, 6.0, 1.2, 0.0));
+        assert!((f64::from(sg.facing_rad) + PI / 4.0).abs() < 1e-6, "between transmitters 0 (-90°) and 1 (0°)");
+        assert!(out.correction.is_none());
+        // an unknown code or a target's: nothing
+        assert!(
+            sensor().frame(&FrameInput { ir: Some(ir(9, 1, 7)), ..f }, &SensorSettings::default()).sightings.is_empty()
+        );
+    }
+
+    #[test]
     fn the_target_is_placed_from_the_pose() {
         let truth = Pose { x: 12.8, y: -1.2, theta: -PI / 2.0 };
         let tubes =
@@ -408,6 +451,9 @@ mod tests {
         let tight = SensorSettings { max_jump_m: 1.0, ..SensorSettings::default() };
         let out = sensor().frame(&f, &tight);
         assert!(out.correction.is_none());
-        assert_eq!(out.sightings[0].from_ir, 0, "too far from checkpoint 1 to be the one the IR names");
+        let cam: Vec<_> = out.sightings.iter().filter(|s| s.from_camera == 1).collect();
+        assert_eq!(cam[0].from_ir, 0, "too far from checkpoint 1 to be the one the IR names");
+        // the IR's checkpoint is reported on its own, without range
+        assert!(out.sightings.iter().any(|s| s.from_camera == 0 && s.checkpoint_id == 1));
     }
 }
