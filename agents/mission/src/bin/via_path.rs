@@ -18,8 +18,8 @@ use std::time::Duration;
 /// Arguments after `--`.
 #[derive(Debug, clap::Parser)]
 struct Args {
-    /// The points, `X,Y[,KIND];...` (metres, world frame).
-    #[arg(long)]
+    /// The points, `X,Y[,KIND];...` (metres, world frame; may start with a minus).
+    #[arg(long, allow_hyphen_values = true)]
     points: String,
     /// The path's id (from 1).
     #[arg(long, default_value_t = 1)]

@@ -1,0 +1,277 @@
+//! The cooperation experiment's command sender and receiver across two
+//! robots: real processes, two routers, two bridges over loopback (Zenoh,
+//! explicit endpoints), and the simulator serving robot 2's motor and arm.
+//!
+//! Robot 1 runs the simulator (which serves robot 2's boards too), the
+//! mission agent as the explorer, and a scripted path (`via-path`) in place
+//! of the map builder; robot 2 runs its motor, odometry, target achiever,
+//! arm and the mission agent as the executor. The path goes out from robot
+//! 1's mission agent, crosses the bridges, reaches robot 2's target
+//! achiever, which drives robot 2 to the last point; the arm tries the grasp
+//! (the only target of the world is far away: missed, out of reach); robot
+//! 2's "arrived" crosses back, robot 1's mission agent answers "resume".
+
+use nerve_tests::{Robot, wait_until};
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// A TCP port free on 127.0.0.1 now.
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("a free port")
+}
+
+/// The figures of agent `name` of robot `r`, by key.
+fn figures(r: &Robot, name: &str) -> BTreeMap<String, String> {
+    let Some(a) = r.agent(name) else { return BTreeMap::new() };
+    a["stats"]["figures"]
+        .as_array()
+        .map(|v| v.iter().filter_map(|p| Some((p[0].as_str()?.to_owned(), p[1].as_str()?.to_owned()))).collect())
+        .unwrap_or_default()
+}
+
+fn figure(r: &Robot, agent: &str, key: &str) -> String {
+    figures(r, agent).get(key).cloned().unwrap_or_default()
+}
+
+fn figure_u64(r: &Robot, agent: &str, key: &str) -> u64 {
+    figure(r, agent, key).parse().unwrap_or(0)
+}
+
+fn write(dir: &Path, name: &str, body: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, body).expect("write file");
+    p
+}
+
+fn launch(r: &Robot, file: &Path) {
+    let out = r.command("nerve").arg("launch").arg(file).output().expect("run nerve launch");
+    assert!(out.status.success(), "launch of {} failed: {}", r.name, String::from_utf8_lossy(&out.stderr));
+}
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Robot 1's path goes to robot 2's target achiever across the bridges;
+/// robot 2 drives it, grasps (and misses: no target in reach), and its
+/// "arrived" comes back to robot 1, which answers "resume".
+#[test]
+fn a_path_crosses_to_robot_2_and_its_arrival_comes_back() {
+    let (r1, r2) = (Robot::new("coopa"), Robot::new("coopb"));
+    let port = free_port();
+    let world = repo().join("worlds").join("cooperate.toml");
+    let r2_dev = r2.home.join(&r2.name).join("dev");
+
+    let r1_bridge = write(
+        &r1.home,
+        "bridge.toml",
+        &format!(
+            r#"listen = ["tcp/127.0.0.1:{port}"]
+lease = "1s"
+[[export]]
+port = "mission/path"
+type = "nerve::ViaPath"
+reliable = true
+[[export]]
+port = "mission/order"
+type = "nerve::MissionCommand"
+reliable = true
+[[import]]
+port = "{r2}/mission/report"
+type = "nerve::MissionCommand"
+as = "report"
+"#,
+            r2 = r2.name
+        ),
+    );
+    let r2_bridge = write(
+        &r2.home,
+        "bridge.toml",
+        &format!(
+            r#"connect = ["tcp/127.0.0.1:{port}"]
+lease = "1s"
+[[export]]
+port = "mission/report"
+type = "nerve::MissionCommand"
+reliable = true
+[[import]]
+port = "{r1}/mission/path"
+type = "nerve::ViaPath"
+as = "path"
+[[import]]
+port = "{r1}/mission/order"
+type = "nerve::MissionCommand"
+as = "order"
+"#,
+            r1 = r1.name
+        ),
+    );
+    // robot 2 starts at (-4, 0) facing +x: a via point 0.5 m ahead, the
+    // "target" 1.4 m ahead (it stops 0.42 m short of it)
+    let r1_launch = r1.launch_file(
+        "r1.toml",
+        &format!(
+            r#"robot = "x"
+[[agent]]
+name = "sim"
+kind = "sim"
+args = ["--world", "{world}", "--robot-model", "h1", "--seed", "1", "--dev-dir", "{{state}}/dev",
+        "--extra-robot", "{r2}:h2:{r2_dev}"]
+[[agent]]
+name = "plan"
+kind = "via-path"
+args = ["--points", "-3.5,0;-2.6,0,target", "--path-id", "7"]
+[[agent]]
+name = "mission"
+kind = "mission"
+args = ["--role", "explorer"]
+params = {{ wait_mode = "", resend_ms = 1000 }}
+[[agent]]
+name = "bridge"
+kind = "bridge"
+args = ["--config", "{cfg}"]
+[[connect]]
+from = "plan/path"
+to = "mission/path_in"
+[[connect]]
+from = "bridge/report"
+to = "mission/report"
+"#,
+            world = world.display(),
+            r2 = r2.name,
+            r2_dev = r2_dev.display(),
+            cfg = r1_bridge.display()
+        ),
+    );
+    let r2_launch = r2.launch_file(
+        "r2.toml",
+        &format!(
+            r#"robot = "x"
+[[agent]]
+name = "motor"
+kind = "motor"
+device = "{{state}}/dev/motor"
+args = ["--robot-model", "h2"]
+[[agent]]
+name = "odometry"
+kind = "odometry"
+args = ["--start=-4,0,0"]
+[[agent]]
+name = "target"
+kind = "target"
+params = {{ standoff_m = 0.42 }}
+[[agent]]
+name = "arm"
+kind = "arm"
+device = "{{state}}/dev/arm"
+[[agent]]
+name = "mission"
+kind = "mission"
+args = ["--role", "executor"]
+params = {{ resend_ms = 1000 }}
+[[agent]]
+name = "bridge"
+kind = "bridge"
+args = ["--config", "{cfg}"]
+[[connect]]
+from = "motor/odom"
+to = "odometry/odom"
+[[connect]]
+from = "bridge/path"
+to = "mission/path_in"
+[[connect]]
+from = "bridge/order"
+to = "mission/order_in"
+[[connect]]
+from = "mission/path"
+to = "target/path"
+[[connect]]
+from = "mission/order"
+to = "target/mission_in"
+[[connect]]
+from = "odometry/pose"
+to = "target/pose"
+[[connect]]
+from = "target/cmd"
+to = "motor/cmd"
+[[connect]]
+from = "target/mission"
+to = "mission/progress"
+[[connect]]
+from = "mission/grasp"
+to = "arm/cmd"
+[[connect]]
+from = "arm/state"
+to = "mission/arm"
+[[connect]]
+from = "odometry/pose"
+to = "mission/pose"
+"#,
+            cfg = r2_bridge.display()
+        ),
+    );
+    launch(&r1, &r1_launch);
+    launch(&r2, &r2_launch);
+
+    // robot 1 sent the path; it crossed to robot 2's mission agent, which
+    // handed it to the target achiever: robot 2 follows path 7
+    assert!(
+        wait_until(Duration::from_secs(60), || figure(&r1, "mission", "phase") == "sent"),
+        "robot 1 did not send the path: {:?}",
+        figures(&r1, "mission")
+    );
+    assert!(
+        wait_until(Duration::from_secs(60), || {
+            matches!(figure(&r2, "mission", "phase").as_str(), "following" | "grasping" | "arrived" | "done")
+        }),
+        "robot 2 did not take the path: mission {:?}, bridge {:?}",
+        figures(&r2, "mission"),
+        figures(&r2, "bridge")
+    );
+    assert_eq!(figure_u64(&r2, "mission", "path_id"), 7);
+    assert!(figure_u64(&r2, "bridge", &format!("import.{}/mission/path.msgs_in", r1.name)) >= 1);
+    let g: Value = serde_json::from_str(&r2.ok(&["graph", "--json"])).expect("graph json");
+    let edges: Vec<String> = g["connections"]
+        .as_array()
+        .map(|c| {
+            c.iter()
+                .map(|e| format!("{} -> {}", e["from"].as_str().unwrap_or("?"), e["to"].as_str().unwrap_or("?")))
+                .collect()
+        })
+        .unwrap_or_default();
+    assert!(edges.contains(&"mission/path -> target/path".to_owned()), "{edges:?}");
+
+    // robot 2 drives to the end of the path, the arm tries, robot 2 reports
+    // "arrived"; it crosses back and robot 1 is done
+    assert!(
+        wait_until(Duration::from_secs(120), || figure(&r1, "mission", "phase") == "done"),
+        "robot 2's arrival did not reach robot 1: r1 mission {:?}, r2 mission {:?}, r2 arm {:?}",
+        figures(&r1, "mission"),
+        figures(&r2, "mission"),
+        figures(&r2, "arm")
+    );
+    assert_eq!(figure_u64(&r1, "mission", "path_id"), 7);
+    assert!(figure_u64(&r1, "bridge", &format!("import.{}/mission/report.msgs_in", r2.name)) >= 1);
+    // the target achiever really drove robot 2 there: the simulator's truth
+    let truth = r1.echo(&format!("sim/truth-{}", r2.name), 1);
+    let x = truth[0]["data"]["x"].as_f64().expect("truth x");
+    assert!(x > -3.6, "robot 2 is still near its start: {truth:?}");
+    // the arm grasped at the target of the path, and missed: the world's
+    // only target is 15 m away, which its probes tell
+    assert_eq!(figure(&r2, "mission", "grasp"), "missed", "{:?}", figures(&r2, "mission"));
+    assert_eq!(figure_u64(&r2, "arm", "missed"), 1, "{:?}", figures(&r2, "arm"));
+    let arm = r2.echo("arm/state", 1);
+    assert_eq!(arm[0]["data"]["reason"].as_u64(), Some(2), "out of reach expected: {arm:?}");
+    // robot 1's "resume" reached robot 2: it stops repeating "arrived"
+    assert!(
+        wait_until(Duration::from_secs(30), || figure(&r2, "mission", "phase") == "done"),
+        "robot 1's resume did not reach robot 2: {:?}",
+        figures(&r2, "mission")
+    );
+
+    r2.down_and_check_clean();
+    r1.down_and_check_clean();
+}
