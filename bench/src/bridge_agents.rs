@@ -156,7 +156,7 @@ impl<P: BenchPayload> Agent for Sink<P> {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let a = args(setup)?;
-        let rows = Vec::with_capacity(a.count.min(1 << 20));
+        let rows = Vec::with_capacity(a.count.min(1 << 16));
         Ok(Sink { input: setup.input("in")?, a, batch: 0, rows, last_arrival: 0 })
     }
 
