@@ -55,12 +55,12 @@ fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// Robot 1's path goes to robot 2's target achiever across the bridges;
-/// robot 2 drives it, grasps (and misses: no target in reach), and its
-/// "arrived" comes back to robot 1, which answers "resume".
-#[test]
-fn a_path_crosses_to_robot_2_and_its_arrival_comes_back() {
-    let (r1, r2) = (Robot::new("coopa"), Robot::new("coopb"));
+/// The two robots of the tests, launched: robot 1 with the simulator, a
+/// scripted path (id 7) and the explorer; robot 2 with motor, odometry,
+/// target achiever, arm and the executor; each with its bridge. Returns
+/// them with robot 2's bridge configuration.
+fn two_robots(tag: &str) -> (Robot, Robot, PathBuf) {
+    let (r1, r2) = (Robot::new(&format!("{tag}a")), Robot::new(&format!("{tag}b")));
     let port = free_port();
     let world = repo().join("worlds").join("cooperate.toml");
     let r2_dev = r2.home.join(&r2.name).join("dev");
@@ -215,6 +215,15 @@ to = "mission/pose"
     );
     launch(&r1, &r1_launch);
     launch(&r2, &r2_launch);
+    (r1, r2, r2_bridge)
+}
+
+/// Robot 1's path goes to robot 2's target achiever across the bridges;
+/// robot 2 drives it, grasps (and misses: no target in reach), and its
+/// "arrived" comes back to robot 1, which answers "resume".
+#[test]
+fn a_path_crosses_to_robot_2_and_its_arrival_comes_back() {
+    let (r1, r2, _) = two_robots("coop");
 
     // robot 1 sent the path; it crossed to robot 2's mission agent, which
     // handed it to the target achiever: robot 2 follows path 7
@@ -272,6 +281,47 @@ to = "mission/pose"
         figures(&r2, "mission")
     );
 
+    r2.down_and_check_clean();
+    r1.down_and_check_clean();
+}
+
+/// Robot 2's bridge is stopped while robot 2 follows the path: its
+/// "arrived" goes nowhere (a bridge that is not running never sees it), and
+/// robot 1 keeps waiting. Once the bridge is started again, robot 2's
+/// repeated report crosses, robot 1 answers, and both are done.
+#[test]
+fn an_arrival_reported_while_the_bridge_is_down_arrives_after_it_restarts() {
+    let (r1, r2, r2_bridge) = two_robots("coup");
+    assert!(
+        wait_until(Duration::from_secs(60), || figure(&r2, "mission", "phase") == "following"),
+        "robot 2 did not take the path: {:?}",
+        figures(&r2, "mission")
+    );
+    r2.ok(&["stop", "bridge"]);
+    assert!(
+        wait_until(Duration::from_secs(120), || figure(&r2, "mission", "phase") == "arrived"),
+        "robot 2 did not arrive: {:?}",
+        figures(&r2, "mission")
+    );
+    // robot 2 repeats its report into the void; robot 1 still waits
+    let sent = figure_u64(&r2, "mission", "sent");
+    assert!(wait_until(Duration::from_secs(30), || figure_u64(&r2, "mission", "sent") > sent + 1));
+    assert_eq!(figure(&r1, "mission", "phase"), "sent", "robot 1 heard of an arrival with the link down");
+    // the bridge back: the next repetition crosses
+    let cfg = r2_bridge.display().to_string();
+    r2.ok(&["start", "bridge", "--name", "bridge", "--", "--config", &cfg]);
+    assert!(
+        wait_until(Duration::from_secs(60), || figure(&r1, "mission", "phase") == "done"),
+        "robot 2's repeated arrival did not reach robot 1: r1 {:?}, r2 {:?}, r2 bridge {:?}",
+        figures(&r1, "mission"),
+        figures(&r2, "mission"),
+        figures(&r2, "bridge")
+    );
+    assert!(
+        wait_until(Duration::from_secs(30), || figure(&r2, "mission", "phase") == "done"),
+        "robot 1's resume did not reach robot 2: {:?}",
+        figures(&r2, "mission")
+    );
     r2.down_and_check_clean();
     r1.down_and_check_clean();
 }
