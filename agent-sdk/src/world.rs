@@ -17,8 +17,59 @@ pub type Ipc = ipc_threadsafe::Service;
 
 /// Environment variable naming the robot when `--robot` is not given.
 pub const ROBOT_ENV: &str = "NERVE_ROBOT";
-/// Environment variable overriding the base of the state directories (default `/tmp/nerve`).
+/// Environment variable overriding the base of the state directories
+/// (default `$XDG_RUNTIME_DIR/nerve`, else `/tmp/nerve-<uid>`).
 pub const HOME_ENV: &str = "NERVE_HOME";
+
+/// The base of the state directories when `NERVE_HOME` is not set: the
+/// user's runtime directory (private, per user, on tmpfs) where there is
+/// one, else `/tmp/nerve-<uid>`. Per user, so that one user's robot named
+/// `default` never locks out or reads another's.
+pub fn default_home() -> PathBuf {
+    match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
+        Some(d) => PathBuf::from(d).join("nerve"),
+        None => PathBuf::from(format!("/tmp/nerve-{}", nix::unistd::geteuid())),
+    }
+}
+
+/// Makes `dir` a private directory of this user, or says why it cannot be
+/// one: created 0700 when missing; refused when it is a symlink, not a
+/// directory, or owned by another uid; made 0700 when it is ours but open
+/// to others (a state directory of an older nerve, say). Another local user
+/// can then neither plant files or symlinks in it nor read its logs.
+pub fn secure_dir(dir: &StdPath) -> Result<(), String> {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+    match std::fs::symlink_metadata(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            std::fs::DirBuilder::new()
+                .recursive(true)
+                .mode(0o700)
+                .create(dir)
+                .map_err(|e| format!("cannot create it: {e}"))?;
+        }
+        Err(e) => return Err(e.to_string()),
+        Ok(_) => {}
+    }
+    let m = std::fs::symlink_metadata(dir).map_err(|e| e.to_string())?;
+    if m.file_type().is_symlink() {
+        return Err("it is a symbolic link; nerve does not follow links for its state (remove it)".into());
+    }
+    if !m.is_dir() {
+        return Err("it is not a directory".into());
+    }
+    let me = nix::unistd::geteuid().as_raw();
+    if m.uid() != me {
+        return Err(format!(
+            "it belongs to uid {}, not to you (uid {me}); another user may have made it: remove it, or set {HOME_ENV} to a directory of yours",
+            m.uid()
+        ));
+    }
+    if m.mode() & 0o077 != 0 {
+        std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
+            .map_err(|e| format!("cannot make it private: {e}"))?;
+    }
+    Ok(())
+}
 /// Environment variable overriding the iceoryx2 root path (default `/dev/shm/nerve-iox2/`).
 pub const IOX2_ROOT_ENV: &str = "NERVE_IOX2_ROOT";
 /// Default iceoryx2 root path. It is short on purpose: iceoryx2 event
@@ -50,6 +101,14 @@ pub enum WorldError {
         detail: String,
     },
     /// The state directory could not be created.
+    #[error("cannot use the state directory {path}: {detail}")]
+    UnsafeStateDir {
+        /// the directory
+        path: String,
+        /// why
+        detail: String,
+    },
+    /// The state directory could not be created.
     #[error("cannot create the state directory {path}: {source}; set {HOME_ENV} to a writable directory")]
     StateDir {
         /// the path
@@ -67,6 +126,29 @@ pub enum WorldError {
     },
 }
 
+/// A base directory named by the user (`NERVE_HOME`): created when missing;
+/// it may be shared (0755) but not a link, nor another user's, nor writable
+/// by others.
+fn check_base(base: &StdPath) -> Result<(), String> {
+    use std::os::unix::fs::MetadataExt;
+    if std::fs::symlink_metadata(base).is_err() {
+        return secure_dir(base);
+    }
+    let m = std::fs::symlink_metadata(base).map_err(|e| e.to_string())?;
+    let me = nix::unistd::geteuid().as_raw();
+    if m.file_type().is_symlink() {
+        return Err(format!("it is a symbolic link; give {HOME_ENV} the real directory"));
+    }
+    if m.uid() != me || m.mode() & 0o022 != 0 {
+        return Err(format!(
+            "it belongs to uid {} with mode {:o}; {HOME_ENV} must name a directory of yours that others cannot write",
+            m.uid(),
+            m.mode() & 0o7777
+        ));
+    }
+    Ok(())
+}
+
 /// One robot's world.
 #[derive(Debug, Clone)]
 pub struct World {
@@ -77,10 +159,10 @@ pub struct World {
 }
 
 impl World {
-    /// The world of `robot`, with its state under `$NERVE_HOME/<robot>` (default `/tmp/nerve/<robot>`).
+    /// The world of `robot`, with its state under `$NERVE_HOME/<robot>` (default: [`default_home`]).
     pub fn new(robot: &str) -> Result<Self, WorldError> {
         let robot = RobotName::new(robot)?;
-        let base = std::env::var_os(HOME_ENV).map(PathBuf::from).unwrap_or_else(|| PathBuf::from("/tmp/nerve"));
+        let base = std::env::var_os(HOME_ENV).filter(|h| !h.is_empty()).map(PathBuf::from).unwrap_or_else(default_home);
         let state_dir = base.join(robot.as_str());
         let mut iox_root = std::env::var(IOX2_ROOT_ENV).unwrap_or_else(|_| DEFAULT_IOX2_ROOT.to_owned());
         if !iox_root.ends_with('/') {
@@ -116,11 +198,21 @@ impl World {
         &self.state_dir
     }
 
-    /// Creates the state directory and its `logs/` and `pids/` folders.
+    /// Creates the state directory and its `logs/` and `pids/` folders,
+    /// private to this user (see [`secure_dir`]); the base above it must not
+    /// be a link, nor belong to or be writable by another user.
     pub fn ensure_state_dirs(&self) -> Result<(), WorldError> {
+        if let Some(base) = self.state_dir.parent() {
+            if std::env::var_os(HOME_ENV).is_none() {
+                secure_dir(base)
+                    .map_err(|detail| WorldError::UnsafeStateDir { path: base.display().to_string(), detail })?;
+            } else {
+                check_base(base)
+                    .map_err(|detail| WorldError::UnsafeStateDir { path: base.display().to_string(), detail })?;
+            }
+        }
         for d in [self.state_dir.clone(), self.logs_dir(), self.pids_dir()] {
-            std::fs::create_dir_all(&d)
-                .map_err(|source| WorldError::StateDir { path: d.display().to_string(), source })?;
+            secure_dir(&d).map_err(|detail| WorldError::UnsafeStateDir { path: d.display().to_string(), detail })?;
         }
         Ok(())
     }
@@ -242,5 +334,39 @@ pub fn pid_alive(pid: u32) -> bool {
             !matches!(state, Some("Z") | Some("X") | None)
         }
         Err(_) => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+
+    #[test]
+    fn state_directories_are_private_and_never_links() {
+        let base = std::env::temp_dir().join(format!("nerve-secure-dir-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&base);
+        let d = base.join("r1");
+        secure_dir(&d).expect("created");
+        assert_eq!(std::fs::metadata(&d).map(|m| m.mode() & 0o777).ok(), Some(0o700));
+        // an old, world-readable state directory of ours is made private
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+        secure_dir(&d).expect("ours");
+        assert_eq!(std::fs::metadata(&d).map(|m| m.mode() & 0o777).ok(), Some(0o700));
+        // a planted symlink is refused (review F6, R1)
+        let target = base.join("elsewhere");
+        std::fs::create_dir_all(&target).expect("target");
+        let link = base.join("r2");
+        std::os::unix::fs::symlink(&target, &link).expect("symlink");
+        assert!(secure_dir(&link).expect_err("a link").contains("symbolic link"));
+        // a directory of another user is refused (root can make one to test with)
+        if nix::unistd::geteuid().is_root() {
+            let theirs = base.join("r3");
+            std::fs::create_dir_all(&theirs).expect("dir");
+            std::os::unix::fs::chown(&theirs, Some(65534), Some(65534)).expect("chown to nobody");
+            assert!(secure_dir(&theirs).expect_err("another uid").contains("uid 65534"));
+            assert!(check_base(&theirs).is_err());
+        }
+        let _ = std::fs::remove_dir_all(&base);
     }
 }

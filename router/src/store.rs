@@ -65,11 +65,20 @@ impl Store {
     pub fn save(&self, connections: &[Connection]) -> std::io::Result<()> {
         let dir = self.path.parent().unwrap_or(Path::new("."));
         std::fs::create_dir_all(dir)?;
-        let tmp = self.path.with_extension("json.tmp");
+        // a fresh temporary name, created exclusively, never through a
+        // symlink, readable by its owner only (review R1, R11d, R24)
+        let tmp = self.path.with_extension(format!("json.{}.tmp", std::process::id()));
         let body = serde_json::to_vec_pretty(&File { version: 1, connections: connections.to_vec() })
             .map_err(std::io::Error::other)?;
         {
-            let mut f = std::fs::File::create(&tmp)?;
+            use std::os::unix::fs::OpenOptionsExt;
+            let _ = std::fs::remove_file(&tmp);
+            let mut f = std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .mode(0o600)
+                .custom_flags(libc::O_NOFOLLOW)
+                .open(&tmp)?;
             f.write_all(&body)?;
             f.sync_all()?;
         }
@@ -140,6 +149,31 @@ mod tests {
         assert_eq!(store.load(), Ok(c));
         std::fs::write(store.path(), b"{ not json").expect("writes");
         assert!(store.load().expect_err("corrupt").contains("fix or remove"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_planted_symlink_is_never_written_through() {
+        use std::os::unix::fs::MetadataExt;
+        let dir = std::env::temp_dir().join(format!("nerve-store-link-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("dir");
+        let store = Store::new(&dir);
+        let victim = dir.join("victim");
+        std::fs::write(&victim, "keep").expect("victim");
+        // the old fixed temporary name, and this process's own one
+        for name in ["connections.json.tmp".to_string(), format!("connections.json.{}.tmp", std::process::id())] {
+            let _ = std::fs::remove_file(dir.join(&name));
+            std::os::unix::fs::symlink(&victim, dir.join(&name)).expect("symlink");
+        }
+        store.save(&[]).expect("saves");
+        assert_eq!(
+            std::fs::read_to_string(&victim).ok().as_deref(),
+            Some("keep"),
+            "wrote through a symlink (review R1)"
+        );
+        let mode = std::fs::metadata(store.path()).map(|m| m.mode() & 0o777).expect("saved");
+        assert_eq!(mode, 0o600, "the connection list is private (review R24)");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! nerve start sim --name sim -- --world worlds/test-room.toml --robot-model h1 \
-//!     --dev-dir /tmp/nerve/h1/dev [--truth truth.csv] [--seed 7] [--duration 60]
+//!     --dev-dir $NERVE_HOME/h1/dev [--truth truth.csv] [--seed 7] [--duration 60]
 //! ```
 //!
 //! * **Periodic** at the simulation rate: one step per period (default
@@ -43,7 +43,7 @@
 //!
 //!   ```text
 //!   nerve --robot coop-r1 start sim --name sim -- --world worlds/cooperate.toml \
-//!       --robot-model h1 --dev-dir /tmp/nerve/coop-r1/dev --extra-robot coop-r2:h2
+//!       --robot-model h1 --dev-dir $NERVE_HOME/coop-r1/dev --extra-robot coop-r2:h2
 //!   ```
 //!
 //! Parameters: read-only `sim_time` (s), `collisions` (the simulator's own
