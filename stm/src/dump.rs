@@ -93,8 +93,9 @@ pub fn dump_png(reader: &RingReader, which: FrameSelector, path: &Path) -> Resul
         format: meta.format().map_or_else(|| format!("code {}", meta.format_code), |f| f.to_string()),
     })?;
     let bpp = format.bytes_per_pixel().unwrap_or(1) as u64;
+    // the sizes come from the ring's writer: (2^32-1)^2 * 3 overflows u64
     let pixels = u64::from(meta.width) * u64::from(meta.height);
-    let needed = pixels * bpp;
+    let needed = pixels.saturating_mul(bpp);
     if pixels == 0 || (data.len() as u64) < needed {
         return Err(DumpError::BadSize {
             seq: meta.seq,

@@ -771,3 +771,22 @@ fn implausible_ring_state_is_recreated_on_reopen() {
         std::fs::remove_file(&path).expect("remove");
     }
 }
+
+#[test]
+fn dump_png_refuses_absurd_frame_sizes_from_the_ring() {
+    use shm_schemas::ring::SlotHeader;
+    use std::mem::offset_of;
+    let robot = unique_robot();
+    let guard = ShmGuard::own_dir(&robot);
+    let mut w = RingWriter::create_with(&guard.opts(), &robot, &name("img"), 2, 32 * 24 * 3).expect("create");
+    let n = w.write(FrameDesc::image(32, 24, PixelFormat::Rgb8), &[7u8; 32 * 24 * 3]).expect("write");
+    // a misbehaving writer's slot header: 0xFFFF_FFFF x 0xFFFF_FFFF rgb8
+    let slot = 4096 + n.slot as usize * (32 * 24 * 3 + 64);
+    poke(w.path(), slot + offset_of!(SlotHeader, width), &u32::MAX.to_ne_bytes());
+    poke(w.path(), slot + offset_of!(SlotHeader, height), &u32::MAX.to_ne_bytes());
+    let r = RingReader::open_with(&guard.opts(), &robot, &name("img")).expect("open");
+    let p = guard.dir.join("absurd.png");
+    let e = dump_png(&r, FrameSelector::Seq(n.seq), &p).expect_err("absurd sizes are refused");
+    assert!(matches!(e, nerve_stm::DumpError::BadSize { width: u32::MAX, height: u32::MAX, .. }), "{e}");
+    assert!(!p.exists());
+}

@@ -215,10 +215,7 @@ impl Source for V4lSource {
         let used = (meta.bytesused as usize).min(buf.len());
         let buf = &buf[..used];
         let monotonic = meta.flags.bits() & Flags::TIMESTAMP_MASK.bits() == Flags::TIMESTAMP_MONOTONIC.bits();
-        let stamp = (meta.timestamp.sec as u64)
-            .checked_mul(1_000_000_000)
-            .map(|s| s + meta.timestamp.usec as u64 * 1_000)
-            .filter(|s| monotonic && *s > 0);
+        let stamp = v4l2_stamp_ns(meta.timestamp.sec, meta.timestamp.usec).filter(|_| monotonic);
         let mut desc = FrameDesc::image(w, h, PixelFormat::Rgb8);
         if let Some(s) = stamp {
             desc = desc.stamped(s);
@@ -273,5 +270,32 @@ impl Drop for V4lSource {
                 tracing::warn!(device = %self.path.display(), "stopping the stream failed: {e}");
             }
         }
+    }
+}
+
+/// A V4L2 buffer timestamp in nanoseconds, `None` when there is none (zero)
+/// or it is implausible. The driver, or a v4l2loopback producer, chooses
+/// these numbers: a negative second or microsecond, or a microsecond of a
+/// million or more, is refused rather than wrapped or overflowed.
+pub(crate) fn v4l2_stamp_ns(sec: i64, usec: i64) -> Option<u64> {
+    let sec = u64::try_from(sec).ok()?;
+    let usec = u64::try_from(usec).ok().filter(|u| *u < 1_000_000)?;
+    sec.checked_mul(1_000_000_000)?.checked_add(usec * 1_000).filter(|s| *s > 0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::v4l2_stamp_ns;
+
+    #[test]
+    fn v4l2_timestamps_from_the_driver_are_checked() {
+        assert_eq!(v4l2_stamp_ns(12, 345_678), Some(12_345_678_000));
+        assert_eq!(v4l2_stamp_ns(0, 0), None, "no timestamp");
+        // a negative usec (e.g. from a v4l2loopback producer) overflowed `usec as u64 * 1000`
+        assert_eq!(v4l2_stamp_ns(5, -1), None);
+        assert_eq!(v4l2_stamp_ns(-1, 0), None);
+        assert_eq!(v4l2_stamp_ns(1, 1_000_000), None, "usec is below a million");
+        assert_eq!(v4l2_stamp_ns(i64::MAX, 0), None, "seconds beyond u64 nanoseconds");
+        assert_eq!(v4l2_stamp_ns(18_446_744_073, 999_999), None, "the sum overflows");
     }
 }

@@ -90,7 +90,7 @@ impl Reports {
 
     /// The facts from the reports received within `timeout` of `now_ns`.
     pub fn facts(&self, now_ns: u64, timeout: Duration) -> Facts {
-        let fresh = |t: u64| now_ns.saturating_sub(t) <= timeout.as_nanos() as u64;
+        let fresh = |t: u64| now_ns.saturating_sub(t) <= agent_sdk::clock::nanos(timeout);
         let live = || self.situations.values().filter(|(t, _)| fresh(*t)).map(|(_, s)| s);
         Facts {
             danger: live().filter_map(Situation::danger_level).max(),
@@ -121,7 +121,7 @@ pub struct Arbiter {
 impl Arbiter {
     /// No mode yet; a mode holds at least `min_dwell` unless an urgent one comes.
     pub fn new(min_dwell: Duration) -> Self {
-        Arbiter { current: None, since_ns: 0, changes: 0, min_dwell_ns: min_dwell.as_nanos() as u64 }
+        Arbiter { current: None, since_ns: 0, changes: 0, min_dwell_ns: agent_sdk::clock::nanos(min_dwell) }
     }
 
     /// The current mode.

@@ -16,6 +16,7 @@ use shm_schemas::payloads::{DangerLevel, LoadLevel, TargetState};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
+use toml::Spanned;
 
 /// Why a knowledge base could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -113,9 +114,9 @@ struct RawKb {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawDecision {
-    report_timeout: Option<String>,
-    min_dwell: Option<String>,
-    retry: Option<String>,
+    report_timeout: Option<Spanned<String>>,
+    min_dwell: Option<Spanned<String>>,
+    retry: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -145,7 +146,7 @@ struct RawMode {
     #[serde(default)]
     resume: Vec<String>,
     #[serde(default)]
-    periods: BTreeMap<String, String>,
+    periods: BTreeMap<String, Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -162,7 +163,7 @@ struct RawResources {
     machine_cpu: Option<RawThresholds>,
     agents_cpu: Option<RawThresholds>,
     memory: Option<RawThresholds>,
-    settle: Option<String>,
+    settle: Option<Spanned<String>>,
     slow_factor: Option<f64>,
     max_slow: Option<f64>,
     default_importance: Option<u8>,
@@ -173,6 +174,32 @@ struct RawResources {
     protect: Vec<String>,
     #[serde(default)]
     may_suspend: Vec<String>,
+}
+
+/// The longest duration a knowledge base may give (`retry`, `report_timeout`,
+/// `min_dwell`, mode periods, `resources.settle`): one hour. Longer ones are
+/// typos, and deadlines such as `now + retry` must stay far from overflowing.
+pub const MAX_KB_DURATION: Duration = Duration::from_secs(3600);
+
+/// The 1-based line of byte `at` of `text`.
+fn line_of(text: &str, at: usize) -> usize {
+    text.get(..at).map_or(0, |t| t.matches('\n').count()) + 1
+}
+
+/// Parses duration `what` of the knowledge base, at most [`MAX_KB_DURATION`];
+/// a refusal names the line.
+fn kb_duration(text: &str, what: &str, s: &Spanned<String>) -> Result<Duration, String> {
+    let line = line_of(text, s.span().start);
+    let v = s.get_ref();
+    let d = agent_sdk::clock::parse_duration(v)
+        .map_err(|e| format!("line {line}: {what} = {v:?}: {e} (write e.g. \"500ms\" or \"2s\")"))?;
+    if d > MAX_KB_DURATION {
+        return Err(format!(
+            "line {line}: {what} = {v:?} is longer than the {} a knowledge base allows; write a shorter duration",
+            agent_sdk::clock::format_duration(MAX_KB_DURATION)
+        ));
+    }
+    Ok(d)
 }
 
 /// The `[decision]` table.
@@ -328,11 +355,10 @@ impl KnowledgeBase {
         let raw: RawKb =
             toml::from_str(text).map_err(|e| KbError::Syntax { path: path.to_owned(), detail: e.to_string() })?;
         let invalid = |detail: String| KbError::Invalid { path: path.to_owned(), detail };
-        let dur = |what: &str, s: &Option<String>, default: Duration| -> Result<Duration, KbError> {
+        let dur = |what: &str, s: Option<&Spanned<String>>, default: Duration| -> Result<Duration, KbError> {
             match s {
                 None => Ok(default),
-                Some(s) => agent_sdk::clock::parse_duration(s)
-                    .map_err(|e| invalid(format!("{what} = {s:?}: {e} (write e.g. \"500ms\" or \"2s\")"))),
+                Some(s) => kb_duration(text, what, s).map_err(invalid),
             }
         };
 
@@ -340,9 +366,9 @@ impl KnowledgeBase {
         let decision = match &raw.decision {
             None => d,
             Some(r) => DecisionSettings {
-                report_timeout: dur("decision.report_timeout", &r.report_timeout, d.report_timeout)?,
-                min_dwell: dur("decision.min_dwell", &r.min_dwell, d.min_dwell)?,
-                retry: dur("decision.retry", &r.retry, d.retry)?,
+                report_timeout: dur("decision.report_timeout", r.report_timeout.as_ref(), d.report_timeout)?,
+                min_dwell: dur("decision.min_dwell", r.min_dwell.as_ref(), d.min_dwell)?,
+                retry: dur("decision.retry", r.retry.as_ref(), d.retry)?,
             },
         };
         if decision.report_timeout.is_zero() || decision.retry.is_zero() {
@@ -371,9 +397,12 @@ impl KnowledgeBase {
             }
             let mut periods = BTreeMap::new();
             for (agent, p) in &m.periods {
-                let d = dur(&format!("[modes.{name}] periods.{agent}"), &Some(p.clone()), Duration::ZERO)?;
+                let d = dur(&format!("[modes.{name}] periods.{agent}"), Some(p), Duration::ZERO)?;
                 if d < Duration::from_micros(10) {
-                    return Err(invalid(format!("[modes.{name}] periods.{agent} = {p:?}: a period is at least 10us")));
+                    return Err(invalid(format!(
+                        "[modes.{name}] periods.{agent} = {:?}: a period is at least 10us",
+                        p.get_ref()
+                    )));
                 }
                 periods.insert(agent.clone(), d);
             }
@@ -440,7 +469,7 @@ impl KnowledgeBase {
 
         let resources = match raw.resources {
             None => ResourcePolicy::default(),
-            Some(r) => resources(r).map_err(invalid)?,
+            Some(r) => resources(r, text).map_err(invalid)?,
         };
         Ok(KnowledgeBase { path: path.to_owned(), decision, rules, modes, resources })
     }
@@ -451,7 +480,7 @@ impl KnowledgeBase {
     }
 }
 
-fn resources(r: RawResources) -> Result<ResourcePolicy, String> {
+fn resources(r: RawResources, text: &str) -> Result<ResourcePolicy, String> {
     let d = ResourcePolicy::default();
     let th = |what: &str, t: Option<RawThresholds>| -> Result<Option<Thresholds>, String> {
         let Some(t) = t else { return Ok(None) };
@@ -468,8 +497,7 @@ fn resources(r: RawResources) -> Result<ResourcePolicy, String> {
     };
     let settle = match &r.settle {
         None => d.settle,
-        Some(s) => agent_sdk::clock::parse_duration(s)
-            .map_err(|e| format!("resources.settle = {s:?}: {e} (write e.g. \"2s\")"))?,
+        Some(s) => kb_duration(text, "resources.settle", s)?,
     };
     let slow_factor = r.slow_factor.unwrap_or(d.slow_factor);
     if !slow_factor.is_finite() || slow_factor <= 1.0 {
@@ -610,5 +638,26 @@ may_suspend = ["wall-follow"]
         assert!(e.contains("1 (least) to 10"), "{e}");
         let e = refused(&format!("{GOOD}\n[modes.idle]\n"));
         assert!(e.contains("\"idle\" is selected by no"), "{e}");
+    }
+
+    #[test]
+    fn kb_durations_are_bounded_with_file_and_line() {
+        // about 584 years overflowed `now + retry` in the decision agent
+        let text = GOOD.replace("min_dwell = \"300ms\"", "min_dwell = \"300ms\"\nretry = \"18446744073s\"");
+        let e = refused(&text);
+        assert!(e.contains("test.toml") && e.contains("line 5") && e.contains("decision.retry"), "{e}");
+        // a day is a valid duration elsewhere, but not in a knowledge base
+        let e = refused(&GOOD.replace("min_dwell = \"300ms\"", "min_dwell = \"300ms\"\nretry = \"86400s\""));
+        assert!(e.contains("line 5: decision.retry = \"86400s\" is longer than") && e.contains("3600s"), "{e}");
+        let e = refused(&GOOD.replace("\"800ms\"", "\"7200s\""));
+        assert!(e.contains("line 3: decision.report_timeout") && e.contains("longer than"), "{e}");
+        let e = refused(&GOOD.replace("\"100ms\"", "\"7200s\""));
+        assert!(e.contains("periods.wall-follow") && e.contains("longer than"), "{e}");
+        let e = refused(&GOOD.replace("may_suspend", "settle = \"3601s\"\nmay_suspend"));
+        assert!(e.contains("resources.settle") && e.contains("longer than"), "{e}");
+        // the longest allowed loads
+        let kb = parse(&GOOD.replace("min_dwell = \"300ms\"", "min_dwell = \"300ms\"\nretry = \"3600s\""))
+            .expect("an hour is allowed");
+        assert_eq!(kb.decision.retry, MAX_KB_DURATION);
     }
 }

@@ -66,7 +66,7 @@ impl Decision {
         if self.pending.is_empty() || now_ns < self.next_try_ns {
             return;
         }
-        self.next_try_ns = now_ns + self.kb.decision.retry.as_nanos() as u64;
+        self.next_try_ns = now_ns.saturating_add(agent_sdk::clock::nanos(self.kb.decision.retry));
         if self.router.is_none() {
             let client = self
                 .world
@@ -95,7 +95,7 @@ impl Decision {
                 Action::Resume(name) => CliRequest::Resume { name: name.clone() },
                 Action::Suspend(name) => CliRequest::Suspend { name: name.clone() },
                 Action::Rate { agent, period } => {
-                    CliRequest::Rate { name: agent.clone(), period_ns: period.as_nanos() as u64 }
+                    CliRequest::Rate { name: agent.clone(), period_ns: agent_sdk::clock::nanos(*period) }
                 }
             };
             match client.call(&RouterRequest::Cli(req), ROUTER_TIMEOUT) {

@@ -71,6 +71,27 @@ fn in_range(lo: f64, hi: f64) -> impl Fn(&f64) -> Result<(), String> + Send + Sy
     }
 }
 
+/// The number of pixels of a `width` x `height` RGB8 frame of `len` bytes,
+/// or why the frame cannot be one. The sizes come from another process's
+/// ring, so they are multiplied with checks (0xFFFF_FFFF squared, times 3,
+/// overflows u64) and must fit in the bytes the frame holds (at most a slot).
+fn rgb8_pixels(width: u32, height: u32, len: usize) -> Result<usize, String> {
+    let pixels = u64::from(width) * u64::from(height); // at most (2^32-1)^2 < 2^64
+    pixels
+        .checked_mul(3)
+        .filter(|bytes| *bytes <= len as u64)
+        .and_then(|_| usize::try_from(pixels).ok())
+        .ok_or_else(|| format!("it says {width}x{height} rgb8 (3 bytes a pixel) but holds {len} bytes"))
+}
+
+/// Why a frame was not processed.
+enum Refusal {
+    /// Not RGB8: the pixel format code.
+    Format(u32),
+    /// Sizes that do not fit the frame.
+    Size(String),
+}
+
 impl ImageAgent {
     fn thresholds(&self) -> hsi::RedThresholds {
         hsi::RedThresholds {
@@ -133,16 +154,19 @@ impl Agent for ImageAgent {
         // buffers; only an Ok result proves the pixels were intact
         let read = self.frames.latest_with(|meta, px| {
             if meta.format() != Some(PixelFormat::Rgb8) {
-                return Err(meta.format_code);
+                return Err(Refusal::Format(meta.format_code));
             }
-            let n = meta.width as usize * meta.height as usize;
-            let red = hsi::convert(&px[..(n * 3).min(px.len())], &thr, hsi, mask);
+            let n = rgb8_pixels(meta.width, meta.height, px.len()).map_err(Refusal::Size)?;
+            let red = hsi::convert(&px[..n * 3], &thr, hsi, mask);
             Ok((*meta, red))
         });
         let (meta, _red) = match read {
             Ok(None) => return Ok(()),
             Ok(Some(Ok(x))) => x,
-            Ok(Some(Err(code))) => {
+            Ok(Some(Err(Refusal::Size(why)))) => {
+                return Err(AgentError::Other(format!("the camera ring is inconsistent: a frame {why}")));
+            }
+            Ok(Some(Err(Refusal::Format(code)))) => {
                 self.refused += 1;
                 if self.refused.is_power_of_two() {
                     tracing::warn!(
@@ -185,4 +209,22 @@ impl Agent for ImageAgent {
 
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<ImageAgent>()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::rgb8_pixels;
+
+    #[test]
+    fn frame_sizes_from_the_ring_are_checked_not_overflowed() {
+        assert_eq!(rgb8_pixels(320, 240, 320 * 240 * 3), Ok(320 * 240));
+        assert_eq!(rgb8_pixels(0, 0, 0), Ok(0));
+        // 0xFFFF_FFFF squared times 3 overflows u64: refused, no panic
+        let e = rgb8_pixels(u32::MAX, u32::MAX, 1 << 20).expect_err("absurd geometry");
+        assert!(e.contains("4294967295x4294967295") && e.contains("1048576 bytes"), "{e}");
+        // larger than the frame (and its slot) holds
+        assert!(rgb8_pixels(320, 240, 320 * 240 * 3 - 1).is_err());
+        assert!(rgb8_pixels(1 << 20, 1 << 20, usize::MAX / 2).is_ok());
+        assert!(rgb8_pixels(u32::MAX, u32::MAX, usize::MAX).is_err(), "3 * (2^32-1)^2 bytes overflow u64");
+    }
 }
