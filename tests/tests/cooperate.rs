@@ -325,3 +325,47 @@ fn an_arrival_reported_while_the_bridge_is_down_arrives_after_it_restarts() {
     r2.down_and_check_clean();
     r1.down_and_check_clean();
 }
+
+/// The experiment's launch files as shipped (launch/cooperate-r1.toml,
+/// -r2.toml and their bridge configurations), with this test's robot names
+/// and a free port: every agent comes up, the bridges meet, each mission
+/// agent is in its first phase, and `nerve down` leaves nothing behind.
+#[test]
+fn the_shipped_launch_files_come_up_and_their_bridges_meet() {
+    let (r1, r2) = (Robot::new("shipa"), Robot::new("shipb"));
+    let port = free_port().to_string();
+    let dir = r1.home.join("shipped");
+    std::fs::create_dir_all(&dir).expect("launch dir");
+    let r2_dev = r2.home.join(&r2.name).join("dev");
+    for f in ["cooperate-r1.toml", "cooperate-r2.toml", "cooperate-r1.zenoh.toml", "cooperate-r2.zenoh.toml"] {
+        let text = std::fs::read_to_string(repo().join("launch").join(f)).expect("shipped launch file");
+        // robot 2's boards go to robot 2's state directory (another NERVE_HOME here)
+        let text = text
+            .replace("\"coop-r2:h2\"", &format!("\"coop-r2:h2:{}\"", r2_dev.display()))
+            .replace("coop-r1", &r1.name)
+            .replace("coop-r2", &r2.name)
+            .replace("7451", &port);
+        std::fs::write(dir.join(f), text).expect("write launch file");
+    }
+    // the launch files name the world and the knowledge bases from the source tree
+    for (r, f) in [(&r1, "cooperate-r1.toml"), (&r2, "cooperate-r2.toml")] {
+        let out = r.command("nerve").arg("launch").arg(dir.join(f)).current_dir(repo()).output().expect("nerve launch");
+        assert!(out.status.success(), "launch of {f} failed: {}", String::from_utf8_lossy(&out.stderr));
+    }
+    assert_eq!(r1.ps().len(), 14, "robot 1's agents");
+    assert_eq!(r2.ps().len(), 10, "robot 2's agents");
+    assert!(
+        wait_until(Duration::from_secs(30), || figure_u64(&r2, "bridge", "peers") == 1
+            && figure_u64(&r1, "bridge", "peers") == 1),
+        "the bridges did not meet: {:?}",
+        figures(&r2, "bridge")
+    );
+    assert_eq!(figure(&r1, "mission", "role"), "explorer");
+    assert_eq!(figure(&r2, "mission", "role"), "executor");
+    assert_eq!(figure(&r2, "mission", "phase"), "waiting");
+    // robot 2's decision maker holds the foot while nothing is to be done
+    let mode = r2.echo("decision/mode", 1);
+    assert_eq!(mode[0]["data"]["name"], "wait", "{mode:?}");
+    r2.down_and_check_clean();
+    r1.down_and_check_clean();
+}
