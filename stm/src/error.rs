@@ -70,7 +70,7 @@ pub enum CreateError {
     },
     /// The file belongs to another user.
     #[error(
-        "{path} belongs to uid {owner}, not to this process (uid {me}); refusing to write into another user's shared memory"
+        "{path} belongs to uid {owner}, not to this process (uid {me}); refusing to write into another user's shared memory. If the file is stale, remove it (as its owner, or root); if someone else holds this ring's name, find out who (`ls -l {path}`) or run the robot under another name"
     )]
     NotOwner {
         /// the file

@@ -360,7 +360,8 @@ impl RingReader {
     /// `(seq, stamp_ns)` of every complete frame in the ring, in slot order.
     /// Frames changing while looked at are skipped.
     pub fn stamps(&self) -> Vec<(u64, u64)> {
-        let mut v = Vec::with_capacity(self.geo.slot_count as usize);
+        // grows as frames are found: an empty ring of many slots costs nothing
+        let mut v = Vec::with_capacity(self.geo.slot_count.min(1024) as usize);
         for i in 0..self.geo.slot_count {
             // SAFETY: geometry validated against the mapping; i in range.
             let h = unsafe { slot_header(&self.map, &self.geo, i) };

@@ -677,6 +677,9 @@ fn foreign_or_writable_ring_files_are_refused() {
         let e = RingReader::open_path(&path).expect_err("a foreign ring is refused");
         assert!(matches!(e, OpenError::Untrusted { owner: 65534, me: 0, .. }), "{e}");
         assert!(e.to_string().contains("uid 65534"), "{e}");
+        // and its writer says what to do
+        let e = RingWriter::create_with(&guard.opts(), &robot, &ring, 2, 16).expect_err("not ours");
+        assert!(matches!(e, CreateError::NotOwner { owner: 65534, .. }) && e.to_string().contains("remove it"), "{e}");
     }
 }
 
