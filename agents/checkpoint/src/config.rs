@@ -490,6 +490,15 @@ mod tests {
     }
 
     #[test]
+    fn the_shipped_configuration_of_the_cooperation_parses() {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/cooperate.toml");
+        let c = SensorConfig::load(&p).unwrap();
+        assert_eq!(c.checkpoints.len(), 4);
+        assert_eq!(c.checkpoint(3).map(|k| (k.position, k.heading_deg)), Some(([10.8, 1.2], -90.0)));
+        assert_eq!(c.target_ids, vec![9]);
+    }
+
+    #[test]
     fn samples_from_toml_and_csv() {
         let dir = std::env::temp_dir().join(format!("nerve-checkpoint-samples-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
