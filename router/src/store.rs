@@ -7,6 +7,12 @@
 //! `nerve connect` (or a decision maker's rewiring) wait. The thread writes
 //! the newest list it has been given, skipping lists overtaken meanwhile,
 //! and is flushed when the router stops.
+//!
+//! A file that cannot be read (corrupt, truncated, a hand edit gone wrong, a
+//! version this router does not know) does not keep the router from
+//! starting: it is moved aside as `connections.json.corrupt-<time>` with a
+//! loud message, and the last good copy (`connections.json.bak`, refreshed
+//! at every successful load) is used instead.
 
 use serde::{Deserialize, Serialize};
 use std::io::Write;
@@ -24,10 +30,34 @@ pub struct Connection {
     pub type_name: String,
 }
 
+/// Version of the file's layout.
+pub const FILE_VERSION: u32 = 1;
+
 #[derive(Debug, Serialize, Deserialize)]
 struct File {
     version: u32,
     connections: Vec<Connection>,
+}
+
+fn parse(bytes: &[u8]) -> Result<Vec<Connection>, String> {
+    let f: File = serde_json::from_slice(bytes).map_err(|e| e.to_string())?;
+    if f.version != FILE_VERSION {
+        return Err(format!(
+            "version {} (this router reads version {FILE_VERSION}); it was written by another nerve",
+            f.version
+        ));
+    }
+    let mut list: Vec<Connection> = Vec::new();
+    for c in f.connections {
+        let ok = |s: &str| s.parse::<shm_schemas::PortRef>().is_ok();
+        if !ok(&c.from) || !ok(&c.to) {
+            return Err(format!("entry {} -> {} does not name two ports AGENT/PORT", c.from, c.to));
+        }
+        if !list.contains(&c) {
+            list.push(c);
+        }
+    }
+    Ok(list)
 }
 
 /// Where the connection list lives.
@@ -47,17 +77,48 @@ impl Store {
         &self.path
     }
 
-    /// Loads the list; a missing file is an empty list, a corrupt one an error.
+    /// The last good copy.
+    pub fn backup_path(&self) -> PathBuf {
+        self.path.with_extension("json.bak")
+    }
+
+    /// Loads the list; a missing file is an empty list. A file that cannot
+    /// be used is moved aside and the last good copy loaded instead, each
+    /// said loudly; only a file that cannot even be read is an error.
     pub fn load(&self) -> Result<Vec<Connection>, String> {
-        match std::fs::read(&self.path) {
-            Ok(bytes) => serde_json::from_slice::<File>(&bytes).map(|f| f.connections).map_err(|e| {
-                format!(
-                    "{}: {e}; fix or remove the file (it holds the connection list) and start the router again",
-                    self.path.display()
-                )
-            }),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Vec::new()),
-            Err(e) => Err(format!("cannot read {}: {e}", self.path.display())),
+        let bytes = match std::fs::read(&self.path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+            Err(e) => return Err(format!("cannot read {}: {e}", self.path.display())),
+        };
+        match parse(&bytes) {
+            Ok(list) => {
+                // the last good copy, for the day this file is damaged
+                if let Err(e) = write_private(&self.backup_path(), &bytes) {
+                    tracing::warn!(
+                        "cannot keep a copy of the connection list in {}: {e}",
+                        self.backup_path().display()
+                    );
+                }
+                Ok(list)
+            }
+            Err(why) => {
+                let secs =
+                    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+                let aside = self.path.with_extension(format!("json.corrupt-{secs}"));
+                let moved = std::fs::rename(&self.path, &aside).is_ok();
+                let backup = std::fs::read(self.backup_path()).ok().and_then(|b| parse(&b).ok());
+                tracing::error!(
+                    file = %self.path.display(),
+                    "THE CONNECTION LIST CANNOT BE USED: {why}; {}; {}",
+                    if moved { format!("moved aside to {}", aside.display()) } else { "left in place".into() },
+                    match &backup {
+                        Some(l) => format!("starting from the last good copy {} ({} connection(s))", self.backup_path().display(), l.len()),
+                        None => "no good copy exists: starting with no connections (relaunch to restore them)".into(),
+                    }
+                );
+                Ok(backup.unwrap_or_default())
+            }
         }
     }
 
@@ -65,27 +126,36 @@ impl Store {
     pub fn save(&self, connections: &[Connection]) -> std::io::Result<()> {
         let dir = self.path.parent().unwrap_or(Path::new("."));
         std::fs::create_dir_all(dir)?;
-        // a fresh temporary name, created exclusively, never through a
-        // symlink, readable by its owner only (review R1, R11d, R24)
-        let tmp = self.path.with_extension(format!("json.{}.tmp", std::process::id()));
-        let body = serde_json::to_vec_pretty(&File { version: 1, connections: connections.to_vec() })
+        let body = serde_json::to_vec_pretty(&File { version: FILE_VERSION, connections: connections.to_vec() })
             .map_err(std::io::Error::other)?;
-        {
-            use std::os::unix::fs::OpenOptionsExt;
-            let _ = std::fs::remove_file(&tmp);
-            let mut f = std::fs::OpenOptions::new()
-                .write(true)
-                .create_new(true)
-                .mode(0o600)
-                .custom_flags(libc::O_NOFOLLOW)
-                .open(&tmp)?;
-            f.write_all(&body)?;
-            f.sync_all()?;
-        }
-        std::fs::rename(&tmp, &self.path)?;
+        write_private(&self.path, &body)?;
         std::fs::File::open(dir)?.sync_all()?;
         Ok(())
     }
+}
+
+/// Writes `path` atomically: a fresh temporary name beside it, created
+/// exclusively, never through a symlink, readable by its owner only, synced,
+/// then renamed over `path` (review R1, R11d, R24).
+fn write_private(path: &Path, body: &[u8]) -> std::io::Result<()> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let tmp = path.with_extension(format!(
+        "{}.{}.tmp",
+        path.extension().and_then(|e| e.to_str()).unwrap_or(""),
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&tmp);
+    {
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .mode(0o600)
+            .custom_flags(libc::O_NOFOLLOW)
+            .open(&tmp)?;
+        f.write_all(body)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path)
 }
 
 /// Saves connection lists on a thread of its own, newest first.
@@ -147,8 +217,36 @@ mod tests {
         let c = vec![Connection { from: "t1/tick".into(), to: "r1/in".into(), type_name: "nerve::Tick".into() }];
         store.save(&c).expect("saves");
         assert_eq!(store.load(), Ok(c));
-        std::fs::write(store.path(), b"{ not json").expect("writes");
-        assert!(store.load().expect_err("corrupt").contains("fix or remove"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_corrupt_list_is_moved_aside_and_the_last_good_copy_used() {
+        let dir = std::env::temp_dir().join(format!("nerve-store-corrupt-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = Store::new(&dir);
+        let c = vec![Connection { from: "t1/tick".into(), to: "r1/in".into(), type_name: "nerve::Tick".into() }];
+        store.save(&c).expect("saves");
+        assert_eq!(store.load(), Ok(c.clone()), "a good load keeps a copy");
+        for bad in [
+            &b"{ not json"[..],
+            b"",
+            br#"{"version": 99, "connections": []}"#,
+            br#"{"version": 1, "connections": [{"from": "a", "to": "b/c", "type": "x"}]}"#,
+        ] {
+            std::fs::write(store.path(), bad).expect("damage");
+            assert_eq!(store.load(), Ok(c.clone()), "recovered from the copy after {:?}", String::from_utf8_lossy(bad));
+            let aside = std::fs::read_dir(&dir)
+                .expect("dir")
+                .filter_map(|e| e.ok())
+                .filter(|e| e.file_name().to_string_lossy().contains(".corrupt-"))
+                .count();
+            assert!(aside >= 1, "the damaged file was not kept aside");
+        }
+        // no copy at all: an empty list, and the router starts
+        let _ = std::fs::remove_file(store.backup_path());
+        std::fs::write(store.path(), b"garbage").expect("damage");
+        assert_eq!(store.load(), Ok(vec![]));
         let _ = std::fs::remove_dir_all(&dir);
     }
 
