@@ -200,7 +200,10 @@ mod tests {
         let n = Arc::new(std::sync::atomic::AtomicU64::new(3));
         let src = n.clone();
         t.set_figures(Box::new(move || {
-            vec![("z.count".into(), src.load(std::sync::atomic::Ordering::Relaxed).to_string()), ("a".into(), "x".into())]
+            vec![
+                ("z.count".into(), src.load(std::sync::atomic::Ordering::Relaxed).to_string()),
+                ("a".into(), "x".into()),
+            ]
         }));
         assert_eq!(t.get("z.count").as_deref(), Ok("3"));
         n.store(7, std::sync::atomic::Ordering::Relaxed);

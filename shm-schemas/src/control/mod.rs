@@ -89,6 +89,9 @@ mod tests {
 
     #[test]
     fn garbage_is_malformed() {
-        assert!(matches!(decode::<AgentCommand>(&[PROTOCOL_VERSION as u8, 0xff, 0xff]), Err(ProtocolError::Malformed(_))));
+        assert!(matches!(
+            decode::<AgentCommand>(&[PROTOCOL_VERSION as u8, 0xff, 0xff]),
+            Err(ProtocolError::Malformed(_))
+        ));
     }
 }

@@ -19,11 +19,11 @@ pub mod tick;
 pub use head::{HeadCommand, HeadState};
 pub use ir::IrSighting;
 pub use motion::{GroundTruth, LinguisticCommand, LinguisticTerm, Odometry, SafetyStop, VelocityCommand};
+pub use navigation::{ArmGraspState, GraspAction, GraspMiss, GraspPhase, GraspRequest, HELD_NOTHING};
 pub use navigation::{
     CheckpointSighting, MAX_VIA_POINTS, MissionCode, MissionCommand, PoseCorrection, PoseEstimate, PoseSource, ViaKind,
     ViaPath,
 };
-pub use navigation::{ArmGraspState, GraspAction, GraspMiss, GraspPhase, GraspRequest, HELD_NOTHING};
 pub use resources::{AgentLoad, LoadLevel, MAX_AGENT_LOADS, ResourceReport};
 pub use router::RouterEpoch;
 pub use scalar::Scalar;
