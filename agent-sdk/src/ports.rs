@@ -269,11 +269,21 @@ impl<T: Payload> Input<T> {
     }
 
     /// Hands every waiting sample, in place (zero copy), to `f`; returns how many.
-    pub fn drain(&self, mut f: impl FnMut(&Meta, &T)) -> usize {
+    pub fn drain(&self, f: impl FnMut(&Meta, &T)) -> usize {
+        self.drain_up_to(usize::MAX, f)
+    }
+
+    /// Like [`Input::drain`], but takes at most `max` samples from each
+    /// source: a sender that refills the port faster than `f` works cannot
+    /// keep the caller in the loop for ever. What is left stays queued (and
+    /// the oldest of it is overwritten, and counted, if the sender goes on).
+    pub fn drain_up_to(&self, max: usize, mut f: impl FnMut(&Meta, &T)) -> usize {
         let mut subs = self.subs();
         let mut count = 0;
         for sub in subs.iter_mut() {
-            loop {
+            let mut taken = 0usize;
+            while taken < max {
+                taken += 1;
                 match sub.subscriber.receive() {
                     Ok(Some(sample)) => {
                         let h = *sample.user_header();

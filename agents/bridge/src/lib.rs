@@ -222,7 +222,8 @@ impl Agent for Bridge {
     }
 }
 
-/// The link thread's loop: pace and retransmit every export, and ask the
+/// The link thread's loop: pace and retransmit every export, pick up what
+/// the task left queued (it takes a bounded batch per wake-up), and ask the
 /// router to wire the exports that are not wired yet.
 fn link_loop(world: &World, me: &Me, exports: &[Arc<ExportTopic>], stop: &AtomicBool) {
     let mut next_wire = std::time::Instant::now();
@@ -230,7 +231,7 @@ fn link_loop(world: &World, me: &Me, exports: &[Arc<ExportTopic>], stop: &Atomic
     while !stop.load(Ordering::Acquire) {
         let now = agent_sdk::clock::now_ns();
         for t in exports {
-            t.flush(now);
+            t.pump(now);
         }
         if std::time::Instant::now() >= next_wire && exports.iter().any(|t| !t.wired()) {
             next_wire = std::time::Instant::now() + WIRE_RETRY;

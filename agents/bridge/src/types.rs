@@ -31,7 +31,8 @@ pub struct TypeInfo {
 
 /// A sample read from an export input: who sent it, its number, its bytes.
 pub trait ExportTap: Send + Sync {
-    /// Hands every waiting sample to `f` as (sender agent, its sequence number, bytes).
+    /// Hands waiting samples to `f` as (sender agent, its sequence number,
+    /// bytes), at most [`DRAIN_BATCH`] per source and call.
     fn drain(&self, f: &mut dyn FnMut(&str, u64, &[u8])) -> usize;
 }
 
@@ -40,6 +41,11 @@ pub trait ImportSink: Send + Sync {
     /// Publishes `bytes` (exactly the type's size) as one sample.
     fn publish(&self, bytes: &[u8]) -> Result<(), PortError>;
 }
+
+/// Samples taken from one source per call of [`ExportTap::drain`]: the
+/// subscription's whole buffer, so nothing is missed between two calls, and
+/// a sender faster than the link cannot keep the bridge in the loop.
+pub const DRAIN_BATCH: usize = agent_sdk::ports::SUBSCRIBER_BUFFER;
 
 type DeclareExport = fn(&mut Setup, &str) -> Result<Box<dyn ExportTap>, AgentError>;
 type DeclareImport = fn(&mut Setup, &str) -> Result<Arc<dyn ImportSink>, AgentError>;
@@ -113,7 +119,7 @@ struct Tap<T: Payload>(Input<T>);
 
 impl<T: Payload> ExportTap for Tap<T> {
     fn drain(&self, f: &mut dyn FnMut(&str, u64, &[u8])) -> usize {
-        self.0.drain(|meta, value| {
+        self.0.drain_up_to(DRAIN_BATCH, |meta, value| {
             // SAFETY: `value` is a valid `T` for the duration of the call, and
             // every byte of a nerve payload is plain data (module docs).
             let bytes =
