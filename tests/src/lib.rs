@@ -207,6 +207,39 @@ impl Drop for Robot {
     }
 }
 
+/// A TCP port free on 127.0.0.1 now (for a test's own Zenoh endpoints).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("a free port")
+}
+
+/// Writes `body` to `dir/name` and returns the path.
+pub fn write_file(dir: &std::path::Path, name: &str, body: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, body).expect("write file");
+    p
+}
+
+impl Robot {
+    /// The read-only figures agent `name` reports (`stats.figures` of `nerve ps --json`), by key.
+    pub fn figures(&self, name: &str) -> std::collections::BTreeMap<String, String> {
+        let Some(a) = self.agent(name) else { return Default::default() };
+        a["stats"]["figures"]
+            .as_array()
+            .map(|v| v.iter().filter_map(|p| Some((p[0].as_str()?.to_owned(), p[1].as_str()?.to_owned()))).collect())
+            .unwrap_or_default()
+    }
+
+    /// One figure of agent `name` as text ("" when absent).
+    pub fn figure(&self, name: &str, key: &str) -> String {
+        self.figures(name).get(key).cloned().unwrap_or_default()
+    }
+
+    /// One figure of agent `name` as a number (0 when absent or not a number).
+    pub fn figure_u64(&self, name: &str, key: &str) -> u64 {
+        self.figure(name, key).parse().unwrap_or(0)
+    }
+}
+
 /// Polls `cond` every 20 ms until it holds or `timeout` passes; returns whether it held.
 pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
     let t0 = Instant::now();

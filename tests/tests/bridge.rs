@@ -3,36 +3,11 @@
 //! over loopback, and across a veth pair between two network namespaces
 //! that the test creates, cuts and removes.
 
-use nerve_tests::{Robot, alive, bin_dir, reap, sigkill, wait_until};
+use nerve_tests::{Robot, alive, bin_dir, free_port, reap, sigkill, wait_until, write_file};
 use serde_json::Value;
-use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
-
-/// A TCP port free on 127.0.0.1 now.
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("a free port")
-}
-
-/// The figures of agent `name` of robot `r`, by key.
-fn figures(r: &Robot, name: &str) -> std::collections::BTreeMap<String, String> {
-    let a = r.agent(name).unwrap_or_else(|| panic!("agent {name} not in ps of {}", r.name));
-    a["stats"]["figures"]
-        .as_array()
-        .map(|v| v.iter().filter_map(|p| Some((p[0].as_str()?.to_owned(), p[1].as_str()?.to_owned()))).collect())
-        .unwrap_or_default()
-}
-
-fn figure_u64(r: &Robot, agent: &str, key: &str) -> u64 {
-    figures(r, agent).get(key).and_then(|v| v.parse().ok()).unwrap_or(0)
-}
-
-fn write(dir: &Path, name: &str, body: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, body).expect("write file");
-    p
-}
 
 /// `nerve launch FILE` for `r`, optionally inside network namespace `netns`.
 fn launch(r: &Robot, file: &Path, netns: Option<&str>) {
@@ -59,7 +34,7 @@ fn launch(r: &Robot, file: &Path, netns: Option<&str>) {
 fn two_robots() -> (Robot, Robot) {
     let (a, b) = (Robot::new("bra"), Robot::new("brb"));
     let port = free_port();
-    let a_cfg = write(
+    let a_cfg = write_file(
         &a.home,
         "bridge.toml",
         &format!(
@@ -82,7 +57,7 @@ as = "cmd"
             b = b.name
         ),
     );
-    let b_cfg = write(
+    let b_cfg = write_file(
         &b.home,
         "bridge.toml",
         &format!(
@@ -197,22 +172,20 @@ fn bridged_robots_exchange_only_what_is_listed() {
     assert!(edges.contains(&"t1/tick -> bridge/t1.tick".to_string()), "{edges:?}");
     // B's reliable commands arrive at A
     assert_eq!(a.echo("r1/out", 2).len(), 2);
-    assert!(wait_until(Duration::from_secs(10), || figure_u64(&b, "bridge", "export.cmd/tick.importers") == 1));
+    assert!(wait_until(Duration::from_secs(10), || b.figure_u64("bridge", "export.cmd/tick.importers") == 1));
 
     // t2 is not exported by A: nothing arrives on B's import of it
-    assert!(wait_until(Duration::from_secs(10), || figure_u64(
-        &b,
-        "bridge",
-        &format!("import.{}/t1/tick.msgs_in", a.name)
-    ) > 50));
-    assert_eq!(figure_u64(&b, "bridge", &format!("import.{}/t2/tick.msgs_in", a.name)), 0, "an unlisted port crossed");
+    assert!(wait_until(Duration::from_secs(10), || b
+        .figure_u64("bridge", &format!("import.{}/t1/tick.msgs_in", a.name))
+        > 50));
+    assert_eq!(b.figure_u64("bridge", &format!("import.{}/t2/tick.msgs_in", a.name)), 0, "an unlisted port crossed");
 
     // t3 crosses as nerve::Tick but B expects nerve::Scalar: refused, counted, both names said
     let key = format!("import.{}/t3/tick", a.name);
-    assert!(wait_until(Duration::from_secs(10), || figure_u64(&b, "bridge", &format!("{key}.refused")) > 0));
-    let err = figures(&b, "bridge").get(&format!("{key}.error")).cloned().unwrap_or_default();
+    assert!(wait_until(Duration::from_secs(10), || b.figure_u64("bridge", &format!("{key}.refused")) > 0));
+    let err = b.figures("bridge").get(&format!("{key}.error")).cloned().unwrap_or_default();
     assert!(err.contains("nerve::Tick") && err.contains("nerve::Scalar"), "{err}");
-    assert_eq!(figure_u64(&b, "bridge", &format!("{key}.msgs_in")), 0);
+    assert_eq!(b.figure_u64("bridge", &format!("{key}.msgs_in")), 0);
 
     // rewiring on B while the bridge runs: a hot-added relay takes A's ticks
     b.ok(&["start", "relay", "--name", "r2"]);
@@ -253,9 +226,9 @@ fn a_killed_bridge_is_restarted_and_the_link_comes_back() {
     );
     assert!(t1_cycles(&a) > before, "robot A stopped while its bridge was dead");
     // the restarted bridge is wired again and B receives again
-    let n = figure_u64(&b, "bridge", &format!("import.{}/t1/tick.msgs_in", a.name));
+    let n = b.figure_u64("bridge", &format!("import.{}/t1/tick.msgs_in", a.name));
     assert!(
-        wait_until(Duration::from_secs(15), || figure_u64(&b, "bridge", &format!("import.{}/t1/tick.msgs_in", a.name))
+        wait_until(Duration::from_secs(15), || b.figure_u64("bridge", &format!("import.{}/t1/tick.msgs_in", a.name))
             > n + 20),
         "no data across the link after the restart"
     );
@@ -341,7 +314,7 @@ fn a_cut_link_loses_nothing_reliable_and_streams_resume() {
         Some(_) => ("tcp/10.231.7.1:7447".to_string(), "tcp/10.231.7.1:7447".to_string()),
         None => (format!("tcp/127.0.0.1:{port}"), format!("tcp/127.0.0.1:{port}")),
     };
-    let a_cfg = write(
+    let a_cfg = write_file(
         &a.home,
         "bridge.toml",
         &format!(
@@ -351,7 +324,7 @@ fn a_cut_link_loses_nothing_reliable_and_streams_resume() {
             b = b.name
         ),
     );
-    let b_cfg = write(
+    let b_cfg = write_file(
         &b.home,
         "bridge.toml",
         &format!(
@@ -396,11 +369,11 @@ fn a_cut_link_loses_nothing_reliable_and_streams_resume() {
     let small_in = format!("import.{}/small/tick", b.name);
     let t1_in = format!("import.{}/t1/tick", a.name);
     assert!(
-        wait_until(Duration::from_secs(20), || figure_u64(&a, "bridge", &format!("{cmd_in}.msgs_in")) >= 5
-            && figure_u64(&b, "bridge", &format!("{t1_in}.msgs_in")) >= 20),
+        wait_until(Duration::from_secs(20), || a.figure_u64("bridge", &format!("{cmd_in}.msgs_in")) >= 5
+            && b.figure_u64("bridge", &format!("{t1_in}.msgs_in")) >= 20),
         "the link did not come up: A {:?} / B {:?}",
-        figures(&a, "bridge"),
-        figures(&b, "bridge")
+        a.figures("bridge"),
+        b.figures("bridge")
     );
     let cycles = |r: &Robot, n: &str| r.agent(n).and_then(|v| v["stats"]["cycles"].as_u64()).unwrap_or(0);
     let (a_t1, b_cmd) = (cycles(&a, "t1"), cycles(&b, "cmd"));
@@ -415,9 +388,9 @@ fn a_cut_link_loses_nothing_reliable_and_streams_resume() {
     std::thread::sleep(Duration::from_secs(4));
     assert!(cycles(&a, "t1") > a_t1 + 100 && cycles(&b, "cmd") > b_cmd + 20, "a robot stopped during the cut");
     assert!(
-        figure_u64(&b, "bridge", "export.cmd/tick.queue") >= 20,
+        b.figure_u64("bridge", "export.cmd/tick.queue") >= 20,
         "B queues its commands while the link is down: {:?}",
-        figures(&b, "bridge")
+        b.figures("bridge")
     );
     let sent_during_cut = cycles(&b, "cmd");
     match &netns {
@@ -430,40 +403,40 @@ fn a_cut_link_loses_nothing_reliable_and_streams_resume() {
 
     // everything queued arrives, in order (the receiver delivers only in order), nothing reliable lost
     assert!(
-        wait_until(Duration::from_secs(20), || figure_u64(&b, "bridge", "export.cmd/tick.queue") <= 2),
+        wait_until(Duration::from_secs(20), || b.figure_u64("bridge", "export.cmd/tick.queue") <= 2),
         "B's queue did not drain after the link came back: {:?}",
-        figures(&b, "bridge")
+        b.figures("bridge")
     );
     assert!(
-        wait_until(Duration::from_secs(10), || figure_u64(&a, "bridge", &format!("{cmd_in}.msgs_in"))
+        wait_until(Duration::from_secs(10), || a.figure_u64("bridge", &format!("{cmd_in}.msgs_in"))
             >= sent_during_cut.saturating_sub(b_cmd).saturating_sub(5)),
         "the commands sent during the cut did not all arrive: {:?}",
-        figures(&a, "bridge")
+        a.figures("bridge")
     );
-    assert_eq!(figure_u64(&a, "bridge", &format!("{cmd_in}.lost")), 0, "{:?}", figures(&a, "bridge"));
+    assert_eq!(a.figure_u64("bridge", &format!("{cmd_in}.lost")), 0, "{:?}", a.figures("bridge"));
     // the small queue overflowed: counted on both sides, and said in B's log
-    assert!(figure_u64(&b, "bridge", "export.small/tick.lost") >= 20, "{:?}", figures(&b, "bridge"));
+    assert!(b.figure_u64("bridge", "export.small/tick.lost") >= 20, "{:?}", b.figures("bridge"));
     assert!(
-        wait_until(Duration::from_secs(10), || figure_u64(&a, "bridge", &format!("{small_in}.lost")) >= 20),
+        wait_until(Duration::from_secs(10), || a.figure_u64("bridge", &format!("{small_in}.lost")) >= 20),
         "the receiver did not count the overflow: {:?}",
-        figures(&a, "bridge")
+        a.figures("bridge")
     );
     let log = b.ok(&["logs", "bridge"]);
     assert!(log.contains("reliable queue full"), "no log line for the overflow");
     // the best-effort stream resumes
-    let n = figure_u64(&b, "bridge", &format!("{t1_in}.msgs_in"));
+    let n = b.figure_u64("bridge", &format!("{t1_in}.msgs_in"));
     assert!(
-        wait_until(Duration::from_secs(10), || figure_u64(&b, "bridge", &format!("{t1_in}.msgs_in")) > n + 20),
+        wait_until(Duration::from_secs(10), || b.figure_u64("bridge", &format!("{t1_in}.msgs_in")) > n + 20),
         "the stream did not resume"
     );
     eprintln!(
         "cut of 4 s over {}: commands during the cut {}, delivered {} (lost {}); small queue lost {} at B, {} counted at A",
         if netns.is_some() { "a veth pair" } else { "loopback (bridge stopped)" },
         sent_during_cut - b_cmd,
-        figure_u64(&a, "bridge", &format!("{cmd_in}.msgs_in")),
-        figure_u64(&a, "bridge", &format!("{cmd_in}.lost")),
-        figure_u64(&b, "bridge", "export.small/tick.lost"),
-        figure_u64(&a, "bridge", &format!("{small_in}.lost")),
+        a.figure_u64("bridge", &format!("{cmd_in}.msgs_in")),
+        a.figure_u64("bridge", &format!("{cmd_in}.lost")),
+        b.figure_u64("bridge", "export.small/tick.lost"),
+        a.figure_u64("bridge", &format!("{small_in}.lost")),
     );
     a.down_and_check_clean();
     b.down_and_check_clean();
@@ -499,7 +472,7 @@ fn the_example_pair_of_launch_files_runs() {
 #[test]
 fn a_bad_bridge_config_is_refused_by_the_launch_check() {
     let r = Robot::new("brbad");
-    let cfg = write(
+    let cfg = write_file(
         &r.home,
         "bridge.toml",
         "listen = [\"udp/127.0.0.1:1\"]\n[[export]]\nport = \"t1/tick\"\ntype = \"nerve::Tock\"\n",

@@ -11,40 +11,10 @@
 //! (the only target of the world is far away: missed, out of reach); robot
 //! 2's "arrived" crosses back, robot 1's mission agent answers "resume".
 
-use nerve_tests::{Robot, wait_until};
+use nerve_tests::{Robot, free_port, wait_until, write_file};
 use serde_json::Value;
-use std::collections::BTreeMap;
-use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-
-/// A TCP port free on 127.0.0.1 now.
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("a free port")
-}
-
-/// The figures of agent `name` of robot `r`, by key.
-fn figures(r: &Robot, name: &str) -> BTreeMap<String, String> {
-    let Some(a) = r.agent(name) else { return BTreeMap::new() };
-    a["stats"]["figures"]
-        .as_array()
-        .map(|v| v.iter().filter_map(|p| Some((p[0].as_str()?.to_owned(), p[1].as_str()?.to_owned()))).collect())
-        .unwrap_or_default()
-}
-
-fn figure(r: &Robot, agent: &str, key: &str) -> String {
-    figures(r, agent).get(key).cloned().unwrap_or_default()
-}
-
-fn figure_u64(r: &Robot, agent: &str, key: &str) -> u64 {
-    figure(r, agent, key).parse().unwrap_or(0)
-}
-
-fn write(dir: &Path, name: &str, body: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, body).expect("write file");
-    p
-}
 
 fn launch(r: &Robot, file: &Path) {
     let out = r.command("nerve").arg("launch").arg(file).output().expect("run nerve launch");
@@ -65,7 +35,7 @@ fn two_robots(tag: &str) -> (Robot, Robot, PathBuf) {
     let world = repo().join("worlds").join("cooperate.toml");
     let r2_dev = r2.home.join(&r2.name).join("dev");
 
-    let r1_bridge = write(
+    let r1_bridge = write_file(
         &r1.home,
         "bridge.toml",
         &format!(
@@ -87,7 +57,7 @@ as = "report"
             r2 = r2.name
         ),
     );
-    let r2_bridge = write(
+    let r2_bridge = write_file(
         &r2.home,
         "bridge.toml",
         &format!(
@@ -228,20 +198,20 @@ fn a_path_crosses_to_robot_2_and_its_arrival_comes_back() {
     // robot 1 sent the path; it crossed to robot 2's mission agent, which
     // handed it to the target achiever: robot 2 follows path 7
     assert!(
-        wait_until(Duration::from_secs(60), || figure(&r1, "mission", "phase") == "sent"),
+        wait_until(Duration::from_secs(60), || r1.figure("mission", "phase") == "sent"),
         "robot 1 did not send the path: {:?}",
-        figures(&r1, "mission")
+        r1.figures("mission")
     );
     assert!(
         wait_until(Duration::from_secs(60), || {
-            matches!(figure(&r2, "mission", "phase").as_str(), "following" | "grasping" | "arrived" | "done")
+            matches!(r2.figure("mission", "phase").as_str(), "following" | "grasping" | "arrived" | "done")
         }),
         "robot 2 did not take the path: mission {:?}, bridge {:?}",
-        figures(&r2, "mission"),
-        figures(&r2, "bridge")
+        r2.figures("mission"),
+        r2.figures("bridge")
     );
-    assert_eq!(figure_u64(&r2, "mission", "path_id"), 7);
-    assert!(figure_u64(&r2, "bridge", &format!("import.{}/mission/path.msgs_in", r1.name)) >= 1);
+    assert_eq!(r2.figure_u64("mission", "path_id"), 7);
+    assert!(r2.figure_u64("bridge", &format!("import.{}/mission/path.msgs_in", r1.name)) >= 1);
     let g: Value = serde_json::from_str(&r2.ok(&["graph", "--json"])).expect("graph json");
     let edges: Vec<String> = g["connections"]
         .as_array()
@@ -256,29 +226,29 @@ fn a_path_crosses_to_robot_2_and_its_arrival_comes_back() {
     // robot 2 drives to the end of the path, the arm tries, robot 2 reports
     // "arrived"; it crosses back and robot 1 is done
     assert!(
-        wait_until(Duration::from_secs(120), || figure(&r1, "mission", "phase") == "done"),
+        wait_until(Duration::from_secs(120), || r1.figure("mission", "phase") == "done"),
         "robot 2's arrival did not reach robot 1: r1 mission {:?}, r2 mission {:?}, r2 arm {:?}",
-        figures(&r1, "mission"),
-        figures(&r2, "mission"),
-        figures(&r2, "arm")
+        r1.figures("mission"),
+        r2.figures("mission"),
+        r2.figures("arm")
     );
-    assert_eq!(figure_u64(&r1, "mission", "path_id"), 7);
-    assert!(figure_u64(&r1, "bridge", &format!("import.{}/mission/report.msgs_in", r2.name)) >= 1);
+    assert_eq!(r1.figure_u64("mission", "path_id"), 7);
+    assert!(r1.figure_u64("bridge", &format!("import.{}/mission/report.msgs_in", r2.name)) >= 1);
     // the target achiever really drove robot 2 there: the simulator's truth
     let truth = r1.echo(&format!("sim/truth-{}", r2.name), 1);
     let x = truth[0]["data"]["x"].as_f64().expect("truth x");
     assert!(x > -3.6, "robot 2 is still near its start: {truth:?}");
     // the arm grasped at the target of the path, and missed: the world's
     // only target is 15 m away, which its probes tell
-    assert_eq!(figure(&r2, "mission", "grasp"), "missed", "{:?}", figures(&r2, "mission"));
-    assert_eq!(figure_u64(&r2, "arm", "missed"), 1, "{:?}", figures(&r2, "arm"));
+    assert_eq!(r2.figure("mission", "grasp"), "missed", "{:?}", r2.figures("mission"));
+    assert_eq!(r2.figure_u64("arm", "missed"), 1, "{:?}", r2.figures("arm"));
     let arm = r2.echo("arm/state", 1);
     assert_eq!(arm[0]["data"]["reason"].as_u64(), Some(2), "out of reach expected: {arm:?}");
     // robot 1's "resume" reached robot 2: it stops repeating "arrived"
     assert!(
-        wait_until(Duration::from_secs(30), || figure(&r2, "mission", "phase") == "done"),
+        wait_until(Duration::from_secs(30), || r2.figure("mission", "phase") == "done"),
         "robot 1's resume did not reach robot 2: {:?}",
-        figures(&r2, "mission")
+        r2.figures("mission")
     );
 
     r2.down_and_check_clean();
@@ -293,34 +263,34 @@ fn a_path_crosses_to_robot_2_and_its_arrival_comes_back() {
 fn an_arrival_reported_while_the_bridge_is_down_arrives_after_it_restarts() {
     let (r1, r2, r2_bridge) = two_robots("coup");
     assert!(
-        wait_until(Duration::from_secs(60), || figure(&r2, "mission", "phase") == "following"),
+        wait_until(Duration::from_secs(60), || r2.figure("mission", "phase") == "following"),
         "robot 2 did not take the path: {:?}",
-        figures(&r2, "mission")
+        r2.figures("mission")
     );
     r2.ok(&["stop", "bridge"]);
     assert!(
-        wait_until(Duration::from_secs(120), || figure(&r2, "mission", "phase") == "arrived"),
+        wait_until(Duration::from_secs(120), || r2.figure("mission", "phase") == "arrived"),
         "robot 2 did not arrive: {:?}",
-        figures(&r2, "mission")
+        r2.figures("mission")
     );
     // robot 2 repeats its report into the void; robot 1 still waits
-    let sent = figure_u64(&r2, "mission", "sent");
-    assert!(wait_until(Duration::from_secs(30), || figure_u64(&r2, "mission", "sent") > sent + 1));
-    assert_eq!(figure(&r1, "mission", "phase"), "sent", "robot 1 heard of an arrival with the link down");
+    let sent = r2.figure_u64("mission", "sent");
+    assert!(wait_until(Duration::from_secs(30), || r2.figure_u64("mission", "sent") > sent + 1));
+    assert_eq!(r1.figure("mission", "phase"), "sent", "robot 1 heard of an arrival with the link down");
     // the bridge back: the next repetition crosses
     let cfg = r2_bridge.display().to_string();
     r2.ok(&["start", "bridge", "--name", "bridge", "--", "--config", &cfg]);
     assert!(
-        wait_until(Duration::from_secs(60), || figure(&r1, "mission", "phase") == "done"),
+        wait_until(Duration::from_secs(60), || r1.figure("mission", "phase") == "done"),
         "robot 2's repeated arrival did not reach robot 1: r1 {:?}, r2 {:?}, r2 bridge {:?}",
-        figures(&r1, "mission"),
-        figures(&r2, "mission"),
-        figures(&r2, "bridge")
+        r1.figures("mission"),
+        r2.figures("mission"),
+        r2.figures("bridge")
     );
     assert!(
-        wait_until(Duration::from_secs(30), || figure(&r2, "mission", "phase") == "done"),
+        wait_until(Duration::from_secs(30), || r2.figure("mission", "phase") == "done"),
         "robot 1's resume did not reach robot 2: {:?}",
-        figures(&r2, "mission")
+        r2.figures("mission")
     );
     r2.down_and_check_clean();
     r1.down_and_check_clean();
@@ -355,14 +325,14 @@ fn the_shipped_launch_files_come_up_and_their_bridges_meet() {
     assert_eq!(r1.ps().len(), 14, "robot 1's agents");
     assert_eq!(r2.ps().len(), 10, "robot 2's agents");
     assert!(
-        wait_until(Duration::from_secs(30), || figure_u64(&r2, "bridge", "peers") == 1
-            && figure_u64(&r1, "bridge", "peers") == 1),
+        wait_until(Duration::from_secs(30), || r2.figure_u64("bridge", "peers") == 1
+            && r1.figure_u64("bridge", "peers") == 1),
         "the bridges did not meet: {:?}",
-        figures(&r2, "bridge")
+        r2.figures("bridge")
     );
-    assert_eq!(figure(&r1, "mission", "role"), "explorer");
-    assert_eq!(figure(&r2, "mission", "role"), "executor");
-    assert_eq!(figure(&r2, "mission", "phase"), "waiting");
+    assert_eq!(r1.figure("mission", "role"), "explorer");
+    assert_eq!(r2.figure("mission", "role"), "executor");
+    assert_eq!(r2.figure("mission", "phase"), "waiting");
     // robot 2's decision maker holds the foot while nothing is to be done
     let mode = r2.echo("decision/mode", 1);
     assert_eq!(mode[0]["data"]["name"], "wait", "{mode:?}");
