@@ -174,6 +174,16 @@ impl Setup {
     }
 }
 
+impl crate::params::Declare for Setup {
+    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display,
+    {
+        self.param_checked(key, default, check)
+    }
+}
+
 /// What [`Agent::step`] gets each cycle.
 #[derive(Debug)]
 pub struct Context {

@@ -48,6 +48,37 @@ pub fn positive<T: Copy + Into<f64>>(v: &T) -> Result<(), String> {
     if x.is_finite() && x > 0.0 { Ok(()) } else { Err("must be a number > 0".into()) }
 }
 
+/// A check for `Setup::param_checked`: a finite number in `(0, hi]`; the
+/// refusal names the parameter, the range and the unit.
+pub fn in_range_above_zero(key: &str, v: f32, hi: f32, unit: &str) -> Result<(), String> {
+    if v.is_finite() && v > 0.0 && v <= hi {
+        Ok(())
+    } else {
+        Err(format!("{key} is in (0, {hi}] {unit}").trim_end().to_owned())
+    }
+}
+
+/// Where checked parameters are declared: the agent's
+/// [`crate::Setup`], or a bare [`ParamTable`] in a test, so that an agent's
+/// test sees exactly the checks the agent declares.
+pub trait Declare {
+    /// Declares `key` with `default`, refusing values `check` refuses.
+    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display;
+}
+
+impl Declare for ParamTable {
+    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
+    where
+        T: FromStr + Display + Send + 'static,
+        T::Err: Display,
+    {
+        self.declare(key, default, Some(Box::new(check)))
+    }
+}
+
 trait DynParam: Send + Sync {
     fn get(&self) -> String;
     fn set(&self, s: &str) -> Result<(), String>;

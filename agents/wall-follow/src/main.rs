@@ -9,47 +9,11 @@
 //! from `v_min` when they come back. After being suspended (a gap of more
 //! than three periods) it also starts again from `v_min`.
 
-use agent_sdk::params::ParamTable;
+use agent_sdk::params::{Declare, in_range_above_zero};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_wall_follow::{Settings, WallSide, follow};
 use shm_schemas::payloads::{SonarScan, VelocityCommand};
-use std::fmt::Display;
-use std::str::FromStr;
 use std::time::Duration;
-
-/// Where parameters are declared: the agent's [`Setup`], or a bare
-/// [`ParamTable`] in the tests, so that both see the same checks.
-trait Declare {
-    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
-    where
-        T: FromStr + Display + Send + 'static,
-        T::Err: Display;
-}
-
-impl Declare for Setup {
-    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
-    where
-        T: FromStr + Display + Send + 'static,
-        T::Err: Display,
-    {
-        self.param_checked(key, default, check)
-    }
-}
-
-impl Declare for ParamTable {
-    fn checked<T>(&mut self, key: &str, default: T, check: fn(&T) -> Result<(), String>) -> Param<T>
-    where
-        T: FromStr + Display + Send + 'static,
-        T::Err: Display,
-    {
-        self.declare(key, default, Some(Box::new(check)))
-    }
-}
-
-/// A check that `v` is a finite number in `(0, hi]`; the refusal names the range.
-fn in_range_above_zero(key: &str, v: f32, hi: f32, unit: &str) -> Result<(), String> {
-    if v.is_finite() && v > 0.0 && v <= hi { Ok(()) } else { Err(format!("{key} is in (0, {hi}] {unit}")) }
-}
 
 /// The farthest wall to keep to, m: beyond it the sonar sees no wall.
 const TARGET_MAX: f32 = 2.0;
@@ -206,6 +170,7 @@ fn main() -> std::process::ExitCode {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use agent_sdk::params::ParamTable;
 
     #[test]
     fn every_numeric_parameter_is_bounded_above_and_says_its_range() {
