@@ -139,10 +139,17 @@ impl Outbox {
         imp.alive = alive;
     }
 
-    /// `who` has delivered everything up to `acked` (at `now_ns`).
+    /// `who` has delivered everything up to `acked` (at `now_ns`). An
+    /// acknowledgement also proves that `who` is reachable: one that was
+    /// taken for gone (its liveliness token lost, or its return not yet
+    /// seen) is alive again and owed what it lacks.
     pub fn ack(&mut self, who: &str, acked: u64, now_ns: u64) {
         let acked = acked.min(self.sent_upto);
         let imp = self.importers.entry(who.into()).or_insert_with(|| Importer::new(true));
+        if !imp.alive {
+            imp.alive = true;
+            imp.last_tx_ns = None;
+        }
         if acked > imp.acked {
             imp.acked = acked;
             imp.last_tx_ns = Some(now_ns);
@@ -201,15 +208,23 @@ impl Outbox {
 /// What the receiver does with a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verdict {
-    /// Deliver it now; `lost` messages before it will never come.
-    Deliver {
-        /// messages skipped for good since the last delivery (the sender's queue overflowed)
-        lost: u64,
-    },
+    /// Deliver it now.
+    Deliver,
     /// Seen already (a retransmission): drop it, acknowledge again.
     Duplicate,
     /// A gap the sender can still fill: drop it and wait.
     Early,
+}
+
+/// What [`Inbox::accept`] found: the verdict, and how many messages are
+/// now known lost for good (the sender's queue overflowed), counted the
+/// moment the loss is known, whether or not this frame is delivered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Judged {
+    /// what to do with the frame
+    pub verdict: Verdict,
+    /// messages found lost by this frame
+    pub lost: u64,
 }
 
 /// The receiver side of one reliable topic.
@@ -217,32 +232,31 @@ pub enum Verdict {
 pub struct Inbox {
     instance: Option<u64>,
     next: u64,
-    /// losses found but not yet reported with a delivery
-    pending_lost: u64,
 }
 
 impl Inbox {
     /// Judges a frame of run `instance` with sequence number `seq`, sent
     /// while the sender held `oldest..`.
-    pub fn accept(&mut self, instance: u64, seq: u64, oldest: u64) -> Verdict {
+    pub fn accept(&mut self, instance: u64, seq: u64, oldest: u64) -> Judged {
         if self.instance != Some(instance) {
             // a new sender (or a restarted one): start from what it holds
             self.instance = Some(instance);
             self.next = oldest.max(1);
-            self.pending_lost = 0;
         }
+        let mut lost = 0;
         if oldest > self.next {
-            self.pending_lost = self.pending_lost.saturating_add(oldest - self.next);
+            lost = oldest - self.next;
             self.next = oldest;
         }
-        if seq < self.next {
-            return Verdict::Duplicate;
-        }
-        if seq > self.next {
-            return Verdict::Early;
-        }
-        self.next = seq.saturating_add(1);
-        Verdict::Deliver { lost: std::mem::take(&mut self.pending_lost) }
+        let verdict = if seq < self.next {
+            Verdict::Duplicate
+        } else if seq > self.next {
+            Verdict::Early
+        } else {
+            self.next = seq.saturating_add(1);
+            Verdict::Deliver
+        };
+        Judged { verdict, lost }
     }
 
     /// The highest sequence number delivered in order, or known lost (what
@@ -309,10 +323,10 @@ mod tests {
 
         let mut i = Inbox::default();
         for s in 1..=2 {
-            assert_eq!(i.accept(1, s, 1), Verdict::Deliver { lost: 0 });
+            assert_eq!(i.accept(1, s, 1), Judged { verdict: Verdict::Deliver, lost: 0 });
         }
         for s in 3..=5 {
-            assert_eq!(i.accept(1, s, 3), Verdict::Deliver { lost: 0 });
+            assert_eq!(i.accept(1, s, 3), Judged { verdict: Verdict::Deliver, lost: 0 });
         }
         assert_eq!(i.acked(), 5);
     }
@@ -329,27 +343,27 @@ mod tests {
         }
         assert_eq!((dropped, o.lost(), o.oldest()), (vec![1, 2], 2, 3));
         let mut i = Inbox::default();
-        assert_eq!(i.accept(9, 1, 1), Verdict::Deliver { lost: 0 }, "it had got 1 before the cut");
-        assert_eq!(i.accept(9, 3, 3), Verdict::Deliver { lost: 1 }, "2 is gone for good");
-        assert_eq!(i.accept(9, 4, 3), Verdict::Deliver { lost: 0 });
+        assert_eq!(i.accept(9, 1, 1), Judged { verdict: Verdict::Deliver, lost: 0 }, "it had got 1 before the cut");
+        assert_eq!(i.accept(9, 3, 3), Judged { verdict: Verdict::Deliver, lost: 1 }, "2 is gone for good");
+        assert_eq!(i.accept(9, 4, 3), Judged { verdict: Verdict::Deliver, lost: 0 });
     }
 
     #[test]
     fn the_receiver_keeps_order_and_drops_duplicates() {
         let mut i = Inbox::default();
-        assert_eq!(i.accept(1, 1, 1), Verdict::Deliver { lost: 0 });
-        assert_eq!(i.accept(1, 3, 1), Verdict::Early, "2 is missing but still held");
-        assert_eq!(i.accept(1, 2, 1), Verdict::Deliver { lost: 0 });
-        assert_eq!(i.accept(1, 2, 1), Verdict::Duplicate);
-        assert_eq!(i.accept(1, 3, 1), Verdict::Deliver { lost: 0 });
-        assert_eq!(i.accept(1, 6, 5), Verdict::Early, "4 is lost, 5 still to come");
-        assert_eq!(i.acked(), 4, "the loss of 4 is recorded, 5 is expected");
+        assert_eq!(i.accept(1, 1, 1), Judged { verdict: Verdict::Deliver, lost: 0 });
+        assert_eq!(i.accept(1, 3, 1), Judged { verdict: Verdict::Early, lost: 0 }, "2 is missing but still held");
+        assert_eq!(i.accept(1, 2, 1), Judged { verdict: Verdict::Deliver, lost: 0 });
+        assert_eq!(i.accept(1, 2, 1), Judged { verdict: Verdict::Duplicate, lost: 0 });
+        assert_eq!(i.accept(1, 3, 1), Judged { verdict: Verdict::Deliver, lost: 0 });
         assert_eq!(
-            i.accept(1, 5, 5),
-            Verdict::Deliver { lost: 1 },
-            "the loss is reported once, with the next delivery"
+            i.accept(1, 6, 5),
+            Judged { verdict: Verdict::Early, lost: 1 },
+            "4 is lost (counted now, even though 6 waits), 5 still to come"
         );
-        assert_eq!(i.accept(1, 6, 5), Verdict::Deliver { lost: 0 });
+        assert_eq!(i.acked(), 4, "the loss of 4 is recorded, 5 is expected");
+        assert_eq!(i.accept(1, 5, 5), Judged { verdict: Verdict::Deliver, lost: 0 }, "the loss is counted once");
+        assert_eq!(i.accept(1, 6, 5), Judged { verdict: Verdict::Deliver, lost: 0 });
     }
 
     #[test]
@@ -358,9 +372,24 @@ mod tests {
         for s in 1..=4 {
             i.accept(1, s, 1);
         }
-        assert_eq!(i.accept(2, 1, 1), Verdict::Deliver { lost: 0 }, "new instance, from its start");
+        assert_eq!(i.accept(2, 1, 1), Judged { verdict: Verdict::Deliver, lost: 0 }, "new instance, from its start");
         assert_eq!(i.instance(), Some(2));
         assert_eq!(i.acked(), 1);
+    }
+
+    #[test]
+    fn an_acknowledgement_revives_an_importer_taken_for_gone() {
+        let mut o = Outbox::new(5);
+        o.set_importer("r2.bridge", true);
+        o.push(0, "t1", 0, vec![]);
+        assert_eq!(seqs(o.due(0, RTO, usize::MAX)), vec![1]);
+        o.set_importer("r2.bridge", false); // its token went with the cut...
+        o.push(0, "t1", 0, vec![]);
+        assert_eq!(seqs(o.due(10, RTO, usize::MAX)), vec![2]);
+        // ...and its return was never seen, but it acknowledges what it got
+        o.ack("r2.bridge", 0, 20);
+        assert_eq!(o.importers(), (1, 1), "alive again");
+        assert_eq!(seqs(o.due(30, RTO, usize::MAX)), vec![1, 2], "owed everything it lacks, at once");
     }
 
     #[test]

@@ -405,14 +405,13 @@ impl ImportTopic {
             return Reply::None;
         }
         if f.reliable {
-            match st.inbox.accept(f.instance, f.seq, f.oldest) {
-                Verdict::Deliver { lost } => {
-                    if lost > 0 {
-                        self.lost.add(lost);
-                        tracing::warn!(topic = %self.spec.origin(), lost, "reliable messages lost: the sender's queue overflowed while the link was down");
-                    }
-                    self.deliver(&mut st, &f, now_mono_ns);
-                }
+            let judged = st.inbox.accept(f.instance, f.seq, f.oldest);
+            if judged.lost > 0 {
+                self.lost.add(judged.lost);
+                tracing::warn!(topic = %self.spec.origin(), lost = judged.lost, "reliable messages lost: the sender's queue overflowed while the link was down");
+            }
+            match judged.verdict {
+                Verdict::Deliver => self.deliver(&mut st, &f, now_mono_ns),
                 Verdict::Duplicate => self.duplicates.add(1),
                 Verdict::Early => {}
             }
