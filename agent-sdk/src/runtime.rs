@@ -133,8 +133,18 @@ fn startup_error(readiness: &mut Readiness, msg: &str) -> ExitCode {
 /// The agent's description, made by running [`Agent::new`] in a private,
 /// throw-away world (so authors must open devices in [`Agent::start`], not in `new`).
 fn describe<A: Agent>(args: &CommonArgs) -> Result<String, String> {
-    use shm_schemas::control::describe::Description;
     let world = World::new(&format!("describe-{}", std::process::id())).map_err(|e| e.to_string())?;
+    let result = describe_in::<A>(args, &world);
+    // iceoryx2 keeps a management file per prefix; this world is private and
+    // gone, whether the agent could be described or not
+    for f in world.shm_files() {
+        let _ = std::fs::remove_file(f);
+    }
+    result
+}
+
+fn describe_in<A: Agent>(args: &CommonArgs, world: &World) -> Result<String, String> {
+    use shm_schemas::control::describe::Description;
     let node = Arc::new(world.node("describe").map_err(|e| e.to_string())?);
     let mut setup = Setup {
         world: world.clone(),
@@ -166,10 +176,6 @@ fn describe<A: Agent>(args: &CommonArgs) -> Result<String, String> {
     };
     drop(agent);
     drop(setup);
-    // iceoryx2 keeps a management file per prefix; this world is private and gone
-    for f in world.shm_files() {
-        let _ = std::fs::remove_file(f);
-    }
     serde_json::to_string(&d).map_err(|e| e.to_string())
 }
 

@@ -487,9 +487,30 @@ fn a_bad_bridge_config_is_refused_by_the_launch_check() {
             cfg.display()
         ),
     );
+    // the refused --describe of the agent leaves no file of its private world behind
+    let describe_files = || -> std::collections::BTreeSet<String> {
+        std::fs::read_dir("/dev/shm")
+            .map(|rd| {
+                rd.filter_map(|e| e.ok())
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| n.starts_with("nerve_describe-"))
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let before = describe_files();
     let out = r.command("nerve").arg("launch").arg(&file).output().expect("launch");
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
+    let left: Vec<String> = describe_files()
+        .difference(&before)
+        .filter(|n| {
+            let pid = n.trim_start_matches("nerve_describe-").split('_').next().and_then(|p| p.parse::<u32>().ok());
+            pid.is_some_and(|p| !alive(p))
+        })
+        .cloned()
+        .collect();
+    assert!(left.is_empty(), "a failed --describe left {left:?} in /dev/shm");
     assert!(err.contains("bridge.toml:1: ") && err.contains("TCP only"), "{err}");
     assert!(err.contains("bridge.toml:4: ") && err.contains("nerve::Tock"), "{err}");
     assert!(err.contains("nothing was started"), "{err}");
