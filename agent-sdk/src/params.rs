@@ -58,6 +58,16 @@ pub fn in_range_above_zero(key: &str, v: f32, hi: f32, unit: &str) -> Result<(),
     }
 }
 
+/// A check for `Setup::param_checked`: a whole number in `range`; the
+/// refusal names the parameter, the range and the unit.
+pub fn in_range(key: &str, v: u64, range: &std::ops::RangeInclusive<u64>, unit: &str) -> Result<(), String> {
+    if range.contains(&v) {
+        Ok(())
+    } else {
+        Err(format!("{key} is in [{}, {}] {unit}", range.start(), range.end()).trim_end().to_owned())
+    }
+}
+
 /// Where checked parameters are declared: the agent's
 /// [`crate::Setup`], or a bare [`ParamTable`] in a test, so that an agent's
 /// test sees exactly the checks the agent declares.

@@ -14,7 +14,7 @@
 //! for `scan_timeout_ms` the monitor is blind: it stops the robot moving
 //! (turning allowed), sends no motion command, and reports danger `stop`.
 
-use agent_sdk::params::{Declare, in_range_above_zero};
+use agent_sdk::params::{Declare, in_range, in_range_above_zero};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_safety::{Judgement, Settings, judge, slew};
 use shm_schemas::payloads::{DangerLevel, SafetyStop, Situation, SonarScan, VelocityCommand};
@@ -50,13 +50,7 @@ impl Params {
             omega_max: d
                 .checked("omega_max", s.omega_max, |v| in_range_above_zero("omega_max", *v, OMEGA_MAX, "rad/s")),
             risk_stop: d.checked("risk_stop", s.risk_stop, |v| in_range_above_zero("risk_stop", *v, 1.0, "")),
-            timeout_ms: d.checked("scan_timeout_ms", 1000u64, |v| {
-                if TIMEOUT_MS.contains(v) {
-                    Ok(())
-                } else {
-                    Err(format!("scan_timeout_ms is in [{}, {}] ms", TIMEOUT_MS.start(), TIMEOUT_MS.end()))
-                }
-            }),
+            timeout_ms: d.checked("scan_timeout_ms", 1000u64, |v| in_range("scan_timeout_ms", *v, &TIMEOUT_MS, "ms")),
         }
     }
 }

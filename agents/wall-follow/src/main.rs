@@ -9,7 +9,7 @@
 //! from `v_min` when they come back. After being suspended (a gap of more
 //! than three periods) it also starts again from `v_min`.
 
-use agent_sdk::params::{Declare, in_range_above_zero};
+use agent_sdk::params::{Declare, in_range, in_range_above_zero};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_wall_follow::{Settings, WallSide, follow};
 use shm_schemas::payloads::{SonarScan, VelocityCommand};
@@ -45,13 +45,7 @@ impl Params {
                 "auto" | "left" | "right" => Ok(()),
                 _ => Err("side is auto, left or right".into()),
             }),
-            timeout_ms: d.checked("scan_timeout_ms", 1000u64, |v| {
-                if TIMEOUT_MS.contains(v) {
-                    Ok(())
-                } else {
-                    Err(format!("scan_timeout_ms is in [{}, {}] ms", TIMEOUT_MS.start(), TIMEOUT_MS.end()))
-                }
-            }),
+            timeout_ms: d.checked("scan_timeout_ms", 1000u64, |v| in_range("scan_timeout_ms", *v, &TIMEOUT_MS, "ms")),
         }
     }
 }
