@@ -587,9 +587,10 @@ impl Simulation {
         for c in &self.world.checkpoints {
             let mid = 0.5 * (c.z[0] + c.z[1]);
             let shape = Shape::Circle(c.position, c.radius);
-            // the stand the tube sits on
+            // the stand the tube sits on: as wide as the tube (the disc that
+            // collisions use), so that the sonar sees what the robot would hit
             out.push(Surface {
-                shape: Shape::Circle(c.position, c.radius * 0.4),
+                shape: Shape::Circle(c.position, c.radius),
                 z: [0.0, c.z[0]],
                 color: [90, 90, 90],
                 textured: false,

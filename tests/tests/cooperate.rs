@@ -322,7 +322,7 @@ fn the_shipped_launch_files_come_up_and_their_bridges_meet() {
         let out = r.command("nerve").arg("launch").arg(dir.join(f)).current_dir(repo()).output().expect("nerve launch");
         assert!(out.status.success(), "launch of {f} failed: {}", String::from_utf8_lossy(&out.stderr));
     }
-    assert_eq!(r1.ps().len(), 14, "robot 1's agents");
+    assert_eq!(r1.ps().len(), 15, "robot 1's agents");
     assert_eq!(r2.ps().len(), 10, "robot 2's agents");
     assert!(
         wait_until(Duration::from_secs(30), || r2.figure_u64("bridge", "peers") == 1

@@ -8,7 +8,10 @@
 //!   checkpoint is near and which of its transmitters are received;
 //! * `pose` (`nerve::PoseEstimate`): the odometry agent's `pose`, to place
 //!   what is seen in the world and to be corrected;
-//! * `head` (`nerve::HeadState`, optional): the head's pan, added to bearings.
+//! * `head` (`nerve::HeadState`, optional): the head's pan, added to bearings;
+//!   while the head is turning (measured pan more than 1.5° from its
+//!   set-point) frames are not used: the pan of a moving head is not known
+//!   at the frame's instant (figure `moving`).
 //!
 //! Outputs:
 //! * `sighting` (`nerve::CheckpointSighting`): each tube seen with a
@@ -54,6 +57,8 @@ struct Args {
 
 /// A head state older than this is not trusted, ns.
 const HEAD_FRESH_NS: u64 = 500_000_000;
+/// A head farther than this from its set-point is turning, radians (1.5°).
+const HEAD_SETTLED_RAD: f64 = 0.026;
 /// A pose older than this is not used, ns.
 const POSE_FRESH_NS: u64 = 1_000_000_000;
 
@@ -64,6 +69,7 @@ struct Counters {
     sightings: AtomicU64,
     corrections: AtomicU64,
     rejected: AtomicU64,
+    moving: AtomicU64,
 }
 
 struct Checkpoint {
@@ -88,7 +94,8 @@ struct Checkpoint {
     counters: Arc<Counters>,
     last_ir: Option<IrSighting>,
     last_pose: Option<PoseEstimate>,
-    pan: Option<(f64, u64)>,
+    /// The head's measured pan, whether it had settled, and when it was read.
+    pan: Option<(f64, bool, u64)>,
     warned_no_pose: bool,
 }
 
@@ -134,7 +141,7 @@ impl Checkpoint {
             now_ns: now,
             pose,
             ir: self.last_ir,
-            pan_rad: self.pan.filter(|(_, t)| now.saturating_sub(*t) <= HEAD_FRESH_NS).map_or(0.0, |(p, _)| p),
+            pan_rad: self.pan.filter(|(_, _, t)| now.saturating_sub(*t) <= HEAD_FRESH_NS).map_or(0.0, |(p, _, _)| p),
         };
         let out = self.sensor.frame(&input, &self.settings());
         self.counters.tubes.fetch_add(out.ranged as u64, Ordering::Relaxed);
@@ -218,6 +225,7 @@ impl Agent for Checkpoint {
                 ("sightings".into(), g(&c2.sightings)),
                 ("corrections".into(), g(&c2.corrections)),
                 ("rejected".into(), g(&c2.rejected)),
+                ("moving".into(), g(&c2.moving)),
             ]
         });
         Ok(Checkpoint {
@@ -259,7 +267,8 @@ impl Agent for Checkpoint {
         }
         if let Some((_, h)) = self.head.latest() {
             if h.pan_rad.is_finite() {
-                self.pan = Some((h.pan_rad, now));
+                let settled = !h.target_pan_rad.is_finite() || (h.pan_rad - h.target_pan_rad).abs() <= HEAD_SETTLED_RAD;
+                self.pan = Some((h.pan_rad, settled, now));
             }
         }
         let (finder, colors, min_px) =
@@ -285,6 +294,10 @@ impl Agent for Checkpoint {
             Err(e) => return Err(e.into()),
         };
         self.counters.frames.fetch_add(1, Ordering::Relaxed);
+        if self.pan.is_some_and(|(_, settled, t)| !settled && now.saturating_sub(t) <= HEAD_FRESH_NS) {
+            self.counters.moving.fetch_add(1, Ordering::Relaxed);
+            return Ok(());
+        }
         self.on_frame(&tubes, width, stamp, now)
     }
 }

@@ -1,0 +1,100 @@
+//! `look`: the look-around agent. It sweeps H1's head through a list of pan
+//! angles, dwelling at each once the head has got there, so that the camera
+//! sees beside the robot's path (see the `nerve_look` library for the sweep).
+//!
+//! Input `head` (`nerve::HeadState`, optional): the head agent's `state`;
+//! with it a step's dwell starts when the measured pan has settled, without
+//! it after the travel time at 90°/s.
+//! Output `cmd` (`nerve::HeadCommand`): the pan set-point, tilt 0, every
+//! cycle (periodic, 100 ms); connect it to the head agent's `cmd`.
+//!
+//! Parameters: `pans_deg` (`"0,-60,0,60"`: the angles, positive to the left,
+//! within ±100°), `dwell_ms` (1200), `settle_deg` (2), `enabled` (true; when
+//! false the head is sent straight ahead). Read-only figure `steps`.
+
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
+use nerve_look::{Sweep, SweepSettings, parse_pans_deg};
+use shm_schemas::payloads::{HeadCommand, HeadState};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+/// The head board's pan limit, degrees.
+const PAN_LIMIT_DEG: f64 = 100.0;
+/// A head report older than this is not used, ns.
+const HEAD_FRESH_NS: u64 = 500_000_000;
+
+struct Look {
+    head: Input<HeadState>,
+    cmd: Output<HeadCommand>,
+    pans_deg: Param<String>,
+    dwell_ms: Param<u64>,
+    settle_deg: Param<f64>,
+    enabled: Param<bool>,
+    sweep: Option<Sweep>,
+    last_head: Option<(f64, u64)>,
+    steps: Arc<AtomicU64>,
+}
+
+impl Agent for Look {
+    const KIND: &'static str = "look";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_millis(100))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let steps = Arc::new(AtomicU64::new(0));
+        let s2 = steps.clone();
+        setup.figures(move || vec![("steps".into(), s2.load(Ordering::Relaxed).to_string())]);
+        Ok(Look {
+            head: setup.input("head")?,
+            cmd: setup.output("cmd")?,
+            pans_deg: setup.param_checked("pans_deg", "0,-60,0,60".to_owned(), |s: &String| {
+                parse_pans_deg(s, PAN_LIMIT_DEG).map(|_| ())
+            }),
+            dwell_ms: setup.param_checked("dwell_ms", 1200u64, |v| {
+                agent_sdk::params::in_range("dwell_ms", *v, &(0..=60_000), "ms")
+            }),
+            settle_deg: setup.param_checked("settle_deg", 2.0, |v: &f64| {
+                if v.is_finite() && *v > 0.0 && *v <= 30.0 { Ok(()) } else { Err(format!("{v} is outside 0 … 30°")) }
+            }),
+            enabled: setup.param("enabled", true),
+            sweep: None,
+            last_head: None,
+            steps,
+        })
+    }
+
+    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+        let now = ctx.now_ns();
+        if let Some((_, h)) = self.head.latest() {
+            if h.pan_rad.is_finite() {
+                self.last_head = Some((h.pan_rad, now));
+            }
+        }
+        let pan = if self.enabled.get() {
+            let settings = SweepSettings {
+                // the parameter was checked when set
+                pans_rad: parse_pans_deg(&self.pans_deg.get(), PAN_LIMIT_DEG).unwrap_or_else(|_| vec![0.0]),
+                dwell_ns: self.dwell_ms.get().saturating_mul(1_000_000),
+                settle_rad: self.settle_deg.get().to_radians(),
+                ..SweepSettings::default()
+            };
+            let measured = self.last_head.filter(|(_, t)| now.saturating_sub(*t) <= HEAD_FRESH_NS).map(|(p, _)| p);
+            let sweep = self.sweep.get_or_insert_with(|| Sweep::new(now));
+            let pan = sweep.update(&settings, now, measured);
+            self.steps.store(sweep.steps(), Ordering::Relaxed);
+            pan
+        } else {
+            self.sweep = None;
+            0.0
+        };
+        self.cmd.send(HeadCommand { pan_rad: pan, tilt_rad: 0.0, stamp_ns: now })?;
+        Ok(())
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<Look>()
+}
