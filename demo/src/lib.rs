@@ -18,6 +18,7 @@
 //! `docs/demo.md` and on [`analysis::analyse`].
 
 pub mod analysis;
+pub mod calibration_plot;
 pub mod cpu;
 pub mod modes;
 pub mod plot;

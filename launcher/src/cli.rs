@@ -82,6 +82,9 @@ pub enum Command {
     /// Reproduce an experiment of the thesis (`nerve demo explore`).
     #[command(subcommand)]
     Demo(crate::cmd::demo::DemoCmd),
+    /// Calibrate a sensor (`nerve calibrate checkpoint`: Appendix A, in the simulator or from samples).
+    #[command(subcommand)]
+    Calibrate(crate::cmd::calibrate::CalibrateCmd),
     /// Run a benchmark scenario (runs `nerve-bench`; see BENCHMARKS.md).
     Bench(crate::cmd::bench::BenchArgs),
     /// Robots talking to each other: the bridge agents' peers and what crosses.

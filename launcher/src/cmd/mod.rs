@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod bridge;
+pub mod calibrate;
 pub mod demo;
 pub mod down;
 pub mod drive;
@@ -40,6 +41,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Logs(a) => logs::logs(&world, a),
         Command::Exec(a) => start::exec(&world, a),
         Command::Demo(c) => demo::demo(&cli.robot, c),
+        Command::Calibrate(c) => calibrate::calibrate(&cli.robot, cli.robot_explicit, c),
         Command::Mem(c) => mem::mem(&world, c),
         Command::Cmd(a) => drive::cmd(&world, a),
         Command::Bench(a) => bench::bench(a),
