@@ -109,6 +109,12 @@ impl Sweep {
     }
 }
 
+/// Wraps an angle into (−π, π].
+pub fn wrap(a: f64) -> f64 {
+    let r = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if r <= -std::f64::consts::PI { r + std::f64::consts::TAU } else { r }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

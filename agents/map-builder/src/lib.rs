@@ -26,6 +26,21 @@
 //! follower to look at). A via point that is a detour (going through it is
 //! more than `detour_factor` times longer than going past it) is left out.
 //!
+//! **Robot 1's own way to the target** ([`MapBuilder::on_pose`]). From the
+//! last checkpoint's via point to the target, a straight line may cut a
+//! corner (the target stands in an open space beside the corridor, behind
+//! an opening). So the map builder keeps robot 1's trail (a point every
+//! `TRAIL_STEP_M`) and, between the last checkpoint's via point and the
+//! target, puts in the way robot 1 drove up to where it found the target —
+//! simplified (Douglas–Peucker, `TRAIL_TOLERANCE_M`) into `waypoint`s. The
+//! target's via point then lies on the line from there to the target: robot
+//! 2 comes the way robot 1 came. A target counts only when seen within
+//! `target_range_m` (0: at any range), so robot 1 has come near it — into
+//! the space where it stands. And the path is ready only once robot 1 has
+//! driven `clear_m` on from where it found the target ([`MapBuilder::path`]
+//! says `None` until then), so that robot 1, which waits where it then
+//! stops, is not in robot 2's way.
+//!
 //! **Where the robot has been** ([`VisitedGrid`]): a coarse grid of cells
 //! with the times the robot entered and left them.
 //! [`VisitedGrid::visited_before`] says whether a place was passed before
@@ -63,11 +78,30 @@ pub struct Settings {
     /// A via point is left out when the path through it is longer than
     /// this times the path past it (0: never).
     pub detour_factor: f64,
+    /// A target sighting counts only within this range, metres (0: any).
+    pub target_range_m: f64,
+    /// Robot 1 drives this far on after finding the target before the path
+    /// is ready, metres (0: at once).
+    pub clear_m: f64,
 }
+
+/// Robot 1's trail keeps a point every this many metres.
+pub const TRAIL_STEP_M: f64 = 0.25;
+/// The trail is simplified to within this many metres.
+pub const TRAIL_TOLERANCE_M: f64 = 0.2;
+/// The trail keeps at most this many points (then every other one is dropped).
+pub const TRAIL_MAX_POINTS: usize = 8192;
 
 impl Default for Settings {
     fn default() -> Self {
-        Settings { via_distance_m: 1.6, merge_m: 1.0, min_sightings: 3, detour_factor: 2.0 }
+        Settings {
+            via_distance_m: 1.6,
+            merge_m: 1.0,
+            min_sightings: 3,
+            detour_factor: 2.0,
+            target_range_m: 0.0,
+            clear_m: 0.0,
+        }
     }
 }
 
@@ -90,6 +124,8 @@ pub struct Landmark {
     transmitter_votes: [(u32, f64); 4],
     /// Sum of unit vectors toward where the robot saw it from (no transmitter known).
     seen_from: (f64, f64),
+    /// Length of robot 1's trail when it was first seen.
+    trail_at: usize,
 }
 
 impl Landmark {
@@ -132,6 +168,9 @@ pub enum SightingEvent {
 pub struct MapBuilder {
     settings: Settings,
     landmarks: Vec<Landmark>,
+    trail: Vec<[f64; 2]>,
+    /// Length of the trail when the target was confirmed.
+    found_at: Option<usize>,
 }
 
 /// Which transmitter directions a sighting reports: bit `i` faces
@@ -157,7 +196,35 @@ fn transmitter_directions(transmitters: u8, facing: f64) -> Vec<(usize, f64)> {
 impl MapBuilder {
     /// An empty map.
     pub fn new(settings: Settings) -> Self {
-        MapBuilder { settings, landmarks: Vec::new() }
+        MapBuilder { settings, landmarks: Vec::new(), trail: Vec::new(), found_at: None }
+    }
+
+    /// Robot 1 is at `(x, y)`: extends its trail.
+    pub fn on_pose(&mut self, x: f64, y: f64) {
+        if !(x.is_finite() && y.is_finite()) {
+            return;
+        }
+        if self.trail.last().is_some_and(|l| (l[0] - x).hypot(l[1] - y) < TRAIL_STEP_M) {
+            return;
+        }
+        if self.trail.len() >= TRAIL_MAX_POINTS {
+            // thin out: every other point (landmarks' marks are halved with it)
+            let mut k = 0;
+            self.trail.retain(|_| {
+                k += 1;
+                k % 2 == 1
+            });
+            for l in &mut self.landmarks {
+                l.trail_at /= 2;
+            }
+            self.found_at = self.found_at.map(|f| f / 2);
+        }
+        self.trail.push([x, y]);
+    }
+
+    /// Robot 1's trail so far.
+    pub fn trail(&self) -> &[[f64; 2]] {
+        &self.trail
     }
 
     /// Changes the settings.
@@ -188,6 +255,10 @@ impl MapBuilder {
         if !finite || (s.checkpoint_id == 0 && !is_target) {
             return SightingEvent::Ignored;
         }
+        let far = !(s.range_m.is_finite() && f64::from(s.range_m) <= self.settings.target_range_m);
+        if is_target && self.settings.target_range_m > 0.0 && far {
+            return SightingEvent::Ignored;
+        }
         let merge = self.settings.merge_m;
         let idx = self.landmarks.iter().position(|l| {
             l.is_target == is_target
@@ -210,6 +281,7 @@ impl MapBuilder {
                     order,
                     transmitter_votes: [(0, 0.0); 4],
                     seen_from: (0.0, 0.0),
+                    trail_at: self.trail.len(),
                 });
                 (self.landmarks.len() - 1, SightingEvent::New)
             }
@@ -243,6 +315,9 @@ impl MapBuilder {
             l.seen_from.1 += from.1 / norm;
         }
         if l.sightings == min {
+            if l.is_target && self.found_at.is_none() {
+                self.found_at = Some(self.trail.len());
+            }
             return SightingEvent::Confirmed { id: l.id, is_target: l.is_target };
         }
         event
@@ -250,9 +325,15 @@ impl MapBuilder {
 
     /// The path for robot 2: via points of the confirmed checkpoints in the
     /// order first seen (detours left out), then the target's via point and
-    /// the target. `None` until a target is confirmed.
+    /// the target. `None` until a target is confirmed and robot 1 has
+    /// driven `clear_m` on from where it was then.
     pub fn path(&self, path_id: u32, stamp_ns: u64) -> Option<ViaPath> {
         let target = self.target()?;
+        let from = self.found_at.unwrap_or(0).saturating_sub(1).min(self.trail.len());
+        let driven: f64 = self.trail[from..].windows(2).map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1])).sum();
+        if driven < self.settings.clear_m {
+            return None;
+        }
         let dist = self.settings.via_distance_m;
         let mut pts: Vec<([f64; 2], ViaKind, u8, [f64; 2])> = self
             .confirmed()
@@ -262,14 +343,36 @@ impl MapBuilder {
                 ([v.0, v.1], ViaKind::Checkpoint, l.id, [l.x, l.y])
             })
             .collect();
-        let tv = target.via_point(dist);
         let t = [target.x, target.y];
+        let last_checkpoint = self.confirmed().filter(|l| !l.is_target).max_by_key(|l| l.order);
+        for w in self.way_to_target(last_checkpoint, t) {
+            pts.push((w, ViaKind::Waypoint, 0, w));
+        }
+        // the target's via point: toward where robot 2 comes from when the
+        // path has robot 1's way in it, else in front of the target
+        let tv = match pts.last().copied() {
+            Some((w, ViaKind::Waypoint, _, _)) => {
+                let (dx, dy) = (w[0] - t[0], w[1] - t[1]);
+                let n = dx.hypot(dy);
+                // on the line from the last waypoint, at most 70 % of the way
+                let k = dist.min(0.7 * n) / n;
+                if n - k * n < 0.3 {
+                    pts.pop(); // the waypoint is (about) the via point
+                }
+                (t[0] + k * dx, t[1] + k * dy)
+            }
+            _ => target.via_point(dist),
+        };
         pts.push(([tv.0, tv.1], ViaKind::TargetApproach, target.id, t));
         pts.push((t, ViaKind::Target, target.id, t));
-        // leave out detours (never the last two)
+        // leave out detours (never the last two, never robot 1's own way)
         if self.settings.detour_factor > 0.0 {
             let mut i = 1;
             while i + 2 < pts.len() {
+                if pts[i].1 == ViaKind::Waypoint {
+                    i += 1;
+                    continue;
+                }
                 let (a, b, c) = (pts[i - 1].0, pts[i].0, pts[i + 1].0);
                 let d = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
                 if d(a, b) + d(b, c) > self.settings.detour_factor * d(a, c).max(1e-6) {
@@ -291,6 +394,61 @@ impl MapBuilder {
         }
         Some(path)
     }
+}
+
+impl MapBuilder {
+    /// Robot 1's way from the via point of `from` (the last checkpoint) to
+    /// where it found the target, simplified; empty without a checkpoint or
+    /// a trail.
+    fn way_to_target(&self, from: Option<&Landmark>, target: [f64; 2]) -> Vec<[f64; 2]> {
+        let end = self.found_at.unwrap_or(self.trail.len()).min(self.trail.len());
+        let Some(from) = from else { return Vec::new() };
+        let via = from.via_point(self.settings.via_distance_m);
+        let d = |p: &[f64; 2], q: (f64, f64)| (p[0] - q.0).hypot(p[1] - q.1);
+        let after = &self.trail[from.trail_at.min(end)..end];
+        // from the trail point nearest the via point, after the checkpoint was first seen
+        let Some(start) = after.iter().enumerate().min_by(|a, b| d(a.1, via).total_cmp(&d(b.1, via))).map(|(i, _)| i)
+        else {
+            return Vec::new();
+        };
+        let mut out = simplify(&after[start..], TRAIL_TOLERANCE_M);
+        // the first point is (about) the via point itself
+        out.retain(|p| d(p, via) > 0.5 && d(p, (target[0], target[1])) > 0.8);
+        out
+    }
+}
+
+/// Douglas–Peucker simplification of a polyline to within `tol` metres
+/// (the first and last points are kept).
+pub fn simplify(pts: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
+    if pts.len() <= 2 {
+        return pts.to_vec();
+    }
+    let mut keep = vec![false; pts.len()];
+    keep[0] = true;
+    keep[pts.len() - 1] = true;
+    let mut stack = vec![(0usize, pts.len() - 1)];
+    while let Some((a, b)) = stack.pop() {
+        let (pa, pb) = (pts[a], pts[b]);
+        let (dx, dy) = (pb[0] - pa[0], pb[1] - pa[1]);
+        let len = dx.hypot(dy);
+        let dist = |p: &[f64; 2]| {
+            if len < 1e-12 {
+                (p[0] - pa[0]).hypot(p[1] - pa[1])
+            } else {
+                ((p[0] - pa[0]) * dy - (p[1] - pa[1]) * dx).abs() / len
+            }
+        };
+        let far = (a + 1..b).map(|i| (i, dist(&pts[i]))).max_by(|x, y| x.1.total_cmp(&y.1));
+        if let Some((i, dmax)) = far {
+            if dmax > tol {
+                keep[i] = true;
+                stack.push((a, i));
+                stack.push((i, b));
+            }
+        }
+    }
+    pts.iter().zip(keep).filter(|(_, k)| *k).map(|(p, _)| *p).collect()
 }
 
 /// A cell of the [`VisitedGrid`].
@@ -447,6 +605,83 @@ mod tests {
 
     fn target(x: f64, y: f64) -> CheckpointSighting {
         CheckpointSighting { x, y, is_target: 1, from_camera: 1, ..Default::default() }
+    }
+
+    /// The cooperation world: robot 1 follows the corridor's right wall
+    /// (y = -0.4) past checkpoint 3 at (10.8, 1.2), turns right through the
+    /// opening at x = 11.6 … 14.8 and down the open space's west side
+    /// (x = 12.2), sees the target at (12.8, -3) within 2 m from (12.2, -1.4)
+    /// and drives 2.5 m on before it stops.
+    #[test]
+    fn robot_1s_way_round_the_corner_enters_the_path() {
+        let mut m =
+            MapBuilder::new(Settings { min_sightings: 1, target_range_m: 2.0, clear_m: 2.5, ..Settings::default() });
+        let mut x = 8.0;
+        while x < 12.2 {
+            m.on_pose(x, -0.4 - 0.6 * ((x - 11.6).max(0.0) / 0.6).min(1.0) * 0.5);
+            if (x - 10.0).abs() < 0.01 {
+                assert!(matches!(m.on_sighting(&cp(3, 10.8, 1.2, 0b0001), None), SightingEvent::Confirmed { .. }));
+            }
+            x += 0.05;
+        }
+        let mut y = -0.7;
+        // seen from afar first: not counted
+        let mut far = target(12.8, -3.0);
+        far.range_m = 2.9;
+        assert_eq!(m.on_sighting(&far, Some(Pose { x: 12.0, y: -0.4, theta: 0.0 })), SightingEvent::Ignored);
+        while y > -1.4 {
+            m.on_pose(12.2, y);
+            y -= 0.05;
+        }
+        let mut near = target(12.8, -3.0);
+        near.range_m = 1.7;
+        m.on_sighting(&near, Some(Pose { x: 12.2, y: -1.4, theta: -FRAC_PI_2 }));
+        assert!(m.path(1, 0).is_none(), "robot 1 has not cleared the way yet");
+        while y > -4.0 {
+            m.on_pose(12.2, y);
+            y -= 0.05;
+        }
+        let p = m.path(1, 0).expect("a path once robot 1 drove 2.5 m on");
+        let kinds: Vec<ViaKind> = p.entries().map(|(_, k, _)| ViaKind::from_code(k).unwrap()).collect();
+        let pts: Vec<[f64; 2]> = p.entries().map(|(p, _, _)| p).collect();
+        assert_eq!(kinds.first(), Some(&ViaKind::Checkpoint));
+        assert_eq!(&kinds[kinds.len() - 2..], &[ViaKind::TargetApproach, ViaKind::Target]);
+        assert!(kinds.contains(&ViaKind::Waypoint), "robot 1's turn through the opening is in the path: {pts:?}");
+        // the corner is passed the way robot 1 went: no leg passes within
+        // 0.4 m of the opening's west corner (11.6, -1), and none within
+        // 0.8 m of robot 1, waiting at (12.2, -3.9)
+        let dist_to = |a: [f64; 2], b: [f64; 2], q: [f64; 2]| {
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let t = (((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
+            (a[0] + t * dx - q[0]).hypot(a[1] + t * dy - q[1])
+        };
+        let legs: Vec<_> = pts.windows(2).collect();
+        for leg in &legs {
+            let d = dist_to(leg[0], leg[1], [11.6, -1.0]);
+            assert!(d > 0.4, "leg {leg:?} passes {d:.2} m from the corner: {pts:?}");
+        }
+        // the last leg ends at the target itself: robot 2 stops short of it
+        for leg in &legs[..legs.len() - 1] {
+            let d = dist_to(leg[0], leg[1], [12.2, -3.9]);
+            assert!(d > 0.8, "leg {leg:?} passes {d:.2} m from robot 1: {pts:?}");
+        }
+        let approach = pts[pts.len() - 2];
+        assert!((approach[0] - 12.8).hypot(approach[1] + 3.0) <= 1.6 + 1e-9, "{approach:?}");
+    }
+
+    #[test]
+    fn the_trail_is_simplified_and_bounded() {
+        let line: Vec<[f64; 2]> = (0..100).map(|i| [f64::from(i) * 0.1, 0.0]).collect();
+        assert_eq!(simplify(&line, 0.2), vec![[0.0, 0.0], [9.9, 0.0]]);
+        let corner = [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [2.0, -1.0], [2.0, -2.0]];
+        assert_eq!(simplify(&corner, 0.2), vec![[0.0, 0.0], [2.0, 0.0], [2.0, -2.0]]);
+        let mut m = MapBuilder::new(Settings::default());
+        for i in 0..(TRAIL_MAX_POINTS + 10) {
+            m.on_pose(i as f64, 0.0);
+        }
+        assert!(m.trail().len() <= TRAIL_MAX_POINTS);
+        m.on_pose(f64::NAN, 0.0);
+        assert!(m.trail().iter().all(|p| p[0].is_finite()));
     }
 
     #[test]

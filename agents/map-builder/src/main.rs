@@ -19,8 +19,10 @@
 //!
 //! The algorithm is the library `nerve_map_builder`. Parameters:
 //! `via_distance_m` (1.6), `merge_m` (1.0), `min_sightings` (3),
-//! `detour_factor` (2.0), `republish_ms` (1000), `cell_m` (0.5; read at
-//! start), `revisit_after_s` (30; read at start), `revisit_radius_m` (0.5);
+//! `detour_factor` (2.0), `target_range_m` (0: a target counts at any
+//! range), `clear_m` (0: robot 1 drives this far on after finding the target
+//! before the path is sent and it stops, to be out of robot 2's way), `republish_ms` (1000), `cell_m`
+//! (0.5; read at start), `revisit_after_s` (30; read at start), `revisit_radius_m` (0.5);
 //! read-only figures `landmarks`, `confirmed`, `cells`, `paths_sent`.
 
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
@@ -64,6 +66,8 @@ struct MapBuilderAgent {
     merge_m: Param<f64>,
     min_sightings: Param<u32>,
     detour_factor: Param<f64>,
+    target_range_m: Param<f64>,
+    clear_m: Param<f64>,
     republish_ms: Param<u64>,
     revisit_radius_m: Param<f64>,
     map: MapBuilder,
@@ -86,6 +90,8 @@ impl MapBuilderAgent {
             merge_m: self.merge_m.get(),
             min_sightings: self.min_sightings.get(),
             detour_factor: self.detour_factor.get(),
+            target_range_m: self.target_range_m.get(),
+            clear_m: self.clear_m.get(),
         }
     }
 
@@ -138,6 +144,8 @@ impl Agent for MapBuilderAgent {
             detour_factor: setup.param_checked("detour_factor", d.detour_factor, |v| {
                 if *v == 0.0 || (1.0..=100.0).contains(v) { Ok(()) } else { Err("0 (off) or 1 … 100".into()) }
             }),
+            target_range_m: setup.param_checked("target_range_m", d.target_range_m, in_range(0.0, 20.0)),
+            clear_m: setup.param_checked("clear_m", d.clear_m, in_range(0.0, 20.0)),
             republish_ms: setup.param_checked("republish_ms", 1000u64, |v| {
                 if *v >= 50 { Ok(()) } else { Err("republish_ms is at least 50".into()) }
             }),
@@ -161,6 +169,7 @@ impl Agent for MapBuilderAgent {
         self.pose.drain(|_, p| poses.push(*p));
         for p in poses.iter().filter(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite()) {
             self.grid.visit(p.x, p.y, p.stamp_ns);
+            self.map.on_pose(p.x, p.y);
             if self.last_pose.is_none_or(|l| p.stamp_ns >= l.stamp_ns) {
                 self.last_pose = Some(*p);
             }

@@ -298,6 +298,26 @@ impl Follower {
         }
     }
 
+    /// Robot 2's own camera sees the target at `(x, y)` (in robot 2's
+    /// frame, which is the frame it drives in): while it drives the last two
+    /// points and the sighting lies within `max_shift_m` of the path's
+    /// target, the target point moves there — robot 1's estimate of where the
+    /// target stands (made with robot 1's odometry) gives way to robot 2's
+    /// own. Returns whether the point moved.
+    pub fn target_seen(&mut self, x: f64, y: f64, max_shift_m: f64) -> bool {
+        let moving = !matches!(self.phase, Phase::Idle | Phase::Arrived);
+        if !(x.is_finite() && y.is_finite()) || !moving || self.index + 2 < self.points.len() {
+            return false;
+        }
+        let Some(last) = self.points.last_mut().filter(|p| p.kind == ViaKind::Target) else { return false };
+        if (last.x - x).hypot(last.y - y) > max_shift_m {
+            return false;
+        }
+        // a running mean would lag behind; the newest, nearest sighting is the best
+        (last.x, last.y, last.landmark) = (x, y, (x, y));
+        true
+    }
+
     /// Stops following (the robot stops).
     pub fn abort(&mut self) {
         self.points.clear();
@@ -454,6 +474,27 @@ mod tests {
             s = f.step(pose, 0.05);
         }
         s
+    }
+
+    #[test]
+    fn robot_2s_own_sighting_moves_the_target_on_the_last_legs_only() {
+        let mut f = Follower::new(Settings::default());
+        f.follow(&path(&[
+            (2.0, 0.0, ViaKind::Waypoint),
+            (4.0, 0.0, ViaKind::TargetApproach),
+            (5.0, 0.0, ViaKind::Target),
+        ]))
+        .unwrap();
+        assert!(!f.target_seen(5.2, 0.1, 1.0), "not while the first point is ahead");
+        settle(&mut f, &Pose { x: 2.0, y: 0.0, theta: 0.0 });
+        assert_eq!(f.index(), 1);
+        assert!(!f.target_seen(6.5, 0.0, 1.0), "too far from robot 1's estimate: another tube");
+        assert!(!f.target_seen(f64::NAN, 0.0, 1.0));
+        assert!(f.target_seen(5.3, -0.2, 1.0));
+        let last = f.points()[2];
+        assert_eq!((last.x, last.y, last.landmark), (5.3, -0.2, (5.3, -0.2)));
+        // the approach point stays: only the target moves
+        assert_eq!((f.points()[1].x, f.points()[1].y), (4.0, 0.0));
     }
 
     #[test]

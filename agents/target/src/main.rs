@@ -5,7 +5,12 @@
 //! * `pose` (`nerve::PoseEstimate`): the odometry agent's `pose`;
 //! * `path` (`nerve::ViaPath`): robot 1's map builder's `path`, through the bridge;
 //! * `mission_in` (`nerve::MissionCommand`): `come` (follow path N; needs
-//!   that path), `abort` (stop), through the bridge.
+//!   that path), `abort` (stop), through the bridge;
+//! * `sighting` (`nerve::CheckpointSighting`, optional): robot 2's own
+//!   checkpoint sensor; on the last two legs a sighting of the target within
+//!   `target_shift_m` (1.0) of the path's target moves the target there —
+//!   robot 2 then drives to the target it sees, not to where robot 1's
+//!   odometry placed it.
 //!
 //! Outputs:
 //! * `cmd` (`nerve::VelocityCommand`): to the motor's `cmd` while following
@@ -25,7 +30,7 @@
 use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_target::{Event, Follower, Phase, Pose, Settings};
-use shm_schemas::payloads::{MissionCode, MissionCommand, PoseEstimate, VelocityCommand, ViaPath};
+use shm_schemas::payloads::{CheckpointSighting, MissionCode, MissionCommand, PoseEstimate, VelocityCommand, ViaPath};
 use std::time::Duration;
 
 /// A pose older than this is not followed: the robot stops, ns.
@@ -37,6 +42,8 @@ struct Target {
     pose: Input<PoseEstimate>,
     path: Input<ViaPath>,
     mission_in: Input<MissionCommand>,
+    sighting: Input<CheckpointSighting>,
+    target_shift_m: Param<f64>,
     cmd: Output<VelocityCommand>,
     mission: Output<MissionCommand>,
     v_cruise: Param<f64>,
@@ -123,6 +130,8 @@ impl Agent for Target {
             pose: setup.input("pose")?,
             path: setup.input("path")?,
             mission_in: setup.input("mission_in")?,
+            sighting: setup.input("sighting")?,
+            target_shift_m: setup.param_checked("target_shift_m", 1.0, in_range(0.0, 5.0)),
             cmd: setup.output("cmd")?,
             mission: setup.output("mission")?,
             v_cruise: setup.param_checked("v_cruise", d.v_cruise, in_range(0.01, 0.6)),
@@ -190,6 +199,17 @@ impl Agent for Target {
             }
         }
         self.start_if_asked();
+        let mut seen = Vec::new();
+        self.sighting.drain(|_, s| {
+            if s.is_target == 1 && s.from_camera == 1 {
+                seen.push((s.x, s.y));
+            }
+        });
+        for (x, y) in seen {
+            if self.follower.target_seen(x, y, self.target_shift_m.get()) {
+                tracing::debug!(x, y, "the target as robot 2 sees it");
+            }
+        }
 
         match self.follower.phase() {
             Phase::Idle => Ok(()),
