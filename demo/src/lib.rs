@@ -19,6 +19,7 @@
 
 pub mod analysis;
 pub mod calibration_plot;
+pub mod cooperate;
 pub mod cpu;
 pub mod modes;
 pub mod plot;

@@ -14,6 +14,7 @@ use crate::scene::Scene;
 use crate::truth::TruthRow;
 use nerve_sim::world::Motion;
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -34,7 +35,7 @@ const DOOR: RGBColor = RGBColor(20, 150, 60);
 /// At most this many points of the robot's path are drawn (the log has 100 per second).
 const MAX_POINTS: usize = 4000;
 
-fn err<E: std::fmt::Display>(path: &Path) -> impl Fn(E) -> DemoError + '_ {
+pub(crate) fn err<E: std::fmt::Display>(path: &Path) -> impl Fn(E) -> DemoError + '_ {
     move |e| DemoError::Plot { path: path.to_path_buf(), message: e.to_string() }
 }
 
@@ -50,7 +51,7 @@ fn thin(rows: &[TruthRow]) -> Vec<&TruthRow> {
 }
 
 /// Pixel size of the trajectory figure for the scene's aspect ratio.
-fn map_size(scene: &Scene) -> (u32, u32, (f64, f64), (f64, f64)) {
+pub(crate) fn map_size(scene: &Scene) -> (u32, u32, (f64, f64), (f64, f64)) {
     let (lo, hi) = scene.bounds();
     let pad = 0.5;
     // room on the right for the legend, so that it never hides the map
@@ -63,35 +64,16 @@ fn map_size(scene: &Scene) -> (u32, u32, (f64, f64), (f64, f64)) {
     (width, height, (x0, x1), (y0, y1))
 }
 
-fn draw_trajectory<DB: DrawingBackend>(
-    root: DrawingArea<DB, Shift>,
+/// The map under a trajectory, seen from above: boxes, walls, door openings,
+/// checkpoints (yellow triangles) and targets (red triangles).
+pub(crate) fn draw_map<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     scene: &Scene,
-    rows: &[TruthRow],
-    a: &Analysis,
-    title: &str,
-    (xr, yr): ((f64, f64), (f64, f64)),
 ) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    root.fill(&WHITE).map_err(e)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)
-        .map_err(e)?;
-    chart
-        .configure_mesh()
-        .x_desc("x (m)")
-        .y_desc("y (m)")
-        .light_line_style(RGBColor(235, 235, 235))
-        .bold_line_style(RGBColor(215, 215, 215))
-        .draw()
-        .map_err(e)?;
-
     // boxes: filled polygons (worktable, cabinets, clutter)
     for b in &scene.world.boxes {
         let pts: Vec<(f64, f64)> = b.edges.iter().map(|s| (s.a.x, s.a.y)).collect();
@@ -132,6 +114,39 @@ where
             TriangleMarker::new((c.position.x, c.position.y), 7, col.filled())
         }))
         .map_err(e)?;
+    Ok(())
+}
+
+fn draw_trajectory<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    scene: &Scene,
+    rows: &[TruthRow],
+    a: &Analysis,
+    title: &str,
+    (xr, yr): ((f64, f64), (f64, f64)),
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(e)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)
+        .map_err(e)?;
+    chart
+        .configure_mesh()
+        .x_desc("x (m)")
+        .y_desc("y (m)")
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .draw()
+        .map_err(e)?;
+
+    draw_map(&mut chart, scene)?;
     // moving objects: the person's path (and the red object's)
     for (i, o) in scene.world.objects.iter().enumerate() {
         let is_target = scene.target == Some(i);

@@ -1,7 +1,11 @@
 //! Range and landmark sensors: the sonar ring and the IR receiver.
 //!
 //! **Sonar**: each of the 12 transducers casts five rays across its beam
-//! (±12.5°) at its mounting height; the nearest hit is the true range. Noise
+//! (±12.5°) at its mounting height; the nearest hit is the true range. A
+//! round thing (a pole, a tube's stand, a person, another robot) echoes when
+//! any part of it lies within the beam's cone — a convex surface always
+//! turns a point squarely to the transducer — so a pole thinner than the
+//! gap between two rays is not missed, and its echo is never specular. Noise
 //! is normal with a constant and a range-proportional part. When the beam
 //! meets the surface at a grazing angle (incidence beyond `specular_angle`),
 //! the echo may be reflected away (specular reflection; the incidence is that
@@ -26,7 +30,7 @@ use rand::Rng;
 use nerve_devices::{IrSighting, SONAR_COUNT, SONAR_NO_ECHO, wrap_angle};
 
 use crate::geom::Vec2;
-use crate::sim::{RobotId, RobotMut, RobotRef, Simulation, Surface, gauss, ray_hit};
+use crate::sim::{RobotId, RobotMut, RobotRef, Shape, Simulation, Surface, gauss, ray_hit};
 
 /// True range and angle of incidence along one ray at `height`.
 fn sonar_ray(surfaces: &[Surface], origin: Vec2, dir: Vec2, height: f64) -> Option<(f64, f64)> {
@@ -36,6 +40,52 @@ fn sonar_ray(surfaces: &[Surface], origin: Vec2, dir: Vec2, height: f64) -> Opti
         .filter_map(|s| ray_hit(origin, dir, &s.shape))
         .min_by(|a, b| a.dist.total_cmp(&b.dist))
         .map(|h| (h.dist, dir.dot(h.normal).abs().clamp(0.0, 1.0).acos()))
+}
+
+/// The nearest round surface at `height` any part of which lies within the
+/// cone of half-angle `half_beam` around `axis` (a unit vector) from
+/// `origin`: its range (to its near side along the line to its centre).
+fn sonar_cone(surfaces: &[Surface], origin: Vec2, axis: Vec2, half_beam: f64, height: f64) -> Option<f64> {
+    surfaces
+        .iter()
+        .filter(|s| s.z[0] <= height && height <= s.z[1])
+        .filter_map(|s| match s.shape {
+            Shape::Circle(c, r) => {
+                let to = c - origin;
+                let d = to.norm();
+                if d <= r {
+                    return Some(0.0);
+                }
+                let off = wrap_angle(to.angle() - axis.angle()).abs();
+                (off <= half_beam + (r / d).asin()).then_some(d - r)
+            }
+            Shape::Seg(_) => None,
+        })
+        .min_by(f64::total_cmp)
+}
+
+/// The true range over one transducer's beam and the angle of incidence
+/// that decides a specular loss: the rays' nearest hit (with the beam
+/// axis' incidence), or a round thing in the cone if nearer (incidence 0).
+fn sonar_beam(surfaces: &[Surface], origin: Vec2, heading: f64, half_beam: f64, height: f64) -> Option<(f64, f64)> {
+    let rays = (-2..=2)
+        .filter_map(|k| {
+            let d = Vec2::from_angle(heading + f64::from(k) * half_beam / 2.0);
+            sonar_ray(surfaces, origin, d, height)
+        })
+        .min_by(|x, y| x.0.total_cmp(&y.0))
+        // the angle of incidence that matters is the beam axis' one
+        .map(|(r, _)| {
+            let axis = Vec2::from_angle(heading);
+            let inc = sonar_ray(surfaces, origin, axis, height).map_or(std::f64::consts::FRAC_PI_2, |(_, inc)| inc);
+            (r, inc)
+        });
+    let cone = sonar_cone(surfaces, origin, Vec2::from_angle(heading), half_beam, height);
+    match (rays, cone) {
+        (Some((r, _)), Some(c)) if c < r => Some((c, 0.0)),
+        (None, Some(c)) => Some((c, 0.0)),
+        (rays, _) => rays,
+    }
 }
 
 /// Whether an opaque surface blocks the straight line from `a` to `b`.
@@ -83,13 +133,7 @@ impl RobotRef<'_> {
             .map(|a| {
                 let heading = r.pose.theta + a;
                 let origin = p + Vec2::from_angle(heading) * r.model.radius;
-                (-2..=2)
-                    .filter_map(|k| {
-                        let d = Vec2::from_angle(heading + f64::from(k) * spec.half_beam / 2.0);
-                        sonar_ray(&surfaces, origin, d, spec.height)
-                    })
-                    .map(|(r, _)| r)
-                    .min_by(f64::total_cmp)
+                sonar_beam(&surfaces, origin, heading, spec.half_beam, spec.height).map(|(r, _)| r)
             })
             .collect()
     }
@@ -139,19 +183,7 @@ impl RobotMut<'_> {
             let heading = pose.theta + a;
             let origin = p + Vec2::from_angle(heading) * radius;
             // Nearest echo over the beam.
-            let best = (-2..=2)
-                .filter_map(|k| {
-                    let d = Vec2::from_angle(heading + f64::from(k) * spec.half_beam / 2.0);
-                    sonar_ray(&surfaces, origin, d, spec.height)
-                })
-                .min_by(|x, y| x.0.total_cmp(&y.0))
-                // the angle of incidence that matters is the beam axis' one
-                .map(|(r, _)| {
-                    let axis = Vec2::from_angle(heading);
-                    let inc = sonar_ray(&surfaces, origin, axis, spec.height)
-                        .map_or(std::f64::consts::FRAC_PI_2, |(_, inc)| inc);
-                    (r, inc)
-                });
+            let best = sonar_beam(&surfaces, origin, heading, spec.half_beam, spec.height);
             // Fixed number of draws per sonar keeps runs reproducible.
             let (g, u_spec, u_kind, u_mult, u_spur, u_rand) = (
                 gauss(rng),

@@ -66,10 +66,14 @@ fn the_corridor_of_section_4_3_3() {
     let behind = sim.robot(RobotId::FIRST).sonar_true_ranges()[6].expect("echo from robot 2");
     assert!((behind - (4.0 - 0.25 - 0.22)).abs() < 0.01, "{behind}");
     // the free space on the right after the third checkpoint: sonar 9
-    // (right) of a robot at x = 13.2 sees the open space's far wall
-    sim.robot_mut(RobotId::FIRST).set_pose(pose(13.2, 0.0, 0.0));
+    // (right) of a robot at x = 14 sees into the open space; at x = 13.2
+    // its beam holds the target's tube, 2.73 m away
+    sim.robot_mut(RobotId::FIRST).set_pose(pose(14.0, 0.0, 0.0));
     let right = sim.robot(RobotId::FIRST).sonar_true_ranges()[9].expect("echo");
     assert!(right > 3.0, "open space on the right: {right} m");
+    sim.robot_mut(RobotId::FIRST).set_pose(pose(13.2, 0.0, 0.0));
+    let right = sim.robot(RobotId::FIRST).sonar_true_ranges()[9].expect("echo");
+    assert!((right - 2.73).abs() < 0.01, "the target's tube: {right} m");
     sim.robot_mut(RobotId::FIRST).set_pose(pose(9.0, 0.0, 0.0));
     let right = sim.robot(RobotId::FIRST).sonar_true_ranges()[9].expect("echo");
     assert!((right - 0.75).abs() < 0.02, "corridor wall on the right before it: {right} m");

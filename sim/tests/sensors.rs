@@ -130,3 +130,24 @@ fn ir_dropouts_are_occasional() {
     let seen = (0..500).filter(|_| sim.ir_sighting().is_some()).count();
     assert!(seen > 450 && seen < 500, "{seen}/500 seen");
 }
+
+#[test]
+fn a_thin_pole_between_two_rays_of_a_beam_echoes() {
+    // a checkpoint tube (radius 5 cm, on a stand as wide) 1.5 m ahead and
+    // 8.5° to the left of sonar 0's axis: between its rays at 6.25° and
+    // 12.5°, 1.5 m away the rays are 16 cm apart; the cone holds it
+    let (x, y) = (1.0, 2.0);
+    let a = 8.5f64.to_radians();
+    let (px, py) = (x + 0.25 + 1.5 * a.cos(), y + 1.5 * a.sin());
+    let pole = format!("[[checkpoint]]\nid = 1\nposition = [{px}, {py}]\n");
+    let mut sim = h1(room(6.0, x, y, 0.0, &pole), 1, NoiseModel::none());
+    let r = sim.sonar_true_ranges()[0].expect("an echo");
+    assert!((r - 1.45).abs() < 0.01, "the pole's near side, 1.45 m: {r}");
+    let scan = sim.sonar_scan();
+    assert!((f64::from(scan[0]) - 1450.0).abs() <= 10.0, "{}", scan[0]);
+    // 30° off the axis it is outside the cone: the wall behind is seen
+    let b = 30f64.to_radians();
+    let pole = format!("[[checkpoint]]\nid = 1\nposition = [{}, {}]\n", x + 1.5 * b.cos(), y + 1.5 * b.sin());
+    let sim = h1(room(6.0, x, y, 0.0, &pole), 1, NoiseModel::none());
+    assert!(sim.sonar_true_ranges()[0].expect("the wall") > 4.0);
+}

@@ -10,8 +10,9 @@
 //!   what is seen in the world and to be corrected;
 //! * `head` (`nerve::HeadState`, optional): the head's pan, added to bearings;
 //!   while the head is turning (measured pan more than 1.5° from its
-//!   set-point) frames are not used: the pan of a moving head is not known
-//!   at the frame's instant (figure `moving`).
+//!   set-point) a frame's tubes are still reported but correct nothing: the
+//!   pan of a moving head at the frame's instant is known only roughly
+//!   (figure `moving`: frames taken so).
 //!
 //! Outputs:
 //! * `sighting` (`nerve::CheckpointSighting`): each tube seen with a
@@ -125,7 +126,14 @@ impl Checkpoint {
     }
 
     /// Handles the tubes of one frame taken at `stamp`, `width` pixels wide.
-    fn on_frame(&mut self, tubes: &[Tube], width: usize, stamp: u64, now: u64) -> Result<(), AgentError> {
+    fn on_frame(
+        &mut self,
+        tubes: &[Tube],
+        width: usize,
+        stamp: u64,
+        now: u64,
+        head_moving: bool,
+    ) -> Result<(), AgentError> {
         let pose = self.fresh_pose(now);
         if pose.is_none() && !tubes.is_empty() && !self.warned_no_pose {
             tracing::warn!(
@@ -143,7 +151,9 @@ impl Checkpoint {
             ir: self.last_ir,
             pan_rad: self.pan.filter(|(_, _, t)| now.saturating_sub(*t) <= HEAD_FRESH_NS).map_or(0.0, |(p, _, _)| p),
         };
-        let out = self.sensor.frame(&input, &self.settings());
+        let mut settings = self.settings();
+        settings.correct &= !head_moving;
+        let out = self.sensor.frame(&input, &settings);
         self.counters.tubes.fetch_add(out.ranged as u64, Ordering::Relaxed);
         for sg in &out.sightings {
             self.sighting_out.send(*sg)?;
@@ -294,11 +304,11 @@ impl Agent for Checkpoint {
             Err(e) => return Err(e.into()),
         };
         self.counters.frames.fetch_add(1, Ordering::Relaxed);
-        if self.pan.is_some_and(|(_, settled, t)| !settled && now.saturating_sub(t) <= HEAD_FRESH_NS) {
+        let moving = self.pan.is_some_and(|(_, settled, t)| !settled && now.saturating_sub(t) <= HEAD_FRESH_NS);
+        if moving {
             self.counters.moving.fetch_add(1, Ordering::Relaxed);
-            return Ok(());
         }
-        self.on_frame(&tubes, width, stamp, now)
+        self.on_frame(&tubes, width, stamp, now, moving)
     }
 }
 

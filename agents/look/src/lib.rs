@@ -27,8 +27,8 @@ pub struct SweepSettings {
 impl Default for SweepSettings {
     fn default() -> Self {
         Self {
-            pans_rad: [0.0f64, -60.0, 0.0, 60.0].iter().map(|d| d.to_radians()).collect(),
-            dwell_ns: 1_200_000_000,
+            pans_rad: [0.0f64, -50.0, 0.0, 50.0].iter().map(|d| d.to_radians()).collect(),
+            dwell_ns: 600_000_000,
             settle_rad: 2f64.to_radians(),
             speed_rad_s: 90f64.to_radians(),
         }

@@ -15,8 +15,8 @@
 //! Output `cmd` (`nerve::HeadCommand`): the pan set-point, tilt 0, every
 //! cycle (periodic, 100 ms); connect it to the head agent's `cmd`.
 //!
-//! Parameters: `pans_deg` (`"0,-60,0,60"`: the angles, positive to the left,
-//! within ±100°), `dwell_ms` (1200), `settle_deg` (2), `enabled` (true; when
+//! Parameters: `pans_deg` (`"0,-50,0,50"`: the angles, positive to the left,
+//! within ±100°; with a 60° camera they cover ±80°), `dwell_ms` (600), `settle_deg` (2), `enabled` (true; when
 //! false the head is sent straight ahead), `hold_ms` (3000). Read-only
 //! figures `steps` and `holding` (1 while looking at the target).
 
@@ -78,10 +78,10 @@ impl Agent for Look {
             last_pose: None,
             holding,
             cmd: setup.output("cmd")?,
-            pans_deg: setup.param_checked("pans_deg", "0,-60,0,60".to_owned(), |s: &String| {
+            pans_deg: setup.param_checked("pans_deg", "0,-50,0,50".to_owned(), |s: &String| {
                 parse_pans_deg(s, PAN_LIMIT_DEG).map(|_| ())
             }),
-            dwell_ms: setup.param_checked("dwell_ms", 1200u64, |v| {
+            dwell_ms: setup.param_checked("dwell_ms", 600u64, |v| {
                 agent_sdk::params::in_range("dwell_ms", *v, &(0..=60_000), "ms")
             }),
             settle_deg: setup.param_checked("settle_deg", 2.0, |v: &f64| {

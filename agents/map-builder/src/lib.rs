@@ -37,9 +37,10 @@
 //! 2 comes the way robot 1 came. A target counts only when seen within
 //! `target_range_m` (0: at any range), so robot 1 has come near it — into
 //! the space where it stands. And the path is ready only once robot 1 has
-//! driven `clear_m` on from where it found the target ([`MapBuilder::path`]
-//! says `None` until then), so that robot 1, which waits where it then
-//! stops, is not in robot 2's way.
+//! driven `clear_m` on from where it found the target and stands at least
+//! [`KEEP_OFF_M`] from every leg of the path ([`MapBuilder::path`] says
+//! `None` until then; with `clear_m` = 0 neither is asked), so that robot 1,
+//! which waits where it then stops, is not in robot 2's way.
 //!
 //! **Where the robot has been** ([`VisitedGrid`]): a coarse grid of cells
 //! with the times the robot entered and left them.
@@ -84,6 +85,11 @@ pub struct Settings {
     /// is ready, metres (0: at once).
     pub clear_m: f64,
 }
+
+/// With `clear_m` > 0, the path is ready only while robot 1 stands this far
+/// from every leg of it, metres (the two robots' radii, 0.47 m, with room
+/// for the few decimetres robot 1 needs to stop).
+pub const KEEP_OFF_M: f64 = 0.9;
 
 /// Robot 1's trail keeps a point every this many metres.
 pub const TRAIL_STEP_M: f64 = 0.25;
@@ -131,10 +137,18 @@ pub struct Landmark {
 impl Landmark {
     /// The direction "in front of" the landmark, radians, world frame.
     pub fn facing(&self) -> f64 {
-        let best = self.transmitter_votes.iter().filter(|(n, _)| *n > 0).max_by_key(|(n, _)| *n);
+        let from = self.seen_from.1.atan2(self.seen_from.0);
+        let has_from = self.seen_from.0.hypot(self.seen_from.1) > 1e-9;
+        // most votes; a tie goes to the direction nearer where the robot saw it from
+        let off = |dir: f64| if has_from { wrap(dir - from).abs() } else { 0.0 };
+        let best = self
+            .transmitter_votes
+            .iter()
+            .filter(|(n, _)| *n > 0)
+            .max_by(|a, b| a.0.cmp(&b.0).then_with(|| off(b.1).total_cmp(&off(a.1))));
         match best {
             Some((_, dir)) => *dir,
-            None => self.seen_from.1.atan2(self.seen_from.0),
+            None => from,
         }
     }
 
@@ -384,6 +398,19 @@ impl MapBuilder {
         }
         // keep the last MAX_VIA_POINTS (the target's end of the path matters most)
         let skip = pts.len().saturating_sub(MAX_VIA_POINTS);
+        // robot 1 must not stand in robot 2's way
+        if let (true, Some(at)) = (self.settings.clear_m > 0.0, self.trail.last()) {
+            let near = pts.iter().skip(skip).map(|p| p.0).collect::<Vec<_>>().windows(2).any(|leg| {
+                let (a, b) = (leg[0], leg[1]);
+                let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                let len2 = (dx * dx + dy * dy).max(1e-12);
+                let t = (((at[0] - a[0]) * dx + (at[1] - a[1]) * dy) / len2).clamp(0.0, 1.0);
+                (a[0] + t * dx - at[0]).hypot(a[1] + t * dy - at[1]) < KEEP_OFF_M
+            });
+            if near {
+                return None;
+            }
+        }
         let mut path = ViaPath { stamp_ns, path_id, ..Default::default() };
         for (k, (p, kind, id, landmark)) in pts.iter().skip(skip).enumerate() {
             path.points[k] = *p;
@@ -641,7 +668,16 @@ mod tests {
             m.on_pose(12.2, y);
             y -= 0.05;
         }
-        let p = m.path(1, 0).expect("a path once robot 1 drove 2.5 m on");
+        // robot 1 drove on but came back into the opening: still in the way
+        m.on_pose(12.2, -3.7);
+        m.on_pose(12.2, -3.4);
+        m.on_pose(12.2, -3.1);
+        assert!(m.path(1, 0).is_none(), "robot 1 stands 0.6 m from the last leg");
+        m.on_pose(12.2, -3.4);
+        m.on_pose(12.2, -3.7);
+        m.on_pose(12.2, -4.0);
+        m.on_pose(13.8, -4.0);
+        let p = m.path(1, 0).expect("a path once robot 1 drove on, off the path");
         let kinds: Vec<ViaKind> = p.entries().map(|(_, k, _)| ViaKind::from_code(k).unwrap()).collect();
         let pts: Vec<[f64; 2]> = p.entries().map(|(p, _, _)| p).collect();
         assert_eq!(kinds.first(), Some(&ViaKind::Checkpoint));
@@ -649,7 +685,7 @@ mod tests {
         assert!(kinds.contains(&ViaKind::Waypoint), "robot 1's turn through the opening is in the path: {pts:?}");
         // the corner is passed the way robot 1 went: no leg passes within
         // 0.4 m of the opening's west corner (11.6, -1), and none within
-        // 0.8 m of robot 1, waiting at (12.2, -3.9)
+        // KEEP_OFF_M of robot 1, waiting at (13.8, -4)
         let dist_to = |a: [f64; 2], b: [f64; 2], q: [f64; 2]| {
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
             let t = (((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
@@ -660,10 +696,9 @@ mod tests {
             let d = dist_to(leg[0], leg[1], [11.6, -1.0]);
             assert!(d > 0.4, "leg {leg:?} passes {d:.2} m from the corner: {pts:?}");
         }
-        // the last leg ends at the target itself: robot 2 stops short of it
-        for leg in &legs[..legs.len() - 1] {
-            let d = dist_to(leg[0], leg[1], [12.2, -3.9]);
-            assert!(d > 0.8, "leg {leg:?} passes {d:.2} m from robot 1: {pts:?}");
+        for leg in &legs {
+            let d = dist_to(leg[0], leg[1], [13.8, -4.0]);
+            assert!(d > KEEP_OFF_M, "leg {leg:?} passes {d:.2} m from robot 1: {pts:?}");
         }
         let approach = pts[pts.len() - 2];
         assert!((approach[0] - 12.8).hypot(approach[1] + 3.0) <= 1.6 + 1e-9, "{approach:?}");
@@ -692,6 +727,19 @@ mod tests {
         let d = transmitter_directions(0b1001, -0.25 * PI);
         assert!(close(d[0].1, 0.0, 1e-12) && close(wrap(d[1].1), -FRAC_PI_2, 1e-12), "{d:?}");
         assert!(transmitter_directions(0b0101, 0.0).is_empty());
+    }
+
+    #[test]
+    fn a_tie_of_transmitters_goes_to_the_side_the_robot_saw_it_from() {
+        // robot 1 at its start, south-west of checkpoint 1: transmitters 0
+        // (south) and 3 (west) both reach it, as often; it is a little more
+        // south than west, and drives on east
+        let mut m = MapBuilder::new(Settings { min_sightings: 1, ..Settings::default() });
+        for x in [0.0, 0.1, 0.2] {
+            m.on_sighting(&cp(1, 1.2, 1.2, 0b1001), Some(Pose { x, y: 0.0, theta: 0.0 }));
+        }
+        let (vx, vy) = m.landmarks()[0].via_point(1.6);
+        assert!(close(vx, 1.2, 1e-6) && close(vy, -0.4, 1e-6), "({vx}, {vy}): in front of it, not beside it");
     }
 
     #[test]

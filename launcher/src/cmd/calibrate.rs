@@ -48,21 +48,19 @@
 
 use super::down::{bring_down, clean};
 use super::logs::{INTERRUPTED, catch_interrupts};
+use super::tap::Tap;
 use crate::client::{RouterSession, cli_node};
 use agent_sdk::World;
-use agent_sdk::ports::existing_port_service;
-use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, anyhow, bail};
-use iceoryx2::port::subscriber::Subscriber;
 use nerve_checkpoint::appendix_a::{Fit, FitOptions, Model, Sample, fit};
 use nerve_checkpoint::bands::{BandColors, Pixels, Tube, TubeFinder};
 use nerve_checkpoint::config::{Calibration, SampleFile};
 use nerve_demo::calibration_plot::{CalibrationPoint, write_fit};
 use nerve_demo::nerve_sim::{RobotKind, RobotModel, focal_length_px};
 use nerve_stm::{ReadError, RingName, RingReader};
+use shm_schemas::RobotName;
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::payloads::GroundTruth;
-use shm_schemas::{RobotName, SampleHeader};
 use std::collections::VecDeque;
 use std::io::{Read as _, Write as _};
 use std::path::{Path, PathBuf};
@@ -393,7 +391,7 @@ fn simulate(robot: &str, explicit: bool, a: &CheckpointArgs, dir: &Path) -> Resu
         "stopped {stopped} process(es){}",
         if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
     );
-    copy_logs(&nworld, &dir.join("logs"));
+    super::demo::copy_logs(&nworld, &dir.join("logs"));
     if !explicit {
         if let Err(e) = std::fs::remove_dir_all(nworld.state_dir()) {
             eprintln!("warning: cannot remove {}: {e}", nworld.state_dir().display());
@@ -420,18 +418,6 @@ fn simulate(robot: &str, explicit: bool, a: &CheckpointArgs, dir: &Path) -> Resu
         focal_px,
         source: format!("{} in the simulator", a.robot_model),
     })
-}
-
-/// Copies every log of the run into `dir`.
-fn copy_logs(world: &World, dir: &Path) {
-    if let Err(e) = std::fs::create_dir_all(dir) {
-        eprintln!("warning: cannot keep the logs: cannot create {}: {e}", dir.display());
-        return;
-    }
-    let Ok(rd) = std::fs::read_dir(world.logs_dir()) else { return };
-    for e in rd.flatten() {
-        let _ = std::fs::copy(e.path(), dir.join(e.file_name()));
-    }
 }
 
 /// What the drive toward the tube gave.
@@ -511,26 +497,7 @@ impl Drop for Driver {
     }
 }
 
-type TruthSubscriber = Subscriber<Ipc, GroundTruth, SampleHeader>;
-
-/// Subscribes to the simulator's ground truth (retrying while it comes up).
-fn subscribe_truth(world: &World, node: &iceoryx2::prelude::Node<Ipc>) -> Result<TruthSubscriber> {
-    let service = world.robot().port_service(SIM_AGENT, "truth");
-    let t0 = Instant::now();
-    loop {
-        if let Some(ps) = existing_port_service::<GroundTruth>(node, &service) {
-            return ps
-                .subscriber_builder()
-                .buffer_size(agent_sdk::ports::SUBSCRIBER_BUFFER)
-                .create()
-                .map_err(|e| anyhow!("cannot subscribe to {SIM_AGENT}/truth: {e:?}"));
-        }
-        if t0.elapsed() > Duration::from_secs(10) {
-            bail!("the simulator's port {SIM_AGENT}/truth did not appear within 10 s");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-}
+type TruthSubscriber = Tap<GroundTruth>;
 
 /// Opens the simulator's camera ring (retrying while it comes up).
 fn open_ring(world: &World) -> Result<RingReader> {
@@ -559,14 +526,13 @@ impl TruthWindow {
     const KEEP: usize = 300;
 
     fn drain(&mut self, sub: &TruthSubscriber) -> Result<()> {
-        while let Some(s) = sub.receive().map_err(|e| anyhow!("cannot read {SIM_AGENT}/truth: {e:?}"))? {
-            self.rows.push_back(*s.payload());
+        sub.drain(|_, t| {
+            self.rows.push_back(*t);
             self.last_received = Some(Instant::now());
             if self.rows.len() > Self::KEEP {
                 self.rows.pop_front();
             }
-        }
-        Ok(())
+        })
     }
 
     fn newest(&self) -> Option<&GroundTruth> {
@@ -586,7 +552,7 @@ impl TruthWindow {
 /// (or stops short of it).
 fn collect(world: &World, tube: &TubeGeometry, a: &CheckpointArgs) -> Result<Collected> {
     let node = cli_node(world)?;
-    let sub = subscribe_truth(world, &node)?;
+    let sub: TruthSubscriber = Tap::open(world, &node, SIM_AGENT, "truth", Duration::from_secs(10))?;
     let ring = open_ring(world)?;
     let mut truth = TruthWindow::default();
     let t0 = Instant::now();

@@ -49,6 +49,10 @@ pub enum DemoCmd {
     /// The exploration experiment (thesis 4.2): through a crowded room and a
     /// doorway to a person with a red object, who leads the robot into a U-turn.
     Explore(ExploreArgs),
+    /// The cooperation experiment (thesis 4.3): robot 1 finds the target and
+    /// sends robot 2 a path over the bridge; robot 2 follows it, corrected at
+    /// the checkpoints, and grasps.
+    Cooperate(super::cooperate::CooperateArgs),
 }
 
 /// `nerve demo explore`
@@ -84,13 +88,14 @@ pub struct ExploreArgs {
 pub fn demo(robot: &str, cmd: DemoCmd) -> Result<ExitCode> {
     match cmd {
         DemoCmd::Explore(a) => explore(robot, a),
+        DemoCmd::Cooperate(a) => super::cooperate::cooperate(a),
     }
 }
 
 /// Finds `rel` relative to the current directory, else above the running
 /// executable (`<tree>/target/<profile>/nerve`), else in the source tree
 /// this `nerve` was compiled from.
-fn find_file(rel: &Path, what: &str) -> Result<PathBuf> {
+pub(super) fn find_file(rel: &Path, what: &str) -> Result<PathBuf> {
     if rel.is_absolute() || rel.exists() {
         return std::fs::canonicalize(rel).with_context(|| format!("cannot use {what} {}", rel.display()));
     }
@@ -111,7 +116,7 @@ fn find_file(rel: &Path, what: &str) -> Result<PathBuf> {
 }
 
 /// Sets `--flag value` in an argument list (replacing or appending).
-fn set_flag(args: &mut Vec<toml::Value>, flag: &str, value: String) {
+pub(super) fn set_flag(args: &mut Vec<toml::Value>, flag: &str, value: String) {
     if let Some(i) = args.iter().position(|a| a.as_str() == Some(flag)) {
         if i + 1 < args.len() {
             args[i + 1] = toml::Value::String(value);
@@ -142,19 +147,7 @@ fn derive_launch(template: &Path, robot: &str, world: &Path, seed: u64) -> Resul
         let is_sim = t.get("kind").and_then(|k| k.as_str()) == Some("sim");
         let args = t.entry("args").or_insert_with(|| toml::Value::Array(vec![]));
         let Some(args) = args.as_array_mut() else { bail!("`args` of an agent must be a list of strings") };
-        for v in args.iter_mut() {
-            if let Some(s) = v.as_str() {
-                let p = Path::new(s);
-                if s.contains('/')
-                    && !s.starts_with('-')
-                    && !s.contains('{')
-                    && p.is_relative()
-                    && base.join(p).exists()
-                {
-                    *v = toml::Value::String(base.join(p).display().to_string());
-                }
-            }
-        }
+        super::cooperate::absolutize_args(args, &base);
         if is_sim {
             found_sim = true;
             set_flag(args, "--world", world.display().to_string());
@@ -183,7 +176,7 @@ fn truth_path(launch_text: &str, world: &World) -> Option<PathBuf> {
 }
 
 /// Agents running on `world`: (name, kind, pid, cpu percent, restarts).
-fn sample_agents(world: &World) -> Vec<(String, String, u32, Option<f64>, u32)> {
+pub(super) fn sample_agents(world: &World) -> Vec<(String, String, u32, Option<f64>, u32)> {
     let Ok(s) = RouterSession::open(world) else { return vec![] };
     match s.call(CliRequest::Ps) {
         Ok(RouterReply::Agents(v)) => {
@@ -456,7 +449,7 @@ fn read_from(path: &Path, offset: u64) -> String {
 }
 
 /// Copies every agent's log (and the router's) into `dir`.
-fn copy_logs(world: &World, dir: &Path) {
+pub(super) fn copy_logs(world: &World, dir: &Path) {
     if let Err(e) = std::fs::create_dir_all(dir) {
         tracing::warn!("cannot create {}: {e}", dir.display());
         return;

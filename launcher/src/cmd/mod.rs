@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod bridge;
 pub mod calibrate;
+pub mod cooperate;
 pub mod demo;
 pub mod down;
 pub mod drive;
@@ -12,6 +13,7 @@ mod launch;
 mod logs;
 pub mod mem;
 pub mod start;
+pub mod tap;
 mod wire;
 
 use crate::cli::{Cli, Command};

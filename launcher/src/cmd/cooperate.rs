@@ -1,0 +1,546 @@
+//! `nerve demo cooperate`: the cooperation experiment of the thesis (section
+//! 4.3) from one command.
+//!
+//! It derives the run's two launch files from `launch/cooperate-r1.toml` and
+//! `launch/cooperate-r2.toml` (and their bridge configurations) into the
+//! output directory — with the seed, the world, the ground-truth files, the
+//! bridge port and, with `--no-checkpoints`, the checkpoint sensors' `correct
+//! = false` — launches robot 1 (the simulator, which owns the world and
+//! serves robot 2's boards too) and then robot 2, and follows the run with a
+//! progress line, recording from the robots' ports (taps: the simulator's
+//! ground truth of both robots, both odometry poses, robot 2's motor
+//! odometry, the path, the reports). It ends when robot 2 has reported its
+//! arrival and robot 1 was told to resume (plus `--linger` seconds), at
+//! `--time-limit` seconds of simulated time, or on Ctrl-C; then it stops both
+//! robots as `nerve down` does and writes into `--out` (default
+//! `out/cooperate-<seed>/`, `out/cooperate-<seed>-no-checkpoints/` without
+//! corrections):
+//!
+//! * `trajectories.png|svg`: both robots' true and recorded paths, robot 2's
+//!   raw dead reckoning, the checkpoints, the via points, the target and the
+//!   correction jumps (Fig. 4-10);
+//! * `summary.json`: the verdict ([`nerve_demo::cooperate::CoopSummary`]);
+//! * `estimates.csv`: the recorded poses; `truth-r1.csv`, `truth-r2.csv`:
+//!   the simulator's ground truth; `launch-r1.toml`, `launch-r2.toml` and the
+//!   bridge configurations that ran; `logs/r1`, `logs/r2`: every agent's log.
+//!
+//! Exit code 0 when the run completed (whatever the robots achieved: read
+//! `summary.json`), 1 when it could not be run.
+
+use super::demo::{copy_logs, find_file, sample_agents, set_flag};
+use super::down::{bring_down, clean};
+use super::logs::{INTERRUPTED, catch_interrupts};
+use super::tap::Tap;
+use crate::client::{RouterSession, cli_node};
+use agent_sdk::World;
+use agent_sdk::world::Ipc;
+use anyhow::{Context as _, Result, bail};
+use iceoryx2::prelude::Node;
+use nerve_demo::Scene;
+use nerve_demo::cooperate::{EstPose, PlannedPoint, Reached, Records, TruePose, analyse, write_trajectories};
+use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
+use shm_schemas::payloads::{
+    CheckpointSighting, GroundTruth, MissionCode, MissionCommand, Odometry, PoseEstimate, ViaKind, ViaPath,
+};
+use std::collections::BTreeMap;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+/// `nerve demo cooperate`
+#[derive(Debug, clap::Args)]
+pub struct CooperateArgs {
+    /// Seed of the simulator's noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output directory [default: out/cooperate-<seed>, out/cooperate-<seed>-no-checkpoints].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// The same run without pose corrections at the checkpoints (dead reckoning alone).
+    #[arg(long)]
+    pub no_checkpoints: bool,
+    /// World file [default: worlds/cooperate.toml of the nerve source tree].
+    #[arg(long)]
+    pub world: Option<PathBuf>,
+    /// Stop after this many seconds of simulated time.
+    #[arg(long, default_value_t = 300.0, value_parser = agent_sdk::clock::parse_seconds)]
+    pub time_limit: f64,
+    /// Seconds to follow the run after robot 1 was told to resume.
+    #[arg(long, default_value_t = 3.0, value_parser = agent_sdk::clock::parse_seconds)]
+    pub linger: f64,
+    /// Robot 2's centre to the target's centre, m, that counts as reaching it.
+    #[arg(long, default_value_t = 0.5)]
+    pub reach: f64,
+    /// TCP port of robot 1's bridge on 127.0.0.1.
+    #[arg(long, default_value_t = 7451)]
+    pub port: u16,
+    /// Seconds between progress lines.
+    #[arg(long, default_value_t = 3.0, value_parser = agent_sdk::clock::parse_seconds)]
+    pub progress: f64,
+}
+
+/// The launch files and bridge configurations the run derives from.
+const TEMPLATES: [&str; 2] = ["launch/cooperate-r1.toml", "launch/cooperate-r2.toml"];
+/// The port the shipped bridge configurations use.
+const SHIPPED_PORT: &str = "7451";
+
+/// How the run ended.
+#[derive(Debug, Clone, PartialEq)]
+enum End {
+    Done,
+    TimeLimit,
+    Interrupted,
+    Stalled(String),
+}
+
+impl End {
+    fn reason(&self) -> String {
+        match self {
+            End::Done => "robot 2 arrived and robot 1 resumed".into(),
+            End::TimeLimit => "time limit".into(),
+            End::Interrupted => "interrupted".into(),
+            End::Stalled(why) => format!("stalled: {why}"),
+        }
+    }
+}
+
+/// Makes relative paths among `args` that exist under `base` absolute
+/// (daemons may run from any directory).
+pub(super) fn absolutize_args(args: &mut [toml::Value], base: &Path) {
+    for v in args.iter_mut() {
+        if let Some(s) = v.as_str() {
+            let p = Path::new(s);
+            if s.contains('/') && !s.starts_with('-') && !s.contains('{') && p.is_relative() && base.join(p).exists() {
+                *v = toml::Value::String(base.join(p).display().to_string());
+            }
+        }
+    }
+}
+
+/// What a derived launch file needs to know.
+struct Derive<'a> {
+    world: &'a Path,
+    seed: u64,
+    out: &'a Path,
+    /// Robot 2's name (for the simulator's `--extra-robot`).
+    r2: &'a str,
+    no_checkpoints: bool,
+}
+
+/// The robot a launch file names.
+fn robot_of(doc: &toml::Table, path: &Path) -> Result<String> {
+    doc.get("robot")
+        .and_then(|r| r.as_str())
+        .map(str::to_owned)
+        .with_context(|| format!("launch file {} names no `robot`; the demo needs both robots named", path.display()))
+}
+
+/// The run's copy of a launch file.
+fn derive(template: &Path, d: &Derive<'_>) -> Result<String> {
+    let text =
+        std::fs::read_to_string(template).with_context(|| format!("cannot read launch file {}", template.display()))?;
+    let mut doc: toml::Table =
+        toml::from_str(&text).with_context(|| format!("launch file {} is not valid TOML", template.display()))?;
+    let base = template.parent().and_then(Path::parent).map(Path::to_path_buf).unwrap_or_default();
+    let Some(toml::Value::Array(agents)) = doc.get_mut("agent") else {
+        bail!("launch file {} has no [[agent]]", template.display());
+    };
+    for a in agents.iter_mut() {
+        let Some(t) = a.as_table_mut() else { continue };
+        let kind = t.get("kind").and_then(|k| k.as_str()).unwrap_or_default().to_owned();
+        if kind == "checkpoint" && d.no_checkpoints {
+            let params = t.entry("params").or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            if let Some(p) = params.as_table_mut() {
+                p.insert("correct".into(), toml::Value::Boolean(false));
+            }
+        }
+        let args = t.entry("args").or_insert_with(|| toml::Value::Array(vec![]));
+        let Some(args) = args.as_array_mut() else { bail!("`args` of an agent must be a list of strings") };
+        absolutize_args(args, &base);
+        if kind == "sim" {
+            set_flag(args, "--world", d.world.display().to_string());
+            set_flag(args, "--seed", d.seed.to_string());
+            set_flag(args, "--truth", d.out.join("truth-r1.csv").display().to_string());
+            let extra = format!("{}:h2::{}", d.r2, d.out.join("truth-r2.csv").display());
+            set_flag(args, "--extra-robot", extra);
+        }
+    }
+    let body = toml::to_string(&doc).context("cannot write the derived launch file")?;
+    Ok(format!(
+        "# Derived by `nerve demo cooperate` from {} (world {}, seed {}{}).\n{body}",
+        template.display(),
+        d.world.display(),
+        d.seed,
+        if d.no_checkpoints { ", no checkpoint corrections" } else { "" }
+    ))
+}
+
+/// Every figure of every agent of `world`.
+fn all_figures(world: &World) -> BTreeMap<String, BTreeMap<String, String>> {
+    let Ok(s) = RouterSession::open(world) else { return BTreeMap::new() };
+    match s.call(CliRequest::Ps) {
+        Ok(RouterReply::Agents(v)) => v
+            .into_iter()
+            .map(|a| (a.name, a.stats.map(|s| s.figures.into_iter().collect()).unwrap_or_default()))
+            .collect(),
+        _ => BTreeMap::new(),
+    }
+}
+
+/// Refuses robots that already run agents.
+fn refuse_busy(world: &World) -> Result<()> {
+    let live: Vec<String> = sample_agents(world).into_iter().filter(|a| a.2 > 0).map(|a| a.0).collect();
+    if !live.is_empty() {
+        let r = world.robot();
+        bail!(
+            "robot {r} already runs {} agent(s) ({}); stop them with `nerve --robot {r} down`",
+            live.len(),
+            live.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// Runs the experiment.
+pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
+    let t_wall = Instant::now();
+    if !(a.time_limit > 0.0 && a.time_limit.is_finite()) {
+        bail!("--time-limit must be a positive number of seconds");
+    }
+    if !(a.reach > 0.0 && a.reach.is_finite()) {
+        bail!("--reach must be a positive number of metres");
+    }
+    let world_file = find_file(a.world.as_deref().unwrap_or(Path::new("worlds/cooperate.toml")), "world file")?;
+    let scene = Scene::load(&world_file).with_context(|| format!("cannot use world {}", world_file.display()))?;
+    let templates =
+        [find_file(Path::new(TEMPLATES[0]), "launch file")?, find_file(Path::new(TEMPLATES[1]), "launch file")?];
+    let docs: Vec<toml::Table> = templates
+        .iter()
+        .map(|t| {
+            let text = std::fs::read_to_string(t).with_context(|| format!("cannot read {}", t.display()))?;
+            toml::from_str(&text).with_context(|| format!("launch file {} is not valid TOML", t.display()))
+        })
+        .collect::<Result<_>>()?;
+    let names = [robot_of(&docs[0], &templates[0])?, robot_of(&docs[1], &templates[1])?];
+    let default_out = if a.no_checkpoints {
+        format!("out/cooperate-{}-no-checkpoints", a.seed)
+    } else {
+        format!("out/cooperate-{}", a.seed)
+    };
+    let out = a.out.clone().unwrap_or_else(|| PathBuf::from(default_out));
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create output directory {}", out.display()))?;
+    let out = std::fs::canonicalize(&out).with_context(|| format!("cannot use output directory {}", out.display()))?;
+    let worlds = [World::new(&names[0])?, World::new(&names[1])?];
+    for w in &worlds {
+        refuse_busy(w)?;
+    }
+    // the run's launch files and bridge configurations, side by side in `out`
+    let d = Derive { world: &world_file, seed: a.seed, out: &out, r2: &names[1], no_checkpoints: a.no_checkpoints };
+    let mut launch_paths = Vec::new();
+    for (i, t) in templates.iter().enumerate() {
+        let name = format!("launch-r{}.toml", i + 1);
+        let text = derive(t, &d)?;
+        std::fs::write(out.join(&name), text).with_context(|| format!("cannot write {name}"))?;
+        launch_paths.push(out.join(name));
+        let zenoh = format!("cooperate-r{}.zenoh.toml", i + 1);
+        let src = t.with_file_name(&zenoh);
+        let text = std::fs::read_to_string(&src).with_context(|| format!("cannot read {}", src.display()))?;
+        std::fs::write(out.join(&zenoh), text.replace(SHIPPED_PORT, &a.port.to_string()))
+            .with_context(|| format!("cannot write {zenoh}"))?;
+    }
+    for f in ["truth-r1.csv", "truth-r2.csv"] {
+        let _ = std::fs::remove_file(out.join(f));
+    }
+    println!(
+        "nerve demo cooperate: world {} ({}), seed {}, robots {} and {}, checkpoint corrections {}, time limit {} s; output {}",
+        scene.world.name,
+        world_file.display(),
+        a.seed,
+        names[0],
+        names[1],
+        if a.no_checkpoints { "OFF" } else { "on" },
+        a.time_limit,
+        out.display()
+    );
+    catch_interrupts();
+    let bring_all_down = || {
+        let mut n = (0, 0);
+        for w in worlds.iter().rev() {
+            let (s, k) = bring_down(w, Duration::from_secs(3));
+            clean(w);
+            n = (n.0 + s, n.1 + k);
+        }
+        n
+    };
+    for (i, p) in launch_paths.iter().enumerate() {
+        if let Err(e) = super::launch::launch_robot(&names[i], p) {
+            eprintln!("error: robot {} did not come up: {e:#}", names[i]);
+            bring_all_down();
+            return Ok(ExitCode::from(1));
+        }
+    }
+    println!("both robots up in {:.1} s; following the run (Ctrl-C ends it early)", t_wall.elapsed().as_secs_f64());
+
+    let followed = follow(&worlds, &names, &a);
+    let bridge_figures: BTreeMap<String, BTreeMap<String, String>> = worlds
+        .iter()
+        .zip(&names)
+        .map(|(w, n)| (n.clone(), all_figures(w).remove("bridge").unwrap_or_default()))
+        .collect();
+    let grasp = all_figures(&worlds[1]).get("mission").and_then(|m| m.get("grasp").cloned());
+    let (stopped, killed) = bring_all_down();
+    println!(
+        "stopped {stopped} process(es){}",
+        if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
+    );
+    let (end, mut rec) = followed?;
+    rec.bridge = bridge_figures;
+    rec.grasp = grasp;
+    for (i, w) in worlds.iter().enumerate() {
+        copy_logs(w, &out.join("logs").join(format!("r{}", i + 1)));
+    }
+    if rec.r1_truth.is_empty() {
+        bail!("the simulator published no ground truth: the world never ran (see {}/logs/r1/sim.log)", out.display());
+    }
+    write_estimates(&out.join("estimates.csv"), &rec)?;
+    let mut s = analyse(&scene, &rec, a.reach, [&names[0], &names[1]]);
+    s.seed = a.seed;
+    s.world = world_file.display().to_string();
+    s.checkpoints = !a.no_checkpoints;
+    s.end_reason = end.reason();
+    let title = format!(
+        "{} (seed {}{}) — robot 2 {} the target: {} m, {} collision(s)",
+        scene.world.name,
+        a.seed,
+        if a.no_checkpoints { ", no checkpoint corrections" } else { "" },
+        if s.robot2_reached_target { "reached" } else { "did NOT reach" },
+        s.final_distance_to_target_m.map_or_else(|| "-".into(), |d| format!("{d:.2}")),
+        s.collisions.values().sum::<u64>()
+    );
+    let figs = write_trajectories(&out, &scene, &rec, &title)?;
+    s.wall_time_s = t_wall.elapsed().as_secs_f64();
+    let json = serde_json::to_string_pretty(&s)?;
+    std::fs::write(out.join("summary.json"), json + "\n").context("cannot write summary.json")?;
+    println!(
+        "{}: target {}, path {}, robot 2 {} ({} m from the target), {} collision(s), corrections {:?}, {:.1} s simulated, {:.0} s wall",
+        s.end_reason,
+        if s.target_found { "found" } else { "NOT found" },
+        if s.path_sent { "sent" } else { "NOT sent" },
+        if s.robot2_reached_target { "reached it" } else { "did NOT reach it" },
+        s.final_distance_to_target_m.map_or_else(|| "-".into(), |d| format!("{d:.2}")),
+        s.collisions.values().sum::<u64>(),
+        s.corrections,
+        s.stage_times_s.get("end").copied().unwrap_or(0.0),
+        s.wall_time_s
+    );
+    println!(
+        "wrote {}/summary.json, estimates.csv, truth-r1.csv, truth-r2.csv, launch files, logs/ and",
+        out.display()
+    );
+    for f in figs.files {
+        println!("  {}", f.display());
+    }
+    if let End::Stalled(why) = &end {
+        eprintln!("error: the run stalled: {why}");
+        return Ok(ExitCode::from(1));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The run's taps, opened as their ports appear.
+#[derive(Default)]
+struct Taps {
+    r1_truth: Option<Tap<GroundTruth>>,
+    r2_truth: Option<Tap<GroundTruth>>,
+    r1_pose: Option<Tap<PoseEstimate>>,
+    r2_pose: Option<Tap<PoseEstimate>>,
+    r2_odom: Option<Tap<Odometry>>,
+    r1_path: Option<Tap<ViaPath>>,
+    r1_sighting: Option<Tap<CheckpointSighting>>,
+    r1_mission: Option<Tap<MissionCommand>>,
+    r2_path: Option<Tap<ViaPath>>,
+    r2_report: Option<Tap<MissionCommand>>,
+}
+
+/// Opens `slot` if its port exists now.
+fn open<T: shm_schemas::Payload>(slot: &mut Option<Tap<T>>, world: &World, node: &Node<Ipc>, agent: &str, port: &str) {
+    if slot.is_none() {
+        match Tap::try_open(world, node, agent, port) {
+            Ok(t) => *slot = t,
+            Err(e) => tracing::debug!("{e:#}"),
+        }
+    }
+}
+
+fn drain<T: shm_schemas::Payload>(slot: &Option<Tap<T>>, f: impl FnMut(&shm_schemas::SampleHeader, &T)) {
+    if let Some(t) = slot {
+        if let Err(e) = t.drain(f) {
+            tracing::debug!("{e:#}");
+        }
+    }
+}
+
+fn true_pose(t: &GroundTruth) -> TruePose {
+    TruePose { stamp_ns: t.stamp_ns, t: t.sim_time, x: t.x, y: t.y, theta: t.theta, collisions: t.collisions }
+}
+
+fn est_pose(p: &PoseEstimate) -> EstPose {
+    EstPose { stamp_ns: p.stamp_ns, x: p.x, y: p.y, theta: p.theta, corrections: p.corrections }
+}
+
+fn planned(p: &ViaPath) -> Vec<PlannedPoint> {
+    p.entries()
+        .map(|(at, k, id)| PlannedPoint {
+            at,
+            kind: ViaKind::from_code(k).map_or("?", |k| k.name()).to_owned(),
+            checkpoint: id,
+        })
+        .collect()
+}
+
+/// Follows the run until it ends, recording; prints progress.
+fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs) -> Result<(End, Records)> {
+    let nodes = [cli_node(&worlds[0])?, cli_node(&worlds[1])?];
+    let mut taps = Taps::default();
+    let mut rec = Records::default();
+    // robot 2's raw dead reckoning starts where the world puts it
+    let mut r2_start: Option<(f64, f64, f64)> = None;
+    let t0 = Instant::now();
+    let mut last_truth = Instant::now();
+    let mut next_progress = Instant::now() + Duration::from_secs(1);
+    let mut next_figures = Instant::now();
+    let mut phases = (String::from("-"), String::from("-"));
+    let mut done_at: Option<Instant> = None;
+    let wall_limit = Duration::from_secs_f64(a.time_limit * 1.5 + 60.0);
+    let truth2_port = format!("truth-{}", names[1]);
+    let end = loop {
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            break End::Interrupted;
+        }
+        let (w1, w2, n1, n2) = (&worlds[0], &worlds[1], &nodes[0], &nodes[1]);
+        open(&mut taps.r1_truth, w1, n1, "sim", "truth");
+        open(&mut taps.r2_truth, w1, n1, "sim", &truth2_port);
+        open(&mut taps.r1_pose, w1, n1, "odometry", "pose");
+        open(&mut taps.r1_path, w1, n1, "map-builder", "path");
+        open(&mut taps.r1_sighting, w1, n1, "checkpoint", "sighting");
+        open(&mut taps.r1_mission, w1, n1, "map-builder", "mission");
+        open(&mut taps.r2_pose, w2, n2, "odometry", "pose");
+        open(&mut taps.r2_odom, w2, n2, "motor", "odom");
+        open(&mut taps.r2_path, w2, n2, "mission", "path");
+        open(&mut taps.r2_report, w2, n2, "mission", "report");
+        let before = rec.r1_truth.len();
+        drain(&taps.r1_truth, |_, t| rec.r1_truth.push(true_pose(t)));
+        drain(&taps.r2_truth, |_, t| rec.r2_truth.push(true_pose(t)));
+        if rec.r1_truth.len() > before {
+            last_truth = Instant::now();
+        }
+        if r2_start.is_none() {
+            r2_start = rec.r2_truth.first().map(|t| (t.x, t.y, t.theta));
+        }
+        drain(&taps.r1_pose, |_, p| rec.r1_est.push(est_pose(p)));
+        drain(&taps.r2_pose, |_, p| rec.r2_est.push(est_pose(p)));
+        if let Some((sx, sy, st)) = r2_start {
+            drain(&taps.r2_odom, |_, o| {
+                let (c, s) = (st.cos(), st.sin());
+                rec.r2_raw.push(EstPose {
+                    stamp_ns: o.stamp_ns,
+                    x: sx + c * o.x - s * o.y,
+                    y: sy + s * o.x + c * o.y,
+                    theta: st + o.theta,
+                    corrections: 0,
+                });
+            });
+        }
+        drain(&taps.r1_path, |h, _| {
+            rec.path_sent_ns.get_or_insert(h.stamp_ns);
+        });
+        drain(&taps.r1_sighting, |h, s| {
+            if s.is_target == 1 {
+                rec.target_seen_ns.get_or_insert(h.stamp_ns);
+            }
+        });
+        drain(&taps.r1_mission, |h, m| {
+            if m.code() == Some(MissionCode::Resume) {
+                rec.resumed_ns.get_or_insert(h.stamp_ns);
+            }
+        });
+        drain(&taps.r2_path, |_, p| rec.path = planned(p));
+        drain(&taps.r2_report, |h, m| {
+            let arrived = m.code() == Some(MissionCode::Arrived);
+            if arrived || m.code() == Some(MissionCode::ViaReached) {
+                rec.reached.push(Reached { stamp_ns: h.stamp_ns, index: m.index, x: m.x, y: m.y, arrived });
+            }
+        });
+        if Instant::now() >= next_figures {
+            next_figures = Instant::now() + Duration::from_secs(2);
+            let phase = |w: &World| {
+                all_figures(w).get("mission").and_then(|m| m.get("phase").cloned()).unwrap_or_else(|| "-".into())
+            };
+            phases = (phase(w1), phase(w2));
+        }
+        if Instant::now() >= next_progress {
+            next_progress = Instant::now() + Duration::from_secs_f64(a.progress.max(0.5));
+            progress(&rec, &phases);
+        }
+        let arrived = rec.reached.iter().any(|r| r.arrived);
+        if arrived && (rec.resumed_ns.is_some() || phases.1 == "done") && done_at.is_none() {
+            done_at = Some(Instant::now());
+        }
+        if done_at.is_some_and(|t| t.elapsed().as_secs_f64() >= a.linger) {
+            break End::Done;
+        }
+        if rec.r1_truth.last().is_some_and(|r| r.t >= a.time_limit) {
+            break End::TimeLimit;
+        }
+        if last_truth.elapsed() > Duration::from_secs(20) {
+            break End::Stalled(format!(
+                "no ground truth from the simulator for 20 s (see `nerve --robot {} logs sim`)",
+                names[0]
+            ));
+        }
+        if t0.elapsed() > wall_limit {
+            break End::Stalled(format!(
+                "the simulation ran slower than real time; {wall_limit:?} of wall time passed"
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    progress(&rec, &phases);
+    Ok((end, rec))
+}
+
+/// One progress line.
+fn progress(rec: &Records, phases: &(String, String)) {
+    let pos = |v: &[TruePose]| v.last().map_or_else(|| "-".into(), |t| format!("({:.2}, {:.2})", t.x, t.y));
+    let t = rec.r1_truth.last().map_or(0.0, |r| r.t);
+    let via = rec.reached.iter().map(|r| r.index + 1).max().unwrap_or(0);
+    println!(
+        "t {t:6.1} s | robot 1 {} {} | robot 2 {} {}{} | path {}",
+        pos(&rec.r1_truth),
+        phases.0,
+        pos(&rec.r2_truth),
+        phases.1,
+        if rec.path.is_empty() { String::new() } else { format!(" {via}/{}", rec.path.len()) },
+        if rec.path.is_empty() { "not yet" } else { "sent" },
+    );
+    let _ = std::io::stdout().flush();
+}
+
+/// `estimates.csv`: every recorded pose, both robots, and robot 2's raw dead reckoning.
+fn write_estimates(path: &Path, rec: &Records) -> Result<()> {
+    let f = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    let mut w = std::io::BufWriter::new(f);
+    let err = || format!("cannot write {}", path.display());
+    writeln!(w, "robot,source,stamp_ns,x,y,theta,corrections").with_context(err)?;
+    for (robot, source, v) in
+        [("1", "odometry", &rec.r1_est), ("2", "odometry", &rec.r2_est), ("2", "raw", &rec.r2_raw)]
+    {
+        for e in v {
+            writeln!(w, "{robot},{source},{},{:.4},{:.4},{:.4},{}", e.stamp_ns, e.x, e.y, e.theta, e.corrections)
+                .with_context(err)?;
+        }
+    }
+    w.flush().with_context(err)
+}
