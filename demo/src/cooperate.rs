@@ -394,7 +394,7 @@ where
         chart
             .draw_series(all_jumps.iter().map(|(a, b)| PathElement::new(vec![*a, *b], JUMP.stroke_width(2))))
             .map_err(e)?
-            .label("correction at a checkpoint (jump)")
+            .label("correction jump at a checkpoint")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], JUMP.stroke_width(2)));
         chart.draw_series(all_jumps.iter().map(|(_, b)| Circle::new(*b, 3, JUMP.filled()))).map_err(e)?;
     }

@@ -76,7 +76,7 @@ fn the_corridor_of_section_4_3_3() {
     assert!((right - 2.73).abs() < 0.01, "the target's tube: {right} m");
     sim.robot_mut(RobotId::FIRST).set_pose(pose(9.0, 0.0, 0.0));
     let right = sim.robot(RobotId::FIRST).sonar_true_ranges()[9].expect("echo");
-    assert!((right - 0.75).abs() < 0.02, "corridor wall on the right before it: {right} m");
+    assert!((right - 1.35).abs() < 0.02, "corridor wall on the right before it: {right} m");
 }
 
 #[test]

@@ -42,6 +42,8 @@ pub struct Robot {
     /// its NERVE_HOME
     pub home: PathBuf,
     bin: PathBuf,
+    /// whether dropping it removes `home` (not for a [`Robot::sibling`])
+    owns_home: bool,
 }
 
 impl Robot {
@@ -62,7 +64,23 @@ impl Robot {
         let home = std::env::temp_dir().join(format!("nerve-test-{name}"));
         let _ = std::fs::remove_dir_all(&home);
         std::fs::create_dir_all(&home).expect("create NERVE_HOME");
-        Robot { name, home, bin: bin_dir() }
+        Robot { name, home, bin: bin_dir(), owns_home: true }
+    }
+
+    /// Another robot with a unique name in this robot's NERVE_HOME (two
+    /// robots of one machine, e.g. a simulator serving both). Dropping it
+    /// stops it and removes its shared memory; the home stays with `self`,
+    /// which must be dropped after it (declare it first).
+    pub fn sibling(&self, tag: &str) -> Self {
+        let other = Robot::new(tag);
+        let _ = std::fs::remove_dir_all(&other.home);
+        let mut other = std::mem::ManuallyDrop::new(other);
+        Robot {
+            name: std::mem::take(&mut other.name),
+            home: self.home.clone(),
+            bin: std::mem::take(&mut other.bin),
+            owns_home: false,
+        }
     }
 
     /// A command for binary `exe` (`nerve`, `nerve-ticker`...) in this robot's world.
@@ -203,7 +221,9 @@ impl Drop for Robot {
         for f in self.shm_files() {
             let _ = std::fs::remove_file(format!("/dev/shm/{f}"));
         }
-        let _ = std::fs::remove_dir_all(&self.home);
+        if self.owns_home {
+            let _ = std::fs::remove_dir_all(&self.home);
+        }
     }
 }
 

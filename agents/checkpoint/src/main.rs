@@ -51,7 +51,7 @@ struct Args {
     /// Sensor configuration: camera, tube colours, IR cones, known checkpoints.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Appendix A calibration (written by nerve-checkpoint-fit).
+    /// Appendix A calibration (written by `nerve calibrate checkpoint` or nerve-checkpoint-fit).
     #[arg(long)]
     calibration: Option<PathBuf>,
 }

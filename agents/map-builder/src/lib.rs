@@ -91,6 +91,9 @@ pub struct Settings {
 /// for the few decimetres robot 1 needs to stop).
 pub const KEEP_OFF_M: f64 = 0.9;
 
+/// Robot 1 drove past a via point when its trail came this near it, metres.
+pub const PASSED_VIA_M: f64 = 1.0;
+
 /// Robot 1's trail keeps a point every this many metres.
 pub const TRAIL_STEP_M: f64 = 0.25;
 /// The trail is simplified to within this many metres.
@@ -130,8 +133,6 @@ pub struct Landmark {
     transmitter_votes: [(u32, f64); 4],
     /// Sum of unit vectors toward where the robot saw it from (no transmitter known).
     seen_from: (f64, f64),
-    /// Length of robot 1's trail when it was first seen.
-    trail_at: usize,
 }
 
 impl Landmark {
@@ -228,9 +229,6 @@ impl MapBuilder {
                 k += 1;
                 k % 2 == 1
             });
-            for l in &mut self.landmarks {
-                l.trail_at /= 2;
-            }
             self.found_at = self.found_at.map(|f| f / 2);
         }
         self.trail.push([x, y]);
@@ -295,7 +293,6 @@ impl MapBuilder {
                     order,
                     transmitter_votes: [(0, 0.0); 4],
                     seen_from: (0.0, 0.0),
-                    trail_at: self.trail.len(),
                 });
                 (self.landmarks.len() - 1, SightingEvent::New)
             }
@@ -358,8 +355,7 @@ impl MapBuilder {
             })
             .collect();
         let t = [target.x, target.y];
-        let last_checkpoint = self.confirmed().filter(|l| !l.is_target).max_by_key(|l| l.order);
-        for w in self.way_to_target(last_checkpoint, t) {
+        for w in self.way_to_target(t) {
             pts.push((w, ViaKind::Waypoint, 0, w));
         }
         // the target's via point: toward where robot 2 comes from when the
@@ -424,21 +420,25 @@ impl MapBuilder {
 }
 
 impl MapBuilder {
-    /// Robot 1's way from the via point of `from` (the last checkpoint) to
-    /// where it found the target, simplified; empty without a checkpoint or
-    /// a trail.
-    fn way_to_target(&self, from: Option<&Landmark>, target: [f64; 2]) -> Vec<[f64; 2]> {
+    /// Robot 1's way from the last checkpoint's via point it drove past
+    /// (within [`PASSED_VIA_M`]) before it found the target, to where it found
+    /// it, simplified; empty without such a via point.
+    fn way_to_target(&self, target: [f64; 2]) -> Vec<[f64; 2]> {
         let end = self.found_at.unwrap_or(self.trail.len()).min(self.trail.len());
-        let Some(from) = from else { return Vec::new() };
-        let via = from.via_point(self.settings.via_distance_m);
+        let trail = &self.trail[..end];
         let d = |p: &[f64; 2], q: (f64, f64)| (p[0] - q.0).hypot(p[1] - q.1);
-        let after = &self.trail[from.trail_at.min(end)..end];
-        // from the trail point nearest the via point, after the checkpoint was first seen
-        let Some(start) = after.iter().enumerate().min_by(|a, b| d(a.1, via).total_cmp(&d(b.1, via))).map(|(i, _)| i)
-        else {
-            return Vec::new();
-        };
-        let mut out = simplify(&after[start..], TRAIL_TOLERANCE_M);
+        let dist = self.settings.via_distance_m;
+        // the latest trail point near a confirmed checkpoint's via point
+        let passed = self
+            .confirmed()
+            .filter(|l| !l.is_target)
+            .filter_map(|l| {
+                let via = l.via_point(dist);
+                trail.iter().rposition(|p| d(p, via) <= PASSED_VIA_M).map(|i| (i, via))
+            })
+            .max_by_key(|(i, _)| *i);
+        let Some((start, via)) = passed else { return Vec::new() };
+        let mut out = simplify(&trail[start..], TRAIL_TOLERANCE_M);
         // the first point is (about) the via point itself
         out.retain(|p| d(p, via) > 0.5 && d(p, (target[0], target[1])) > 0.8);
         out
@@ -648,6 +648,10 @@ mod tests {
             m.on_pose(x, -0.4 - 0.6 * ((x - 11.6).max(0.0) / 0.6).min(1.0) * 0.5);
             if (x - 10.0).abs() < 0.01 {
                 assert!(matches!(m.on_sighting(&cp(3, 10.8, 1.2, 0b0001), None), SightingEvent::Confirmed { .. }));
+            }
+            if (x - 11.5).abs() < 0.01 {
+                // checkpoint 4, seen from afar and never passed: not where robot 1's way starts
+                m.on_sighting(&cp(4, 15.6, 1.2, 0b0011), None);
             }
             x += 0.05;
         }

@@ -5,7 +5,7 @@
 //! `launch/cooperate-r2.toml` (and their bridge configurations) into the
 //! output directory — with the seed, the world, the ground-truth files, the
 //! bridge port and, with `--no-checkpoints`, the checkpoint sensors' `correct
-//! = false` — launches robot 1 (the simulator, which owns the world and
+//! = false` and robot 2's target achiever's `target_shift_m = 0` — launches robot 1 (the simulator, which owns the world and
 //! serves robot 2's boards too) and then robot 2, and follows the run with a
 //! progress line, recording from the robots' ports (taps: the simulator's
 //! ground truth of both robots, both odometry poses, robot 2's motor
@@ -73,6 +73,9 @@ pub struct CooperateArgs {
     /// Robot 2's centre to the target's centre, m, that counts as reaching it.
     #[arg(long, default_value_t = 0.5)]
     pub reach: f64,
+    /// The two robots' names [default: those of the launch files, coop-r1,coop-r2].
+    #[arg(long, value_delimiter = ',', num_args = 2, value_name = "ROBOT1,ROBOT2")]
+    pub robots: Option<Vec<String>>,
     /// TCP port of robot 1's bridge on 127.0.0.1.
     #[arg(long, default_value_t = 7451)]
     pub port: u16,
@@ -124,8 +127,9 @@ struct Derive<'a> {
     world: &'a Path,
     seed: u64,
     out: &'a Path,
-    /// Robot 2's name (for the simulator's `--extra-robot`).
-    r2: &'a str,
+    /// The templates' robot names and the run's.
+    template_names: &'a [String; 2],
+    names: &'a [String; 2],
     no_checkpoints: bool,
 }
 
@@ -137,10 +141,24 @@ fn robot_of(doc: &toml::Table, path: &Path) -> Result<String> {
         .with_context(|| format!("launch file {} names no `robot`; the demo needs both robots named", path.display()))
 }
 
+/// `text` with the templates' robot names replaced by the run's.
+fn rename(text: &str, from: &[String; 2], to: &[String; 2]) -> String {
+    // through placeholders, so that swapped names do not clash
+    let mut t = text.to_owned();
+    for (i, f) in from.iter().enumerate() {
+        t = t.replace(f.as_str(), &format!("\u{1}{i}\u{1}"));
+    }
+    for (i, n) in to.iter().enumerate() {
+        t = t.replace(&format!("\u{1}{i}\u{1}"), n);
+    }
+    t
+}
+
 /// The run's copy of a launch file.
 fn derive(template: &Path, d: &Derive<'_>) -> Result<String> {
     let text =
         std::fs::read_to_string(template).with_context(|| format!("cannot read launch file {}", template.display()))?;
+    let text = rename(&text, d.template_names, d.names);
     let mut doc: toml::Table =
         toml::from_str(&text).with_context(|| format!("launch file {} is not valid TOML", template.display()))?;
     let base = template.parent().and_then(Path::parent).map(Path::to_path_buf).unwrap_or_default();
@@ -150,10 +168,17 @@ fn derive(template: &Path, d: &Derive<'_>) -> Result<String> {
     for a in agents.iter_mut() {
         let Some(t) = a.as_table_mut() else { continue };
         let kind = t.get("kind").and_then(|k| k.as_str()).unwrap_or_default().to_owned();
-        if kind == "checkpoint" && d.no_checkpoints {
+        // without checkpoints: the sensors correct no pose, and robot 2 does
+        // not steer to the target its camera sees (dead reckoning alone)
+        let off = match kind.as_str() {
+            "checkpoint" => Some(("correct", toml::Value::Boolean(false))),
+            "target" => Some(("target_shift_m", toml::Value::Float(0.0))),
+            _ => None,
+        };
+        if let (true, Some((key, value))) = (d.no_checkpoints, off) {
             let params = t.entry("params").or_insert_with(|| toml::Value::Table(toml::Table::new()));
             if let Some(p) = params.as_table_mut() {
-                p.insert("correct".into(), toml::Value::Boolean(false));
+                p.insert(key.into(), value);
             }
         }
         let args = t.entry("args").or_insert_with(|| toml::Value::Array(vec![]));
@@ -163,7 +188,7 @@ fn derive(template: &Path, d: &Derive<'_>) -> Result<String> {
             set_flag(args, "--world", d.world.display().to_string());
             set_flag(args, "--seed", d.seed.to_string());
             set_flag(args, "--truth", d.out.join("truth-r1.csv").display().to_string());
-            let extra = format!("{}:h2::{}", d.r2, d.out.join("truth-r2.csv").display());
+            let extra = format!("{}:h2::{}", d.names[1], d.out.join("truth-r2.csv").display());
             set_flag(args, "--extra-robot", extra);
         }
     }
@@ -223,7 +248,14 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
             toml::from_str(&text).with_context(|| format!("launch file {} is not valid TOML", t.display()))
         })
         .collect::<Result<_>>()?;
-    let names = [robot_of(&docs[0], &templates[0])?, robot_of(&docs[1], &templates[1])?];
+    let template_names = [robot_of(&docs[0], &templates[0])?, robot_of(&docs[1], &templates[1])?];
+    let names: [String; 2] = match &a.robots {
+        Some(v) => match v.as_slice() {
+            [r1, r2] if r1 != r2 => [r1.clone(), r2.clone()],
+            _ => bail!("--robots takes two different names, ROBOT1,ROBOT2"),
+        },
+        None => template_names.clone(),
+    };
     let default_out = if a.no_checkpoints {
         format!("out/cooperate-{}-no-checkpoints", a.seed)
     } else {
@@ -237,7 +269,14 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         refuse_busy(w)?;
     }
     // the run's launch files and bridge configurations, side by side in `out`
-    let d = Derive { world: &world_file, seed: a.seed, out: &out, r2: &names[1], no_checkpoints: a.no_checkpoints };
+    let d = Derive {
+        world: &world_file,
+        seed: a.seed,
+        out: &out,
+        template_names: &template_names,
+        names: &names,
+        no_checkpoints: a.no_checkpoints,
+    };
     let mut launch_paths = Vec::new();
     for (i, t) in templates.iter().enumerate() {
         let name = format!("launch-r{}.toml", i + 1);
@@ -247,8 +286,8 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         let zenoh = format!("cooperate-r{}.zenoh.toml", i + 1);
         let src = t.with_file_name(&zenoh);
         let text = std::fs::read_to_string(&src).with_context(|| format!("cannot read {}", src.display()))?;
-        std::fs::write(out.join(&zenoh), text.replace(SHIPPED_PORT, &a.port.to_string()))
-            .with_context(|| format!("cannot write {zenoh}"))?;
+        let text = rename(&text, &template_names, &names).replace(SHIPPED_PORT, &a.port.to_string());
+        std::fs::write(out.join(&zenoh), text).with_context(|| format!("cannot write {zenoh}"))?;
     }
     for f in ["truth-r1.csv", "truth-r2.csv"] {
         let _ = std::fs::remove_file(out.join(f));

@@ -1,0 +1,147 @@
+//! End-to-end runs of `nerve demo cooperate` (the thesis' second experiment,
+//! section 4.3): two robots, two routers, two bridges over loopback, the
+//! real-time simulator serving both robots' boards, every agent a process.
+//!
+//! One run with the checkpoint corrections, during which each robot's bridge
+//! is killed once (its supervisor restarts it; reliable messages arrive
+//! after the restart), then the same run without corrections: robot 2 must
+//! reach the target within 0.5 m with no collision in the first, and end
+//! farther from it in the second. Each run takes about two and a half
+//! minutes of simulated (= wall) time; they run in the `demo-runs` group,
+//! one at a time (`.config/nextest.toml`).
+
+use nerve_tests::{Robot, free_port, sigkill, wait_until};
+use serde_json::Value;
+use std::io::{BufRead as _, BufReader};
+use std::path::Path;
+use std::process::{Child, Stdio};
+use std::time::{Duration, Instant};
+
+/// The demo as a child process, killed (with its robots brought down by the
+/// robots' guards) if the test fails.
+struct Demo(Child);
+
+impl Drop for Demo {
+    fn drop(&mut self) {
+        if matches!(self.0.try_wait(), Ok(None)) {
+            let _ = self.0.kill();
+        }
+        let _ = self.0.wait();
+    }
+}
+
+fn start(r1: &Robot, r2: &Robot, out: &Path, extra: &[&str]) -> (Demo, std::sync::mpsc::Receiver<String>) {
+    let port = free_port().to_string();
+    let robots = format!("{},{}", r1.name, r2.name);
+    let mut cmd = r1.command("nerve");
+    cmd.args(["demo", "cooperate", "--seed", "1", "--robots", &robots, "--port", &port, "--out"])
+        .arg(out)
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    let mut child = cmd.spawn().expect("start nerve demo cooperate");
+    let stdout = child.stdout.take().expect("stdout");
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            println!("{line}");
+            // keep reading after the test stops listening: the pipe must not fill
+            let _ = tx.send(line);
+        }
+    });
+    (Demo(child), rx)
+}
+
+/// Waits for the demo to end (at most `limit`) and returns its summary.
+fn finish(mut demo: Demo, out: &Path, limit: Duration) -> Value {
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = demo.0.try_wait().expect("wait for the demo") {
+            break s;
+        }
+        assert!(t0.elapsed() < limit, "nerve demo cooperate did not end within {limit:?}");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert!(status.success(), "nerve demo cooperate failed: {status}");
+    let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json");
+    serde_json::from_str(&text).expect("summary.json is JSON")
+}
+
+fn distance(s: &Value) -> f64 {
+    s["final_distance_to_target_m"].as_f64().unwrap_or_else(|| panic!("no final distance: {s:#}"))
+}
+
+#[test]
+fn demo_cooperate_robot_2_reaches_the_target_through_bridge_restarts_and_misses_without_checkpoints() {
+    let r1 = Robot::new("coa");
+    let r2 = r1.sibling("cob");
+    let out = r1.home.join("run");
+    // ---- with corrections; each bridge killed once on the way ----
+    let (demo, lines) = start(&r1, &r2, &out, &[]);
+    let t0 = Instant::now();
+    // robot 2 follows the path: kill its bridge (the path and "come" are in,
+    // its reports must still cross later)
+    let following = |l: &String| l.contains("robot 2") && l.contains("following");
+    assert!(
+        lines.iter().take_while(|_| t0.elapsed() < Duration::from_secs(240)).any(|l| following(&l)),
+        "robot 2 never started to follow the path"
+    );
+    let b2 = r2.pid("bridge");
+    sigkill(b2);
+    assert!(
+        wait_until(Duration::from_secs(30), || r2
+            .agent("bridge")
+            .is_some_and(|a| a["pid"].as_u64().is_some_and(|p| p != 0 && p != u64::from(b2)))),
+        "robot 2's bridge was not restarted"
+    );
+    // a little later, robot 1's (robot 2's reports come in through it)
+    std::thread::sleep(Duration::from_secs(10));
+    let b1 = r1.pid("bridge");
+    sigkill(b1);
+    assert!(
+        wait_until(Duration::from_secs(30), || r1
+            .agent("bridge")
+            .is_some_and(|a| a["pid"].as_u64().is_some_and(|p| p != 0 && p != u64::from(b1)))),
+        "robot 1's bridge was not restarted"
+    );
+    drop(lines);
+    let with = finish(demo, &out, Duration::from_secs(480));
+    assert_eq!(with["target_found"], true, "{with:#}");
+    assert_eq!(with["path_sent"], true, "{with:#}");
+    assert_eq!(with["end_reason"], "robot 2 arrived and robot 1 resumed", "{with:#}");
+    assert!(distance(&with) <= 0.5, "robot 2 ended {} m from the target: {with:#}", distance(&with));
+    assert_eq!(with["robot2_reached_target"], true);
+    for (robot, n) in with["collisions"].as_object().expect("collisions per robot") {
+        assert_eq!(n.as_u64(), Some(0), "robot {robot} collided: {with:#}");
+    }
+    let corrections = with["corrections"][&r2.name].as_u64().expect("robot 2's corrections");
+    assert!(corrections >= 3, "robot 2 was corrected at the checkpoints: {with:#}");
+    assert!(with["via_points"].as_array().is_some_and(|v| v.len() >= 5), "{with:#}");
+    for b in ["messages_out", "bytes_out"] {
+        for r in [&r1.name, &r2.name] {
+            assert!(with["bridge"][b][r].as_u64().is_some_and(|n| n > 0), "{b} of {r}: {with:#}");
+        }
+    }
+    for f in ["trajectories.png", "trajectories.svg", "estimates.csv", "truth-r1.csv", "truth-r2.csv"] {
+        let len = std::fs::metadata(out.join(f)).map(|m| m.len()).unwrap_or(0);
+        assert!(len > 1000, "{f} is missing or empty");
+    }
+    // nothing left behind
+    for r in [&r1, &r2] {
+        assert!(r.shm_files().is_empty(), "left in /dev/shm by robot {}: {:?}", r.name, r.shm_files());
+    }
+
+    // ---- the same run without corrections ----
+    let out_n = r1.home.join("run-no-checkpoints");
+    let (demo, lines) = start(&r1, &r2, &out_n, &["--no-checkpoints"]);
+    drop(lines);
+    let without = finish(demo, &out_n, Duration::from_secs(480));
+    assert_eq!(without["checkpoints"], false);
+    assert_eq!(without["corrections"][&r2.name], 0, "{without:#}");
+    assert!(
+        distance(&without) > distance(&with),
+        "without corrections robot 2 ends farther from the target: {} m, with them {} m",
+        distance(&without),
+        distance(&with)
+    );
+}
