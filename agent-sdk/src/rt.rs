@@ -1,11 +1,76 @@
 //! Real-time scheduling and locked memory, asked for where the system
 //! permits and reported plainly where it does not.
+//!
+//! Memory locking and `RLIMIT_MEMLOCK`: `mlockall(MCL_FUTURE)` makes every
+//! later mapping (rings, iceoryx2 segments) count against the limit, so
+//! under a raised but finite limit a mapping made long after the start
+//! fails with EAGAIN ("cannot map"). [`lock_memory`] therefore asks for
+//! `MCL_FUTURE` only when the limit is infinite or the process holds
+//! `CAP_IPC_LOCK` (which lifts it); under a finite limit it locks the pages
+//! mapped so far and warns, naming the limit and how to raise it.
 
-/// Locks current and future pages of the process in RAM as they are touched
-/// (`MCL_ONFAULT`, so large sparse shared-memory mappings are not faulted in).
+/// How much of the process [`lock_memory`] locks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LockPlan {
+    /// Current and future pages (`MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT`).
+    CurrentAndFuture,
+    /// Only the pages mapped now (`MCL_CURRENT | MCL_ONFAULT`): the limit is
+    /// finite, and locking future mappings would make them fail to map once
+    /// the limit is reached. Carries the limit in bytes, for the warning.
+    CurrentOnly { limit: u64 },
+}
+
+/// Decides how to lock memory from the soft `RLIMIT_MEMLOCK` (`None` for
+/// infinity) and whether the process holds `CAP_IPC_LOCK`.
+pub fn lock_plan(memlock_limit: Option<u64>, cap_ipc_lock: bool) -> LockPlan {
+    match memlock_limit {
+        None => LockPlan::CurrentAndFuture,
+        Some(_) if cap_ipc_lock => LockPlan::CurrentAndFuture,
+        Some(limit) => LockPlan::CurrentOnly { limit },
+    }
+}
+
+/// The soft `RLIMIT_MEMLOCK` in bytes, `None` for infinity (or when it
+/// cannot be read, so the old behaviour is kept).
+fn memlock_limit() -> Option<u64> {
+    let mut lim = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
+    // SAFETY: getrlimit writes one rlimit through a valid pointer.
+    let rc = unsafe { libc::getrlimit(libc::RLIMIT_MEMLOCK, &mut lim) };
+    if rc != 0 || lim.rlim_cur == libc::RLIM_INFINITY { None } else { Some(lim.rlim_cur) }
+}
+
+/// Whether the effective capability set holds `CAP_IPC_LOCK` (read from
+/// `/proc/self/status`; `false` when it cannot be read).
+fn has_cap_ipc_lock() -> bool {
+    const CAP_IPC_LOCK: u32 = 14;
+    let Ok(status) = std::fs::read_to_string("/proc/self/status") else { return false };
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("CapEff:"))
+        .and_then(|hex| u64::from_str_radix(hex.trim(), 16).ok())
+        .is_some_and(|caps| caps & (1 << CAP_IPC_LOCK) != 0)
+}
+
+/// Locks the pages of the process in RAM as they are touched
+/// (`MCL_ONFAULT`, so large sparse shared-memory mappings are not faulted
+/// in): current and future pages where `RLIMIT_MEMLOCK` is infinite, only
+/// current ones (with a warning) where it is finite; see [`lock_plan`].
 pub fn lock_memory() -> Result<(), String> {
+    let flags = match lock_plan(memlock_limit(), has_cap_ipc_lock()) {
+        LockPlan::CurrentAndFuture => libc::MCL_CURRENT | libc::MCL_FUTURE | libc::MCL_ONFAULT,
+        LockPlan::CurrentOnly { limit } => {
+            tracing::warn!(
+                memlock_limit_bytes = limit,
+                "RLIMIT_MEMLOCK is finite ({limit} bytes): locking only the memory mapped now, not later \
+                 mappings (rings and iceoryx2 segments would fail to map once the limit is reached); \
+                 to lock everything, set LimitMEMLOCK=infinity in the systemd unit or run `ulimit -l unlimited` \
+                 before starting"
+            );
+            libc::MCL_CURRENT | libc::MCL_ONFAULT
+        }
+    };
     // SAFETY: mlockall has no memory-safety preconditions.
-    let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE | libc::MCL_ONFAULT) };
+    let rc = unsafe { libc::mlockall(flags) };
     if rc == 0 { Ok(()) } else { Err(std::io::Error::last_os_error().to_string()) }
 }
 
@@ -47,4 +112,19 @@ pub fn drop_realtime() {
     let param = libc::sched_param { sched_priority: 0 };
     // SAFETY: pthread_self is always valid; param is a valid sched_param.
     let _ = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_OTHER, &param) };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_finite_memlock_limit_never_locks_future_mappings() {
+        assert_eq!(lock_plan(None, false), LockPlan::CurrentAndFuture);
+        assert_eq!(lock_plan(None, true), LockPlan::CurrentAndFuture);
+        assert_eq!(lock_plan(Some(64 << 20), false), LockPlan::CurrentOnly { limit: 64 << 20 });
+        assert_eq!(lock_plan(Some(0), false), LockPlan::CurrentOnly { limit: 0 });
+        // CAP_IPC_LOCK lifts the limit: future mappings cannot hit it.
+        assert_eq!(lock_plan(Some(64 << 20), true), LockPlan::CurrentAndFuture);
+    }
 }
