@@ -74,7 +74,7 @@ pub struct CooperateArgs {
     #[arg(long, default_value_t = 0.5)]
     pub reach: f64,
     /// The two robots' names [default: those of the launch files, coop-r1,coop-r2].
-    #[arg(long, value_delimiter = ',', num_args = 2, value_name = "ROBOT1,ROBOT2")]
+    #[arg(long, value_delimiter = ',', value_name = "ROBOT1,ROBOT2")]
     pub robots: Option<Vec<String>>,
     /// TCP port of robot 1's bridge on 127.0.0.1.
     #[arg(long, default_value_t = 7451)]
