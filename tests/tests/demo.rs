@@ -9,7 +9,11 @@
 //!   the person, then reach the doorway and the target without a
 //!   collision, and must do so when the tracker is killed mid-run (the
 //!   supervisor restarts it) and with a CPU-hungry agent added (the
-//!   resource manager lengthens periods).
+//!   resource manager lengthens periods);
+//! * end to end on the island world (issue 12): a robot that only followed
+//!   the nearest wall would circle the island for ever; back at a place it
+//!   passed, the wall follower switches sides, leaves the island, and the
+//!   robot finds the door and the person.
 //!
 //! The end-to-end tests (`demo_*`) each run a whole robot in real time for
 //! about two minutes; `.config/nextest.toml` runs them one at a time.
@@ -328,6 +332,25 @@ fn demo_explore_second_world() {
     let s = run_demo(&r, &["--seed", "3", "--world", world("explore-2.toml").as_str()], |_| {});
     assert_success(&s);
     assert_eq!(s["world"], "explore-2");
+    clean_up(&r);
+}
+
+/// The island world (issue 12): the robot starts beside a round
+/// free-standing workbench, more than the sonar's reach from every wall,
+/// and follows it round. Back at the place it passed a lap ago (the map
+/// builder's `revisit`, from odometry), the wall follower switches sides,
+/// leaves the island for the room's walls, and so finds the door and the
+/// person — within the same time limit as the other runs.
+#[test]
+fn demo_explore_island_leaves_the_island() {
+    let r = Robot::new("demoi");
+    let s = run_demo(&r, &["--seed", "1", "--world", world("explore-island.toml").as_str()], |_| {});
+    let log = std::fs::read_to_string(r.home.join("out/logs/wall-follow.log")).unwrap_or_default();
+    let switches = log.lines().filter(|l| l.contains("back at a place passed before: switching to the")).count();
+    assert!(switches >= 1, "the wall follower never switched sides; its log:\n{log}");
+    println!("wall follower: {switches} side switch(es)");
+    assert_success(&s);
+    assert_eq!(s["world"], "explore-island");
     clean_up(&r);
 }
 

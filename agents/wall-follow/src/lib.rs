@@ -20,6 +20,19 @@
 //! * **Speed** rises by `accel × dt` every cycle up to `v_max` (from
 //!   `v_min`), and is scaled by the front clearance.
 //! * No wall within range: straight ahead, speed still rising.
+//!
+//! **Going round in circles** ([`SideSwitch`]). Following the nearest wall
+//! never leaves a free-standing obstacle (an island): the robot circles it
+//! for ever. The map builder says when the robot is back at a place it
+//! passed long ago (its `revisit`); on such a *rising edge* the follower
+//! switches to the other side and keeps that side for `hold_s`, whatever
+//! the nearer wall, following only a wall that comes within `reach_m` on
+//! it ([`revisit_settings`]): it leaves the island, drives straight on into
+//! new space, and does not steer back toward the island, 2 m away on the
+//! new side, once it has turned along another wall. Then the ordinary
+//! choice takes over, keeping the new wall (its 20 % hysteresis). A
+//! revisit less than `holdoff_s` after the last switch is ignored, so that
+//! the robot does not flip back and forth while it crosses visited space.
 
 use shm_schemas::payloads::{SONAR_DIRECTIONS, SonarScan};
 
@@ -162,6 +175,129 @@ pub fn follow(scan: &SonarScan, s: &Settings, previous: Option<WallSide>, rising
     Command { v: rising * scale, omega: omega.clamp(-s.omega_max, s.omega_max), side, rising }
 }
 
+/// How the follower answers a revisit (the map builder's `revisit`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RevisitSettings {
+    /// How long the other side is kept after a switch, s: long enough to
+    /// leave the obstacle circled and find a wall on that side.
+    pub hold_s: f32,
+    /// A revisit sooner than this after the last switch is ignored, s.
+    pub holdoff_s: f32,
+    /// While the hold lasts, only a wall this near on the new side is followed, m.
+    pub reach_m: f32,
+}
+
+impl Default for RevisitSettings {
+    fn default() -> Self {
+        RevisitSettings { hold_s: 20.0, holdoff_s: 40.0, reach_m: 1.2 }
+    }
+}
+
+/// The settings of one cycle: `base`, or while a switch holds (`forced`),
+/// the side switched to with a wall range of at most `r.reach_m`.
+pub fn revisit_settings(base: &Settings, forced: Option<WallSide>, r: &RevisitSettings) -> Settings {
+    match forced {
+        Some(side) => Settings { side: Some(side), wall_range: base.wall_range.min(r.reach_m), ..*base },
+        None => *base,
+    }
+}
+
+/// What one revisit reading did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RevisitEvent {
+    /// No rising edge (still in new space, still on the same visited stretch, or no reading).
+    Nothing,
+    /// Back at a place passed before: now following the other side.
+    Switched {
+        /// The side followed until now.
+        from: WallSide,
+        /// The side followed from now on.
+        to: WallSide,
+    },
+    /// Back at a place passed before, but the last switch was only `since_s` ago.
+    TooSoon {
+        /// Seconds since the last switch.
+        since_s: f32,
+    },
+    /// Back at a place passed before, but no wall was ever followed: nothing to switch.
+    NoWall,
+}
+
+/// The side switch on revisits: an edge detector on the map builder's
+/// `revisit`, a hold on the new side and a hold-off between switches.
+/// Without readings (input not connected, or silent) it never switches.
+#[derive(Debug, Clone, Default)]
+pub struct SideSwitch {
+    was: bool,
+    last_side: Option<WallSide>,
+    forced: Option<(WallSide, u64)>,
+    last_switch_ns: Option<u64>,
+    switches: u64,
+}
+
+impl WallSide {
+    /// The other side.
+    pub fn other(self) -> WallSide {
+        match self {
+            WallSide::Left => WallSide::Right,
+            WallSide::Right => WallSide::Left,
+        }
+    }
+
+    /// `"left"` or `"right"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            WallSide::Left => "left",
+            WallSide::Right => "right",
+        }
+    }
+}
+
+impl SideSwitch {
+    /// The wall followed this cycle (the last one followed is remembered).
+    pub fn followed(&mut self, side: Option<WallSide>) {
+        if side.is_some() {
+            self.last_side = side;
+        }
+    }
+
+    /// A reading of `revisit` at `now_ns`: `Some(true)` back at a place
+    /// passed before, `Some(false)` in new space, `None` no fresh reading
+    /// (the edge detector keeps its state). A rising edge switches sides.
+    pub fn revisit(&mut self, back: Option<bool>, now_ns: u64, s: &RevisitSettings) -> RevisitEvent {
+        let Some(back) = back else { return RevisitEvent::Nothing };
+        let rising = back && !self.was;
+        self.was = back;
+        if !rising {
+            return RevisitEvent::Nothing;
+        }
+        if let Some(t) = self.last_switch_ns {
+            let since_s = now_ns.saturating_sub(t) as f32 / 1e9;
+            if since_s < s.holdoff_s {
+                return RevisitEvent::TooSoon { since_s };
+            }
+        }
+        let Some(from) = self.last_side else { return RevisitEvent::NoWall };
+        let to = from.other();
+        let hold_ns = (f64::from(s.hold_s.max(0.0)) * 1e9) as u64;
+        self.forced = Some((to, now_ns.saturating_add(hold_ns)));
+        self.last_switch_ns = Some(now_ns);
+        self.last_side = Some(to);
+        self.switches = self.switches.saturating_add(1);
+        RevisitEvent::Switched { from, to }
+    }
+
+    /// The side to keep at `now_ns`: the side switched to, while its hold lasts.
+    pub fn forced(&self, now_ns: u64) -> Option<WallSide> {
+        self.forced.filter(|(_, until)| now_ns < *until).map(|(side, _)| side)
+    }
+
+    /// Switches so far.
+    pub fn switches(&self) -> u64 {
+        self.switches
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -235,5 +371,108 @@ mod tests {
         assert_eq!(choose_wall(&sc, &s, Some(WallSide::Left)), Some(WallSide::Right));
         let fixed = Settings { side: Some(WallSide::Left), ..s };
         assert_eq!(choose_wall(&sc, &fixed, None), Some(WallSide::Left));
+    }
+
+    const S: u64 = 1_000_000_000;
+
+    #[test]
+    fn unconnected_or_silent_revisit_never_switches() {
+        let r = RevisitSettings::default();
+        let mut sw = SideSwitch::default();
+        sw.followed(Some(WallSide::Right));
+        for t in 0..1000 {
+            assert_eq!(sw.revisit(None, t * S, &r), RevisitEvent::Nothing);
+            assert_eq!(sw.forced(t * S), None);
+        }
+        assert_eq!(sw.switches(), 0);
+    }
+
+    #[test]
+    fn a_rising_edge_switches_to_the_other_side_for_the_hold() {
+        let r = RevisitSettings { hold_s: 20.0, holdoff_s: 40.0, ..RevisitSettings::default() };
+        let mut sw = SideSwitch::default();
+        sw.followed(Some(WallSide::Right));
+        sw.followed(None); // lost the wall for a cycle: the last one counts
+        assert_eq!(sw.revisit(Some(false), 10 * S, &r), RevisitEvent::Nothing);
+        assert_eq!(
+            sw.revisit(Some(true), 50 * S, &r),
+            RevisitEvent::Switched { from: WallSide::Right, to: WallSide::Left }
+        );
+        assert_eq!(sw.switches(), 1);
+        // held, whatever else happens, for 20 s; no edge while it stays 1
+        for t in 50..70 {
+            assert_eq!(sw.revisit(Some(true), t * S, &r), RevisitEvent::Nothing);
+            assert_eq!(sw.forced(t * S), Some(WallSide::Left), "at {t} s");
+        }
+        assert_eq!(sw.forced(70 * S), None, "the hold ends: the ordinary choice again");
+        // silence keeps the edge detector's state: 1 -> silent -> 1 is no new edge
+        assert_eq!(sw.revisit(None, 100 * S, &r), RevisitEvent::Nothing);
+        assert_eq!(sw.revisit(Some(true), 101 * S, &r), RevisitEvent::Nothing);
+        assert_eq!(sw.switches(), 1);
+    }
+
+    #[test]
+    fn switches_have_a_hold_off_and_alternate() {
+        let r = RevisitSettings { hold_s: 20.0, holdoff_s: 40.0, ..RevisitSettings::default() };
+        let mut sw = SideSwitch::default();
+        sw.followed(Some(WallSide::Left));
+        assert!(matches!(sw.revisit(Some(true), 100 * S, &r), RevisitEvent::Switched { to: WallSide::Right, .. }));
+        sw.followed(Some(WallSide::Right));
+        // crossing visited space: 1, 0, 1 within the hold-off does not flip back
+        assert_eq!(sw.revisit(Some(false), 110 * S, &r), RevisitEvent::Nothing);
+        assert_eq!(sw.revisit(Some(true), 120 * S, &r), RevisitEvent::TooSoon { since_s: 20.0 });
+        assert_eq!(sw.forced(119 * S), Some(WallSide::Right));
+        assert_eq!(sw.switches(), 1);
+        // a new edge after the hold-off switches back
+        assert_eq!(sw.revisit(Some(false), 130 * S, &r), RevisitEvent::Nothing);
+        assert_eq!(
+            sw.revisit(Some(true), 141 * S, &r),
+            RevisitEvent::Switched { from: WallSide::Right, to: WallSide::Left }
+        );
+        assert_eq!(sw.switches(), 2);
+    }
+
+    #[test]
+    fn no_wall_followed_yet_is_nothing_to_switch() {
+        let r = RevisitSettings::default();
+        let mut sw = SideSwitch::default();
+        assert_eq!(sw.revisit(Some(true), 5 * S, &r), RevisitEvent::NoWall);
+        assert_eq!(sw.forced(5 * S), None);
+        assert_eq!(sw.switches(), 0);
+    }
+
+    #[test]
+    fn the_forced_side_leaves_an_island_on_the_other_side() {
+        // an island 0.6 m on the right, nothing on the left: auto keeps to the
+        // island; the side switched to (left, no wall) drives straight on
+        let s = Settings::default();
+        let k = 1.0 / 60f32.to_radians().sin();
+        let island = scan(&[(10, 1.0 * k), (9, 1.0), (8, 0.6 * k)]);
+        let auto = follow(&island, &s, Some(WallSide::Right), 0.5, 0.1);
+        assert_eq!(auto.side, Some(WallSide::Right));
+        assert!(auto.omega < -0.1, "auto turns back toward the island: {auto:?}");
+        let r = RevisitSettings::default();
+        let left = revisit_settings(&s, Some(WallSide::Left), &r);
+        let away = follow(&island, &left, Some(WallSide::Right), 0.5, 0.1);
+        assert_eq!((away.side, away.omega), (Some(WallSide::Left), 0.0), "straight on: {away:?}");
+        assert_eq!(revisit_settings(&s, None, &r), s, "no switch: the settings unchanged");
+    }
+
+    #[test]
+    fn while_held_a_far_wall_on_the_new_side_does_not_pull() {
+        // along a wall on the right at 0.6 m, the island 1.9 m away on the
+        // left (the side switched to): the robot goes straight on instead of
+        // steering back across the room to the island
+        let s = Settings::default();
+        let k = 1.0 / 60f32.to_radians().sin();
+        let sc = scan(&[(2, 1.9 * k), (3, 1.9), (4, 1.9 * k), (10, 0.6 * k), (9, 0.6), (8, 0.6 * k)]);
+        let plain_left = Settings { side: Some(WallSide::Left), ..s };
+        assert!(follow(&sc, &plain_left, None, 0.5, 0.1).omega > 0.5, "a plain left follower turns to the island");
+        let held = revisit_settings(&s, Some(WallSide::Left), &RevisitSettings::default());
+        let c = follow(&sc, &held, None, 0.5, 0.1);
+        assert_eq!(c.omega, 0.0, "{c:?}");
+        // a wall within reach on the new side is followed as usual
+        let near = scan(&[(2, 1.0 * k), (3, 1.0), (4, 1.0 * k)]);
+        assert!(follow(&near, &held, None, 0.5, 0.1).omega > 0.0);
     }
 }

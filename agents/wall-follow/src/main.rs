@@ -8,11 +8,20 @@
 //! dead man stops the robot if no other source speaks) and starts again
 //! from `v_min` when they come back. After being suspended (a gap of more
 //! than three periods) it also starts again from `v_min`.
+//!
+//! Optional input `revisit` (`nerve::Scalar`, the map builder's `revisit`:
+//! 1 while the robot is back at a place it passed long ago). On its rising
+//! edge, with `side` = `auto`, the follower switches to the other side for
+//! `revisit_hold_s` seconds, at most once every `revisit_holdoff_s`
+//! (library: `SideSwitch`); the read-only figure `revisit_switches` counts
+//! the switches. Not connected, or silent for 3 s, it changes nothing.
 
 use agent_sdk::params::{Declare, in_range, in_range_above_zero};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
-use nerve_wall_follow::{Settings, WallSide, follow};
-use shm_schemas::payloads::{SonarScan, VelocityCommand};
+use nerve_wall_follow::{RevisitEvent, RevisitSettings, Settings, SideSwitch, WallSide, follow, revisit_settings};
+use shm_schemas::payloads::{Scalar, SonarScan, VelocityCommand};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 /// The farthest wall to keep to, m: beyond it the sonar sees no wall.
@@ -24,6 +33,12 @@ const ACCEL_MAX: f32 = 5.0;
 /// Scan timeout bounds, ms: under 100 ms a scan period would count as
 /// silence; over 10 s the robot would follow a wall it no longer sees.
 const TIMEOUT_MS: std::ops::RangeInclusive<u64> = 100..=10_000;
+/// The longest hold and hold-off of a revisit switch, s.
+const REVISIT_S_MAX: f32 = 600.0;
+/// A `revisit` reading older than this is no reading, ns (the map builder
+/// sends one every 200 ms, every 1.6 s when the resource manager has
+/// slowed it down the most).
+const REVISIT_FRESH_NS: u64 = 3_000_000_000;
 
 /// The follower's parameters, each number bounded above and below.
 struct Params {
@@ -32,6 +47,8 @@ struct Params {
     accel: Param<f32>,
     side: Param<String>,
     timeout_ms: Param<u64>,
+    revisit_hold_s: Param<f32>,
+    revisit_holdoff_s: Param<f32>,
 }
 
 impl Params {
@@ -46,18 +63,30 @@ impl Params {
                 _ => Err("side is auto, left or right".into()),
             }),
             timeout_ms: d.checked("scan_timeout_ms", 1000u64, |v| in_range("scan_timeout_ms", *v, &TIMEOUT_MS, "ms")),
+            revisit_hold_s: d.checked("revisit_hold_s", RevisitSettings::default().hold_s, |v| {
+                in_range_above_zero("revisit_hold_s", *v, REVISIT_S_MAX, "s")
+            }),
+            revisit_holdoff_s: d.checked("revisit_holdoff_s", RevisitSettings::default().holdoff_s, |v| {
+                in_range_above_zero("revisit_holdoff_s", *v, REVISIT_S_MAX, "s")
+            }),
         }
     }
 }
 
 struct WallFollow {
     scan: Input<SonarScan>,
+    revisit: Input<Scalar>,
     cmd: Output<VelocityCommand>,
     target: Param<f32>,
     v_max: Param<f32>,
     accel: Param<f32>,
     side: Param<String>,
     timeout_ms: Param<u64>,
+    revisit_hold_s: Param<f32>,
+    revisit_holdoff_s: Param<f32>,
+    last_revisit: Option<(u64, bool)>,
+    switch: SideSwitch,
+    switches: Arc<AtomicU64>,
     last_scan: Option<(u64, SonarScan)>,
     last_step_ns: Option<u64>,
     rising: f32,
@@ -85,16 +114,27 @@ impl Agent for WallFollow {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let scan = setup.input("scan")?;
+        let revisit = setup.input("revisit")?;
         let cmd = setup.output("cmd")?;
-        let Params { target, v_max, accel, side, timeout_ms } = Params::declare(setup);
+        let Params { target, v_max, accel, side, timeout_ms, revisit_hold_s, revisit_holdoff_s } =
+            Params::declare(setup);
+        let switches = Arc::new(AtomicU64::new(0));
+        let figure = switches.clone();
+        setup.figures(move || vec![("revisit_switches".into(), figure.load(Ordering::Relaxed).to_string())]);
         Ok(WallFollow {
             scan,
+            revisit,
             cmd,
             target,
             v_max,
             accel,
             side,
             timeout_ms,
+            revisit_hold_s,
+            revisit_holdoff_s,
+            last_revisit: None,
+            switch: SideSwitch::default(),
+            switches,
             last_scan: None,
             last_step_ns: None,
             rising: 0.0,
@@ -127,17 +167,20 @@ impl Agent for WallFollow {
             return Ok(());
         };
         self.silent = false;
-        let s = Settings {
+        let fixed = match self.side.get().as_str() {
+            "left" => Some(WallSide::Left),
+            "right" => Some(WallSide::Right),
+            _ => None,
+        };
+        let r = self.on_revisit(now, fixed);
+        let base = Settings {
             target: self.target.get(),
             v_max: self.v_max.get(),
             accel: self.accel.get(),
-            side: match self.side.get().as_str() {
-                "left" => Some(WallSide::Left),
-                "right" => Some(WallSide::Right),
-                _ => None,
-            },
+            side: fixed,
             ..Settings::default()
         };
+        let s = revisit_settings(&base, if fixed.is_none() { self.switch.forced(now) } else { None }, &r);
         let c = follow(&scan, &s, self.wall, self.rising, dt);
         if c.side != self.wall {
             tracing::info!(
@@ -146,6 +189,7 @@ impl Agent for WallFollow {
             );
         }
         self.wall = c.side;
+        self.switch.followed(c.side);
         self.rising = c.rising;
         let (v0, w0, t0) =
             self.sent.unwrap_or((0.0, 0.0, now.saturating_sub(u64::try_from(period.as_nanos()).unwrap_or(u64::MAX))));
@@ -154,6 +198,52 @@ impl Agent for WallFollow {
         self.sent = Some((v, omega, now));
         self.cmd.send(VelocityCommand { v: f64::from(v), omega: f64::from(omega), stamp_ns: now })?;
         Ok(())
+    }
+}
+
+impl WallFollow {
+    /// Reads `revisit` and switches sides on its rising edge (side `auto`
+    /// only: a side set by the operator is kept).
+    fn on_revisit(&mut self, now: u64, fixed: Option<WallSide>) -> RevisitSettings {
+        if let Some((_, r)) = self.revisit.latest() {
+            if r.value.is_finite() {
+                self.last_revisit = Some((now, r.value >= 0.5));
+            } else {
+                tracing::debug!(value = r.value, "revisit reading not a number: ignored");
+            }
+        }
+        let back = self.last_revisit.filter(|(t, _)| now.saturating_sub(*t) <= REVISIT_FRESH_NS).map(|(_, b)| b);
+        let s = RevisitSettings {
+            hold_s: self.revisit_hold_s.get(),
+            holdoff_s: self.revisit_holdoff_s.get(),
+            ..RevisitSettings::default()
+        };
+        match self.switch.revisit(back, now, &s) {
+            RevisitEvent::Nothing => {}
+            RevisitEvent::Switched { from, to } if fixed.is_none() => {
+                self.switches.store(self.switch.switches(), Ordering::Relaxed);
+                tracing::info!(
+                    from = from.name(),
+                    to = to.name(),
+                    hold_s = s.hold_s,
+                    switches = self.switch.switches(),
+                    "back at a place passed before: switching to the {} wall",
+                    to.name()
+                );
+            }
+            RevisitEvent::Switched { .. } => {
+                tracing::info!(side = self.side.get(), "back at a place passed before; side fixed by parameter, kept")
+            }
+            RevisitEvent::TooSoon { since_s } => tracing::info!(
+                since_s,
+                holdoff_s = s.holdoff_s,
+                "back at a place passed before, but switched sides only {since_s:.0} s ago: keeping the side"
+            ),
+            RevisitEvent::NoWall => {
+                tracing::info!("back at a place passed before, but no wall followed yet: nothing to switch")
+            }
+        }
+        s
     }
 }
 
@@ -171,7 +261,7 @@ mod tests {
         let mut t = ParamTable::default();
         let _p = Params::declare(&mut t);
         let keys: Vec<String> = t.snapshot().into_iter().map(|(k, _)| k).filter(|k| k != "side").collect();
-        assert_eq!(keys.len(), 4, "{keys:?}");
+        assert_eq!(keys.len(), 6, "{keys:?}");
         for key in &keys {
             // values of the parameter's type, refused by its range
             for absurd in ["18446744073709551615", "0"] {
@@ -184,7 +274,14 @@ mod tests {
             }
         }
         assert!(t.set("side", "up").is_err());
-        for (key, ok) in [("scan_timeout_ms", "100"), ("scan_timeout_ms", "10000"), ("v_max", "0.8"), ("target", "2")] {
+        for (key, ok) in [
+            ("scan_timeout_ms", "100"),
+            ("scan_timeout_ms", "10000"),
+            ("v_max", "0.8"),
+            ("target", "2"),
+            ("revisit_hold_s", "600"),
+            ("revisit_holdoff_s", "0.5"),
+        ] {
             t.set(key, ok).unwrap_or_else(|e| panic!("{key} = {ok}: {e}"));
         }
     }
