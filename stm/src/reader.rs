@@ -22,21 +22,39 @@
 //! loads because the reader's mapping is read-only, and the standard library
 //! guarantees only small relaxed atomic loads on read-only memory.
 //!
+//! Step 2 never makes a `&[u8]` or a reference to non-atomic header fields
+//! over the shared bytes: that would be a data race in Rust's memory model
+//! (the compiler may assume the bytes do not change). Slot headers are
+//! atomics; the payload is copied out with volatile loads
+//! ([`crate::sys::copy_volatile`]) into the caller's buffer or, for the
+//! in-place reads (`read_with`, `latest_with`, `nearest_with`), into a
+//! buffer of the calling thread that is reused from read to read. The
+//! closure sees that private copy; the seqlock still decides whether the
+//! copy is frame `seq` intact.
+//!
 //! Readers keep no state in shared memory: the cost of a read is the same for
 //! one reader or fifty, and a reader that dies leaves nothing behind.
 
 use crate::RingOptions;
 use crate::error::{OpenError, ReadError};
 use crate::name::RingName;
-use crate::sys::{Geometry, Mapping, pid_alive, slot_header, slot_payload};
+use crate::sys::{Geometry, Mapping, copy_volatile, pid_alive, slot_header, slot_payload};
 use crate::writer::{MAX_SLOT_CAPACITY, MAX_SLOTS};
 use serde::Serialize;
 use shm_schemas::RobotName;
 use shm_schemas::ring::{PixelFormat, RING_HEADER_SIZE, RING_LAYOUT_VERSION, RING_MAGIC};
+use std::cell::Cell;
 use std::fs::{File, OpenOptions};
 use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{Ordering, fence};
+
+thread_local! {
+    /// The private copy the in-place reads hand to their closure, kept from
+    /// read to read (it grows to the largest frame this thread has read).
+    /// Taken out while a closure runs, so a nested read gets a fresh one.
+    static SCRATCH: Cell<Vec<u8>> = const { Cell::new(Vec::new()) };
+}
 
 /// How often a read of "the latest" or "the nearest" frame is retried when
 /// the writer overwrote the chosen frame meanwhile (only a ring with very few
@@ -162,10 +180,9 @@ impl RingReader {
             path: path.to_owned(),
             source: e.into(),
         })?;
-        let h = map.header();
-        let magic = h.magic.load(Ordering::Relaxed);
+        let magic = map.header_atomics().magic.load(Ordering::Relaxed);
         // pairs with the creator's release store of the magic: the other
-        // header fields below are complete
+        // header fields, copied below, are complete
         fence(Ordering::Acquire);
         if magic == 0 {
             return Err(OpenError::NotReady { path: path.to_owned() });
@@ -173,10 +190,12 @@ impl RingReader {
         if magic != RING_MAGIC {
             return Err(not_a_ring("unknown magic number"));
         }
+        // the fixed fields, read once: never a reference into the mapping
+        let h = map.header_copy();
         if h.layout_version != RING_LAYOUT_VERSION {
             return Err(not_a_ring(&format!("it has layout version {}", h.layout_version)));
         }
-        let geo = Geometry::from_header(h, map.len()).ok_or_else(|| {
+        let geo = Geometry::from_header(&h, map.len()).ok_or_else(|| {
             not_a_ring(&format!(
                 "its header ({} slots of {} bytes, stride {}, header {} bytes) contradicts its size of {} bytes or exceeds the limits ({MAX_SLOTS} slots of {MAX_SLOT_CAPACITY} bytes)",
                 h.slot_count, h.slot_capacity, h.slot_stride, h.header_size, map.len()
@@ -209,7 +228,7 @@ impl RingReader {
 
     /// The last complete frame's sequence number, `None` while empty.
     pub fn last_seq(&self) -> Option<u64> {
-        let last = self.map.header().last_seq.load(Ordering::Relaxed);
+        let last = self.map.header_atomics().last_seq.load(Ordering::Relaxed);
         fence(Ordering::Acquire);
         Some(last).filter(|s| *s > 0)
     }
@@ -224,7 +243,7 @@ impl RingReader {
 
     /// The pid of the current writer, `None` if it closed the ring.
     pub fn writer_pid(&self) -> Option<u32> {
-        Some(self.map.header().writer_pid.load(Ordering::Relaxed)).filter(|p| *p != 0)
+        Some(self.map.header_atomics().writer_pid.load(Ordering::Relaxed)).filter(|p| *p != 0)
     }
 
     /// Whether the recorded writer process is alive.
@@ -234,7 +253,7 @@ impl RingReader {
 
     /// How many times a writer opened this ring; changes when the writer restarts.
     pub fn writer_generation(&self) -> u64 {
-        self.map.header().writer_generation.load(Ordering::Relaxed)
+        self.map.header_atomics().writer_generation.load(Ordering::Relaxed)
     }
 
     /// Whether the ring file was removed or replaced since this reader
@@ -246,25 +265,27 @@ impl RingReader {
         }
     }
 
-    /// Reads frame `seq` in place: `f` gets its description and its bytes
-    /// in shared memory, without a copy.
+    /// Reads frame `seq` without an allocation: `f` gets its description
+    /// and a copy of its bytes in a buffer of the calling thread, reused
+    /// from read to read (see the module doc for why not the shared bytes
+    /// themselves).
     ///
-    /// **The bytes are speculative while `f` runs**: the writer may overwrite
-    /// the slot concurrently (it is never blocked by readers). Only after
-    /// `read_with` returned `Ok` is it known that `f` saw frame `seq` intact;
-    /// on `Err(Overwritten { during_read: true, .. })` whatever `f` computed
-    /// must be discarded. So `f` should compute (a checksum, a detection, a
-    /// copy) and not act; it must not loop on the data's content, and it must
-    /// not panic on odd content. The slice is always in bounds.
+    /// **The copy is speculative while `f` runs**: the writer may have been
+    /// overwriting the slot while it was copied (it is never blocked by
+    /// readers). Only after `read_with` returned `Ok` is it known that `f`
+    /// saw frame `seq` intact; on `Err(Overwritten { during_read: true, .. })`
+    /// whatever `f` computed must be discarded. So `f` should compute (a
+    /// checksum, a detection) and not act, and it must not panic on odd
+    /// content. The copy does not change while `f` runs.
     pub fn read_with<R>(&self, seq: u64, f: impl FnOnce(&FrameMeta, &[u8]) -> R) -> Result<R, ReadError> {
-        self.with_frame(seq, |meta, ptr| {
-            // SAFETY: ptr points at meta.len <= slot_capacity bytes inside
-            // the mapping (checked by with_frame), which lives as long as
-            // &self. The bytes may change under us (another process writes
-            // them); u8 has no invalid values and the result is validated
-            // by the seqlock before it is returned.
-            let bytes = unsafe { std::slice::from_raw_parts(ptr, meta.len) };
-            f(meta, bytes)
+        SCRATCH.with(|scratch| {
+            let mut buf = scratch.take();
+            let r = self.with_frame(seq, |meta, ptr| {
+                copy_frame(ptr, meta.len, &mut buf);
+                f(meta, &buf)
+            });
+            scratch.set(buf);
+            r
         })
     }
 
@@ -273,13 +294,7 @@ impl RingReader {
     pub fn read_into(&self, seq: u64, buf: &mut Vec<u8>) -> Result<FrameMeta, ReadError> {
         buf.clear();
         let r = self.with_frame(seq, |meta, ptr| {
-            buf.reserve(meta.len);
-            // SAFETY: source as in read_with; destination has capacity for
-            // meta.len bytes, and u8 needs no initialisation beyond the copy.
-            unsafe {
-                std::ptr::copy_nonoverlapping(ptr, buf.as_mut_ptr(), meta.len);
-                buf.set_len(meta.len);
-            }
+            copy_frame(ptr, meta.len, buf);
             *meta
         });
         if r.is_err() {
@@ -300,8 +315,8 @@ impl RingReader {
         self.with_frame(seq, |meta, _| *meta)
     }
 
-    /// Reads the latest frame in place (see [`RingReader::read_with`] for
-    /// what `f` may do). `f` is called again if the frame was overwritten
+    /// Reads the latest frame without an allocation (see
+    /// [`RingReader::read_with`] for what `f` gets and may do). `f` is called again if the frame was overwritten
     /// while it ran (a newer one is then the latest).
     pub fn latest_with<R>(&self, mut f: impl FnMut(&FrameMeta, &[u8]) -> R) -> Result<R, ReadError> {
         self.retry(|| self.last_seq().ok_or_else(|| self.empty()), |seq| self.read_with(seq, &mut f))
@@ -337,7 +352,8 @@ impl RingReader {
         self.retry(|| self.nearest_seq(stamp_ns), |seq| self.read_into(seq, buf))
     }
 
-    /// Reads the frame stamped nearest to `stamp_ns` in place.
+    /// Reads the frame stamped nearest to `stamp_ns` without an allocation
+    /// (as [`RingReader::read_with`]).
     pub fn nearest_with<R>(&self, stamp_ns: u64, mut f: impl FnMut(&FrameMeta, &[u8]) -> R) -> Result<R, ReadError> {
         self.retry(|| self.nearest_seq(stamp_ns), |seq| self.read_with(seq, &mut f))
     }
@@ -402,8 +418,9 @@ impl RingReader {
     }
 
     /// The seqlock read (see the module doc). `f` gets the description and a
-    /// pointer to `meta.len` in-bounds bytes; its result is returned only if
-    /// the slot did not change while it ran.
+    /// pointer to `meta.len` in-bounds bytes, which it may only read through
+    /// [`copy_frame`]; its result is returned only if the slot did not change
+    /// while it ran.
     fn with_frame<R>(&self, seq: u64, f: impl FnOnce(&FrameMeta, *const u8) -> R) -> Result<R, ReadError> {
         if seq == 0 {
             return Err(ReadError::ZeroSeq);
@@ -481,7 +498,7 @@ impl RingReader {
                 during_read: false,
             }
         } else if l == want - 1 {
-            let pid = self.map.header().writer_pid.load(Ordering::Relaxed);
+            let pid = self.map.header_atomics().writer_pid.load(Ordering::Relaxed);
             if pid_alive(pid) {
                 ReadError::InProgress { ring: self.name.to_string(), seq }
             } else {
@@ -497,5 +514,68 @@ impl RingReader {
             None => self.empty(),
             Some(last) => ReadError::NotYet { ring: self.name.to_string(), seq, last },
         }
+    }
+}
+
+/// Replaces `buf`'s content with a volatile copy of the `len` shared bytes at
+/// `src` (a slot's payload, as [`RingReader::with_frame`] hands it out).
+fn copy_frame(src: *const u8, len: usize, buf: &mut Vec<u8>) {
+    buf.clear();
+    buf.reserve(len);
+    // SAFETY: with_frame guarantees src points at len <= slot_capacity bytes
+    // inside the mapping, alive while the reader is borrowed; buf has
+    // capacity for len bytes, a fresh allocation that cannot overlap the
+    // mapping, and u8 needs no initialisation beyond the copy.
+    unsafe {
+        copy_volatile(src, buf.as_mut_ptr(), len);
+        buf.set_len(len);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{FrameDesc, RingOptions, RingWriter};
+
+    #[test]
+    fn in_place_reads_see_a_private_copy_the_writer_cannot_change() {
+        let robot = RobotName::new(&format!("stmu-{}", std::process::id())).expect("robot name");
+        let dir = PathBuf::from(format!("/dev/shm/nerve-stm-unit-{}", robot.as_str()));
+        std::fs::create_dir_all(&dir).expect("test dir");
+        let opts = RingOptions { base_dir: dir.clone(), group_readable: false };
+        let name = RingName::parse("copy").expect("ring name");
+        let mut w = RingWriter::create_with(&opts, &robot, &name, 2, 64).expect("create");
+        let r = RingReader::open_with(&opts, &robot, &name).expect("open");
+        w.write(FrameDesc::raw(), &[1; 64]).expect("frame 1");
+        w.write(FrameDesc::raw(), &[2; 64]).expect("frame 2");
+
+        // while `f` looks at frame 2, the writer overwrites its slot: `f`'s
+        // bytes stay what was copied, and the read reports the overwrite
+        let res = r.read_with(2, |_, bytes| {
+            let before = bytes[0];
+            w.write(FrameDesc::raw(), &[3; 64]).expect("frame 3");
+            w.write(FrameDesc::raw(), &[4; 64]).expect("frame 4"); // frame 2's slot
+            (before, bytes[0])
+        });
+        assert!(matches!(res, Err(ReadError::Overwritten { seq: 2, during_read: true, .. })), "{res:?}");
+        let seen = std::cell::RefCell::new(Vec::new());
+        let res = r.read_with(4, |_, bytes| {
+            seen.borrow_mut().push(bytes[0]);
+            w.write(FrameDesc::raw(), &[5; 64]).expect("frame 5");
+            w.write(FrameDesc::raw(), &[6; 64]).expect("frame 6"); // frame 4's slot
+            seen.borrow_mut().push(bytes[0]);
+            // a nested read gets its own copy, not this one
+            let nested = r.read_with(6, |_, b| b[0]).expect("frame 6");
+            seen.borrow_mut().push(nested);
+            seen.borrow_mut().push(bytes[0]);
+        });
+        assert!(matches!(res, Err(ReadError::Overwritten { seq: 4, during_read: true, .. })), "{res:?}");
+        assert_eq!(*seen.borrow(), [4, 4, 6, 4], "the bytes changed under the closure");
+        // and a copy by read_into is exact
+        let mut buf = Vec::new();
+        assert_eq!(r.read_into(6, &mut buf).expect("frame 6").len, 64);
+        assert_eq!(buf, [6; 64]);
+        drop((r, w));
+        std::fs::remove_dir_all(&dir).expect("remove test dir");
     }
 }

@@ -1,6 +1,20 @@
 //! Operating-system plumbing shared by writer and reader: the memory mapping
-//! of a ring file, typed views of its header and slots, clocks, and the
-//! "is the writer still alive" check.
+//! of a ring file, typed views of its header and slots, the copy of bytes
+//! another process may be writing, clocks, and the "is the writer still
+//! alive" check.
+//!
+//! # Reading memory another process writes
+//!
+//! Rust's memory model makes a plain read that races with a write undefined
+//! behaviour, even if the value read is thrown away afterwards, and a
+//! `&[u8]` or `&T` over such bytes lets the compiler assume they do not
+//! change. So a reader never makes a reference to bytes a writer may store
+//! to concurrently, except to atomics: the ring header's mutable fields are
+//! reached one by one ([`Mapping::header_atomics`]), its fixed fields are
+//! copied once with a volatile read ([`Mapping::header_copy`]), and payload
+//! bytes are copied out with volatile loads ([`copy_volatile`]) before
+//! anyone looks at them, as crossbeam's seqlock (`AtomicCell`) does. The
+//! copy may be torn; the seqlock tells afterwards whether it is.
 
 use nix::errno::Errno;
 use nix::sys::mman::{MapFlags, ProtFlags, mmap, munmap};
@@ -8,6 +22,7 @@ use shm_schemas::ring::{RingHeader, SlotHeader};
 use std::fs::File;
 use std::num::NonZeroUsize;
 use std::ptr::NonNull;
+use std::sync::atomic::{AtomicU32, AtomicU64};
 
 /// A `MAP_SHARED` mapping of a whole ring file, unmapped on drop.
 ///
@@ -47,7 +62,37 @@ impl Mapping {
         self.ptr.as_ptr()
     }
 
-    /// The ring header at offset 0.
+    /// The mutable (atomic) fields of the ring header, each reached through
+    /// a raw pointer, without a reference to the header's other fields.
+    pub(crate) fn header_atomics(&self) -> HeaderAtomics<'_> {
+        let h = self.ptr.as_ptr() as *const RingHeader;
+        // SAFETY: the mapping is page-aligned and at least RING_HEADER_SIZE
+        // long (checked before any mapping is made); `&(*h).field` borrows
+        // only that field, not the whole header, and each is an atomic, which
+        // other processes only store to atomically.
+        unsafe {
+            HeaderAtomics {
+                magic: &(*h).magic,
+                writer_pid: &(*h).writer_pid,
+                last_seq: &(*h).last_seq,
+                writer_generation: &(*h).writer_generation,
+            }
+        }
+    }
+
+    /// A copy of the ring header, read with one volatile read: the fixed
+    /// fields (geometry, name) as they were when read. Read it after the
+    /// magic number was seen (acquire), and check it before use: the file
+    /// may be damaged or hostile.
+    pub(crate) fn header_copy(&self) -> RingHeader {
+        // SAFETY: in bounds and aligned as in `header_atomics`; RingHeader is
+        // plain old data (integers, atomics, a byte array) valid for any bit
+        // pattern, and a volatile read never assumes the bytes stay put.
+        unsafe { std::ptr::read_volatile(self.ptr.as_ptr() as *const RingHeader) }
+    }
+
+    /// The ring header at offset 0. For the writer, whose ring it is;
+    /// readers use [`Mapping::header_atomics`] and [`Mapping::header_copy`].
     pub(crate) fn header(&self) -> &RingHeader {
         // SAFETY: the mapping is page-aligned and at least RING_HEADER_SIZE
         // long (checked by every constructor's caller before use); the
@@ -63,6 +108,67 @@ impl Drop for Mapping {
         // the mapping outlives `self` (all views borrow from it).
         if let Err(e) = unsafe { munmap(self.ptr.cast(), self.len) } {
             tracing::warn!("munmap of a ring failed: {e}");
+        }
+    }
+}
+
+/// The atomic fields of a mapped ring header (see [`Mapping::header_atomics`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct HeaderAtomics<'a> {
+    pub(crate) magic: &'a AtomicU64,
+    pub(crate) writer_pid: &'a AtomicU32,
+    pub(crate) last_seq: &'a AtomicU64,
+    pub(crate) writer_generation: &'a AtomicU64,
+}
+
+/// Copies `len` bytes from `src`, which another process may be writing at
+/// this moment, to `dst`, with volatile loads (16-byte SSE2 loads on x86_64,
+/// 8-byte loads elsewhere, single bytes at the unaligned ends): the compiler
+/// neither assumes the source stays put nor reads it twice. The copy may be
+/// torn; validate it with the seqlock before trusting it.
+///
+/// # Safety
+/// `src` must be valid for reads and `dst` for writes of `len` bytes, and
+/// they must not overlap.
+pub(crate) unsafe fn copy_volatile(src: *const u8, dst: *mut u8, len: usize) {
+    #[cfg(target_arch = "x86_64")]
+    type Word = std::arch::x86_64::__m128i;
+    #[cfg(not(target_arch = "x86_64"))]
+    type Word = u64;
+    const W: usize = std::mem::size_of::<Word>();
+    let mut i = 0;
+    // SAFETY (whole body): every offset read or written is below `len`, as
+    // the caller guarantees to be valid; word loads are aligned (the head
+    // loop stops at an aligned source address) and stores are unaligned.
+    unsafe {
+        let head = src.align_offset(W).min(len);
+        while i < head {
+            dst.add(i).write(std::ptr::read_volatile(src.add(i)));
+            i += 1;
+        }
+        // four words per round, so the loads can overlap
+        while i + 4 * W <= len {
+            let s = src.add(i) as *const Word;
+            let (a, b, c, d) = (
+                std::ptr::read_volatile(s),
+                std::ptr::read_volatile(s.add(1)),
+                std::ptr::read_volatile(s.add(2)),
+                std::ptr::read_volatile(s.add(3)),
+            );
+            let t = dst.add(i) as *mut Word;
+            t.write_unaligned(a);
+            t.add(1).write_unaligned(b);
+            t.add(2).write_unaligned(c);
+            t.add(3).write_unaligned(d);
+            i += 4 * W;
+        }
+        while i + W <= len {
+            (dst.add(i) as *mut Word).write_unaligned(std::ptr::read_volatile(src.add(i) as *const Word));
+            i += W;
+        }
+        while i < len {
+            dst.add(i).write(std::ptr::read_volatile(src.add(i)));
+            i += 1;
         }
     }
 }
@@ -230,6 +336,20 @@ mod tests {
             last_seq: AtomicU64::new(0),
             writer_generation: AtomicU64::new(0),
             reserved: [0; 16],
+        }
+    }
+
+    #[test]
+    fn volatile_copies_are_exact_at_every_alignment_and_length() {
+        let src: Vec<u8> = (0..300u32).map(|i| (i * 7 + 3) as u8).collect();
+        for start in 0..20 {
+            for len in [0, 1, 7, 15, 16, 17, 63, 64, 65, 129, 200, 280] {
+                let mut dst = vec![0xAAu8; len + 2];
+                // SAFETY: start + len <= 300 and dst has len + 2 bytes.
+                unsafe { super::copy_volatile(src.as_ptr().add(start), dst.as_mut_ptr().add(1), len) };
+                assert_eq!(&dst[1..=len], &src[start..start + len], "start {start}, len {len}");
+                assert_eq!((dst[0], dst[len + 1]), (0xAA, 0xAA), "wrote outside: start {start}, len {len}");
+            }
         }
     }
 
