@@ -169,8 +169,8 @@ mod tests {
         let v = parse_pans_deg("0, -60,0,60", 100.0).expect("valid");
         assert_eq!(v.len(), 4);
         assert!((v[1] + 60f64.to_radians()).abs() < 1e-12);
-        assert!(parse_pans_deg("", 100.0).unwrap_err().contains("at least one"));
-        assert!(parse_pans_deg("0,abc", 100.0).unwrap_err().contains("abc"));
-        assert!(parse_pans_deg("120", 100.0).unwrap_err().contains("outside"));
+        assert!(parse_pans_deg("", 100.0).expect_err("refused").contains("at least one"));
+        assert!(parse_pans_deg("0,abc", 100.0).expect_err("refused").contains("abc"));
+        assert!(parse_pans_deg("120", 100.0).expect_err("refused").contains("outside"));
     }
 }

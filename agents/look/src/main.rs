@@ -12,6 +12,7 @@
 //!   `pose`, else at its last bearing — until it has not been seen for
 //!   `hold_ms`, so the sensor keeps seeing it as the robot comes near;
 //! * `pose` (`nerve::PoseEstimate`): the odometry's `pose`.
+//!
 //! Output `cmd` (`nerve::HeadCommand`): the pan set-point, tilt 0, every
 //! cycle (periodic, 100 ms); connect it to the head agent's `cmd`.
 //!

@@ -306,7 +306,7 @@ impl Follower {
     /// own. Returns whether the point moved.
     pub fn target_seen(&mut self, x: f64, y: f64, max_shift_m: f64) -> bool {
         let moving = !matches!(self.phase, Phase::Idle | Phase::Arrived);
-        if !(x.is_finite() && y.is_finite()) || !moving || self.index + 2 < self.points.len() {
+        if !(x.is_finite() && y.is_finite() && moving) || self.index + 2 < self.points.len() {
             return false;
         }
         let Some(last) = self.points.last_mut().filter(|p| p.kind == ViaKind::Target) else { return false };
