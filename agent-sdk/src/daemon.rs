@@ -4,6 +4,14 @@
 //!
 //! Also the logging set-up shared by every nerve process, and sd_notify for
 //! systemd (`READY=1`, `WATCHDOG=1`) when `NOTIFY_SOCKET` is set.
+//!
+//! Logs are rotated by size: a log larger than [`LOG_ROTATE_BYTES`] (8 MiB)
+//! when it is opened ([`open_log`]: daemon start-up, the router's restart of
+//! an agent), or found so while a daemon writes to it (checked every
+//! [`LOG_CHECK_EVERY`] bytes of `tracing` output), is renamed `NAME.log.1`;
+//! older generations shift to `.2` and `.3`, and the fourth is dropped
+//! ([`LOG_GENERATIONS`]). A robot's logs so take at most about 32 MiB per
+//! process name.
 
 use nix::unistd::{ForkResult, fork, setsid};
 use std::io::{Read, Write};
@@ -149,15 +157,160 @@ pub fn daemonize(log: &Path, pid_file: &Path) -> std::io::Result<Readiness> {
         std::process::exit(1);
     }
     let devnull = std::fs::File::open("/dev/null")?;
-    let logf = {
-        use std::os::unix::fs::OpenOptionsExt;
-        std::fs::OpenOptions::new().create(true).append(true).mode(0o600).custom_flags(libc::O_NOFOLLOW).open(log)?
-    };
+    let logf = open_log(log)?;
+    if let Ok(mut current) = DAEMON_LOG.lock() {
+        *current = Some(log.to_path_buf());
+    }
     nix::unistd::dup2_stdin(&devnull)?;
     nix::unistd::dup2_stdout(&logf)?;
     nix::unistd::dup2_stderr(&logf)?;
     let _ = logf.as_raw_fd();
     Ok(Readiness { pipe: Some(pipe), pid_file: Some(pid_file.to_path_buf()) })
+}
+
+/// Size above which a log is rotated (see the module documentation).
+pub const LOG_ROTATE_BYTES: u64 = 8 << 20;
+
+/// Rotated generations kept: `NAME.log.1` (the newest) to `NAME.log.3`.
+pub const LOG_GENERATIONS: u32 = 3;
+
+/// A daemon checks the size of its log after this many bytes of `tracing`
+/// output (one `fstat`, not one per line).
+pub const LOG_CHECK_EVERY: u64 = 64 << 10;
+
+/// The log a daemon's stdout and stderr go to (set by [`daemonize`]); `None`
+/// in a foreground process, whose stderr is not ours to rotate.
+static DAEMON_LOG: std::sync::Mutex<Option<PathBuf>> = std::sync::Mutex::new(None);
+
+/// `tracing` output since the last size check of the daemon's log.
+static LOG_WRITTEN: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// Opens the log `path` for appending, readable by its owner only and never
+/// through a symlink, first rotating it if it is larger than
+/// [`LOG_ROTATE_BYTES`].
+pub fn open_log(path: &Path) -> std::io::Result<std::fs::File> {
+    open_log_with(path, LOG_ROTATE_BYTES, LOG_GENERATIONS)
+}
+
+fn open_log_with(path: &Path, max_bytes: u64, keep: u32) -> std::io::Result<std::fs::File> {
+    match std::fs::symlink_metadata(path) {
+        // a link or other non-file is left for the open to refuse
+        Ok(m) if m.file_type().is_file() && m.len() > max_bytes => rotate_log(path, keep)?,
+        _ => {}
+    }
+    open_append(path)
+}
+
+fn open_append(path: &Path) -> std::io::Result<std::fs::File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .mode(0o600)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(path)
+        .map_err(|e| std::io::Error::new(e.kind(), format!("cannot open log {}: {e}", path.display())))
+}
+
+/// `path` with `.i` appended (`agent.log` → `agent.log.1`).
+pub fn rotated_log(path: &Path, i: u32) -> PathBuf {
+    let mut s = path.as_os_str().to_owned();
+    s.push(format!(".{i}"));
+    PathBuf::from(s)
+}
+
+/// Shifts `path.1`..`path.{keep-1}` up by one (dropping `path.{keep}`) and
+/// renames `path` to `path.1`. A generation missing, or already moved by
+/// another process rotating the same log, is skipped.
+fn rotate_log(path: &Path, keep: u32) -> std::io::Result<()> {
+    let ignore_missing = |r: std::io::Result<()>| match r {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            Err(std::io::Error::new(e.kind(), format!("cannot rotate log {}: {e}", path.display())))
+        }
+        _ => Ok(()),
+    };
+    if keep == 0 {
+        return ignore_missing(std::fs::remove_file(path));
+    }
+    for i in (1..keep).rev() {
+        ignore_missing(std::fs::rename(rotated_log(path, i), rotated_log(path, i + 1)))?;
+    }
+    ignore_missing(std::fs::rename(path, rotated_log(path, 1)))
+}
+
+/// Whether the log open as `fd` has to be replaced by a fresh `path`: if it
+/// grew past `max_bytes` it is rotated; if `path` is no longer the file open
+/// (rotated by another process) the current `path` is opened. Returns the
+/// file to write to from now on, `None` to keep `fd`.
+fn rotate_open_log(
+    fd: std::os::fd::BorrowedFd<'_>,
+    path: &Path,
+    max_bytes: u64,
+    keep: u32,
+) -> std::io::Result<Option<std::fs::File>> {
+    use std::os::unix::fs::MetadataExt;
+    let open = nix::sys::stat::fstat(fd).map_err(std::io::Error::from)?;
+    let same =
+        std::fs::symlink_metadata(path).is_ok_and(|m| m.dev() == open.st_dev as u64 && m.ino() == open.st_ino as u64);
+    if same && (open.st_size as u64) <= max_bytes {
+        return Ok(None);
+    }
+    if same {
+        rotate_log(path, keep)?;
+    }
+    open_append(path).map(Some)
+}
+
+/// After a daemon wrote [`LOG_CHECK_EVERY`] bytes of log, rotates its log if
+/// it grew too large, pointing stdout and stderr at the fresh file.
+fn check_daemon_log(written: u64) {
+    use std::sync::atomic::Ordering;
+    if LOG_WRITTEN.fetch_add(written, Ordering::Relaxed) + written < LOG_CHECK_EVERY {
+        return;
+    }
+    // one thread checks; the others keep writing to the current file
+    let Ok(current) = DAEMON_LOG.try_lock() else { return };
+    LOG_WRITTEN.store(0, Ordering::Relaxed);
+    let Some(path) = current.as_deref() else { return };
+    // SAFETY: fd 2 is open for the life of the process.
+    let stderr = unsafe { std::os::fd::BorrowedFd::borrow_raw(2) };
+    match rotate_open_log(stderr, path, LOG_ROTATE_BYTES, LOG_GENERATIONS) {
+        Ok(Some(fresh)) => {
+            let _ = nix::unistd::dup2_stdout(&fresh);
+            let _ = nix::unistd::dup2_stderr(&fresh);
+        }
+        Ok(None) => {}
+        // keep writing to the file open now; say why once per check
+        Err(e) => {
+            let _ = writeln!(std::io::stderr(), "warning: {e}; the log keeps growing until it can be rotated");
+        }
+    }
+}
+
+/// `tracing`'s writer: stderr, with the daemon's log rotation checked once
+/// the event is written (so an event never straddles two files).
+struct LogWriter {
+    written: u64,
+}
+
+impl Write for LogWriter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = std::io::stderr().write(buf)?;
+        self.written += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        std::io::stderr().flush()
+    }
+}
+
+impl Drop for LogWriter {
+    fn drop(&mut self) {
+        if self.written > 0 {
+            check_daemon_log(self.written);
+        }
+    }
 }
 
 /// Sets up `tracing` for a nerve process: `--log-level` when given, else
@@ -170,7 +323,7 @@ pub fn init_logging(who: &str, level: Option<&str>) {
     };
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+        .with_writer(|| LogWriter { written: 0 })
         .with_ansi(nix::unistd::isatty(std::io::stderr()).unwrap_or(false))
         .with_target(false)
         .with_thread_names(false)
@@ -239,6 +392,53 @@ pub fn watchdog_interval() -> Option<std::time::Duration> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn logs_are_rotated_by_size_keeping_three_generations() {
+        let dir = std::env::temp_dir().join(format!("nerve-log-rotate-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("agent.log");
+        // five runs, each writing more than the limit: the log is rotated
+        // at each open and only the three newest generations stay
+        for run in 0..5u8 {
+            let mut f = open_log_with(&log, 100, 3).unwrap();
+            f.write_all(&[b'a' + run; 150]).unwrap();
+        }
+        let generation = |i| std::fs::read(rotated_log(&log, i)).unwrap();
+        assert_eq!(std::fs::read(&log).unwrap(), [b'e'; 150]);
+        assert_eq!(generation(1), [b'd'; 150]);
+        assert_eq!(generation(2), [b'c'; 150]);
+        assert_eq!(generation(3), [b'b'; 150]);
+        assert!(!rotated_log(&log, 4).exists());
+        use std::os::unix::fs::PermissionsExt;
+        assert_eq!(std::fs::metadata(&log).unwrap().permissions().mode() & 0o777, 0o600);
+        // a small log is appended to, not rotated
+        let mut f = open_log_with(&log, 1000, 3).unwrap();
+        f.write_all(b"more").unwrap();
+        assert_eq!(std::fs::read(&log).unwrap().len(), 154);
+        assert_eq!(generation(1), [b'd'; 150]);
+
+        // while appending: the open log grew past the limit, so it is
+        // rotated and a fresh file handed back
+        use std::os::fd::AsFd;
+        assert!(rotate_open_log(f.as_fd(), &log, 1000, 3).unwrap().is_none());
+        let mut fresh = rotate_open_log(f.as_fd(), &log, 100, 3).unwrap().expect("rotated");
+        assert_eq!(generation(1).len(), 154);
+        fresh.write_all(b"new").unwrap();
+        assert_eq!(std::fs::read(&log).unwrap(), b"new");
+        // another process rotated the log under us: reopen the current one
+        std::fs::rename(&log, rotated_log(&log, 1)).unwrap();
+        std::fs::write(&log, b"").unwrap();
+        assert!(rotate_open_log(fresh.as_fd(), &log, 100, 3).unwrap().is_some());
+
+        // never through a symlink, and 0600
+        let link = dir.join("link.log");
+        std::os::unix::fs::symlink(dir.join("elsewhere"), &link).unwrap();
+        assert!(open_log_with(&link, 100, 3).is_err());
+        assert!(!dir.join("elsewhere").exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn a_pid_file_is_exclusive_and_removed_only_by_its_owner() {

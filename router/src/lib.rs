@@ -592,11 +592,15 @@ impl State {
             sup.next_start = None;
             sup.recent.push_back(now);
             sup.total += 1;
-            let stderr = std::fs::OpenOptions::new().create(true).append(true).open(&log);
+            // rotated by size, 0600, never through a symlink (see agent_sdk::daemon)
+            let stderr = agent_sdk::daemon::open_log(&log);
             let mut cmd = std::process::Command::new(&sup.spec.argv[0]);
             cmd.args(&sup.spec.argv[1..]).stdin(std::process::Stdio::null()).stdout(std::process::Stdio::null());
-            if let Ok(f) = stderr {
-                cmd.stderr(f);
+            match stderr {
+                Ok(f) => {
+                    cmd.stderr(f);
+                }
+                Err(e) => tracing::warn!("{e}; {name}'s start-up errors go to the router's log"),
             }
             match cmd.spawn() {
                 Ok(child) => {

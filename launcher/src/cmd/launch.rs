@@ -6,7 +6,7 @@
 //! `--foreground`, streams every agent's log and stops everything on Ctrl-C.
 
 use super::down::{bring_down, clean};
-use super::logs::{INTERRUPTED, Tail, catch_interrupts};
+use super::logs::{INTERRUPTED, Tail, catch_interrupts, tails_from_now};
 use crate::cli::LaunchArgs;
 use crate::client::RouterSession;
 use crate::launch_file::{self, LaunchFile, RestartPolicy};
@@ -68,6 +68,12 @@ pub fn launch(cli_robot: &str, explicit: bool, a: LaunchArgs) -> Result<ExitCode
         world.robot(),
         file.connections.len()
     );
+    // taken before anything starts: the foreground stream shows this run's
+    // lines from the start, and none of the earlier runs' (R16)
+    let tails = a.foreground.then(|| {
+        let names = file.agents.iter().map(|a| a.name.as_str()).chain(["router"]);
+        tails_from_now(names.map(|n| world.log_file(n)))
+    });
     let up = bring_up(&world, &file)?;
     let (failed, wiring_failed) = (up.failed, up.wiring_failed);
     eprintln!(
@@ -78,8 +84,8 @@ pub fn launch(cli_robot: &str, explicit: bool, a: LaunchArgs) -> Result<ExitCode
         t0.elapsed().as_secs_f64(),
         if a.foreground { "" } else { " (`nerve ps`, `nerve graph`, `nerve logs NAME`, `nerve down`)" }
     );
-    if a.foreground {
-        follow(&world, &file)?;
+    if let Some(tails) = tails {
+        follow(&world, tails)?;
         return Ok(ExitCode::SUCCESS);
     }
     Ok(if failed > 0 || wiring_failed > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS })
@@ -165,11 +171,10 @@ fn wait_registered(session: &RouterSession, file: &LaunchFile) -> Result<()> {
     }
 }
 
-/// Streams every agent's log (and the router's) until Ctrl-C, then brings the robot down.
-fn follow(world: &World, file: &LaunchFile) -> Result<()> {
+/// Streams every agent's log (and the router's) from where `tails` start
+/// until Ctrl-C, then brings the robot down.
+fn follow(world: &World, mut tails: Vec<Tail>) -> Result<()> {
     catch_interrupts();
-    let mut tails: Vec<Tail> = file.agents.iter().map(|a| Tail::new(world.log_file(&a.name), 0)).collect();
-    tails.push(Tail::new(world.log_file("router"), 0));
     eprintln!("streaming logs; Ctrl-C stops every agent and the router");
     while !INTERRUPTED.load(Ordering::SeqCst) {
         for t in &mut tails {
