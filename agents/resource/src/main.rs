@@ -167,9 +167,11 @@ impl Agent for Resource {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        let sys = System::new().map_err(|e| {
-            AgentError::Other(format!("cannot read the system's figures ({e}); is /proc mounted and readable?"))
+        // sysinfo reads /proc and reports nothing when it cannot: say so here
+        std::fs::read_to_string("/proc/stat").map_err(|e| {
+            AgentError::Other(format!("cannot read the system's figures (/proc/stat: {e}); is /proc mounted and readable?"))
         })?;
+        let sys = System::new();
         self.sys = Some(sys);
         let p = self.planner.policy();
         tracing::info!(
