@@ -60,6 +60,7 @@ pub fn launch(cli_robot: &str, explicit: bool, a: LaunchArgs) -> Result<ExitCode
             return Ok(ExitCode::from(1));
         }
     };
+    super::shm_space::ensure_shm_space("launch")?;
     world.ensure_state_dirs()?;
     let n = file.agents.len();
     eprintln!(
@@ -200,6 +201,7 @@ fn follow(world: &World, mut tails: Vec<Tail>) -> Result<()> {
 /// start or register, a connection refused — is an error. Used by `nerve demo`.
 pub(crate) fn launch_robot(robot: &str, path: &std::path::Path) -> Result<World> {
     let (file, world) = launch_file::load(path, robot, false).map_err(|e| anyhow!("{e}"))?;
+    super::shm_space::ensure_shm_space("launch")?;
     world.ensure_state_dirs()?;
     let up = bring_up(&world, &file)?;
     if up.failed > 0 {

@@ -12,6 +12,7 @@ mod inspect;
 mod launch;
 mod logs;
 pub mod mem;
+pub mod shm_space;
 pub mod start;
 pub mod tap;
 mod wire;
@@ -28,7 +29,10 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Start(a) => start::start(&world, a),
         Command::Ps(a) => inspect::ps(&world, a),
         Command::Graph(a) => inspect::graph(&world, a),
-        Command::Connect(a) => wire::connect(&world, a),
+        Command::Connect(a) => {
+            shm_space::ensure_shm_space("connect")?;
+            wire::connect(&world, a)
+        }
         Command::Disconnect(a) => wire::disconnect(&world, a),
         Command::Rate { name, period } => wire::rate(&world, &name, &period),
         Command::Suspend { name } => wire::simple(&world, wire::Simple::Suspend, &name),

@@ -39,6 +39,7 @@ const ROUTER_PRIORITY: i32 = 10;
 
 pub fn start(world: &World, a: StartArgs) -> Result<ExitCode> {
     AgentName::new(&a.name)?;
+    super::shm_space::ensure_shm_space("start an agent")?;
     let exe = resolve_kind(&a.kind)?;
     let mut cmd = Command::new(&exe);
     cmd.arg("--robot").arg(world.robot().as_str()).arg("--name").arg(&a.name).arg("--daemon");
