@@ -55,10 +55,10 @@ impl Drop for Readiness {
     fn drop(&mut self) {
         // remove the pid file only while it still names this process: a
         // file that another process wrote since is not ours to delete
-        if let Some(p) = &self.pid_file {
-            if read_pid(p) == Some(std::process::id()) {
-                let _ = std::fs::remove_file(p);
-            }
+        if let Some(p) = &self.pid_file
+            && read_pid(p) == Some(std::process::id())
+        {
+            let _ = std::fs::remove_file(p);
         }
     }
 }
@@ -381,15 +381,16 @@ pub fn sd_notify(state: &str) -> std::io::Result<()> {
 /// The watchdog interval systemd asked for (`WATCHDOG_USEC`), if any and meant for us.
 pub fn watchdog_interval() -> Option<std::time::Duration> {
     let usec: u64 = std::env::var("WATCHDOG_USEC").ok()?.parse().ok()?;
-    if let Ok(pid) = std::env::var("WATCHDOG_PID") {
-        if pid.parse::<u32>().ok()? != std::process::id() {
-            return None;
-        }
+    if let Ok(pid) = std::env::var("WATCHDOG_PID")
+        && pid.parse::<u32>().ok()? != std::process::id()
+    {
+        return None;
     }
     (usec > 0).then(|| std::time::Duration::from_micros(usec))
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -221,12 +221,12 @@ impl Geometry {
         let ok = h.slot_header_size == SLOT_HEADER_SIZE
             && g.header_size >= std::mem::size_of::<RingHeader>() as u64
             && g.header_size <= MAX_HEADER_SIZE
-            && g.header_size % SLOT_ALIGN == 0
+            && g.header_size.is_multiple_of(SLOT_ALIGN)
             && g.slot_count >= 1
             && g.slot_count <= MAX_SLOTS
             && g.slot_capacity <= MAX_SLOT_CAPACITY
             && g.slot_stride <= MAX_SLOT_CAPACITY + SLOT_ALIGN + u64::from(SLOT_HEADER_SIZE)
-            && g.slot_stride % SLOT_ALIGN == 0
+            && g.slot_stride.is_multiple_of(SLOT_ALIGN)
             && g.slot_stride >= g.slot_capacity.checked_add(u64::from(SLOT_HEADER_SIZE))?
             && g.file_len()? <= mapped as u64;
         ok.then_some(g)

@@ -190,6 +190,7 @@ pub fn logs(world: &World, a: LogsArgs) -> Result<ExitCode> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use std::io::Cursor;
