@@ -55,15 +55,16 @@ pub const EXPLORING_MODES: [&str; 2] = ["explore", "lean"];
 /// One change of the decision maker's mode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ModeChange {
-    /// Simulated time of the change, s (estimated from the log's clock).
+    /// Simulated time of the change, s (the `since_ns` of `decision/mode`
+    /// placed on the simulator's clock through the newest `sim/truth` sample).
     pub t_s: Option<f64>,
-    /// The log's wall-clock time of day (UTC), `HH:MM:SS.mmm`.
+    /// Wall-clock time of day (UTC) when the demo saw it, `HH:MM:SS.mmm`.
     pub clock: String,
     /// The new mode.
     pub mode: String,
     /// The mode before, when the log says.
     pub from: Option<String>,
-    /// The whole log line.
+    /// What was seen, e.g. `decision/mode: explore -> track (change 3)`.
     pub line: String,
 }
 

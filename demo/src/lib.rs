@@ -1,18 +1,21 @@
 //! nerve-demo: analysis and figures of nerve's demos.
 //!
 //! The exploration demo (`nerve demo explore`, thesis section 4.2) runs the
-//! whole robot against the simulator and then hands its records to this
-//! crate, which builds nothing and starts nothing itself:
+//! whole robot against the simulator, records it through nerve (the
+//! launcher's taps on `sim/truth` and `decision/mode`) and then hands its
+//! records to this crate, which builds nothing and starts nothing itself;
+//! the cooperation demo (`nerve demo cooperate`, section 4.3) likewise:
 //!
-//! * [`truth`]: the simulator's ground-truth CSV, read while it is written;
+//! * [`truth`]: a ground-truth row, and the simulator's ground-truth CSV;
 //! * [`scene`]: the world file's geometry as the analysis needs it (solid
 //!   things, door openings, the target and its path);
 //! * [`analysis`]: the run's verdict — doorway reached, target followed,
 //!   collisions, clearance — as [`analysis::Summary`] (`summary.json`);
-//! * [`modes`]: the decision maker's mode changes parsed from its log;
 //! * [`cpu`]: CPU use per agent sampled during the run;
 //! * [`plot`]: the trajectory over the map (Fig. 4-4) and velocity, angular
-//!   speed and heading against time (Fig. 4-6), as PNG and SVG.
+//!   speed and heading against time (Fig. 4-6), as PNG and SVG;
+//! * [`cooperate`]: the cooperation run's verdict and its trajectories (Fig. 4-10);
+//! * [`calibration_plot`]: the Appendix A fit against the pinhole term.
 //!
 //! The definitions of `reached_doorway` and `reached_target` are in
 //! `docs/demo.md` and on [`analysis::analyse`].
@@ -21,7 +24,6 @@ pub mod analysis;
 pub mod calibration_plot;
 pub mod cooperate;
 pub mod cpu;
-pub mod modes;
 pub mod plot;
 pub mod scene;
 pub mod truth;

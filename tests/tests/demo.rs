@@ -18,7 +18,7 @@
 //! The end-to-end tests (`demo_*`) each run a whole robot in real time for
 //! about two minutes; `.config/nextest.toml` runs them one at a time.
 
-use nerve_demo::analysis::{EXPLORING_MODES, TRACKING_MODES, first_change_into, time_in_modes_before};
+use nerve_demo::analysis::{EXPLORING_MODES, ModeChange, TRACKING_MODES, first_change_into, time_in_modes_before};
 use nerve_demo::{Criteria, Scene, analyse, read_truth};
 use nerve_tests::{Robot, reap, wait_until};
 use serde_json::Value;
@@ -158,18 +158,36 @@ fn second_world_doorway_is_on_another_wall() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Mode changes at the given simulated times.
+fn changes(v: &[(f64, &str)]) -> Vec<ModeChange> {
+    let mut from: Option<String> = None;
+    v.iter()
+        .map(|(t, m)| {
+            let c = ModeChange {
+                t_s: Some(*t),
+                clock: String::new(),
+                mode: (*m).to_owned(),
+                from: from.clone(),
+                line: format!("decision/mode: {} -> {m}", from.as_deref().unwrap_or("-")),
+            };
+            from = Some((*m).to_owned());
+            c
+        })
+        .collect()
+}
+
 #[test]
 fn time_explored_before_the_target_is_tracked() {
-    let log = "00:00:01.000  INFO [decision] mode change: none -> avoid (danger unknown; rule 1)
-00:00:02.000  INFO [decision] mode change: avoid -> explore (danger none; rule 5)
-00:00:10.000  INFO [decision] mode change: explore -> lean (load critical; rule 4)
-00:00:14.500  INFO [decision] mode change: lean -> avoid (danger high; rule 1)
-00:00:16.000  INFO [decision] mode change: avoid -> track (target seen; rule 3)
-00:00:30.000  INFO [decision] mode change: track -> hold (target close; rule 2)
-00:00:40.000  INFO [decision] mode change: hold -> explore (target none; rule 5)
-";
-    let modes = nerve_demo::modes::parse_log(log, &nerve_demo::modes::ClockMap { sim_zero_s_of_day: Some(0.0) });
-    assert_eq!(modes.len(), 7);
+    // as `nerve demo explore` records them from `decision/mode`
+    let modes = changes(&[
+        (1.0, "avoid"),
+        (2.0, "explore"),
+        (10.0, "lean"),
+        (14.5, "avoid"),
+        (16.0, "track"),
+        (30.0, "hold"),
+        (40.0, "explore"),
+    ]);
     let first = first_change_into(&modes, &TRACKING_MODES).expect("tracked");
     assert!((first - 16.0).abs() < 1e-9, "{first}");
     let before = time_in_modes_before(&modes, first);
@@ -190,11 +208,7 @@ fn figures_are_written_as_png_and_svg() {
     let truth = synthetic(&dir, GOOD_RUN, &[(6, 70.0)], None);
     let rows = read_truth(&truth).expect("reads");
     let a = analyse(&s, &rows, Criteria::default());
-    let modes = nerve_demo::modes::parse_log(
-        "00:00:01.000  INFO [decision] mode change: none -> explore\n00:00:40.000  INFO [decision] mode change: explore -> track\n",
-        &nerve_demo::modes::ClockMap { sim_zero_s_of_day: Some(0.0) },
-    );
-    assert_eq!(modes.len(), 2);
+    let modes = changes(&[(1.0, "explore"), (40.0, "track")]);
     let figs = nerve_demo::plot::write_all(&dir, &s, &rows, &a, &modes, "synthetic").expect("plots");
     assert_eq!(figs.files.len(), 4);
     for f in &figs.files {

@@ -25,18 +25,19 @@
 //! `summary.json`), 1 when it could not be run.
 
 use super::down::{bring_down, clean};
-use super::logs::{INTERRUPTED, Tail, catch_interrupts};
-use crate::client::RouterSession;
+use super::logs::{INTERRUPTED, catch_interrupts};
+use super::tap::Tap;
+use crate::client::{RouterSession, cli_node};
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
+use nerve_demo::analysis::ModeChange;
 use nerve_demo::analysis::{
     DoorwayWatch, EXPLORING_MODES, TRACKING_MODES, at_target, first_change_into, time_in_modes, time_in_modes_before,
 };
 use nerve_demo::cpu::CpuTable;
-use nerve_demo::modes::{ClockMap, now_s_of_day, parse_change, parse_log};
-use nerve_demo::truth::TruthTail;
 use nerve_demo::{Criteria, Scene, TruthRow, analyse};
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
+use shm_schemas::payloads::{GroundTruth, Mode};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -232,8 +233,6 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     std::fs::write(&launch_path, &derived).with_context(|| format!("cannot write {}", launch_path.display()))?;
     let truth = truth_path(&derived, &nworld).unwrap_or_else(|| nworld.state_dir().join("truth.csv"));
     let _ = std::fs::remove_file(&truth);
-    let decision_log = nworld.log_file("decision");
-    let decision_offset = std::fs::metadata(&decision_log).map(|m| m.len()).unwrap_or(0);
 
     println!(
         "nerve demo explore: world {} ({}), seed {}, robot {robot}, time limit {} s; output {}",
@@ -256,7 +255,7 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     };
     println!("robot up in {:.1} s; following the run (Ctrl-C ends it early)", t_wall.elapsed().as_secs_f64());
 
-    let outcome = follow(&world, &scene, &a, &truth, &decision_log, decision_offset);
+    let outcome = follow(&world, &scene, &a);
     // whatever happened, stop everything and leave nothing behind
     let (stopped, killed) = bring_down(&world, Duration::from_secs(3));
     clean(&world);
@@ -264,21 +263,17 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
         "stopped {stopped} process(es){}",
         if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
     );
-    let (end, clock, cpu) = outcome?;
+    let Followed { end, rows, modes, cpu } = outcome?;
 
-    // the records
-    let rows = nerve_demo::read_truth(&truth).with_context(|| "the simulator left no usable ground truth")?;
+    // the records: what the demo received on `sim/truth` and `decision/mode`
+    // (the simulator's own truth.csv is kept beside them)
     if rows.is_empty() {
-        bail!(
-            "the ground truth {} is empty: the simulator never ran (see {}/logs/sim.log)",
-            truth.display(),
-            out.display()
-        );
+        bail!("no ground truth came on sim/truth: the simulator never ran (see {}/logs/sim.log)", out.display());
     }
-    std::fs::copy(&truth, out.join("truth.csv")).with_context(|| format!("cannot copy {}", truth.display()))?;
+    if let Err(e) = std::fs::copy(&truth, out.join("truth.csv")) {
+        eprintln!("warning: cannot copy the simulator's {}: {e}", truth.display());
+    }
     copy_logs(&world, &out.join("logs"));
-    let log_text = read_from(&decision_log, decision_offset);
-    let modes = parse_log(&log_text, &clock);
     let criteria = Criteria { target_reach_m: a.reach };
     let analysis = analyse(&scene, &rows, criteria);
     let mut s = analysis.summary.clone();
@@ -324,27 +319,54 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// What `follow` hands back: how it ended, the log-clock mapping, CPU per agent.
-type Followed = (End, ClockMap, std::collections::BTreeMap<String, nerve_demo::analysis::AgentCpu>);
+/// What `follow` hands back.
+struct Followed {
+    end: End,
+    /// The ground truth as it came on `sim/truth`.
+    rows: Vec<TruthRow>,
+    /// The decision maker's mode changes as they came on `decision/mode`.
+    modes: Vec<ModeChange>,
+    cpu: std::collections::BTreeMap<String, nerve_demo::analysis::AgentCpu>,
+}
 
-/// Follows the run until it ends; prints progress.
-fn follow(
-    world: &World,
-    scene: &Scene,
-    a: &ExploreArgs,
-    truth: &Path,
-    decision_log: &Path,
-    offset: u64,
-) -> Result<Followed> {
+fn truth_row(t: &GroundTruth) -> TruthRow {
+    TruthRow {
+        t: t.sim_time,
+        x: t.x,
+        y: t.y,
+        theta: t.theta,
+        v: t.v,
+        omega: t.omega,
+        collisions: t.collisions,
+        in_contact: t.in_contact != 0,
+    }
+}
+
+/// `HH:MM:SS.mmm` (UTC) of the wall clock now.
+fn clock_now() -> String {
+    let d = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+    let s = d.as_secs() % 86_400;
+    format!("{:02}:{:02}:{:02}.{:03}", s / 3600, s / 60 % 60, s % 60, d.subsec_millis())
+}
+
+/// Follows the run until it ends, observing the robot through nerve: the
+/// simulator's `sim/truth` and the decision maker's `decision/mode`, each
+/// through a tap (the demo's own subscription); prints progress.
+fn follow(world: &World, scene: &Scene, a: &ExploreArgs) -> Result<Followed> {
     let criteria = Criteria { target_reach_m: a.reach };
-    let mut tail = TruthTail::new(truth);
-    let mut dlog = Tail::new(decision_log.to_path_buf(), offset);
+    let node = cli_node(world)?;
+    let mut truth_tap: Option<Tap<GroundTruth>> = None;
+    let mut mode_tap: Option<Tap<Mode>> = None;
+    let mut rows: Vec<TruthRow> = Vec::new();
+    // (stamp_ns, sim time) of the newest truth sample: a mode's instant in simulated time
+    let mut clock: Option<(u64, f64)> = None;
+    let mut modes: Vec<ModeChange> = Vec::new();
     let mut watch = DoorwayWatch::default();
-    let mut clock = ClockMap::default();
     let mut cpu = CpuTable::default();
-    let mut last: Option<TruthRow> = None;
     let mut mode = String::from("-");
     let mut at_since: Option<f64> = None;
+    let mut missed = 0u64;
+    let mut last_seq: Option<u64> = None;
     let t0 = Instant::now();
     let mut last_rows = Instant::now();
     let mut next_progress = Instant::now();
@@ -354,14 +376,28 @@ fn follow(
         if INTERRUPTED.load(Ordering::SeqCst) {
             break End::Interrupted;
         }
-        let rows = tail.poll();
-        let now = now_s_of_day();
-        if let Some(r) = rows.last() {
-            clock.observe(now, r.t);
+        if truth_tap.is_none() {
+            truth_tap = Tap::try_open(world, &node, "sim", "truth")?;
+        }
+        if mode_tap.is_none() {
+            mode_tap = Tap::try_open(world, &node, "decision", "mode")?;
+        }
+        let before = rows.len();
+        if let Some(t) = &truth_tap {
+            t.drain(|h, g| {
+                if let Some(l) = last_seq {
+                    missed += h.seq.saturating_sub(l.saturating_add(1));
+                }
+                last_seq = Some(h.seq);
+                clock = Some((g.stamp_ns, g.sim_time));
+                rows.push(truth_row(g));
+            })?;
+        }
+        if rows.len() > before {
             last_rows = Instant::now();
         }
         let mut followed = false;
-        for r in &rows {
+        for r in &rows[before..] {
             watch.push(scene, r);
             if at_target(scene, &criteria, watch.crossed.map(|c| c.0), r) {
                 let since = *at_since.get_or_insert(r.t);
@@ -369,12 +405,30 @@ fn follow(
             } else {
                 at_since = None;
             }
-            last = Some(*r);
         }
-        for line in dlog.poll() {
-            if let Some((_, m)) = parse_change(line.split_once(']').map_or(line.as_str(), |(_, m)| m)) {
-                mode = m;
-            }
+        if let Some(t) = &mode_tap {
+            t.drain(|_, m| {
+                let name = m.name.as_str().to_owned();
+                if name != mode {
+                    let from = (mode != "-").then(|| mode.clone());
+                    // the change's instant, in simulated time through the newest truth sample
+                    let t_s = clock.map(|(stamp, sim)| {
+                        sim - (stamp.saturating_sub(m.since_ns) as f64 - m.since_ns.saturating_sub(stamp) as f64) / 1e9
+                    });
+                    modes.push(ModeChange {
+                        t_s,
+                        clock: clock_now(),
+                        line: format!(
+                            "decision/mode: {} -> {name} (change {})",
+                            from.as_deref().unwrap_or("-"),
+                            m.changes
+                        ),
+                        mode: name.clone(),
+                        from,
+                    });
+                    mode = name;
+                }
+            })?;
         }
         if Instant::now() >= next_sample {
             next_sample = Instant::now() + Duration::from_secs(2);
@@ -384,18 +438,17 @@ fn follow(
         }
         if Instant::now() >= next_progress {
             next_progress = Instant::now() + Duration::from_secs_f64(a.progress.max(0.5));
-            progress(scene, last.as_ref(), &mode, watch.crossed.is_some());
+            progress(scene, rows.last(), &mode, watch.crossed.is_some());
         }
         if followed {
             break End::Followed;
         }
-        if last.is_some_and(|r| r.t >= a.time_limit) {
+        if rows.last().is_some_and(|r| r.t >= a.time_limit) {
             break End::TimeLimit;
         }
         if last_rows.elapsed() > Duration::from_secs(20) {
             break End::Stalled(format!(
-                "no new ground truth in {} for 20 s (see `nerve --robot {} logs sim`)",
-                truth.display(),
+                "no ground truth on sim/truth for 20 s (see `nerve --robot {} logs sim`)",
                 world.robot()
             ));
         }
@@ -404,15 +457,19 @@ fn follow(
                 "the simulation ran slower than real time; {wall_limit:?} of wall time passed"
             ));
         }
-        std::thread::sleep(Duration::from_millis(250));
+        std::thread::sleep(Duration::from_millis(50));
     };
-    progress(scene, last.as_ref(), &mode, watch.crossed.is_some());
+    progress(scene, rows.last(), &mode, watch.crossed.is_some());
+    if missed > 0 {
+        tracing::warn!(missed, received = rows.len(), "ground-truth samples overwritten before the demo read them");
+    }
     for (name, kind, pid, pct, restarts) in sample_agents(world) {
         cpu.record(&name, &kind, pct, restarts, pid);
     }
-    Ok((end, clock, cpu.finish()))
+    Ok(Followed { end, rows, modes, cpu: cpu.finish() })
 }
 
+/// One progress line: simulated time, true pose, the mode, the target's distance.
 fn progress(scene: &Scene, r: Option<&TruthRow>, mode: &str, doorway: bool) {
     let Some(r) = r else {
         println!("  waiting for the simulator's first step...");
@@ -439,13 +496,6 @@ fn progress(scene: &Scene, r: Option<&TruthRow>, mode: &str, doorway: bool) {
 
 fn nerve_sim_vec(x: f64, y: f64) -> nerve_demo::nerve_sim::Vec2 {
     nerve_demo::nerve_sim::Vec2::new(x, y)
-}
-
-/// The text of `path` from `offset` on (empty when unreadable).
-fn read_from(path: &Path, offset: u64) -> String {
-    let text = std::fs::read(path).unwrap_or_default();
-    let start = usize::try_from(offset).unwrap_or(0).min(text.len());
-    String::from_utf8_lossy(&text[start..]).into_owned()
 }
 
 /// Copies every agent's log (and the router's) into `dir`.
