@@ -9,14 +9,31 @@
 //! The binaries under test are the ones cargo built next to the test
 //! executable (`target/<profile>/nerve`, `nerve-ticker`, ...): build them
 //! with `cargo build --workspace --bins` before running the tests.
+//!
+//! A test process killed before its robots are dropped (the nextest
+//! watchdog's SIGKILL) leaves their daemons running, in sessions of their
+//! own, and their files. So the first [`Robot`] of every test process first
+//! sweeps the robots of test processes that are gone
+//! ([`sweep_dead_test_robots`]): robot names start with `t<pid>-`, so what
+//! belongs to a dead test process is known by its pid.
 
 use serde_json::Value;
 use std::path::PathBuf;
 use std::process::{Command, Output};
+use std::sync::Once;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 static COUNTER: AtomicU32 = AtomicU32::new(0);
+
+/// The sweep of dead test processes' robots, once per test process.
+static SWEEP: Once = Once::new();
+
+/// Prefix of a test robot's `NERVE_HOME` under the temporary directory.
+const HOME_PREFIX: &str = "nerve-test-t";
+
+/// Prefix of a test robot's files in /dev/shm (and under the iceoryx2 root).
+const SHM_PREFIX: &str = "nerve_t";
 
 /// The directory holding the built binaries.
 pub fn bin_dir() -> PathBuf {
@@ -53,9 +70,21 @@ impl Robot {
     /// system: daemons whose parents exit are re-parented to it, and
     /// [`reap`] collects them when they die (PID 1 of the build sandbox does
     /// not reap orphans).
+    ///
+    /// The first robot of a test process sweeps what dead test processes
+    /// left ([`sweep_dead_test_robots`]).
     pub fn new(tag: &str) -> Self {
         // SAFETY: prctl with PR_SET_CHILD_SUBREAPER takes no pointers.
         unsafe { libc::prctl(libc::PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) };
+        SWEEP.call_once(|| {
+            let swept = sweep_dead_test_robots();
+            if swept.processes + swept.files > 0 {
+                eprintln!(
+                    "swept what dead test processes left: {} process(es) killed, {} file(s) and folder(s) removed",
+                    swept.processes, swept.files
+                );
+            }
+        });
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
         let tag: String = tag.chars().filter(|c| c.is_ascii_lowercase()).take(6).collect();
         let name =
@@ -274,16 +303,163 @@ pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
     }
 }
 
-/// Collects every exited child (re-parented daemons included).
+/// Collects the exited daemons re-parented to this process (its subreaper).
+///
+/// Only those: zombie children in another session than ours. A daemon runs
+/// in a session of its own (it called `setsid`), while the children a test
+/// starts with `Command` stay in the test's session, and `waitpid(-1)`
+/// could collect one of those that another test thread is about to wait
+/// for (its `Command::output()` would then fail with ECHILD).
 pub fn reap() {
-    loop {
-        let mut status = 0;
-        // SAFETY: waitpid with WNOHANG and a valid status pointer.
-        let rc = unsafe { libc::waitpid(-1, &mut status, libc::WNOHANG) };
-        if rc <= 0 {
-            break;
+    let me = std::process::id();
+    let Some((_, _, my_session)) = proc_stat(me) else { return };
+    let Ok(rd) = std::fs::read_dir("/proc") else { return };
+    for pid in rd.filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u32>().ok()) {
+        if let Some(("Z", ppid, session)) = proc_stat(pid).as_ref().map(|(s, p, sid)| (s.as_str(), *p, *sid))
+            && ppid == me
+            && session != my_session
+        {
+            let mut status = 0;
+            // SAFETY: waitpid on one pid with WNOHANG and a valid status pointer.
+            unsafe { libc::waitpid(pid as i32, &mut status, libc::WNOHANG) };
         }
     }
+}
+
+/// State, parent pid and session of `pid`, from `/proc/<pid>/stat`.
+fn proc_stat(pid: u32) -> Option<(String, u32, u32)> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let mut f = stat.rsplit_once(')')?.1.split_whitespace();
+    let state = f.next()?.to_owned();
+    let ppid = f.next()?.parse().ok()?;
+    let _pgrp = f.next()?;
+    let session = f.next()?.parse().ok()?;
+    Some((state, ppid, session))
+}
+
+/// What [`sweep_dead_test_robots`] did.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Swept {
+    /// Daemons killed.
+    pub processes: usize,
+    /// Files and state folders removed.
+    pub files: usize,
+}
+
+/// The test pid in a name `<prefix><pid>-...` (`nerve-test-t123-0-x`,
+/// `nerve_t123-0-x_...`).
+fn test_pid_of(name: &str, prefix: &str) -> Option<u32> {
+    let rest = name.strip_prefix(prefix)?;
+    let (digits, _) = rest.split_once('-')?;
+    digits.parse().ok()
+}
+
+/// Whether a test process that left something behind is gone. Our own pid
+/// is never gone; a pid reused since by another process counts as alive
+/// (the leftovers then wait for a later sweep).
+fn test_pid_dead(pid: u32) -> bool {
+    pid != std::process::id() && !alive(pid)
+}
+
+/// Whether live process `pid` is a nerve process started in test home
+/// `home` (its command name starts with `nerve`, and `NERVE_HOME` in its
+/// environment is `home`): nothing else is ever killed.
+fn nerve_process_of(pid: u32, home: &std::path::Path) -> bool {
+    let comm = std::fs::read_to_string(format!("/proc/{pid}/comm")).unwrap_or_default();
+    if !comm.starts_with("nerve") || !alive(pid) {
+        return false;
+    }
+    let mut want = b"NERVE_HOME=".to_vec();
+    want.extend_from_slice(home.as_os_str().as_encoded_bytes());
+    std::fs::read(format!("/proc/{pid}/environ")).is_ok_and(|env| env.split(|&b| b == 0).any(|v| v == want))
+}
+
+/// Kills the daemons and removes the files of robots whose test process is
+/// gone: state folders `$TMPDIR/nerve-test-t<pid>-...` (the processes
+/// whose pid files are there, and any other nerve process whose
+/// `NERVE_HOME` is that folder, are killed first), and files
+/// `/dev/shm/nerve_t<pid>-...` and under the iceoryx2 root
+/// `/dev/shm/nerve-iox2/`. Robots of live test processes are left alone.
+/// Called once per test process by the first [`Robot::new`]; safe to call
+/// again.
+pub fn sweep_dead_test_robots() -> Swept {
+    let mut swept = Swept::default();
+    let tmp = std::env::temp_dir();
+    let homes: Vec<PathBuf> = std::fs::read_dir(&tmp)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok())
+                .filter(|e| {
+                    let name = e.file_name();
+                    let pid = name.to_str().and_then(|n| test_pid_of(n, HOME_PREFIX));
+                    pid.is_some_and(test_pid_dead) && e.file_type().is_ok_and(|t| t.is_dir())
+                })
+                .map(|e| e.path())
+                .collect()
+        })
+        .unwrap_or_default();
+    if !homes.is_empty() {
+        // the daemons of those homes: by pid file, then by environment
+        let mut victims: Vec<u32> = Vec::new();
+        for home in &homes {
+            let robots = std::fs::read_dir(home).map(|rd| rd.filter_map(|e| e.ok()).collect()).unwrap_or(Vec::new());
+            for robot in robots {
+                let pids = std::fs::read_dir(robot.path().join("pids"))
+                    .map(|rd| rd.filter_map(|e| e.ok()).collect())
+                    .unwrap_or(Vec::new());
+                for f in pids {
+                    let pid = std::fs::read_to_string(f.path()).ok().and_then(|s| s.trim().parse::<u32>().ok());
+                    if let Some(pid) = pid.filter(|p| nerve_process_of(*p, home)) {
+                        victims.push(pid);
+                    }
+                }
+            }
+        }
+        if let Ok(rd) = std::fs::read_dir("/proc") {
+            for pid in rd.filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u32>().ok()) {
+                if homes.iter().any(|h| nerve_process_of(pid, h)) {
+                    victims.push(pid);
+                }
+            }
+        }
+        victims.sort_unstable();
+        victims.dedup();
+        for &pid in &victims {
+            sigkill(pid);
+        }
+        swept.processes = victims.len();
+        // let them die before their files go (they may still be writing)
+        wait_until(Duration::from_secs(2), || {
+            reap();
+            victims.iter().all(|&p| !alive(p))
+        });
+        for home in &homes {
+            if std::fs::remove_dir_all(home).is_ok() {
+                swept.files += 1;
+            }
+        }
+    }
+    // shared memory of dead test processes, whether their home is gone or not
+    fn remove_dead(dir: &std::path::Path, depth: u32, swept: &mut Swept) {
+        let Ok(rd) = std::fs::read_dir(dir) else { return };
+        for e in rd.filter_map(|e| e.ok()) {
+            let name = e.file_name();
+            let is_dir = e.file_type().is_ok_and(|t| t.is_dir());
+            let dead = name.to_str().and_then(|n| test_pid_of(n, SHM_PREFIX)).is_some_and(test_pid_dead);
+            if dead && !is_dir {
+                if std::fs::remove_file(e.path()).is_ok() {
+                    swept.files += 1;
+                }
+            } else if is_dir && depth > 0 {
+                // in /dev/shm only the iceoryx2 root; inside it, every folder
+                let in_iox_root = dir != std::path::Path::new("/dev/shm");
+                if in_iox_root || name.to_str().is_some_and(|n| n.starts_with("nerve-iox2")) {
+                    remove_dead(&e.path(), depth - 1, swept);
+                }
+            }
+        }
+    }
+    remove_dead(std::path::Path::new("/dev/shm"), 4, &mut swept);
+    swept
 }
 
 /// Whether `pid` exists at all (a zombie counts).
@@ -303,4 +479,73 @@ pub fn alive(pid: u32) -> bool {
 pub fn sigkill(pid: u32) {
     // SAFETY: kill has no memory-safety preconditions.
     unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn what_a_killed_test_process_left_is_swept_and_a_live_ones_is_not() {
+        // a test process that is gone: a child that exited and was waited for
+        let mut gone = Command::new("true").spawn().expect("run true");
+        gone.wait().expect("wait for true");
+        let dead = gone.id();
+        assert!(!alive(dead));
+
+        // its robot's home, with a daemon still running (a nerve process
+        // with NERVE_HOME set to the home, as the harness starts them) and
+        // its pid file, and its files in /dev/shm and the iceoryx2 root
+        let robot = format!("t{dead}-0-swept");
+        let home = std::env::temp_dir().join(format!("nerve-test-{robot}"));
+        let pids = home.join(&robot).join("pids");
+        std::fs::create_dir_all(&pids).expect("pids dir");
+        let fake = std::env::temp_dir().join(format!("nerve-sweeptest-{}", std::process::id()));
+        std::fs::copy("/bin/sleep", &fake).expect("copy sleep");
+        let mut daemon = Command::new(&fake).arg("600").env("NERVE_HOME", &home).spawn().expect("fake daemon");
+        std::fs::write(pids.join("agent.pid"), format!("{}\n", daemon.id())).expect("pid file");
+        let shm = PathBuf::from(format!("/dev/shm/nerve_{robot}_ring"));
+        std::fs::write(&shm, b"").expect("shm file");
+        let iox_dir = PathBuf::from("/dev/shm/nerve-iox2");
+        let iox = std::fs::create_dir_all(&iox_dir).ok().map(|()| iox_dir.join(format!("nerve_{robot}_node")));
+        if let Some(p) = &iox {
+            std::fs::write(p, b"").expect("iox file");
+        }
+        // a live test process's robot (ours), which must stay
+        let mine = PathBuf::from(format!("/dev/shm/nerve_t{}-999-mine_ring", std::process::id()));
+        std::fs::write(&mine, b"").expect("own shm file");
+        let bystander = Command::new(&fake).arg("600").spawn().expect("bystander");
+
+        let swept = sweep_dead_test_robots();
+        let _ = std::fs::remove_file(&fake);
+        let status = daemon.wait().expect("wait for the fake daemon");
+        assert!(!status.success(), "the daemon was not killed: {status}");
+        assert!(!home.exists() && !shm.exists(), "left: {home:?} {shm:?}");
+        assert!(iox.is_none_or(|p| !p.exists()));
+        assert!(swept.processes >= 1 && swept.files >= 2, "{swept:?}");
+        assert!(mine.exists(), "a live test process's file was removed");
+        assert!(alive(bystander.id()), "a process of no test home was killed");
+        let _ = std::fs::remove_file(&mine);
+        sigkill(bystander.id());
+        let mut bystander = bystander;
+        let _ = bystander.wait();
+    }
+
+    #[test]
+    fn reap_collects_exited_daemons_but_never_a_child_someone_waits_for() {
+        // a child of ours in our session, exited: reap() must leave it to its owner
+        let mut child = Command::new("true").spawn().expect("run true");
+        wait_until(Duration::from_secs(5), || proc_stat(child.id()).is_some_and(|(s, _, _)| s == "Z"));
+        reap();
+        assert!(child.wait().is_ok(), "reap() took a child that its owner waits for");
+        // a daemon (its own session) re-parented to us, exited: reaped
+        // SAFETY: prctl with PR_SET_CHILD_SUBREAPER takes no pointers.
+        unsafe { libc::prctl(libc::PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) };
+        let out = Command::new("setsid").args(["-f", "sh", "-c", "echo $$; sleep 0.2"]).output().expect("setsid");
+        let pid: u32 = String::from_utf8_lossy(&out.stdout).trim().parse().expect("daemon pid");
+        assert!(wait_until(Duration::from_secs(5), || {
+            reap();
+            !exists(pid)
+        }));
+    }
 }
