@@ -245,4 +245,9 @@ pub struct DownArgs {
     /// Seconds to wait for a clean stop before SIGTERM, and again before SIGKILL.
     #[arg(long, default_value_t = 3.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub grace: f64,
+    /// Keep the robot's connection list for its next start (by default a
+    /// robot brought down starts unwired next time: its launch file or
+    /// `nerve connect` wires it again).
+    #[arg(long)]
+    pub keep_connections: bool,
 }

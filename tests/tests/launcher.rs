@@ -329,3 +329,26 @@ fn foreground_launch_streams_logs_and_stops_on_ctrl_c() {
     }
     assert!(r.shm_files().is_empty(), "{:?}", r.shm_files());
 }
+
+/// `nerve down` forgets the robot's connections unless told to keep them,
+/// and says which (reliability review F3d': they used to survive silently
+/// and wire the next, unrelated launch).
+#[test]
+fn down_drops_the_connection_list_unless_kept_and_says_so() {
+    let r = Robot::new("downconn");
+    let file = r.launch_file("pipeline.toml", &pipeline());
+    let edges = |r: &Robot| r.graph()["connections"].as_array().map_or(0, Vec::len);
+    r.ok(&["launch", &file.display().to_string()]);
+    assert_eq!(edges(&r), 2, "{}", r.graph());
+    // kept: a new router restores both edges
+    let out = r.ok(&["down", "--grace", "1", "--keep-connections"]);
+    assert!(out.contains("kept its 2 connection(s)"), "{out}");
+    r.router();
+    assert_eq!(edges(&r), 2, "the kept list is restored: {}", r.graph());
+    // dropped (the default): a new router starts unwired
+    let out = r.ok(&["down", "--grace", "1"]);
+    assert!(out.contains("dropped its 2 connection(s)"), "{out}");
+    r.router();
+    assert_eq!(edges(&r), 0, "nothing leaks into the next start: {}", r.graph());
+    r.down_and_check_clean();
+}
