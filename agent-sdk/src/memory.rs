@@ -195,12 +195,11 @@ impl RingOutput {
         let robot = setup.world().robot().clone();
         // refuse a ring someone else writes now, while `nerve start` still
         // reports startup errors (best effort: the writer lock decides)
-        if let Ok(r) = RingReader::open_with(&spec.options, &robot, &ring) {
-            if let Some(pid) = r.writer_pid().filter(|p| *p != std::process::id()) {
-                if r.writer_alive() {
-                    return Err(MemoryError::Taken { ring: ring.to_string(), pid }.into());
-                }
-            }
+        if let Ok(r) = RingReader::open_with(&spec.options, &robot, &ring)
+            && let Some(pid) = r.writer_pid().filter(|p| *p != std::process::id())
+            && r.writer_alive()
+        {
+            return Err(MemoryError::Taken { ring: ring.to_string(), pid }.into());
         }
         let out = setup.output::<RingNotice>(port)?;
         Ok(RingOutput { port_name: port.to_owned(), port: out, robot, ring, spec, writer: None })

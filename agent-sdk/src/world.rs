@@ -308,10 +308,10 @@ impl World {
         use iceoryx2::node::NodeView;
         let mut pids = Vec::new();
         let _ = Node::<Ipc>::list(&self.config, |state| {
-            if let NodeState::Alive(view) = state {
-                if let Some(d) = view.details() {
-                    pids.push(d.process_id().value() as u32);
-                }
+            if let NodeState::Alive(view) = state
+                && let Some(d) = view.details()
+            {
+                pids.push(d.process_id().value() as u32);
             }
             CallbackProgression::Continue
         });

@@ -425,11 +425,11 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                         2
                     };
                     let v = peer.batch(size, secs).with_context(|| format!("ddsperf at {size} B, round {round}"))?;
-                    if round > 0 {
-                        if let Some(d) = dds_intervals.iter_mut().find(|d| d.0 == size) {
-                            d.2.push(dds::summarise(&v).p50_ns);
-                            d.1.extend(v);
-                        }
+                    if round > 0
+                        && let Some(d) = dds_intervals.iter_mut().find(|d| d.0 == size)
+                    {
+                        d.2.push(dds::summarise(&v).p50_ns);
+                        d.1.extend(v);
                     }
                 }
             }

@@ -109,10 +109,10 @@ pub fn parse_cyclictest(out: &str) -> Result<(Vec<u64>, u64, u64)> {
             overflows = rest.split_whitespace().next().and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
         } else if !line.starts_with('#') {
             let mut it = line.split_whitespace();
-            if let (Some(b), Some(c), None) = (it.next(), it.next(), it.next()) {
-                if let (Ok(bucket), Ok(count)) = (b.parse::<u64>(), c.parse::<u64>()) {
-                    values.extend(std::iter::repeat_n(bucket * 1000, count as usize));
-                }
+            if let (Some(b), Some(c), None) = (it.next(), it.next(), it.next())
+                && let (Ok(bucket), Ok(count)) = (b.parse::<u64>(), c.parse::<u64>())
+            {
+                values.extend(std::iter::repeat_n(bucket * 1000, count as usize));
             }
         }
     }

@@ -252,11 +252,11 @@ pub fn analyse(scene: &Scene, rows: &[TruthRow], criteria: Criteria) -> Analysis
             let o = scene.doors[d].opening;
             s.doorway = Some([[o.a.x, o.a.y], [o.b.x, o.b.y]]);
         }
-        if let (Some(td), Some(tp)) = (s.doorway_time_s, scene.target_at(r.t)) {
-            if r.t >= td {
-                let dist = tp.dist(p);
-                s.min_target_distance_m = Some(s.min_target_distance_m.map_or(dist, |m: f64| m.min(dist)));
-            }
+        if let (Some(td), Some(tp)) = (s.doorway_time_s, scene.target_at(r.t))
+            && r.t >= td
+        {
+            let dist = tp.dist(p);
+            s.min_target_distance_m = Some(s.min_target_distance_m.map_or(dist, |m: f64| m.min(dist)));
         }
         if !s.reached_target && at_target(scene, &criteria, s.doorway_time_s, r) {
             s.reached_target = true;

@@ -239,10 +239,10 @@ pub fn analyse(scene: &Scene, rec: &Records, reach_m: f64, robots: [&str; 2]) ->
     // via points: the first report of each index
     let mut seen = std::collections::BTreeSet::new();
     for r in &rec.reached {
-        if r.arrived {
-            if let Some(t) = sim_t(r.stamp_ns) {
-                s.stage_times_s.entry("arrived".into()).or_insert(t);
-            }
+        if r.arrived
+            && let Some(t) = sim_t(r.stamp_ns)
+        {
+            s.stage_times_s.entry("arrived".into()).or_insert(t);
         }
         if !seen.insert(r.index) {
             continue;
@@ -298,7 +298,7 @@ const MAX_POINTS: usize = 3000;
 fn thin<T: Copy>(v: &[T]) -> Vec<T> {
     let step = v.len().div_ceil(MAX_POINTS).max(1);
     let mut out: Vec<T> = v.iter().step_by(step).copied().collect();
-    if v.len() > 1 && (v.len() - 1) % step != 0 {
+    if v.len() > 1 && !(v.len() - 1).is_multiple_of(step) {
         out.extend(v.last().copied());
     }
     out

@@ -48,11 +48,11 @@ impl CpuTable {
             a.max_percent = a.max_percent.max(p);
             a.mean_percent = acc.sum / a.samples as f64;
         }
-        if pid > 0 {
-            if let Some(s) = process_cpu_seconds(pid) {
-                acc.per_pid.insert(pid, s);
-                a.cpu_seconds = Some(acc.per_pid.values().sum());
-            }
+        if pid > 0
+            && let Some(s) = process_cpu_seconds(pid)
+        {
+            acc.per_pid.insert(pid, s);
+            a.cpu_seconds = Some(acc.per_pid.values().sum());
         }
     }
 

@@ -42,10 +42,10 @@ pub(crate) fn err<E: std::fmt::Display>(path: &Path) -> impl Fn(E) -> DemoError 
 fn thin(rows: &[TruthRow]) -> Vec<&TruthRow> {
     let step = rows.len().div_ceil(MAX_POINTS).max(1);
     let mut v: Vec<&TruthRow> = rows.iter().step_by(step).collect();
-    if let (Some(last), Some(kept)) = (rows.last(), v.last()) {
-        if !std::ptr::eq(last, *kept) {
-            v.push(last);
-        }
+    if let (Some(last), Some(kept)) = (rows.last(), v.last())
+        && !std::ptr::eq(last, *kept)
+    {
+        v.push(last);
     }
     v
 }

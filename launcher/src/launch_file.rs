@@ -370,10 +370,10 @@ pub fn load(
             }),
             None => default,
         };
-        if let Some(p) = &a.period {
-            if let Err(e) = agent_sdk::clock::parse_duration(p.get_ref()) {
-                cx.err(p, format!("period: {e}"));
-            }
+        if let Some(p) = &a.period
+            && let Err(e) = agent_sdk::clock::parse_duration(p.get_ref())
+        {
+            cx.err(p, format!("period: {e}"));
         }
         let restart_window = dur(&mut cx, &a.restart_window, Duration::from_secs(60));
         let backoff = dur(&mut cx, &a.backoff, Duration::from_millis(250));
@@ -394,10 +394,11 @@ pub fn load(
                 continue;
             }
         };
-        if a.period.is_some() && description.task == TaskKind::EventDriven {
-            if let Some(p) = &a.period {
-                cx.err(p, format!("agent {name:?} ({kind}) is event-driven; remove `period`"));
-            }
+        if a.period.is_some()
+            && description.task == TaskKind::EventDriven
+            && let Some(p) = &a.period
+        {
+            cx.err(p, format!("agent {name:?} ({kind}) is event-driven; remove `period`"));
         }
         agents.push(AgentSpec {
             name,
@@ -484,11 +485,11 @@ pub fn load(
                 }
             },
         };
-        if let (Some(ft), Some(tt)) = (&from_type, &to_type) {
-            if ft != tt {
-                cx.err(&c.from, format!("cannot connect {from} to {to}: {from} sends {ft} but {to} takes {tt}"));
-                continue;
-            }
+        if let (Some(ft), Some(tt)) = (&from_type, &to_type)
+            && ft != tt
+        {
+            cx.err(&c.from, format!("cannot connect {from} to {to}: {from} sends {ft} but {to} takes {tt}"));
+            continue;
         }
         if from_type.is_some() && to_type.is_some() {
             if connections.iter().any(|(f, t)| f == &from && t == &to) {

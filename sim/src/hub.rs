@@ -110,7 +110,7 @@ impl DeviceHub {
     pub fn send_reports(&mut self, sim: &mut Simulation) {
         let steps = sim.steps();
         let dt = sim.dt();
-        let due = |hz: f64| steps % period_steps(hz, dt) == 0;
+        let due = |hz: f64| steps.is_multiple_of(period_steps(hz, dt));
         let (sonar, enc, head, ir, arm) =
             (due(SONAR_RATE_HZ), due(ENCODER_RATE_HZ), due(HEAD_RATE_HZ), due(IR_RATE_HZ), due(ARM_RATE_HZ));
         if !(sonar || enc || head || ir || arm) {

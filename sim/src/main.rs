@@ -480,10 +480,10 @@ impl Agent for SimAgent {
     }
 
     fn stop(&mut self, _ctx: &mut Context) {
-        if let Some(log) = self.truth_log.as_mut() {
-            if let Err(e) = log.flush() {
-                tracing::warn!("truth log: {e}");
-            }
+        if let Some(log) = self.truth_log.as_mut()
+            && let Err(e) = log.flush()
+        {
+            tracing::warn!("truth log: {e}");
         }
         if let Some(hub) = self.hub.take() {
             for d in hub.devices() {
@@ -491,10 +491,10 @@ impl Agent for SimAgent {
             }
         }
         for x in &mut self.extras {
-            if let Some(log) = x.truth_log.as_mut() {
-                if let Err(e) = log.flush() {
-                    tracing::warn!(robot = %x.name, "truth log: {e}");
-                }
+            if let Some(log) = x.truth_log.as_mut()
+                && let Err(e) = log.flush()
+            {
+                tracing::warn!(robot = %x.name, "truth log: {e}");
             }
             if let Some(hub) = x.hub.take() {
                 for d in hub.devices() {
@@ -508,10 +508,10 @@ impl Agent for SimAgent {
                 }
             }
         }
-        if let Some(path) = self.camera.as_ref().and_then(|c| c.writer()).map(|w| w.path().to_owned()) {
-            if let Err(e) = std::fs::remove_file(&path) {
-                tracing::warn!("cannot remove the camera ring {}: {e}", path.display());
-            }
+        if let Some(path) = self.camera.as_ref().and_then(|c| c.writer()).map(|w| w.path().to_owned())
+            && let Err(e) = std::fs::remove_file(&path)
+        {
+            tracing::warn!("cannot remove the camera ring {}: {e}", path.display());
         }
         if let Some(sim) = &self.sim {
             tracing::info!(

@@ -286,10 +286,10 @@ impl PtyDevice {
 impl Drop for PtyDevice {
     fn drop(&mut self) {
         // Remove the link only if it is still ours.
-        if std::fs::read_link(&self.link).is_ok_and(|t| t == self.slave_path) {
-            if let Err(e) = std::fs::remove_file(&self.link) {
-                tracing::warn!(link = %self.link.display(), error = %e, "cannot remove device link");
-            }
+        if std::fs::read_link(&self.link).is_ok_and(|t| t == self.slave_path)
+            && let Err(e) = std::fs::remove_file(&self.link)
+        {
+            tracing::warn!(link = %self.link.display(), error = %e, "cannot remove device link");
         }
     }
 }

@@ -299,10 +299,10 @@ fn grasp_over_the_arm_pty() {
     for _ in 0..3000 {
         step(&mut sim, &mut hub);
         while let Some(m) = arm.recv(Duration::from_millis(1)).expect("read") {
-            if let Message::GraspState(g) = m {
-                if g.phase == GripperPhase::Holding {
-                    held = Some(g);
-                }
+            if let Message::GraspState(g) = m
+                && g.phase == GripperPhase::Holding
+            {
+                held = Some(g);
             }
         }
         if held.is_some() {

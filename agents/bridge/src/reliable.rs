@@ -94,11 +94,11 @@ impl Outbox {
         let seq = self.next_seq;
         self.next_seq = self.next_seq.saturating_add(1);
         let mut overflow = None;
-        if self.queue.len() >= self.cap {
-            if let Some(old) = self.queue.pop_front() {
-                self.lost = self.lost.saturating_add(1);
-                overflow = Some(Overflow { seq: old.seq });
-            }
+        if self.queue.len() >= self.cap
+            && let Some(old) = self.queue.pop_front()
+        {
+            self.lost = self.lost.saturating_add(1);
+            overflow = Some(Overflow { seq: old.seq });
         }
         self.queue.push_back(Queued { seq, stamp_unix_ns, sender: sender.into(), origin_seq, payload });
         (seq, overflow)

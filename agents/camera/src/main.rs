@@ -280,12 +280,12 @@ fn main() -> std::process::ExitCode {
     let mut args = <CommonArgs as Parser>::parse();
     // --fps sets the task period unless --period says otherwise; bad camera
     // options are reported by Agent::new, through the usual startup path
-    if args.period.is_none() {
-        if let Ok(cam) = CameraArgs::parse_agent_args(&args.args) {
-            if cam.fps.is_finite() && cam.fps > 0.0 {
-                args.period = Some(format!("{}hz", cam.fps));
-            }
-        }
+    if args.period.is_none()
+        && let Ok(cam) = CameraArgs::parse_agent_args(&args.args)
+        && cam.fps.is_finite()
+        && cam.fps > 0.0
+    {
+        args.period = Some(format!("{}hz", cam.fps));
     }
     agent_sdk::run_with_args::<Camera>(args)
 }

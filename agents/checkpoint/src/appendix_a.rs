@@ -235,10 +235,10 @@ pub fn fit(samples: &[Sample], df: f64, opts: &FitOptions) -> Result<Fit, FitErr
     let mut best: Option<(usize, f64)> = None;
     for i in 0..n {
         let h = lo + step * i as f64;
-        if let Some(r) = rss(h) {
-            if best.is_none_or(|(_, b)| r < b) {
-                best = Some((i, r));
-            }
+        if let Some(r) = rss(h)
+            && best.is_none_or(|(_, b)| r < b)
+        {
+            best = Some((i, r));
         }
     }
     let (bi, _) = best.ok_or(FitError::Singular)?;

@@ -275,11 +275,11 @@ impl Agent for Checkpoint {
         if let Some((_, p)) = self.pose.latest() {
             self.last_pose = Some(p);
         }
-        if let Some((_, h)) = self.head.latest() {
-            if h.pan_rad.is_finite() {
-                let settled = !h.target_pan_rad.is_finite() || (h.pan_rad - h.target_pan_rad).abs() <= HEAD_SETTLED_RAD;
-                self.pan = Some((h.pan_rad, settled, now));
-            }
+        if let Some((_, h)) = self.head.latest()
+            && h.pan_rad.is_finite()
+        {
+            let settled = !h.target_pan_rad.is_finite() || (h.pan_rad - h.target_pan_rad).abs() <= HEAD_SETTLED_RAD;
+            self.pan = Some((h.pan_rad, settled, now));
         }
         let (finder, colors, min_px) =
             (&mut self.finder, self.sensor.config().tube.colors(), self.min_pixels.get() as usize);

@@ -97,15 +97,17 @@ impl Agent for Look {
 
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
         let now = ctx.now_ns();
-        if let Some((_, h)) = self.head.latest() {
-            if h.pan_rad.is_finite() {
-                self.last_head = Some((h.pan_rad, now));
-            }
+        if let Some((_, h)) = self.head.latest()
+            && h.pan_rad.is_finite()
+        {
+            self.last_head = Some((h.pan_rad, now));
         }
-        if let Some((_, p)) = self.pose.latest() {
-            if p.x.is_finite() && p.y.is_finite() && p.theta.is_finite() {
-                self.last_pose = Some(p);
-            }
+        if let Some((_, p)) = self.pose.latest()
+            && p.x.is_finite()
+            && p.y.is_finite()
+            && p.theta.is_finite()
+        {
+            self.last_pose = Some(p);
         }
         let mut seen = None;
         self.sighting.drain(|_, s| {

@@ -467,12 +467,12 @@ pub fn simplify(pts: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
             }
         };
         let far = (a + 1..b).map(|i| (i, dist(&pts[i]))).max_by(|x, y| x.1.total_cmp(&y.1));
-        if let Some((i, dmax)) = far {
-            if dmax > tol {
-                keep[i] = true;
-                stack.push((a, i));
-                stack.push((i, b));
-            }
+        if let Some((i, dmax)) = far
+            && dmax > tol
+        {
+            keep[i] = true;
+            stack.push((a, i));
+            stack.push((i, b));
         }
     }
     pts.iter().zip(keep).filter(|(_, k)| *k).map(|(p, _)| *p).collect()

@@ -327,8 +327,10 @@ impl DeadReckoning {
         let bearing = f64::from(c.bearing_rad);
         if let Some(a) = self.anchor.filter(|a| self.settings.two_checkpoints && a.checkpoint != c.checkpoint_id) {
             let leg = (est.x - a.pose.x, est.y - a.pose.y);
-            if leg.0.hypot(leg.1) >= self.settings.min_baseline_m && range.is_finite() && bearing.is_finite() {
-                if let Some((delta, resid)) = heading_from_two(
+            if leg.0.hypot(leg.1) >= self.settings.min_baseline_m
+                && range.is_finite()
+                && bearing.is_finite()
+                && let Some((delta, resid)) = heading_from_two(
                     a.checkpoint_pos,
                     (est.x - a.checkpoint_pos.0, est.y - a.checkpoint_pos.1),
                     est.theta,
@@ -336,18 +338,13 @@ impl DeadReckoning {
                     range,
                     bearing,
                     self.settings.max_heading_fix_rad,
-                ) {
-                    if resid <= self.settings.max_residual_m {
-                        let theta = wrap(est.theta + delta);
-                        let phi = theta + bearing;
-                        target = Pose {
-                            x: c.checkpoint_x - range * phi.cos(),
-                            y: c.checkpoint_y - range * phi.sin(),
-                            theta,
-                        };
-                        from_two = true;
-                    }
-                }
+                )
+                && resid <= self.settings.max_residual_m
+            {
+                let theta = wrap(est.theta + delta);
+                let phi = theta + bearing;
+                target = Pose { x: c.checkpoint_x - range * phi.cos(), y: c.checkpoint_y - range * phi.sin(), theta };
+                from_two = true;
             }
         }
         let jump_m = (target.x - est.x).hypot(target.y - est.y);

@@ -405,41 +405,41 @@ impl Follower {
                 }
             }
         }
-        if matches!(self.phase, Phase::Rotating | Phase::Driving) {
-            if let Some(p) = self.points.get(self.index).copied() {
-                let (dx, dy) = (p.x - pose.x, p.y - pose.y);
-                let dist = dx.hypot(dy);
-                let err = wrap(dy.atan2(dx) - pose.theta);
-                out.error = err;
-                if self.phase == Phase::Rotating && err.abs() <= s.rotate_until {
-                    self.phase = Phase::Driving;
-                } else if self.phase == Phase::Driving && err.abs() > s.rotate_above {
-                    self.phase = Phase::Rotating;
+        if matches!(self.phase, Phase::Rotating | Phase::Driving)
+            && let Some(p) = self.points.get(self.index).copied()
+        {
+            let (dx, dy) = (p.x - pose.x, p.y - pose.y);
+            let dist = dx.hypot(dy);
+            let err = wrap(dy.atan2(dx) - pose.theta);
+            out.error = err;
+            if self.phase == Phase::Rotating && err.abs() <= s.rotate_until {
+                self.phase = Phase::Driving;
+            } else if self.phase == Phase::Driving && err.abs() > s.rotate_above {
+                self.phase = Phase::Rotating;
+            }
+            match self.phase {
+                Phase::Rotating => {
+                    // slower near the end: ω ≥ 0.15 rad/s, ≤ omega_turn
+                    let w = (2.0 * err.abs()).clamp(0.15, s.omega_turn.max(0.15));
+                    omega = w.copysign(err);
                 }
-                match self.phase {
-                    Phase::Rotating => {
-                        // slower near the end: ω ≥ 0.15 rad/s, ≤ omega_turn
-                        let w = (2.0 * err.abs()).clamp(0.15, s.omega_turn.max(0.15));
-                        omega = w.copysign(err);
-                    }
-                    _ => {
-                        let to_go = if self.is_last() {
-                            let stop_at = if p.kind == ViaKind::Target { s.standoff_m } else { 0.0 };
-                            (dist - stop_at).max(0.0)
-                        } else {
-                            f64::INFINITY
-                        };
-                        v = if to_go < s.slow_within_m {
-                            (s.v_cruise * to_go / s.slow_within_m.max(1e-6)).max(s.v_min)
-                        } else {
-                            s.v_cruise
-                        };
-                        omega = if err.abs() <= s.deadband {
-                            0.0
-                        } else {
-                            (s.k_heading * err).clamp(-s.omega_drive_max, s.omega_drive_max)
-                        };
-                    }
+                _ => {
+                    let to_go = if self.is_last() {
+                        let stop_at = if p.kind == ViaKind::Target { s.standoff_m } else { 0.0 };
+                        (dist - stop_at).max(0.0)
+                    } else {
+                        f64::INFINITY
+                    };
+                    v = if to_go < s.slow_within_m {
+                        (s.v_cruise * to_go / s.slow_within_m.max(1e-6)).max(s.v_min)
+                    } else {
+                        s.v_cruise
+                    };
+                    omega = if err.abs() <= s.deadband {
+                        0.0
+                    } else {
+                        (s.k_heading * err).clamp(-s.omega_drive_max, s.omega_drive_max)
+                    };
                 }
             }
         }

@@ -96,11 +96,12 @@ impl Agent for Tracker {
 
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
         let now = ctx.now_ns();
-        if let Some((_, h)) = self.head.latest() {
-            if h.pan_rad.is_finite() && h.tilt_rad.is_finite() {
-                self.pan_tilt = (h.pan_rad as f32, h.tilt_rad as f32);
-                self.head_seen_ns = Some(now);
-            }
+        if let Some((_, h)) = self.head.latest()
+            && h.pan_rad.is_finite()
+            && h.tilt_rad.is_finite()
+        {
+            self.pan_tilt = (h.pan_rad as f32, h.tilt_rad as f32);
+            self.head_seen_ns = Some(now);
         }
         let finder = &mut self.finder;
         let found = self.mask.latest_with(|meta, px| -> Result<(Option<Blob>, usize, usize), String> {

@@ -392,10 +392,8 @@ fn simulate(robot: &str, explicit: bool, a: &CheckpointArgs, dir: &Path) -> Resu
         if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
     );
     super::demo::copy_logs(&nworld, &dir.join("logs"));
-    if !explicit {
-        if let Err(e) = std::fs::remove_dir_all(nworld.state_dir()) {
-            eprintln!("warning: cannot remove {}: {e}", nworld.state_dir().display());
-        }
+    if !explicit && let Err(e) = std::fs::remove_dir_all(nworld.state_dir()) {
+        eprintln!("warning: cannot remove {}: {e}", nworld.state_dir().display());
     }
     if result.is_err() {
         eprintln!("the run's logs are in {}", dir.join("logs").display());

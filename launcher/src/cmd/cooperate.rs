@@ -414,10 +414,10 @@ fn open<T: shm_schemas::Payload>(slot: &mut Option<Tap<T>>, world: &World, node:
 }
 
 fn drain<T: shm_schemas::Payload>(slot: &Option<Tap<T>>, f: impl FnMut(&shm_schemas::SampleHeader, &T)) {
-    if let Some(t) = slot {
-        if let Err(e) = t.drain(f) {
-            tracing::debug!("{e:#}");
-        }
+    if let Some(t) = slot
+        && let Err(e) = t.drain(f)
+    {
+        tracing::debug!("{e:#}");
     }
 }
 

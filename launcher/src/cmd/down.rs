@@ -142,10 +142,10 @@ pub fn clean(world: &World) -> usize {
             if std::fs::remove_file(&f).is_ok() {
                 removed += 1;
             }
-            if let Some(dir) = f.parent() {
-                if dir.parent() == Some(nodes_dir.as_path()) {
-                    let _ = std::fs::remove_dir(dir);
-                }
+            if let Some(dir) = f.parent()
+                && dir.parent() == Some(nodes_dir.as_path())
+            {
+                let _ = std::fs::remove_dir(dir);
             }
         }
     }

@@ -99,10 +99,10 @@ fn watch<T: Payload>(
         if !f(Event::Tick) {
             return Ok(true);
         }
-        if let Some(idle) = idle {
-            if now_ns().saturating_sub(last_sample) > idle.as_nanos() as u64 {
-                return Ok(false);
-            }
+        if let Some(idle) = idle
+            && now_ns().saturating_sub(last_sample) > idle.as_nanos() as u64
+        {
+            return Ok(false);
         }
     }
 }
