@@ -114,7 +114,7 @@ pub enum OpenError {
     },
     /// Not allowed to read the file.
     #[error(
-        "permission denied reading {path}: rings are readable by their owner only unless the writer creates them group-readable (RingOptions::group_readable); run the reader as the writer's user or in its group"
+        "permission denied reading {path}: rings are read by agents of the writer's own user only; run the reader as the writer's user"
     )]
     PermissionDenied {
         /// the file
