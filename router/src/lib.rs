@@ -179,7 +179,12 @@ impl Router {
     }
 
     /// Serves until SIGTERM, SIGINT or a `Shutdown` request.
+    ///
+    /// Call it from the thread that set the router's scheduling policy:
+    /// that thread's real-time policy is marked not to pass to the agents
+    /// the supervisor restarts from it (see [`reset_realtime_on_fork`]).
     pub fn run(mut self) -> Result<(), String> {
+        reset_realtime_on_fork();
         let ws = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<Ipc>()
@@ -231,6 +236,38 @@ impl Router {
         self.state.writer.flush();
         tracing::info!("router stopped");
         Ok(())
+    }
+}
+
+/// Marks the calling thread's real-time policy (SCHED_FIFO or SCHED_RR, set
+/// by `nerve router` before it serves) with `SCHED_RESET_ON_FORK`, so that
+/// every process and thread it creates starts under SCHED_OTHER.
+///
+/// Without it an agent restarted by the supervisor inherited the router's
+/// SCHED_FIFO 10 through fork and exec: every thread of it, the task of a
+/// `--no-realtime` agent, helper threads and a CPU-bound step included, ran
+/// real-time and could starve normal work, where the same agent started by
+/// `nerve launch` ran them SCHED_OTHER. A normal-priority router has
+/// nothing to pass on and is left alone.
+pub fn reset_realtime_on_fork() {
+    // SAFETY: sched_getscheduler and sched_getparam on the calling thread (0)
+    // with a valid sched_param; no other memory is touched.
+    let (policy, mut param) = unsafe {
+        let mut param = std::mem::zeroed::<libc::sched_param>();
+        (libc::sched_getscheduler(0), if libc::sched_getparam(0, &mut param) == 0 { Some(param) } else { None })
+    };
+    let policy = policy & !libc::SCHED_RESET_ON_FORK;
+    if !(policy == libc::SCHED_FIFO || policy == libc::SCHED_RR) {
+        return;
+    }
+    let Some(param) = param.as_mut() else { return };
+    // SAFETY: sets the calling thread's own policy to the one it has, plus the flag.
+    let rc = unsafe { libc::sched_setscheduler(0, policy | libc::SCHED_RESET_ON_FORK, param) };
+    if rc != 0 {
+        tracing::warn!(
+            "cannot mark the router's real-time policy reset-on-fork ({}); agents the supervisor restarts may run real-time",
+            std::io::Error::last_os_error()
+        );
     }
 }
 
@@ -696,4 +733,40 @@ fn split_port(p: &str) -> (&str, &str) {
 
 fn port_agent(p: &str) -> &str {
     split_port(p).0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_real_time_router_starts_its_children_under_the_normal_policy() {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let param = libc::sched_param { sched_priority: 1 };
+            // SAFETY: the calling thread's own policy, a valid sched_param.
+            if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } != 0 {
+                let _ = tx.send(None);
+                return;
+            }
+            reset_realtime_on_fork();
+            let child = std::process::Command::new("sleep").arg("5").spawn();
+            // SAFETY: as above; back to normal before the thread ends
+            let normal = libc::sched_param { sched_priority: 0 };
+            unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &normal) };
+            let _ = tx.send(Some(child));
+        });
+        let Some(child) = rx.recv().expect("the spawning thread answers") else {
+            eprintln!(
+                "SCHED_FIFO is not permitted here: nothing to reset (tests/tests/restart_state.rs checks the router)"
+            );
+            return;
+        };
+        let mut child = child.expect("spawn sleep");
+        let stat = std::fs::read_to_string(format!("/proc/{}/stat", child.id())).expect("child stat");
+        let _ = child.kill();
+        let _ = child.wait();
+        let policy = stat.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().nth(38)).unwrap_or("?").to_owned();
+        assert_eq!(policy, libc::SCHED_OTHER.to_string(), "the child's policy (field 41 of {stat})");
+    }
 }
