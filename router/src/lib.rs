@@ -15,7 +15,11 @@
 //!   state directory and reloaded at start.
 //! * **Restart**: at start the router publishes a new epoch on
 //!   `nerve/<robot>/router/epoch`; running agents see it and re-register.
+//! * **Run-time state**: what `nerve suspend`, `resume`, `rate` and
+//!   `param set` changed is remembered per agent name and re-applied when an
+//!   agent of that name registers again ([`remembered`]).
 
+pub mod remembered;
 pub mod store;
 
 use agent_sdk::clock::now_ns;
@@ -26,6 +30,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
+use remembered::{FORGET_AFTER, Remembered};
 use shm_schemas::control::agent_to_router::{AgentToRouter, Registration, TaskKind};
 use shm_schemas::control::cli_to_router::{
     AgentState, AgentView, CliRequest, ConnectionView, GraphView, RestartPolicy, RouterError, RouterReply,
@@ -78,6 +83,9 @@ impl Supervised {
     }
 }
 
+/// How often names gone for long are looked for.
+const GC_PERIOD: Duration = Duration::from_secs(60);
+
 /// Why the router could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum StartError {
@@ -115,6 +123,9 @@ struct State {
     supervised: BTreeMap<String, Supervised>,
     /// start-up processes of restarted agents, reaped as they exit
     children: Vec<std::process::Child>,
+    /// run-time state re-applied to a re-registering agent
+    remembered: Remembered,
+    last_gc: Instant,
 }
 
 impl std::fmt::Debug for Router {
@@ -174,6 +185,8 @@ impl Router {
                 shutdown: false,
                 supervised: BTreeMap::new(),
                 children: Vec::new(),
+                remembered: Remembered::default(),
+                last_gc: Instant::now(),
             },
         })
     }
@@ -215,13 +228,17 @@ impl Router {
             }
             while let Some(action) = self.state.pending.pop_front() {
                 match action {
-                    Action::Rewire(name) => self.state.rewire(&name),
+                    Action::Rewire(name) => {
+                        self.state.reapply(&name);
+                        self.state.rewire(&name);
+                    }
                 }
             }
             if last_liveness.elapsed() >= LIVENESS_PERIOD {
                 last_liveness = Instant::now();
                 self.state.check_liveness();
                 self.state.run_restarts();
+                self.state.forget_gone();
                 self.server.tidy();
                 self.cli_server.tidy();
                 let _ = self.epoch_pub.update_connections();
@@ -382,6 +399,79 @@ impl State {
         Some(client.call(cmd, timeout))
     }
 
+    /// Re-applies to a newly registered `name` what was set at run time for
+    /// an earlier agent of that name: a suspend first (so that it does not
+    /// run meanwhile), then parameters and period, a resume last. An agent
+    /// that does not answer is not tried further (the router would wait for
+    /// each command).
+    fn reapply(&mut self, name: &str) {
+        let Some(mem) = self.remembered.get(name).cloned() else { return };
+        let Some(entry) = self.agents.get(name) else { return };
+        let registered_suspended = entry.state == AgentState::Suspended;
+        let registered_period = entry.reg.period_ns;
+        let mut todo = Vec::new();
+        if mem.suspended == Some(true) && !registered_suspended {
+            todo.push(AgentCommand::Suspend);
+        }
+        for (key, value) in &mem.params {
+            todo.push(AgentCommand::ParamSet { key: key.clone(), value: value.clone() });
+        }
+        if let Some(period_ns) = mem.period_ns.filter(|p| Some(*p) != registered_period) {
+            todo.push(AgentCommand::SetPeriod { period_ns });
+        }
+        if mem.suspended == Some(false) && registered_suspended {
+            todo.push(AgentCommand::Resume);
+        }
+        for cmd in todo {
+            let what = match &cmd {
+                AgentCommand::Suspend => "suspend".to_owned(),
+                AgentCommand::Resume => "resume".to_owned(),
+                AgentCommand::SetPeriod { period_ns } => {
+                    format!("period {}", agent_sdk::clock::format_duration(Duration::from_nanos(*period_ns)))
+                }
+                AgentCommand::ParamSet { key, value } => format!("{key} = {value}"),
+                other => format!("{other:?}"),
+            };
+            match self.command(name, &cmd, AGENT_TIMEOUT) {
+                Ok(_) => {
+                    tracing::info!("re-applied to {name}: {what}");
+                    if let Some(e) = self.agents.get_mut(name) {
+                        match cmd {
+                            AgentCommand::Suspend => e.state = AgentState::Suspended,
+                            AgentCommand::Resume => e.state = AgentState::Running,
+                            AgentCommand::SetPeriod { period_ns } => e.reg.period_ns = Some(period_ns),
+                            _ => {}
+                        }
+                    }
+                }
+                Err(e @ RouterError::AgentRefused { .. }) => {
+                    tracing::warn!("could not re-apply {what} to {name}: {e}");
+                }
+                Err(e) => {
+                    tracing::warn!("could not re-apply {what} (and what follows) to {name}: {e}; set it again by hand");
+                    break;
+                }
+            }
+        }
+    }
+
+    /// Drops the remembered state of names gone for [`FORGET_AFTER`];
+    /// keeps the time live names were last seen.
+    fn forget_gone(&mut self) {
+        let now = Instant::now();
+        for name in self.agents.keys() {
+            self.remembered.seen(name, now);
+        }
+        if now.duration_since(self.last_gc) < GC_PERIOD {
+            return;
+        }
+        self.last_gc = now;
+        let agents = &self.agents;
+        for name in self.remembered.forget_gone(now, |n| agents.contains_key(n)) {
+            tracing::info!("forgot the run-time state of {name}: gone for more than {FORGET_AFTER:?}");
+        }
+    }
+
     /// Applies every stored connection that involves `name` and whose other end is live.
     fn rewire(&mut self, name: &str) {
         let todo: Vec<Connection> = self
@@ -502,6 +592,7 @@ impl State {
                 if let Some(e) = self.agents.get_mut(&name) {
                     e.reg.period_ns = Some(period_ns);
                 }
+                self.remembered.set_period(&name, period_ns, Instant::now());
                 Ok(RouterReply::Ok)
             }
             CliRequest::Suspend { name } => {
@@ -509,6 +600,7 @@ impl State {
                 if let Some(e) = self.agents.get_mut(&name) {
                     e.state = AgentState::Suspended;
                 }
+                self.remembered.set_suspended(&name, true, Instant::now());
                 Ok(RouterReply::Ok)
             }
             CliRequest::Resume { name } => {
@@ -516,6 +608,7 @@ impl State {
                 if let Some(e) = self.agents.get_mut(&name) {
                     e.state = AgentState::Running;
                 }
+                self.remembered.set_suspended(&name, false, Instant::now());
                 Ok(RouterReply::Ok)
             }
             CliRequest::ParamGet { name, key } => {
@@ -525,7 +618,14 @@ impl State {
                 }
             }
             CliRequest::ParamSet { name, key, value } => {
-                self.command(&name, &AgentCommand::ParamSet { key, value }, AGENT_TIMEOUT)?;
+                let cmd = AgentCommand::ParamSet { key: key.clone(), value: value.clone() };
+                self.command(&name, &cmd, AGENT_TIMEOUT)?;
+                if !self.remembered.set_param(&name, &key, &value, Instant::now()) {
+                    tracing::warn!(
+                        "{name}: {key} = {value} is set but not remembered for a restart: {} other parameters of it are",
+                        remembered::MAX_PARAMS
+                    );
+                }
                 Ok(RouterReply::Ok)
             }
             CliRequest::Stop { name } => {
@@ -534,6 +634,8 @@ impl State {
                     sup.next_start = None;
                 }
                 self.command(&name, &AgentCommand::Stop, AGENT_TIMEOUT)?;
+                // stopped on purpose: its next start is a fresh one
+                self.remembered.forget(&name);
                 Ok(RouterReply::Ok)
             }
             CliRequest::Supervise(spec) => {

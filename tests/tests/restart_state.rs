@@ -6,9 +6,28 @@
 //! decision maker goes on deciding while the router waits for an agent
 //! (R26).
 
-use nerve_tests::{Robot, bin_dir, sigkill, wait_until};
+use nerve_tests::{Robot, alive, bin_dir, sigkill, wait_until};
 use std::os::unix::fs::PermissionsExt;
 use std::time::Duration;
+
+fn cycles(r: &Robot, name: &str) -> u64 {
+    r.agent(name).and_then(|a| a["stats"]["cycles"].as_u64()).unwrap_or(0)
+}
+
+fn rate_of(r: &Robot, name: &str) -> f64 {
+    r.agent(name).and_then(|a| a["stats"]["rate_hz"].as_f64()).unwrap_or(0.0)
+}
+
+fn log_of(r: &Robot, agent: &str) -> String {
+    std::fs::read_to_string(r.home.join(&r.name).join("logs").join(format!("{agent}.log"))).unwrap_or_default()
+}
+
+/// Whether the agent itself (not the router's view) makes no progress.
+fn really_suspended(r: &Robot, name: &str) -> bool {
+    let before = cycles(r, name);
+    std::thread::sleep(Duration::from_millis(300));
+    cycles(r, name) <= before + 1
+}
 
 /// The router's pid, from its pid file.
 fn router_pid(r: &Robot) -> u32 {
@@ -16,6 +35,80 @@ fn router_pid(r: &Robot) -> u32 {
         .ok()
         .and_then(|s| s.trim().parse().ok())
         .expect("the router's pid file")
+}
+
+/// Kills agent `name` and waits until the router has noticed.
+fn kill_and_wait(r: &Robot, name: &str) -> u32 {
+    let pid = r.pid(name);
+    sigkill(pid);
+    assert!(wait_until(Duration::from_secs(5), || !alive(pid) && r.agent(name).is_none()), "{name} still listed");
+    pid
+}
+
+/// R12: suspend, period and parameters set through the router come back
+/// when an agent of the same name is started again by hand; `nerve stop`
+/// ends that memory (the next start is a fresh one).
+#[test]
+fn run_time_state_comes_back_to_an_agent_restarted_by_hand() {
+    let r = Robot::new("byhand");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["start", "ticker", "--name", "t2", "--period", "10ms"]);
+    r.ok(&["param", "set", "t1", "step", "1000"]);
+    r.ok(&["rate", "t1", "50ms"]);
+    r.ok(&["suspend", "t2"]);
+
+    kill_and_wait(&r, "t1");
+    kill_and_wait(&r, "t2");
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["start", "ticker", "--name", "t2", "--period", "10ms"]);
+
+    assert!(
+        wait_until(Duration::from_secs(5), || r.ok(&["param", "get", "t1", "step"]).trim() == "1000"),
+        "t1's step was not re-applied; router log:\n{}",
+        log_of(&r, "router")
+    );
+    assert!(
+        wait_until(Duration::from_secs(8), || (10.0..30.0).contains(&rate_of(&r, "t1"))),
+        "t1 should run every 50 ms again, it runs at {} Hz",
+        rate_of(&r, "t1")
+    );
+    assert!(wait_until(Duration::from_secs(5), || r.agent("t2").is_some_and(|a| a["state"] == "suspended")));
+    assert!(really_suspended(&r, "t2"), "t2 runs although it was suspended before its restart");
+
+    // stopped on purpose: started again, it is a fresh agent
+    r.ok(&["stop", "t1"]);
+    assert!(wait_until(Duration::from_secs(5), || r.agent("t1").is_none()));
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    std::thread::sleep(Duration::from_millis(500));
+    assert_eq!(r.ok(&["param", "get", "t1", "step"]).trim(), "1", "a stopped agent's state is forgotten");
+    r.down_and_check_clean();
+}
+
+/// R12: the same for an agent the supervisor restarts after a crash.
+#[test]
+fn run_time_state_comes_back_after_a_supervisor_restart() {
+    let r = Robot::new("supst");
+    let file = r.launch_file(
+        "sup.toml",
+        "robot = \"x\"\n[[agent]]\nname = \"t1\"\nkind = \"ticker\"\nperiod = \"10ms\"\nrestart = \"on-failure\"\nbackoff = \"100ms\"\n",
+    );
+    r.ok(&["launch", file.to_str().expect("utf-8 path")]);
+    r.ok(&["param", "set", "t1", "step", "7"]);
+    r.ok(&["suspend", "t1"]);
+    let old = r.pid("t1");
+    sigkill(old);
+    assert!(
+        wait_until(Duration::from_secs(10), || r
+            .agent("t1")
+            .is_some_and(|a| a["pid"].as_u64().unwrap_or(0) as u32 != old && a["pid"] != 0)),
+        "t1 was not restarted: {:?}",
+        r.ps()
+    );
+    assert!(wait_until(Duration::from_secs(5), || r.ok(&["param", "get", "t1", "step"]).trim() == "7"));
+    assert!(wait_until(Duration::from_secs(5), || r.agent("t1").is_some_and(|a| a["state"] == "suspended")));
+    assert!(really_suspended(&r, "t1"), "the restarted t1 runs although it was suspended");
+    r.down_and_check_clean();
 }
 
 /// The scheduling policy of every thread of `pid` (field 41 of its stat).
