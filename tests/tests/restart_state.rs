@@ -111,6 +111,57 @@ fn run_time_state_comes_back_after_a_supervisor_restart() {
     r.down_and_check_clean();
 }
 
+/// A knowledge base with one mode, entered at once, that suspends `wander`.
+const HOLD_KB: &str = r#"
+[decision]
+retry = "200ms"
+
+[[rule]]
+mode = "hold"
+
+[modes.hold]
+suspend = ["wander"]
+"#;
+
+/// R12: a restarted router starts with no memory; the decision maker sees
+/// its new epoch and sends the current mode's actions again, so that an
+/// agent restarted afterwards still gets them.
+#[test]
+fn the_decision_maker_sends_its_mode_again_to_a_restarted_router() {
+    let r = Robot::new("epoch");
+    r.router();
+    let kb = nerve_tests::write_file(&r.home, "hold.toml", HOLD_KB);
+    r.ok(&["start", "ticker", "--name", "wander", "--period", "10ms"]);
+    r.ok(&["start", "decision", "--name", "dm", "--", "--kb", kb.to_str().expect("utf-8 path")]);
+    assert!(wait_until(Duration::from_secs(10), || r.agent("wander").is_some_and(|a| a["state"] == "suspended")));
+
+    // a new router: the agents re-register; the decision maker re-sends
+    let old_router = router_pid(&r);
+    sigkill(old_router);
+    assert!(wait_until(Duration::from_secs(5), || !alive(old_router)));
+    r.router();
+    let new_router = format!("registered with the router (pid {})", router_pid(&r));
+    assert!(
+        wait_until(Duration::from_secs(10), || log_of(&r, "dm").contains(&new_router)
+            && log_of(&r, "wander").contains(&new_router)),
+        "dm and wander did not register with the new router:\n{}",
+        log_of(&r, "dm")
+    );
+    // the decision maker sees the new epoch and sends its mode again
+    std::thread::sleep(Duration::from_millis(1500));
+
+    // wander restarts by hand: the new router re-applies the suspend it got from the decision maker
+    kill_and_wait(&r, "wander");
+    r.ok(&["start", "ticker", "--name", "wander", "--period", "10ms"]);
+    assert!(
+        wait_until(Duration::from_secs(5), || r.agent("wander").is_some_and(|a| a["state"] == "suspended")),
+        "router log:\n{}",
+        log_of(&r, "router")
+    );
+    assert!(really_suspended(&r, "wander"), "the restarted wander runs in mode hold");
+    r.down_and_check_clean();
+}
+
 /// The scheduling policy of every thread of `pid` (field 41 of its stat).
 fn policies(pid: u32) -> Vec<u32> {
     let Ok(rd) = std::fs::read_dir(format!("/proc/{pid}/task")) else { return vec![] };
@@ -157,5 +208,56 @@ fn a_supervisor_restarted_agent_does_not_inherit_the_routers_real_time_policy() 
     }));
     let p = policies(restarted);
     assert!(!p.is_empty() && p.iter().all(|p| *p == 0), "the restarted agent's threads run under policies {p:?}");
+    r.down_and_check_clean();
+}
+
+/// A knowledge base whose one mode commands an agent that will not answer.
+const FROZEN_KB: &str = r#"
+[decision]
+retry = "100ms"
+
+[[rule]]
+mode = "m"
+
+[modes.m]
+weights = { frozen = { a = 1 } }
+periods = { frozen = "50ms" }
+suspend = ["frozen"]
+"#;
+
+/// R26: while the router waits for an agent that does not answer (stopped
+/// with SIGSTOP: each command waits for the router's time-out), the
+/// decision maker goes on deciding and publishing its mode every cycle.
+#[test]
+fn the_decision_maker_keeps_deciding_while_the_router_waits_for_an_agent() {
+    let r = Robot::new("block");
+    r.router();
+    let kb = nerve_tests::write_file(&r.home, "frozen.toml", FROZEN_KB);
+    r.ok(&["start", "ticker", "--name", "frozen", "--period", "100ms"]);
+    let frozen = r.pid("frozen");
+    // SAFETY: kill has no memory-safety preconditions.
+    unsafe { libc::kill(frozen as i32, libc::SIGSTOP) };
+    r.ok(&["start", "decision", "--name", "dm", "--", "--kb", kb.to_str().expect("utf-8 path")]);
+    // each of the mode's three actions holds the router for a second (its
+    // wait for the frozen agent), again every 100 ms: a decision task that
+    // waited for them would publish nothing for three seconds at a time
+    let out = r.nerve(&["echo", "dm/mode", "--count", "15", "--json", "--timeout", "8"]);
+    let stamps: Vec<u64> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter_map(|v| v["data"]["stamp_ns"].as_u64())
+        .collect();
+    assert_eq!(stamps.len(), 15, "{}", String::from_utf8_lossy(&out.stderr));
+    let longest = stamps.windows(2).map(|w| w[1].saturating_sub(w[0])).max().unwrap_or(0);
+    assert!(
+        longest < 1_500_000_000,
+        "the decision maker published nothing for {} ms (its period is 100 ms); its log:\n{}",
+        longest / 1_000_000,
+        log_of(&r, "dm")
+    );
+    // the worker met the frozen agent meanwhile
+    assert!(wait_until(Duration::from_secs(15), || log_of(&r, "dm").contains("not done yet")), "{}", log_of(&r, "dm"));
+    // SAFETY: as above.
+    unsafe { libc::kill(frozen as i32, libc::SIGCONT) };
     r.down_and_check_clean();
 }
