@@ -38,20 +38,29 @@ pub struct ControlSize {
     pub max_nodes: usize,
     /// the largest message, fixed; `None`: any size
     pub max_message: Option<usize>,
+    /// client slots that [`ControlClient::open`] leaves free, for the
+    /// service's owner's [`ControlClient::open_reserved`] (the router)
+    pub reserved_clients: usize,
 }
 
 impl ControlSize {
     /// The router's service for agents (registration): every agent of the
     /// robot, small fixed-size messages.
-    pub const ROUTER: ControlSize = ControlSize { max_clients: 512, max_nodes: 640, max_message: Some(8192) };
+    pub const ROUTER: ControlSize =
+        ControlSize { max_clients: 512, max_nodes: 640, max_message: Some(8192), reserved_clients: 0 };
     /// The router's service for tools and programs (`nerve ps` of 500 agents
     /// is a large reply): a few clients at once.
-    pub const ROUTER_CLI: ControlSize = ControlSize { max_clients: 32, max_nodes: 64, max_message: None };
+    pub const ROUTER_CLI: ControlSize =
+        ControlSize { max_clients: 32, max_nodes: 64, max_message: None, reserved_clients: 0 };
     /// An agent's control service: the router, a restarted router, tools.
     /// Fixed 64 KiB messages (statistics of an agent with a few hundred
     /// ports): with growing messages the router's client of each agent
     /// cost 0.85 MiB of heap (17 of the router's 40 MiB with 20 agents).
-    pub const AGENT: ControlSize = ControlSize { max_clients: 8, max_nodes: 16, max_message: Some(65536) };
+    /// One slot is kept for the router: tools (`nerve drive`, test
+    /// injectors, clients of killed tools not yet cleaned up) take at most
+    /// seven, so that they never leave the agent unreachable for the router.
+    pub const AGENT: ControlSize =
+        ControlSize { max_clients: 8, max_nodes: 16, max_message: Some(65536), reserved_clients: 1 };
 
     fn slice_len(&self) -> usize {
         self.max_message.unwrap_or(INITIAL_MESSAGE_BYTES)
@@ -84,6 +93,18 @@ pub enum ControlError {
         service: String,
         /// how long we waited
         timeout: Duration,
+    },
+    /// Every client slot a tool may take is taken.
+    #[error(
+        "{service} has no free client slot ({taken} clients connected, {max} at most for tools): close other tools talking to it, or wait a few seconds for the clients of killed ones to be cleaned up, and try again"
+    )]
+    Full {
+        /// the service
+        service: String,
+        /// clients connected now
+        taken: usize,
+        /// the most a tool may find connected and still join
+        max: usize,
     },
     /// A message larger than the service allows.
     #[error("a message of {bytes} bytes is larger than the {max} bytes {service} takes")]
@@ -214,14 +235,31 @@ pub struct ControlClient<Req, Resp> {
 }
 
 impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
-    /// Opens `service`; [`ControlError::NoServer`] when it does not exist.
+    /// Opens `service`; [`ControlError::NoServer`] when it does not exist,
+    /// [`ControlError::Full`] when only the slots kept for the service's
+    /// owner (`size.reserved_clients`) are free.
     pub fn open(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<Self, ControlError> {
+        Self::open_with(node, service, size, size.reserved_clients)
+    }
+
+    /// Opens `service`, taking a slot kept for the service's owner if
+    /// needed: for the router only.
+    pub fn open_reserved(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<Self, ControlError> {
+        Self::open_with(node, service, size, 0)
+    }
+
+    fn open_with(node: &Node<Ipc>, service: &str, size: ControlSize, leave: usize) -> Result<Self, ControlError> {
         let rr = rr_builder(node, service, size)?.open().map_err(|e| match e {
             iceoryx2::service::builder::request_response::RequestResponseOpenError::DoesNotExist => {
                 ControlError::NoServer { service: service.into() }
             }
             e => ipc_err(service, e),
         })?;
+        let max = size.max_clients.saturating_sub(leave);
+        let taken = rr.dynamic_config().number_of_clients();
+        if leave > 0 && taken >= max {
+            return Err(ControlError::Full { service: service.into(), taken, max });
+        }
         let client = rr
             .client_builder()
             .initial_max_slice_len(size.slice_len())
@@ -361,10 +399,29 @@ mod tests {
     }
 
     #[test]
+    fn tools_leave_the_reserved_client_slot_for_the_router() {
+        let world = World::new(&format!("slot{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let size = ControlSize { max_clients: 3, max_nodes: 8, max_message: Some(128), reserved_clients: 1 };
+        let service = format!("nerve/{}/test/ctl", world.robot());
+        let node = world.node("server").expect("node");
+        let _server: ControlServer<String, String> = ControlServer::create(&node, &service, size).expect("server");
+        let tools = world.node("tools").expect("node");
+        let a = ControlClient::<String, String>::open(&tools, &service, size).expect("first tool");
+        let b = ControlClient::<String, String>::open(&tools, &service, size).expect("second tool");
+        let e = ControlClient::<String, String>::open(&tools, &service, size).expect_err("the router's slot");
+        assert!(matches!(e, ControlError::Full { taken: 2, max: 2, .. }), "{e}");
+        assert!(e.to_string().contains("try again"), "{e}");
+        let router = world.node("router").expect("node");
+        let r = ControlClient::<String, String>::open_reserved(&router, &service, size).expect("the router gets in");
+        drop((a, b, r));
+    }
+
+    #[test]
     fn oversized_messages_are_refused_or_answered_with_an_error() {
         let world = World::new(&format!("ctl{}", std::process::id())).expect("world");
         let _cleanup = Cleanup(world.clone());
-        let size = ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128) };
+        let size = ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128), reserved_clients: 0 };
         let service = format!("nerve/{}/test/ctl", world.robot());
         let done = Arc::new(AtomicBool::new(false));
         let server_thread = {

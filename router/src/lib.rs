@@ -18,6 +18,11 @@
 //! * **Run-time state**: what `nerve suspend`, `resume`, `rate` and
 //!   `param set` changed is remembered per agent name and re-applied when an
 //!   agent of that name registers again ([`remembered`]).
+//! * **Bounds**: the registry holds live agents only; the remembered state
+//!   and the supervision entries are bounded in number, and those of names
+//!   gone for [`remembered::FORGET_AFTER`] are dropped (a supervised agent
+//!   still waiting for its restart is kept). The connection list is the
+//!   user's wiring, persisted, and is never dropped behind their back.
 
 pub mod remembered;
 pub mod store;
@@ -75,16 +80,49 @@ struct Supervised {
     next_start: Option<Instant>,
     /// `nerve stop` asked it to leave: do not restart
     stopped_by_user: bool,
+    /// when its agent was last live (or supervision was asked for)
+    last_seen: Instant,
 }
 
 impl Supervised {
-    fn new(spec: Supervision) -> Self {
-        Supervised { spec, recent: VecDeque::new(), total: 0, failed: false, next_start: None, stopped_by_user: false }
+    fn new(spec: Supervision, now: Instant) -> Self {
+        Supervised {
+            spec,
+            recent: VecDeque::new(),
+            total: 0,
+            failed: false,
+            next_start: None,
+            stopped_by_user: false,
+            last_seen: now,
+        }
     }
 }
 
+/// The most agents the router supervises at once.
+pub const MAX_SUPERVISED: usize = 1024;
 /// How often names gone for long are looked for.
 const GC_PERIOD: Duration = Duration::from_secs(60);
+
+/// Drops the supervision of names that are not live, not waiting for a
+/// restart, and gone for more than `forget_after` before `now`; returns them.
+fn forget_gone_supervision(
+    supervised: &mut BTreeMap<String, Supervised>,
+    now: Instant,
+    forget_after: Duration,
+    live: impl Fn(&str) -> bool,
+) -> Vec<String> {
+    let gone: Vec<String> = supervised
+        .iter()
+        .filter(|(n, s)| {
+            !live(n) && s.next_start.is_none() && now.saturating_duration_since(s.last_seen) > forget_after
+        })
+        .map(|(n, _)| n.clone())
+        .collect();
+    for n in &gone {
+        supervised.remove(n);
+    }
+    gone
+}
 
 /// Why the router could not start.
 #[derive(Debug, thiserror::Error)]
@@ -243,11 +281,11 @@ impl Router {
                 self.cli_server.tidy();
                 let _ = self.epoch_pub.update_connections();
             }
-            if let Some(wd) = watchdog {
-                if last_ping.elapsed() >= wd / 2 {
-                    let _ = agent_sdk::daemon::sd_notify("WATCHDOG=1");
-                    last_ping = Instant::now();
-                }
+            if let Some(wd) = watchdog
+                && last_ping.elapsed() >= wd / 2
+            {
+                let _ = agent_sdk::daemon::sd_notify("WATCHDOG=1");
+                last_ping = Instant::now();
             }
         }
         self.state.writer.flush();
@@ -315,10 +353,11 @@ impl State {
         if let Err(e) = AgentName::new(&reg.name) {
             return RouterReply::Error(RouterError::InvalidName(e.to_string()));
         }
-        if let Some(existing) = self.agents.get(&reg.name) {
-            if existing.reg.pid != reg.pid && pid_alive(existing.reg.pid) {
-                return RouterReply::Error(RouterError::DuplicateName { name: reg.name, pid: existing.reg.pid });
-            }
+        if let Some(existing) = self.agents.get(&reg.name)
+            && existing.reg.pid != reg.pid
+            && pid_alive(existing.reg.pid)
+        {
+            return RouterReply::Error(RouterError::DuplicateName { name: reg.name, pid: existing.reg.pid });
         }
         let name = reg.name.clone();
         // The agent's control client is opened when first needed (by the
@@ -345,7 +384,18 @@ impl State {
 
     fn open_agent(&self, name: &str) -> Option<ControlClient<AgentCommand, AgentReply>> {
         let agent = AgentName::new(name).ok()?;
-        match ControlClient::open(&self.node, &self.world.robot().ctl_service(&agent), ControlSize::AGENT) {
+        let service = self.world.robot().ctl_service(&agent);
+        let mut opened = ControlClient::open_reserved(&self.node, &service, ControlSize::AGENT);
+        if matches!(opened, Err(ControlError::Ipc { .. } | ControlError::Full { .. })) {
+            // Every client slot may be taken, some by tools that were
+            // killed: clean the ports of dead processes and try once more.
+            let cleaned = self.world.cleanup_dead_nodes();
+            if cleaned > 0 {
+                tracing::info!("cleaned the shared-memory resources of {cleaned} dead node(s) to reach {name}");
+            }
+            opened = ControlClient::open_reserved(&self.node, &service, ControlSize::AGENT);
+        }
+        match opened {
             Ok(c) => Some(c),
             Err(e) => {
                 tracing::warn!("cannot open the control service of {name}: {e}");
@@ -455,12 +505,15 @@ impl State {
         }
     }
 
-    /// Drops the remembered state of names gone for [`FORGET_AFTER`];
-    /// keeps the time live names were last seen.
+    /// Drops the remembered state and the supervision of names gone for
+    /// [`FORGET_AFTER`]; keeps the time live names were last seen.
     fn forget_gone(&mut self) {
         let now = Instant::now();
         for name in self.agents.keys() {
             self.remembered.seen(name, now);
+            if let Some(s) = self.supervised.get_mut(name) {
+                s.last_seen = now;
+            }
         }
         if now.duration_since(self.last_gc) < GC_PERIOD {
             return;
@@ -469,6 +522,9 @@ impl State {
         let agents = &self.agents;
         for name in self.remembered.forget_gone(now, |n| agents.contains_key(n)) {
             tracing::info!("forgot the run-time state of {name}: gone for more than {FORGET_AFTER:?}");
+        }
+        for name in forget_gone_supervision(&mut self.supervised, now, FORGET_AFTER, |n| agents.contains_key(n)) {
+            tracing::info!("stopped supervising {name}: gone for more than {FORGET_AFTER:?}");
         }
     }
 
@@ -650,13 +706,31 @@ impl State {
                     Duration::from_nanos(spec.window_ns)
                 );
                 let name = spec.name.clone();
+                let now = Instant::now();
+                let full = self.supervised.len() >= MAX_SUPERVISED;
                 match self.supervised.get_mut(&name) {
                     Some(s) => {
                         s.spec = spec;
                         s.failed = false;
+                        s.last_seen = now;
+                    }
+                    None if full => {
+                        let agents = &self.agents;
+                        let gone = forget_gone_supervision(&mut self.supervised, now, Duration::ZERO, |n| {
+                            agents.contains_key(n) || n == name
+                        });
+                        if !gone.is_empty() {
+                            tracing::info!("stopped supervising {} agent(s) no longer running", gone.len());
+                        }
+                        if self.supervised.len() >= MAX_SUPERVISED {
+                            return Err(RouterError::NotApplicable(format!(
+                                "the router supervises {MAX_SUPERVISED} agents at most and all are running or restarting; stop some with `nerve stop NAME`, or restart the router with `nerve down`"
+                            )));
+                        }
+                        self.supervised.insert(name, Supervised::new(spec, now));
                     }
                     None => {
-                        self.supervised.insert(name, Supervised::new(spec));
+                        self.supervised.insert(name, Supervised::new(spec, now));
                     }
                 }
                 Ok(RouterReply::Ok)
@@ -840,6 +914,37 @@ fn port_agent(p: &str) -> &str {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn spec(name: &str) -> Supervision {
+        Supervision {
+            name: name.into(),
+            argv: vec!["nerve-ticker".into()],
+            policy: RestartPolicy::OnFailure,
+            max_restarts: 3,
+            window_ns: 1_000_000_000,
+            backoff_ns: 1_000_000,
+            importance: 5,
+        }
+    }
+
+    #[test]
+    fn supervision_of_names_gone_for_long_is_dropped_unless_live_or_restarting() {
+        let t0 = Instant::now();
+        let mut sup = BTreeMap::new();
+        for n in ["gone", "live", "restarting"] {
+            sup.insert(n.to_owned(), Supervised::new(spec(n), t0));
+        }
+        if let Some(s) = sup.get_mut("restarting") {
+            s.next_start = Some(t0);
+        }
+        // not yet gone long enough
+        assert!(
+            forget_gone_supervision(&mut sup, t0 + Duration::from_secs(60), FORGET_AFTER, |n| n == "live").is_empty()
+        );
+        let later = t0 + FORGET_AFTER + Duration::from_secs(1);
+        assert_eq!(forget_gone_supervision(&mut sup, later, FORGET_AFTER, |n| n == "live"), vec!["gone".to_owned()]);
+        assert_eq!(sup.keys().cloned().collect::<Vec<_>>(), vec!["live".to_owned(), "restarting".to_owned()]);
+    }
 
     #[test]
     fn a_real_time_router_starts_its_children_under_the_normal_policy() {

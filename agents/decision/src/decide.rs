@@ -70,7 +70,16 @@ pub fn lookup<'a>(kb: &'a KnowledgeBase, facts: &Facts) -> Option<(usize, &'a Mo
         .and_then(|(i, r)| kb.modes.get(&r.mode).map(|m| (i, m)))
 }
 
+/// The most senders whose situation is kept at once; a new sender beyond
+/// it replaces the one heard from longest ago.
+pub const MAX_SENDERS: usize = 256;
+
 /// The newest reports, by sender, with the time they arrived.
+///
+/// Bounded: a report that is no longer fresh counts for nothing, so
+/// [`Reports::forget_stale`] drops it, and at most [`MAX_SENDERS`] senders
+/// are kept (a sender renamed at every restart, or many short-lived ones,
+/// grew the map without end).
 #[derive(Debug, Clone, Default)]
 pub struct Reports {
     situations: BTreeMap<String, (u64, Situation)>,
@@ -80,7 +89,25 @@ pub struct Reports {
 impl Reports {
     /// Keeps `s`, received from `sender` at `now_ns`.
     pub fn situation(&mut self, sender: &str, s: Situation, now_ns: u64) {
+        if !self.situations.contains_key(sender)
+            && self.situations.len() >= MAX_SENDERS
+            && let Some(oldest) = self.situations.iter().min_by_key(|(_, (t, _))| *t).map(|(n, _)| n.clone())
+        {
+            self.situations.remove(&oldest);
+        }
         self.situations.insert(sender.to_owned(), (now_ns, s));
+    }
+
+    /// Drops the situations older than `timeout` at `now_ns` (they no longer
+    /// count in [`Reports::facts`]).
+    pub fn forget_stale(&mut self, now_ns: u64, timeout: Duration) {
+        let keep = agent_sdk::clock::nanos(timeout);
+        self.situations.retain(|_, (t, _)| now_ns.saturating_sub(*t) <= keep);
+    }
+
+    /// How many senders' situations are kept.
+    pub fn senders(&self) -> usize {
+        self.situations.len()
     }
 
     /// Keeps the resource manager's report, received at `now_ns`.
@@ -284,6 +311,25 @@ resume = ["wall-follow"]
         let f = r.facts(1_200_000_000, s);
         assert_eq!((f.danger, f.target, f.load), (None, Some(TargetState::Seen), None));
         assert_eq!(f.to_string(), "target seen, danger unknown, load unknown");
+    }
+
+    #[test]
+    fn senders_are_bounded_and_stale_ones_forgotten() {
+        let mut r = Reports::default();
+        let s = Duration::from_secs(1);
+        for i in 0..MAX_SENDERS as u64 + 50 {
+            r.situation(&format!("s{i}"), Situation::danger(DangerLevel::Low, 0.3, 0), i);
+        }
+        assert_eq!(r.senders(), MAX_SENDERS);
+        // the newest sender is kept, the oldest went
+        r.situation("danger", Situation::danger(DangerLevel::High, 0.3, 0), 1_000);
+        assert_eq!(r.senders(), MAX_SENDERS);
+        assert_eq!(r.facts(2_000, s).danger, Some(DangerLevel::High));
+        r.forget_stale(2_000_000_000, s);
+        assert_eq!(r.senders(), 0, "every report is older than the timeout");
+        r.situation("safety", Situation::danger(DangerLevel::Low, 0.3, 0), 2_000_000_000);
+        r.forget_stale(2_500_000_000, s);
+        assert_eq!(r.senders(), 1);
     }
 
     #[test]

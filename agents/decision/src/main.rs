@@ -102,6 +102,7 @@ impl Agent for Decision {
         if let Some((_, r)) = self.load.latest() {
             self.reports.load(r, now);
         }
+        self.reports.forget_stale(now, self.kb.decision.report_timeout);
         let facts = self.reports.facts(now, self.kb.decision.report_timeout);
         if facts != self.facts {
             tracing::debug!("situation: {facts}");

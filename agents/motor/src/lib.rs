@@ -12,11 +12,13 @@
 //! * [`weights`]: per-sender weights, from text such as `safety:2,wall-follow:1`.
 //! * [`fusion`]: the base's decision each control cycle.
 //! * [`drive`]: from (v, ω) to wheel speeds.
+//! * [`refusals`]: refused commands counted per sender, bounded.
 
 pub mod drive;
 pub mod filter;
 pub mod fusion;
 pub mod fuzzy;
+pub mod refusals;
 pub mod weights;
 
 pub use filter::{Limits, Refusal};

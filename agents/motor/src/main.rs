@@ -31,9 +31,8 @@ use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_devices::{DiffDriveGeometry, Message, Pose2, WheelCommand, wrap_angle};
 use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
-use nerve_motor::{Fusion, Limits, Weights, drive::wheel_speeds};
+use nerve_motor::{Fusion, Limits, Weights, drive::wheel_speeds, refusals::Refusals};
 use shm_schemas::payloads::{LinguisticCommand, Odometry, SafetyStop, VelocityCommand};
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -88,7 +87,7 @@ struct Motor {
     fusion: Fusion,
     odometry: nerve_devices::Odometry,
     last_report: Option<(u32, Pose2)>,
-    refusals_by_sender: BTreeMap<String, u64>,
+    refusals_by_sender: Refusals,
     last_stopped_by: Option<String>,
     was_idle: bool,
     last_step_ns: u64,
@@ -105,10 +104,9 @@ impl Motor {
         }
     }
 
-    fn refused_from(&mut self, sender: &str, what: &str, why: &dyn std::fmt::Display) {
+    fn refused_from(&mut self, sender: &str, what: &str, why: &dyn std::fmt::Display, now_ns: u64) {
         self.refused.set(self.refused.get() + 1);
-        let n = self.refusals_by_sender.entry(sender.to_owned()).or_insert(0);
-        *n += 1;
+        let n = self.refusals_by_sender.record(sender, now_ns);
         if n.is_power_of_two() {
             tracing::warn!("refused {what} from {sender} ({n} so far from it): {why}");
         }
@@ -189,7 +187,7 @@ impl Agent for Motor {
             fusion: Fusion::new(0.3),
             odometry: nerve_devices::Odometry::new(geometry, args.start.unwrap_or_default()),
             last_report: None,
-            refusals_by_sender: BTreeMap::new(),
+            refusals_by_sender: Refusals::default(),
             last_stopped_by: None,
             was_idle: true,
             last_step_ns: 0,
@@ -239,7 +237,7 @@ impl Agent for Motor {
             };
             match r {
                 Ok(()) => self.accepted.set(self.accepted.get() + 1),
-                Err((what, e)) => self.refused_from(&sender, what, &e),
+                Err((what, e)) => self.refused_from(&sender, what, &e, now),
             }
         }
         let mut stops = Vec::new();
@@ -284,13 +282,13 @@ impl Agent for Motor {
     }
 
     fn stop(&mut self, _ctx: &mut Context) {
-        if let Some(link) = &self.link {
-            if link.stats().connected {
-                link.send(WheelCommand::default().into());
-                // the device thread writes within its 20 ms poll
-                std::thread::sleep(Duration::from_millis(60));
-                tracing::info!("wheels commanded to zero");
-            }
+        if let Some(link) = &self.link
+            && link.stats().connected
+        {
+            link.send(WheelCommand::default().into());
+            // the device thread writes within its 20 ms poll
+            std::thread::sleep(Duration::from_millis(60));
+            tracing::info!("wheels commanded to zero");
         }
     }
 }
