@@ -690,8 +690,6 @@ impl State {
                     sup.next_start = None;
                 }
                 self.command(&name, &AgentCommand::Stop, AGENT_TIMEOUT)?;
-                // stopped on purpose: its next start is a fresh one
-                self.remembered.forget(&name);
                 Ok(RouterReply::Ok)
             }
             CliRequest::Supervise(spec) => {

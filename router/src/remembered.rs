@@ -8,12 +8,17 @@
 //! restarted `wall-follow` ran unsuspended in a mode that suspends it, until
 //! the next mode change.
 //!
-//! Only what the agent accepted is remembered; the last value wins. The
-//! memory lives as long as the router: a restarted router starts empty.
+//! Only what the agent accepted is remembered; the last value wins, and it
+//! wins over the new agent's command line (`--suspended`, `--period`,
+//! `--param`): an agent stopped with `nerve stop` and started again gets it
+//! too, since a robot in a mode that sets weights or suspends an agent
+//! needs them whatever way the agent came back. The router logs each value
+//! it re-applies (`re-applied to NAME: ...`); change it with `nerve resume`,
+//! `nerve rate` or `nerve param set` as usual. The memory lives as long as
+//! the router: a restarted router starts empty (the decision maker then
+//! sends its mode again).
 //!
 //! Growth is bounded:
-//! * a name's memory is dropped when `nerve stop` ends it on purpose (the
-//!   next agent of that name starts as its own command line says);
 //! * at most [`MAX_PARAMS`] parameters per name (later keys are applied to
 //!   the running agent but not remembered, with a warning);
 //! * at most [`MAX_NAMES`] names: a new name evicts the one gone longest;
@@ -116,11 +121,6 @@ impl Remembered {
         }
     }
 
-    /// Forgets `name` (stopped on purpose).
-    pub fn forget(&mut self, name: &str) {
-        self.names.remove(name);
-    }
-
     /// Forgets the names not live (`live` says which are) and not seen for
     /// [`FORGET_AFTER`] before `now`; returns them.
     pub fn forget_gone(&mut self, now: Instant, live: impl Fn(&str) -> bool) -> Vec<String> {
@@ -153,8 +153,6 @@ mod tests {
         let wf = m.get("wf").expect("wf remembered");
         assert_eq!((wf.suspended, wf.period_ns), (Some(false), Some(500_000_000)));
         assert_eq!(m.get("motor").map(|s| s.params["weights"].as_str()), Some("safety:4,tracker:0"));
-        m.forget("wf");
-        assert!(m.get("wf").is_none());
     }
 
     #[test]

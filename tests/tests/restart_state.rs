@@ -46,8 +46,8 @@ fn kill_and_wait(r: &Robot, name: &str) -> u32 {
 }
 
 /// R12: suspend, period and parameters set through the router come back
-/// when an agent of the same name is started again by hand; `nerve stop`
-/// ends that memory (the next start is a fresh one).
+/// when an agent of the same name is started again by hand, after a crash
+/// or after `nerve stop`.
 #[test]
 fn run_time_state_comes_back_to_an_agent_restarted_by_hand() {
     let r = Robot::new("byhand");
@@ -76,12 +76,20 @@ fn run_time_state_comes_back_to_an_agent_restarted_by_hand() {
     assert!(wait_until(Duration::from_secs(5), || r.agent("t2").is_some_and(|a| a["state"] == "suspended")));
     assert!(really_suspended(&r, "t2"), "t2 runs although it was suspended before its restart");
 
-    // stopped on purpose: started again, it is a fresh agent
-    r.ok(&["stop", "t1"]);
-    assert!(wait_until(Duration::from_secs(5), || r.agent("t1").is_none()));
-    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
-    std::thread::sleep(Duration::from_millis(500));
-    assert_eq!(r.ok(&["param", "get", "t1", "step"]).trim(), "1", "a stopped agent's state is forgotten");
+    // stopped and started again by hand: the same
+    r.ok(&["stop", "t2"]);
+    assert!(wait_until(Duration::from_secs(5), || r.agent("t2").is_none()));
+    r.ok(&["start", "ticker", "--name", "t2", "--period", "10ms"]);
+    assert!(wait_until(Duration::from_secs(5), || r.agent("t2").is_some_and(|a| a["state"] == "suspended")));
+    assert!(really_suspended(&r, "t2"), "t2 runs although it was suspended before it was stopped");
+    // resumed by hand, it stays resumed through the next restart
+    r.ok(&["resume", "t2"]);
+    kill_and_wait(&r, "t2");
+    r.ok(&["start", "ticker", "--name", "t2", "--period", "10ms", "--suspended"]);
+    assert!(
+        wait_until(Duration::from_secs(5), || r.agent("t2").is_some_and(|a| a["state"] == "running")),
+        "the last request (resume) wins over --suspended"
+    );
     r.down_and_check_clean();
 }
 
