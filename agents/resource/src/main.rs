@@ -169,7 +169,9 @@ impl Agent for Resource {
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
         // sysinfo reads /proc and reports nothing when it cannot: say so here
         std::fs::read_to_string("/proc/stat").map_err(|e| {
-            AgentError::Other(format!("cannot read the system's figures (/proc/stat: {e}); is /proc mounted and readable?"))
+            AgentError::Other(format!(
+                "cannot read the system's figures (/proc/stat: {e}); is /proc mounted and readable?"
+            ))
         })?;
         let sys = System::new();
         self.sys = Some(sys);
