@@ -103,6 +103,17 @@ pub const MAX_SUPERVISED: usize = 1024;
 /// How often names gone for long are looked for.
 const GC_PERIOD: Duration = Duration::from_secs(60);
 
+/// A supervision spec the router can act on: a valid agent name (it names
+/// the log file the router opens, so `../x` would write outside the robot's
+/// logs: reliability review R10) and a command line.
+fn check_supervision(spec: &shm_schemas::control::cli_to_router::Supervision) -> Result<(), RouterError> {
+    AgentName::new(&spec.name).map_err(|e| RouterError::InvalidName(format!("{:?}: {e}", spec.name)))?;
+    if spec.argv.is_empty() {
+        return Err(RouterError::NotApplicable("supervision needs a command line".into()));
+    }
+    Ok(())
+}
+
 /// Drops the supervision of names that are not live, not waiting for a
 /// restart, and gone for more than `forget_after` before `now`; returns them.
 fn forget_gone_supervision(
@@ -693,9 +704,7 @@ impl State {
                 Ok(RouterReply::Ok)
             }
             CliRequest::Supervise(spec) => {
-                if spec.argv.is_empty() {
-                    return Err(RouterError::NotApplicable("supervision needs a command line".into()));
-                }
+                check_supervision(&spec)?;
                 tracing::info!(
                     "supervising {}: restart {:?}, at most {} restarts in {:?}",
                     spec.name,
@@ -807,6 +816,18 @@ impl State {
             let stderr = agent_sdk::daemon::open_log(&log);
             let mut cmd = std::process::Command::new(&sup.spec.argv[0]);
             cmd.args(&sup.spec.argv[1..]).stdin(std::process::Stdio::null()).stdout(std::process::Stdio::null());
+            // whatever policy the router runs under (SCHED_RESET_ON_FORK covers
+            // a real-time one; SCHED_BATCH or IDLE would pass on), the agent
+            // starts under the normal one and asks for its own (R13)
+            // SAFETY: the closure runs in the child between fork and exec and
+            // only makes one system call, which is async-signal-safe.
+            unsafe {
+                std::os::unix::process::CommandExt::pre_exec(&mut cmd, || {
+                    let normal = libc::sched_param { sched_priority: 0 };
+                    libc::sched_setscheduler(0, libc::SCHED_OTHER, &normal);
+                    Ok(())
+                });
+            }
             match stderr {
                 Ok(f) => {
                     cmd.stderr(f);
@@ -923,6 +944,20 @@ mod tests {
             backoff_ns: 1_000_000,
             importance: 5,
         }
+    }
+
+    #[test]
+    fn a_supervision_name_that_is_not_an_agent_name_is_refused() {
+        assert!(check_supervision(&spec("t1")).is_ok());
+        for bad in ["../../x", "a/b", "", ".hidden"] {
+            match check_supervision(&spec(bad)) {
+                Err(RouterError::InvalidName(m)) => assert!(m.contains(&format!("{bad:?}")), "{m}"),
+                other => panic!("{bad:?} accepted: {other:?}"),
+            }
+        }
+        let mut no_argv = spec("t1");
+        no_argv.argv.clear();
+        assert!(matches!(check_supervision(&no_argv), Err(RouterError::NotApplicable(_))));
     }
 
     #[test]
