@@ -12,7 +12,7 @@
 //! points, the target and the correction jumps (`trajectories.png|svg`).
 
 use crate::DemoError;
-use crate::plot::{Figures, draw_map, err, map_size};
+use crate::plot::{Figures, err, map_chart, map_size};
 use crate::scene::Scene;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -324,23 +324,7 @@ where
     DB::ErrorType: 'static,
 {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    root.fill(&WHITE).map_err(e)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 18))
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)
-        .map_err(e)?;
-    chart
-        .configure_mesh()
-        .x_desc("x (m)")
-        .y_desc("y (m)")
-        .light_line_style(RGBColor(235, 235, 235))
-        .bold_line_style(RGBColor(215, 215, 215))
-        .draw()
-        .map_err(e)?;
-    draw_map(&mut chart, scene)?;
+    let mut chart = map_chart(&root, scene, title, 18, (xr, yr))?;
     // the planned path and its via points
     if !rec.path.is_empty() {
         let pts: Vec<(f64, f64)> = rec.path.iter().map(|p| (p.at[0], p.at[1])).collect();

@@ -117,21 +117,22 @@ where
     Ok(())
 }
 
-fn draw_trajectory<DB: DrawingBackend>(
-    root: DrawingArea<DB, Shift>,
+/// A white figure with `title` (caption font size `font`), metre axes over
+/// `(xr, yr)` and the map drawn: what every trajectory figure starts from.
+pub(crate) fn map_chart<'a, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
     scene: &Scene,
-    rows: &[TruthRow],
-    a: &Analysis,
     title: &str,
+    font: u32,
     (xr, yr): ((f64, f64), (f64, f64)),
-) -> Result<(), String>
+) -> Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>, String>
 where
     DB::ErrorType: 'static,
 {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(e)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", font))
         .margin(15)
         .x_label_area_size(40)
         .y_label_area_size(50)
@@ -145,8 +146,23 @@ where
         .bold_line_style(RGBColor(215, 215, 215))
         .draw()
         .map_err(e)?;
-
     draw_map(&mut chart, scene)?;
+    Ok(chart)
+}
+
+fn draw_trajectory<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    scene: &Scene,
+    rows: &[TruthRow],
+    a: &Analysis,
+    title: &str,
+    (xr, yr): ((f64, f64), (f64, f64)),
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let mut chart = map_chart(&root, scene, title, 20, (xr, yr))?;
     // moving objects: the person's path (and the red object's)
     for (i, o) in scene.world.objects.iter().enumerate() {
         let is_target = scene.target == Some(i);
