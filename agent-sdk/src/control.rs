@@ -10,6 +10,8 @@
 //! and this keeps every waiting side free of extra listeners.
 
 use crate::world::{Ipc, World};
+use iceoryx2::active_request::ActiveRequest;
+use iceoryx2::pending_response::PendingResponse;
 use iceoryx2::port::client::Client;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -196,31 +198,78 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
         let _ = self.server.has_requests();
     }
 
+    /// Drains the wake-ups of the listener, so that a request arriving
+    /// after this call wakes the server again. Call it before receiving.
+    pub fn drain_wakeups(&self) {
+        let _ = self.listener.try_wait(|_| {});
+    }
+
+    /// Takes the next pending request, if any, with the [`Responder`] that
+    /// answers it, now or later: a server that must ask others before it
+    /// can answer (the router) keeps the responder and goes on serving.
+    #[allow(clippy::type_complexity)]
+    pub fn receive(&self) -> Result<Option<(Result<Req, ProtocolError>, Responder<Resp>)>, ControlError> {
+        let Some(active) = self.server.receive().map_err(|e| ipc_err(&self.service, e))? else {
+            return Ok(None);
+        };
+        let req = decode::<Req>(active.payload());
+        let responder =
+            Responder { active, service: self.service.clone(), max_message: self.size.max_message, _types: PhantomData };
+        Ok(Some((req, responder)))
+    }
+
     /// Answers every pending request with `handler`; returns how many were
     /// served. A reply larger than the service carries is replaced by
     /// `handler`'s answer to [`ProtocolError::TooLarge`] (an error reply).
     pub fn serve(&self, mut handler: impl FnMut(Result<Req, ProtocolError>) -> Resp) -> Result<usize, ControlError> {
         // drain the wake-ups first, so that a request arriving while we serve wakes us again
-        let _ = self.listener.try_wait(|_| {});
+        self.drain_wakeups();
         let mut n = 0;
-        while let Some(active) = self.server.receive().map_err(|e| ipc_err(&self.service, e))? {
-            let reply = handler(decode::<Req>(active.payload()));
-            let mut bytes = encode(&reply);
-            if let Some(max) = self.size.max_message.filter(|&m| bytes.len() > m) {
-                tracing::warn!(service = %self.service, "a reply of {} bytes exceeds the service's {max}", bytes.len());
-                bytes = encode(&handler(Err(ProtocolError::TooLarge { bytes: bytes.len(), max })));
-            }
-            match active.loan_slice_uninit(bytes.len()) {
-                Ok(resp) => {
-                    if let Err(e) = resp.write_from_slice(&bytes).send() {
-                        tracing::warn!(service = %self.service, "could not send a reply: {e:?}");
-                    }
-                }
-                Err(e) => tracing::warn!(service = %self.service, "could not loan a reply: {e:?}"),
-            }
+        while let Some((req, responder)) = self.receive()? {
+            let reply = handler(req);
+            responder.respond_or(&reply, |e| handler(Err(e)));
             n += 1;
         }
         Ok(n)
+    }
+}
+
+/// A request taken by a [`ControlServer`] and not answered yet.
+///
+/// Dropping it unanswered tells the caller nothing until its time-out: answer
+/// every request, with an error reply if need be.
+#[derive(Debug)]
+pub struct Responder<Resp> {
+    active: ActiveRequest<Ipc, Bytes, (), Bytes, ()>,
+    service: String,
+    max_message: Option<usize>,
+    _types: PhantomData<fn(Resp)>,
+}
+
+impl<Resp: Serialize> Responder<Resp> {
+    /// Whether the caller still waits for the answer (it has not given up
+    /// or gone).
+    pub fn is_connected(&self) -> bool {
+        self.active.is_connected()
+    }
+
+    /// Sends `reply`; a reply larger than the service carries is replaced by
+    /// `too_large`'s answer to [`ProtocolError::TooLarge`]. Failures to send
+    /// are logged: the caller's time-out tells it.
+    pub fn respond_or(self, reply: &Resp, too_large: impl FnOnce(ProtocolError) -> Resp) {
+        let mut bytes = encode(reply);
+        if let Some(max) = self.max_message.filter(|&m| bytes.len() > m) {
+            tracing::warn!(service = %self.service, bytes = bytes.len(), max, "a reply exceeds the service's limit");
+            bytes = encode(&too_large(ProtocolError::TooLarge { bytes: bytes.len(), max }));
+        }
+        match self.active.loan_slice_uninit(bytes.len()) {
+            Ok(resp) => {
+                if let Err(e) = resp.write_from_slice(&bytes).send() {
+                    tracing::warn!(service = %self.service, "could not send a reply: {e:?}");
+                }
+            }
+            Err(e) => tracing::warn!(service = %self.service, "could not loan a reply: {e:?}"),
+        }
     }
 }
 
@@ -306,19 +355,14 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
     /// Sends the request once and waits for the reply; `None` when no server
     /// took it (none connected, or the request was dropped unanswered).
     fn attempt(&self, bytes: &[u8], start: Instant, timeout: Duration) -> Result<Option<Resp>, ControlError> {
-        let loan = self.client.loan_slice_uninit(bytes.len()).map_err(|e| ipc_err(&self.service, e))?;
-        let pending = loan.write_from_slice(bytes).send().map_err(|e| ipc_err(&self.service, e))?;
-        if pending.number_of_server_connections() == 0 {
-            return Ok(None);
-        }
-        self.notifier.notify().map_err(|e| ipc_err(&self.service, e))?;
+        let Some(pending) = self.send_bytes(bytes)? else { return Ok(None) };
         let mut backoff = Duration::from_micros(10);
         loop {
-            if let Some(resp) = pending.receive().map_err(|e| ipc_err(&self.service, e))? {
-                return Ok(Some(decode::<Resp>(resp.payload())?));
-            }
-            if !pending.is_connected() {
-                return Ok(None);
+            match pending.poll() {
+                Ok(Some(resp)) => return Ok(Some(resp)),
+                Ok(None) => {}
+                Err(ControlError::NoServer { .. }) => return Ok(None),
+                Err(e) => return Err(e),
             }
             if start.elapsed() > timeout {
                 return Err(ControlError::Timeout { service: self.service.clone(), timeout });
@@ -326,6 +370,51 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
             std::thread::sleep(backoff);
             backoff = (backoff * 2).min(MAX_POLL_INTERVAL);
         }
+    }
+
+    /// Sends `req` and returns at once: the reply is picked up later with
+    /// [`PendingCall::poll`]. [`ControlError::NoServer`] when no server took
+    /// the request (none is connected); a caller that sends to a server it
+    /// has just seen appear may send again (see [`ControlClient::call`]).
+    pub fn send(&self, req: &Req) -> Result<PendingCall<Resp>, ControlError> {
+        let bytes = encode(req);
+        if let Some(max) = self.size.max_message.filter(|&m| bytes.len() > m) {
+            return Err(ControlError::TooLarge { service: self.service.clone(), bytes: bytes.len(), max });
+        }
+        self.send_bytes(&bytes)?.ok_or_else(|| ControlError::NoServer { service: self.service.clone() })
+    }
+
+    fn send_bytes(&self, bytes: &[u8]) -> Result<Option<PendingCall<Resp>>, ControlError> {
+        let loan = self.client.loan_slice_uninit(bytes.len()).map_err(|e| ipc_err(&self.service, e))?;
+        let pending = loan.write_from_slice(bytes).send().map_err(|e| ipc_err(&self.service, e))?;
+        if pending.number_of_server_connections() == 0 {
+            return Ok(None);
+        }
+        self.notifier.notify().map_err(|e| ipc_err(&self.service, e))?;
+        Ok(Some(PendingCall { pending, service: self.service.clone(), _types: PhantomData }))
+    }
+}
+
+/// A request sent and not answered yet.
+#[derive(Debug)]
+pub struct PendingCall<Resp> {
+    pending: PendingResponse<Ipc, Bytes, (), Bytes, ()>,
+    service: String,
+    _types: PhantomData<fn() -> Resp>,
+}
+
+impl<Resp: DeserializeOwned> PendingCall<Resp> {
+    /// The reply if it has come; [`ControlError::NoServer`] when the server
+    /// is gone or dropped the request unanswered. Dropping the call
+    /// abandons it.
+    pub fn poll(&self) -> Result<Option<Resp>, ControlError> {
+        if let Some(resp) = self.pending.receive().map_err(|e| ipc_err(&self.service, e))? {
+            return Ok(Some(decode::<Resp>(resp.payload())?));
+        }
+        if !self.pending.is_connected() {
+            return Err(ControlError::NoServer { service: self.service.clone() });
+        }
+        Ok(None)
     }
 }
 

@@ -5,8 +5,9 @@
 //! The router writes through a [`Writer`] thread: the two fsyncs take tens of
 //! milliseconds on a busy disk, and a router blocked in them made the next
 //! `nerve connect` (or a decision maker's rewiring) wait. The thread writes
-//! the newest list it has been given, skipping lists overtaken meanwhile,
-//! and is flushed when the router stops.
+//! the newest body it has been given for each file, skipping bodies
+//! overtaken meanwhile, and is flushed when the router stops. It writes the
+//! supervision list ([`crate::supervision`]) the same way.
 //!
 //! A file that cannot be read (corrupt, truncated, a hand edit gone wrong, a
 //! version this router does not know) does not keep the router from
@@ -122,22 +123,31 @@ impl Store {
         }
     }
 
+    /// The file's bytes for `connections`.
+    pub fn encode(connections: &[Connection]) -> Vec<u8> {
+        serde_json::to_vec_pretty(&File { version: FILE_VERSION, connections: connections.to_vec() })
+            .unwrap_or_default()
+    }
+
     /// Saves the list atomically.
     pub fn save(&self, connections: &[Connection]) -> std::io::Result<()> {
-        let dir = self.path.parent().unwrap_or(Path::new("."));
-        std::fs::create_dir_all(dir)?;
-        let body = serde_json::to_vec_pretty(&File { version: FILE_VERSION, connections: connections.to_vec() })
-            .map_err(std::io::Error::other)?;
-        write_private(&self.path, &body)?;
-        std::fs::File::open(dir)?.sync_all()?;
-        Ok(())
+        write_atomic(&self.path, &Self::encode(connections))
     }
+}
+
+/// Writes `path` atomically and durably: [`write_private`], then a sync of
+/// its directory so that the rename survives a power cut.
+pub fn write_atomic(path: &Path, body: &[u8]) -> std::io::Result<()> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)?;
+    write_private(path, body)?;
+    std::fs::File::open(dir)?.sync_all()
 }
 
 /// Writes `path` atomically: a fresh temporary name beside it, created
 /// exclusively, never through a symlink, readable by its owner only, synced,
 /// then renamed over `path` (review R1, R11d, R24).
-fn write_private(path: &Path, body: &[u8]) -> std::io::Result<()> {
+pub(crate) fn write_private(path: &Path, body: &[u8]) -> std::io::Result<()> {
     use std::os::unix::fs::OpenOptionsExt;
     let tmp = path.with_extension(format!(
         "{}.{}.tmp",
@@ -158,39 +168,74 @@ fn write_private(path: &Path, body: &[u8]) -> std::io::Result<()> {
     std::fs::rename(&tmp, path)
 }
 
-/// Saves connection lists on a thread of its own, newest first.
+/// What the writer thread does to one file.
+#[derive(Debug)]
+enum Job {
+    /// Write this body atomically.
+    Write(Vec<u8>),
+    /// Remove the file.
+    Remove,
+}
+
+/// Saves files on a thread of its own, the newest body of each file only.
 #[derive(Debug)]
 pub struct Writer {
-    tx: Option<std::sync::mpsc::Sender<Vec<Connection>>>,
+    tx: Option<std::sync::mpsc::Sender<(PathBuf, Job)>>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
 impl Writer {
-    /// Starts the thread that saves into `store`.
-    pub fn start(store: Store) -> std::io::Result<Self> {
-        let (tx, rx) = std::sync::mpsc::channel::<Vec<Connection>>();
+    /// Starts the thread.
+    pub fn start() -> std::io::Result<Self> {
+        let (tx, rx) = std::sync::mpsc::channel::<(PathBuf, Job)>();
         let thread = std::thread::Builder::new().name("persist".into()).spawn(move || {
-            while let Ok(mut list) = rx.recv() {
-                // a newer list makes the older ones pointless
-                while let Ok(newer) = rx.try_recv() {
-                    list = newer;
+            while let Ok(first) = rx.recv() {
+                // a newer body of a file makes the older ones pointless; the
+                // order of files is kept
+                let mut batch: Vec<(PathBuf, Job)> = vec![first];
+                while let Ok((path, job)) = rx.try_recv() {
+                    match batch.iter_mut().find(|(p, _)| *p == path) {
+                        Some(slot) => slot.1 = job,
+                        None => batch.push((path, job)),
+                    }
                 }
-                if let Err(e) = store.save(&list) {
-                    tracing::error!("cannot save the connection list to {}: {e}", store.path().display());
+                for (path, job) in batch {
+                    let done = match job {
+                        Job::Write(body) => write_atomic(&path, &body),
+                        Job::Remove => match std::fs::remove_file(&path) {
+                            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+                            _ => Ok(()),
+                        },
+                    };
+                    if let Err(e) = done {
+                        tracing::error!(file = %path.display(), "cannot save: {e}");
+                    }
                 }
             }
         })?;
         Ok(Writer { tx: Some(tx), thread: Some(thread) })
     }
 
-    /// Queues `list` to be saved.
-    pub fn save(&self, list: Vec<Connection>) {
+    /// Queues the connection list `list` to be saved into `store`.
+    pub fn save(&self, store: &Store, list: &[Connection]) {
+        self.write(store.path(), Store::encode(list));
+    }
+
+    /// Queues `body` to be written atomically to `path`.
+    pub fn write(&self, path: &Path, body: Vec<u8>) {
         if let Some(tx) = &self.tx {
-            let _ = tx.send(list);
+            let _ = tx.send((path.to_owned(), Job::Write(body)));
         }
     }
 
-    /// Waits until every queued list is saved.
+    /// Queues the removal of `path`.
+    pub fn remove(&self, path: &Path) {
+        if let Some(tx) = &self.tx {
+            let _ = tx.send((path.to_owned(), Job::Remove));
+        }
+    }
+
+    /// Waits until every queued file is saved.
     pub fn flush(&mut self) {
         self.tx.take();
         if let Some(t) = self.thread.take() {
@@ -279,9 +324,12 @@ mod tests {
     fn writer_saves_the_newest_list_and_flushes() {
         let dir = std::env::temp_dir().join(format!("nerve-store-writer-{}", std::process::id()));
         let store = Store::new(&dir);
-        let mut w = Writer::start(store.clone()).expect("thread");
+        let mut w = Writer::start().expect("thread");
         for i in 0..20 {
-            w.save(vec![Connection { from: format!("a{i}/out"), to: "b/in".into(), type_name: "nerve::Tick".into() }]);
+            w.save(
+                &store,
+                &[Connection { from: format!("a{i}/out"), to: "b/in".into(), type_name: "nerve::Tick".into() }],
+            );
         }
         w.flush();
         let got = store.load().expect("load");

@@ -1,0 +1,231 @@
+//! Commands to agents, sent without waiting: the router never blocks on an
+//! agent (reliability review R5, F2c).
+//!
+//! Each agent has a link: its control client, a queue of commands and at
+//! most one command in flight, so that an agent sees its commands in the
+//! order they were given. [`Calls::pump`] sends what is queued, collects
+//! the replies that have come and times out the calls that waited too long;
+//! the serving loop calls it on every pass. A hung agent therefore delays
+//! its own commands only: `ps`, `connect` of other agents, registrations
+//! and the liveness check go on.
+//!
+//! When a call to an agent times out, the commands queued behind it fail at
+//! once with the same cause instead of waiting their own time-outs: an
+//! agent that did not answer one command is not expected to answer the next.
+
+use agent_sdk::control::{ControlClient, ControlError, ControlSize, PendingCall};
+use agent_sdk::world::{Ipc, World};
+use iceoryx2::prelude::Node;
+use shm_schemas::AgentName;
+use shm_schemas::control::cli_to_router::RouterError;
+use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
+use std::collections::{BTreeMap, VecDeque};
+use std::time::{Duration, Instant};
+
+/// Names one command given to [`Calls::submit`]; its [`Outcome`] carries it.
+pub type Ticket = u64;
+
+/// How a command ended.
+#[derive(Debug)]
+pub struct Outcome {
+    /// the command's ticket
+    pub ticket: Ticket,
+    /// the agent it was sent to
+    pub agent: String,
+    /// its reply, or why there is none
+    pub result: Result<AgentReply, RouterError>,
+}
+
+#[derive(Debug)]
+struct Queued {
+    ticket: Ticket,
+    cmd: AgentCommand,
+    timeout: Duration,
+}
+
+#[derive(Debug)]
+struct InFlight {
+    queued: Queued,
+    call: PendingCall<AgentReply>,
+    sent: Instant,
+    /// sent again through a reopened client already
+    retried: bool,
+}
+
+#[derive(Debug, Default)]
+struct Link {
+    client: Option<ControlClient<AgentCommand, AgentReply>>,
+    /// open the client afresh before the next send
+    reopen: bool,
+    queue: VecDeque<Queued>,
+    in_flight: Option<InFlight>,
+}
+
+/// The router's commands to its agents.
+#[derive(Debug, Default)]
+pub struct Calls {
+    links: BTreeMap<String, Link>,
+    next: Ticket,
+}
+
+fn unreachable(name: &str, detail: impl Into<String>) -> RouterError {
+    RouterError::AgentUnreachable { name: name.into(), detail: detail.into() }
+}
+
+fn outcome_of(name: &str, reply: AgentReply) -> Result<AgentReply, RouterError> {
+    match reply {
+        AgentReply::Error(message) => Err(RouterError::AgentRefused { name: name.into(), message }),
+        reply => Ok(reply),
+    }
+}
+
+impl Calls {
+    /// Queues `cmd` for the agent `name`; its outcome comes from a later
+    /// [`Calls::pump`], `timeout` after it is sent at the latest.
+    pub fn submit(&mut self, name: &str, cmd: AgentCommand, timeout: Duration) -> Ticket {
+        self.next = self.next.wrapping_add(1);
+        let ticket = self.next;
+        self.links.entry(name.to_owned()).or_default().queue.push_back(Queued { ticket, cmd, timeout });
+        ticket
+    }
+
+    /// An agent of this name registered (again): its next command goes
+    /// through a freshly opened client, bound to the new instance's service.
+    pub fn registered(&mut self, name: &str) {
+        if let Some(link) = self.links.get_mut(name) {
+            link.reopen = true;
+        }
+    }
+
+    /// The agent is gone for good: drops its client once nothing is pending.
+    pub fn left(&mut self, name: &str) {
+        if self.links.get(name).is_some_and(|l| l.in_flight.is_none() && l.queue.is_empty()) {
+            self.links.remove(name);
+        }
+    }
+
+    /// Whether a command is queued or waits for its reply.
+    pub fn busy(&self) -> bool {
+        self.links.values().any(|l| l.in_flight.is_some() || !l.queue.is_empty())
+    }
+
+    /// Sends what can be sent, collects replies and time-outs.
+    pub fn pump(&mut self, world: &World, node: &Node<Ipc>, now: Instant) -> Vec<Outcome> {
+        let mut out = Vec::new();
+        for (name, link) in self.links.iter_mut() {
+            // at most a few rounds: a reply, then the next command sent
+            for _ in 0..4 {
+                if !link.step(name, world, node, now, &mut out) {
+                    break;
+                }
+            }
+        }
+        self.links.retain(|_, l| l.client.is_some() || l.in_flight.is_some() || !l.queue.is_empty());
+        out
+    }
+}
+
+impl Link {
+    /// One step of this link; whether another may make progress.
+    fn step(&mut self, name: &str, world: &World, node: &Node<Ipc>, now: Instant, out: &mut Vec<Outcome>) -> bool {
+        if let Some(f) = self.in_flight.take() {
+            match f.call.poll() {
+                Ok(Some(reply)) => {
+                    out.push(Outcome { ticket: f.queued.ticket, agent: name.into(), result: outcome_of(name, reply) });
+                    return true;
+                }
+                Ok(None) if now.saturating_duration_since(f.sent) > f.queued.timeout => {
+                    let detail = format!("no reply within {:?}", f.queued.timeout);
+                    tracing::warn!(agent = name, command = ?f.queued.cmd, "the agent did not answer in time");
+                    out.push(Outcome { ticket: f.queued.ticket, agent: name.into(), result: Err(unreachable(name, &detail)) });
+                    for q in self.queue.drain(..) {
+                        let detail = format!("it did not answer the command before this one ({detail})");
+                        out.push(Outcome { ticket: q.ticket, agent: name.into(), result: Err(unreachable(name, detail)) });
+                    }
+                    return false;
+                }
+                Ok(None) => {
+                    self.in_flight = Some(f);
+                    return false;
+                }
+                Err(ControlError::NoServer { .. }) if !f.retried => {
+                    // The client was opened while the agent's previous
+                    // instance (same name) was still leaving, and may be bound
+                    // to the service it tore down: open it afresh and try once
+                    // more (seen about once in 40 hot-add/stop cycles).
+                    self.reopen = true;
+                    return self.send(name, f.queued, true, world, node, now, out);
+                }
+                Err(e) => {
+                    out.push(Outcome {
+                        ticket: f.queued.ticket,
+                        agent: name.into(),
+                        result: Err(unreachable(name, e.to_string())),
+                    });
+                    return true;
+                }
+            }
+        }
+        let Some(q) = self.queue.pop_front() else { return false };
+        self.send(name, q, false, world, node, now, out)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn send(
+        &mut self,
+        name: &str,
+        q: Queued,
+        retried: bool,
+        world: &World,
+        node: &Node<Ipc>,
+        now: Instant,
+        out: &mut Vec<Outcome>,
+    ) -> bool {
+        if self.reopen || self.client.is_none() {
+            self.reopen = false;
+            self.client = open(name, world, node);
+        }
+        let Some(client) = &self.client else {
+            out.push(Outcome { ticket: q.ticket, agent: name.into(), result: Err(unreachable(name, "its control service is missing")) });
+            return true;
+        };
+        match client.send(&q.cmd) {
+            Ok(call) => {
+                self.in_flight = Some(InFlight { queued: q, call, sent: now, retried });
+                true
+            }
+            Err(ControlError::NoServer { .. }) if !retried => {
+                self.reopen = true;
+                self.send(name, q, true, world, node, now, out)
+            }
+            Err(e) => {
+                out.push(Outcome { ticket: q.ticket, agent: name.into(), result: Err(unreachable(name, e.to_string())) });
+                true
+            }
+        }
+    }
+}
+
+/// Opens the control client of `name`, cleaning up after dead processes
+/// once if every client slot seems taken.
+fn open(name: &str, world: &World, node: &Node<Ipc>) -> Option<ControlClient<AgentCommand, AgentReply>> {
+    let agent = AgentName::new(name).ok()?;
+    let service = world.robot().ctl_service(&agent);
+    let mut opened = ControlClient::open_reserved(node, &service, ControlSize::AGENT);
+    if matches!(opened, Err(ControlError::Ipc { .. } | ControlError::Full { .. })) {
+        // Every client slot may be taken, some by tools that were
+        // killed: clean the ports of dead processes and try once more.
+        let cleaned = world.cleanup_dead_nodes();
+        if cleaned > 0 {
+            tracing::info!(agent = name, cleaned, "cleaned the shared-memory resources of dead nodes to reach the agent");
+        }
+        opened = ControlClient::open_reserved(node, &service, ControlSize::AGENT);
+    }
+    match opened {
+        Ok(c) => Some(c),
+        Err(e) => {
+            tracing::warn!(agent = name, "cannot open the agent's control service: {e}");
+            None
+        }
+    }
+}

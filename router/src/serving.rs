@@ -1,0 +1,606 @@
+//! What each request does. The router's state ([`State`]) and its answer to
+//! every request, agent or command line.
+//!
+//! A request the router can answer from what it knows (register, `Supervise`,
+//! a refused `connect`) is answered at once. One that needs agents becomes a
+//! [`Job`]: its commands go out through [`Calls`], the job keeps the
+//! caller's [`Responder`], and it is answered when the last outcome is in.
+//! Nothing here waits, so a hung agent delays its own commands only
+//! (reliability review R5, F2c).
+//!
+//! What the router records follows what the agents did, not what was asked
+//! (F2d, F2e): an edge leaves the list when its input agent has let go of
+//! it (or is not running), a `Suspend` marks the agent suspended when it
+//! obeyed, and a `Stop` cancels the agent's restarts only when it obeyed.
+
+use crate::calls::{Calls, Outcome, Ticket};
+use crate::registry::Registry;
+use crate::remembered::{self, FORGET_AFTER, Remembered};
+use crate::store::{Connection, Store, Writer};
+use crate::supervision::{Exit, Supervisor};
+use crate::wiring::Wiring;
+use crate::{AGENT_TIMEOUT, STATS_TIMEOUT};
+use agent_sdk::control::Responder;
+use agent_sdk::world::{Ipc, World, pid_alive};
+use iceoryx2::prelude::Node;
+use shm_schemas::control::ProtocolError;
+use shm_schemas::control::agent_to_router::{AgentToRouter, Registration, TaskKind};
+use shm_schemas::control::cli_to_router::{
+    AgentState, AgentView, CliRequest, GraphView, RouterError, RouterReply, RouterRequest,
+};
+use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
+use shm_schemas::stats::AgentStats;
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+/// How often names gone for long are looked for.
+const GC_PERIOD: Duration = Duration::from_secs(60);
+/// How long `nerve kill` waits for the process to be gone.
+const KILL_WAIT: Duration = Duration::from_millis(500);
+
+/// What a job does when its outcomes are in.
+#[derive(Debug)]
+enum Work {
+    /// `ps` or `graph`: statistics of every live agent
+    Views { graph: bool, asked: BTreeMap<Ticket, String> },
+    /// `connect`: the input agent subscribed
+    Connect { conn: Connection },
+    /// `disconnect`: the input agent let go
+    Disconnect { conn: Connection },
+    /// `rate`, `suspend`, `resume`, `param get/set`, `stop`
+    Command { name: String, what: Asked },
+    /// `kill`: the process is gone
+    Kill { name: String, pid: u32, until: Instant },
+    /// re-applying remembered state or a connection to a re-registered
+    /// agent: logged, nobody waits
+    Background { name: String, what: String, effect: Asked },
+}
+
+/// A command whose success changes what the router records.
+#[derive(Debug, Clone)]
+enum Asked {
+    Rate(u64),
+    Suspend,
+    Resume,
+    ParamGet,
+    ParamSet { key: String, value: String },
+    Stop,
+    /// nothing to record
+    Nothing,
+}
+
+/// A request waiting for agents.
+#[derive(Debug)]
+pub struct Job {
+    reply: Option<Responder<RouterReply>>,
+    waiting: Vec<Ticket>,
+    outcomes: Vec<Outcome>,
+    work: Work,
+}
+
+/// Everything the router knows.
+pub struct State {
+    pub(crate) world: World,
+    pub(crate) node: Node<Ipc>,
+    pub(crate) epoch: u64,
+    pub(crate) registry: Registry,
+    pub(crate) wiring: Wiring,
+    pub(crate) store: Store,
+    pub(crate) writer: Writer,
+    pub(crate) supervisor: Supervisor,
+    pub(crate) remembered: Remembered,
+    pub(crate) calls: Calls,
+    pub(crate) jobs: Vec<Job>,
+    pub(crate) shutdown: bool,
+    pub(crate) last_gc: Instant,
+}
+
+/// The answer to a request the router cannot decode.
+pub fn protocol_error(e: ProtocolError) -> RouterReply {
+    RouterReply::Error(RouterError::Internal(e.to_string()))
+}
+
+fn answer(reply: Option<Responder<RouterReply>>, r: Result<RouterReply, RouterError>) {
+    if let Some(responder) = reply {
+        let r = r.unwrap_or_else(RouterReply::Error);
+        responder.respond_or(&r, protocol_error);
+    }
+}
+
+impl State {
+    /// Takes a request: answers it, or makes it a job.
+    pub fn accept(&mut self, req: Result<RouterRequest, ProtocolError>, responder: Responder<RouterReply>) {
+        let req = match req {
+            Ok(r) => r,
+            Err(e) => return responder.respond_or(&protocol_error(e), protocol_error),
+        };
+        match req {
+            RouterRequest::Agent(AgentToRouter::Register(reg)) => {
+                let reply = self.register(reg);
+                responder.respond_or(&reply, protocol_error);
+            }
+            RouterRequest::Agent(AgentToRouter::Unregister { name, pid }) => {
+                if self.registry.unregister(&name, pid) {
+                    tracing::info!(agent = %name, pid, "agent {name} (pid {pid}) left");
+                    self.calls.left(&name);
+                    self.exited(&name, false);
+                }
+                responder.respond_or(&RouterReply::Ok, protocol_error);
+            }
+            RouterRequest::Cli(cli) => match self.cli(cli) {
+                Ok(Started::Answer(reply)) => responder.respond_or(&reply, protocol_error),
+                Ok(Started::Job(mut job)) => {
+                    job.reply = Some(responder);
+                    self.jobs.push(job);
+                }
+                Err(e) => responder.respond_or(&RouterReply::Error(e), protocol_error),
+            },
+        }
+    }
+
+    fn register(&mut self, reg: Registration) -> RouterReply {
+        let name = reg.name.clone();
+        let summary = format!(
+            "kind {}, pid {}, {}, inputs [{}], outputs [{}]",
+            reg.kind,
+            reg.pid,
+            reg.task,
+            reg.inputs.iter().map(|p| format!("{}: {}", p.name, p.type_name)).collect::<Vec<_>>().join(", "),
+            reg.outputs.iter().map(|p| format!("{}: {}", p.name, p.type_name)).collect::<Vec<_>>().join(", ")
+        );
+        let pid = reg.pid;
+        if let Err(e) = self.registry.register(reg) {
+            return RouterReply::Error(e);
+        }
+        tracing::info!(agent = %name, pid, "agent {name} registered: {summary}");
+        self.supervisor.registered(&name);
+        self.calls.registered(&name);
+        // Sent after this reply, by the next pump: the agent goes on starting
+        // its threads meanwhile.
+        self.reapply(&name);
+        self.rewire(&name);
+        RouterReply::Registered { epoch: self.epoch }
+    }
+
+    /// Queues what was set at run time for an earlier agent of this name:
+    /// a suspend first (so that it does not run meanwhile), then parameters
+    /// and period, a resume last.
+    fn reapply(&mut self, name: &str) {
+        let Some(mem) = self.remembered.get(name).cloned() else { return };
+        let Some(entry) = self.registry.get(name) else { return };
+        let registered_suspended = entry.state == AgentState::Suspended;
+        let registered_period = entry.reg.period_ns;
+        let mut todo = Vec::new();
+        if mem.suspended == Some(true) && !registered_suspended {
+            todo.push((AgentCommand::Suspend, "suspend".to_owned(), Asked::Suspend));
+        }
+        for (key, value) in &mem.params {
+            todo.push((
+                AgentCommand::ParamSet { key: key.clone(), value: value.clone() },
+                format!("{key} = {value}"),
+                Asked::Nothing,
+            ));
+        }
+        if let Some(period_ns) = mem.period_ns.filter(|p| Some(*p) != registered_period) {
+            let what = format!("period {}", agent_sdk::clock::format_duration(Duration::from_nanos(period_ns)));
+            todo.push((AgentCommand::SetPeriod { period_ns }, what, Asked::Rate(period_ns)));
+        }
+        if mem.suspended == Some(false) && registered_suspended {
+            todo.push((AgentCommand::Resume, "resume".to_owned(), Asked::Resume));
+        }
+        for (cmd, what, effect) in todo {
+            let ticket = self.calls.submit(name, cmd, AGENT_TIMEOUT);
+            let work = Work::Background { name: name.into(), what: format!("re-applied to {name}: {what}"), effect };
+            self.jobs.push(Job { reply: None, waiting: vec![ticket], outcomes: vec![], work });
+        }
+    }
+
+    /// Queues every stored connection that involves `name` and whose other end is live.
+    fn rewire(&mut self, name: &str) {
+        let registry = &self.registry;
+        for c in self.wiring.involving(name, |a| registry.contains(a)) {
+            let (agent, cmd) = Wiring::connect_command(&c);
+            let ticket = self.calls.submit(&agent, cmd, AGENT_TIMEOUT);
+            let work = Work::Background { name: agent, what: format!("rewired {} -> {}", c.from, c.to), effect: Asked::Nothing };
+            self.jobs.push(Job { reply: None, waiting: vec![ticket], outcomes: vec![], work });
+        }
+    }
+
+    /// A supervised agent exited (`failure`: died without leaving cleanly).
+    fn exited(&mut self, name: &str, failure: bool) {
+        let exit = if self.shutdown { Exit::Left } else { self.supervisor.exited(name, failure, Instant::now()) };
+        match exit {
+            Exit::Left => {}
+            Exit::Restart(delay) => {
+                let s = self.supervisor.get(name);
+                tracing::warn!(
+                    agent = name,
+                    ?delay,
+                    "restarting {name} in {delay:?} (at most {} restarts within {:?})",
+                    s.map_or(0, |s| s.spec.max_restarts),
+                    s.map_or(Duration::ZERO, |s| Duration::from_nanos(s.spec.window_ns))
+                );
+            }
+            Exit::Failed { restarts, window } => {
+                tracing::error!(
+                    agent = name,
+                    restarts,
+                    "agent {name} failed: {restarts} restarts within {window:?}; not restarting it (see its log, fix it, then `nerve start` it or launch again)"
+                );
+                self.supervisor.persist(&self.writer);
+            }
+        }
+    }
+
+    /// Removes dead agents from the registry and cleans their resources.
+    pub fn check_liveness(&mut self) {
+        let dead = self.registry.dead();
+        if dead.is_empty() {
+            return;
+        }
+        for (name, pid) in &dead {
+            tracing::warn!(agent = %name, pid, "agent {name} (pid {pid}) died; its connections are kept for its restart");
+            self.calls.left(name);
+            self.exited(name, true);
+        }
+        let cleaned = self.world.cleanup_dead_nodes();
+        if cleaned > 0 {
+            tracing::info!(cleaned, "cleaned the shared-memory resources of {cleaned} dead node(s)");
+        }
+    }
+
+    /// Starts the supervised agents whose back-off has passed, and counts
+    /// as dead those an earlier router expected and that never came back.
+    pub fn run_restarts(&mut self) {
+        self.supervisor.reap();
+        let now = Instant::now();
+        let registry = &self.registry;
+        for name in self.supervisor.missing(now, |n| registry.contains(n)) {
+            tracing::warn!(agent = %name, "{name} was running under the previous router and has not come back");
+            self.exited(&name, true);
+        }
+        let registry = &self.registry;
+        for (name, argv, restart) in self.supervisor.due(now, |n| registry.contains(n)) {
+            let log = self.world.log_file(&name);
+            self.supervisor.spawn(&name, &argv, &log, restart);
+        }
+    }
+
+    /// Drops the remembered state and the supervision of names gone for
+    /// [`FORGET_AFTER`]; keeps the time live names were last seen.
+    pub fn forget_gone(&mut self) {
+        let now = Instant::now();
+        for (name, _) in self.registry.iter() {
+            self.remembered.seen(name, now);
+            self.supervisor.seen(name, now);
+        }
+        if now.duration_since(self.last_gc) < GC_PERIOD {
+            return;
+        }
+        self.last_gc = now;
+        let registry = &self.registry;
+        for name in self.remembered.forget_gone(now, |n| registry.contains(n)) {
+            tracing::info!(agent = %name, "forgot the run-time state of {name}: gone for more than {FORGET_AFTER:?}");
+        }
+        let gone = self.supervisor.forget_gone(now, FORGET_AFTER, |n| registry.contains(n));
+        for name in &gone {
+            tracing::info!(agent = %name, "stopped supervising {name}: gone for more than {FORGET_AFTER:?}");
+        }
+        if !gone.is_empty() {
+            self.supervisor.persist(&self.writer);
+        }
+    }
+
+    /// Hands the connection list to the writer thread, which saves it off
+    /// the request path (its fsyncs take 10-60 ms on a busy disk).
+    fn persist_wiring(&self) {
+        self.writer.save(&self.store, self.wiring.list());
+    }
+
+    /// Whether jobs wait for something the loop must look at soon.
+    pub fn busy(&self) -> bool {
+        self.calls.busy() || self.jobs.iter().any(|j| matches!(j.work, Work::Kill { .. }))
+    }
+
+    fn submit(&mut self, name: &str, cmd: AgentCommand, timeout: Duration) -> Result<Ticket, RouterError> {
+        self.registry.live(name)?;
+        Ok(self.calls.submit(name, cmd, timeout))
+    }
+
+    fn cli(&mut self, req: CliRequest) -> Result<Started, RouterError> {
+        // answer from a registry without dead agents (a few /proc reads)
+        self.check_liveness();
+        let command = |s: &mut Self, name: String, cmd: AgentCommand, what: Asked| -> Result<Started, RouterError> {
+            let ticket = s.submit(&name, cmd, AGENT_TIMEOUT)?;
+            Ok(Started::waiting(vec![ticket], Work::Command { name, what }))
+        };
+        match req {
+            CliRequest::Ps | CliRequest::Graph => {
+                let graph = matches!(req, CliRequest::Graph);
+                let names: Vec<String> = self.registry.iter().map(|(n, _)| n.clone()).collect();
+                let mut asked = BTreeMap::new();
+                for name in names {
+                    let ticket = self.calls.submit(&name, AgentCommand::Stats, STATS_TIMEOUT);
+                    asked.insert(ticket, name);
+                }
+                Ok(Started::waiting(asked.keys().copied().collect(), Work::Views { graph, asked }))
+            }
+            CliRequest::Connect { from, to } => {
+                let from_type = self.registry.port_type(&from, true)?;
+                let to_type = self.registry.port_type(&to, false)?;
+                if from_type != to_type {
+                    return Err(RouterError::TypeMismatch {
+                        from: from.to_string(),
+                        from_type,
+                        to: to.to_string(),
+                        to_type,
+                    });
+                }
+                let conn = Connection { from: from.to_string(), to: to.to_string(), type_name: from_type };
+                let (agent, cmd) = Wiring::connect_command(&conn);
+                let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
+                Ok(Started::waiting(vec![ticket], Work::Connect { conn }))
+            }
+            CliRequest::Disconnect { from, to } => {
+                let (f, t) = (from.to_string(), to.to_string());
+                let Some(conn) = self.wiring.find(&f, &t).cloned() else {
+                    return Err(RouterError::NotConnected { from: f, to: t });
+                };
+                if !self.registry.contains(to.agent.as_str()) {
+                    // nobody reads it: the list is the whole truth
+                    self.wiring.remove(&f, &t);
+                    self.persist_wiring();
+                    tracing::info!(from = %f, to = %t, "disconnected {f} -> {t}");
+                    return Ok(Started::Answer(RouterReply::Ok));
+                }
+                let (agent, cmd) = Wiring::disconnect_command(&conn);
+                let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
+                Ok(Started::waiting(vec![ticket], Work::Disconnect { conn }))
+            }
+            CliRequest::Rate { name, period_ns } => {
+                command(self, name, AgentCommand::SetPeriod { period_ns }, Asked::Rate(period_ns))
+            }
+            CliRequest::Suspend { name } => command(self, name, AgentCommand::Suspend, Asked::Suspend),
+            CliRequest::Resume { name } => command(self, name, AgentCommand::Resume, Asked::Resume),
+            CliRequest::ParamGet { name, key } => command(self, name, AgentCommand::ParamGet { key }, Asked::ParamGet),
+            CliRequest::ParamSet { name, key, value } => {
+                let cmd = AgentCommand::ParamSet { key: key.clone(), value: value.clone() };
+                command(self, name, cmd, Asked::ParamSet { key, value })
+            }
+            CliRequest::Stop { name } => {
+                if !self.registry.contains(&name) {
+                    // a supervised agent waiting for its restart: stopping it
+                    // cancels the restart (there is no process to disagree)
+                    if self.supervisor.stopped_by_user(&name) {
+                        self.supervisor.persist(&self.writer);
+                    }
+                    return Err(self.registry.unknown(&name));
+                }
+                command(self, name, AgentCommand::Stop, Asked::Stop)
+            }
+            CliRequest::Supervise(spec) => {
+                tracing::info!(
+                    agent = %spec.name,
+                    "supervising {}: restart {:?}, at most {} restarts in {:?}",
+                    spec.name,
+                    spec.policy,
+                    spec.max_restarts,
+                    Duration::from_nanos(spec.window_ns)
+                );
+                let registry = &self.registry;
+                self.supervisor.supervise(spec, Instant::now(), |n| registry.contains(n))?;
+                self.supervisor.persist(&self.writer);
+                Ok(Started::Answer(RouterReply::Ok))
+            }
+            CliRequest::Kill { name } => {
+                let pid = self.registry.live(&name)?.reg.pid;
+                nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), nix::sys::signal::Signal::SIGKILL)
+                    .map_err(|e| RouterError::Internal(format!("cannot kill pid {pid}: {e}")))?;
+                tracing::info!(agent = %name, pid, "killed agent {name} (pid {pid}) on request");
+                Ok(Started::waiting(vec![], Work::Kill { name, pid, until: Instant::now() + KILL_WAIT }))
+            }
+            CliRequest::Shutdown => {
+                self.shutdown = true;
+                self.supervisor.forget_all(&self.writer);
+                Ok(Started::Answer(RouterReply::Ok))
+            }
+        }
+    }
+
+    /// Hands the outcomes of agent commands to their jobs, and answers the
+    /// jobs that are complete.
+    pub fn pump(&mut self) {
+        let outcomes = self.calls.pump(&self.world, &self.node, Instant::now());
+        for o in outcomes {
+            if let Some(job) = self.jobs.iter_mut().find(|j| j.waiting.contains(&o.ticket)) {
+                job.waiting.retain(|t| *t != o.ticket);
+                job.outcomes.push(o);
+            }
+        }
+        let mut i = 0;
+        while i < self.jobs.len() {
+            let ready = match &self.jobs[i].work {
+                Work::Kill { pid, until, .. } => !pid_alive(*pid) || Instant::now() >= *until,
+                _ => self.jobs[i].waiting.is_empty(),
+            };
+            if ready {
+                let job = self.jobs.swap_remove(i);
+                self.finish(job);
+            } else {
+                i += 1;
+            }
+        }
+    }
+
+    fn finish(&mut self, job: Job) {
+        let Job { reply, mut outcomes, work, .. } = job;
+        let mut single = || {
+            outcomes.pop().map_or_else(|| Err(RouterError::Internal("a command without an outcome".into())), |o| o.result)
+        };
+        let result = match work {
+            Work::Views { graph, asked } => {
+                let mut stats: BTreeMap<String, AgentStats> = BTreeMap::new();
+                for o in outcomes {
+                    let name = asked.get(&o.ticket).cloned().unwrap_or(o.agent);
+                    if let Ok(AgentReply::Stats(s)) = o.result {
+                        stats.insert(name, s);
+                    }
+                }
+                let agents = self.views(&stats);
+                Ok(if graph {
+                    let connections = self.wiring.views(&agents);
+                    RouterReply::Graph(GraphView { agents, connections })
+                } else {
+                    RouterReply::Agents(agents)
+                })
+            }
+            Work::Connect { conn } => single().map(|_| {
+                tracing::info!(from = %conn.from, to = %conn.to, "connected {} -> {}", conn.from, conn.to);
+                if self.wiring.add(conn) {
+                    self.persist_wiring();
+                }
+                RouterReply::Ok
+            }),
+            Work::Disconnect { conn } => match single() {
+                // it let go, or it did not have it: either way nothing flows
+                Ok(_) | Err(RouterError::AgentRefused { .. }) => {
+                    self.wiring.remove(&conn.from, &conn.to);
+                    self.persist_wiring();
+                    tracing::info!(from = %conn.from, to = %conn.to, "disconnected {} -> {}", conn.from, conn.to);
+                    Ok(RouterReply::Ok)
+                }
+                Err(RouterError::AgentUnreachable { name, detail }) => Err(RouterError::AgentUnreachable {
+                    detail: format!(
+                        "{detail}; {} -> {} stays in the connection list since {name} may still read it: try again, or `nerve kill {name}` and disconnect then",
+                        conn.from, conn.to
+                    ),
+                    name,
+                }),
+                Err(e) => Err(e),
+            },
+            Work::Command { name, what } => {
+                single().map(|reply| self.obeyed(&name, &what, reply))
+            }
+            Work::Kill { name, pid, .. } => {
+                self.check_liveness();
+                if pid_alive(pid) {
+                    tracing::warn!(agent = %name, pid, "{name} (pid {pid}) is still there {KILL_WAIT:?} after SIGKILL");
+                }
+                Ok(RouterReply::Ok)
+            }
+            Work::Background { name, what, effect } => {
+                match single() {
+                    Ok(reply) => {
+                        tracing::info!(agent = %name, "{what}");
+                        self.obeyed(&name, &effect, reply);
+                    }
+                    Err(e) => tracing::warn!(agent = %name, "not done: {what}: {e}"),
+                }
+                return;
+            }
+        };
+        answer(reply, result);
+    }
+
+    /// Records what an agent obeyed; the reply to give.
+    fn obeyed(&mut self, name: &str, what: &Asked, reply: AgentReply) -> RouterReply {
+        let now = Instant::now();
+        match what {
+            Asked::Rate(period_ns) => {
+                if let Some(e) = self.registry.get_mut(name) {
+                    e.reg.period_ns = Some(*period_ns);
+                }
+                self.remembered.set_period(name, *period_ns, now);
+            }
+            Asked::Suspend | Asked::Resume => {
+                let suspended = matches!(what, Asked::Suspend);
+                if let Some(e) = self.registry.get_mut(name) {
+                    e.state = if suspended { AgentState::Suspended } else { AgentState::Running };
+                }
+                self.remembered.set_suspended(name, suspended, now);
+            }
+            Asked::ParamGet => {
+                return match reply {
+                    AgentReply::Param(v) => RouterReply::Param(v),
+                    other => RouterReply::Error(RouterError::Internal(format!("unexpected reply {other:?}"))),
+                };
+            }
+            Asked::ParamSet { key, value } => {
+                if !self.remembered.set_param(name, key, value, now) {
+                    tracing::warn!(
+                        agent = name,
+                        "{name}: {key} = {value} is set but not remembered for a restart: {} other parameters of it are",
+                        remembered::MAX_PARAMS
+                    );
+                }
+            }
+            Asked::Stop => {
+                if self.supervisor.stopped_by_user(name) {
+                    self.supervisor.persist(&self.writer);
+                }
+            }
+            Asked::Nothing => {}
+        }
+        RouterReply::Ok
+    }
+
+    /// The agents as `ps` shows them: the live ones with the statistics
+    /// they answered (`unresponsive` when they did not), then the supervised
+    /// ones that are restarting or failed.
+    fn views(&self, stats: &BTreeMap<String, AgentStats>) -> Vec<AgentView> {
+        let mut out = Vec::new();
+        for (name, e) in self.registry.iter() {
+            let stats = stats.get(name).cloned();
+            let sup = self.supervisor.get(name);
+            out.push(AgentView {
+                name: name.clone(),
+                pid: e.reg.pid,
+                kind: e.reg.kind.clone(),
+                state: if stats.is_some() { e.state } else { AgentState::Unresponsive },
+                task: e.reg.task,
+                period_ns: if e.reg.task == TaskKind::Periodic { e.reg.period_ns } else { None },
+                inputs: e.reg.inputs.clone(),
+                outputs: e.reg.outputs.clone(),
+                log_file: e.reg.log_file.clone(),
+                stats,
+                restarts: sup.map(|s| s.total).unwrap_or(0),
+                importance: sup.map(|s| s.spec.importance),
+            });
+        }
+        for (name, sup) in self.supervisor.iter() {
+            if self.registry.contains(name) || !sup.is_pending() {
+                continue;
+            }
+            out.push(AgentView {
+                name: name.clone(),
+                pid: 0,
+                kind: sup.spec.argv[0].rsplit('/').next().unwrap_or("").trim_start_matches("nerve-").to_owned(),
+                state: if sup.failed { AgentState::Failed } else { AgentState::Restarting },
+                task: TaskKind::Periodic,
+                period_ns: None,
+                inputs: vec![],
+                outputs: vec![],
+                log_file: Some(self.world.log_file(name).display().to_string()),
+                stats: None,
+                restarts: sup.total,
+                importance: Some(sup.spec.importance),
+            });
+        }
+        out.sort_by(|a, b| a.name.cmp(&b.name));
+        out
+    }
+}
+
+/// How a command-line request starts.
+enum Started {
+    /// answered at once
+    Answer(RouterReply),
+    /// waits for agents
+    Job(Job),
+}
+
+impl Started {
+    fn waiting(tickets: Vec<Ticket>, work: Work) -> Started {
+        Started::Job(Job { reply: None, waiting: tickets, outcomes: Vec::new(), work })
+    }
+}

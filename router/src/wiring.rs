@@ -1,0 +1,145 @@
+//! The wiring: the connection list (output port to input port, with the
+//! checked type), the user's intent, persisted; the commands that carry a
+//! connection out (the input's agent subscribes); and the figures of each
+//! connection as its input sees them.
+//!
+//! An edge is in the list exactly when the user asked for it and its input
+//! agent was either told to subscribe or was not running (it is wired when
+//! it registers). A `disconnect` that the input agent did not answer keeps
+//! the edge: the agent may still be reading (reliability review F2d).
+
+use crate::store::Connection;
+use shm_schemas::control::cli_to_router::{AgentView, ConnectionView};
+use shm_schemas::control::router_to_agent::AgentCommand;
+
+/// `agent/port` split in two.
+pub fn split_port(p: &str) -> (&str, &str) {
+    p.split_once('/').unwrap_or((p, ""))
+}
+
+/// The agent of `agent/port`.
+pub fn port_agent(p: &str) -> &str {
+    split_port(p).0
+}
+
+/// The connection list.
+#[derive(Debug, Default)]
+pub struct Wiring {
+    list: Vec<Connection>,
+}
+
+impl Wiring {
+    /// The list loaded from the store.
+    pub fn new(list: Vec<Connection>) -> Self {
+        Wiring { list }
+    }
+
+    /// Every connection.
+    pub fn list(&self) -> &[Connection] {
+        &self.list
+    }
+
+    /// Adds `c`; whether it was new.
+    pub fn add(&mut self, c: Connection) -> bool {
+        if self.list.contains(&c) {
+            return false;
+        }
+        self.list.push(c);
+        true
+    }
+
+    /// The connection `from` → `to`.
+    pub fn find(&self, from: &str, to: &str) -> Option<&Connection> {
+        self.list.iter().find(|c| c.from == from && c.to == to)
+    }
+
+    /// Removes `from` → `to`; whether it was there.
+    pub fn remove(&mut self, from: &str, to: &str) -> bool {
+        let before = self.list.len();
+        self.list.retain(|c| !(c.from == from && c.to == to));
+        self.list.len() != before
+    }
+
+    /// The connections that involve `name` and whose two agents are live.
+    pub fn involving(&self, name: &str, live: impl Fn(&str) -> bool) -> Vec<Connection> {
+        self.list
+            .iter()
+            .filter(|c| port_agent(&c.from) == name || port_agent(&c.to) == name)
+            .filter(|c| live(port_agent(&c.from)) && live(port_agent(&c.to)))
+            .cloned()
+            .collect()
+    }
+
+    /// The agent to command and the command that carries `c` out.
+    pub fn connect_command(c: &Connection) -> (String, AgentCommand) {
+        let (from_agent, from_port) = split_port(&c.from);
+        let (to_agent, to_port) = split_port(&c.to);
+        let cmd = AgentCommand::Connect {
+            input: to_port.into(),
+            from_agent: from_agent.into(),
+            from_port: from_port.into(),
+            type_name: c.type_name.clone(),
+        };
+        (to_agent.to_owned(), cmd)
+    }
+
+    /// The agent to command and the command that undoes `c`.
+    pub fn disconnect_command(c: &Connection) -> (String, AgentCommand) {
+        let (from_agent, from_port) = split_port(&c.from);
+        let (to_agent, to_port) = split_port(&c.to);
+        let cmd =
+            AgentCommand::Disconnect { input: to_port.into(), from_agent: from_agent.into(), from_port: from_port.into() };
+        (to_agent.to_owned(), cmd)
+    }
+
+    /// Each connection with the figures its input reports in `agents`.
+    pub fn views(&self, agents: &[AgentView]) -> Vec<ConnectionView> {
+        self.list
+            .iter()
+            .map(|c| {
+                let (fa, fp) = split_port(&c.from);
+                let (ta, tp) = split_port(&c.to);
+                let input =
+                    agents.iter().find(|a| a.name == ta).and_then(|a| a.stats.as_ref()).and_then(|s| {
+                        s.inputs.iter().find(|i| i.input == tp && i.from_agent == fa && i.from_port == fp)
+                    });
+                let from_live = agents.iter().any(|a| a.name == fa && a.pid != 0);
+                ConnectionView {
+                    from: c.from.clone(),
+                    to: c.to.clone(),
+                    type_name: c.type_name.clone(),
+                    active: from_live && input.is_some(),
+                    rate_hz: input.map(|i| i.rate_hz).unwrap_or(0.0),
+                    last_age_ms: input.and_then(|i| i.last_age_ns).map(|ns| ns as f64 / 1e6),
+                    received: input.map(|i| i.received).unwrap_or(0),
+                    dropped: input.map(|i| i.dropped).unwrap_or(0),
+                }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn c(from: &str, to: &str) -> Connection {
+        Connection { from: from.into(), to: to.into(), type_name: "nerve::Tick".into() }
+    }
+
+    #[test]
+    fn the_list_holds_each_edge_once_and_finds_those_of_an_agent() {
+        let mut w = Wiring::default();
+        assert!(w.add(c("t1/tick", "r1/in")));
+        assert!(!w.add(c("t1/tick", "r1/in")));
+        assert!(w.add(c("r1/out", "r2/in")));
+        assert_eq!(w.involving("r1", |_| true).len(), 2);
+        assert_eq!(w.involving("r1", |a| a != "t1").len(), 1, "only edges whose two ends are live");
+        let (agent, cmd) = Wiring::connect_command(&c("t1/tick", "r1/in"));
+        assert_eq!(agent, "r1");
+        assert!(matches!(cmd, AgentCommand::Connect { ref input, ref from_agent, .. } if input == "in" && from_agent == "t1"));
+        assert!(w.remove("t1/tick", "r1/in"));
+        assert!(!w.remove("t1/tick", "r1/in"));
+        assert_eq!(w.list().len(), 1);
+    }
+}
