@@ -3,7 +3,7 @@
 //! on stop.
 
 use super::Shared;
-use crate::control::{ControlClient, ControlError, ControlSize, agent_router_client};
+use crate::control::{ControlClient, ControlError, agent_router_client};
 use crate::world::{Ipc, World};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -27,22 +27,20 @@ pub(super) struct RouterLink {
     pub(super) registered: Option<u64>,
 }
 
-/// Opens the router's epoch service (publish-subscribe, history 1).
+// every agent the router serves must be able to watch its epoch
+const _: () = assert!(
+    shm_schemas::services::EPOCH_MAX_SUBSCRIBERS >= crate::control::ControlSize::ROUTER.max_clients
+        && shm_schemas::services::EPOCH_MAX_NODES >= crate::control::ControlSize::ROUTER.max_nodes
+);
+
+/// Opens the router's epoch service (publish-subscribe, history 1), as
+/// defined once for the router and every agent in
+/// [`shm_schemas::services::router_epoch`].
 pub fn epoch_service(
     node: &Node<Ipc>,
     world: &World,
 ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, RouterEpoch, ()>, String> {
-    let name = world.robot().router_epoch_service();
-    node.service_builder(&name.as_str().try_into().map_err(|e| format!("{e:?}"))?)
-        .publish_subscribe::<RouterEpoch>()
-        .max_publishers(2)
-        .max_subscribers(ControlSize::ROUTER.max_clients)
-        .max_nodes(ControlSize::ROUTER.max_nodes)
-        .history_size(1)
-        .subscriber_max_buffer_size(1)
-        .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| format!("cannot open {name}: {e:?}"))
+    shm_schemas::services::router_epoch(node, world.robot()).map_err(|e| e.to_string())
 }
 
 impl RouterLink {
