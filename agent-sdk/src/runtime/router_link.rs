@@ -1,6 +1,12 @@
 //! The agent's side of the router: registration at start, noticing a
 //! (re)started router through its epoch and registering again, and leaving
 //! on stop.
+//!
+//! The link registers whenever the latest router epoch it has seen differs
+//! from the epoch of the router that accepted it ([`Registrar`]): a new
+//! router is registered with at once, and an attempt that failed (a router
+//! busy starting, a timed-out reply) is retried with back-off, so one lost
+//! reply never leaves the agent unknown to the router until its next restart.
 
 use super::Shared;
 use crate::control::{ControlClient, ControlError, agent_router_client};
@@ -12,19 +18,92 @@ use shm_schemas::control::agent_to_router::{AgentToRouter, Registration};
 use shm_schemas::control::cli_to_router::{RouterError, RouterReply, RouterRequest};
 use shm_schemas::payloads::RouterEpoch;
 use std::sync::atomic::Ordering;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
+/// Why a registration did not happen.
 pub(super) enum RegisterError {
+    /// No router serves the robot.
     NoRouter,
+    /// The router refused this agent for good (its name is taken).
     Refused(RouterError),
+    /// Anything else (a timeout, a protocol mismatch); worth another try.
     Other(String),
+}
+
+/// The first wait before trying to register again after a failed attempt.
+const RETRY_FIRST: Duration = Duration::from_millis(250);
+/// The longest wait between two attempts.
+const RETRY_MAX: Duration = Duration::from_secs(8);
+
+/// When to register: the decision of the link, apart from iceoryx2.
+///
+/// Registering is due while the latest epoch seen differs from the one the
+/// agent is registered under; after a failed attempt, not before a back-off
+/// (doubling from [`RETRY_FIRST`] to [`RETRY_MAX`]) has passed. A new epoch
+/// makes it due at once.
+#[derive(Debug)]
+struct Registrar {
+    /// the newest epoch published by a router
+    latest: Option<u64>,
+    /// the epoch of the router that accepted this agent
+    registered: Option<u64>,
+    /// no attempt before this
+    retry_at: Option<Instant>,
+    /// the wait after the next failed attempt
+    backoff: Duration,
+}
+
+impl Registrar {
+    fn new() -> Self {
+        Registrar { latest: None, registered: None, retry_at: None, backoff: RETRY_FIRST }
+    }
+
+    /// A router announced `epoch`.
+    fn seen(&mut self, epoch: u64) {
+        if self.latest != Some(epoch) {
+            self.latest = Some(epoch);
+            self.retry_at = None;
+            self.backoff = RETRY_FIRST;
+        }
+    }
+
+    /// When the next attempt is due: `None` while registered with the
+    /// latest router (or before any router was seen).
+    fn next_attempt(&self, now: Instant) -> Option<Instant> {
+        match self.latest {
+            Some(latest) if self.registered != Some(latest) => Some(self.retry_at.unwrap_or(now)),
+            _ => None,
+        }
+    }
+
+    fn due(&self, now: Instant) -> bool {
+        self.next_attempt(now).is_some_and(|at| at <= now)
+    }
+
+    /// A router of `epoch` accepted this agent.
+    fn accepted(&mut self, epoch: u64, now: Instant) {
+        self.registered = Some(epoch);
+        if self.latest.is_some_and(|latest| latest != epoch) {
+            // an older router answered: try the newest again, but not at once
+            self.failed(now);
+        } else {
+            self.retry_at = None;
+            self.backoff = RETRY_FIRST;
+        }
+    }
+
+    /// An attempt failed at `now`: wait before the next one.
+    fn failed(&mut self, now: Instant) {
+        self.retry_at = Some(now + self.backoff);
+        self.backoff = (self.backoff * 2).min(RETRY_MAX);
+    }
 }
 
 /// The agent's side of the router: registration, and noticing a restarted router.
 pub(super) struct RouterLink {
-    pub(super) client: Option<ControlClient<RouterRequest, RouterReply>>,
-    pub(super) epoch: Option<Subscriber<Ipc, RouterEpoch, ()>>,
-    pub(super) registered: Option<u64>,
+    client: Option<ControlClient<RouterRequest, RouterReply>>,
+    epoch: Option<Subscriber<Ipc, RouterEpoch, ()>>,
+    registrar: Registrar,
 }
 
 // every agent the router serves must be able to watch its epoch
@@ -45,7 +124,7 @@ pub fn epoch_service(
 
 impl RouterLink {
     pub(super) fn new() -> Self {
-        RouterLink { client: None, epoch: None, registered: None }
+        RouterLink { client: None, epoch: None, registrar: Registrar::new() }
     }
 
     /// Subscribes to the router's epoch. Done after the first registration,
@@ -83,7 +162,7 @@ impl RouterLink {
         reg.period_ns = (p > 0).then_some(p);
         match client.call(&RouterRequest::Agent(AgentToRouter::Register(reg)), Duration::from_secs(3)) {
             Ok(RouterReply::Registered { epoch }) => {
-                self.registered = Some(epoch);
+                self.registrar.accepted(epoch, Instant::now());
                 Ok(())
             }
             Ok(RouterReply::Error(e)) => Err(RegisterError::Refused(e)),
@@ -96,41 +175,142 @@ impl RouterLink {
         }
     }
 
-    /// Re-registers when a router with a new epoch has started. Returns false
-    /// when the router refuses this agent for good (its name was taken meanwhile).
+    /// Whether a router accepted this agent.
+    pub(super) fn is_registered(&self) -> bool {
+        self.registrar.registered.is_some()
+    }
+
+    /// Reads the newest router epoch and registers when that is due (a new
+    /// router, or a failed attempt whose back-off has passed). Returns false
+    /// when the router refuses this agent for good (its name was taken
+    /// meanwhile).
     pub(super) fn poll(&mut self, node: &Node<Ipc>, world: &World, reg: &Registration, sh: &Shared) -> bool {
-        let Some(sub) = &self.epoch else { return true };
-        let mut newest = None;
-        while let Ok(Some(s)) = sub.receive() {
-            newest = Some(*s.payload());
+        let mut router_pid = None;
+        if let Some(sub) = &self.epoch {
+            while let Ok(Some(s)) = sub.receive() {
+                self.registrar.seen(s.epoch);
+                router_pid = Some(s.pid);
+            }
         }
-        let Some(e) = newest else { return true };
-        if Some(e.epoch) == self.registered {
+        if !self.registrar.due(Instant::now()) {
             return true;
         }
         match self.register(node, world, reg, sh) {
             Ok(()) => {
-                tracing::info!("registered with the router (pid {})", e.pid);
+                tracing::info!(router_pid, epoch = self.registrar.registered, "registered with the router");
                 true
             }
             Err(RegisterError::Refused(err)) => {
-                tracing::error!("the router refused this agent: {err}");
+                tracing::error!(%err, "the router refused this agent");
                 false
             }
-            Err(RegisterError::NoRouter) => true,
+            Err(RegisterError::NoRouter) => {
+                self.registrar.failed(Instant::now());
+                tracing::debug!(retry_at = ?self.registrar.retry_at, "no router to register with");
+                true
+            }
             Err(RegisterError::Other(err)) => {
-                tracing::warn!("could not register with the router: {err}");
+                self.registrar.failed(Instant::now());
+                tracing::warn!(%err, backoff = ?self.registrar.backoff, "could not register with the router; will retry");
                 true
             }
         }
     }
 
     pub(super) fn unregister(&mut self, name: &str) {
-        if let (Some(client), Some(_)) = (&self.client, self.registered) {
+        if let (Some(client), Some(_)) = (&self.client, self.registrar.registered) {
             let msg = RouterRequest::Agent(AgentToRouter::Unregister { name: name.into(), pid: std::process::id() });
             if let Err(e) = client.call(&msg, Duration::from_millis(500)) {
                 tracing::debug!("could not unregister: {e}");
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(t0: Instant, ms: u64) -> Instant {
+        t0 + Duration::from_millis(ms)
+    }
+
+    #[test]
+    fn nothing_is_due_before_a_router_was_seen() {
+        let r = Registrar::new();
+        let t0 = Instant::now();
+        assert_eq!(r.next_attempt(t0), None);
+        assert!(!r.due(t0));
+    }
+
+    #[test]
+    fn a_new_router_is_registered_with_at_once_and_only_once() {
+        let t0 = Instant::now();
+        let mut r = Registrar::new();
+        r.seen(1);
+        assert!(r.due(t0));
+        r.accepted(1, t0);
+        assert!(!r.due(at(t0, 60_000)));
+        r.seen(1); // the same epoch read again
+        assert!(!r.due(at(t0, 60_000)));
+        r.seen(2); // a restarted router
+        assert!(r.due(t0));
+    }
+
+    #[test]
+    fn a_failed_attempt_is_retried_with_growing_back_off() {
+        let t0 = Instant::now();
+        let mut r = Registrar::new();
+        r.seen(1);
+        r.failed(t0);
+        assert!(!r.due(at(t0, 249)));
+        assert!(r.due(at(t0, 250)));
+        let mut now = at(t0, 250);
+        let mut waits = Vec::new();
+        for _ in 0..8 {
+            r.failed(now);
+            let next = r.next_attempt(now).expect("still due");
+            waits.push((next - now).as_millis());
+            now = next;
+        }
+        assert_eq!(waits, [500, 1000, 2000, 4000, 8000, 8000, 8000, 8000]);
+        r.accepted(1, now);
+        assert_eq!(r.next_attempt(now), None);
+    }
+
+    #[test]
+    fn a_new_router_during_back_off_is_tried_at_once() {
+        let t0 = Instant::now();
+        let mut r = Registrar::new();
+        r.seen(1);
+        for _ in 0..5 {
+            r.failed(t0);
+        }
+        assert!(!r.due(at(t0, 1000)));
+        r.seen(2);
+        assert!(r.due(t0));
+        r.failed(t0);
+        assert_eq!(r.next_attempt(t0), Some(at(t0, 250)), "a new router restarts the back-off");
+    }
+
+    #[test]
+    fn an_answer_from_an_older_router_is_retried_not_spun_on() {
+        let t0 = Instant::now();
+        let mut r = Registrar::new();
+        r.seen(2);
+        r.accepted(1, t0);
+        assert!(!r.due(t0), "not again at once");
+        assert!(r.due(at(t0, 250)));
+        r.accepted(2, at(t0, 250));
+        assert_eq!(r.next_attempt(at(t0, 250)), None);
+    }
+
+    #[test]
+    fn registered_at_start_before_the_epoch_was_read() {
+        let t0 = Instant::now();
+        let mut r = Registrar::new();
+        r.accepted(5, t0);
+        r.seen(5);
+        assert!(!r.due(t0));
     }
 }

@@ -287,7 +287,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
             Some(p) => format!("periodic every {}", crate::clock::format_duration(p)),
             None => "event-driven".into(),
         },
-        if link.registered.is_some() { ", registered with the router" } else { "" }
+        if link.is_registered() { ", registered with the router" } else { "" }
     );
     readiness.ready(&startup_msg);
     let _ = sd_notify("READY=1");
