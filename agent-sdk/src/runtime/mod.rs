@@ -2,13 +2,16 @@
 //! router, runs the task thread and, in the main thread, the message checker.
 //!
 //! Threads:
-//! * **message checker** (main thread, SCHED_FIFO one above the task): waits
-//!   on the control service and a 100 ms housekeeping tick; applies commands
-//!   to shared state and answers at once; notices a (re)started router and
-//!   re-registers; stops on SIGTERM/SIGINT or a `Stop` command.
+//! * **message checker** (main thread, SCHED_FIFO one above the task): sleeps
+//!   on the control service, the task's wake-up event and a 2 s housekeeping
+//!   tick (`checker::HOUSEKEEPING`); applies commands to shared state and
+//!   answers at once; notices a (re)started router and registers again,
+//!   retrying with back-off; stops on SIGTERM/SIGINT, a `Stop` command or the
+//!   task's request. An idle agent wakes once per tick and not otherwise.
 //! * **task**: periodic (absolute deadlines, run-time period, lateness and
 //!   overruns measured) or event-driven (blocked on a WaitSet of its inputs'
-//!   listeners plus a private wake-up event; never re-entered).
+//!   listeners plus a private wake-up event; never re-entered). A suspended
+//!   periodic task waits at a gate until resumed, without polling.
 //!
 //! The modules, one per seam:
 //! * `startup`: the command line, `--describe`, and the start of an agent
@@ -30,8 +33,8 @@ use crate::agent::AgentError;
 use crate::meters::{LatenessRecorder, RateMeter};
 use crate::world::Ipc;
 use iceoryx2::port::notifier::Notifier;
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Condvar, Mutex};
 
 /// Figures the task thread keeps about itself.
 #[derive(Debug, Default)]
@@ -54,14 +57,24 @@ struct Shared {
     generation: AtomicU64,
     realtime: AtomicBool,
     figures: Mutex<TaskFigures>,
-    gate: (Mutex<()>, Condvar),
+    gate: task::SuspendGate,
     wake: Notifier<Ipc>,
 }
 
 impl Shared {
+    /// Tells the other thread that the shared state changed: wakes the task
+    /// (at its suspend gate or in its event loop's WaitSet) and the message
+    /// checker (its WaitSet also listens to the wake-up event).
     fn poke(&self) {
-        self.gate.1.notify_all();
+        self.gate.notify();
         let _ = self.wake.notify();
+    }
+
+    /// Stops the agent from the task's side (the agent asked for it, or the
+    /// task cannot go on); the message checker wakes and shuts down.
+    fn request_stop(&self) {
+        self.stop.store(true, Ordering::Release);
+        self.poke();
     }
 
     fn stopping(&self) -> bool {

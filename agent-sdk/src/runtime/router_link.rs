@@ -180,6 +180,11 @@ impl RouterLink {
         self.registrar.registered.is_some()
     }
 
+    /// When [`RouterLink::poll`] next has an attempt to make, if one is pending.
+    pub(super) fn next_attempt(&self) -> Option<Instant> {
+        self.registrar.next_attempt(Instant::now())
+    }
+
     /// Reads the newest router epoch and registers when that is due (a new
     /// router, or a failed attempt whose back-off has passed). Returns false
     /// when the router refuses this agent for good (its name was taken

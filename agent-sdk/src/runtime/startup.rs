@@ -5,7 +5,7 @@
 
 use super::checker::Checker;
 use super::router_link::{RegisterError, RouterLink};
-use super::task::task_main;
+use super::task::{SuspendGate, task_main};
 use super::{Shared, TaskFigures};
 use crate::agent::{Agent, Setup, Task};
 use crate::cli::CommonArgs;
@@ -20,7 +20,7 @@ use shm_schemas::control::agent_to_router::{PortSpec, Registration, TaskKind};
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// Exit code when the agent could not start (bad arguments, duplicate name, device).
@@ -178,6 +178,8 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         .open_or_create()
         .map_err(|e| format!("cannot create {wake_service}: {e:?}"))?;
     let wake_listener = wake_factory.listener_builder().create().map_err(|e| format!("{e:?}"))?;
+    // the message checker's own listener: the task wakes it when it stops
+    let checker_wake = wake_factory.listener_builder().create().map_err(|e| format!("{e:?}"))?;
     let wake = wake_factory.notifier_builder().create().map_err(|e| format!("{e:?}"))?;
 
     let mut setup = Setup {
@@ -202,7 +204,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         generation: AtomicU64::new(0),
         realtime: AtomicBool::new(false),
         figures: Mutex::new(TaskFigures { last_cycle_ns: now_ns(), ..TaskFigures::default() }),
-        gate: (Mutex::new(()), Condvar::new()),
+        gate: SuspendGate::default(),
         wake,
     });
 
@@ -293,7 +295,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     let _ = sd_notify("READY=1");
 
     let checker = Checker { world: &world, node: &node, shared: &shared, inputs: &inputs, params: &params, task_kind };
-    checker.run(&server, &mut link, &registration);
+    checker.run(&server, &checker_wake, &mut link, &registration);
 
     // stop: wake the task, wait for it a bounded time, leave the router
     shared.stop.store(true, Ordering::Release);

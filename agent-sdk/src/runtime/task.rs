@@ -10,8 +10,8 @@ use crate::ports::DynInput;
 use crate::world::Ipc;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
-use std::sync::Arc;
 use std::sync::atomic::Ordering;
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::Duration;
 
 pub(super) fn task_main<A: Agent>(
@@ -26,7 +26,7 @@ pub(super) fn task_main<A: Agent>(
     let mut ctx = Context { name: name.to_owned(), cycle: 0, now_ns: now_ns(), period: None, stop: false };
     if let Err(e) = agent.start(&mut ctx) {
         tracing::error!("start failed: {e}; stopping");
-        sh.stop.store(true, Ordering::Release);
+        sh.request_stop();
         let _ = started.send(Err(e.to_string()));
         return;
     }
@@ -51,17 +51,38 @@ fn run_step<A: Agent>(agent: &mut A, sh: &Shared, ctx: &mut Context) {
     }
     ctx.cycle += 1;
     if ctx.stop {
-        sh.stop.store(true, Ordering::Release);
+        sh.request_stop();
     }
 }
 
 fn wait_while_suspended(sh: &Shared) {
-    let mut g = sh.gate.0.lock().unwrap_or_else(|p| p.into_inner());
-    while sh.suspended.load(Ordering::Acquire) && !sh.stopping() {
-        g = match sh.gate.1.wait_timeout(g, Duration::from_millis(100)) {
-            Ok((g, _)) => g,
-            Err(p) => p.into_inner().0,
-        };
+    sh.gate.wait_while(|| sh.suspended.load(Ordering::Acquire) && !sh.stopping());
+}
+
+/// Where a suspended periodic task waits, without polling, until the
+/// message checker resumes or stops it.
+#[derive(Debug, Default)]
+pub(super) struct SuspendGate {
+    lock: Mutex<()>,
+    changed: Condvar,
+}
+
+impl SuspendGate {
+    /// Blocks while `held()` is true; looks again only when [`SuspendGate::notify`] is called.
+    pub(super) fn wait_while(&self, held: impl Fn() -> bool) {
+        let mut g = self.lock.lock().unwrap_or_else(|p| p.into_inner());
+        while held() {
+            g = self.changed.wait(g).unwrap_or_else(|p| p.into_inner());
+        }
+    }
+
+    /// Wakes the waiters to look at their condition again; call after
+    /// changing it. Taking the lock first orders the change before a
+    /// waiter's next look, or after its wait began: no wake-up is lost, so
+    /// the waiter needs no timeout.
+    pub(super) fn notify(&self) {
+        drop(self.lock.lock().unwrap_or_else(|p| p.into_inner()));
+        self.changed.notify_all();
     }
 }
 
@@ -156,13 +177,13 @@ fn event_loop<A: Agent>(
             Ok(ws) => ws,
             Err(e) => {
                 tracing::error!("cannot create the task's WaitSet: {e:?}; stopping");
-                sh.stop.store(true, Ordering::Release);
+                sh.request_stop();
                 return;
             }
         };
         let Ok(wake_guard) = ws.attach_notification(wake) else {
             tracing::error!("cannot attach the wake-up event; stopping");
-            sh.stop.store(true, Ordering::Release);
+            sh.request_stop();
             return;
         };
         let guards: Vec<_> = listeners.iter().filter_map(|l| ws.attach_notification(l.as_ref()).ok()).collect();
@@ -205,5 +226,59 @@ fn event_loop<A: Agent>(
                 break; // inputs changed: rebuild the WaitSet
             }
         }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::AtomicBool;
+    use std::sync::mpsc;
+
+    /// Generous: a lost wake-up hangs for ever, a slow machine takes
+    /// milliseconds; this only turns a hang into a failure.
+    const HANG: Duration = Duration::from_secs(20);
+
+    #[test]
+    fn the_gate_lets_the_task_go_when_resumed() {
+        let gate = Arc::new(SuspendGate::default());
+        let held = Arc::new(AtomicBool::new(true));
+        let (tx, rx) = mpsc::channel();
+        let (g, h) = (gate.clone(), held.clone());
+        let waiter = std::thread::spawn(move || {
+            g.wait_while(|| h.load(Ordering::Acquire));
+            tx.send(()).unwrap();
+        });
+        std::thread::sleep(Duration::from_millis(20));
+        assert!(rx.try_recv().is_err(), "the gate must hold while suspended");
+        held.store(false, Ordering::Release);
+        gate.notify();
+        rx.recv_timeout(HANG).expect("the task was not let go");
+        waiter.join().unwrap();
+    }
+
+    #[test]
+    fn the_gate_loses_no_wake_up_racing_the_resume() {
+        for _ in 0..500 {
+            let gate = SuspendGate::default();
+            let held = AtomicBool::new(true);
+            let (tx, rx) = mpsc::channel();
+            std::thread::scope(|s| {
+                s.spawn(|| {
+                    gate.wait_while(|| held.load(Ordering::Acquire));
+                    tx.send(()).unwrap();
+                });
+                // resume at once, racing the waiter's first look
+                held.store(false, Ordering::Release);
+                gate.notify();
+                rx.recv_timeout(HANG).expect("a wake-up was lost");
+            });
+        }
+    }
+
+    #[test]
+    fn an_open_gate_does_not_block() {
+        SuspendGate::default().wait_while(|| false);
     }
 }
