@@ -23,7 +23,15 @@ pub(super) fn task_main<A: Agent>(
     kind: Task,
     started: std::sync::mpsc::Sender<Result<(), String>>,
 ) {
-    let mut ctx = Context { name: name.to_owned(), cycle: 0, now_ns: now_ns(), period: None, stop: false };
+    let mut ctx = Context {
+        name: name.to_owned(),
+        cycle: 0,
+        now_ns: now_ns(),
+        period: None,
+        stop: false,
+        inputs: inputs.iter().map(|i| i.name().to_owned()).collect(),
+        woken: vec![false; inputs.len()],
+    };
     if let Err(e) = agent.start(&mut ctx) {
         tracing::error!("start failed: {e}; stopping");
         sh.request_stop();
@@ -172,7 +180,9 @@ fn event_loop<A: Agent>(
             return;
         }
         let generation = sh.generation.load(Ordering::Acquire);
-        let listeners: Vec<Arc<Listener<Ipc>>> = inputs.iter().flat_map(|i| i.listeners()).collect();
+        // every listener with the position of its input, for Context::woken_by
+        let listeners: Vec<(usize, Arc<Listener<Ipc>>)> =
+            inputs.iter().enumerate().flat_map(|(k, i)| i.listeners().into_iter().map(move |l| (k, l))).collect();
         let ws = match WaitSetBuilder::new().signal_handling_mode(SignalHandlingMode::Disabled).create::<Ipc>() {
             Ok(ws) => ws,
             Err(e) => {
@@ -186,7 +196,8 @@ fn event_loop<A: Agent>(
             sh.request_stop();
             return;
         };
-        let guards: Vec<_> = listeners.iter().filter_map(|l| ws.attach_notification(l.as_ref()).ok()).collect();
+        let guards: Vec<_> =
+            listeners.iter().filter_map(|(k, l)| ws.attach_notification(l.as_ref()).ok().map(|g| (g, *k, l))).collect();
         let mut was_suspended = sh.suspended.load(Ordering::Acquire);
         loop {
             let mut got_input = false;
@@ -194,9 +205,11 @@ fn event_loop<A: Agent>(
                 if id.has_event_from(&wake_guard) {
                     drain_listener(wake);
                 }
-                for (g, l) in guards.iter().zip(&listeners) {
+                for (g, k, l) in &guards {
                     if id.has_event_from(g) {
                         drain_listener(l);
+                        // kept while suspended: they count for the step after resuming
+                        ctx.woken[*k] = true;
                         got_input = true;
                     }
                 }
@@ -216,6 +229,7 @@ fn event_loop<A: Agent>(
                 let t = now_ns();
                 ctx.now_ns = t;
                 run_step(agent, sh, ctx);
+                ctx.woken.fill(false);
                 let mut f = sh.figures();
                 f.cycles += 1;
                 f.rate.record(t);
