@@ -78,7 +78,8 @@ pub trait Agent: Sized + Send + 'static {
         Ok(())
     }
 
-    /// One cycle of the task. Event-driven agents should drain their inputs.
+    /// One cycle of the task. Event-driven agents should drain their inputs
+    /// ([`Context::woken_by`] says which have new samples).
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError>;
 
     /// Called once in the task thread after the last step.
@@ -192,6 +193,10 @@ pub struct Context {
     pub(crate) now_ns: u64,
     pub(crate) period: Option<Duration>,
     pub(crate) stop: bool,
+    /// the input ports, in the order they were declared
+    pub(crate) inputs: Vec<String>,
+    /// per input (same order): whether it woke the task for this step
+    pub(crate) woken: Vec<bool>,
 }
 
 impl Context {
@@ -215,8 +220,52 @@ impl Context {
         self.period
     }
 
+    /// The inputs whose new samples woke this step of an event-driven task
+    /// (in the order they were declared): it need only read those. Samples
+    /// that came while the agent was suspended count for the first step
+    /// after it resumes. Empty for a periodic task, which is woken by its
+    /// clock, and for a step run only because the agent resumed.
+    pub fn woken_by(&self) -> impl Iterator<Item = &str> {
+        self.inputs.iter().zip(&self.woken).filter(|(_, w)| **w).map(|(n, _)| n.as_str())
+    }
+
+    /// Whether input `input` has new samples that woke this step; see
+    /// [`Context::woken_by`]. False for an input that is not declared.
+    pub fn has_new(&self, input: &str) -> bool {
+        self.inputs.iter().zip(&self.woken).any(|(n, w)| *w && n == input)
+    }
+
     /// Asks the SDK to stop the agent after this cycle.
     pub fn request_stop(&mut self) {
         self.stop = true;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn context(inputs: &[&str]) -> Context {
+        Context {
+            name: "t".into(),
+            cycle: 0,
+            now_ns: 0,
+            period: None,
+            stop: false,
+            inputs: inputs.iter().map(|s| s.to_string()).collect(),
+            woken: vec![false; inputs.len()],
+        }
+    }
+
+    #[test]
+    fn the_step_knows_which_inputs_woke_it() {
+        let mut ctx = context(&["scan", "pose", "goal"]);
+        assert_eq!(ctx.woken_by().count(), 0);
+        ctx.woken[0] = true;
+        ctx.woken[2] = true;
+        assert_eq!(ctx.woken_by().collect::<Vec<_>>(), ["scan", "goal"]);
+        assert!(ctx.has_new("scan") && ctx.has_new("goal"));
+        assert!(!ctx.has_new("pose"));
+        assert!(!ctx.has_new("nonesuch"));
     }
 }

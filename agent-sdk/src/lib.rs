@@ -9,7 +9,8 @@
 //!   suspend and resume, parameters, stop, statistics — each answered at once;
 //! * the **task**, periodic (absolute deadlines, period changeable at run
 //!   time, overruns and lateness measured) or event-driven (woken by input
-//!   through iceoryx2 events, never re-entered);
+//!   through iceoryx2 events, never re-entered, told which inputs woke it by
+//!   [`Context::woken_by`]);
 //! * the common command line (`--robot`, `--name`, `--period`, `--daemon`,
 //!   `--log-level`), registration with the router and re-registration with a
 //!   restarted one, SCHED_FIFO and locked memory where permitted, sd_notify,

@@ -20,6 +20,7 @@ pub mod header;
 pub mod names;
 pub mod payloads;
 pub mod ring;
+pub mod services;
 pub mod stats;
 
 pub use control::{PROTOCOL_VERSION, ProtocolError};

@@ -1,0 +1,299 @@
+//! The message checker (thesis Fig. 3-4): serves the agent's control service
+//! (connect, disconnect, period, suspend, resume, parameters, statistics,
+//! stop), answering each command at once, and does the housekeeping
+//! (router epoch, CPU meter, systemd watchdog).
+
+use super::Shared;
+use super::router_link::RouterLink;
+use crate::agent::Task;
+use crate::clock::now_ns;
+use crate::control::ControlServer;
+use crate::daemon::{sd_notify, watchdog_interval};
+use crate::meters::{CpuMeter, rss_bytes};
+use crate::params::ParamTable;
+use crate::ports::DynInput;
+use crate::world::{Ipc, World};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use shm_schemas::control::agent_to_router::Registration;
+use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
+use shm_schemas::stats::AgentStats;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+/// How often an idle message checker wakes up for its housekeeping: read
+/// the router's epoch (a restarted router is also noticed at the next
+/// command), sample the CPU meter, ping the systemd watchdog. An idle agent
+/// costs this many wake-ups and nothing else; a 100 ms tick made 100 idle
+/// agents cost about 1000 wake-ups a second.
+pub(super) const HOUSEKEEPING: Duration = Duration::from_secs(2);
+
+/// The housekeeping tick: [`HOUSEKEEPING`], or often enough to ping a
+/// systemd watchdog of interval `watchdog` at half its interval.
+fn housekeeping_interval(watchdog: Option<Duration>) -> Duration {
+    match watchdog {
+        Some(wd) => HOUSEKEEPING.min(wd / 4).max(Duration::from_millis(1)),
+        None => HOUSEKEEPING,
+    }
+}
+
+pub(super) struct Checker<'a> {
+    pub(super) world: &'a World,
+    pub(super) node: &'a Node<Ipc>,
+    pub(super) shared: &'a Arc<Shared>,
+    pub(super) inputs: &'a [Arc<dyn DynInput>],
+    pub(super) params: &'a ParamTable,
+    pub(super) task_kind: Task,
+}
+
+impl Checker<'_> {
+    /// Serves the control service until a stop (a `Stop` command, a
+    /// signal, the task's request). Sleeps until a request, the task's
+    /// wake-up, a due registration attempt or the [`HOUSEKEEPING`] tick.
+    pub(super) fn run(
+        &self,
+        server: &ControlServer<AgentCommand, AgentReply>,
+        wake: &Listener<Ipc>,
+        link: &mut RouterLink,
+        reg: &Registration,
+    ) {
+        let ws = match WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<Ipc>()
+        {
+            Ok(ws) => ws,
+            Err(e) => {
+                tracing::error!("cannot create the message checker's WaitSet: {e:?}");
+                return;
+            }
+        };
+        let (Ok(_ctl), Ok(wake_guard)) = (ws.attach_notification(server.listener()), ws.attach_notification(wake))
+        else {
+            tracing::error!("cannot attach the control service to the WaitSet");
+            return;
+        };
+        let watchdog = watchdog_interval();
+        let tick = housekeeping_interval(watchdog);
+        let mut cpu = CpuMeter::default();
+        let mut last_cpu = 0u64;
+        let mut last_ping = Instant::now();
+        let mut next_tick = Instant::now() + tick;
+        loop {
+            let now = Instant::now();
+            let until = link.next_attempt().map_or(next_tick, |at| at.min(next_tick));
+            let result = ws.wait_and_process_once_with_timeout(
+                |id| {
+                    if id.has_event_from(&wake_guard) {
+                        let _ = wake.try_wait(|_| {});
+                    }
+                    CallbackProgression::Continue
+                },
+                until.saturating_duration_since(now),
+            );
+            match result {
+                Ok(WaitSetRunResult::TerminationRequest) => {
+                    tracing::info!("termination requested by signal");
+                    return;
+                }
+                Ok(_) => {}
+                Err(e) => {
+                    tracing::warn!("message checker wait failed: {e:?}");
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+            }
+            if self.shared.stopping() {
+                return;
+            }
+            // before serving, so that statistics asked after a quiet while are fresh
+            let now_ns = now_ns();
+            if now_ns.saturating_sub(last_cpu) >= 1_000_000_000 {
+                cpu.sample(now_ns);
+                last_cpu = now_ns;
+            }
+            let mut stop_now = false;
+            if let Err(e) = server.serve(|req| match req {
+                Ok(AgentCommand::Stop) => {
+                    stop_now = true;
+                    AgentReply::Ok
+                }
+                Ok(cmd) => self.handle(cmd, &cpu),
+                Err(e) => AgentReply::Error(e.to_string()),
+            }) {
+                tracing::warn!("control service failed: {e}");
+            }
+            if stop_now {
+                tracing::info!("stop requested");
+                return;
+            }
+            if self.shared.stopping() {
+                return;
+            }
+            // cheap (one receive on the epoch subscriber) unless registering is due
+            if !link.poll(self.node, self.world, reg, self.shared) {
+                return;
+            }
+            if Instant::now() >= next_tick {
+                next_tick = Instant::now() + tick;
+            }
+            if let Some(wd) = watchdog {
+                // ping at half the interval, and only while the task makes progress
+                if last_ping.elapsed() >= wd / 2 && self.task_alive(now_ns, wd) {
+                    let _ = sd_notify("WATCHDOG=1");
+                    last_ping = Instant::now();
+                }
+            }
+        }
+    }
+
+    /// Whether the task thread has made progress recently enough to keep the
+    /// watchdog happy: no step runs for longer than the watchdog interval, and
+    /// a periodic task has completed a cycle recently.
+    fn task_alive(&self, now: u64, wd: Duration) -> bool {
+        let wd_ns = wd.as_nanos() as u64;
+        let (last, in_step) = {
+            let f = self.shared.figures();
+            (f.last_cycle_ns, f.in_step_since_ns)
+        };
+        if in_step != 0 && now.saturating_sub(in_step) > wd_ns {
+            return false;
+        }
+        if self.shared.suspended.load(Ordering::Acquire) || matches!(self.task_kind, Task::EventDriven) {
+            return true;
+        }
+        let period = self.shared.period_ns.load(Ordering::Acquire);
+        now.saturating_sub(last) < wd_ns.max(period * 2)
+    }
+
+    fn find_input(&self, name: &str) -> Result<&Arc<dyn DynInput>, String> {
+        self.inputs.iter().find(|i| i.name() == name).ok_or_else(|| {
+            let names: Vec<&str> = self.inputs.iter().map(|i| i.name()).collect();
+            format!(
+                "no input port {name:?} (inputs: {})",
+                if names.is_empty() { "none".into() } else { names.join(", ") }
+            )
+        })
+    }
+
+    fn changed_inputs(&self) {
+        self.shared.generation.fetch_add(1, Ordering::AcqRel);
+        self.shared.poke();
+    }
+
+    fn handle(&self, cmd: AgentCommand, cpu: &CpuMeter) -> AgentReply {
+        match cmd {
+            AgentCommand::Connect { input, from_agent, from_port, type_name } => {
+                let inp = match self.find_input(&input) {
+                    Ok(i) => i,
+                    Err(e) => return AgentReply::Error(e),
+                };
+                if inp.type_name() != type_name {
+                    return AgentReply::Error(format!(
+                        "input {input:?} takes {} but {from_agent}/{from_port} sends {type_name}",
+                        inp.type_name()
+                    ));
+                }
+                let t0 = now_ns();
+                match inp.connect(self.node, self.world.robot(), &from_agent, &from_port) {
+                    Ok(changed) => {
+                        tracing::debug!(
+                            "subscribed {input} to {from_agent}/{from_port} in {} us",
+                            (now_ns() - t0) / 1000
+                        );
+                        if changed {
+                            tracing::info!("input {input} now reads {from_agent}/{from_port}");
+                            self.changed_inputs();
+                        }
+                        AgentReply::Ok
+                    }
+                    Err(e) => AgentReply::Error(e.to_string()),
+                }
+            }
+            AgentCommand::Disconnect { input, from_agent, from_port } => {
+                let inp = match self.find_input(&input) {
+                    Ok(i) => i,
+                    Err(e) => return AgentReply::Error(e),
+                };
+                if inp.disconnect(&from_agent, &from_port) {
+                    tracing::info!("input {input} no longer reads {from_agent}/{from_port}");
+                    self.changed_inputs();
+                    AgentReply::Ok
+                } else {
+                    AgentReply::Error(format!("input {input:?} does not read {from_agent}/{from_port}"))
+                }
+            }
+            AgentCommand::SetPeriod { period_ns } => match self.task_kind {
+                Task::EventDriven => AgentReply::Error("this agent is event-driven; it has no period".into()),
+                Task::Periodic(_) if period_ns < 10_000 => AgentReply::Error("a period must be at least 10us".into()),
+                Task::Periodic(_) if period_ns > crate::clock::nanos(crate::clock::MAX_DURATION) => {
+                    AgentReply::Error("a period must be at most 1 day".into())
+                }
+                Task::Periodic(_) => {
+                    self.shared.period_ns.store(period_ns, Ordering::Release);
+                    self.shared.poke();
+                    tracing::info!("period set to {}", crate::clock::format_duration(Duration::from_nanos(period_ns)));
+                    AgentReply::Ok
+                }
+            },
+            AgentCommand::Suspend => {
+                self.shared.suspended.store(true, Ordering::Release);
+                self.shared.poke();
+                tracing::info!("suspended");
+                AgentReply::Ok
+            }
+            AgentCommand::Resume => {
+                self.shared.suspended.store(false, Ordering::Release);
+                self.shared.poke();
+                tracing::info!("resumed");
+                AgentReply::Ok
+            }
+            AgentCommand::ParamGet { key } => match self.params.get(&key) {
+                Ok(v) => AgentReply::Param(v),
+                Err(e) => AgentReply::Error(e),
+            },
+            AgentCommand::ParamSet { key, value } => match self.params.set(&key, &value) {
+                Ok(()) => {
+                    tracing::info!("parameter {key} = {value}");
+                    AgentReply::Ok
+                }
+                Err(e) => AgentReply::Error(e),
+            },
+            AgentCommand::Stats => AgentReply::Stats(self.stats(cpu)),
+            AgentCommand::Stop => AgentReply::Ok,
+        }
+    }
+
+    fn stats(&self, cpu: &CpuMeter) -> AgentStats {
+        let now = now_ns();
+        let f = self.shared.figures();
+        let (p50, p99, max) = f.lateness.summary();
+        AgentStats {
+            cycles: f.cycles,
+            rate_hz: f.rate.rate(now),
+            jitter_p50_ns: p50,
+            jitter_p99_ns: p99,
+            jitter_max_ns: max,
+            overruns: f.overruns,
+            cpu_percent: cpu.percent(),
+            rss_bytes: rss_bytes(),
+            realtime: self.shared.realtime.load(Ordering::Relaxed),
+            inputs: self.inputs.iter().flat_map(|i| i.stats(now)).collect(),
+            figures: self.params.figures(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn housekeeping_is_rare_unless_a_watchdog_needs_pings() {
+        assert_eq!(housekeeping_interval(None), HOUSEKEEPING);
+        assert_eq!(housekeeping_interval(Some(Duration::from_secs(60))), HOUSEKEEPING);
+        // pinged at half the interval: ticks at a quarter keep the pings in time
+        assert_eq!(housekeeping_interval(Some(Duration::from_secs(4))), Duration::from_secs(1));
+        assert!(housekeeping_interval(Some(Duration::ZERO)) > Duration::ZERO);
+    }
+}

@@ -1,0 +1,320 @@
+//! Start-up of an agent: the command line, `--describe` (the agent's ports
+//! and parameters as JSON, from a throw-away world), and [`start`]: the node,
+//! the control service, the agent's ports, registration, the task thread,
+//! then the message checker until the agent stops.
+
+use super::checker::Checker;
+use super::router_link::{RegisterError, RouterLink};
+use super::task::{SuspendGate, task_main};
+use super::{Shared, TaskFigures};
+use crate::agent::{Agent, Setup, Task};
+use crate::cli::CommonArgs;
+use crate::clock::{now_ns, parse_duration};
+use crate::control::{ControlError, ControlServer, ControlSize};
+use crate::daemon::{Readiness, daemonize, init_logging, sd_notify};
+use crate::params::ParamTable;
+use crate::rt;
+use crate::world::World;
+use shm_schemas::AgentName;
+use shm_schemas::control::agent_to_router::{PortSpec, Registration, TaskKind};
+use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// Exit code when the agent could not start (bad arguments, duplicate name, device).
+pub const EXIT_STARTUP: u8 = 1;
+
+/// Runs agent `A` with the common command line; the body of an agent's `main`.
+pub fn run<A: Agent>() -> ExitCode {
+    let args = <CommonArgs as clap::Parser>::parse();
+    run_with_args::<A>(args)
+}
+
+/// Runs agent `A` with already parsed arguments.
+pub fn run_with_args<A: Agent>(args: CommonArgs) -> ExitCode {
+    let name = args.name.clone().unwrap_or_else(|| A::KIND.to_owned());
+    let mut readiness = Readiness::foreground();
+    let world = match World::new(&args.robot) {
+        Ok(w) => w,
+        Err(e) => return startup_error(&mut readiness, &e.to_string()),
+    };
+    if let Err(e) = AgentName::new(&name) {
+        return startup_error(&mut readiness, &format!("invalid --name: {e}"));
+    }
+    if args.describe {
+        return match describe::<A>(&args) {
+            Ok(json) => {
+                println!("{json}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => startup_error(&mut readiness, &e),
+        };
+    }
+    if args.daemon {
+        if let Err(e) = world.ensure_state_dirs() {
+            return startup_error(&mut readiness, &e.to_string());
+        }
+        match daemonize(&world.log_file(&name), &world.pid_file(&name)) {
+            Ok(r) => readiness = r,
+            Err(e) => return startup_error(&mut readiness, &format!("cannot daemonize: {e}")),
+        }
+    }
+    init_logging(&name, args.log_level.as_deref());
+    match start::<A>(&args, &name, world, &mut readiness) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(msg) => startup_error(&mut readiness, &msg),
+    }
+}
+
+fn startup_error(readiness: &mut Readiness, msg: &str) -> ExitCode {
+    tracing::error!("{msg}");
+    if readiness.pid_file().is_none() {
+        eprintln!("error: {msg}");
+    }
+    readiness.fail(msg);
+    ExitCode::from(EXIT_STARTUP)
+}
+
+/// The agent's description, made by running [`Agent::new`] in a private,
+/// throw-away world (so authors must open devices in [`Agent::start`], not in `new`).
+fn describe<A: Agent>(args: &CommonArgs) -> Result<String, String> {
+    let world = World::new(&format!("describe-{}", std::process::id())).map_err(|e| e.to_string())?;
+    let result = describe_in::<A>(args, &world);
+    // iceoryx2 keeps a management file per prefix; this world is private and
+    // gone, whether the agent could be described or not
+    for f in world.shm_files() {
+        let _ = std::fs::remove_file(f);
+    }
+    result
+}
+
+fn describe_in<A: Agent>(args: &CommonArgs, world: &World) -> Result<String, String> {
+    use shm_schemas::control::describe::Description;
+    let node = Arc::new(world.node("describe").map_err(|e| e.to_string())?);
+    let mut setup = Setup {
+        world: world.clone(),
+        name: AgentName::new(A::KIND).map_err(|e| e.to_string())?,
+        node,
+        args: args.args.clone(),
+        inputs: Vec::new(),
+        outputs: Vec::new(),
+        params: ParamTable::default(),
+    };
+    let agent = A::new(&mut setup).map_err(|e| format!("{} could not be set up: {e}", A::KIND))?;
+    apply_params(&setup.params, &args.params)?;
+    let (task, default_period_ns) = match A::task() {
+        Task::Periodic(p) => (TaskKind::Periodic, Some(crate::clock::nanos(p))),
+        Task::EventDriven => (TaskKind::EventDriven, None),
+    };
+    let d = Description {
+        protocol: shm_schemas::PROTOCOL_VERSION,
+        kind: A::KIND.into(),
+        task,
+        default_period_ns,
+        inputs: setup
+            .inputs
+            .iter()
+            .map(|i| PortSpec { name: i.name().into(), type_name: i.type_name().into() })
+            .collect(),
+        outputs: setup.outputs.clone(),
+        params: setup.params.snapshot(),
+    };
+    drop(agent);
+    drop(setup);
+    serde_json::to_string(&d).map_err(|e| e.to_string())
+}
+
+/// Applies `--param KEY=VALUE` settings.
+fn apply_params(table: &ParamTable, settings: &[String]) -> Result<(), String> {
+    for s in settings {
+        let (k, v) = s.split_once('=').ok_or_else(|| format!("--param {s:?}: write KEY=VALUE"))?;
+        table.set(k.trim(), v).map_err(|e| format!("--param {s}: {e}"))?;
+    }
+    Ok(())
+}
+
+fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut Readiness) -> Result<(), String> {
+    let agent_name = AgentName::new(name).map_err(|e| e.to_string())?;
+    let task_kind = A::task();
+    let period = match (task_kind, &args.period) {
+        (Task::Periodic(default), None) => Some(default),
+        (Task::Periodic(_), Some(p)) => Some(parse_duration(p).map_err(|e| format!("--period: {e}"))?),
+        (Task::EventDriven, Some(_)) => {
+            return Err(format!("agent kind {} is event-driven; it takes no --period", A::KIND));
+        }
+        (Task::EventDriven, None) => None,
+    };
+
+    if !args.no_realtime {
+        match rt::lock_memory() {
+            Ok(()) => tracing::debug!("memory locked (mlockall, on fault)"),
+            Err(e) => tracing::info!("memory not locked: mlockall refused ({e}); page faults may add latency"),
+        }
+    }
+
+    let t_start = Instant::now();
+    let stage = |what: &str| tracing::debug!("start-up: {what} at {} us", t_start.elapsed().as_micros());
+    let node = Arc::new(world.node(name).map_err(|e| e.to_string())?);
+    stage("node created");
+    let ctl_service = world.robot().ctl_service(&agent_name);
+    let server: ControlServer<AgentCommand, AgentReply> = ControlServer::create(&node, &ctl_service, ControlSize::AGENT)
+        .map_err(|e| match e {
+            ControlError::AlreadyServed { .. } => format!(
+                "an agent named {name:?} is already running on robot {}; choose another --name, or stop it first with `nerve stop {name}`",
+                world.robot()
+            ),
+            e => e.to_string(),
+        })?;
+
+    stage("control service created");
+    let wake_service = format!("nerve/{}/{}/_wake", world.robot(), name);
+    let wake_factory = node
+        .service_builder(&wake_service.as_str().try_into().map_err(|e| format!("{e:?}"))?)
+        .event()
+        .max_listeners(2)
+        .max_notifiers(2)
+        .open_or_create()
+        .map_err(|e| format!("cannot create {wake_service}: {e:?}"))?;
+    let wake_listener = wake_factory.listener_builder().create().map_err(|e| format!("{e:?}"))?;
+    // the message checker's own listener: the task wakes it when it stops
+    let checker_wake = wake_factory.listener_builder().create().map_err(|e| format!("{e:?}"))?;
+    let wake = wake_factory.notifier_builder().create().map_err(|e| format!("{e:?}"))?;
+
+    let mut setup = Setup {
+        world: world.clone(),
+        name: agent_name.clone(),
+        node: node.clone(),
+        args: args.args.clone(),
+        inputs: Vec::new(),
+        outputs: Vec::new(),
+        params: ParamTable::default(),
+    };
+    stage("wake-up event created");
+    let agent = A::new(&mut setup).map_err(|e| format!("{} {name:?} could not start: {e}", A::KIND))?;
+    stage("agent and its ports created");
+    let Setup { inputs, outputs, params, .. } = setup;
+    apply_params(&params, &args.params)?;
+
+    let shared = Arc::new(Shared {
+        period_ns: AtomicU64::new(period.map(crate::clock::nanos).unwrap_or(0)),
+        suspended: AtomicBool::new(args.suspended),
+        stop: AtomicBool::new(false),
+        generation: AtomicU64::new(0),
+        realtime: AtomicBool::new(false),
+        figures: Mutex::new(TaskFigures { last_cycle_ns: now_ns(), ..TaskFigures::default() }),
+        gate: SuspendGate::default(),
+        wake,
+    });
+
+    let registration = Registration {
+        name: name.to_owned(),
+        pid: std::process::id(),
+        kind: A::KIND.to_owned(),
+        executable: std::env::current_exe().map(|p| p.display().to_string()).unwrap_or_default(),
+        task: match task_kind {
+            Task::Periodic(_) => TaskKind::Periodic,
+            Task::EventDriven => TaskKind::EventDriven,
+        },
+        period_ns: period.map(crate::clock::nanos),
+        inputs: inputs.iter().map(|i| PortSpec { name: i.name().into(), type_name: i.type_name().into() }).collect(),
+        outputs,
+        log_file: readiness.pid_file().map(|_| world.log_file(name).display().to_string()),
+        suspended: args.suspended,
+    };
+    let mut link = RouterLink::new();
+    let registered = link.register(&node, &world, &registration, &shared);
+    stage("registration answered");
+    link.watch_epoch(&world, &node);
+    stage("router epoch subscribed");
+    match registered {
+        Ok(()) => {}
+        Err(RegisterError::Refused(e)) => return Err(e.to_string()),
+        Err(RegisterError::NoRouter) => tracing::warn!(
+            "no router runs for robot {}; running unregistered, and registering as soon as one starts (`nerve router --robot {}`)",
+            world.robot(),
+            world.robot()
+        ),
+        Err(RegisterError::Other(e)) => tracing::warn!("could not register with the router: {e}; will retry"),
+    }
+
+    // the task thread
+    let task_shared = shared.clone();
+    let task_inputs = inputs.clone();
+    let name_owned = name.to_owned();
+    let want_rt = !args.no_realtime;
+    let prio = args.priority;
+    let (started_tx, started_rx) = std::sync::mpsc::channel::<Result<(), String>>();
+    let handle = std::thread::Builder::new()
+        .name("task".into())
+        .spawn(move || {
+            rt::block_termination_signals();
+            rt::tight_timer_slack();
+            if want_rt {
+                match rt::set_thread_fifo(prio) {
+                    Ok(()) => task_shared.realtime.store(true, Ordering::Relaxed),
+                    Err(e) => tracing::info!(
+                        "real-time scheduling not permitted ({e}); the task runs with normal priority (grant CAP_SYS_NICE or LimitRTPRIO, or pass --no-realtime to silence this)"
+                    ),
+                }
+            }
+            task_main(agent, &name_owned, &task_shared, &task_inputs, wake_listener, task_kind, started_tx)
+        })
+        .map_err(|e| format!("cannot start the task thread: {e}"))?;
+    if want_rt {
+        let _ = rt::set_thread_fifo((prio + 1).min(99));
+    }
+    // ready only once the agent's own `start` worked (devices opened, a
+    // network session up): a failed start is a failed `nerve start`, and an
+    // exit without leaving the router, so supervision counts it as a failure
+    match started_rx.recv_timeout(START_TIMEOUT) {
+        Ok(Ok(())) => stage("agent started"),
+        Ok(Err(e)) => {
+            let _ = handle.join();
+            return Err(format!("{} {name:?} could not start: {e}", A::KIND));
+        }
+        Err(_) if handle.is_finished() => return Err(format!("{} {name:?} stopped while starting", A::KIND)),
+        Err(_) => tracing::warn!(
+            "the agent's start has not finished after {} s; reporting ready anyway",
+            START_TIMEOUT.as_secs()
+        ),
+    }
+
+    let startup_msg = format!("{name} started (pid {}, robot {})", std::process::id(), world.robot());
+    tracing::info!(
+        "started: kind {}, {}{}",
+        A::KIND,
+        match period {
+            Some(p) => format!("periodic every {}", crate::clock::format_duration(p)),
+            None => "event-driven".into(),
+        },
+        if link.is_registered() { ", registered with the router" } else { "" }
+    );
+    readiness.ready(&startup_msg);
+    let _ = sd_notify("READY=1");
+
+    let checker = Checker { world: &world, node: &node, shared: &shared, inputs: &inputs, params: &params, task_kind };
+    checker.run(&server, &checker_wake, &mut link, &registration);
+
+    // stop: wake the task, wait for it a bounded time, leave the router
+    shared.stop.store(true, Ordering::Release);
+    shared.poke();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while !handle.is_finished() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    if handle.is_finished() {
+        let _ = handle.join();
+    } else {
+        tracing::warn!("the task did not finish within 5 s of the stop request; exiting anyway");
+    }
+    link.unregister(name);
+    let _ = sd_notify("STOPPING=1");
+    tracing::info!("stopped");
+    Ok(())
+}
+
+/// How long the start-up waits for the agent's own `start` before it
+/// reports ready anyway.
+const START_TIMEOUT: Duration = Duration::from_secs(60);
