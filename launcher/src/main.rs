@@ -5,6 +5,7 @@
 mod cli;
 mod client;
 mod cmd;
+mod interrupt;
 mod kinds;
 mod launch_file;
 

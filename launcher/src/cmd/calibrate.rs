@@ -47,9 +47,9 @@
 //! calibration was written, 1 when not.
 
 use super::down::{bring_down, clean};
-use super::logs::{INTERRUPTED, catch_interrupts};
 use super::tap::Tap;
 use crate::client::{RouterSession, cli_node};
+use crate::interrupt;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, anyhow, bail};
 use nerve_checkpoint::appendix_a::{Fit, FitOptions, Model, Sample, fit};
@@ -65,7 +65,6 @@ use std::collections::VecDeque;
 use std::io::{Read as _, Write as _};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ExitCode, Stdio};
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// `nerve calibrate ...`
@@ -375,7 +374,7 @@ fn simulate(robot: &str, explicit: bool, a: &CheckpointArgs, dir: &Path) -> Resu
         a.speed,
         dir.display()
     );
-    catch_interrupts();
+    interrupt::catch();
     let t0 = Instant::now();
     let result = match super::launch::launch_robot(&robot, &launch_path) {
         Ok(w) => {
@@ -574,7 +573,7 @@ fn collect(world: &World, tube: &TubeGeometry, a: &CheckpointArgs) -> Result<Col
     let mut passed_near = false;
     let mut still_since: Option<Instant> = None;
     loop {
-        if INTERRUPTED.load(Ordering::SeqCst) {
+        if interrupt::requested() {
             bail!("interrupted (Ctrl-C): no calibration written");
         }
         truth.drain(&sub)?;

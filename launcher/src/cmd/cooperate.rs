@@ -29,9 +29,9 @@
 
 use super::demo::{copy_logs, find_file, sample_agents, set_flag};
 use super::down::{bring_down, clean};
-use super::logs::{INTERRUPTED, catch_interrupts};
 use super::tap::Tap;
 use crate::client::{RouterSession, cli_node};
+use crate::interrupt;
 use agent_sdk::World;
 use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, bail};
@@ -46,7 +46,6 @@ use std::collections::BTreeMap;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// `nerve demo cooperate`
@@ -303,7 +302,7 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         a.time_limit,
         out.display()
     );
-    catch_interrupts();
+    interrupt::catch();
     let bring_all_down = || {
         let mut n = (0, 0);
         for w in worlds.iter().rev() {
@@ -455,7 +454,7 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs) -> Result
     let wall_limit = Duration::from_secs_f64(a.time_limit * 1.5 + 60.0);
     let truth2_port = format!("truth-{}", names[1]);
     let end = loop {
-        if INTERRUPTED.load(Ordering::SeqCst) {
+        if interrupt::requested() {
             break End::Interrupted;
         }
         let (w1, w2, n1, n2) = (&worlds[0], &worlds[1], &nodes[0], &nodes[1]);

@@ -25,9 +25,9 @@
 //! `summary.json`), 1 when it could not be run.
 
 use super::down::{bring_down, clean};
-use super::logs::{INTERRUPTED, catch_interrupts};
 use super::tap::Tap;
 use crate::client::{RouterSession, cli_node};
+use crate::interrupt;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
 use nerve_demo::analysis::ModeChange;
@@ -41,7 +41,6 @@ use shm_schemas::payloads::{GroundTruth, Mode};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// `nerve demo ...`
@@ -242,7 +241,7 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
         a.time_limit,
         out.display()
     );
-    catch_interrupts();
+    interrupt::catch();
     let launched = super::launch::launch_robot(robot, &launch_path);
     let world = match launched {
         Ok(w) => w,
@@ -373,7 +372,7 @@ fn follow(world: &World, scene: &Scene, a: &ExploreArgs) -> Result<Followed> {
     let mut next_sample = Instant::now();
     let wall_limit = Duration::from_secs_f64(a.time_limit * 1.5 + 30.0);
     let end = loop {
-        if INTERRUPTED.load(Ordering::SeqCst) {
+        if interrupt::requested() {
             break End::Interrupted;
         }
         if truth_tap.is_none() {

@@ -6,16 +6,16 @@
 //! `--foreground`, streams every agent's log and stops everything on Ctrl-C.
 
 use super::down::{bring_down, clean};
-use super::logs::{INTERRUPTED, Tail, catch_interrupts, tails_from_now};
+use super::logs::{Tail, tails_from_now};
 use crate::cli::LaunchArgs;
 use crate::client::RouterSession;
+use crate::interrupt;
 use crate::launch_file::{self, LaunchFile, RestartPolicy};
 use agent_sdk::World;
 use anyhow::{Context as _, Result, anyhow, bail};
 use shm_schemas::control::cli_to_router::{self as proto, CliRequest, RouterReply};
 use std::io::Read;
 use std::process::{Command, ExitCode, Stdio};
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// How long `launch` waits for every agent to register.
@@ -175,9 +175,9 @@ fn wait_registered(session: &RouterSession, file: &LaunchFile) -> Result<()> {
 /// Streams every agent's log (and the router's) from where `tails` start
 /// until Ctrl-C, then brings the robot down.
 fn follow(world: &World, mut tails: Vec<Tail>) -> Result<()> {
-    catch_interrupts();
+    interrupt::catch();
     eprintln!("streaming logs; Ctrl-C stops every agent and the router");
-    while !INTERRUPTED.load(Ordering::SeqCst) {
+    while !interrupt::requested() {
         for t in &mut tails {
             for l in t.poll() {
                 println!("{l}");

@@ -9,13 +9,13 @@
 //! log (another file under the name) and starts again at its beginning.
 
 use crate::cli::LogsArgs;
+use crate::interrupt;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::os::unix::fs::MetadataExt;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 /// The most a [`Tail`] reads in one poll; the rest comes at the next.
@@ -124,23 +124,6 @@ pub fn last_lines<F: Read + Seek>(f: &mut F, n: usize) -> std::io::Result<(Vec<u
     Ok((out, end))
 }
 
-/// Set by SIGINT/SIGTERM while following.
-pub static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-
-extern "C" fn on_signal(_: libc::c_int) {
-    INTERRUPTED.store(true, Ordering::SeqCst);
-}
-
-/// Routes SIGINT and SIGTERM to [`INTERRUPTED`].
-pub fn catch_interrupts() {
-    use nix::sys::signal::{SaFlags, SigAction, SigHandler, SigSet, Signal, sigaction};
-    let act = SigAction::new(SigHandler::Handler(on_signal), SaFlags::empty(), SigSet::empty());
-    for sig in [Signal::SIGINT, Signal::SIGTERM] {
-        // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
-        let _ = unsafe { sigaction(sig, &act) };
-    }
-}
-
 pub fn logs(world: &World, a: LogsArgs) -> Result<ExitCode> {
     let path = world.log_file(&a.name);
     if !path.exists() {
@@ -177,9 +160,9 @@ pub fn logs(world: &World, a: LogsArgs) -> Result<ExitCode> {
     out.flush()?;
     drop(out);
     if a.follow {
-        catch_interrupts();
+        interrupt::catch();
         let mut tail = Tail::new(path, end);
-        while !INTERRUPTED.load(Ordering::SeqCst) {
+        while !interrupt::requested() {
             for l in tail.poll() {
                 println!("{l}");
             }
