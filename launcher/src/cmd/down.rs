@@ -5,7 +5,6 @@
 //! says which). A router that crashes or is restarted keeps the list: only
 //! a deliberate `nerve down` forgets it.
 
-use crate::cli::DownArgs;
 use crate::client::RouterSession;
 use agent_sdk::World;
 use agent_sdk::world::pid_alive;
@@ -15,6 +14,19 @@ use nix::unistd::Pid;
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
+
+/// `nerve down`
+#[derive(Debug, clap::Args)]
+pub struct DownArgs {
+    /// Seconds to wait for a clean stop before SIGTERM, and again before SIGKILL.
+    #[arg(long, default_value_t = 3.0, value_parser = agent_sdk::clock::parse_seconds)]
+    pub grace: f64,
+    /// Keep the robot's connection list for its next start (by default a
+    /// robot brought down starts unwired next time: its launch file or
+    /// `nerve connect` wires it again).
+    #[arg(long)]
+    pub keep_connections: bool,
+}
 
 /// (name, pid) of every process that has a pid file in the robot's state directory.
 fn pid_files(world: &World) -> Vec<(String, u32, std::path::PathBuf)> {

@@ -7,7 +7,6 @@
 
 use super::down::{bring_down, clean};
 use super::logs::{Tail, tails_from_now};
-use crate::cli::LaunchArgs;
 use crate::client::RouterSession;
 use crate::interrupt;
 use crate::launch_file::{self, LaunchFile, RestartPolicy};
@@ -17,6 +16,16 @@ use shm_schemas::control::cli_to_router::{self as proto, CliRequest, RouterReply
 use std::io::Read;
 use std::process::{Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
+
+/// `nerve launch`
+#[derive(Debug, clap::Args)]
+pub struct LaunchArgs {
+    /// The launch file (TOML).
+    pub file: std::path::PathBuf,
+    /// Stay attached: stream the agents' logs, stop everything on Ctrl-C.
+    #[arg(long)]
+    pub foreground: bool,
+}
 
 /// How long `launch` waits for every agent to register.
 const REGISTER_TIMEOUT: Duration = Duration::from_secs(20);

@@ -8,7 +8,6 @@
 //! reads at most [`TAIL_READ_MAX`] bytes per poll. A tail notices a rotated
 //! log (another file under the name) and starts again at its beginning.
 
-use crate::cli::LogsArgs;
 use crate::interrupt;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
@@ -17,6 +16,19 @@ use std::os::unix::fs::MetadataExt;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
+
+/// `nerve logs`
+#[derive(Debug, clap::Args)]
+pub struct LogsArgs {
+    /// Agent name (or `router`).
+    pub name: String,
+    /// Keep printing new lines.
+    #[arg(long, short)]
+    pub follow: bool,
+    /// Only the last N lines.
+    #[arg(long, short = 'n')]
+    pub lines: Option<usize>,
+}
 
 /// The most a [`Tail`] reads in one poll; the rest comes at the next.
 pub const TAIL_READ_MAX: u64 = 1 << 20;
