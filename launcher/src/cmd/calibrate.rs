@@ -46,9 +46,9 @@
 //! `out/calibrate-checkpoint` for a samples file. Exit code 0 when the
 //! calibration was written, 1 when not.
 
-use super::down::{bring_down, clean};
 use super::tap::Tap;
-use crate::client::{RouterSession, cli_node};
+use crate::bring;
+use crate::client::cli_node;
 use crate::interrupt;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, anyhow, bail};
@@ -59,7 +59,6 @@ use nerve_demo::calibration_plot::{CalibrationPoint, write_fit};
 use nerve_demo::nerve_sim::{RobotKind, RobotModel, focal_length_px};
 use nerve_stm::{ReadError, RingName, RingReader};
 use shm_schemas::RobotName;
-use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::payloads::GroundTruth;
 use std::collections::VecDeque;
 use std::io::{Read as _, Write as _};
@@ -336,18 +335,15 @@ fn depth(tube: &TubeGeometry, t: &GroundTruth) -> f64 {
 
 /// Refuses a robot that already runs agents (they would be stopped at the end).
 fn refuse_busy(world: &World) -> Result<()> {
-    let Ok(s) = RouterSession::open(world) else { return Ok(()) };
-    if let Ok(RouterReply::Agents(v)) = s.call(CliRequest::Ps) {
-        let live: Vec<String> = v.into_iter().filter(|a| a.pid > 0).map(|a| a.name).collect();
-        if !live.is_empty() {
-            bail!(
-                "robot {r} already runs {} agent(s) ({}); the calibration brings its robot down at the end: \
-                 stop them with `nerve --robot {r} down` or leave out --robot (a private robot is used)",
-                live.len(),
-                live.join(", "),
-                r = world.robot()
-            );
-        }
+    let live = bring::running_agents(world);
+    if !live.is_empty() {
+        bail!(
+            "robot {r} already runs {} agent(s) ({}); the calibration brings its robot down at the end: \
+             stop them with `nerve --robot {r} down` or leave out --robot (a private robot is used)",
+            live.len(),
+            live.join(", "),
+            r = world.robot()
+        );
     }
     Ok(())
 }
@@ -376,7 +372,7 @@ fn simulate(robot: &str, explicit: bool, a: &CheckpointArgs, dir: &Path) -> Resu
     );
     interrupt::catch();
     let t0 = Instant::now();
-    let result = match super::launch::launch_robot(&robot, &launch_path) {
+    let result = match bring::launch_robot(&robot, &launch_path) {
         Ok(w) => {
             println!("simulator up in {:.1} s; driving at the tube (Ctrl-C stops)", t0.elapsed().as_secs_f64());
             collect(&w, &tube, a)
@@ -384,12 +380,8 @@ fn simulate(robot: &str, explicit: bool, a: &CheckpointArgs, dir: &Path) -> Resu
         Err(e) => Err(e.context("the simulator did not come up")),
     };
     // whatever happened: stop everything and leave nothing behind
-    let (stopped, killed) = bring_down(&nworld, Duration::from_secs(3));
-    clean(&nworld);
-    println!(
-        "stopped {stopped} process(es){}",
-        if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
-    );
+    let (stopped, killed) = bring::down_and_clean(&nworld);
+    println!("{}", bring::stopped_line(stopped, killed));
     super::demo::copy_logs(&nworld, &dir.join("logs"));
     if !explicit && let Err(e) = std::fs::remove_dir_all(nworld.state_dir()) {
         eprintln!("warning: cannot remove {}: {e}", nworld.state_dir().display());

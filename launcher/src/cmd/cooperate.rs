@@ -27,9 +27,9 @@
 //! Exit code 0 when the run completed (whatever the robots achieved: read
 //! `summary.json`), 1 when it could not be run.
 
-use super::demo::{copy_logs, find_file, sample_agents, set_flag};
-use super::down::{bring_down, clean};
+use super::demo::{copy_logs, find_file, set_flag};
 use super::tap::Tap;
+use crate::bring;
 use crate::client::{RouterSession, cli_node};
 use crate::interrupt;
 use agent_sdk::World;
@@ -215,7 +215,7 @@ fn all_figures(world: &World) -> BTreeMap<String, BTreeMap<String, String>> {
 
 /// Refuses robots that already run agents.
 fn refuse_busy(world: &World) -> Result<()> {
-    let live: Vec<String> = sample_agents(world).into_iter().filter(|a| a.2 > 0).map(|a| a.0).collect();
+    let live = bring::running_agents(world);
     if !live.is_empty() {
         let r = world.robot();
         bail!(
@@ -306,14 +306,13 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
     let bring_all_down = || {
         let mut n = (0, 0);
         for w in worlds.iter().rev() {
-            let (s, k) = bring_down(w, Duration::from_secs(3));
-            clean(w);
+            let (s, k) = bring::down_and_clean(w);
             n = (n.0 + s, n.1 + k);
         }
         n
     };
     for (i, p) in launch_paths.iter().enumerate() {
-        if let Err(e) = super::launch::launch_robot(&names[i], p) {
+        if let Err(e) = bring::launch_robot(&names[i], p) {
             eprintln!("error: robot {} did not come up: {e:#}", names[i]);
             bring_all_down();
             return Ok(ExitCode::from(1));
@@ -329,10 +328,7 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         .collect();
     let grasp = all_figures(&worlds[1]).get("mission").and_then(|m| m.get("grasp").cloned());
     let (stopped, killed) = bring_all_down();
-    println!(
-        "stopped {stopped} process(es){}",
-        if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
-    );
+    println!("{}", bring::stopped_line(stopped, killed));
     let (end, mut rec) = followed?;
     rec.bridge = bridge_figures;
     rec.grasp = grasp;

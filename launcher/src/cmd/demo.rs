@@ -24,8 +24,8 @@
 //! Exit code 0 when the run completed (whatever the robot achieved: read
 //! `summary.json`), 1 when it could not be run.
 
-use super::down::{bring_down, clean};
 use super::tap::Tap;
+use crate::bring;
 use crate::client::{RouterSession, cli_node};
 use crate::interrupt;
 use agent_sdk::World;
@@ -219,7 +219,7 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     let out = std::fs::canonicalize(&out).with_context(|| format!("cannot use output directory {}", out.display()))?;
 
     let nworld = World::new(robot)?;
-    let live: Vec<String> = sample_agents(&nworld).into_iter().filter(|a| a.2 > 0).map(|a| a.0).collect();
+    let live = bring::running_agents(&nworld);
     if !live.is_empty() {
         bail!(
             "robot {robot} already runs {} agent(s) ({}); stop them with `nerve --robot {robot} down` or pick another --robot",
@@ -242,13 +242,13 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
         out.display()
     );
     interrupt::catch();
-    let launched = super::launch::launch_robot(robot, &launch_path);
+    let launched = bring::launch_robot(robot, &launch_path);
     let world = match launched {
         Ok(w) => w,
         Err(e) => {
             eprintln!("error: the robot did not come up: {e:#}");
-            let (_, _) = bring_down(&nworld, Duration::from_secs(2));
-            clean(&nworld);
+            let (_, _) = bring::down(&nworld, Duration::from_secs(2));
+            bring::clean(&nworld);
             return Ok(ExitCode::from(1));
         }
     };
@@ -256,12 +256,8 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
 
     let outcome = follow(&world, &scene, &a);
     // whatever happened, stop everything and leave nothing behind
-    let (stopped, killed) = bring_down(&world, Duration::from_secs(3));
-    clean(&world);
-    println!(
-        "stopped {stopped} process(es){}",
-        if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
-    );
+    let (stopped, killed) = bring::down_and_clean(&world);
+    println!("{}", bring::stopped_line(stopped, killed));
     let Followed { end, rows, modes, cpu } = outcome?;
 
     // the records: what the demo received on `sim/truth` and `decision/mode`
