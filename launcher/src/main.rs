@@ -2,6 +2,7 @@
 //! dispatch, print the error with what to do, exit with a meaningful code
 //! (0 success, 1 failure, 2 bad usage).
 
+mod agent_logs;
 mod bring;
 mod cli;
 mod client;

@@ -382,7 +382,7 @@ fn simulate(robot: &str, explicit: bool, a: &CheckpointArgs, dir: &Path) -> Resu
     // whatever happened: stop everything and leave nothing behind
     let (stopped, killed) = bring::down_and_clean(&nworld);
     println!("{}", bring::stopped_line(stopped, killed));
-    super::demo::copy_logs(&nworld, &dir.join("logs"));
+    crate::agent_logs::copy_logs(&nworld, &dir.join("logs"));
     if !explicit && let Err(e) = std::fs::remove_dir_all(nworld.state_dir()) {
         eprintln!("warning: cannot remove {}: {e}", nworld.state_dir().display());
     }

@@ -27,8 +27,9 @@
 //! Exit code 0 when the run completed (whatever the robots achieved: read
 //! `summary.json`), 1 when it could not be run.
 
-use super::demo::{copy_logs, find_file, set_flag};
+use super::demo::{find_file, set_flag};
 use super::tap::Tap;
+use crate::agent_logs::copy_logs;
 use crate::bring;
 use crate::client::{RouterSession, cli_node};
 use crate::interrupt;

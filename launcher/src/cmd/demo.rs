@@ -25,6 +25,7 @@
 //! `summary.json`), 1 when it could not be run.
 
 use super::tap::Tap;
+use crate::agent_logs::copy_logs;
 use crate::bring;
 use crate::client::{RouterSession, cli_node};
 use crate::interrupt;
@@ -491,18 +492,6 @@ fn progress(scene: &Scene, r: Option<&TruthRow>, mode: &str, doorway: bool) {
 
 fn nerve_sim_vec(x: f64, y: f64) -> nerve_demo::nerve_sim::Vec2 {
     nerve_demo::nerve_sim::Vec2::new(x, y)
-}
-
-/// Copies every agent's log (and the router's) into `dir`.
-pub(super) fn copy_logs(world: &World, dir: &Path) {
-    if let Err(e) = std::fs::create_dir_all(dir) {
-        tracing::warn!("cannot create {}: {e}", dir.display());
-        return;
-    }
-    let Ok(rd) = std::fs::read_dir(world.logs_dir()) else { return };
-    for e in rd.flatten() {
-        let _ = std::fs::copy(e.path(), dir.join(e.file_name()));
-    }
 }
 
 /// `log.csv`: the truth with derived columns and the mode in force.

@@ -6,7 +6,7 @@
 //! `--foreground`, streams every agent's log and stops everything on Ctrl-C.
 //! The bring-up itself is [`crate::bring::up`].
 
-use super::logs::{Tail, tails_from_now};
+use crate::agent_logs::{Tail, tails_from_now};
 use crate::bring;
 use crate::interrupt;
 use crate::launch_file;
