@@ -6,7 +6,6 @@
 pub mod bench;
 pub mod bridge;
 pub mod calibrate;
-pub mod cooperate;
 pub mod demo;
 pub mod down;
 pub mod drive;

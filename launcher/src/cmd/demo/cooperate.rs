@@ -27,11 +27,11 @@
 //! Exit code 0 when the run completed (whatever the robots achieved: read
 //! `summary.json`), 1 when it could not be run.
 
-use super::demo::{find_file, set_flag};
-use super::tap::Tap;
+use super::{End, absolutize_args, find_file, set_flag};
 use crate::agent_logs::copy_logs;
 use crate::bring;
 use crate::client::{RouterSession, cli_node};
+use crate::cmd::tap::Tap;
 use crate::interrupt;
 use agent_sdk::World;
 use agent_sdk::world::Ipc;
@@ -88,39 +88,6 @@ pub struct CooperateArgs {
 const TEMPLATES: [&str; 2] = ["launch/cooperate-r1.toml", "launch/cooperate-r2.toml"];
 /// The port the shipped bridge configurations use.
 const SHIPPED_PORT: &str = "7451";
-
-/// How the run ended.
-#[derive(Debug, Clone, PartialEq)]
-enum End {
-    Done,
-    TimeLimit,
-    Interrupted,
-    Stalled(String),
-}
-
-impl End {
-    fn reason(&self) -> String {
-        match self {
-            End::Done => "robot 2 arrived and robot 1 resumed".into(),
-            End::TimeLimit => "time limit".into(),
-            End::Interrupted => "interrupted".into(),
-            End::Stalled(why) => format!("stalled: {why}"),
-        }
-    }
-}
-
-/// Makes relative paths among `args` that exist under `base` absolute
-/// (daemons may run from any directory).
-pub(super) fn absolutize_args(args: &mut [toml::Value], base: &Path) {
-    for v in args.iter_mut() {
-        if let Some(s) = v.as_str() {
-            let p = Path::new(s);
-            if s.contains('/') && !s.starts_with('-') && !s.contains('{') && p.is_relative() && base.join(p).exists() {
-                *v = toml::Value::String(base.join(p).display().to_string());
-            }
-        }
-    }
-}
 
 /// What a derived launch file needs to know.
 struct Derive<'a> {
@@ -524,7 +491,7 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs) -> Result
             done_at = Some(Instant::now());
         }
         if done_at.is_some_and(|t| t.elapsed().as_secs_f64() >= a.linger) {
-            break End::Done;
+            break End::Goal("robot 2 arrived and robot 1 resumed");
         }
         if rec.r1_truth.last().is_some_and(|r| r.t >= a.time_limit) {
             break End::TimeLimit;

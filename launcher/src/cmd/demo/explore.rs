@@ -24,10 +24,11 @@
 //! Exit code 0 when the run completed (whatever the robot achieved: read
 //! `summary.json`), 1 when it could not be run.
 
-use super::tap::Tap;
+use super::{End, find_file, set_flag};
 use crate::agent_logs::copy_logs;
 use crate::bring;
 use crate::client::{RouterSession, cli_node};
+use crate::cmd::tap::Tap;
 use crate::interrupt;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
@@ -43,18 +44,6 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
-
-/// `nerve demo ...`
-#[derive(Debug, clap::Subcommand)]
-pub enum DemoCmd {
-    /// The exploration experiment (thesis 4.2): through a crowded room and a
-    /// doorway to a person with a red object, who leads the robot into a U-turn.
-    Explore(ExploreArgs),
-    /// The cooperation experiment (thesis 4.3): robot 1 finds the target and
-    /// sends robot 2 a path over the bridge; robot 2 follows it, corrected at
-    /// the checkpoints, and grasps.
-    Cooperate(super::cooperate::CooperateArgs),
-}
 
 /// `nerve demo explore`
 #[derive(Debug, clap::Args)]
@@ -85,50 +74,6 @@ pub struct ExploreArgs {
     pub progress: f64,
 }
 
-/// Runs a demo.
-pub fn demo(robot: &str, cmd: DemoCmd) -> Result<ExitCode> {
-    match cmd {
-        DemoCmd::Explore(a) => explore(robot, a),
-        DemoCmd::Cooperate(a) => super::cooperate::cooperate(a),
-    }
-}
-
-/// Finds `rel` relative to the current directory, else above the running
-/// executable (`<tree>/target/<profile>/nerve`), else in the source tree
-/// this `nerve` was compiled from.
-pub(super) fn find_file(rel: &Path, what: &str) -> Result<PathBuf> {
-    if rel.is_absolute() || rel.exists() {
-        return std::fs::canonicalize(rel).with_context(|| format!("cannot use {what} {}", rel.display()));
-    }
-    let exe = std::env::current_exe().context("cannot find the nerve executable")?;
-    // the source tree this nerve was built from (also when CARGO_TARGET_DIR is elsewhere)
-    let built_from = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    for dir in exe.ancestors().skip(1).chain(std::iter::once(built_from.as_path())) {
-        let p = dir.join(rel);
-        if p.exists() {
-            return std::fs::canonicalize(&p).with_context(|| format!("cannot use {what} {}", p.display()));
-        }
-    }
-    bail!(
-        "cannot find {what} {} (looked in the current directory and above {}); run from the nerve source tree or give its path",
-        rel.display(),
-        exe.display()
-    )
-}
-
-/// Sets `--flag value` in an argument list (replacing or appending).
-pub(super) fn set_flag(args: &mut Vec<toml::Value>, flag: &str, value: String) {
-    if let Some(i) = args.iter().position(|a| a.as_str() == Some(flag)) {
-        if i + 1 < args.len() {
-            args[i + 1] = toml::Value::String(value);
-            return;
-        }
-        args.truncate(i);
-    }
-    args.push(toml::Value::String(flag.to_owned()));
-    args.push(toml::Value::String(value));
-}
-
 /// The run's launch file: the template with this robot, world and seed, and
 /// relative paths that exist under the source tree made absolute (daemons
 /// may run from any directory).
@@ -148,7 +93,7 @@ fn derive_launch(template: &Path, robot: &str, world: &Path, seed: u64) -> Resul
         let is_sim = t.get("kind").and_then(|k| k.as_str()) == Some("sim");
         let args = t.entry("args").or_insert_with(|| toml::Value::Array(vec![]));
         let Some(args) = args.as_array_mut() else { bail!("`args` of an agent must be a list of strings") };
-        super::cooperate::absolutize_args(args, &base);
+        super::absolutize_args(args, &base);
         if is_sim {
             found_sim = true;
             set_flag(args, "--world", world.display().to_string());
@@ -187,27 +132,7 @@ pub(super) fn sample_agents(world: &World) -> Vec<(String, String, u32, Option<f
     }
 }
 
-/// How the run ended.
-#[derive(Debug, Clone, PartialEq)]
-enum End {
-    Followed,
-    TimeLimit,
-    Interrupted,
-    Stalled(String),
-}
-
-impl End {
-    fn reason(&self) -> String {
-        match self {
-            End::Followed => "target followed".into(),
-            End::TimeLimit => "time limit".into(),
-            End::Interrupted => "interrupted".into(),
-            End::Stalled(why) => format!("stalled: {why}"),
-        }
-    }
-}
-
-fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
+pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     let t_wall = Instant::now();
     if !(a.time_limit > 0.0 && a.time_limit.is_finite()) {
         bail!("--time-limit must be a positive number of seconds");
@@ -437,7 +362,7 @@ fn follow(world: &World, scene: &Scene, a: &ExploreArgs) -> Result<Followed> {
             progress(scene, rows.last(), &mode, watch.crossed.is_some());
         }
         if followed {
-            break End::Followed;
+            break End::Goal("target followed");
         }
         if rows.last().is_some_and(|r| r.t >= a.time_limit) {
             break End::TimeLimit;
@@ -536,19 +461,4 @@ fn write_log_csv(
     }
     w.flush().with_context(err)?;
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn flags_are_replaced_or_appended() {
-        let mut v: Vec<toml::Value> =
-            ["--world", "a", "--x"].iter().map(|s| toml::Value::String((*s).into())).collect();
-        set_flag(&mut v, "--world", "b".into());
-        set_flag(&mut v, "--seed", "3".into());
-        let s: Vec<&str> = v.iter().filter_map(|x| x.as_str()).collect();
-        assert_eq!(s, ["--world", "b", "--x", "--seed", "3"]);
-    }
 }
