@@ -12,6 +12,8 @@
 //! * [`analysis`]: the run's verdict — doorway reached, target followed,
 //!   collisions, clearance — as [`analysis::Summary`] (`summary.json`);
 //! * [`cpu`]: CPU use per agent sampled during the run;
+//! * [`explore`]: the exploration run's report, from the launcher's record
+//!   to `log.csv`, the figures and `summary.json` (its one entry point);
 //! * [`plot`]: the trajectory over the map (Fig. 4-4) and velocity, angular
 //!   speed and heading against time (Fig. 4-6), as PNG and SVG;
 //! * [`cooperate`]: the cooperation run's verdict and its trajectories (Fig. 4-10);
@@ -24,6 +26,7 @@ pub mod analysis;
 pub mod calibration_plot;
 pub mod cooperate;
 pub mod cpu;
+pub mod explore;
 pub mod plot;
 pub mod scene;
 pub mod truth;
@@ -57,6 +60,18 @@ pub enum DemoError {
         /// What is wrong.
         problem: String,
     },
+    /// A record of the run (a CSV file, `summary.json`) could not be written.
+    #[error("{context}")]
+    Record {
+        /// What was being done, and the file.
+        context: String,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A summary that JSON cannot hold.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
     /// Drawing a figure.
     #[error("cannot draw {path}: {message}")]
     Plot {
@@ -65,4 +80,11 @@ pub enum DemoError {
         /// What plotters said.
         message: String,
     },
+}
+
+/// Writes `summary.json` (pretty JSON and a line break) into `out`.
+fn write_summary(out: &std::path::Path, summary: &impl serde::Serialize) -> Result<(), DemoError> {
+    let json = serde_json::to_string_pretty(summary)?;
+    std::fs::write(out.join("summary.json"), json + "\n")
+        .map_err(|source| DemoError::Record { context: "cannot write summary.json".into(), source })
 }

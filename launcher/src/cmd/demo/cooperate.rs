@@ -38,7 +38,7 @@ use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, bail};
 use iceoryx2::prelude::Node;
 use nerve_demo::Scene;
-use nerve_demo::cooperate::{EstPose, PlannedPoint, Reached, Records, TruePose, analyse, write_trajectories};
+use nerve_demo::cooperate::{self, EstPose, PlannedPoint, Reached, Records, TruePose};
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::payloads::{
     CheckpointSighting, GroundTruth, MissionCode, MissionCommand, Odometry, PoseEstimate, ViaKind, ViaPath,
@@ -306,42 +306,22 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
     if rec.r1_truth.is_empty() {
         bail!("the simulator published no ground truth: the world never ran (see {}/logs/r1/sim.log)", out.display());
     }
-    write_estimates(&out.join("estimates.csv"), &rec)?;
-    let mut s = analyse(&scene, &rec, a.reach, [&names[0], &names[1]]);
-    s.seed = a.seed;
-    s.world = world_file.display().to_string();
-    s.checkpoints = !a.no_checkpoints;
-    s.end_reason = end.reason();
-    let title = format!(
-        "{} (seed {}{}) — robot 2 {} the target: {} m, {} collision(s)",
-        scene.world.name,
-        a.seed,
-        if a.no_checkpoints { ", no checkpoint corrections" } else { "" },
-        if s.robot2_reached_target { "reached" } else { "did NOT reach" },
-        s.final_distance_to_target_m.map_or_else(|| "-".into(), |d| format!("{d:.2}")),
-        s.collisions.values().sum::<u64>()
-    );
-    let figs = write_trajectories(&out, &scene, &rec, &title)?;
-    s.wall_time_s = t_wall.elapsed().as_secs_f64();
-    let json = serde_json::to_string_pretty(&s)?;
-    std::fs::write(out.join("summary.json"), json + "\n").context("cannot write summary.json")?;
-    println!(
-        "{}: target {}, path {}, robot 2 {} ({} m from the target), {} collision(s), corrections {:?}, {:.1} s simulated, {:.0} s wall",
-        s.end_reason,
-        if s.target_found { "found" } else { "NOT found" },
-        if s.path_sent { "sent" } else { "NOT sent" },
-        if s.robot2_reached_target { "reached it" } else { "did NOT reach it" },
-        s.final_distance_to_target_m.map_or_else(|| "-".into(), |d| format!("{d:.2}")),
-        s.collisions.values().sum::<u64>(),
-        s.corrections,
-        s.stage_times_s.get("end").copied().unwrap_or(0.0),
-        s.wall_time_s
-    );
+    let run = cooperate::Run {
+        seed: a.seed,
+        world: world_file.display().to_string(),
+        checkpoints: !a.no_checkpoints,
+        end_reason: end.reason(),
+        reach_m: a.reach,
+        robots: [&names[0], &names[1]],
+        started: t_wall,
+    };
+    let report = cooperate::report(&out, &scene, &rec, &run)?;
+    println!("{}", report.headline());
     println!(
         "wrote {}/summary.json, estimates.csv, truth-r1.csv, truth-r2.csv, launch files, logs/ and",
         out.display()
     );
-    for f in figs.files {
+    for f in report.figures.files {
         println!("  {}", f.display());
     }
     if let End::Stalled(why) = &end {
@@ -528,21 +508,4 @@ fn progress(rec: &Records, phases: &(String, String)) {
         if rec.path.is_empty() { "not yet" } else { "sent" },
     );
     let _ = std::io::stdout().flush();
-}
-
-/// `estimates.csv`: every recorded pose, both robots, and robot 2's raw dead reckoning.
-fn write_estimates(path: &Path, rec: &Records) -> Result<()> {
-    let f = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-    let mut w = std::io::BufWriter::new(f);
-    let err = || format!("cannot write {}", path.display());
-    writeln!(w, "robot,source,stamp_ns,x,y,theta,corrections").with_context(err)?;
-    for (robot, source, v) in
-        [("1", "odometry", &rec.r1_est), ("2", "odometry", &rec.r2_est), ("2", "raw", &rec.r2_raw)]
-    {
-        for e in v {
-            writeln!(w, "{robot},{source},{},{:.4},{:.4},{:.4},{}", e.stamp_ns, e.x, e.y, e.theta, e.corrections)
-                .with_context(err)?;
-        }
-    }
-    w.flush().with_context(err)
 }

@@ -32,12 +32,9 @@ use crate::cmd::tap::Tap;
 use crate::interrupt;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
-use nerve_demo::analysis::ModeChange;
-use nerve_demo::analysis::{
-    DoorwayWatch, EXPLORING_MODES, TRACKING_MODES, at_target, first_change_into, time_in_modes, time_in_modes_before,
-};
+use nerve_demo::analysis::{DoorwayWatch, ModeChange, at_target};
 use nerve_demo::cpu::CpuTable;
-use nerve_demo::{Criteria, Scene, TruthRow, analyse};
+use nerve_demo::{Criteria, Scene, TruthRow, explore};
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::payloads::{GroundTruth, Mode};
 use std::io::Write as _;
@@ -184,53 +181,28 @@ pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     // whatever happened, stop everything and leave nothing behind
     let (stopped, killed) = bring::down_and_clean(&world);
     println!("{}", bring::stopped_line(stopped, killed));
-    let Followed { end, rows, modes, cpu } = outcome?;
+    let Followed { end, rec } = outcome?;
 
     // the records: what the demo received on `sim/truth` and `decision/mode`
     // (the simulator's own truth.csv is kept beside them)
-    if rows.is_empty() {
+    if rec.rows.is_empty() {
         bail!("no ground truth came on sim/truth: the simulator never ran (see {}/logs/sim.log)", out.display());
     }
     if let Err(e) = std::fs::copy(&truth, out.join("truth.csv")) {
         eprintln!("warning: cannot copy the simulator's {}: {e}", truth.display());
     }
     copy_logs(&world, &out.join("logs"));
-    let criteria = Criteria { target_reach_m: a.reach };
-    let analysis = analyse(&scene, &rows, criteria);
-    let mut s = analysis.summary.clone();
-    s.seed = a.seed;
-    s.robot = robot.to_owned();
-    s.end_reason = end.reason();
-    s.time_in_mode_s = time_in_modes(&modes, s.duration_s);
-    s.first_track_s = first_change_into(&modes, &TRACKING_MODES);
-    s.time_in_mode_before_track_s = time_in_modes_before(&modes, s.first_track_s.unwrap_or(s.duration_s));
-    s.mode_changes = modes.clone();
-    s.cpu = cpu;
-    s.wall_time_s = t_wall.elapsed().as_secs_f64();
-    write_log_csv(&out.join("log.csv"), &rows, &analysis, &modes)?;
-    let title = format!("{} (seed {})", scene.world.name, a.seed);
-    let figs = nerve_demo::plot::write_all(&out, &scene, &rows, &analysis, &modes, &title)?;
-    s.wall_time_s = t_wall.elapsed().as_secs_f64();
-    let json = serde_json::to_string_pretty(&s)?;
-    std::fs::write(out.join("summary.json"), json + "\n").context("cannot write summary.json")?;
-
-    let explored: f64 = EXPLORING_MODES.iter().filter_map(|m| s.time_in_mode_before_track_s.get(*m)).sum();
-    println!(
-        "{}: explored {explored:.1} s{}, doorway {}{}, target {}{}, {} collision(s), min clearance {:.2} m, {:.1} s simulated, {} mode change(s), {:.0} s wall",
-        s.end_reason,
-        s.first_track_s.map(|t| format!(" before tracking at {t:.1} s")).unwrap_or_else(|| ", never tracked".into()),
-        if s.reached_doorway { "reached" } else { "NOT reached" },
-        s.doorway_time_s.map(|t| format!(" at {t:.1} s")).unwrap_or_default(),
-        if s.reached_target { "reached" } else { "NOT reached" },
-        s.target_time_s.map(|t| format!(" at {t:.1} s")).unwrap_or_default(),
-        s.collisions,
-        s.min_clearance_m,
-        s.duration_s,
-        s.mode_changes.len(),
-        s.wall_time_s
-    );
+    let run = explore::Run {
+        seed: a.seed,
+        robot,
+        end_reason: end.reason(),
+        criteria: Criteria { target_reach_m: a.reach },
+        started: t_wall,
+    };
+    let report = explore::report(&out, &scene, &rec, &run)?;
+    println!("{}", report.headline());
     println!("wrote {}/summary.json, log.csv, truth.csv, launch.toml, logs/ and", out.display());
-    for f in figs.files {
+    for f in report.figures.files {
         println!("  {}", f.display());
     }
     if let End::Stalled(why) = &end {
@@ -243,11 +215,8 @@ pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
 /// What `follow` hands back.
 struct Followed {
     end: End,
-    /// The ground truth as it came on `sim/truth`.
-    rows: Vec<TruthRow>,
-    /// The decision maker's mode changes as they came on `decision/mode`.
-    modes: Vec<ModeChange>,
-    cpu: std::collections::BTreeMap<String, nerve_demo::analysis::AgentCpu>,
+    /// The ground truth, the mode changes and the CPU use, for the report.
+    rec: explore::Recorded,
 }
 
 fn truth_row(t: &GroundTruth) -> TruthRow {
@@ -387,7 +356,7 @@ fn follow(world: &World, scene: &Scene, a: &ExploreArgs) -> Result<Followed> {
     for (name, kind, pid, pct, restarts) in sample_agents(world) {
         cpu.record(&name, &kind, pct, restarts, pid);
     }
-    Ok(Followed { end, rows, modes, cpu: cpu.finish() })
+    Ok(Followed { end, rec: explore::Recorded { rows, modes, cpu: cpu.finish() } })
 }
 
 /// One progress line: simulated time, true pose, the mode, the target's distance.
@@ -417,48 +386,4 @@ fn progress(scene: &Scene, r: Option<&TruthRow>, mode: &str, doorway: bool) {
 
 fn nerve_sim_vec(x: f64, y: f64) -> nerve_demo::nerve_sim::Vec2 {
     nerve_demo::nerve_sim::Vec2::new(x, y)
-}
-
-/// `log.csv`: the truth with derived columns and the mode in force.
-fn write_log_csv(
-    path: &Path,
-    rows: &[TruthRow],
-    a: &nerve_demo::Analysis,
-    modes: &[nerve_demo::analysis::ModeChange],
-) -> Result<()> {
-    let f = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-    let mut w = std::io::BufWriter::new(f);
-    let err = || format!("cannot write {}", path.display());
-    writeln!(w, "t,x,y,theta,v,omega,collisions,in_contact,clearance_m,target_x,target_y,target_dist_m,mode")
-        .with_context(err)?;
-    let mut k = 0;
-    let mut mode = "";
-    for (i, r) in rows.iter().enumerate() {
-        while k < modes.len() && modes[k].t_s.is_some_and(|t| t <= r.t) {
-            mode = &modes[k].mode;
-            k += 1;
-        }
-        let (tx, ty, td) = match a.target.get(i).copied().flatten() {
-            Some(p) => {
-                (format!("{:.3}", p.x), format!("{:.3}", p.y), format!("{:.3}", p.dist(nerve_sim_vec(r.x, r.y))))
-            }
-            None => (String::new(), String::new(), String::new()),
-        };
-        writeln!(
-            w,
-            "{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.4},{tx},{ty},{td},{mode}",
-            r.t,
-            r.x,
-            r.y,
-            r.theta,
-            r.v,
-            r.omega,
-            r.collisions,
-            u8::from(r.in_contact),
-            a.clearance.get(i).copied().unwrap_or(f64::NAN)
-        )
-        .with_context(err)?;
-    }
-    w.flush().with_context(err)?;
-    Ok(())
 }
