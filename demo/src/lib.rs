@@ -17,12 +17,14 @@
 //! * [`plot`]: the trajectory over the map (Fig. 4-4) and velocity, angular
 //!   speed and heading against time (Fig. 4-6), as PNG and SVG;
 //! * [`cooperate`]: the cooperation run's verdict and its trajectories (Fig. 4-10);
+//! * [`calibration`]: the Appendix A calibration's fit and files;
 //! * [`calibration_plot`]: the Appendix A fit against the pinhole term.
 //!
 //! The definitions of `reached_doorway` and `reached_target` are in
 //! `docs/demo.md` and on [`analysis::analyse`].
 
 pub mod analysis;
+pub mod calibration;
 pub mod calibration_plot;
 pub mod cooperate;
 pub mod cpu;
@@ -69,6 +71,27 @@ pub enum DemoError {
         #[source]
         source: std::io::Error,
     },
+    /// The Appendix A fit failed.
+    #[error("{context}")]
+    Fit {
+        /// What was being fitted.
+        context: String,
+        /// Why it failed.
+        #[source]
+        source: nerve_checkpoint::appendix_a::FitError,
+    },
+    /// The calibration just written does not load as the checkpoint agent loads it.
+    #[error("{context}")]
+    Calibration {
+        /// What was being checked.
+        context: String,
+        /// What the loader said.
+        #[source]
+        source: nerve_checkpoint::config::ConfigError,
+    },
+    /// A calibration file could not be written.
+    #[error(transparent)]
+    Config(#[from] nerve_checkpoint::config::ConfigError),
     /// A summary that JSON cannot hold.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
