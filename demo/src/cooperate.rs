@@ -10,15 +10,19 @@
 //! ([`CoopSummary`], `summary.json`); [`write_trajectories`] draws the map
 //! with both robots' true and recorded paths, the checkpoints, the via
 //! points, the target and the correction jumps (`trajectories.png|svg`).
+//! [`report`] is the launcher's one call: it does both and writes
+//! `estimates.csv` and `summary.json` beside the figure.
 
-use crate::DemoError;
 use crate::plot::{Figures, err, map_chart, map_size};
 use crate::scene::Scene;
+use crate::{DemoError, write_summary};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
+use std::io::Write as _;
 use std::path::Path;
+use std::time::Instant;
 
 /// One ground-truth sample of a robot.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -405,6 +409,96 @@ pub fn write_trajectories(dir: &Path, scene: &Scene, rec: &Records, title: &str)
     draw(SVGBackend::new(&p, (w, h)).into_drawing_area(), scene, rec, title, (xr, yr)).map_err(err(&p))?;
     files.push(p);
     Ok(Figures { files })
+}
+
+/// How the cooperation run was made.
+#[derive(Debug, Clone)]
+pub struct Run<'a> {
+    /// Seed of the simulator's noise.
+    pub seed: u64,
+    /// The world file.
+    pub world: String,
+    /// Whether the checkpoint sensors corrected the poses.
+    pub checkpoints: bool,
+    /// Why the run ended (`summary.json`'s `end_reason`).
+    pub end_reason: String,
+    /// Robot 2's centre to the target's centre, m, that counts as reaching it.
+    pub reach_m: f64,
+    /// The two robots' names.
+    pub robots: [&'a str; 2],
+    /// When the command started, for the wall time.
+    pub started: Instant,
+}
+
+/// What [`report`] wrote.
+#[derive(Debug, Clone)]
+pub struct Report {
+    /// `summary.json`.
+    pub summary: CoopSummary,
+    /// The figure.
+    pub figures: Figures,
+}
+
+/// Writes `estimates.csv`, analyses the run, draws `trajectories.png|svg`
+/// and writes `summary.json` into `out`.
+pub fn report(out: &Path, scene: &Scene, rec: &Records, run: &Run<'_>) -> Result<Report, DemoError> {
+    write_estimates(&out.join("estimates.csv"), rec)?;
+    let mut s = analyse(scene, rec, run.reach_m, run.robots);
+    s.seed = run.seed;
+    s.world = run.world.clone();
+    s.checkpoints = run.checkpoints;
+    s.end_reason = run.end_reason.clone();
+    let title = format!(
+        "{} (seed {}{}) — robot 2 {} the target: {} m, {} collision(s)",
+        scene.world.name,
+        run.seed,
+        if run.checkpoints { "" } else { ", no checkpoint corrections" },
+        if s.robot2_reached_target { "reached" } else { "did NOT reach" },
+        s.final_distance_to_target_m.map_or_else(|| "-".into(), |d| format!("{d:.2}")),
+        s.collisions.values().sum::<u64>()
+    );
+    let figures = write_trajectories(out, scene, rec, &title)?;
+    s.wall_time_s = run.started.elapsed().as_secs_f64();
+    write_summary(out, &s)?;
+    Ok(Report { summary: s, figures })
+}
+
+impl Report {
+    /// The run in one line: how it ended, the target, the path, robot 2's
+    /// arrival, collisions, corrections, times.
+    pub fn headline(&self) -> String {
+        let s = &self.summary;
+        format!(
+            "{}: target {}, path {}, robot 2 {} ({} m from the target), {} collision(s), corrections {:?}, {:.1} s simulated, {:.0} s wall",
+            s.end_reason,
+            if s.target_found { "found" } else { "NOT found" },
+            if s.path_sent { "sent" } else { "NOT sent" },
+            if s.robot2_reached_target { "reached it" } else { "did NOT reach it" },
+            s.final_distance_to_target_m.map_or_else(|| "-".into(), |d| format!("{d:.2}")),
+            s.collisions.values().sum::<u64>(),
+            s.corrections,
+            s.stage_times_s.get("end").copied().unwrap_or(0.0),
+            s.wall_time_s
+        )
+    }
+}
+
+/// `estimates.csv`: every recorded pose, both robots, and robot 2's raw dead reckoning.
+fn write_estimates(path: &Path, rec: &Records) -> Result<(), DemoError> {
+    let f = std::fs::File::create(path)
+        .map_err(|source| DemoError::Record { context: format!("cannot create {}", path.display()), source })?;
+    let mut w = std::io::BufWriter::new(f);
+    let err = |source| DemoError::Record { context: format!("cannot write {}", path.display()), source };
+    writeln!(w, "robot,source,stamp_ns,x,y,theta,corrections").map_err(err)?;
+    for (robot, source, v) in
+        [("1", "odometry", &rec.r1_est), ("2", "odometry", &rec.r2_est), ("2", "raw", &rec.r2_raw)]
+    {
+        for e in v {
+            writeln!(w, "{robot},{source},{},{:.4},{:.4},{:.4},{}", e.stamp_ns, e.x, e.y, e.theta, e.corrections)
+                .map_err(err)?;
+        }
+    }
+    w.flush().map_err(err)
 }
 
 #[cfg(test)]

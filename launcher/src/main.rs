@@ -2,18 +2,25 @@
 //! dispatch, print the error with what to do, exit with a meaningful code
 //! (0 success, 1 failure, 2 bad usage).
 
+mod agent_logs;
+mod bring;
 mod cli;
 mod client;
 mod cmd;
+mod interrupt;
 mod kinds;
 mod launch_file;
 
+use agent_sdk::World;
+use anyhow::Result;
 use clap::{CommandFactory, FromArgMatches};
+use cli::{Cli, Command};
+use cmd::{bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, shm_space, start, wire};
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    let matches = cli::Cli::command().get_matches();
-    let mut args = match cli::Cli::from_arg_matches(&matches) {
+    let matches = Cli::command().get_matches();
+    let mut args = match Cli::from_arg_matches(&matches) {
         Ok(a) => a,
         Err(e) => e.exit(),
     };
@@ -24,11 +31,45 @@ fn main() -> ExitCode {
         Some(clap::parser::ValueSource::CommandLine | clap::parser::ValueSource::EnvVariable)
     );
     agent_sdk::world::quiet_iceoryx2();
-    match cmd::dispatch(args) {
+    match dispatch(args) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(1)
         }
+    }
+}
+
+/// Runs the command of the parsed command line.
+fn dispatch(cli: Cli) -> Result<ExitCode> {
+    let world = World::new(&cli.robot)?;
+    match cli.command {
+        Command::Router(a) => start::router(&world, a),
+        Command::Start(a) => start::start(&world, a),
+        Command::Ps(a) => inspect::ps(&world, a),
+        Command::Graph(a) => inspect::graph(&world, a),
+        Command::Connect(a) => {
+            shm_space::ensure_shm_space("connect")?;
+            wire::connect(&world, a)
+        }
+        Command::Disconnect(a) => wire::disconnect(&world, a),
+        Command::Rate { name, period } => wire::rate(&world, &name, &period),
+        Command::Suspend { name } => wire::simple(&world, wire::Simple::Suspend, &name),
+        Command::Resume { name } => wire::simple(&world, wire::Simple::Resume, &name),
+        Command::Stop { name } => wire::simple(&world, wire::Simple::Stop, &name),
+        Command::Kill { name } => wire::simple(&world, wire::Simple::Kill, &name),
+        Command::Param(p) => wire::param(&world, p),
+        Command::Echo(a) => echo::echo(&world, a),
+        Command::Hz(a) => echo::hz(&world, a),
+        Command::Down(a) => down::down(&world, a),
+        Command::Launch(a) => launch::launch(&cli.robot, cli.robot_explicit, a),
+        Command::Logs(a) => logs::logs(&world, a),
+        Command::Exec(a) => start::exec(&world, a),
+        Command::Demo(c) => demo::demo(&cli.robot, c),
+        Command::Calibrate(c) => calibrate::calibrate(&cli.robot, cli.robot_explicit, c),
+        Command::Mem(c) => mem::mem(&world, c),
+        Command::Cmd(a) => drive::cmd(&world, a),
+        Command::Bench(a) => bench::bench(a),
+        Command::Bridge(c) => bridge::bridge(&world, c),
     }
 }

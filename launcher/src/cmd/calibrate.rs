@@ -30,8 +30,8 @@
 //! `focal_px`, `[[sample]] d_px z_m`) or CSV (`d_px,z_m`, with
 //! `--band-spacing` and `--focal`), as `nerve-checkpoint-fit` reads them.
 //!
-//! Either way it fits `h` and `α1..α4` (`nerve_checkpoint::appendix_a::fit`)
-//! and writes:
+//! Either way `nerve_demo::calibration::report` fits `h` and `α1..α4`
+//! (`nerve_checkpoint::appendix_a::fit`) and writes:
 //!
 //! * `--out FILE` (default `DIR/calibration.toml`): the calibration, checked
 //!   with the checkpoint agent's own loader; give it to the agent with
@@ -46,26 +46,24 @@
 //! `out/calibrate-checkpoint` for a samples file. Exit code 0 when the
 //! calibration was written, 1 when not.
 
-use super::down::{bring_down, clean};
-use super::logs::{INTERRUPTED, catch_interrupts};
 use super::tap::Tap;
-use crate::client::{RouterSession, cli_node};
+use crate::bring;
+use crate::client::cli_node;
+use crate::interrupt;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, anyhow, bail};
-use nerve_checkpoint::appendix_a::{Fit, FitOptions, Model, Sample, fit};
+use nerve_checkpoint::appendix_a::Sample;
 use nerve_checkpoint::bands::{BandColors, Pixels, Tube, TubeFinder};
-use nerve_checkpoint::config::{Calibration, SampleFile};
-use nerve_demo::calibration_plot::{CalibrationPoint, write_fit};
+use nerve_checkpoint::config::SampleFile;
+use nerve_demo::calibration::{self, SampleSet};
 use nerve_demo::nerve_sim::{RobotKind, RobotModel, focal_length_px};
 use nerve_stm::{ReadError, RingName, RingReader};
 use shm_schemas::RobotName;
-use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::payloads::GroundTruth;
 use std::collections::VecDeque;
 use std::io::{Read as _, Write as _};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ExitCode, Stdio};
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// `nerve calibrate ...`
@@ -124,15 +122,6 @@ pub fn calibrate(robot: &str, explicit: bool, cmd: CalibrateCmd) -> Result<ExitC
     }
 }
 
-/// The samples to fit, and where they came from.
-#[derive(Debug, Clone)]
-struct SampleSet {
-    samples: Vec<Sample>,
-    band_spacing_m: f64,
-    focal_px: f64,
-    source: String,
-}
-
 /// The checkpoint tube of the calibration world, as the truth needs it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct TubeGeometry {
@@ -183,31 +172,11 @@ fn checkpoint(robot: &str, explicit: bool, a: &CheckpointArgs) -> Result<ExitCod
         Some(path) => from_file(path, a)?,
         None => simulate(robot, explicit, a, &dir)?,
     };
-    let f = fit_and_write(&set, &dir, &out)?;
-    report(&f, &dir, &out);
-    Ok(ExitCode::SUCCESS)
-}
-
-/// Prints the fit, its RMS errors and what was written.
-fn report(f: &Fit, dir: &Path, out: &Path) {
-    println!(
-        "fitted {} samples (d {:.1} … {:.1} px): h = {:.3} px, alpha = [{}]",
-        f.samples,
-        f.d_range_px.0,
-        f.d_range_px.1,
-        f.model.h_px,
-        f.model.alpha.iter().map(|x| format!("{x:.6e}")).collect::<Vec<_>>().join(", ")
-    );
-    println!(
-        "RMS error over the samples: pinhole term {:.1} mm, fitted model {:.1} mm",
-        f.pinhole_rms_m * 1000.0,
-        f.rms_m * 1000.0
-    );
-    println!("wrote {}", out.display());
-    for name in ["samples.csv", "fit.png", "fit.svg"] {
-        println!("  {}", dir.join(name).display());
+    let f = calibration::report(&set, &dir, &out)?;
+    for line in calibration::describe(&f, &dir, &out) {
+        println!("{line}");
     }
-    println!("use it: nerve start checkpoint --name checkpoint -- --calibration {}", out.display());
+    Ok(ExitCode::SUCCESS)
 }
 
 /// Reads `--samples`.
@@ -219,61 +188,6 @@ fn from_file(path: &Path, a: &CheckpointArgs) -> Result<SampleSet> {
         focal_px: sf.focal_px,
         source: format!("samples of {}", path.display()),
     })
-}
-
-/// Fits, writes the calibration (and checks it with the agent's loader),
-/// the samples and the figures.
-fn fit_and_write(set: &SampleSet, dir: &Path, out: &Path) -> Result<Fit> {
-    let f = fit(&set.samples, set.band_spacing_m * set.focal_px, &FitOptions::default())
-        .with_context(|| format!("cannot fit the {}", set.source))?;
-    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
-    }
-    Calibration::from_fit(set.band_spacing_m, set.focal_px, &f).save(out)?;
-    // what the checkpoint agent does with `-- --calibration FILE`
-    Calibration::load(out).context("the checkpoint agent would refuse the calibration just written")?;
-    write_samples_csv(&dir.join("samples.csv"), set)?;
-    let title = format!(
-        "Appendix A calibration: {} samples, {} (D = {} m, f = {:.1} px)",
-        set.samples.len(),
-        set.source,
-        set.band_spacing_m,
-        set.focal_px
-    );
-    write_fit(dir, &points(&set.samples, &f.model), &title)?;
-    Ok(f)
-}
-
-/// Each sample's true distance and what the pinhole term and the model make of its `d`.
-fn points(samples: &[Sample], model: &Model) -> Vec<CalibrationPoint> {
-    samples
-        .iter()
-        .map(|s| CalibrationPoint {
-            true_m: s.z_m,
-            pinhole_m: model.df / s.d_px,
-            fitted_m: model.distance(s.d_px).ok(),
-        })
-        .collect()
-}
-
-/// `samples.csv`, readable again with `--samples` (and by `nerve-checkpoint-fit`).
-fn write_samples_csv(path: &Path, set: &SampleSet) -> Result<()> {
-    let mut text = format!(
-        "# Appendix A calibration samples ({}), written by `nerve calibrate checkpoint`\n\
-         # band_spacing_m = {}, focal_px = {}: refit with\n\
-         #   nerve calibrate checkpoint --samples {} --band-spacing {} --focal {}\n\
-         d_px,z_m\n",
-        set.source,
-        set.band_spacing_m,
-        set.focal_px,
-        path.display(),
-        set.band_spacing_m,
-        set.focal_px
-    );
-    for s in &set.samples {
-        text += &format!("{},{}\n", s.d_px, s.z_m);
-    }
-    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// The calibration world: the robot at the origin facing +x, one checkpoint
@@ -337,18 +251,15 @@ fn depth(tube: &TubeGeometry, t: &GroundTruth) -> f64 {
 
 /// Refuses a robot that already runs agents (they would be stopped at the end).
 fn refuse_busy(world: &World) -> Result<()> {
-    let Ok(s) = RouterSession::open(world) else { return Ok(()) };
-    if let Ok(RouterReply::Agents(v)) = s.call(CliRequest::Ps) {
-        let live: Vec<String> = v.into_iter().filter(|a| a.pid > 0).map(|a| a.name).collect();
-        if !live.is_empty() {
-            bail!(
-                "robot {r} already runs {} agent(s) ({}); the calibration brings its robot down at the end: \
-                 stop them with `nerve --robot {r} down` or leave out --robot (a private robot is used)",
-                live.len(),
-                live.join(", "),
-                r = world.robot()
-            );
-        }
+    let live = bring::running_agents(world);
+    if !live.is_empty() {
+        bail!(
+            "robot {r} already runs {} agent(s) ({}); the calibration brings its robot down at the end: \
+             stop them with `nerve --robot {r} down` or leave out --robot (a private robot is used)",
+            live.len(),
+            live.join(", "),
+            r = world.robot()
+        );
     }
     Ok(())
 }
@@ -375,9 +286,9 @@ fn simulate(robot: &str, explicit: bool, a: &CheckpointArgs, dir: &Path) -> Resu
         a.speed,
         dir.display()
     );
-    catch_interrupts();
+    interrupt::catch();
     let t0 = Instant::now();
-    let result = match super::launch::launch_robot(&robot, &launch_path) {
+    let result = match bring::launch_robot(&robot, &launch_path) {
         Ok(w) => {
             println!("simulator up in {:.1} s; driving at the tube (Ctrl-C stops)", t0.elapsed().as_secs_f64());
             collect(&w, &tube, a)
@@ -385,13 +296,9 @@ fn simulate(robot: &str, explicit: bool, a: &CheckpointArgs, dir: &Path) -> Resu
         Err(e) => Err(e.context("the simulator did not come up")),
     };
     // whatever happened: stop everything and leave nothing behind
-    let (stopped, killed) = bring_down(&nworld, Duration::from_secs(3));
-    clean(&nworld);
-    println!(
-        "stopped {stopped} process(es){}",
-        if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
-    );
-    super::demo::copy_logs(&nworld, &dir.join("logs"));
+    let (stopped, killed) = bring::down_and_clean(&nworld);
+    println!("{}", bring::stopped_line(stopped, killed));
+    crate::agent_logs::copy_logs(&nworld, &dir.join("logs"));
     if !explicit && let Err(e) = std::fs::remove_dir_all(nworld.state_dir()) {
         eprintln!("warning: cannot remove {}: {e}", nworld.state_dir().display());
     }
@@ -574,7 +481,7 @@ fn collect(world: &World, tube: &TubeGeometry, a: &CheckpointArgs) -> Result<Col
     let mut passed_near = false;
     let mut still_since: Option<Instant> = None;
     loop {
-        if INTERRUPTED.load(Ordering::SeqCst) {
+        if interrupt::requested() {
             bail!("interrupted (Ctrl-C): no calibration written");
         }
         truth.drain(&sub)?;
@@ -763,32 +670,5 @@ mod tests {
         assert_eq!(w.at(1_030_000_000).map(|t| t.x), Some(3.0));
         assert_eq!(w.at(1_031_000_000).map(|t| t.x), Some(3.0));
         assert!(w.at(1_200_000_000).is_none(), "too far from every step");
-    }
-
-    #[test]
-    fn a_samples_file_is_fitted_written_and_plotted() {
-        let dir = std::env::temp_dir().join(format!("nerve-calib-file-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let df = 0.2 * focal_length_px(60f64.to_radians());
-        let truth = Model { df, h_px: 3.0, alpha: [20.0, -150.0, 700.0, -2000.0] };
-        let samples: Vec<Sample> = (0..30)
-            .map(|i| {
-                let d = 16.0 + 2.0 * f64::from(i);
-                Sample { d_px: d, z_m: truth.distance(d).unwrap() }
-            })
-            .collect();
-        let set = SampleSet { samples, band_spacing_m: 0.2, focal_px: df / 0.2, source: "a test".into() };
-        let out = dir.join("cal").join("calibration.toml");
-        let f = fit_and_write(&set, &dir, &out).unwrap();
-        assert!(f.rms_m < 1e-4 && f.pinhole_rms_m > 0.005, "fit {} pinhole {}", f.rms_m, f.pinhole_rms_m);
-        let cal = Calibration::load(&out).unwrap();
-        assert_eq!(cal.samples, Some(30));
-        // samples.csv reads back as the samples it was written from
-        let again = SampleFile::load(&dir.join("samples.csv"), Some((0.2, df / 0.2))).unwrap();
-        assert_eq!(again.samples, set.samples);
-        for f in ["fit.png", "fit.svg"] {
-            assert!(std::fs::metadata(dir.join(f)).unwrap().len() > 5_000, "{f}");
-        }
-        std::fs::remove_dir_all(&dir).ok();
     }
 }

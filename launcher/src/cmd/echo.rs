@@ -4,7 +4,6 @@
 //! router, by probing the types this build knows. Tools subscribe like any
 //! agent (zero copy) and never disturb the publisher.
 
-use crate::cli::{EchoArgs, HzArgs};
 use crate::client::{RouterSession, cli_node};
 use agent_sdk::World;
 use agent_sdk::clock::now_ns;
@@ -20,6 +19,38 @@ use shm_schemas::{Payload, PortRef, SampleHeader, for_each_payload};
 use std::io::Write;
 use std::process::ExitCode;
 use std::time::Duration;
+
+/// `nerve echo`
+#[derive(Debug, clap::Args)]
+pub struct EchoArgs {
+    /// Output port, AGENT/PORT.
+    pub port: String,
+    /// Exit after this many samples.
+    #[arg(long)]
+    pub count: Option<u64>,
+    /// One JSON object per line.
+    #[arg(long)]
+    pub json: bool,
+    /// Give up after this many seconds without a sample (default: wait for ever).
+    #[arg(long, value_parser = agent_sdk::clock::parse_seconds)]
+    pub timeout: Option<f64>,
+}
+
+/// `nerve hz`
+#[derive(Debug, clap::Args)]
+pub struct HzArgs {
+    /// Output port, AGENT/PORT.
+    pub port: String,
+    /// Seconds per report.
+    #[arg(long, default_value_t = 1.0, value_parser = agent_sdk::clock::parse_seconds)]
+    pub window: f64,
+    /// Exit after this many reports.
+    #[arg(long)]
+    pub count: Option<u64>,
+    /// One JSON object per report.
+    #[arg(long)]
+    pub json: bool,
+}
 
 /// The payload type of `port`: from the router, else by probing known types.
 fn port_type(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<String> {

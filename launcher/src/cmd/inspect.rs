@@ -1,6 +1,5 @@
 //! `nerve ps` and `nerve graph`: what runs, and what feeds what.
 
-use crate::cli::{GraphArgs, PsArgs};
 use crate::client::RouterSession;
 use agent_sdk::World;
 use agent_sdk::clock::format_duration;
@@ -8,6 +7,25 @@ use anyhow::{Result, bail};
 use shm_schemas::control::cli_to_router::{AgentView, CliRequest, GraphView, RouterReply};
 use std::process::ExitCode;
 use std::time::Duration;
+
+/// `nerve ps`
+#[derive(Debug, clap::Args)]
+pub struct PsArgs {
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `nerve graph`
+#[derive(Debug, clap::Args)]
+pub struct GraphArgs {
+    /// Print JSON.
+    #[arg(long, conflicts_with = "dot")]
+    pub json: bool,
+    /// Print Graphviz DOT (pipe into `dot -Tsvg`).
+    #[arg(long)]
+    pub dot: bool,
+}
 
 fn us(ns: u64) -> String {
     if ns >= 10_000_000 { format!("{:.0}ms", ns as f64 / 1e6) } else { format!("{:.0}us", ns as f64 / 1e3) }

@@ -1,13 +1,56 @@
-//! `nerve router` and `nerve start`: running the router, and hot-adding an
-//! agent as a daemon.
+//! `nerve router`, `nerve start` and `nerve exec`: running the router,
+//! hot-adding an agent as a daemon, and running an agent in place of this
+//! process (for systemd units).
 
-use crate::cli::{ExecArgs, RouterArgs, StartArgs};
 use crate::kinds::resolve_kind;
 use agent_sdk::World;
 use agent_sdk::daemon::{Readiness, daemonize, init_logging, sd_notify};
 use anyhow::{Context as _, Result, bail};
 use shm_schemas::AgentName;
 use std::process::{Command, ExitCode, Stdio};
+
+/// `nerve router`
+#[derive(Debug, clap::Args)]
+pub struct RouterArgs {
+    /// Detach and run as a daemon (log in the robot's state directory).
+    #[arg(long)]
+    pub daemon: bool,
+    /// Log filter; RUST_LOG is used when absent.
+    #[arg(long)]
+    pub log_level: Option<String>,
+}
+
+/// `nerve start`
+#[derive(Debug, clap::Args)]
+pub struct StartArgs {
+    /// Agent kind (ticker, relay, ...) or the path of an agent executable.
+    pub kind: String,
+    /// Agent name, unique within the robot.
+    #[arg(long)]
+    pub name: String,
+    /// Period of a periodic agent: 10ms, 1s, 100hz...
+    #[arg(long)]
+    pub period: Option<String>,
+    /// Log filter of the agent.
+    #[arg(long)]
+    pub log_level: Option<String>,
+    /// Start with the task suspended.
+    #[arg(long)]
+    pub suspended: bool,
+    /// Arguments for the agent itself.
+    #[arg(last = true)]
+    pub args: Vec<String>,
+}
+
+/// `nerve exec`
+#[derive(Debug, clap::Args)]
+pub struct ExecArgs {
+    /// Agent kind.
+    pub kind: String,
+    /// Arguments of the agent (common options, then `--` and its own).
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+    pub args: Vec<String>,
+}
 
 pub fn router(world: &World, a: RouterArgs) -> Result<ExitCode> {
     let mut readiness = Readiness::foreground();

@@ -2,13 +2,42 @@
 //! suspend, resume, parameters, stop and kill. Each is one request to the
 //! router, which commands the agents.
 
-use crate::cli::{ParamCmd, WireArgs};
 use crate::client::RouterSession;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
 use shm_schemas::PortRef;
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use std::process::ExitCode;
+
+/// `nerve connect` / `nerve disconnect`
+#[derive(Debug, clap::Args)]
+pub struct WireArgs {
+    /// Output port, AGENT/PORT.
+    pub from: String,
+    /// Input port, AGENT/PORT.
+    pub to: String,
+}
+
+/// `nerve param`
+#[derive(Debug, clap::Subcommand)]
+pub enum ParamCmd {
+    /// Print a parameter's value.
+    Get {
+        /// agent name
+        name: String,
+        /// parameter
+        key: String,
+    },
+    /// Change a parameter.
+    Set {
+        /// agent name
+        name: String,
+        /// parameter
+        key: String,
+        /// new value
+        value: String,
+    },
+}
 
 fn refs(a: &WireArgs) -> Result<(PortRef, PortRef)> {
     let from: PortRef = a.from.parse().context("FROM")?;

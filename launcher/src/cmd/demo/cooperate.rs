@@ -27,17 +27,18 @@
 //! Exit code 0 when the run completed (whatever the robots achieved: read
 //! `summary.json`), 1 when it could not be run.
 
-use super::demo::{copy_logs, find_file, sample_agents, set_flag};
-use super::down::{bring_down, clean};
-use super::logs::{INTERRUPTED, catch_interrupts};
-use super::tap::Tap;
+use super::{End, absolutize_args, find_file, set_flag};
+use crate::agent_logs::copy_logs;
+use crate::bring;
 use crate::client::{RouterSession, cli_node};
+use crate::cmd::tap::Tap;
+use crate::interrupt;
 use agent_sdk::World;
 use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, bail};
 use iceoryx2::prelude::Node;
 use nerve_demo::Scene;
-use nerve_demo::cooperate::{EstPose, PlannedPoint, Reached, Records, TruePose, analyse, write_trajectories};
+use nerve_demo::cooperate::{self, EstPose, PlannedPoint, Reached, Records, TruePose};
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::payloads::{
     CheckpointSighting, GroundTruth, MissionCode, MissionCommand, Odometry, PoseEstimate, ViaKind, ViaPath,
@@ -46,7 +47,6 @@ use std::collections::BTreeMap;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// `nerve demo cooperate`
@@ -88,39 +88,6 @@ pub struct CooperateArgs {
 const TEMPLATES: [&str; 2] = ["launch/cooperate-r1.toml", "launch/cooperate-r2.toml"];
 /// The port the shipped bridge configurations use.
 const SHIPPED_PORT: &str = "7451";
-
-/// How the run ended.
-#[derive(Debug, Clone, PartialEq)]
-enum End {
-    Done,
-    TimeLimit,
-    Interrupted,
-    Stalled(String),
-}
-
-impl End {
-    fn reason(&self) -> String {
-        match self {
-            End::Done => "robot 2 arrived and robot 1 resumed".into(),
-            End::TimeLimit => "time limit".into(),
-            End::Interrupted => "interrupted".into(),
-            End::Stalled(why) => format!("stalled: {why}"),
-        }
-    }
-}
-
-/// Makes relative paths among `args` that exist under `base` absolute
-/// (daemons may run from any directory).
-pub(super) fn absolutize_args(args: &mut [toml::Value], base: &Path) {
-    for v in args.iter_mut() {
-        if let Some(s) = v.as_str() {
-            let p = Path::new(s);
-            if s.contains('/') && !s.starts_with('-') && !s.contains('{') && p.is_relative() && base.join(p).exists() {
-                *v = toml::Value::String(base.join(p).display().to_string());
-            }
-        }
-    }
-}
 
 /// What a derived launch file needs to know.
 struct Derive<'a> {
@@ -216,7 +183,7 @@ fn all_figures(world: &World) -> BTreeMap<String, BTreeMap<String, String>> {
 
 /// Refuses robots that already run agents.
 fn refuse_busy(world: &World) -> Result<()> {
-    let live: Vec<String> = sample_agents(world).into_iter().filter(|a| a.2 > 0).map(|a| a.0).collect();
+    let live = bring::running_agents(world);
     if !live.is_empty() {
         let r = world.robot();
         bail!(
@@ -303,18 +270,17 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         a.time_limit,
         out.display()
     );
-    catch_interrupts();
+    interrupt::catch();
     let bring_all_down = || {
         let mut n = (0, 0);
         for w in worlds.iter().rev() {
-            let (s, k) = bring_down(w, Duration::from_secs(3));
-            clean(w);
+            let (s, k) = bring::down_and_clean(w);
             n = (n.0 + s, n.1 + k);
         }
         n
     };
     for (i, p) in launch_paths.iter().enumerate() {
-        if let Err(e) = super::launch::launch_robot(&names[i], p) {
+        if let Err(e) = bring::launch_robot(&names[i], p) {
             eprintln!("error: robot {} did not come up: {e:#}", names[i]);
             bring_all_down();
             return Ok(ExitCode::from(1));
@@ -330,10 +296,7 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         .collect();
     let grasp = all_figures(&worlds[1]).get("mission").and_then(|m| m.get("grasp").cloned());
     let (stopped, killed) = bring_all_down();
-    println!(
-        "stopped {stopped} process(es){}",
-        if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
-    );
+    println!("{}", bring::stopped_line(stopped, killed));
     let (end, mut rec) = followed?;
     rec.bridge = bridge_figures;
     rec.grasp = grasp;
@@ -343,42 +306,22 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
     if rec.r1_truth.is_empty() {
         bail!("the simulator published no ground truth: the world never ran (see {}/logs/r1/sim.log)", out.display());
     }
-    write_estimates(&out.join("estimates.csv"), &rec)?;
-    let mut s = analyse(&scene, &rec, a.reach, [&names[0], &names[1]]);
-    s.seed = a.seed;
-    s.world = world_file.display().to_string();
-    s.checkpoints = !a.no_checkpoints;
-    s.end_reason = end.reason();
-    let title = format!(
-        "{} (seed {}{}) — robot 2 {} the target: {} m, {} collision(s)",
-        scene.world.name,
-        a.seed,
-        if a.no_checkpoints { ", no checkpoint corrections" } else { "" },
-        if s.robot2_reached_target { "reached" } else { "did NOT reach" },
-        s.final_distance_to_target_m.map_or_else(|| "-".into(), |d| format!("{d:.2}")),
-        s.collisions.values().sum::<u64>()
-    );
-    let figs = write_trajectories(&out, &scene, &rec, &title)?;
-    s.wall_time_s = t_wall.elapsed().as_secs_f64();
-    let json = serde_json::to_string_pretty(&s)?;
-    std::fs::write(out.join("summary.json"), json + "\n").context("cannot write summary.json")?;
-    println!(
-        "{}: target {}, path {}, robot 2 {} ({} m from the target), {} collision(s), corrections {:?}, {:.1} s simulated, {:.0} s wall",
-        s.end_reason,
-        if s.target_found { "found" } else { "NOT found" },
-        if s.path_sent { "sent" } else { "NOT sent" },
-        if s.robot2_reached_target { "reached it" } else { "did NOT reach it" },
-        s.final_distance_to_target_m.map_or_else(|| "-".into(), |d| format!("{d:.2}")),
-        s.collisions.values().sum::<u64>(),
-        s.corrections,
-        s.stage_times_s.get("end").copied().unwrap_or(0.0),
-        s.wall_time_s
-    );
+    let run = cooperate::Run {
+        seed: a.seed,
+        world: world_file.display().to_string(),
+        checkpoints: !a.no_checkpoints,
+        end_reason: end.reason(),
+        reach_m: a.reach,
+        robots: [&names[0], &names[1]],
+        started: t_wall,
+    };
+    let report = cooperate::report(&out, &scene, &rec, &run)?;
+    println!("{}", report.headline());
     println!(
         "wrote {}/summary.json, estimates.csv, truth-r1.csv, truth-r2.csv, launch files, logs/ and",
         out.display()
     );
-    for f in figs.files {
+    for f in report.figures.files {
         println!("  {}", f.display());
     }
     if let End::Stalled(why) = &end {
@@ -455,7 +398,7 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs) -> Result
     let wall_limit = Duration::from_secs_f64(a.time_limit * 1.5 + 60.0);
     let truth2_port = format!("truth-{}", names[1]);
     let end = loop {
-        if INTERRUPTED.load(Ordering::SeqCst) {
+        if interrupt::requested() {
             break End::Interrupted;
         }
         let (w1, w2, n1, n2) = (&worlds[0], &worlds[1], &nodes[0], &nodes[1]);
@@ -528,7 +471,7 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs) -> Result
             done_at = Some(Instant::now());
         }
         if done_at.is_some_and(|t| t.elapsed().as_secs_f64() >= a.linger) {
-            break End::Done;
+            break End::Goal("robot 2 arrived and robot 1 resumed");
         }
         if rec.r1_truth.last().is_some_and(|r| r.t >= a.time_limit) {
             break End::TimeLimit;
@@ -565,21 +508,4 @@ fn progress(rec: &Records, phases: &(String, String)) {
         if rec.path.is_empty() { "not yet" } else { "sent" },
     );
     let _ = std::io::stdout().flush();
-}
-
-/// `estimates.csv`: every recorded pose, both robots, and robot 2's raw dead reckoning.
-fn write_estimates(path: &Path, rec: &Records) -> Result<()> {
-    let f = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-    let mut w = std::io::BufWriter::new(f);
-    let err = || format!("cannot write {}", path.display());
-    writeln!(w, "robot,source,stamp_ns,x,y,theta,corrections").with_context(err)?;
-    for (robot, source, v) in
-        [("1", "odometry", &rec.r1_est), ("2", "odometry", &rec.r2_est), ("2", "raw", &rec.r2_raw)]
-    {
-        for e in v {
-            writeln!(w, "{robot},{source},{},{:.4},{:.4},{:.4},{}", e.stamp_ns, e.x, e.y, e.theta, e.corrections)
-                .with_context(err)?;
-        }
-    }
-    w.flush().with_context(err)
 }

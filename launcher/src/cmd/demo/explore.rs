@@ -24,37 +24,23 @@
 //! Exit code 0 when the run completed (whatever the robot achieved: read
 //! `summary.json`), 1 when it could not be run.
 
-use super::down::{bring_down, clean};
-use super::logs::{INTERRUPTED, catch_interrupts};
-use super::tap::Tap;
+use super::{End, find_file, set_flag};
+use crate::agent_logs::copy_logs;
+use crate::bring;
 use crate::client::{RouterSession, cli_node};
+use crate::cmd::tap::Tap;
+use crate::interrupt;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
-use nerve_demo::analysis::ModeChange;
-use nerve_demo::analysis::{
-    DoorwayWatch, EXPLORING_MODES, TRACKING_MODES, at_target, first_change_into, time_in_modes, time_in_modes_before,
-};
+use nerve_demo::analysis::{DoorwayWatch, ModeChange, at_target};
 use nerve_demo::cpu::CpuTable;
-use nerve_demo::{Criteria, Scene, TruthRow, analyse};
+use nerve_demo::{Criteria, Scene, TruthRow, explore};
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::payloads::{GroundTruth, Mode};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
-
-/// `nerve demo ...`
-#[derive(Debug, clap::Subcommand)]
-pub enum DemoCmd {
-    /// The exploration experiment (thesis 4.2): through a crowded room and a
-    /// doorway to a person with a red object, who leads the robot into a U-turn.
-    Explore(ExploreArgs),
-    /// The cooperation experiment (thesis 4.3): robot 1 finds the target and
-    /// sends robot 2 a path over the bridge; robot 2 follows it, corrected at
-    /// the checkpoints, and grasps.
-    Cooperate(super::cooperate::CooperateArgs),
-}
 
 /// `nerve demo explore`
 #[derive(Debug, clap::Args)]
@@ -85,50 +71,6 @@ pub struct ExploreArgs {
     pub progress: f64,
 }
 
-/// Runs a demo.
-pub fn demo(robot: &str, cmd: DemoCmd) -> Result<ExitCode> {
-    match cmd {
-        DemoCmd::Explore(a) => explore(robot, a),
-        DemoCmd::Cooperate(a) => super::cooperate::cooperate(a),
-    }
-}
-
-/// Finds `rel` relative to the current directory, else above the running
-/// executable (`<tree>/target/<profile>/nerve`), else in the source tree
-/// this `nerve` was compiled from.
-pub(super) fn find_file(rel: &Path, what: &str) -> Result<PathBuf> {
-    if rel.is_absolute() || rel.exists() {
-        return std::fs::canonicalize(rel).with_context(|| format!("cannot use {what} {}", rel.display()));
-    }
-    let exe = std::env::current_exe().context("cannot find the nerve executable")?;
-    // the source tree this nerve was built from (also when CARGO_TARGET_DIR is elsewhere)
-    let built_from = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    for dir in exe.ancestors().skip(1).chain(std::iter::once(built_from.as_path())) {
-        let p = dir.join(rel);
-        if p.exists() {
-            return std::fs::canonicalize(&p).with_context(|| format!("cannot use {what} {}", p.display()));
-        }
-    }
-    bail!(
-        "cannot find {what} {} (looked in the current directory and above {}); run from the nerve source tree or give its path",
-        rel.display(),
-        exe.display()
-    )
-}
-
-/// Sets `--flag value` in an argument list (replacing or appending).
-pub(super) fn set_flag(args: &mut Vec<toml::Value>, flag: &str, value: String) {
-    if let Some(i) = args.iter().position(|a| a.as_str() == Some(flag)) {
-        if i + 1 < args.len() {
-            args[i + 1] = toml::Value::String(value);
-            return;
-        }
-        args.truncate(i);
-    }
-    args.push(toml::Value::String(flag.to_owned()));
-    args.push(toml::Value::String(value));
-}
-
 /// The run's launch file: the template with this robot, world and seed, and
 /// relative paths that exist under the source tree made absolute (daemons
 /// may run from any directory).
@@ -148,7 +90,7 @@ fn derive_launch(template: &Path, robot: &str, world: &Path, seed: u64) -> Resul
         let is_sim = t.get("kind").and_then(|k| k.as_str()) == Some("sim");
         let args = t.entry("args").or_insert_with(|| toml::Value::Array(vec![]));
         let Some(args) = args.as_array_mut() else { bail!("`args` of an agent must be a list of strings") };
-        super::cooperate::absolutize_args(args, &base);
+        super::absolutize_args(args, &base);
         if is_sim {
             found_sim = true;
             set_flag(args, "--world", world.display().to_string());
@@ -187,27 +129,7 @@ pub(super) fn sample_agents(world: &World) -> Vec<(String, String, u32, Option<f
     }
 }
 
-/// How the run ended.
-#[derive(Debug, Clone, PartialEq)]
-enum End {
-    Followed,
-    TimeLimit,
-    Interrupted,
-    Stalled(String),
-}
-
-impl End {
-    fn reason(&self) -> String {
-        match self {
-            End::Followed => "target followed".into(),
-            End::TimeLimit => "time limit".into(),
-            End::Interrupted => "interrupted".into(),
-            End::Stalled(why) => format!("stalled: {why}"),
-        }
-    }
-}
-
-fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
+pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     let t_wall = Instant::now();
     if !(a.time_limit > 0.0 && a.time_limit.is_finite()) {
         bail!("--time-limit must be a positive number of seconds");
@@ -220,7 +142,7 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     let out = std::fs::canonicalize(&out).with_context(|| format!("cannot use output directory {}", out.display()))?;
 
     let nworld = World::new(robot)?;
-    let live: Vec<String> = sample_agents(&nworld).into_iter().filter(|a| a.2 > 0).map(|a| a.0).collect();
+    let live = bring::running_agents(&nworld);
     if !live.is_empty() {
         bail!(
             "robot {robot} already runs {} agent(s) ({}); stop them with `nerve --robot {robot} down` or pick another --robot",
@@ -242,14 +164,14 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
         a.time_limit,
         out.display()
     );
-    catch_interrupts();
-    let launched = super::launch::launch_robot(robot, &launch_path);
+    interrupt::catch();
+    let launched = bring::launch_robot(robot, &launch_path);
     let world = match launched {
         Ok(w) => w,
         Err(e) => {
             eprintln!("error: the robot did not come up: {e:#}");
-            let (_, _) = bring_down(&nworld, Duration::from_secs(2));
-            clean(&nworld);
+            let (_, _) = bring::down(&nworld, Duration::from_secs(2));
+            bring::clean(&nworld);
             return Ok(ExitCode::from(1));
         }
     };
@@ -257,59 +179,30 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
 
     let outcome = follow(&world, &scene, &a);
     // whatever happened, stop everything and leave nothing behind
-    let (stopped, killed) = bring_down(&world, Duration::from_secs(3));
-    clean(&world);
-    println!(
-        "stopped {stopped} process(es){}",
-        if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
-    );
-    let Followed { end, rows, modes, cpu } = outcome?;
+    let (stopped, killed) = bring::down_and_clean(&world);
+    println!("{}", bring::stopped_line(stopped, killed));
+    let Followed { end, rec } = outcome?;
 
     // the records: what the demo received on `sim/truth` and `decision/mode`
     // (the simulator's own truth.csv is kept beside them)
-    if rows.is_empty() {
+    if rec.rows.is_empty() {
         bail!("no ground truth came on sim/truth: the simulator never ran (see {}/logs/sim.log)", out.display());
     }
     if let Err(e) = std::fs::copy(&truth, out.join("truth.csv")) {
         eprintln!("warning: cannot copy the simulator's {}: {e}", truth.display());
     }
     copy_logs(&world, &out.join("logs"));
-    let criteria = Criteria { target_reach_m: a.reach };
-    let analysis = analyse(&scene, &rows, criteria);
-    let mut s = analysis.summary.clone();
-    s.seed = a.seed;
-    s.robot = robot.to_owned();
-    s.end_reason = end.reason();
-    s.time_in_mode_s = time_in_modes(&modes, s.duration_s);
-    s.first_track_s = first_change_into(&modes, &TRACKING_MODES);
-    s.time_in_mode_before_track_s = time_in_modes_before(&modes, s.first_track_s.unwrap_or(s.duration_s));
-    s.mode_changes = modes.clone();
-    s.cpu = cpu;
-    s.wall_time_s = t_wall.elapsed().as_secs_f64();
-    write_log_csv(&out.join("log.csv"), &rows, &analysis, &modes)?;
-    let title = format!("{} (seed {})", scene.world.name, a.seed);
-    let figs = nerve_demo::plot::write_all(&out, &scene, &rows, &analysis, &modes, &title)?;
-    s.wall_time_s = t_wall.elapsed().as_secs_f64();
-    let json = serde_json::to_string_pretty(&s)?;
-    std::fs::write(out.join("summary.json"), json + "\n").context("cannot write summary.json")?;
-
-    let explored: f64 = EXPLORING_MODES.iter().filter_map(|m| s.time_in_mode_before_track_s.get(*m)).sum();
-    println!(
-        "{}: explored {explored:.1} s{}, doorway {}{}, target {}{}, {} collision(s), min clearance {:.2} m, {:.1} s simulated, {} mode change(s), {:.0} s wall",
-        s.end_reason,
-        s.first_track_s.map(|t| format!(" before tracking at {t:.1} s")).unwrap_or_else(|| ", never tracked".into()),
-        if s.reached_doorway { "reached" } else { "NOT reached" },
-        s.doorway_time_s.map(|t| format!(" at {t:.1} s")).unwrap_or_default(),
-        if s.reached_target { "reached" } else { "NOT reached" },
-        s.target_time_s.map(|t| format!(" at {t:.1} s")).unwrap_or_default(),
-        s.collisions,
-        s.min_clearance_m,
-        s.duration_s,
-        s.mode_changes.len(),
-        s.wall_time_s
-    );
+    let run = explore::Run {
+        seed: a.seed,
+        robot,
+        end_reason: end.reason(),
+        criteria: Criteria { target_reach_m: a.reach },
+        started: t_wall,
+    };
+    let report = explore::report(&out, &scene, &rec, &run)?;
+    println!("{}", report.headline());
     println!("wrote {}/summary.json, log.csv, truth.csv, launch.toml, logs/ and", out.display());
-    for f in figs.files {
+    for f in report.figures.files {
         println!("  {}", f.display());
     }
     if let End::Stalled(why) = &end {
@@ -322,11 +215,8 @@ fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
 /// What `follow` hands back.
 struct Followed {
     end: End,
-    /// The ground truth as it came on `sim/truth`.
-    rows: Vec<TruthRow>,
-    /// The decision maker's mode changes as they came on `decision/mode`.
-    modes: Vec<ModeChange>,
-    cpu: std::collections::BTreeMap<String, nerve_demo::analysis::AgentCpu>,
+    /// The ground truth, the mode changes and the CPU use, for the report.
+    rec: explore::Recorded,
 }
 
 fn truth_row(t: &GroundTruth) -> TruthRow {
@@ -373,7 +263,7 @@ fn follow(world: &World, scene: &Scene, a: &ExploreArgs) -> Result<Followed> {
     let mut next_sample = Instant::now();
     let wall_limit = Duration::from_secs_f64(a.time_limit * 1.5 + 30.0);
     let end = loop {
-        if INTERRUPTED.load(Ordering::SeqCst) {
+        if interrupt::requested() {
             break End::Interrupted;
         }
         if truth_tap.is_none() {
@@ -441,7 +331,7 @@ fn follow(world: &World, scene: &Scene, a: &ExploreArgs) -> Result<Followed> {
             progress(scene, rows.last(), &mode, watch.crossed.is_some());
         }
         if followed {
-            break End::Followed;
+            break End::Goal("target followed");
         }
         if rows.last().is_some_and(|r| r.t >= a.time_limit) {
             break End::TimeLimit;
@@ -466,7 +356,7 @@ fn follow(world: &World, scene: &Scene, a: &ExploreArgs) -> Result<Followed> {
     for (name, kind, pid, pct, restarts) in sample_agents(world) {
         cpu.record(&name, &kind, pct, restarts, pid);
     }
-    Ok(Followed { end, rows, modes, cpu: cpu.finish() })
+    Ok(Followed { end, rec: explore::Recorded { rows, modes, cpu: cpu.finish() } })
 }
 
 /// One progress line: simulated time, true pose, the mode, the target's distance.
@@ -496,75 +386,4 @@ fn progress(scene: &Scene, r: Option<&TruthRow>, mode: &str, doorway: bool) {
 
 fn nerve_sim_vec(x: f64, y: f64) -> nerve_demo::nerve_sim::Vec2 {
     nerve_demo::nerve_sim::Vec2::new(x, y)
-}
-
-/// Copies every agent's log (and the router's) into `dir`.
-pub(super) fn copy_logs(world: &World, dir: &Path) {
-    if let Err(e) = std::fs::create_dir_all(dir) {
-        tracing::warn!("cannot create {}: {e}", dir.display());
-        return;
-    }
-    let Ok(rd) = std::fs::read_dir(world.logs_dir()) else { return };
-    for e in rd.flatten() {
-        let _ = std::fs::copy(e.path(), dir.join(e.file_name()));
-    }
-}
-
-/// `log.csv`: the truth with derived columns and the mode in force.
-fn write_log_csv(
-    path: &Path,
-    rows: &[TruthRow],
-    a: &nerve_demo::Analysis,
-    modes: &[nerve_demo::analysis::ModeChange],
-) -> Result<()> {
-    let f = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-    let mut w = std::io::BufWriter::new(f);
-    let err = || format!("cannot write {}", path.display());
-    writeln!(w, "t,x,y,theta,v,omega,collisions,in_contact,clearance_m,target_x,target_y,target_dist_m,mode")
-        .with_context(err)?;
-    let mut k = 0;
-    let mut mode = "";
-    for (i, r) in rows.iter().enumerate() {
-        while k < modes.len() && modes[k].t_s.is_some_and(|t| t <= r.t) {
-            mode = &modes[k].mode;
-            k += 1;
-        }
-        let (tx, ty, td) = match a.target.get(i).copied().flatten() {
-            Some(p) => {
-                (format!("{:.3}", p.x), format!("{:.3}", p.y), format!("{:.3}", p.dist(nerve_sim_vec(r.x, r.y))))
-            }
-            None => (String::new(), String::new(), String::new()),
-        };
-        writeln!(
-            w,
-            "{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.4},{tx},{ty},{td},{mode}",
-            r.t,
-            r.x,
-            r.y,
-            r.theta,
-            r.v,
-            r.omega,
-            r.collisions,
-            u8::from(r.in_contact),
-            a.clearance.get(i).copied().unwrap_or(f64::NAN)
-        )
-        .with_context(err)?;
-    }
-    w.flush().with_context(err)?;
-    Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn flags_are_replaced_or_appended() {
-        let mut v: Vec<toml::Value> =
-            ["--world", "a", "--x"].iter().map(|s| toml::Value::String((*s).into())).collect();
-        set_flag(&mut v, "--world", "b".into());
-        set_flag(&mut v, "--seed", "3".into());
-        let s: Vec<&str> = v.iter().filter_map(|x| x.as_str()).collect();
-        assert_eq!(s, ["--world", "b", "--x", "--seed", "3"]);
-    }
 }
