@@ -213,8 +213,12 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
             return Ok(None);
         };
         let req = decode::<Req>(active.payload());
-        let responder =
-            Responder { active, service: self.service.clone(), max_message: self.size.max_message, _types: PhantomData };
+        let responder = Responder {
+            active,
+            service: self.service.clone(),
+            max_message: self.size.max_message,
+            _types: PhantomData,
+        };
         Ok(Some((req, responder)))
     }
 

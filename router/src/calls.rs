@@ -137,10 +137,18 @@ impl Link {
                 Ok(None) if now.saturating_duration_since(f.sent) > f.queued.timeout => {
                     let detail = format!("no reply within {:?}", f.queued.timeout);
                     tracing::warn!(agent = name, command = ?f.queued.cmd, "the agent did not answer in time");
-                    out.push(Outcome { ticket: f.queued.ticket, agent: name.into(), result: Err(unreachable(name, &detail)) });
+                    out.push(Outcome {
+                        ticket: f.queued.ticket,
+                        agent: name.into(),
+                        result: Err(unreachable(name, &detail)),
+                    });
                     for q in self.queue.drain(..) {
                         let detail = format!("it did not answer the command before this one ({detail})");
-                        out.push(Outcome { ticket: q.ticket, agent: name.into(), result: Err(unreachable(name, detail)) });
+                        out.push(Outcome {
+                            ticket: q.ticket,
+                            agent: name.into(),
+                            result: Err(unreachable(name, detail)),
+                        });
                     }
                     return false;
                 }
@@ -186,7 +194,11 @@ impl Link {
             self.client = open(name, world, node);
         }
         let Some(client) = &self.client else {
-            out.push(Outcome { ticket: q.ticket, agent: name.into(), result: Err(unreachable(name, "its control service is missing")) });
+            out.push(Outcome {
+                ticket: q.ticket,
+                agent: name.into(),
+                result: Err(unreachable(name, "its control service is missing")),
+            });
             return true;
         };
         match client.send(&q.cmd) {
@@ -199,7 +211,11 @@ impl Link {
                 self.send(name, q, true, world, node, now, out)
             }
             Err(e) => {
-                out.push(Outcome { ticket: q.ticket, agent: name.into(), result: Err(unreachable(name, e.to_string())) });
+                out.push(Outcome {
+                    ticket: q.ticket,
+                    agent: name.into(),
+                    result: Err(unreachable(name, e.to_string())),
+                });
                 true
             }
         }
@@ -217,7 +233,11 @@ fn open(name: &str, world: &World, node: &Node<Ipc>) -> Option<ControlClient<Age
         // killed: clean the ports of dead processes and try once more.
         let cleaned = world.cleanup_dead_nodes();
         if cleaned > 0 {
-            tracing::info!(agent = name, cleaned, "cleaned the shared-memory resources of dead nodes to reach the agent");
+            tracing::info!(
+                agent = name,
+                cleaned,
+                "cleaned the shared-memory resources of dead nodes to reach the agent"
+            );
         }
         opened = ControlClient::open_reserved(node, &service, ControlSize::AGENT);
     }

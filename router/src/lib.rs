@@ -44,7 +44,6 @@ pub mod wiring;
 
 use agent_sdk::clock::now_ns;
 use agent_sdk::control::{ControlError, ControlServer, ControlSize};
-use agent_sdk::runtime::epoch_service;
 use agent_sdk::world::{Ipc, World};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::UpdateConnections;
@@ -117,8 +116,8 @@ impl Router {
         let connections = store.load().map_err(StartError::Other)?;
         let supervisor = supervision::Supervisor::load(world.state_dir(), Instant::now());
         let epoch = now_ns() ^ ((std::process::id() as u64) << 32);
-        let epoch_pub = epoch_service(&node, &world)
-            .map_err(StartError::Other)?
+        let epoch_pub = shm_schemas::services::router_epoch(&node, world.robot())
+            .map_err(|e| StartError::Other(e.to_string()))?
             .publisher_builder()
             .create()
             .map_err(|e| StartError::Other(format!("cannot publish the router epoch: {e:?}")))?;

@@ -63,7 +63,10 @@ enum Asked {
     Suspend,
     Resume,
     ParamGet,
-    ParamSet { key: String, value: String },
+    ParamSet {
+        key: String,
+        value: String,
+    },
     Stop,
     /// nothing to record
     Nothing,
@@ -201,7 +204,11 @@ impl State {
         for c in self.wiring.involving(name, |a| registry.contains(a)) {
             let (agent, cmd) = Wiring::connect_command(&c);
             let ticket = self.calls.submit(&agent, cmd, AGENT_TIMEOUT);
-            let work = Work::Background { name: agent, what: format!("rewired {} -> {}", c.from, c.to), effect: Asked::Nothing };
+            let work = Work::Background {
+                name: agent,
+                what: format!("rewired {} -> {}", c.from, c.to),
+                effect: Asked::Nothing,
+            };
             self.jobs.push(Job { reply: None, waiting: vec![ticket], outcomes: vec![], work });
         }
     }
@@ -435,7 +442,9 @@ impl State {
     fn finish(&mut self, job: Job) {
         let Job { reply, mut outcomes, work, .. } = job;
         let mut single = || {
-            outcomes.pop().map_or_else(|| Err(RouterError::Internal("a command without an outcome".into())), |o| o.result)
+            outcomes
+                .pop()
+                .map_or_else(|| Err(RouterError::Internal("a command without an outcome".into())), |o| o.result)
         };
         let result = match work {
             Work::Views { graph, asked } => {
@@ -478,9 +487,7 @@ impl State {
                 }),
                 Err(e) => Err(e),
             },
-            Work::Command { name, what } => {
-                single().map(|reply| self.obeyed(&name, &what, reply))
-            }
+            Work::Command { name, what } => single().map(|reply| self.obeyed(&name, &what, reply)),
             Work::Kill { name, pid, .. } => {
                 self.check_liveness();
                 if pid_alive(pid) {

@@ -233,7 +233,12 @@ impl Supervisor {
     /// Supervises `spec.name` (again: a new spec replaces the old one,
     /// clears `failed` and starts a new restart window). When the list is full, names neither live nor
     /// restarting are dropped to make room.
-    pub fn supervise(&mut self, spec: Supervision, now: Instant, live: impl Fn(&str) -> bool) -> Result<(), RouterError> {
+    pub fn supervise(
+        &mut self,
+        spec: Supervision,
+        now: Instant,
+        live: impl Fn(&str) -> bool,
+    ) -> Result<(), RouterError> {
         check(&spec)?;
         let name = spec.name.clone();
         if let Some(s) = self.entries.get_mut(&name) {
@@ -487,7 +492,8 @@ mod tests {
     fn policies_and_stop_decide_whether_an_exit_restarts() {
         let t0 = Instant::now();
         let mut s = Supervisor::new(&dir("policy"));
-        for (n, p) in [("never", RestartPolicy::Never), ("fail", RestartPolicy::OnFailure), ("always", RestartPolicy::Always)]
+        for (n, p) in
+            [("never", RestartPolicy::Never), ("fail", RestartPolicy::OnFailure), ("always", RestartPolicy::Always)]
         {
             s.supervise(spec(n, p), t0, |_| false).expect("supervised");
         }
@@ -558,6 +564,9 @@ mod tests {
         assert!(s.forget_gone(t0 + Duration::from_secs(60), FORGET_AFTER, |n| n == "live").is_empty());
         let later = t0 + FORGET_AFTER + Duration::from_secs(1);
         assert_eq!(s.forget_gone(later, FORGET_AFTER, |n| n == "live"), vec!["gone".to_owned()]);
-        assert_eq!(s.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>(), vec!["live".to_owned(), "restarting".to_owned()]);
+        assert_eq!(
+            s.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>(),
+            vec!["live".to_owned(), "restarting".to_owned()]
+        );
     }
 }

@@ -87,8 +87,11 @@ impl Wiring {
     pub fn disconnect_command(c: &Connection) -> (String, AgentCommand) {
         let (from_agent, from_port) = split_port(&c.from);
         let (to_agent, to_port) = split_port(&c.to);
-        let cmd =
-            AgentCommand::Disconnect { input: to_port.into(), from_agent: from_agent.into(), from_port: from_port.into() };
+        let cmd = AgentCommand::Disconnect {
+            input: to_port.into(),
+            from_agent: from_agent.into(),
+            from_port: from_port.into(),
+        };
         (to_agent.to_owned(), cmd)
     }
 
@@ -137,7 +140,9 @@ mod tests {
         assert_eq!(w.involving("r1", |a| a != "t1").len(), 1, "only edges whose two ends are live");
         let (agent, cmd) = Wiring::connect_command(&c("t1/tick", "r1/in"));
         assert_eq!(agent, "r1");
-        assert!(matches!(cmd, AgentCommand::Connect { ref input, ref from_agent, .. } if input == "in" && from_agent == "t1"));
+        assert!(
+            matches!(cmd, AgentCommand::Connect { ref input, ref from_agent, .. } if input == "in" && from_agent == "t1")
+        );
         assert!(w.remove("t1/tick", "r1/in"));
         assert!(!w.remove("t1/tick", "r1/in"));
         assert_eq!(w.list().len(), 1);
