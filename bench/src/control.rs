@@ -183,7 +183,7 @@ fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>, Vec<u64>)> {
                 robot.run(&["connect", "t2/tick", "r/in"])?;
             } else {
                 match client.call(
-                    &RouterRequest::Cli(CliRequest::Connect { from: from.clone(), to: to.clone() }),
+                    &RouterRequest::Cli(CliRequest::Connect { from: from.clone(), to: to.clone(), allow_cycle: false }),
                     Duration::from_secs(5),
                 ) {
                     Ok(RouterReply::Ok) => reply.push(now_ns() - t0),

@@ -191,7 +191,8 @@ pub fn up(world: &World, file: &LaunchFile) -> Result<BroughtUp> {
     wait_registered(&session, file)?;
     let mut wiring_failed = 0;
     for (from, to) in &file.connections {
-        match session.ok(CliRequest::Connect { from: from.clone(), to: to.clone() }) {
+        let allow_cycle = file.allow_cycle.contains(&(from.clone(), to.clone()));
+        match session.ok(CliRequest::Connect { from: from.clone(), to: to.clone(), allow_cycle }) {
             Ok(()) => eprintln!("  connected {from} -> {to}"),
             Err(e) => {
                 wiring_failed += 1;

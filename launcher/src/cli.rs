@@ -32,7 +32,7 @@ pub enum Command {
     /// Show the connection list with live figures per connection.
     Graph(inspect::GraphArgs),
     /// Connect an output port to an input port.
-    Connect(wire::WireArgs),
+    Connect(wire::ConnectArgs),
     /// Remove a connection.
     Disconnect(wire::WireArgs),
     /// Change the period of a periodic agent.

@@ -82,6 +82,8 @@ struct RawAgent {
 struct RawConnect {
     from: Spanned<String>,
     to: Spanned<String>,
+    #[serde(default)]
+    allow_cycle: bool,
 }
 
 /// One agent of a validated launch file.
@@ -157,6 +159,9 @@ pub struct LaunchFile {
     pub agents: Vec<AgentSpec>,
     /// connections (from, to) in file order
     pub connections: Vec<(PortRef, PortRef)>,
+    /// the connections marked `allow_cycle = true`: they may close a loop
+    /// of event-driven agents ([`shm_schemas::cycles`])
+    pub allow_cycle: Vec<(PortRef, PortRef)>,
 }
 
 /// Every problem found in a launch file, each with its line.
@@ -419,6 +424,7 @@ pub fn load(
     }
 
     let mut connections = Vec::new();
+    let mut allow_cycle = Vec::new();
     for c in &raw.connect {
         let from: PortRef = match c.from.get_ref().parse() {
             Ok(p) => p,
@@ -494,16 +500,34 @@ pub fn load(
         if from_type.is_some() && to_type.is_some() {
             if connections.iter().any(|(f, t)| f == &from && t == &to) {
                 cx.err(&c.from, format!("connection {from} -> {to} is listed twice"));
-            } else {
-                connections.push((from, to));
+                continue;
             }
+            let event_driven = |n: &str| {
+                agents.iter().find(|a| a.name == n).is_some_and(|a| a.description.task == TaskKind::EventDriven)
+            };
+            let edges = connections.iter().map(|(f, t): &(PortRef, PortRef)| (f.agent.as_str(), t.agent.as_str()));
+            if c.allow_cycle {
+                allow_cycle.push((from.clone(), to.clone()));
+            } else if let Some(cycle) =
+                shm_schemas::cycles::event_cycle(edges, from.agent.as_str(), to.agent.as_str(), event_driven)
+            {
+                cx.err(
+                    &c.from,
+                    format!(
+                        "connection {from} -> {to} closes a loop of event-driven agents ({}): each sample would wake the next agent at once, forever; if an agent on it breaks the loop, add `allow_cycle = true` to this [[connect]]",
+                        cycle.join(" -> ")
+                    ),
+                );
+                continue;
+            }
+            connections.push((from, to));
         }
     }
     if !cx.errors.is_empty() {
         cx.errors.sort_by_key(|(l, _)| *l);
         return Err(fail(cx.errors));
     }
-    Ok((LaunchFile { path: path.to_path_buf(), agents, connections }, world))
+    Ok((LaunchFile { path: path.to_path_buf(), agents, connections, allow_cycle }, world))
 }
 
 fn list(v: &[&str]) -> String {

@@ -124,6 +124,16 @@ impl Router {
         epoch_pub
             .send_copy(RouterEpoch { epoch, pid: std::process::id(), reserved: 0 })
             .map_err(|e| StartError::Other(format!("cannot publish the router epoch: {e:?}")))?;
+        // wake the agents' message checkers, which sleep until something happens
+        match shm_schemas::services::router_epoch_event(&node, world.robot()).map(|f| f.notifier_builder().create()) {
+            Ok(Ok(n)) => {
+                if let Err(e) = n.notify() {
+                    tracing::warn!("cannot wake the agents for the new epoch: {e:?}; they notice it within 2 s");
+                }
+            }
+            Ok(Err(e)) => tracing::warn!("cannot wake the agents for the new epoch: {e:?}; they notice it within 2 s"),
+            Err(e) => tracing::warn!("{e}; the agents notice the new router within 2 s"),
+        }
         tracing::info!(
             robot = %world.robot(),
             pid = std::process::id(),

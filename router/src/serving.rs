@@ -18,7 +18,7 @@ use crate::registry::Registry;
 use crate::remembered::{self, FORGET_AFTER, Remembered};
 use crate::store::{Connection, Store, Writer};
 use crate::supervision::{Exit, Supervisor};
-use crate::wiring::Wiring;
+use crate::wiring::{Wiring, port_agent};
 use crate::{AGENT_TIMEOUT, STATS_TIMEOUT};
 use agent_sdk::control::Responder;
 use agent_sdk::world::{Ipc, World, pid_alive};
@@ -29,6 +29,7 @@ use shm_schemas::control::cli_to_router::{
     AgentState, AgentView, CliRequest, GraphView, RouterError, RouterReply, RouterRequest,
 };
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
+use shm_schemas::cycles::event_cycle;
 use shm_schemas::stats::AgentStats;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -332,7 +333,7 @@ impl State {
                 }
                 Ok(Started::waiting(asked.keys().copied().collect(), Work::Views { graph, asked }))
             }
-            CliRequest::Connect { from, to } => {
+            CliRequest::Connect { from, to, allow_cycle } => {
                 let from_type = self.registry.port_type(&from, true)?;
                 let to_type = self.registry.port_type(&to, false)?;
                 if from_type != to_type {
@@ -342,6 +343,14 @@ impl State {
                         to: to.to_string(),
                         to_type,
                     });
+                }
+                if !allow_cycle {
+                    let registry = &self.registry;
+                    let event_driven = |n: &str| registry.get(n).is_some_and(|e| e.reg.task == TaskKind::EventDriven);
+                    let edges = self.wiring.list().iter().map(|c| (port_agent(&c.from), port_agent(&c.to)));
+                    if let Some(cycle) = event_cycle(edges, from.agent.as_str(), to.agent.as_str(), event_driven) {
+                        return Err(RouterError::Cycle { from: from.to_string(), to: to.to_string(), cycle });
+                    }
                 }
                 let conn = Connection { from: from.to_string(), to: to.to_string(), type_name: from_type };
                 let (agent, cmd) = Wiring::connect_command(&conn);

@@ -15,6 +15,7 @@
 #![warn(missing_docs)]
 
 pub mod control;
+pub mod cycles;
 pub mod fixed;
 pub mod header;
 pub mod names;

@@ -32,6 +32,15 @@ pub enum ServiceError {
         /// the service
         service: String,
     },
+    /// iceoryx2 could neither open nor create the event service.
+    #[error("cannot open the event service {service}: {source:?}")]
+    OpenEvent {
+        /// the service
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::service::builder::event::EventOpenOrCreateError,
+    },
     /// iceoryx2 could neither open nor create the service.
     #[error("cannot open {service}: {source:?}")]
     Open {
@@ -64,6 +73,25 @@ pub fn router_epoch<S: Service>(
         .enable_safe_overflow(true)
         .open_or_create()
         .map_err(|source| ServiceError::Open { service, source })
+}
+
+/// Opens (or creates) the event service paired with the router epoch (same
+/// name): a router notifies it after publishing its epoch, so that the
+/// agents' message checkers, which sleep until something happens, notice a
+/// restarted router at once (pub-sub alone wakes nobody).
+pub fn router_epoch_event<S: Service>(
+    node: &Node<S>,
+    robot: &RobotName,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<S>, ServiceError> {
+    let service = robot.router_epoch_service();
+    let name: ServiceName = service.as_str().try_into().map_err(|_| ServiceError::Name { service: service.clone() })?;
+    node.service_builder(&name)
+        .event()
+        .max_notifiers(EPOCH_MAX_PUBLISHERS)
+        .max_listeners(EPOCH_MAX_SUBSCRIBERS)
+        .max_nodes(EPOCH_MAX_NODES)
+        .open_or_create()
+        .map_err(|source| ServiceError::OpenEvent { service, source })
 }
 
 #[cfg(test)]

@@ -74,6 +74,9 @@ impl Checker<'_> {
             tracing::error!("cannot attach the control service to the WaitSet");
             return;
         };
+        // a restarted router wakes the checker at once (its epoch event)
+        let epoch_wake = link.take_epoch_wake();
+        let epoch_guard = epoch_wake.as_ref().and_then(|l| ws.attach_notification(l).ok());
         let watchdog = watchdog_interval();
         let tick = housekeeping_interval(watchdog);
         let mut cpu = CpuMeter::default();
@@ -87,6 +90,11 @@ impl Checker<'_> {
                 |id| {
                     if id.has_event_from(&wake_guard) {
                         let _ = wake.try_wait(|_| {});
+                    }
+                    if let (Some(g), Some(l)) = (&epoch_guard, &epoch_wake)
+                        && id.has_event_from(g)
+                    {
+                        let _ = l.try_wait(|_| {});
                     }
                     CallbackProgression::Continue
                 },

@@ -11,6 +11,7 @@
 use super::Shared;
 use crate::control::{ControlClient, ControlError, agent_router_client};
 use crate::world::{Ipc, World};
+use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use shm_schemas::ProtocolError;
@@ -103,6 +104,10 @@ impl Registrar {
 pub(super) struct RouterLink {
     client: Option<ControlClient<RouterRequest, RouterReply>>,
     epoch: Option<Subscriber<Ipc, RouterEpoch, ()>>,
+    /// wakes the message checker when a router publishes a new epoch
+    epoch_wake: Option<Listener<Ipc>>,
+    /// the pid of the newest router seen, for the log
+    router_pid: Option<u32>,
     registrar: Registrar,
 }
 
@@ -124,7 +129,7 @@ pub fn epoch_service(
 
 impl RouterLink {
     pub(super) fn new() -> Self {
-        RouterLink { client: None, epoch: None, registrar: Registrar::new() }
+        RouterLink { client: None, epoch: None, epoch_wake: None, router_pid: None, registrar: Registrar::new() }
     }
 
     /// Subscribes to the router's epoch. Done after the first registration,
@@ -139,6 +144,19 @@ impl RouterLink {
                 None
             }
         };
+        self.epoch_wake = match shm_schemas::services::router_epoch_event(node, world.robot()) {
+            Ok(f) => f.listener_builder().create().ok(),
+            Err(e) => {
+                tracing::warn!("{e}; a restarted router is noticed at the next housekeeping tick");
+                None
+            }
+        };
+    }
+
+    /// The listener that wakes when a router publishes a new epoch, for the
+    /// message checker's WaitSet (taken once).
+    pub(super) fn take_epoch_wake(&mut self) -> Option<Listener<Ipc>> {
+        self.epoch_wake.take()
     }
 
     pub(super) fn register(
@@ -190,11 +208,10 @@ impl RouterLink {
     /// when the router refuses this agent for good (its name was taken
     /// meanwhile).
     pub(super) fn poll(&mut self, node: &Node<Ipc>, world: &World, reg: &Registration, sh: &Shared) -> bool {
-        let mut router_pid = None;
         if let Some(sub) = &self.epoch {
             while let Ok(Some(s)) = sub.receive() {
                 self.registrar.seen(s.epoch);
-                router_pid = Some(s.pid);
+                self.router_pid = Some(s.pid);
             }
         }
         if !self.registrar.due(Instant::now()) {
@@ -202,7 +219,8 @@ impl RouterLink {
         }
         match self.register(node, world, reg, sh) {
             Ok(()) => {
-                tracing::info!(router_pid, epoch = self.registrar.registered, "registered with the router");
+                let pid = self.router_pid.map_or_else(|| "?".to_owned(), |p| p.to_string());
+                tracing::info!(router_pid = ?self.router_pid, epoch = ?self.registrar.registered, "registered with the router (pid {pid})");
                 true
             }
             Err(RegisterError::Refused(err)) => {

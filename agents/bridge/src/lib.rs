@@ -266,7 +266,7 @@ fn wire_exports(world: &World, me: &Me, exports: &[Arc<ExportTopic>], router: &m
             continue;
         };
         match client.call(
-            &RouterRequest::Cli(CliRequest::Connect { from: from.clone(), to: to.clone() }),
+            &RouterRequest::Cli(CliRequest::Connect { from: from.clone(), to: to.clone(), allow_cycle: false }),
             Duration::from_secs(5),
         ) {
             Ok(RouterReply::Ok) => {

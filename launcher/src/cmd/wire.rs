@@ -18,6 +18,18 @@ pub struct WireArgs {
     pub to: String,
 }
 
+/// `nerve connect`
+#[derive(Debug, clap::Args)]
+pub struct ConnectArgs {
+    /// The two ports.
+    #[command(flatten)]
+    pub ports: WireArgs,
+    /// Connect even if it closes a loop of event-driven agents (an agent on
+    /// the loop breaks it itself: it drops or thins what it forwards).
+    #[arg(long)]
+    pub allow_cycle: bool,
+}
+
 /// `nerve param`
 #[derive(Debug, clap::Subcommand)]
 pub enum ParamCmd {
@@ -45,9 +57,13 @@ fn refs(a: &WireArgs) -> Result<(PortRef, PortRef)> {
     Ok((from, to))
 }
 
-pub fn connect(world: &World, a: WireArgs) -> Result<ExitCode> {
-    let (from, to) = refs(&a)?;
-    RouterSession::open(world)?.ok(CliRequest::Connect { from: from.clone(), to: to.clone() })?;
+pub fn connect(world: &World, a: ConnectArgs) -> Result<ExitCode> {
+    let (from, to) = refs(&a.ports)?;
+    RouterSession::open(world)?.ok(CliRequest::Connect {
+        from: from.clone(),
+        to: to.clone(),
+        allow_cycle: a.allow_cycle,
+    })?;
     println!("connected {from} -> {to}");
     Ok(ExitCode::SUCCESS)
 }

@@ -28,6 +28,9 @@ pub enum CliRequest {
         from: PortRef,
         /// input port
         to: PortRef,
+        /// connect even if it closes a cycle of event-driven agents
+        /// ([`crate::cycles`]): an agent on it breaks the loop itself
+        allow_cycle: bool,
     },
     /// Remove a connection.
     Disconnect {
@@ -298,6 +301,19 @@ pub enum RouterError {
         name: String,
         /// what happened
         detail: String,
+    },
+    /// The connection would close a cycle of event-driven agents.
+    #[error(
+        "connecting {from} to {to} closes a loop of event-driven agents ({}): each sample would wake the next agent at once, forever; if an agent on it breaks the loop, connect with `nerve connect --allow-cycle` (or `allow_cycle = true` in the launch file's [[connect]])",
+        .cycle.join(" -> ")
+    )]
+    Cycle {
+        /// output port
+        from: String,
+        /// input port
+        to: String,
+        /// the agents on the loop, first and last the same
+        cycle: Vec<String>,
     },
     /// The command does not apply to this agent.
     #[error("{0}")]
