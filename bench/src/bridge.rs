@@ -615,7 +615,7 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
         for prefix in ["", "b", "c"] {
             let (ping, pong) = (format!("{prefix}ping-{t}"), format!("{prefix}pong-{t}"));
             ra.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
-            ra.run(&["connect", &format!("{pong}/out"), &format!("{ping}/in")])?;
+            ra.run(&["connect", "--allow-cycle", &format!("{pong}/out"), &format!("{ping}/in")])?;
         }
         for kind in ["l", "t"] {
             rb.run(&["connect", &format!("bridge/{kind}src-{t}"), &format!("{kind}sink-{t}/in")])?;

@@ -505,7 +505,11 @@ pub fn load(
             let event_driven = |n: &str| {
                 agents.iter().find(|a| a.name == n).is_some_and(|a| a.description.task == TaskKind::EventDriven)
             };
-            let edges = connections.iter().map(|(f, t): &(PortRef, PortRef)| (f.agent.as_str(), t.agent.as_str()));
+            // a loop through an edge allowed to close one is allowed, whatever the order
+            let edges = connections
+                .iter()
+                .filter(|e| !allow_cycle.contains(*e))
+                .map(|(f, t): &(PortRef, PortRef)| (f.agent.as_str(), t.agent.as_str()));
             if c.allow_cycle {
                 allow_cycle.push((from.clone(), to.clone()));
             } else if let Some(cycle) =

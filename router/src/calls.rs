@@ -22,6 +22,12 @@ use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
 
+/// How long the router waits for an agent's message checker to answer.
+pub const AGENT_TIMEOUT: Duration = Duration::from_millis(1000);
+/// How long it waits for statistics (for `ps` and `graph`; asked of every
+/// agent at once).
+pub const STATS_TIMEOUT: Duration = Duration::from_millis(300);
+
 /// Names one command given to [`Calls::submit`]; its [`Outcome`] carries it.
 pub type Ticket = u64;
 

@@ -56,11 +56,7 @@ use store::Store;
 
 pub use supervision::{MAX_BACKOFF, MAX_SUPERVISED};
 
-/// How long the router waits for an agent's message checker to answer.
-pub const AGENT_TIMEOUT: Duration = Duration::from_millis(1000);
-/// How long it waits for statistics (for `ps` and `graph`; asked of every
-/// agent at once).
-pub const STATS_TIMEOUT: Duration = Duration::from_millis(300);
+pub use calls::{AGENT_TIMEOUT, STATS_TIMEOUT};
 /// How often liveness is checked.
 pub const LIVENESS_PERIOD: Duration = Duration::from_millis(250);
 /// The longest sleep between two looks for agents' replies while commands

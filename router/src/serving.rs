@@ -13,13 +13,12 @@
 //! it (or is not running), a `Suspend` marks the agent suspended when it
 //! obeyed, and a `Stop` cancels the agent's restarts only when it obeyed.
 
-use crate::calls::{Calls, Outcome, Ticket};
+use crate::calls::{AGENT_TIMEOUT, Calls, Outcome, STATS_TIMEOUT, Ticket};
 use crate::registry::Registry;
 use crate::remembered::{self, FORGET_AFTER, Remembered};
 use crate::store::{Connection, Store, Writer};
 use crate::supervision::{Exit, Supervisor};
-use crate::wiring::{Wiring, port_agent};
-use crate::{AGENT_TIMEOUT, STATS_TIMEOUT};
+use crate::wiring::Wiring;
 use agent_sdk::control::Responder;
 use agent_sdk::world::{Ipc, World, pid_alive};
 use iceoryx2::prelude::Node;
@@ -347,12 +346,13 @@ impl State {
                 if !allow_cycle {
                     let registry = &self.registry;
                     let event_driven = |n: &str| registry.get(n).is_some_and(|e| e.reg.task == TaskKind::EventDriven);
-                    let edges = self.wiring.list().iter().map(|c| (port_agent(&c.from), port_agent(&c.to)));
+                    // a loop through an edge allowed to close one is allowed
+                    let edges = self.wiring.loop_edges();
                     if let Some(cycle) = event_cycle(edges, from.agent.as_str(), to.agent.as_str(), event_driven) {
                         return Err(RouterError::Cycle { from: from.to_string(), to: to.to_string(), cycle });
                     }
                 }
-                let conn = Connection { from: from.to_string(), to: to.to_string(), type_name: from_type };
+                let conn = Connection { from: from.to_string(), to: to.to_string(), type_name: from_type, allow_cycle };
                 let (agent, cmd) = Wiring::connect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
                 Ok(Started::waiting(vec![ticket], Work::Connect { conn }))

@@ -29,6 +29,9 @@ pub struct Connection {
     /// payload type name
     #[serde(rename = "type")]
     pub type_name: String,
+    /// it may close a loop of event-driven agents ([`shm_schemas::cycles`])
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub allow_cycle: bool,
 }
 
 /// Version of the file's layout.
@@ -259,7 +262,12 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("nerve-store-test-{}", std::process::id()));
         let store = Store::new(&dir);
         assert_eq!(store.load(), Ok(vec![]));
-        let c = vec![Connection { from: "t1/tick".into(), to: "r1/in".into(), type_name: "nerve::Tick".into() }];
+        let c = vec![Connection {
+            from: "t1/tick".into(),
+            to: "r1/in".into(),
+            type_name: "nerve::Tick".into(),
+            allow_cycle: false,
+        }];
         store.save(&c).expect("saves");
         assert_eq!(store.load(), Ok(c));
         let _ = std::fs::remove_dir_all(&dir);
@@ -270,7 +278,12 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("nerve-store-corrupt-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let store = Store::new(&dir);
-        let c = vec![Connection { from: "t1/tick".into(), to: "r1/in".into(), type_name: "nerve::Tick".into() }];
+        let c = vec![Connection {
+            from: "t1/tick".into(),
+            to: "r1/in".into(),
+            type_name: "nerve::Tick".into(),
+            allow_cycle: false,
+        }];
         store.save(&c).expect("saves");
         assert_eq!(store.load(), Ok(c.clone()), "a good load keeps a copy");
         for bad in [
@@ -328,7 +341,12 @@ mod tests {
         for i in 0..20 {
             w.save(
                 &store,
-                &[Connection { from: format!("a{i}/out"), to: "b/in".into(), type_name: "nerve::Tick".into() }],
+                &[Connection {
+                    from: format!("a{i}/out"),
+                    to: "b/in".into(),
+                    type_name: "nerve::Tick".into(),
+                    allow_cycle: false,
+                }],
             );
         }
         w.flush();

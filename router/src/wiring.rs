@@ -39,13 +39,26 @@ impl Wiring {
         &self.list
     }
 
-    /// Adds `c`; whether it was new.
+    /// Adds `c` (an edge already listed takes `c`'s settings); whether the
+    /// list changed.
     pub fn add(&mut self, c: Connection) -> bool {
-        if self.list.contains(&c) {
-            return false;
+        match self.list.iter_mut().find(|e| e.from == c.from && e.to == c.to) {
+            Some(e) if *e == c => false,
+            Some(e) => {
+                *e = c;
+                true
+            }
+            None => {
+                self.list.push(c);
+                true
+            }
         }
-        self.list.push(c);
-        true
+    }
+
+    /// The edges, agent to agent, that a loop may not run through: those not
+    /// allowed to close one.
+    pub fn loop_edges(&self) -> impl Iterator<Item = (&str, &str)> {
+        self.list.iter().filter(|c| !c.allow_cycle).map(|c| (port_agent(&c.from), port_agent(&c.to)))
     }
 
     /// The connection `from` → `to`.
@@ -127,7 +140,7 @@ mod tests {
     use super::*;
 
     fn c(from: &str, to: &str) -> Connection {
-        Connection { from: from.into(), to: to.into(), type_name: "nerve::Tick".into() }
+        Connection { from: from.into(), to: to.into(), type_name: "nerve::Tick".into(), allow_cycle: false }
     }
 
     #[test]

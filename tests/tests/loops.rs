@@ -30,9 +30,16 @@ fn connect_refuses_a_loop_of_event_driven_agents_unless_allowed() {
     // nothing feeds the two relays: allowing the loop spins nothing here
     r.ok(&["connect", "--allow-cycle", "r2/out", "r1/in"]);
     assert_eq!(r.graph()["connections"].as_array().map(|c| c.len()), Some(2));
-    // a periodic agent breaks a loop: the ticker reads nothing, so build t1 -> r1 only
-    r.ok(&["connect", "t1/tick", "r2/in"]);
+    // a loop through an allowed edge is allowed, whichever edge comes last
     r.ok(&["disconnect", "r2/out", "r1/in"]);
+    r.ok(&["disconnect", "r1/out", "r2/in"]);
+    r.ok(&["connect", "--allow-cycle", "r1/out", "r2/in"]);
+    r.ok(&["connect", "r2/out", "r1/in"]);
+    // but not a second loop beside it
+    r.ok(&["start", "relay", "--name", "r3"]);
+    r.ok(&["connect", "r1/out", "r3/in"]);
+    let e = r.fails(&["connect", "r3/out", "r1/in"]);
+    assert!(e.contains("(r3 -> r1 -> r3)"), "{e}");
     r.down_and_check_clean();
 }
 
