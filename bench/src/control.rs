@@ -164,7 +164,7 @@ fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>, Vec<u64>)> {
     let _router = robot.start_router()?;
     robot.run(&["start", "ticker", "--name", "t1", "--period", "1ms"])?;
     robot.run(&["start", "ticker", "--name", "t2", "--period", "1ms"])?;
-    robot.run(&["param", "set", "t2", "step", "1000000000"])?;
+    robot.run(&["param", "set", "t2", "step", "1000000"])?;
     robot.run(&["start", "relay", "--name", "r"])?;
     robot.run(&["connect", "t1/tick", "r/in"])?;
     let watch = Watch::new(&robot, "r", "out")?;
@@ -172,7 +172,8 @@ fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>, Vec<u64>)> {
     let node = world.node(&format!("bench-rq-{}", std::process::id()))?;
     let client = router_client::<RouterRequest, RouterReply>(&world, &node)?;
     let (from, to): (PortRef, PortRef) = ("t2/tick".parse()?, "r/in".parse()?);
-    let from_t2 = |t: &Tick| t.seq >= 1_000_000_000;
+    // t1 counts by 1 at 1 kHz: it reaches a million only after 17 minutes
+    let from_t2 = |t: &Tick| t.seq >= 1_000_000;
     let (mut cli, mut req, mut reply) = (Vec::new(), Vec::new(), Vec::new());
     for i in 0..opts.rounds {
         eprintln!("control: rewire {}/{}", i + 1, opts.rounds);
