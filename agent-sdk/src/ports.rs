@@ -31,21 +31,119 @@ pub const SUBSCRIBER_BUFFER: usize = 16;
 const MAX_PUBLISHERS: usize = 4;
 const MAX_NODES: usize = 40;
 
-/// Why a port could not be made or used.
+/// Why a port could not be made or used. Each variant names the iceoryx2
+/// operation that failed and keeps iceoryx2's own error as its source, so a
+/// caller can tell a full subscriber list from a missing service.
 #[derive(Debug, thiserror::Error)]
 pub enum PortError {
-    /// iceoryx2 refused.
+    /// The port's publish-subscribe service could not be opened or created.
+    #[error("port {service}: cannot open its service: {source:?}")]
+    Service {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError,
+    },
+    /// The service exists with another payload type.
+    #[error("port {service}: the service exists with another payload type than {type_name}")]
+    IncompatibleType {
+        /// service name
+        service: String,
+        /// the type this side asked for
+        type_name: String,
+    },
+    /// The port's wake-up event service could not be opened or created.
+    #[error("port {service}: cannot open its wake-up event: {source:?}")]
+    Event {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::service::builder::event::EventOpenOrCreateError,
+    },
+    /// The publisher could not be created.
+    #[error("port {service}: cannot create the publisher: {source:?}")]
+    Publisher {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::port::publisher::PublisherCreateError,
+    },
+    /// The subscriber could not be created (e.g. the service has its most subscribers).
+    #[error("port {service}: cannot subscribe: {source:?}")]
+    Subscriber {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::port::subscriber::SubscriberCreateError,
+    },
+    /// The event notifier could not be created.
+    #[error("port {service}: cannot create the wake-up notifier: {source:?}")]
+    Notifier {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::port::notifier::NotifierCreateError,
+    },
+    /// The event listener could not be created.
+    #[error("port {service}: cannot create the wake-up listener: {source:?}")]
+    Listener {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::port::listener::ListenerCreateError,
+    },
+    /// No sample could be loaned (every slot is held by subscribers or unsent).
+    #[error("port {service}: cannot loan a sample: {source:?}")]
+    Loan {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::port::LoanError,
+    },
+    /// The sample could not be sent.
+    #[error("port {service}: cannot send: {source:?}")]
+    Send {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::port::SendError,
+    },
+    /// The subscribers could not be woken.
+    #[error("port {service}: cannot wake the subscribers: {source:?}")]
+    Notify {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::port::notifier::NotifierNotifyError,
+    },
+    /// Anything else: an invalid service name, a sample of the wrong size.
     #[error("port {service}: {detail}")]
     Ipc {
         /// service name
         service: String,
-        /// what iceoryx2 said
+        /// what went wrong
         detail: String,
     },
 }
 
 fn perr(service: &str, e: impl std::fmt::Debug) -> PortError {
     PortError::Ipc { service: service.into(), detail: format!("{e:?}") }
+}
+
+/// Wraps iceoryx2's error `source` into the [`PortError`] variant `$v` for `$service`.
+macro_rules! port_err {
+    ($v:ident, $service:expr) => {
+        |source| PortError::$v { service: String::from($service), source }
+    };
 }
 
 type PortBuilder<T> = iceoryx2::service::builder::publish_subscribe::Builder<T, SampleHeader, Ipc>;
@@ -73,11 +171,8 @@ pub fn port_service<T: Payload>(
     port_builder::<T>(node, service)?.open_or_create().map_err(|e| match e {
         iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
             iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::IncompatibleTypes,
-        ) => PortError::Ipc {
-            service: service.into(),
-            detail: format!("the service exists with another payload type than {}", T::stable_type_name()),
-        },
-        e => perr(service, e),
+        ) => PortError::IncompatibleType { service: service.into(), type_name: T::stable_type_name().into() },
+        source => PortError::Service { service: service.into(), source },
     })
 }
 
@@ -99,7 +194,7 @@ pub fn port_event(node: &Node<Ipc>, service: &str) -> Result<event::PortFactory<
         .max_notifiers(MAX_PUBLISHERS + 4)
         .max_nodes(MAX_NODES)
         .open_or_create()
-        .map_err(|e| perr(service, e))
+        .map_err(port_err!(Event, service))
 }
 
 /// Metadata of a received sample.
@@ -126,8 +221,8 @@ pub struct Output<T: Payload> {
 impl<T: Payload> Output<T> {
     pub(crate) fn create(node: &Node<Ipc>, service: &str, sender: &str) -> Result<Self, PortError> {
         let ps = port_service::<T>(node, service)?;
-        let publisher = ps.publisher_builder().create().map_err(|e| perr(service, e))?;
-        let notifier = port_event(node, service)?.notifier_builder().create().map_err(|e| perr(service, e))?;
+        let publisher = ps.publisher_builder().create().map_err(port_err!(Publisher, service))?;
+        let notifier = port_event(node, service)?.notifier_builder().create().map_err(port_err!(Notifier, service))?;
         Ok(Output {
             service: service.into(),
             sender: FixedName::new(sender),
@@ -144,10 +239,10 @@ impl<T: Payload> Output<T> {
 
     /// Sends `value` (written once, in place, into shared memory) and wakes the readers.
     pub fn send(&self, value: T) -> Result<(), PortError> {
-        let mut sample = self.publisher.loan_uninit().map_err(|e| perr(&self.service, e))?;
+        let mut sample = self.publisher.loan_uninit().map_err(port_err!(Loan, &self.service))?;
         *sample.user_header_mut() = self.next_header();
-        sample.write_payload(value).send().map_err(|e| perr(&self.service, e))?;
-        self.notifier.notify().map_err(|e| perr(&self.service, e))?;
+        sample.write_payload(value).send().map_err(port_err!(Send, &self.service))?;
+        self.notifier.notify().map_err(port_err!(Notify, &self.service))?;
         Ok(())
     }
 
@@ -156,12 +251,12 @@ impl<T: Payload> Output<T> {
     where
         T: Default,
     {
-        let mut sample = self.publisher.loan_uninit().map_err(|e| perr(&self.service, e))?;
+        let mut sample = self.publisher.loan_uninit().map_err(port_err!(Loan, &self.service))?;
         *sample.user_header_mut() = self.next_header();
         let mut sample = sample.write_payload(T::default());
         fill(sample.payload_mut());
-        sample.send().map_err(|e| perr(&self.service, e))?;
-        self.notifier.notify().map_err(|e| perr(&self.service, e))?;
+        sample.send().map_err(port_err!(Send, &self.service))?;
+        self.notifier.notify().map_err(port_err!(Notify, &self.service))?;
         Ok(())
     }
 
@@ -173,13 +268,13 @@ impl<T: Payload> Output<T> {
     /// look at written, and only bit patterns valid for `T` in the rest (for
     /// plain numeric and byte-array payloads any bytes are valid).
     pub unsafe fn send_uninit(&self, fill: impl FnOnce(&mut std::mem::MaybeUninit<T>)) -> Result<(), PortError> {
-        let mut sample = self.publisher.loan_uninit().map_err(|e| perr(&self.service, e))?;
+        let mut sample = self.publisher.loan_uninit().map_err(port_err!(Loan, &self.service))?;
         *sample.user_header_mut() = self.next_header();
         fill(sample.payload_mut());
         // SAFETY: the caller guarantees that `fill` initialised the payload.
         let sample = unsafe { sample.assume_init() };
-        sample.send().map_err(|e| perr(&self.service, e))?;
-        self.notifier.notify().map_err(|e| perr(&self.service, e))?;
+        sample.send().map_err(port_err!(Send, &self.service))?;
+        self.notifier.notify().map_err(port_err!(Notify, &self.service))?;
         Ok(())
     }
 
@@ -365,8 +460,9 @@ impl<T: Payload> DynInput for InputInner<T> {
         let service = robot.port_service(from_agent, from_port);
         let ps = port_service::<T>(node, &service)?;
         let subscriber =
-            ps.subscriber_builder().buffer_size(SUBSCRIBER_BUFFER).create().map_err(|e| perr(&service, e))?;
-        let listener = port_event(node, &service)?.listener_builder().create().map_err(|e| perr(&service, e))?;
+            ps.subscriber_builder().buffer_size(SUBSCRIBER_BUFFER).create().map_err(port_err!(Subscriber, &service))?;
+        let listener =
+            port_event(node, &service)?.listener_builder().create().map_err(port_err!(Listener, &service))?;
         lock(&self.subs).push(Subscription {
             from_agent: from_agent.into(),
             from_port: from_port.into(),
@@ -410,7 +506,41 @@ impl<T: Payload> DynInput for InputInner<T> {
 
 #[cfg(test)]
 mod tests {
-    use super::gap;
+    use super::{PortError, gap, port_service};
+    use crate::world::World;
+    use shm_schemas::payloads::{Scalar, Tick};
+
+    /// Removes the test robot's shared-memory and iceoryx2 files, even when the test fails.
+    struct Cleanup(World);
+
+    impl Drop for Cleanup {
+        fn drop(&mut self) {
+            for f in self.0.shm_files().into_iter().chain(self.0.iox2_files()) {
+                let _ = std::fs::remove_file(f);
+            }
+        }
+    }
+
+    #[test]
+    fn a_port_error_says_which_operation_failed_and_keeps_iceoryx2s_cause() {
+        let world = World::new(&format!("perr{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let service = format!("nerve/{}/a/out", world.robot());
+        let _ticks = port_service::<Tick>(&node, &service).expect("created");
+        match port_service::<Scalar>(&node, &service) {
+            Err(PortError::IncompatibleType { service: s, type_name }) => {
+                assert_eq!(s, service);
+                assert_eq!(type_name, "nerve::Scalar");
+            }
+            other => panic!("another type on the same port: {:?}", other.err()),
+        }
+        // an operation's failure keeps iceoryx2's error as its source
+        let e = PortError::Loan { service: service.clone(), source: iceoryx2::port::LoanError::OutOfMemory };
+        let source = std::error::Error::source(&e).expect("a source");
+        assert!(source.downcast_ref::<iceoryx2::port::LoanError>().is_some(), "{source:?}");
+        assert!(e.to_string().contains("cannot loan a sample") && e.to_string().contains(&service), "{e}");
+    }
 
     #[test]
     fn gaps_are_counted_without_overflow() {
