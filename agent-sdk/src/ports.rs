@@ -168,13 +168,38 @@ pub fn port_service<T: Payload>(
     node: &Node<Ipc>,
     service: &str,
 ) -> Result<publish_subscribe::PortFactory<Ipc, T, SampleHeader>, PortError> {
-    port_builder::<T>(node, service)?.open_or_create().map_err(|e| match e {
-        iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
-            iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::IncompatibleTypes,
-        ) => PortError::IncompatibleType { service: service.into(), type_name: T::stable_type_name().into() },
-        source => PortError::Service { service: service.into(), source },
-    })
+    use iceoryx2::service::builder::publish_subscribe::{
+        PublishSubscribeOpenError as Open, PublishSubscribeOpenOrCreateError as OpenOrCreate,
+    };
+    let mut attempt = 0;
+    loop {
+        attempt += 1;
+        match port_builder::<T>(node, service)?.open_or_create() {
+            Ok(f) => return Ok(f),
+            Err(OpenOrCreate::PublishSubscribeOpenError(Open::IncompatibleTypes)) => {
+                return Err(PortError::IncompatibleType {
+                    service: service.into(),
+                    type_name: T::stable_type_name().into(),
+                });
+            }
+            // The last owner of the service (an agent of the same name that
+            // was killed while it stopped, or is still leaving) is removing
+            // it: once it is gone the service can be created anew. Seen when
+            // a supervisor restart came 0.5 s after such a death.
+            Err(OpenOrCreate::PublishSubscribeOpenError(Open::IsMarkedForDestruction))
+                if attempt < MARKED_FOR_DESTRUCTION_ATTEMPTS =>
+            {
+                tracing::debug!(service, attempt, "the port's service is being removed; trying again");
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
+            Err(source) => return Err(PortError::Service { service: service.into(), source }),
+        }
+    }
 }
+
+/// How often opening a port's service is tried while its last owner removes
+/// it (10 ms apart: half a second in all).
+const MARKED_FOR_DESTRUCTION_ATTEMPTS: u32 = 50;
 
 /// Opens the service of an existing output port; `None` when it does not
 /// exist or carries another type (used by tools that probe a port's type).

@@ -259,7 +259,12 @@ impl State {
     /// Starts the supervised agents whose back-off has passed, and counts
     /// as dead those an earlier router expected and that never came back.
     pub fn run_restarts(&mut self) {
-        self.supervisor.reap();
+        for name in self.supervisor.reap() {
+            if !self.registry.contains(&name) {
+                tracing::warn!(agent = %name, "the restarted {name} could not start (see its log)");
+                self.exited(&name, true);
+            }
+        }
         let now = Instant::now();
         let registry = &self.registry;
         for name in self.supervisor.missing(now, |n| registry.contains(n)) {

@@ -117,8 +117,9 @@ struct SavedFile {
 #[derive(Debug)]
 pub struct Supervisor {
     entries: BTreeMap<String, Supervised>,
-    /// start-up processes of restarted agents, reaped as they exit
-    children: Vec<std::process::Child>,
+    /// start-up processes of restarted agents (with the agent's name),
+    /// reaped as they exit
+    children: Vec<(String, std::process::Child)>,
     path: PathBuf,
     /// the router is stopping: nothing is restarted any more
     stopping: bool,
@@ -341,7 +342,6 @@ impl Supervisor {
 
     /// Starts `argv` for the agent `name`, its start-up errors into `log`.
     pub fn spawn(&mut self, name: &str, argv: &[String], log: &Path, restart: u32) {
-        self.children.retain_mut(|c| !matches!(c.try_wait(), Ok(Some(_))));
         let Some((program, args)) = argv.split_first() else { return };
         // rotated by size, 0600, never through a symlink (see agent_sdk::daemon)
         let stderr = agent_sdk::daemon::open_log(log);
@@ -368,15 +368,29 @@ impl Supervisor {
         match cmd.spawn() {
             Ok(child) => {
                 tracing::info!(agent = name, restart, "restarted {name} (restart {restart})");
-                self.children.push(child);
+                self.children.push((name.to_owned(), child));
             }
             Err(e) => tracing::error!(agent = name, program = %program, "cannot restart {name}: {e}"),
         }
     }
 
-    /// Reaps the start-up processes that have exited.
-    pub fn reap(&mut self) {
-        self.children.retain_mut(|c| !matches!(c.try_wait(), Ok(Some(_))));
+    /// Reaps the start-up processes that have exited; returns the names
+    /// of the agents whose start failed (the start-up process exits with
+    /// an error when the agent could not start): no agent registered, so
+    /// no death would be noticed, and the restart must count as failed.
+    pub fn reap(&mut self) -> Vec<String> {
+        let mut failed = Vec::new();
+        self.children.retain_mut(|(name, c)| match c.try_wait() {
+            Ok(Some(status)) => {
+                if !status.success() {
+                    failed.push(name.clone());
+                }
+                false
+            }
+            Ok(None) => true,
+            Err(_) => false,
+        });
+        failed
     }
 
     /// Notes that `name` is live at `now`.
@@ -539,6 +553,25 @@ mod tests {
         assert!(!d.join(FILE_NAME).exists());
         assert!(again.due(later + Duration::from_secs(60), |_| false).is_empty());
         assert!(Supervisor::load(&d, later).is_empty());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_restart_whose_start_up_fails_is_reported_so_that_it_counts() {
+        let d = dir("startfail");
+        std::fs::create_dir_all(&d).expect("dir");
+        let mut s = Supervisor::new(&d);
+        s.spawn("bad", &["false".to_owned()], &d.join("bad.log"), 1);
+        s.spawn("good", &["true".to_owned()], &d.join("good.log"), 1);
+        let mut failed = Vec::new();
+        for _ in 0..200 {
+            failed.extend(s.reap());
+            if s.children.is_empty() {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        assert_eq!(failed, vec!["bad".to_owned()]);
         let _ = std::fs::remove_dir_all(&d);
     }
 

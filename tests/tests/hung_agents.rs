@@ -134,8 +134,9 @@ fn a_stop_the_agent_did_not_obey_leaves_its_restarts_alone() {
     let hung = Hung::stop(&[old]);
     let why = r.fails(&["stop", "h1"]);
     assert!(why.contains("did not answer"), "{why}");
-    drop(hung);
+    // killed while still stopped: it never reads the stop it was sent
     sigkill(old);
+    drop(hung);
     assert!(
         wait_until(Duration::from_secs(10), || r.agent("h1").is_some_and(|a| {
             let pid = a["pid"].as_u64().unwrap_or(0) as u32;
