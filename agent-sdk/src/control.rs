@@ -477,19 +477,9 @@ pub fn agent_router_client<Req: Serialize, Resp: DeserializeOwned>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::world::test_support::Cleanup;
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
-
-    /// Removes the test robot's shared-memory and iceoryx2 files, even when the test fails.
-    struct Cleanup(World);
-
-    impl Drop for Cleanup {
-        fn drop(&mut self) {
-            for f in self.0.shm_files().into_iter().chain(self.0.iox2_files()) {
-                let _ = std::fs::remove_file(f);
-            }
-        }
-    }
 
     #[test]
     fn tools_leave_the_reserved_client_slot_for_the_router() {

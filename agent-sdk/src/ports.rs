@@ -533,18 +533,8 @@ impl<T: Payload> DynInput for InputInner<T> {
 mod tests {
     use super::{PortError, gap, port_service};
     use crate::world::World;
+    use crate::world::test_support::Cleanup;
     use shm_schemas::payloads::{Scalar, Tick};
-
-    /// Removes the test robot's shared-memory and iceoryx2 files, even when the test fails.
-    struct Cleanup(World);
-
-    impl Drop for Cleanup {
-        fn drop(&mut self) {
-            for f in self.0.shm_files().into_iter().chain(self.0.iox2_files()) {
-                let _ = std::fs::remove_file(f);
-            }
-        }
-    }
 
     #[test]
     fn a_port_error_says_which_operation_failed_and_keeps_iceoryx2s_cause() {

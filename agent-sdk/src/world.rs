@@ -337,6 +337,24 @@ pub fn pid_alive(pid: u32) -> bool {
     }
 }
 
+/// Helpers of the SDK's own tests.
+#[cfg(test)]
+pub(crate) mod test_support {
+    use super::World;
+
+    /// Removes a test robot's shared-memory and iceoryx2 files when dropped,
+    /// even when the test fails.
+    pub(crate) struct Cleanup(pub(crate) World);
+
+    impl Drop for Cleanup {
+        fn drop(&mut self) {
+            for f in self.0.shm_files().into_iter().chain(self.0.iox2_files()) {
+                let _ = std::fs::remove_file(f);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

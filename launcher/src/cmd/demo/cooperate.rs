@@ -321,14 +321,7 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         "wrote {}/summary.json, estimates.csv, truth-r1.csv, truth-r2.csv, launch files, logs/ and",
         out.display()
     );
-    for f in report.figures.files {
-        println!("  {}", f.display());
-    }
-    if let End::Stalled(why) = &end {
-        eprintln!("error: the run stalled: {why}");
-        return Ok(ExitCode::from(1));
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(end.finish(&report.figures.files))
 }
 
 /// The run's taps, opened as their ports appear.

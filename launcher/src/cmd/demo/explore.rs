@@ -202,14 +202,7 @@ pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     let report = explore::report(&out, &scene, &rec, &run)?;
     println!("{}", report.headline());
     println!("wrote {}/summary.json, log.csv, truth.csv, launch.toml, logs/ and", out.display());
-    for f in report.figures.files {
-        println!("  {}", f.display());
-    }
-    if let End::Stalled(why) = &end {
-        eprintln!("error: the run stalled: {why}");
-        return Ok(ExitCode::from(1));
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(end.finish(&report.figures.files))
 }
 
 /// What `follow` hands back.

@@ -102,6 +102,19 @@ impl End {
             End::Stalled(why) => format!("stalled: {why}"),
         }
     }
+
+    /// Lists the figures written, under the `wrote ...` line, and gives the
+    /// command's exit code: 1 for a run that stalled.
+    fn finish(&self, figures: &[std::path::PathBuf]) -> std::process::ExitCode {
+        for f in figures {
+            println!("  {}", f.display());
+        }
+        if let End::Stalled(why) = self {
+            eprintln!("error: the run stalled: {why}");
+            return std::process::ExitCode::from(1);
+        }
+        std::process::ExitCode::SUCCESS
+    }
 }
 
 #[cfg(test)]
