@@ -70,17 +70,37 @@ pub fn secure_dir(dir: &StdPath) -> Result<(), String> {
     }
     Ok(())
 }
-/// Environment variable overriding the iceoryx2 root path (default `/dev/shm/nerve-iox2/`).
+/// Environment variable overriding the iceoryx2 root path (default
+/// `/dev/shm/nerve-iox2-<uid>/`, see [`default_iox2_root`]).
 pub const IOX2_ROOT_ENV: &str = "NERVE_IOX2_ROOT";
-/// Default iceoryx2 root path. It is short on purpose: iceoryx2 event
-/// listeners are Unix datagram sockets under this path, and a socket path may
-/// not exceed 108 bytes. Robots sharing it stay isolated by their file prefix.
+
+/// The iceoryx2 root path when `NERVE_IOX2_ROOT` is not set:
+/// `/dev/shm/nerve-iox2-<uid>/`, one per user, private (0700, checked before
+/// every use). A root shared by all users (earlier nerve used
+/// `/dev/shm/nerve-iox2/`) belonged to whoever ran nerve first: everyone
+/// else was locked out, and a planted one let its owner replace other users'
+/// node records and sockets (review R3).
+///
+/// It is short on purpose: iceoryx2 event listeners are Unix datagram
+/// sockets under this path, and a socket path may not exceed 108 bytes.
+/// Robots of one user sharing it stay isolated by their file prefix.
 ///
 /// It is on tmpfs on purpose: iceoryx2 keeps a file per node and per
 /// service there and creates them at every node and port creation. Under
 /// `/tmp` on a disk (ext4 on these machines) an agent took 26-46 ms from
 /// its first iceoryx2 call to its registration; on tmpfs 7-11 ms.
-pub const DEFAULT_IOX2_ROOT: &str = "/dev/shm/nerve-iox2/";
+pub fn default_iox2_root() -> String {
+    format!("/dev/shm/nerve-iox2-{}/", shm_schemas::names::effective_uid())
+}
+
+/// Longest Unix socket path (`sun_path`, with its terminating zero).
+const MAX_SOCKET_PATH: usize = 107;
+/// What iceoryx2 adds to root and prefix in an event socket's path:
+/// `<root><prefix><id>.event`, the id a u128 whose top 32 bits are a
+/// per-process counter (31-32 digits as measured; 34 leave room for 10^4
+/// listeners in one process).
+const SOCKET_NAME_TAIL: usize = 34 + ".event".len();
+
 /// Robot name used when neither `--robot` nor `NERVE_ROBOT` is set.
 pub const DEFAULT_ROBOT: &str = "default";
 
@@ -92,13 +112,33 @@ pub enum WorldError {
     Name(#[from] shm_schemas::NameError),
     /// A path is not accepted by iceoryx2.
     #[error(
-        "the iceoryx2 root {path} cannot be used ({detail}); set {IOX2_ROOT_ENV} to a short path on tmpfs such as /dev/shm/nerve-iox2/"
+        "the iceoryx2 root {path} cannot be used ({detail}); set {IOX2_ROOT_ENV} to a short path on tmpfs such as /dev/shm/nerve-iox2-<your uid>/"
     )]
     Path {
         /// the path
         path: String,
         /// what iceoryx2 said
         detail: String,
+    },
+    /// The iceoryx2 root is not a private directory of this user.
+    #[error("cannot use the iceoryx2 root {path}: {detail}")]
+    UnsafeIox2Root {
+        /// the directory
+        path: String,
+        /// why
+        detail: String,
+    },
+    /// A shared-memory file of this robot belongs to another user.
+    #[error(
+        "{path} belongs to uid {owner}, not to you (uid {me}): another user made a file with your robot's prefix; remove it (as root or as that user) and start again"
+    )]
+    ForeignFile {
+        /// the file
+        path: String,
+        /// its owner
+        owner: u32,
+        /// the caller
+        me: u32,
     },
     /// The state directory could not be created.
     #[error("cannot use the state directory {path}: {detail}")]
@@ -164,14 +204,19 @@ impl World {
         let robot = RobotName::new(robot)?;
         let base = std::env::var_os(HOME_ENV).filter(|h| !h.is_empty()).map(PathBuf::from).unwrap_or_else(default_home);
         let state_dir = base.join(robot.as_str());
-        let mut iox_root = std::env::var(IOX2_ROOT_ENV).unwrap_or_else(|_| DEFAULT_IOX2_ROOT.to_owned());
+        let mut iox_root =
+            std::env::var(IOX2_ROOT_ENV).ok().filter(|r| !r.is_empty()).unwrap_or_else(default_iox2_root);
         if !iox_root.ends_with('/') {
             iox_root.push('/');
         }
-        if iox_root.len() > 40 {
+        let socket_path = iox_root.len() + robot.shm_prefix().len() + SOCKET_NAME_TAIL;
+        if socket_path > MAX_SOCKET_PATH {
             return Err(WorldError::Path {
                 path: iox_root,
-                detail: "longer than 40 bytes, which would overflow Unix socket paths".into(),
+                detail: format!(
+                    "with robot {robot}'s prefix {}, iceoryx2's socket paths would reach {socket_path} bytes, over the {MAX_SOCKET_PATH} a Unix socket allows; use a shorter root or robot name",
+                    robot.shm_prefix()
+                ),
             });
         }
         let mut config = Config::default();
@@ -239,16 +284,80 @@ impl World {
 
     /// Creates an iceoryx2 node in this world. Creating a node also removes
     /// the stale resources of dead nodes.
+    ///
+    /// Before: the iceoryx2 root must be a private directory of this user
+    /// (created 0700, never a link or another user's) and no file of this
+    /// robot's global management segment may belong to someone else. After:
+    /// that segment, which iceoryx2 creates readable and writable by all
+    /// (0666), is made 0600 (review R3, F6).
     pub fn node(&self, name: &str) -> Result<Node<Ipc>, WorldError> {
         quiet_iceoryx2();
         let node_name: NodeName =
             name.try_into().map_err(|e| WorldError::Node { name: name.into(), detail: format!("{e:?}") })?;
-        NodeBuilder::new()
+        self.secure_iox2_root()?;
+        let mgmt = self.global_mgmt_files();
+        check_own_files(&mgmt)?;
+        let node = NodeBuilder::new()
             .name(&node_name)
             .config(&self.config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<Ipc>()
-            .map_err(|e| WorldError::Node { name: name.into(), detail: format!("{e:?}") })
+            .map_err(|e| WorldError::Node { name: name.into(), detail: format!("{e:?}") })?;
+        let mgmt = if mgmt.is_empty() { self.global_mgmt_files() } else { mgmt };
+        make_private(&mgmt);
+        Ok(node)
+    }
+
+    /// Makes the iceoryx2 root a private directory of this user, or says why it is not one.
+    pub fn secure_iox2_root(&self) -> Result<(), WorldError> {
+        // without the trailing `/`, which would follow a link to a directory
+        let root: PathBuf = self.iox_root.components().collect();
+        secure_dir(&root)
+            .map_err(|detail| WorldError::UnsafeIox2Root { path: self.iox_root.display().to_string(), detail })
+    }
+
+    /// This robot's iceoryx2 global management segment in `/dev/shm` (a
+    /// node counter, one file per iceoryx2 version).
+    fn global_mgmt_files(&self) -> Vec<PathBuf> {
+        self.shm_files().into_iter().filter(|f| f.to_string_lossy().ends_with(".global_mgmt")).collect()
+    }
+
+    /// Removes what a command leaves of a robot nobody runs: iceoryx2's
+    /// global management segment (created by the first node of a robot,
+    /// never removed by iceoryx2) and empty node folders of this user's
+    /// root, when no node of the robot is alive. A `nerve ps` on a robot
+    /// with no router, or with a mistyped name, thus leaves nothing behind
+    /// (review F7). Returns how many files and folders were removed.
+    pub fn forget_if_unused(&self) -> usize {
+        if !self.live_node_pids().is_empty() {
+            return 0;
+        }
+        let mut removed = 0;
+        for f in self.global_mgmt_files() {
+            if std::fs::remove_file(f).is_ok() {
+                removed += 1;
+            }
+        }
+        removed + self.remove_empty_node_dirs()
+    }
+
+    /// Removes empty node folders (`<root>/nodes/<id>/`) older than a few
+    /// seconds: iceoryx2 removes a dead node's files but may leave its
+    /// folder. A folder just made by a node being created is left alone.
+    pub fn remove_empty_node_dirs(&self) -> usize {
+        let Ok(rd) = std::fs::read_dir(self.iox_root.join("nodes")) else { return 0 };
+        let young = std::time::Duration::from_secs(5);
+        let mut removed = 0;
+        for e in rd.filter_map(|e| e.ok()) {
+            let old = e.metadata().ok().and_then(|m| m.modified().ok()).and_then(|t| t.elapsed().ok());
+            if e.file_type().is_ok_and(|t| t.is_dir()) && old.is_some_and(|age| age > young) {
+                // fails, as it should, on a folder that is not empty
+                if std::fs::remove_dir(e.path()).is_ok() {
+                    removed += 1;
+                }
+            }
+        }
+        removed
     }
 
     /// Files of this robot in `/dev/shm`.
@@ -261,7 +370,7 @@ impl World {
             .collect()
     }
 
-    /// The iceoryx2 root path (shared by every robot; files carry the robot's prefix).
+    /// The iceoryx2 root path (this user's; shared by the user's robots, whose files carry their prefix).
     pub fn iox2_root(&self) -> &StdPath {
         &self.iox_root
     }
@@ -316,6 +425,33 @@ impl World {
             CallbackProgression::Continue
         });
         pids
+    }
+}
+
+/// Refuses files another user owns.
+fn check_own_files(files: &[PathBuf]) -> Result<(), WorldError> {
+    use std::os::unix::fs::MetadataExt;
+    let me = shm_schemas::names::effective_uid();
+    for f in files {
+        if let Ok(m) = std::fs::symlink_metadata(f)
+            && m.uid() != me
+        {
+            return Err(WorldError::ForeignFile { path: f.display().to_string(), owner: m.uid(), me });
+        }
+    }
+    Ok(())
+}
+
+/// Makes files of ours readable and writable by us only.
+fn make_private(files: &[PathBuf]) {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    for f in files {
+        if let Ok(m) = std::fs::symlink_metadata(f)
+            && m.file_type().is_file()
+            && m.mode() & 0o077 != 0
+        {
+            let _ = std::fs::set_permissions(f, std::fs::Permissions::from_mode(0o600));
+        }
     }
 }
 
@@ -386,5 +522,74 @@ mod tests {
             assert!(check_base(&theirs).is_err());
         }
         let _ = std::fs::remove_dir_all(&base);
+    }
+
+    /// A world of a throw-away robot whose iceoryx2 root is `root`.
+    fn world_at(tag: &str, root: &StdPath) -> World {
+        let mut w = World::new(&format!("w{}-{tag}", std::process::id())).expect("world");
+        let root = format!("{}/", root.display());
+        let path = Path::new(root.as_bytes()).expect("root path");
+        w.config.global.set_root_path(&path);
+        w.iox_root = PathBuf::from(root);
+        w
+    }
+
+    #[test]
+    fn the_iceoryx2_root_is_private_and_the_management_file_ours_alone() {
+        let base = std::env::temp_dir().join(format!("nerve-iox2-root-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&base);
+        std::fs::create_dir_all(&base).expect("base");
+        // a fresh root is made 0700 (iceoryx2 makes its own 0750 or 0755)
+        let w = world_at("fresh", &base.join("root"));
+        let _clean = test_support::Cleanup(w.clone());
+        let node = w.node("probe").expect("node in a fresh root");
+        assert_eq!(std::fs::metadata(w.iox2_root()).map(|m| m.mode() & 0o777).ok(), Some(0o700));
+        // iceoryx2 makes its global management file 0666 (review F6): ours is 0600
+        let mgmt = w.global_mgmt_files();
+        assert_eq!(mgmt.len(), 1, "{mgmt:?}");
+        assert_eq!(std::fs::metadata(&mgmt[0]).map(|m| m.mode() & 0o777).ok(), Some(0o600));
+        // with the node gone and no other, a command leaves nothing (review F7)
+        drop(node);
+        assert!(w.forget_if_unused() >= 1);
+        assert!(w.global_mgmt_files().is_empty() && w.shm_files().is_empty(), "{:?}", w.shm_files());
+
+        // a root that is a link is refused (review R3: it could lead anywhere)
+        let target = base.join("elsewhere");
+        std::fs::create_dir_all(&target).expect("target");
+        std::os::unix::fs::symlink(&target, base.join("linked")).expect("symlink");
+        let linked = world_at("linked", &base.join("linked"));
+        let err = linked.node("probe").expect_err("a linked root");
+        assert!(err.to_string().contains("symbolic link"), "{err}");
+
+        if nix::unistd::geteuid().is_root() {
+            // a root another user made (as one could in /dev/shm) is refused
+            let theirs = base.join("theirs");
+            std::fs::create_dir_all(&theirs).expect("dir");
+            std::os::unix::fs::chown(&theirs, Some(65534), Some(65534)).expect("chown to nobody");
+            let err = world_at("theirs", &theirs).node("probe").expect_err("another user's root");
+            assert!(err.to_string().contains("uid 65534"), "{err}");
+            // and so is a management file with our prefix that another user planted
+            let w = world_at("planted", &base.join("root"));
+            let _clean = test_support::Cleanup(w.clone());
+            let planted = PathBuf::from(format!("/dev/shm/{}planted.global_mgmt", w.robot().shm_prefix()));
+            std::fs::write(&planted, [0u8; 16]).expect("plant");
+            std::os::unix::fs::chown(&planted, Some(65534), Some(65534)).expect("chown to nobody");
+            let err = w.node("probe").expect_err("a planted management file");
+            assert!(err.to_string().contains("belongs to uid 65534"), "{err}");
+            let _ = std::fs::remove_file(&planted);
+        }
+        let _ = std::fs::remove_dir_all(&base);
+    }
+
+    #[test]
+    fn a_root_and_robot_name_too_long_for_a_socket_path_are_refused() {
+        // 24-byte robot names fit the default root of any 5-digit uid
+        let long = "r".repeat(RobotName::MAX_LEN);
+        assert!(
+            default_iox2_root().len() + RobotName::shm_prefix_of(99_999, &long).len() + SOCKET_NAME_TAIL
+                <= MAX_SOCKET_PATH
+                || shm_schemas::names::effective_uid() > 99_999
+        );
+        assert!(World::new(&long).is_ok());
     }
 }

@@ -28,8 +28,11 @@ fn run(scenario: &str, extra: &[&str]) -> Value {
     // every robot the run names on its first line ("robot b123a and robot b123b")
     let first = stderr.lines().find(|l| l.contains("robot ")).expect("the robot name is reported");
     let words: Vec<&str> = first.split_whitespace().collect();
-    let robots: Vec<String> =
-        words.windows(2).filter(|w| w[0] == "robot").map(|w| format!("nerve_{}_", w[1])).collect();
+    let robots: Vec<String> = words
+        .windows(2)
+        .filter(|w| w[0] == "robot")
+        .map(|w| shm_schemas::RobotName::shm_prefix_of(shm_schemas::names::effective_uid(), w[1]))
+        .collect();
     assert!(!robots.is_empty(), "the robot name is reported: {first}");
     for robot in &robots {
         let left = std::fs::read_dir("/dev/shm")

@@ -40,9 +40,18 @@ fn main() -> ExitCode {
     }
 }
 
-/// Runs the command of the parsed command line.
+/// Runs the command of the parsed command line. Afterwards, a robot that
+/// no process runs is left without a trace of the command (iceoryx2's
+/// management file and empty node folders; review F7).
 fn dispatch(cli: Cli) -> Result<ExitCode> {
     let world = World::new(&cli.robot)?;
+    let result = run(cli, &world);
+    world.forget_if_unused();
+    result
+}
+
+fn run(cli: Cli, world: &World) -> Result<ExitCode> {
+    let world = world.clone();
     match cli.command {
         Command::Router(a) => start::router(&world, a),
         Command::Start(a) => start::start(&world, a),

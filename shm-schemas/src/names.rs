@@ -57,6 +57,12 @@ pub enum NameError {
     NotAPortRef(String),
 }
 
+/// The calling process's effective user id (the owner of every file it creates).
+pub fn effective_uid() -> u32 {
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    unsafe { libc::geteuid() }
+}
+
 fn check(what: &'static str, name: &str, max: usize, extra: &[char], allowed: &'static str) -> Result<(), NameError> {
     if name.is_empty() {
         return Err(NameError::Empty { what });
@@ -78,7 +84,7 @@ fn check(what: &'static str, name: &str, max: usize, extra: &[char], allowed: &'
 ///
 /// Lowercase letters, digits and `-`, at most 24 bytes. The underscore is not
 /// allowed because the robot name is embedded in the shared-memory file prefix
-/// `nerve_<robot>_`, and `_` would let one robot's prefix be a prefix of
+/// `nerve_<uid>_<robot>_`, and `_` would let one robot's prefix be a prefix of
 /// another's.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(try_from = "String", into = "String")]
@@ -99,9 +105,16 @@ impl RobotName {
         &self.0
     }
 
-    /// The shared-memory file prefix of this robot's world, `nerve_<robot>_`.
+    /// The shared-memory file prefix of this robot's world for the calling
+    /// user, `nerve_<uid>_<robot>_` (effective uid): two users who both run
+    /// a robot named `default` on one host never share a file.
     pub fn shm_prefix(&self) -> String {
-        format!("nerve_{}_", self.0)
+        Self::shm_prefix_of(effective_uid(), &self.0)
+    }
+
+    /// The shared-memory file prefix of robot `robot` of user `uid`.
+    pub fn shm_prefix_of(uid: u32, robot: &str) -> String {
+        format!("nerve_{uid}_{robot}_")
     }
 
     /// The router's service for agents (registration), `nerve/<robot>/router`.

@@ -29,7 +29,7 @@ struct ShmGuard(String);
 
 impl Drop for ShmGuard {
     fn drop(&mut self) {
-        let prefix = format!("nerve_{}_", self.0);
+        let prefix = shm_schemas::RobotName::shm_prefix_of(shm_schemas::names::effective_uid(), &self.0);
         if let Ok(rd) = std::fs::read_dir("/dev/shm") {
             for e in rd.filter_map(|e| e.ok()) {
                 if e.file_name().to_string_lossy().starts_with(&prefix) {
@@ -156,7 +156,13 @@ fn sim_binary_serves_sonar_and_motor_over_ptys() {
     for name in ["sonar", "motor", "head", "ir"] {
         assert!(std::fs::symlink_metadata(dev.join(name)).is_err(), "{name} link removed");
     }
-    let ring = format!("/dev/shm/nerve_simbin-{}_stm_simcam", std::process::id());
+    let ring = format!(
+        "/dev/shm/{}stm_simcam",
+        shm_schemas::RobotName::shm_prefix_of(
+            shm_schemas::names::effective_uid(),
+            &format!("simbin-{}", std::process::id())
+        )
+    );
     assert!(std::fs::metadata(&ring).is_err(), "{ring} removed at stop");
     let csv = std::fs::read_to_string(&truth).expect("truth log");
     let mut lines = csv.lines();
@@ -231,7 +237,10 @@ fn two_robots_in_one_world_each_served_to_its_own_robot() {
         wait_for(&dev2.join(name));
     }
     assert!(std::fs::symlink_metadata(dev2.join("sonar")).is_err(), "robot 2 (H2) has no sonar");
-    let ring2 = format!("/dev/shm/nerve_{r2}_stm_simcam");
+    let ring2 = format!(
+        "/dev/shm/{}stm_simcam",
+        shm_schemas::RobotName::shm_prefix_of(shm_schemas::names::effective_uid(), &r2)
+    );
     let deadline = Instant::now() + Duration::from_secs(30);
     while std::fs::metadata(&ring2).is_err() {
         assert!(Instant::now() < deadline, "robot 2's camera ring {ring2} never appeared");

@@ -127,9 +127,9 @@ impl RingName {
         FixedName::new(&self.to_string())
     }
 
-    /// The file name of this ring of `robot`: `nerve_<robot>_stm_<name>`.
+    /// The file name of this ring of `robot`: `nerve_<uid>_<robot>_stm_<name>`.
     ///
-    /// The prefix `nerve_<robot>_` is how nerve finds (and cleans) everything
+    /// The prefix `nerve_<uid>_<robot>_` is how nerve finds (and cleans) everything
     /// a robot keeps in shared memory.
     pub fn file_name(&self, robot: &RobotName) -> String {
         format!("{}{}{}", robot.shm_prefix(), STM_INFIX, self)
@@ -218,7 +218,8 @@ mod tests {
     #[test]
     fn file_names_keep_the_robot_prefix() {
         let robot = RobotName::new("h1").expect("robot");
-        assert_eq!(RingName::parse("cam").expect("ok").file_name(&robot), "nerve_h1_stm_cam");
-        assert_eq!(RingName::id(7).file_name(&robot), "nerve_h1_stm_id-7");
+        let uid = shm_schemas::names::effective_uid();
+        assert_eq!(RingName::parse("cam").expect("ok").file_name(&robot), format!("nerve_{uid}_h1_stm_cam"));
+        assert_eq!(RingName::id(7).file_name(&robot), format!("nerve_{uid}_h1_stm_id-7"));
     }
 }

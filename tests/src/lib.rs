@@ -1,7 +1,7 @@
 //! Test harness for nerve's multi-process tests.
 //!
 //! Each [`Robot`] is an isolated world: a unique robot name (so its own
-//! iceoryx2 prefix `nerve_<robot>_`) and its own `NERVE_HOME` state
+//! iceoryx2 prefix `nerve_<uid>_<robot>_`) and its own `NERVE_HOME` state
 //! directory. Dropping it brings everything down and removes its shared
 //! memory and state even when the test failed, so parallel tests and
 //! leftovers never interfere.
@@ -32,8 +32,11 @@ static SWEEP: Once = Once::new();
 /// Prefix of a test robot's `NERVE_HOME` under the temporary directory.
 const HOME_PREFIX: &str = "nerve-test-t";
 
-/// Prefix of a test robot's files in /dev/shm (and under the iceoryx2 root).
-const SHM_PREFIX: &str = "nerve_t";
+/// Prefix of this user's test robots' files in /dev/shm (and under the
+/// iceoryx2 root): `nerve_<uid>_t`.
+fn shm_test_prefix() -> String {
+    shm_schemas::RobotName::shm_prefix_of(shm_schemas::names::effective_uid(), "t").trim_end_matches('_').to_owned()
+}
 
 /// The directory holding the built binaries.
 pub fn bin_dir() -> PathBuf {
@@ -201,7 +204,7 @@ impl Robot {
 
     /// This robot's files in /dev/shm.
     pub fn shm_files(&self) -> Vec<String> {
-        let prefix = format!("nerve_{}_", self.name);
+        let prefix = shm_schemas::RobotName::shm_prefix_of(shm_schemas::names::effective_uid(), &self.name);
         std::fs::read_dir("/dev/shm")
             .map(|rd| {
                 rd.filter_map(|e| e.ok())
@@ -378,8 +381,8 @@ fn nerve_process_of(pid: u32, home: &std::path::Path) -> bool {
 /// gone: state folders `$TMPDIR/nerve-test-t<pid>-...` (the processes
 /// whose pid files are there, and any other nerve process whose
 /// `NERVE_HOME` is that folder, are killed first), and files
-/// `/dev/shm/nerve_t<pid>-...` and under the iceoryx2 root
-/// `/dev/shm/nerve-iox2/`. Robots of live test processes are left alone.
+/// `/dev/shm/nerve_<uid>_t<pid>-...` and under the iceoryx2 root
+/// `/dev/shm/nerve-iox2-<uid>/`. Robots of live test processes are left alone.
 /// Called once per test process by the first [`Robot::new`]; safe to call
 /// again.
 pub fn sweep_dead_test_robots() -> Swept {
@@ -439,12 +442,12 @@ pub fn sweep_dead_test_robots() -> Swept {
         }
     }
     // shared memory of dead test processes, whether their home is gone or not
-    fn remove_dead(dir: &std::path::Path, depth: u32, swept: &mut Swept) {
+    fn remove_dead(dir: &std::path::Path, depth: u32, shm_prefix: &str, swept: &mut Swept) {
         let Ok(rd) = std::fs::read_dir(dir) else { return };
         for e in rd.filter_map(|e| e.ok()) {
             let name = e.file_name();
             let is_dir = e.file_type().is_ok_and(|t| t.is_dir());
-            let dead = name.to_str().and_then(|n| test_pid_of(n, SHM_PREFIX)).is_some_and(test_pid_dead);
+            let dead = name.to_str().and_then(|n| test_pid_of(n, shm_prefix)).is_some_and(test_pid_dead);
             if dead && !is_dir {
                 if std::fs::remove_file(e.path()).is_ok() {
                     swept.files += 1;
@@ -453,12 +456,13 @@ pub fn sweep_dead_test_robots() -> Swept {
                 // in /dev/shm only the iceoryx2 root; inside it, every folder
                 let in_iox_root = dir != std::path::Path::new("/dev/shm");
                 if in_iox_root || name.to_str().is_some_and(|n| n.starts_with("nerve-iox2")) {
-                    remove_dead(&e.path(), depth - 1, swept);
+                    remove_dead(&e.path(), depth - 1, shm_prefix, swept);
                 }
             }
         }
     }
-    remove_dead(std::path::Path::new("/dev/shm"), 4, &mut swept);
+    let shm_prefix = shm_test_prefix();
+    remove_dead(std::path::Path::new("/dev/shm"), 4, &shm_prefix, &mut swept);
     swept
 }
 
@@ -504,15 +508,18 @@ mod tests {
         std::fs::copy("/bin/sleep", &fake).expect("copy sleep");
         let mut daemon = Command::new(&fake).arg("600").env("NERVE_HOME", &home).spawn().expect("fake daemon");
         std::fs::write(pids.join("agent.pid"), format!("{}\n", daemon.id())).expect("pid file");
-        let shm = PathBuf::from(format!("/dev/shm/nerve_{robot}_ring"));
+        let uid = shm_schemas::names::effective_uid();
+        let shm = PathBuf::from(format!("/dev/shm/{}ring", shm_schemas::RobotName::shm_prefix_of(uid, &robot)));
         std::fs::write(&shm, b"").expect("shm file");
-        let iox_dir = PathBuf::from("/dev/shm/nerve-iox2");
-        let iox = std::fs::create_dir_all(&iox_dir).ok().map(|()| iox_dir.join(format!("nerve_{robot}_node")));
+        let iox_dir = PathBuf::from(agent_sdk::world::default_iox2_root());
+        let iox = agent_sdk::world::secure_dir(&iox_dir)
+            .ok()
+            .map(|()| iox_dir.join(format!("{}node", shm_schemas::RobotName::shm_prefix_of(uid, &robot))));
         if let Some(p) = &iox {
             std::fs::write(p, b"").expect("iox file");
         }
         // a live test process's robot (ours), which must stay
-        let mine = PathBuf::from(format!("/dev/shm/nerve_t{}-999-mine_ring", std::process::id()));
+        let mine = PathBuf::from(format!("/dev/shm/{}{}-999-mine_ring", shm_test_prefix(), std::process::id()));
         std::fs::write(&mine, b"").expect("own shm file");
         let bystander = Command::new(&fake).arg("600").spawn().expect("bystander");
 

@@ -1,7 +1,7 @@
 //! `nerve mem`: look into the robot's short-term memory.
 //!
 //! * `nerve mem list [--json]` — every ring of the robot
-//!   (`/dev/shm/nerve_<robot>_stm_*`): name, slots, slot size, last sequence
+//!   (`/dev/shm/nerve_<uid>_<robot>_stm_*`): name, slots, slot size, last sequence
 //!   number, frame rate (from the stamps of the frames it holds), age of the
 //!   newest frame, the newest frame's geometry and format, and the writer
 //!   (pid, alive or gone). Files that cannot be read as rings are listed
