@@ -16,7 +16,7 @@
 use crate::calls::{AGENT_TIMEOUT, Calls, Outcome, STATS_TIMEOUT, Ticket};
 use crate::registry::Registry;
 use crate::remembered::{self, FORGET_AFTER, Remembered};
-use crate::store::{Connection, Store, Writer};
+use crate::store::{Connection, Saved, Store, Writer};
 use crate::supervision::{Exit, Supervisor};
 use crate::wiring::Wiring;
 use agent_sdk::control::Responder;
@@ -54,6 +54,9 @@ enum Work {
     /// re-applying remembered state or a connection to a re-registered
     /// agent: logged, nobody waits
     Background { name: String, what: String, effect: Asked },
+    /// `connect`/`disconnect` done: answered once the connection list is on
+    /// disk (review R11a)
+    Saved { saved: Saved, what: String },
 }
 
 /// A command whose success changes what the router records.
@@ -305,8 +308,13 @@ impl State {
 
     /// Hands the connection list to the writer thread, which saves it off
     /// the request path (its fsyncs take 10-60 ms on a busy disk).
-    fn persist_wiring(&self) {
-        self.writer.save(&self.store, self.wiring.list());
+    fn persist_wiring(&self) -> Saved {
+        self.writer.save(&self.store, self.wiring.list())
+    }
+
+    /// The job that answers `what` (done) once save `saved` is on disk.
+    fn when_saved(saved: Saved, what: String) -> Job {
+        Job { reply: None, waiting: Vec::new(), outcomes: Vec::new(), work: Work::Saved { saved, what } }
     }
 
     /// Whether jobs wait for something the loop must look at soon.
@@ -370,9 +378,9 @@ impl State {
                 if !self.registry.contains(to.agent.as_str()) {
                     // nobody reads it: the list is the whole truth
                     self.wiring.remove(&f, &t);
-                    self.persist_wiring();
+                    let saved = self.persist_wiring();
                     tracing::info!(from = %f, to = %t, "disconnected {f} -> {t}");
-                    return Ok(Started::Answer(RouterReply::Ok));
+                    return Ok(Started::Job(Self::when_saved(saved, format!("disconnected {f} -> {t}"))));
                 }
                 let (agent, cmd) = Wiring::disconnect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
@@ -442,6 +450,7 @@ impl State {
         while i < self.jobs.len() {
             let ready = match &self.jobs[i].work {
                 Work::Kill { pid, until, .. } => !pid_alive(*pid) || Instant::now() >= *until,
+                Work::Saved { saved, .. } => self.writer.outcome(*saved).is_some(),
                 _ => self.jobs[i].waiting.is_empty(),
             };
             if ready {
@@ -477,20 +486,26 @@ impl State {
                     RouterReply::Agents(agents)
                 })
             }
-            Work::Connect { conn } => single().map(|_| {
-                tracing::info!(from = %conn.from, to = %conn.to, "connected {} -> {}", conn.from, conn.to);
-                if self.wiring.add(conn) {
-                    self.persist_wiring();
+            Work::Connect { conn } => match single() {
+                Ok(_) => {
+                    tracing::info!(from = %conn.from, to = %conn.to, "connected {} -> {}", conn.from, conn.to);
+                    let what = format!("connected {} -> {}", conn.from, conn.to);
+                    if self.wiring.add(conn) {
+                        let saved = self.persist_wiring();
+                        return self.jobs.push(Job { reply, ..Self::when_saved(saved, what) });
+                    }
+                    Ok(RouterReply::Ok)
                 }
-                RouterReply::Ok
-            }),
+                Err(e) => Err(e),
+            },
             Work::Disconnect { conn } => match single() {
                 // it let go, or it did not have it: either way nothing flows
                 Ok(_) | Err(RouterError::AgentRefused { .. }) => {
                     self.wiring.remove(&conn.from, &conn.to);
-                    self.persist_wiring();
+                    let saved = self.persist_wiring();
                     tracing::info!(from = %conn.from, to = %conn.to, "disconnected {} -> {}", conn.from, conn.to);
-                    Ok(RouterReply::Ok)
+                    let what = format!("disconnected {} -> {}", conn.from, conn.to);
+                    return self.jobs.push(Job { reply, ..Self::when_saved(saved, what) });
                 }
                 Err(RouterError::AgentUnreachable { name, detail }) => Err(RouterError::AgentUnreachable {
                     detail: format!(
@@ -509,6 +524,12 @@ impl State {
                 }
                 Ok(RouterReply::Ok)
             }
+            Work::Saved { saved, what } => match self.writer.outcome(saved) {
+                Some(Err(detail)) => {
+                    Err(RouterError::NotSaved { what, file: self.store.path().display().to_string(), detail })
+                }
+                _ => Ok(RouterReply::Ok),
+            },
             Work::Background { name, what, effect } => {
                 match single() {
                     Ok(reply) => {

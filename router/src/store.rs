@@ -180,29 +180,56 @@ enum Job {
     Remove,
 }
 
+/// A queued save, to learn when it is on disk ([`Writer::outcome`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Saved(u64);
+
+/// How far the writer thread got: every save up to `done` was attempted;
+/// those that failed are in `failed` (the newest [`MAX_FAILED`]).
+#[derive(Debug, Default)]
+struct Progress {
+    done: std::sync::atomic::AtomicU64,
+    failed: std::sync::Mutex<std::collections::VecDeque<(u64, String)>>,
+}
+
+/// How many failed saves are remembered for their callers.
+const MAX_FAILED: usize = 256;
+
 /// Saves files on a thread of its own, the newest body of each file only.
+/// Each save is numbered, so that a caller can answer only once its change
+/// is on disk (review R11a: `nerve connect` was acknowledged before the
+/// save, and a failed save was only logged).
 #[derive(Debug)]
 pub struct Writer {
-    tx: Option<std::sync::mpsc::Sender<(PathBuf, Job)>>,
+    tx: Option<std::sync::mpsc::Sender<(PathBuf, Job, u64)>>,
     thread: Option<std::thread::JoinHandle<()>>,
+    queued: std::sync::atomic::AtomicU64,
+    progress: std::sync::Arc<Progress>,
 }
 
 impl Writer {
     /// Starts the thread.
     pub fn start() -> std::io::Result<Self> {
-        let (tx, rx) = std::sync::mpsc::channel::<(PathBuf, Job)>();
+        let (tx, rx) = std::sync::mpsc::channel::<(PathBuf, Job, u64)>();
+        let progress = std::sync::Arc::new(Progress::default());
+        let shared = progress.clone();
         let thread = std::thread::Builder::new().name("persist".into()).spawn(move || {
-            while let Ok(first) = rx.recv() {
-                // a newer body of a file makes the older ones pointless; the
-                // order of files is kept
-                let mut batch: Vec<(PathBuf, Job)> = vec![first];
-                while let Ok((path, job)) = rx.try_recv() {
-                    match batch.iter_mut().find(|(p, _)| *p == path) {
-                        Some(slot) => slot.1 = job,
-                        None => batch.push((path, job)),
+            while let Ok((path, job, seq)) = rx.recv() {
+                // a newer body of a file makes the older ones pointless (their
+                // callers learn the newer one's outcome); the order of files is kept
+                let mut batch: Vec<(PathBuf, Job, Vec<u64>)> = vec![(path, job, vec![seq])];
+                let mut last = seq;
+                while let Ok((path, job, seq)) = rx.try_recv() {
+                    last = seq;
+                    match batch.iter_mut().find(|(p, _, _)| *p == path) {
+                        Some(slot) => {
+                            slot.1 = job;
+                            slot.2.push(seq);
+                        }
+                        None => batch.push((path, job, vec![seq])),
                     }
                 }
-                for (path, job) in batch {
+                for (path, job, seqs) in batch {
                     let done = match job {
                         Job::Write(body) => write_atomic(&path, &body),
                         Job::Remove => match std::fs::remove_file(&path) {
@@ -212,30 +239,59 @@ impl Writer {
                     };
                     if let Err(e) = done {
                         tracing::error!(file = %path.display(), "cannot save: {e}");
+                        let mut failed = shared.failed.lock().unwrap_or_else(|p| p.into_inner());
+                        for s in seqs {
+                            if failed.len() == MAX_FAILED {
+                                failed.pop_front();
+                            }
+                            failed.push_back((s, format!("cannot save {}: {e}", path.display())));
+                        }
                     }
                 }
+                shared.done.store(last, std::sync::atomic::Ordering::Release);
             }
         })?;
-        Ok(Writer { tx: Some(tx), thread: Some(thread) })
+        Ok(Writer { tx: Some(tx), thread: Some(thread), queued: 0.into(), progress })
     }
 
     /// Queues the connection list `list` to be saved into `store`.
-    pub fn save(&self, store: &Store, list: &[Connection]) {
-        self.write(store.path(), Store::encode(list));
+    pub fn save(&self, store: &Store, list: &[Connection]) -> Saved {
+        self.write(store.path(), Store::encode(list))
     }
 
     /// Queues `body` to be written atomically to `path`.
-    pub fn write(&self, path: &Path, body: Vec<u8>) {
-        if let Some(tx) = &self.tx {
-            let _ = tx.send((path.to_owned(), Job::Write(body)));
-        }
+    pub fn write(&self, path: &Path, body: Vec<u8>) -> Saved {
+        self.send(path, Job::Write(body))
     }
 
     /// Queues the removal of `path`.
-    pub fn remove(&self, path: &Path) {
-        if let Some(tx) = &self.tx {
-            let _ = tx.send((path.to_owned(), Job::Remove));
+    pub fn remove(&self, path: &Path) -> Saved {
+        self.send(path, Job::Remove)
+    }
+
+    fn send(&self, path: &Path, job: Job) -> Saved {
+        let seq = self.queued.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        if let Some(tx) = &self.tx
+            && tx.send((path.to_owned(), job, seq)).is_err()
+        {
+            let mut failed = self.progress.failed.lock().unwrap_or_else(|p| p.into_inner());
+            failed.push_back((seq, "the persisting thread is gone".into()));
+            self.progress.done.fetch_max(seq, std::sync::atomic::Ordering::Release);
         }
+        Saved(seq)
+    }
+
+    /// What became of save `saved`: `None` while it is queued, then whether
+    /// it reached the disk (and if not, why).
+    pub fn outcome(&self, saved: Saved) -> Option<Result<(), String>> {
+        if self.progress.done.load(std::sync::atomic::Ordering::Acquire) < saved.0 {
+            return None;
+        }
+        let failed = self.progress.failed.lock().unwrap_or_else(|p| p.into_inner());
+        Some(match failed.iter().find(|(s, _)| *s == saved.0) {
+            Some((_, why)) => Err(why.clone()),
+            None => Ok(()),
+        })
     }
 
     /// Waits until every queued file is saved.
@@ -353,6 +409,37 @@ mod tests {
         let got = store.load().expect("load");
         assert_eq!(got.len(), 1);
         assert_eq!(got[0].from, "a19/out");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn each_save_reports_when_it_is_on_disk_and_whether_it_failed() {
+        let dir = std::env::temp_dir().join(format!("nerve-store-outcome-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = Store::new(&dir);
+        let w = Writer::start().expect("thread");
+        let c = Connection { from: "a/out".into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false };
+        let wait = |saved| {
+            let t0 = std::time::Instant::now();
+            loop {
+                if let Some(r) = w.outcome(saved) {
+                    return r;
+                }
+                assert!(t0.elapsed() < std::time::Duration::from_secs(10), "save {saved:?} never done");
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+        };
+        let ok = w.save(&store, std::slice::from_ref(&c));
+        assert_eq!(wait(ok), Ok(()));
+        // once reported, it is on disk
+        assert_eq!(Store::new(&dir).load().expect("load"), vec![c.clone()]);
+        // a save that cannot happen (the file is a folder now) is reported, not only logged
+        std::fs::remove_file(store.path()).expect("rm");
+        std::fs::create_dir(store.path()).expect("a folder in its place");
+        let bad = w.save(&store, &[]);
+        let err = wait(bad).expect_err("the save failed");
+        assert!(err.contains("connections.json"), "{err}");
+        assert!(bad > ok);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -86,6 +86,35 @@ fn rewire_switches_source_without_restart() {
     r.down_and_check_clean();
 }
 
+/// `connect` and `disconnect` answer once the connection list is on disk,
+/// and say so when it could not be saved (review R11a: both were answered
+/// before the save, and a failed save was only logged).
+#[test]
+fn rewiring_is_acknowledged_once_saved_and_a_failed_save_is_reported() {
+    let r = Robot::new("durable");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["start", "relay", "--name", "r1"]);
+    let list = r.home.join(&r.name).join("connections.json");
+    r.ok(&["connect", "t1/tick", "r1/in"]);
+    let saved = std::fs::read_to_string(&list).expect("the list exists once connect answered");
+    assert!(saved.contains("t1/tick") && saved.contains("r1/in"), "{saved}");
+    // the list cannot be written any more: a folder stands in its place
+    std::fs::remove_file(&list).expect("rm");
+    std::fs::create_dir(&list).expect("mkdir");
+    let err = r.fails(&["disconnect", "t1/tick", "r1/in"]);
+    assert!(
+        err.contains("disconnected t1/tick -> r1/in, but the connection list") && err.contains("could not be saved"),
+        "{err}"
+    );
+    // the change itself holds
+    assert!(connection(&r.graph(), "t1/tick", "r1/in").is_none());
+    std::fs::remove_dir(&list).expect("rmdir");
+    r.ok(&["connect", "t1/tick", "r1/in"]);
+    assert!(std::fs::read_to_string(&list).is_ok_and(|s| s.contains("t1/tick")));
+    r.down_and_check_clean();
+}
+
 /// A period change shows in the measured rate; suspend stops output, resume restarts it.
 #[test]
 fn period_change_and_suspend_resume() {

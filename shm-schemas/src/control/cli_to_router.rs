@@ -324,4 +324,16 @@ pub enum RouterError {
     /// The router could not do what was asked for another reason.
     #[error("router error: {0}")]
     Internal(String),
+    /// The change is in effect but the connection list could not be saved.
+    #[error(
+        "{what}, but the connection list {file} could not be saved ({detail}): the change holds until the router restarts; free space or repair the file system, then run the command again"
+    )]
+    NotSaved {
+        /// what was done
+        what: String,
+        /// the connection list's file
+        file: String,
+        /// why it could not be saved
+        detail: String,
+    },
 }
