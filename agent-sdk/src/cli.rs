@@ -27,6 +27,10 @@ pub struct CommonArgs {
     /// SCHED_FIFO priority of the task (the message checker runs one above).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(i32).range(1..=98))]
     pub priority: i32,
+    /// Share of one CPU (percent) above which a real-time task that keeps it
+    /// for 2 s is demoted to SCHED_OTHER until it calms down; 0 never demotes.
+    #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u32).range(0..=100))]
+    pub rt_cpu_limit: u32,
     /// Start with the task suspended.
     #[arg(long)]
     pub suspended: bool,

@@ -388,9 +388,14 @@ impl<T: Payload> Input<T> {
         None
     }
 
-    /// Hands every waiting sample, in place (zero copy), to `f`; returns how many.
+    /// Hands every waiting sample, in place (zero copy), to `f`; returns how
+    /// many. At most a port's buffer ([`SUBSCRIBER_BUFFER`]) per source:
+    /// what arrives meanwhile is left for the next step (whose wake-up is
+    /// already pending). Unbounded, a step that sends what it drains along
+    /// an allowed loop back to itself never returned, and held the input,
+    /// so that even `nerve ps` could not read its statistics.
     pub fn drain(&self, f: impl FnMut(&Meta, &T)) -> usize {
-        self.drain_up_to(usize::MAX, f)
+        self.drain_up_to(SUBSCRIBER_BUFFER, f)
     }
 
     /// Like [`Input::drain`], but takes at most `max` samples from each

@@ -62,3 +62,54 @@ fn a_launch_file_with_a_loop_is_refused_before_anything_starts_unless_allowed() 
     assert_eq!(r.graph()["connections"].as_array().map(|c| c.len()), Some(2));
     r.down_and_check_clean();
 }
+
+/// The scheduling policy of the thread named `task` of process `pid`
+/// (0 SCHED_OTHER, 1 SCHED_FIFO; field 41 of its stat).
+fn task_policy(pid: u32) -> Option<u32> {
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
+    for t in tasks.filter_map(|e| e.ok()) {
+        let comm = std::fs::read_to_string(t.path().join("comm")).unwrap_or_default();
+        if comm.trim() == "task" {
+            let stat = std::fs::read_to_string(t.path().join("stat")).ok()?;
+            let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+            // fields after the command start at field 3
+            return fields.get(41 - 3)?.parse().ok();
+        }
+    }
+    None
+}
+
+/// An allowed loop fed from outside is an event storm: the relays' tasks,
+/// under SCHED_FIFO, would take the CPUs from everything else (review F3c:
+/// load 10.6 on two cores, `ps` 7 s, `down` 25 s). The guard demotes a
+/// task that holds a whole CPU for 2 s to SCHED_OTHER, says so in its log,
+/// and the robot stays usable.
+#[test]
+fn a_real_time_task_in_an_event_storm_is_demoted() {
+    let r = Robot::new("storm");
+    r.router();
+    // real-time is what this is about: without the permission, nothing to test
+    r.ok(&["start", "relay", "--name", "r1"]);
+    let pid = r.pid("r1");
+    if task_policy(pid) != Some(1) {
+        eprintln!("not run: the relay's task did not get SCHED_FIFO here");
+        return;
+    }
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "50ms"]);
+    r.ok(&["connect", "t1/tick", "r1/in"]);
+    r.ok(&["connect", "--allow-cycle", "r1/out", "r1/in"]);
+    let log = r.home.join(&r.name).join("logs").join("r1.log");
+    let demoted = nerve_tests::wait_until(std::time::Duration::from_secs(20), || {
+        std::fs::read_to_string(&log).is_ok_and(|l| l.contains("demoted to SCHED_OTHER"))
+    });
+    assert!(demoted, "no demotion in {}", log.display());
+    assert_eq!(task_policy(pid), Some(0), "the task thread runs under SCHED_OTHER");
+    assert_eq!(
+        r.agent("r1").map(|a| a["stats"]["realtime"].clone()),
+        Some(serde_json::Value::Bool(false)),
+        "ps says so"
+    );
+    // the robot is still usable: undo the loop, and the storm ends
+    r.ok(&["disconnect", "r1/out", "r1/in"]);
+    r.down_and_check_clean();
+}

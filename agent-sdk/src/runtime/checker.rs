@@ -5,6 +5,7 @@
 
 use super::Shared;
 use super::router_link::RouterLink;
+use super::runaway::{Guard, TaskThread, Verdict};
 use crate::agent::Task;
 use crate::clock::now_ns;
 use crate::control::ControlServer;
@@ -46,6 +47,8 @@ pub(super) struct Checker<'a> {
     pub(super) inputs: &'a [Arc<dyn DynInput>],
     pub(super) params: &'a ParamTable,
     pub(super) task_kind: Task,
+    /// the task thread, its run-away guard and its real-time priority, when it runs real-time
+    pub(super) guard: std::cell::RefCell<Option<(TaskThread, Guard, i32)>>,
 }
 
 impl Checker<'_> {
@@ -79,6 +82,7 @@ impl Checker<'_> {
         let epoch_guard = epoch_wake.as_ref().and_then(|l| ws.attach_notification(l).ok());
         let watchdog = watchdog_interval();
         let tick = housekeeping_interval(watchdog);
+        let mut guard = self.guard.borrow_mut().take();
         let mut cpu = CpuMeter::default();
         let mut last_cpu = 0u64;
         let mut last_ping = Instant::now();
@@ -120,6 +124,9 @@ impl Checker<'_> {
                 cpu.sample(now_ns);
                 last_cpu = now_ns;
             }
+            if let Some((task, g, priority)) = &mut guard {
+                self.guard_task(task, g, *priority, now_ns);
+            }
             let mut stop_now = false;
             if let Err(e) = server.serve(|req| match req {
                 Ok(AgentCommand::Stop) => {
@@ -152,6 +159,43 @@ impl Checker<'_> {
                     last_ping = Instant::now();
                 }
             }
+        }
+    }
+
+    /// Demotes a real-time task that runs away, and restores it once calm
+    /// (see [`super::runaway`]).
+    fn guard_task(&self, task: &TaskThread, guard: &mut Guard, priority: i32, now_ns: u64) {
+        let Some(cpu_ns) = task.cpu_ns() else { return };
+        match guard.observe(now_ns, cpu_ns) {
+            Verdict::Keep => {}
+            Verdict::Demote { percent, over } => match task.demote() {
+                Ok(()) => {
+                    self.shared.realtime.store(false, Ordering::Relaxed);
+                    tracing::warn!(
+                        cpu_percent = percent.round(),
+                        seconds = over.as_secs_f64(),
+                        demotions = guard.demotions(),
+                        "the task used {percent:.0}% of a CPU for {:.1} s under SCHED_FIFO (a step that does not \
+                         return, or inputs that never stop: a loop of agents, a flood): demoted to SCHED_OTHER so that \
+                         it cannot starve the machine; it gets real-time priority back after {} s below half the limit \
+                         (--rt-cpu-limit, 0 never demotes)",
+                        over.as_secs_f64(),
+                        super::runaway::CALM.as_secs()
+                    );
+                }
+                Err(e) => tracing::warn!("the task runs away ({percent:.0}% of a CPU) but cannot be demoted: {e}"),
+            },
+            Verdict::Restore { over } => match task.restore(priority) {
+                Ok(()) => {
+                    self.shared.realtime.store(true, Ordering::Relaxed);
+                    tracing::info!(
+                        seconds = over.as_secs_f64(),
+                        "the task has been calm for {:.0} s: real-time priority {priority} restored",
+                        over.as_secs_f64()
+                    );
+                }
+                Err(e) => tracing::warn!("cannot restore the task's real-time priority: {e}"),
+            },
         }
     }
 

@@ -19,10 +19,13 @@
 //! * `task`: the task thread (periodic and event loops, the suspend gate);
 //! * `router_link`: the agent's side of the router (register, notice a
 //!   restarted router, unregister);
-//! * `checker`: the message checker, serving the control service.
+//! * `checker`: the message checker, serving the control service;
+//! * `runaway`: the guard that demotes a real-time task that takes a whole
+//!   CPU for seconds (a step that never yields, an event storm).
 
 mod checker;
 mod router_link;
+mod runaway;
 mod startup;
 mod task;
 

@@ -5,6 +5,7 @@
 
 use super::checker::Checker;
 use super::router_link::{RegisterError, RouterLink};
+use super::runaway;
 use super::task::{SuspendGate, task_main};
 use super::{Shared, TaskFigures};
 use crate::agent::{Agent, Setup, Task};
@@ -294,7 +295,21 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     readiness.ready(&startup_msg);
     let _ = sd_notify("READY=1");
 
-    let checker = Checker { world: &world, node: &node, shared: &shared, inputs: &inputs, params: &params, task_kind };
+    let guard = if shared.realtime.load(Ordering::Relaxed) {
+        use std::os::unix::thread::JoinHandleExt;
+        runaway::TaskThread::new(handle.as_pthread_t()).map(|t| (t, runaway::Guard::new(args.rt_cpu_limit), prio))
+    } else {
+        None
+    };
+    let checker = Checker {
+        world: &world,
+        node: &node,
+        shared: &shared,
+        inputs: &inputs,
+        params: &params,
+        task_kind,
+        guard: std::cell::RefCell::new(guard),
+    };
     checker.run(&server, &checker_wake, &mut link, &registration);
 
     // stop: wake the task, wait for it a bounded time, leave the router
