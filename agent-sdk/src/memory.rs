@@ -372,59 +372,56 @@ impl RingInput {
         self.readers.len()
     }
 
+    /// The reader of the ring file `notice` names. A notice carries the
+    /// creation id of the file its frame is in; when the cached mapping is
+    /// of another file (the ring was replaced since it was mapped), the
+    /// ring is mapped again. A notice of a file that is gone (sent before
+    /// the ring was replaced) is refused with `ReadError::OtherRing`: its
+    /// sequence number would name another frame in the current file.
+    pub fn reader_for(&mut self, notice: &RingNotice) -> Result<&RingReader, MemoryError> {
+        let ring = ring_of(notice)?;
+        if self.reader(&ring)?.check_notice(notice).is_err() && self.refresh_if_stale(&ring) {
+            tracing::debug!(ring = %ring, seq = notice.seq, "a notice of another ring file; mapped the ring again");
+        }
+        let r = self.reader(&ring)?;
+        r.check_notice(notice)?;
+        Ok(r)
+    }
+
     /// Reads the frame `notice` names, in place: `f` gets its description
     /// and its bytes in shared memory.
     ///
     /// As with [`RingReader::read_with`], the bytes are speculative while
     /// `f` runs: compute (into your own buffers), don't act; only an `Ok`
-    /// result proves `f` saw the frame intact. `f` may run twice: when the
-    /// first read fails because the ring file was replaced (its writer
-    /// restarted with another geometry), the ring is mapped again and read
-    /// once more.
+    /// result proves `f` saw the frame intact. The frame is read from the
+    /// ring file the notice names (see [`RingInput::reader_for`]): a notice
+    /// of a ring replaced since (another geometry) is refused, never
+    /// resolved in another file.
     pub fn read_notice_with<R>(
         &mut self,
         notice: &RingNotice,
-        mut f: impl FnMut(&FrameMeta, &[u8]) -> R,
+        f: impl FnOnce(&FrameMeta, &[u8]) -> R,
     ) -> Result<R, MemoryError> {
-        let ring = ring_of(notice)?;
-        let first = self.reader(&ring)?.read_with(notice.seq, &mut f);
-        match first {
-            Ok(r) => Ok(r),
-            Err(e) => {
-                if self.refresh_if_stale(&ring) {
-                    Ok(self.reader(&ring)?.read_with(notice.seq, f)?)
-                } else {
-                    Err(e.into())
-                }
-            }
-        }
+        Ok(self.reader_for(notice)?.read_with(notice.seq, f)?)
     }
 
-    /// Copies the frame `notice` names into `buf` (validated) and returns its description.
+    /// Copies the frame `notice` names into `buf` (validated) and returns
+    /// its description; the same checks as [`RingInput::read_notice_with`].
     pub fn read_notice_into(&mut self, notice: &RingNotice, buf: &mut Vec<u8>) -> Result<FrameMeta, MemoryError> {
-        let ring = ring_of(notice)?;
-        match self.reader(&ring)?.read_into(notice.seq, buf) {
-            Ok(m) => Ok(m),
-            Err(e) => {
-                if self.refresh_if_stale(&ring) {
-                    Ok(self.reader(&ring)?.read_into(notice.seq, buf)?)
-                } else {
-                    Err(e.into())
-                }
-            }
-        }
+        Ok(self.reader_for(notice)?.read_into(notice.seq, buf)?)
     }
 
     /// Takes every waiting notice and reads the newest frame in place:
     /// `Ok(None)` when no notice was waiting. If that frame was overwritten
-    /// before it could be read (this agent is slower than the writer), the
-    /// newest frame of its ring is read instead. Same rules for `f` as
-    /// [`RingInput::read_notice_with`].
+    /// before it could be read (this agent is slower than the writer), or
+    /// its ring was replaced since (the notice names a file that is gone),
+    /// the newest frame of the ring's current file is read instead. Same
+    /// rules for `f` as [`RingInput::read_notice_with`].
     pub fn latest_with<R>(&mut self, mut f: impl FnMut(&FrameMeta, &[u8]) -> R) -> Result<Option<R>, MemoryError> {
         let Some((_, notice)) = self.latest_notice() else { return Ok(None) };
         match self.read_notice_with(&notice, &mut f) {
             Ok(r) => Ok(Some(r)),
-            Err(MemoryError::Read(ReadError::Overwritten { .. })) => {
+            Err(MemoryError::Read(ReadError::Overwritten { .. } | ReadError::OtherRing { .. })) => {
                 let ring = ring_of(&notice)?;
                 Ok(Some(self.reader(&ring)?.latest_with(f)?))
             }
@@ -462,6 +459,63 @@ mod tests {
         let e = ring_name_for("camera_left", None).expect_err("too long");
         assert!(e.to_string().contains("camera_left") && e.to_string().contains("6"), "{e}");
         assert!(ring_name_for("x", Some("Cam")).is_err());
+    }
+
+    /// Review R18: a ring replaced for another geometry starts its sequence
+    /// at 1 again. A reader that still maps the old file must not resolve a
+    /// notice of the new ring there (the old frame would come back as the
+    /// new one), nor a notice of the old ring in the new file.
+    #[test]
+    fn notices_resolve_only_in_the_ring_file_that_announced_them() {
+        use crate::params::ParamTable;
+        use crate::world::World;
+        use crate::world::test_support::Cleanup;
+        use shm_schemas::AgentName;
+        use std::sync::Arc;
+
+        let world = World::new(&format!("r18m{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = Arc::new(world.node("t").expect("node"));
+        let mut setup = Setup {
+            world: world.clone(),
+            name: AgentName::new("t").expect("name"),
+            node,
+            args: Vec::new(),
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            params: ParamTable::default(),
+        };
+        let mut out = setup.ring_output("frames", RingSpec::new(4, 64).named("r18")).expect("ring output");
+        let mut input = setup.ring_input("in").expect("ring input");
+        let old: Vec<RingNotice> =
+            (1..=3u8).map(|k| out.write(FrameDesc::raw(), &[k; 64]).expect("old frame")).collect();
+        // the reader maps the old ring
+        assert_eq!(input.read_notice_with(&old[2], |m, b| (m.seq, b[0])).expect("old frame 3"), (3, 3));
+
+        // the writer outgrows it: a new file, sequence from 1 again
+        out.reserve(200).expect("replace the ring");
+        let new1 = out.write(FrameDesc::raw(), &[101; 200]).expect("new frame 1");
+        assert_eq!(new1.seq, 1);
+        assert_ne!(new1.creation_id, old[0].creation_id, "a new ring file has a new creation id");
+        let got = input.read_notice_with(&new1, |m, b| (m.len, b[0])).expect("the new frame 1");
+        assert_eq!(got, (200, 101), "notice 1 of the new ring resolved in the old file");
+        let mut buf = Vec::new();
+        assert_eq!(input.read_notice_into(&new1, &mut buf).expect("copy").len, 200);
+        assert_eq!(buf[0], 101);
+
+        // a notice of the old ring, read late, names a frame that is gone;
+        // the new file has a frame 2 too, which is another frame
+        let new2 = out.write(FrameDesc::raw(), &[102; 200]).expect("new frame 2");
+        let stale = input.read_notice_with(&old[1], |_, b| b[0]);
+        assert!(
+            matches!(stale, Err(MemoryError::Read(ReadError::OtherRing { seq: 2, .. }))),
+            "an old notice must be refused, not resolved in the new file: {stale:?}"
+        );
+        let msg = stale.err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(msg.contains("replaced") && msg.contains("r18"), "{msg}");
+        assert!(input.read_notice_into(&old[0], &mut buf).is_err());
+        assert_eq!(input.read_notice_with(&new2, |_, b| b[0]).expect("new frame 2"), 102);
+        assert_eq!(input.open_rings(), 1);
     }
 
     #[test]

@@ -167,6 +167,38 @@ impl SerialLink {
         }
     }
 
+    /// Discards, unread, every byte the line holds now: what the device
+    /// sent before the port was opened (while it was cut, or before the
+    /// agent started), which the kernel kept for whoever opens the port
+    /// next. Call it right after opening. Returns the complete frames
+    /// discarded; they count as decoded `frames` too. A frame the device is
+    /// sending at this very moment (its start is here, its end not yet)
+    /// is kept: it is the freshest there is.
+    pub fn discard_waiting(&mut self) -> io::Result<u64> {
+        let waiting = self.port.bytes_to_read().map_err(|e| io::Error::other(e.description))?;
+        let mut left = usize::try_from(waiting).unwrap_or(usize::MAX);
+        let mut discarded = 0u64;
+        // the bytes are there already: a read never waits long
+        self.port.set_timeout(Duration::from_millis(10)).map_err(|e| io::Error::other(e.description))?;
+        while left > 0 {
+            let n = left.min(self.buf.len());
+            match self.port.read(&mut self.buf[..n]) {
+                Ok(0) => return Err(io::Error::from(io::ErrorKind::BrokenPipe)),
+                Ok(got) => {
+                    left = left.saturating_sub(got);
+                    let _ = self.decoder.push(&self.buf[..got]);
+                    while self.decoder.next_message().is_some() {
+                        discarded = discarded.saturating_add(1);
+                    }
+                }
+                Err(e) if e.kind() == io::ErrorKind::TimedOut => break,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(discarded)
+    }
+
     /// Decoder counters (garbage, bad checksums, truncated frames).
     pub fn stats(&self) -> DecodeStats {
         self.decoder.stats()

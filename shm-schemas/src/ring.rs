@@ -37,8 +37,12 @@ use std::sync::atomic::{AtomicU32, AtomicU64};
 /// `RingHeader::magic` of a ready ring: the bytes `NERVESTM`.
 pub const RING_MAGIC: u64 = u64::from_le_bytes(*b"NERVESTM");
 
-/// Version of this layout; a ring of another version is refused by name.
-pub const RING_LAYOUT_VERSION: u32 = 1;
+/// Version of this layout; a ring of another version is refused by name
+/// by readers, and replaced by a writer that creates the ring again.
+///
+/// Version 2 added [`RingHeader::creation_id`] (and [`RingNotice::creation_id`]):
+/// a version-1 file has zero there, which would match no notice.
+pub const RING_LAYOUT_VERSION: u32 = 2;
 
 /// Bytes before the first slot: the header, padded to one page.
 pub const RING_HEADER_SIZE: u32 = 4096;
@@ -97,8 +101,14 @@ pub struct RingHeader {
     /// How many times a writer opened the ring (1 for the creator). A reader
     /// sees a writer restart as a change of this number.
     pub writer_generation: AtomicU64,
+    /// A random, nonzero number drawn when this file was created, never
+    /// changed afterwards: it tells this ring apart from an earlier or later
+    /// ring of the same name (a ring replaced for another geometry starts
+    /// its sequence numbers at 1 again). Every [`RingNotice`] carries it, so
+    /// that a reader never resolves a notice in another ring's file.
+    pub creation_id: u64,
     /// Zero; room for later fields within the same layout version.
-    pub reserved: [u64; 16],
+    pub reserved: [u64; 15],
 }
 
 /// The header of one slot, followed by the payload.
@@ -220,6 +230,12 @@ pub struct RingNotice {
     pub format: u32,
     /// Zero.
     pub reserved: u32,
+    /// The [`RingHeader::creation_id`] of the ring file that holds the
+    /// frame: `seq` means this frame only in that file. A reader whose
+    /// mapping has another creation id maps the ring again, and refuses the
+    /// notice if the ring's file is still another one (the ring was
+    /// replaced since: the frame is gone).
+    pub creation_id: u64,
 }
 
 impl Payload for RingNotice {}
@@ -237,6 +253,8 @@ mod tests {
         assert_eq!(offset_of!(RingHeader, name), 40);
         assert_eq!(offset_of!(RingHeader, writer_pid), 104);
         assert_eq!(offset_of!(RingHeader, last_seq), 112);
+        assert_eq!(offset_of!(RingHeader, writer_generation), 120);
+        assert_eq!(offset_of!(RingHeader, creation_id), 128);
         assert!(size_of::<RingHeader>() <= RING_HEADER_SIZE as usize);
 
         assert_eq!(size_of::<SlotHeader>(), SLOT_HEADER_SIZE as usize);
@@ -244,9 +262,11 @@ mod tests {
         assert_eq!(offset_of!(SlotHeader, len), 24);
         assert_eq!(offset_of!(SlotHeader, format), 40);
 
-        assert_eq!(size_of::<RingNotice>(), 88);
+        assert_eq!(size_of::<RingNotice>(), 96);
         assert_eq!(align_of::<RingNotice>(), 8);
         assert_eq!(offset_of!(RingNotice, ring_id), 40);
+        assert_eq!(offset_of!(RingNotice, seq), 48);
+        assert_eq!(offset_of!(RingNotice, creation_id), 88);
         assert_eq!(<RingNotice as Payload>::stable_type_name(), "nerve::RingNotice");
     }
 

@@ -255,6 +255,23 @@ pub enum ReadError {
         /// the pid of the writer that left it (0 if it closed the ring)
         writer_pid: u32,
     },
+    /// The notice names a frame of another file of this ring: the ring was
+    /// replaced (another geometry, or created again) after the notice was
+    /// sent, or before this reader mapped it. The frame is gone; its
+    /// sequence number means another frame in the ring's current file.
+    #[error(
+        "frame {seq} of ring {ring} was announced for the ring's file with creation id {notice_creation_id:016x}, but the ring's file is now another one (creation id {creation_id:016x}): the ring was replaced since, and the frame is gone; wait for the next notice"
+    )]
+    OtherRing {
+        /// the ring
+        ring: String,
+        /// the frame the notice named
+        seq: u64,
+        /// the creation id the notice carries
+        notice_creation_id: u64,
+        /// the creation id of the file the reader maps
+        creation_id: u64,
+    },
     /// The slot header contradicts itself (a misbehaving writer).
     #[error("slot {slot} of ring {ring} is corrupt: {why}")]
     Corrupt {

@@ -42,7 +42,7 @@ use crate::sys::{Geometry, Mapping, copy_volatile, pid_alive, slot_header, slot_
 use crate::writer::{MAX_SLOT_CAPACITY, MAX_SLOTS};
 use serde::Serialize;
 use shm_schemas::RobotName;
-use shm_schemas::ring::{PixelFormat, RING_HEADER_SIZE, RING_LAYOUT_VERSION, RING_MAGIC};
+use shm_schemas::ring::{PixelFormat, RING_HEADER_SIZE, RING_LAYOUT_VERSION, RING_MAGIC, RingNotice};
 use std::cell::Cell;
 use std::fs::{File, OpenOptions};
 use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
@@ -116,6 +116,7 @@ pub struct RingReader {
     name: RingName,
     path: PathBuf,
     dev_ino: (u64, u64),
+    creation_id: u64,
 }
 
 impl RingReader {
@@ -203,7 +204,14 @@ impl RingReader {
         })?;
         let name = RingName::parse(h.name.as_str()).map_err(|e| not_a_ring(&format!("bad name in header: {e}")))?;
         tracing::debug!(ring = %name, path = %path.display(), slots = geo.slot_count, "ring opened for reading");
-        Ok(RingReader { map, geo, name, path: path.to_owned(), dev_ino: (meta.dev(), meta.ino()) })
+        Ok(RingReader {
+            map,
+            geo,
+            name,
+            path: path.to_owned(),
+            dev_ino: (meta.dev(), meta.ino()),
+            creation_id: h.creation_id,
+        })
     }
 
     /// The ring's name.
@@ -254,6 +262,31 @@ impl RingReader {
     /// How many times a writer opened this ring; changes when the writer restarts.
     pub fn writer_generation(&self) -> u64 {
         self.map.header_atomics().writer_generation.load(Ordering::Relaxed)
+    }
+
+    /// The random number drawn when this ring file was created; a notice
+    /// names a frame of this file only if it carries the same number.
+    pub fn creation_id(&self) -> u64 {
+        self.creation_id
+    }
+
+    /// Whether `notice` names a frame of the ring file this reader maps.
+    /// Sequence numbers start at 1 again in a replaced ring (another
+    /// geometry), so frame `seq` of another file is another frame: reading
+    /// it here would hand out an unrelated frame as if it were the one
+    /// announced. `Err(OtherRing)` then: open the ring again and check once
+    /// more ([`RingReader::is_stale`] says whether the file changed).
+    pub fn check_notice(&self, notice: &RingNotice) -> Result<(), ReadError> {
+        if notice.creation_id == self.creation_id {
+            Ok(())
+        } else {
+            Err(ReadError::OtherRing {
+                ring: self.name.to_string(),
+                seq: notice.seq,
+                notice_creation_id: notice.creation_id,
+                creation_id: self.creation_id,
+            })
+        }
     }
 
     /// Whether the ring file was removed or replaced since this reader

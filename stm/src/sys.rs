@@ -335,7 +335,8 @@ mod tests {
             reserved0: 0,
             last_seq: AtomicU64::new(0),
             writer_generation: AtomicU64::new(0),
-            reserved: [0; 16],
+            creation_id: 1,
+            reserved: [0; 15],
         }
     }
 

@@ -66,6 +66,8 @@ pub struct RingWriter {
     name: RingName,
     path: PathBuf,
     next_seq: u64,
+    /// The ring's `RingHeader::creation_id`, copied into every notice.
+    creation_id: u64,
     // last field: dropped (unlocked, closed) after the mapping
     _lock: Flock<File>,
 }
@@ -163,7 +165,22 @@ impl RingWriter {
             let magic = h.magic.load(Ordering::Acquire);
             if magic == RING_MAGIC {
                 if h.layout_version != RING_LAYOUT_VERSION {
-                    return Err(not_a_ring(&path, &format!("it has layout version {}", h.layout_version)));
+                    let version = h.layout_version;
+                    return match want {
+                        // Left by another build of nerve: its header means
+                        // something else (a version-1 ring has no creation
+                        // id, so its notices would match no reader). We hold
+                        // the writer lock, so nobody writes it: replace it.
+                        Some(geo) if !recreated => {
+                            tracing::warn!(
+                                ring = %ring, path = %path.display(), found = version, expected = RING_LAYOUT_VERSION,
+                                "ring has another layout version; recreating it, its frames are lost"
+                            );
+                            drop(map);
+                            Self::recreate(opts, file, path, name, geo)
+                        }
+                        _ => Err(not_a_ring(&path, &format!("it has layout version {version}"))),
+                    };
                 }
                 let found = Geometry::from_header(h, map.len())
                     .ok_or_else(|| not_a_ring(&path, "its header contradicts its size"))?;
@@ -191,11 +208,7 @@ impl RingWriter {
                             "ring state is implausible ({why}); recreating the ring with the same geometry, its frames are lost"
                         );
                         drop(map);
-                        std::fs::remove_file(&path).map_err(|e| os("cannot remove the implausible ring", &path, e))?;
-                        drop(file);
-                        let file = open_rw(&path, true, opts).map_err(|e| os("cannot create", &path, e))?;
-                        let file = take_lock(file, &path, &ring)?;
-                        return Self::init_or_reopen(opts, file, path, name, Some(found), true);
+                        return Self::recreate(opts, file, path, name, found);
                     }
                     Err(why) => return Err(not_a_ring(&path, &format!("its state is implausible: {why}"))),
                 }
@@ -224,6 +237,25 @@ impl RingWriter {
         Ok(Self::start(map, geo, name, path, file))
     }
 
+    /// Replaces the ring file by a new, empty one of geometry `geo` (a new
+    /// inode and creation id: readers that mapped the old file keep it until
+    /// they notice, and refuse notices of the other file). `file` is the old
+    /// file, whose writer lock we hold until the new file is locked.
+    fn recreate(
+        opts: &RingOptions,
+        file: Flock<File>,
+        path: PathBuf,
+        name: RingName,
+        geo: Geometry,
+    ) -> Result<Self, CreateError> {
+        let ring = name.to_string();
+        std::fs::remove_file(&path).map_err(|e| os("cannot remove the old ring", &path, e))?;
+        drop(file);
+        let file = open_rw(&path, true, opts).map_err(|e| os("cannot create", &path, e))?;
+        let file = take_lock(file, &path, &ring)?;
+        Self::init_or_reopen(opts, file, path, name, Some(geo), true)
+    }
+
     /// Takes over a complete ring: finds the last complete frame and records
     /// this process as the writer.
     fn start(map: Mapping, geo: Geometry, name: RingName, path: PathBuf, lock: Flock<File>) -> Self {
@@ -249,7 +281,8 @@ impl RingWriter {
             tracing::warn!(ring = %name, frames = ?incomplete, "the previous writer died while storing these frames; they are lost");
         }
         tracing::info!(ring = %name, path = %path.display(), next_seq = last + 1, generation, "ring writer ready");
-        RingWriter { map, geo, name, path, next_seq: last + 1, _lock: lock }
+        let creation_id = h.creation_id;
+        RingWriter { map, geo, name, path, next_seq: last + 1, creation_id, _lock: lock }
     }
 
     /// Stores a copy of `data` as the next frame, overwriting the oldest.
@@ -315,6 +348,7 @@ impl RingWriter {
             height: desc.height,
             format: desc.format.code(),
             reserved: 0,
+            creation_id: self.creation_id,
         })
     }
 
@@ -366,6 +400,12 @@ impl RingWriter {
     /// Largest frame, in bytes.
     pub fn slot_capacity(&self) -> usize {
         self.geo.slot_capacity as usize
+    }
+
+    /// The random number drawn when this ring file was created (see
+    /// [`RingHeader::creation_id`]); every notice carries it.
+    pub fn creation_id(&self) -> u64 {
+        self.creation_id
     }
 
     /// Deletes the ring file. Readers that mapped it keep their mapping (and
@@ -529,7 +569,8 @@ fn create_file(
         reserved0: 0,
         last_seq: AtomicU64::new(0),
         writer_generation: AtomicU64::new(0),
-        reserved: [0; 16],
+        creation_id: new_creation_id(),
+        reserved: [0; 15],
     };
     // SAFETY: the mapping is at least RING_HEADER_SIZE long and page-aligned;
     // with magic 0 no reader trusts (or keeps) this mapping, and we hold the
@@ -547,4 +588,22 @@ fn create_file(
     // publish: a reader that sees the magic (acquire) sees all of the above
     map.header().magic.store(RING_MAGIC, Ordering::Release);
     Ok(map)
+}
+
+/// A fresh [`RingHeader::creation_id`]: 64 random bits from the kernel,
+/// never 0 (a default notice, or a ring of an older layout, has 0). Should
+/// the kernel refuse (it does not, once booted), the clocks, the pid and a
+/// counter still tell two rings of one name apart.
+fn new_creation_id() -> u64 {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let mut b = [0u8; 8];
+    // SAFETY: b is valid for writes of its 8 bytes; getrandom writes at most that many.
+    let n = unsafe { libc::getrandom(b.as_mut_ptr().cast(), b.len(), 0) };
+    let id = if n == 8 {
+        u64::from_ne_bytes(b)
+    } else {
+        let count = COUNTER.fetch_add(1, Ordering::Relaxed);
+        realtime_ns() ^ monotonic_ns().rotate_left(21) ^ (u64::from(my_pid()) << 40) ^ count.rotate_left(11)
+    };
+    id.max(1)
 }

@@ -793,3 +793,75 @@ fn dump_png_refuses_absurd_frame_sizes_from_the_ring() {
     assert!(matches!(e, nerve_stm::DumpError::BadSize { width: u32::MAX, height: u32::MAX, .. }), "{e}");
     assert!(!p.exists());
 }
+
+/// Review R18: a ring replaced by one of another geometry starts over at
+/// frame 1. Its notices carry the new file's creation id, so a reader of
+/// the old file refuses them (and maps the ring again), and a notice of the
+/// old file is refused by a reader of the new one: frame N of one file is
+/// never handed out as frame N of the other.
+#[test]
+fn notices_name_the_ring_file_and_a_replaced_ring_refuses_old_ones() {
+    let robot = unique_robot();
+    let guard = ShmGuard::own_dir(&robot);
+    let ring = name("cam");
+    let mut w = RingWriter::create_with(&guard.opts(), &robot, &ring, 4, 64).expect("create");
+    let old: Vec<_> = (1..=3u8).map(|k| w.write(FrameDesc::raw(), &[k; 64]).expect("write")).collect();
+    assert!(old.iter().all(|n| n.creation_id == w.creation_id() && n.creation_id != 0));
+    let r_old = RingReader::open_with(&guard.opts(), &robot, &ring).expect("open");
+    assert_eq!(r_old.creation_id(), w.creation_id());
+    r_old.check_notice(&old[0]).expect("a notice of the mapped file");
+
+    // another geometry: the file is replaced, the sequence starts over
+    w.remove().expect("remove");
+    let mut w = RingWriter::create_with(&guard.opts(), &robot, &ring, 8, 128).expect("recreate");
+    let new1 = w.write(FrameDesc::raw(), &[101; 128]).expect("write");
+    assert_eq!(new1.seq, 1);
+    assert_ne!(new1.creation_id, old[0].creation_id, "every ring file draws its own creation id");
+    let e = r_old.check_notice(&new1).expect_err("a notice of the new file, checked against the old mapping");
+    assert!(matches!(e, ReadError::OtherRing { seq: 1, .. }), "{e}");
+    assert!(r_old.is_stale());
+    // the old mapping still holds frame 1, the old one: that is what must not be returned
+    assert_eq!(r_old.read(1).expect("old frame 1").data, [1; 64]);
+
+    let r_new = RingReader::open_with(&guard.opts(), &robot, &ring).expect("open again");
+    r_new.check_notice(&new1).expect("the new notice in the new file");
+    assert_eq!(r_new.read(new1.seq).expect("new frame 1").data, [101; 128]);
+    let e = r_new.check_notice(&old[0]).expect_err("a notice of the old file");
+    assert!(e.to_string().contains("replaced") && e.to_string().contains("cam"), "{e}");
+    assert!(r_new.check_notice(&nerve_stm::RingNotice::default()).is_err(), "creation ids are never 0");
+
+    // a writer restart keeps the file, so the creation id and old notices stay good
+    drop(w);
+    let w = RingWriter::create_with(&guard.opts(), &robot, &ring, 8, 128).expect("reopen");
+    assert_eq!(w.creation_id(), new1.creation_id);
+    r_new.check_notice(&new1).expect("same file after a writer restart");
+}
+
+/// A ring file of an older layout (version 1 has no creation id) is
+/// recreated by its writer, never continued, and refused by readers.
+#[test]
+fn a_ring_of_an_older_layout_is_recreated_by_its_writer() {
+    use shm_schemas::ring::RingHeader;
+    use std::mem::offset_of;
+    use std::os::unix::fs::MetadataExt;
+    let robot = unique_robot();
+    let guard = ShmGuard::own_dir(&robot);
+    let ring = name("old");
+    let mut w = RingWriter::create_with(&guard.opts(), &robot, &ring, 4, 8).expect("create");
+    w.write(FrameDesc::raw(), b"12345678").expect("write");
+    let path = w.path().to_owned();
+    let ino = std::fs::metadata(&path).expect("stat").ino();
+    drop(w);
+    poke(&path, offset_of!(RingHeader, layout_version), &1u32.to_ne_bytes());
+    poke(&path, offset_of!(RingHeader, creation_id), &0u64.to_ne_bytes());
+    let e = RingReader::open_path(&path).expect_err("an old layout");
+    assert!(matches!(e, OpenError::NotARing { .. }) && e.to_string().contains("layout version 1"), "{e}");
+    // without a geometry to create it with, the writer cannot replace it
+    let e = RingWriter::open_existing_with(&guard.opts(), &robot, &ring).expect_err("no geometry");
+    assert!(e.to_string().contains("layout version 1"), "{e}");
+    let w = RingWriter::create_with(&guard.opts(), &robot, &ring, 4, 8).expect("recreated");
+    assert_eq!(w.next_seq(), 1, "a recreated ring starts over");
+    assert_ne!(w.creation_id(), 0);
+    assert_ne!(std::fs::metadata(&path).expect("stat").ino(), ino, "a new file");
+    RingReader::open_path(&path).expect("readable again");
+}

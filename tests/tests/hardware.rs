@@ -74,10 +74,24 @@ fn sonar_frame(seq: u16, mm: u16) -> Vec<u8> {
 struct FakeDevice {
     master: File,
     link: PathBuf,
+    /// the slave's path, and (until published) its descriptor, held open so
+    /// that what the test writes waits on the line
+    tty: PathBuf,
+    slave: Option<std::os::fd::OwnedFd>,
 }
 
 impl FakeDevice {
     fn new(link: &Path) -> FakeDevice {
+        let mut dev = FakeDevice::unpublished(link);
+        dev.publish();
+        dev
+    }
+
+    /// A line the agent cannot find yet: what the test writes now waits on
+    /// it for whoever opens it first (like a cut line that comes back
+    /// holding what the board sent meanwhile). [`FakeDevice::publish`] makes
+    /// it appear at `link`.
+    fn unpublished(link: &Path) -> FakeDevice {
         use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
         let pair = nix::pty::openpty(None, None).expect("openpty");
         // not inherited by the agents this test starts: closing it here
@@ -91,13 +105,17 @@ impl FakeDevice {
         cfmakeraw(&mut t);
         tcsetattr(&pair.slave, SetArg::TCSANOW, &t).expect("raw mode");
         let tty = nix::unistd::ttyname(&pair.slave).expect("ttyname");
-        drop(pair.slave);
-        if let Some(dir) = link.parent() {
+        FakeDevice { master: File::from(pair.master), link: link.to_path_buf(), tty, slave: Some(pair.slave) }
+    }
+
+    /// Publishes the line at its link, where the agent finds it.
+    fn publish(&mut self) {
+        if let Some(dir) = self.link.parent() {
             std::fs::create_dir_all(dir).expect("device dir");
         }
-        let _ = std::fs::remove_file(link);
-        std::os::unix::fs::symlink(&tty, link).expect("symlink");
-        FakeDevice { master: File::from(pair.master), link: link.to_path_buf() }
+        let _ = std::fs::remove_file(&self.link);
+        std::os::unix::fs::symlink(&self.tty, &self.link).expect("symlink");
+        self.slave = None;
     }
 
     fn write(&mut self, bytes: &[u8]) {
@@ -458,6 +476,74 @@ fn vanished_device_is_retried_with_backoff_and_recovered() {
     let dev = writer.join().expect("writer");
     assert!((scans[0]["data"]["ranges_m"][3].as_f64().expect("range") - 2.0).abs() < 1e-6);
     assert!(log_of(&r, "sonar").contains("device recovered"));
+    dev.vanish();
+    r.down_and_check_clean();
+}
+
+/// Review fault 4c: after a cut line came back, the sonar published 12 scans
+/// in one burst with the same stamp, sent by the module during the outage.
+/// What the line holds when it is reopened is discarded unread and counted
+/// in `stale_frames`; only scans sent after the reopen are published.
+#[test]
+fn scans_sent_while_the_line_was_cut_are_not_published_when_it_returns() {
+    use std::io::BufRead;
+    let r = Robot::new("stale");
+    r.router();
+    let link = r.home.join("dev").join("sonar");
+    let mut dev = FakeDevice::new(&link);
+    r.ok(&["start", "sonar", "--name", "sonar", "--", "--device", &link.display().to_string()]);
+    assert!(wait_until(Duration::from_secs(10), || param_u64(&r, "sonar", "device_opens") == 1));
+
+    // every scan published from now on, in order
+    let mut echo = r
+        .command("nerve")
+        .args(["echo", "sonar/scan", "--json", "--timeout", "30"])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("nerve echo");
+    let scans = Arc::new(Mutex::new(Vec::<f64>::new()));
+    let lines = std::io::BufReader::new(echo.stdout.take().expect("echo stdout"));
+    let seen = scans.clone();
+    let reader = std::thread::spawn(move || {
+        for line in lines.lines().map_while(Result::ok) {
+            let v: Value = serde_json::from_str(&line).expect("echo json line");
+            seen.lock().expect("lock").push(v["data"]["ranges_m"][0].as_f64().expect("range"));
+        }
+    });
+    let count = |range: f64| scans.lock().expect("lock").iter().filter(|r0| (**r0 - range).abs() < 1e-6).count();
+    // the echo listens once a scan gets through
+    let mut seq = 1;
+    assert!(wait_until(Duration::from_secs(10), || {
+        dev.write(&sonar_frame(seq, 900));
+        seq += 1;
+        count(0.9) > 0
+    }));
+
+    // the cut; the module goes on scanning (0.5 m) into the line meanwhile
+    dev.vanish();
+    assert!(wait_until(Duration::from_secs(10), || param_u64(&r, "sonar", "device_losses") == 1));
+    let mut dev = FakeDevice::unpublished(&link);
+    for seq in 50..62 {
+        dev.write(&sonar_frame(seq, 500));
+    }
+    dev.publish();
+    assert!(wait_until(Duration::from_secs(15), || param_u64(&r, "sonar", "device_opens") == 2));
+    // and after the reopen, fresh scans (2 m)
+    let mut seq = 100;
+    let fresh = wait_until(Duration::from_secs(10), || {
+        dev.write(&sonar_frame(seq, 2000));
+        seq += 1;
+        std::thread::sleep(Duration::from_millis(50));
+        count(2.0) >= 3
+    });
+    let _ = echo.kill();
+    let _ = echo.wait();
+    reader.join().expect("echo reader");
+    let published = scans.lock().expect("lock").clone();
+    assert!(fresh, "scans after the reopen are published: {published:?}");
+    assert_eq!(count(0.5), 0, "scans sent while the line was cut were published: {published:?}");
+    assert_eq!(param_u64(&r, "sonar", "stale_frames"), 12);
+    assert!(log_of(&r, "sonar").contains("discarded 12 frame(s)"), "the discard is logged");
     dev.vanish();
     r.down_and_check_clean();
 }

@@ -16,6 +16,14 @@
 //! not fill up. When the device reappears it is reopened, logged at `info`
 //! level ("device recovered"), and the backoff starts over. Decoder
 //! counters ([`LinkStats`]) are cumulative over reopenings.
+//!
+//! **Stale input.** Whatever the line holds at the moment it is opened was
+//! sent before: while the line was cut, or before the agent started (the
+//! kernel, a USB adapter or a pty keeps it for the next reader). Handed on,
+//! it would arrive as a burst of old readings stamped "now" (review fault
+//! 4c: 12 sonar scans in one burst after a reconnect). So every open first
+//! discards it unread; the frames discarded are counted
+//! ([`LinkStats::stale`], the agents' `stale_frames`) and logged.
 
 use nerve_devices::{DecodeStats, Message, SerialLink};
 use std::path::{Path, PathBuf};
@@ -101,6 +109,9 @@ pub struct LinkStats {
     pub overflow: u64,
     /// Commands that could not be written (device absent or failing).
     pub unsent: u64,
+    /// Frames that were waiting on the line when it was opened (sent while
+    /// it was cut, or before the agent started), discarded unread.
+    pub stale: u64,
 }
 
 fn add(a: DecodeStats, b: DecodeStats) -> DecodeStats {
@@ -256,7 +267,22 @@ impl Worker {
         let mut ever_open = false;
         while !self.stopping() {
             match SerialLink::open(&self.path) {
-                Ok(link) => {
+                Ok(mut link) => {
+                    // what the line holds now was sent before we listened
+                    match link.discard_waiting() {
+                        Ok(0) => {}
+                        Ok(n) => {
+                            let mut s = lock(&self.stats);
+                            s.stale = s.stale.saturating_add(n);
+                            drop(s);
+                            tracing::info!(
+                                device = %label, path = %self.path.display(), stale_frames = n,
+                                "discarded {n} frame(s) the device sent before the line was opened"
+                            );
+                        }
+                        // serving the link finds out whether it still works
+                        Err(e) => tracing::debug!(device = %label, "cannot discard stale input: {e}"),
+                    }
                     if ever_open {
                         tracing::info!(
                             device = %label, path = %self.path.display(),
@@ -395,6 +421,7 @@ pub fn counter_params(setup: &mut agent_sdk::Setup) -> CounterParams {
         opens: p("device_opens"),
         losses: p("device_losses"),
         failed_opens: p("device_failed_opens"),
+        stale: p("stale_frames"),
         last_logged: DecodeStats::default(),
         last_log: None,
     }
@@ -402,7 +429,8 @@ pub fn counter_params(setup: &mut agent_sdk::Setup) -> CounterParams {
 
 /// The read-only counter parameters of a device link (see [`counter_params`]):
 /// `frames`, `garbage_bytes`, `bad_headers`, `bad_checksums`, `truncated`,
-/// `invalid_payloads`, `device_opens`, `device_losses`, `device_failed_opens`.
+/// `invalid_payloads`, `device_opens`, `device_losses`, `device_failed_opens`,
+/// `stale_frames`.
 #[derive(Debug)]
 pub struct CounterParams {
     frames: agent_sdk::Param<u64>,
@@ -414,6 +442,7 @@ pub struct CounterParams {
     opens: agent_sdk::Param<u64>,
     losses: agent_sdk::Param<u64>,
     failed_opens: agent_sdk::Param<u64>,
+    stale: agent_sdk::Param<u64>,
     last_logged: DecodeStats,
     last_log: Option<Instant>,
 }
@@ -432,6 +461,7 @@ impl CounterParams {
         self.opens.set(s.opens);
         self.losses.set(s.losses);
         self.failed_opens.set(s.failed_opens);
+        self.stale.set(s.stale);
         let dirty = d.garbage_bytes != self.last_logged.garbage_bytes
             || d.rejected_frames() != self.last_logged.rejected_frames();
         if dirty && self.last_log.is_none_or(|t| t.elapsed() >= Duration::from_secs(5)) {
@@ -458,6 +488,108 @@ mod tests {
         assert_eq!(b.attempts(), 5);
         b.reset();
         assert_eq!(b.next_delay(), Duration::from_millis(100));
+    }
+
+    /// A pseudo-terminal standing in for a board: the test writes to the
+    /// master; the link opens the slave through a symlink, once it exists.
+    struct Line {
+        master: std::fs::File,
+        // held open, so that what the master writes stays queued for
+        // whoever opens the slave next
+        _slave: std::os::fd::OwnedFd,
+        tty: PathBuf,
+    }
+
+    impl Line {
+        fn new() -> Line {
+            use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+            let pair = nix::pty::openpty(None, None).expect("openpty");
+            let mut t = tcgetattr(&pair.slave).expect("tcgetattr");
+            cfmakeraw(&mut t);
+            tcsetattr(&pair.slave, SetArg::TCSANOW, &t).expect("raw mode");
+            let tty = nix::unistd::ttyname(&pair.slave).expect("ttyname");
+            Line { master: std::fs::File::from(pair.master), _slave: pair.slave, tty }
+        }
+
+        fn scan(&mut self, seq: u16) {
+            use std::io::Write;
+            let msg =
+                Message::SonarScan(nerve_devices::SonarScan { seq, ranges_mm: [1000; nerve_devices::SONAR_COUNT] });
+            self.master.write_all(&msg.encode()).expect("write to the pty master");
+        }
+    }
+
+    /// The next sonar scan's seq, skipping connection events; `None` if no
+    /// scan comes within `wait`.
+    fn next_scan(link: &DeviceLink, wait: Duration) -> Option<u16> {
+        let end = Instant::now() + wait;
+        while let Some(left) = end.checked_duration_since(Instant::now()) {
+            match link.recv_timeout(left) {
+                Some(DeviceEvent::Message(Message::SonarScan(s), _)) => return Some(s.seq),
+                Some(_) => {}
+                None => return None,
+            }
+        }
+        None
+    }
+
+    /// Review fault 4c: after a cut line came back, a burst of 12 scans
+    /// the device had sent during the outage reached the agent, all stamped
+    /// at the reconnect. Frames waiting when the line is opened are
+    /// discarded unread and counted; the first frame handed on is the first
+    /// one sent after the reopen.
+    #[test]
+    fn frames_sent_while_the_line_was_cut_are_discarded_and_counted() {
+        let dir = std::env::temp_dir().join(format!("nerve-devlink-cut-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let link_path = dir.join("sonar");
+        let _ = std::fs::remove_file(&link_path);
+        let mut line = Line::new();
+        std::os::unix::fs::symlink(&line.tty, &link_path).expect("symlink");
+        let link = DeviceLink::spawn(
+            &link_path,
+            LinkOptions {
+                backoff: Backoff::new(Duration::from_millis(20), Duration::from_millis(100)),
+                label: "sonar".into(),
+            },
+        )
+        .expect("spawn");
+        assert!(wait_for(|| link.stats().opens == 1), "the line opens: {:?}", link.stats());
+        line.scan(1);
+        assert_eq!(next_scan(&link, Duration::from_secs(5)), Some(1));
+
+        // the cut: the line goes away, the link notices and retries
+        std::fs::remove_file(&link_path).expect("remove link");
+        drop(line);
+        assert!(wait_for(|| link.stats().losses == 1), "the cut is noticed: {:?}", link.stats());
+
+        // the line comes back holding 12 scans sent during the outage
+        let mut line = Line::new();
+        for seq in 2..=13 {
+            line.scan(seq);
+        }
+        std::os::unix::fs::symlink(&line.tty, &link_path).expect("symlink");
+        assert!(wait_for(|| link.stats().opens == 2), "the line reopens: {:?}", link.stats());
+        // then the device goes on talking
+        line.scan(14);
+        assert_eq!(next_scan(&link, Duration::from_secs(5)), Some(14), "a stale scan was handed on");
+        let s = link.stats();
+        assert_eq!(s.stale, 12, "{s:?}");
+        assert_eq!(s.decode.garbage_bytes, 0, "{s:?}");
+        drop(link);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Polls `cond` for up to 10 s (a bound against hangs, not a timing assertion).
+    fn wait_for(mut cond: impl FnMut() -> bool) -> bool {
+        let end = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < end {
+            if cond() {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        cond()
     }
 
     #[test]

@@ -10,7 +10,7 @@
 //! Periodic (default 50 ms). Parameters: read-only counters `frames`,
 //! `garbage_bytes`, `bad_headers`, `bad_checksums`, `truncated`,
 //! `invalid_payloads`, `device_opens`, `device_losses`,
-//! `device_failed_opens`. A device that vanishes is logged and reopened with
+//! `device_failed_opens`, `stale_frames`. A device that vanishes is logged and reopened with
 //! exponential backoff (see `nerve_devlink`); no sightings are published
 //! meanwhile.
 

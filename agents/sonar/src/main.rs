@@ -11,9 +11,12 @@
 //! received. Parameters: `ttc_horizon` (s), `near` (m), `smoothing`,
 //! `max_closing` (m/s); read-only counters `frames`, `garbage_bytes`,
 //! `bad_headers`, `bad_checksums`, `truncated`, `invalid_payloads`,
-//! `device_opens`, `device_losses`, `device_failed_opens`, `missed_scans`,
-//! `artefacts`. A device that vanishes is logged and reopened with
-//! exponential backoff; see `nerve_devlink`.
+//! `device_opens`, `device_losses`, `device_failed_opens`, `stale_frames`,
+//! `missed_scans`, `artefacts`. A device that vanishes is logged and reopened
+//! with exponential backoff; scans the module sent while the line was cut
+//! (waiting on the line when it is reopened) are discarded, not published
+//! in a burst stamped "now", and counted in `stale_frames`; see
+//! `nerve_devlink`.
 
 use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Output, Param, Setup, Task};
