@@ -5,7 +5,7 @@
 //! joins the two halves nerve has for that:
 //!
 //! * a ring of the robot's short-term memory (`nerve-stm`: one file
-//!   `/dev/shm/nerve_<robot>_stm_<ring>`, one writer, any number of readers
+//!   `/dev/shm/nerve_<uid>_<robot>_stm_<ring>`, one writer, any number of readers
 //!   reading in place), and
 //! * an ordinary output port carrying a [`RingNotice`] (ring, slot, sequence,
 //!   stamp, size, image geometry) after every stored frame, so that readers

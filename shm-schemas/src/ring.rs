@@ -1,7 +1,7 @@
 //! Short-term memory rings: the shared-memory layout, and the notice that
 //! announces a stored frame (the thesis' "a link and a signal").
 //!
-//! A ring is one file in `/dev/shm` named `nerve_<robot>_stm_<name>`. Its
+//! A ring is one file in `/dev/shm` named `nerve_<uid>_<robot>_stm_<name>`. Its
 //! layout, all little-endian native `#[repr(C)]`:
 //!
 //! ```text

@@ -6,7 +6,7 @@
 //! unsigned long integer, or a six characters name"; large data travels as
 //! "a link and a signal". In nerve:
 //!
-//! * a ring is a file `/dev/shm/nerve_<robot>_stm_<name>` ([`RingName`]:
+//! * a ring is a file `/dev/shm/nerve_<uid>_<robot>_stm_<name>` ([`RingName`]:
 //!   `cam` or `id-42`) of fixed-size slots, created by its single
 //!   [`RingWriter`] (an exclusive `flock` keeps it single);
 //! * each frame gets a sequence number (from 1) and a CLOCK_MONOTONIC stamp;
