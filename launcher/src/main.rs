@@ -68,8 +68,15 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
         Command::Stop { name } => wire::simple(&world, wire::Simple::Stop, &name),
         Command::Kill { name } => wire::simple(&world, wire::Simple::Kill, &name),
         Command::Param(p) => wire::param(&world, p),
-        Command::Echo(a) => echo::echo(&world, a),
-        Command::Hz(a) => echo::hz(&world, a),
+        Command::Echo(a) => {
+            // a subscriber maps a connection segment: on a full /dev/shm, SIGBUS (review R14)
+            shm_space::ensure_shm_space("echo")?;
+            echo::echo(&world, a)
+        }
+        Command::Hz(a) => {
+            shm_space::ensure_shm_space("hz")?;
+            echo::hz(&world, a)
+        }
         Command::Down(a) => down::down(&world, a),
         Command::Launch(a) => launch::launch(&cli.robot, cli.robot_explicit, a),
         Command::Logs(a) => logs::logs(&world, a),

@@ -355,6 +355,28 @@ fn no_router_is_reported_with_advice() {
     r.down_and_check_clean();
 }
 
+/// Commands that create shared memory refuse to begin when /dev/shm has
+/// less free space than the margin (here an absurd one), instead of dying
+/// of SIGBUS in iceoryx2 (review R14); `echo` and `hz` map a connection
+/// segment too.
+#[test]
+fn commands_that_map_shared_memory_check_the_free_space_first() {
+    let r = Robot::new("shmfull");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    for args in [
+        &["echo", "t1/tick", "--count", "1"][..],
+        &["hz", "t1/tick"][..],
+        &["start", "relay", "--name", "r1"][..],
+    ] {
+        let out = r.command("nerve").args(args).env("NERVE_SHM_MIN_FREE", "100000G").output().expect("nerve");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains("/dev/shm"), "{args:?}: {err}");
+    }
+    assert_eq!(r.echo("t1/tick", 1).len(), 1, "with the default margin, echo works");
+    r.down_and_check_clean();
+}
+
 /// `nerve stop` stops an agent cleanly: it leaves the registry, its pid file goes.
 #[test]
 fn stop_is_clean() {
