@@ -29,6 +29,7 @@ pub mod memory;
 pub mod meters;
 pub mod params;
 pub mod ports;
+pub mod process;
 pub mod rt;
 pub mod runtime;
 pub mod world;

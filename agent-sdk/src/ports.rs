@@ -26,6 +26,11 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 /// Fan-out of one output port: how many inputs may read it at once.
 pub const MAX_SUBSCRIBERS: usize = 16;
+/// Fan-in of one input port: how many outputs it may read at once. Each
+/// source costs a subscriber, a listener, their file descriptors and a line
+/// in the agent's statistics, so a flood of `Connect` commands is refused
+/// past this (reliability review R10).
+pub const MAX_SOURCES: usize = 64;
 /// Samples a subscription buffers before the oldest is overwritten (and counted as dropped).
 pub const SUBSCRIBER_BUFFER: usize = 16;
 const MAX_PUBLISHERS: usize = 4;
@@ -125,6 +130,41 @@ pub enum PortError {
         #[source]
         source: iceoryx2::port::notifier::NotifierNotifyError,
     },
+    /// The output port an input was asked to read does not exist: no agent
+    /// of the robot has it (an input opens a source, it never creates one).
+    #[error("port {service} does not exist: no running agent of this robot has that output; see `nerve ps`")]
+    NoSuchPort {
+        /// service name
+        service: String,
+    },
+    /// The source port's services exist but could not be opened.
+    #[error("port {service}: cannot open its service: {source:?}")]
+    OpenService {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError,
+    },
+    /// The source port's wake-up event could not be opened.
+    #[error("port {service}: cannot open its wake-up event: {source:?}")]
+    OpenEvent {
+        /// service name
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::service::builder::event::EventOpenError,
+    },
+    /// An input reads from as many sources as it may.
+    #[error(
+        "input {input} already reads {max} sources, the most an input may: disconnect one first (`nerve disconnect`)"
+    )]
+    TooManySources {
+        /// the input
+        input: String,
+        /// [`MAX_SOURCES`]
+        max: usize,
+    },
     /// Anything else: an invalid service name, a sample of the wrong size.
     #[error("port {service}: {detail}")]
     Ipc {
@@ -208,6 +248,49 @@ pub fn existing_port_service<T: Payload>(
     service: &str,
 ) -> Option<publish_subscribe::PortFactory<Ipc, T, SampleHeader>> {
     port_builder::<T>(node, service).ok()?.open().ok()
+}
+
+/// The publish-subscribe and event services of a source port.
+type SourceServices<T> = (publish_subscribe::PortFactory<Ipc, T, SampleHeader>, event::PortFactory<Ipc>);
+
+/// Opens the services of an existing output port, for an input to read it:
+/// never creates them, so a source that no agent has is refused
+/// ([`PortError::NoSuchPort`]) and leaves no file behind.
+fn source_services<T: Payload>(node: &Node<Ipc>, service: &str) -> Result<SourceServices<T>, PortError> {
+    use iceoryx2::service::builder::event::EventOpenError;
+    use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as Open;
+    let mut attempt = 0;
+    let ps = loop {
+        attempt += 1;
+        match port_builder::<T>(node, service)?.open() {
+            Ok(f) => break f,
+            Err(Open::DoesNotExist) => return Err(PortError::NoSuchPort { service: service.into() }),
+            Err(Open::IncompatibleTypes) => {
+                return Err(PortError::IncompatibleType {
+                    service: service.into(),
+                    type_name: T::stable_type_name().into(),
+                });
+            }
+            // its owner is removing it (see port_service): it may come back at once
+            Err(Open::IsMarkedForDestruction) if attempt < MARKED_FOR_DESTRUCTION_ATTEMPTS => {
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
+            Err(source) => return Err(PortError::OpenService { service: service.into(), source }),
+        }
+    };
+    let name: ServiceName = service.try_into().map_err(|e| perr(service, e))?;
+    let ev = node
+        .service_builder(&name)
+        .event()
+        .max_listeners(MAX_SUBSCRIBERS + 4)
+        .max_notifiers(MAX_PUBLISHERS + 4)
+        .max_nodes(MAX_NODES)
+        .open()
+        .map_err(|source| match source {
+            EventOpenError::DoesNotExist => PortError::NoSuchPort { service: service.into() },
+            source => PortError::OpenEvent { service: service.into(), source },
+        })?;
+    Ok((ps, ev))
 }
 
 /// Opens (or creates) the event service paired with an output port.
@@ -484,15 +567,20 @@ impl<T: Payload> DynInput for InputInner<T> {
         from_agent: &str,
         from_port: &str,
     ) -> Result<bool, PortError> {
-        if lock(&self.subs).iter().any(|s| s.from_agent == from_agent && s.from_port == from_port) {
-            return Ok(false);
+        {
+            let subs = lock(&self.subs);
+            if subs.iter().any(|s| s.from_agent == from_agent && s.from_port == from_port) {
+                return Ok(false);
+            }
+            if subs.len() >= MAX_SOURCES {
+                return Err(PortError::TooManySources { input: self.name.clone(), max: MAX_SOURCES });
+            }
         }
         let service = robot.port_service(from_agent, from_port);
-        let ps = port_service::<T>(node, &service)?;
+        let (ps, ev) = source_services::<T>(node, &service)?;
         let subscriber =
             ps.subscriber_builder().buffer_size(SUBSCRIBER_BUFFER).create().map_err(port_err!(Subscriber, &service))?;
-        let listener =
-            port_event(node, &service)?.listener_builder().create().map_err(port_err!(Listener, &service))?;
+        let listener = ev.listener_builder().create().map_err(port_err!(Listener, &service))?;
         lock(&self.subs).push(Subscription {
             from_agent: from_agent.into(),
             from_port: from_port.into(),
@@ -536,7 +624,7 @@ impl<T: Payload> DynInput for InputInner<T> {
 
 #[cfg(test)]
 mod tests {
-    use super::{PortError, gap, port_service};
+    use super::{DynInput, Input, MAX_SOURCES, PortError, gap, port_event, port_service};
     use crate::world::World;
     use crate::world::test_support::Cleanup;
     use shm_schemas::payloads::{Scalar, Tick};
@@ -560,6 +648,50 @@ mod tests {
         let source = std::error::Error::source(&e).expect("a source");
         assert!(source.downcast_ref::<iceoryx2::port::LoanError>().is_some(), "{source:?}");
         assert!(e.to_string().contains("cannot loan a sample") && e.to_string().contains(&service), "{e}");
+    }
+
+    /// A Connect can come from anyone who opens the agent's control service
+    /// (review R10): a source that does not exist is refused and leaves no
+    /// file, and an input takes at most MAX_SOURCES sources.
+    #[test]
+    fn an_input_opens_existing_sources_only_and_at_most_max_sources() {
+        let world = World::new(&format!("fanin{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+        let (input, inner) = Input::<Tick>::new("in");
+        let files = |w: &World| {
+            let mut f = w.shm_files();
+            f.extend(w.iox2_files());
+            f.sort();
+            f
+        };
+        let before = files(&world);
+        match inner.connect(&node, &robot, "ghost", "out") {
+            Err(PortError::NoSuchPort { service }) => assert_eq!(service, robot.port_service("ghost", "out")),
+            other => panic!("a source nobody has: {:?}", other.err()),
+        }
+        assert_eq!(files(&world), before, "refusing a source created files");
+        assert_eq!(input.sources(), 0);
+
+        let sources: Vec<_> = (0..=MAX_SOURCES)
+            .map(|i| {
+                let service = robot.port_service(&format!("a{i}"), "out");
+                (port_service::<Tick>(&node, &service).expect("service"), port_event(&node, &service).expect("event"))
+            })
+            .collect();
+        for i in 0..MAX_SOURCES {
+            assert!(inner.connect(&node, &robot, &format!("a{i}"), "out").expect("an existing source"));
+        }
+        assert!(!inner.connect(&node, &robot, "a0", "out").expect("again"), "already read: nothing changes");
+        match inner.connect(&node, &robot, &format!("a{MAX_SOURCES}"), "out") {
+            Err(e @ PortError::TooManySources { .. }) => {
+                assert!(e.to_string().contains(&format!("{MAX_SOURCES} sources")), "{e}")
+            }
+            other => panic!("source {} of one input: {:?}", MAX_SOURCES + 1, other.err()),
+        }
+        assert_eq!(input.sources(), MAX_SOURCES);
+        drop(sources);
     }
 
     #[test]

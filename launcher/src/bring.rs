@@ -15,10 +15,10 @@
 use crate::client::RouterSession;
 use crate::launch_file::{self, LaunchFile, RestartPolicy};
 use agent_sdk::World;
+use agent_sdk::process::{ProcessError, ProcessHandle};
 use agent_sdk::world::pid_alive;
 use anyhow::{Context as _, Result, anyhow, bail};
-use nix::sys::signal::{Signal, kill};
-use nix::unistd::Pid;
+use nix::sys::signal::Signal;
 use shm_schemas::control::cli_to_router::{self as proto, CliRequest, RouterReply};
 use std::io::Read;
 use std::process::{Command, Stdio};
@@ -216,35 +216,26 @@ fn pid_files(world: &World) -> Vec<(String, u32, std::path::PathBuf)> {
         .collect()
 }
 
-/// Whether `pid` runs a nerve program of this robot. A pid file can outlive
-/// its process (a crash), and the pid can be reused meanwhile — possibly by
-/// another robot's router or agent: the robot is read from the process's own
-/// `--robot` argument, else its `NERVE_ROBOT`, else the default robot.
-fn belongs_to(pid: u32, world: &World) -> bool {
-    let Ok(cmdline) = std::fs::read(format!("/proc/{pid}/cmdline")) else { return false };
-    let args: Vec<String> = cmdline.split(|b| *b == 0).map(|a| String::from_utf8_lossy(a).into_owned()).collect();
-    if !args.iter().any(|a| a.contains("nerve")) {
-        return false;
-    }
-    let robot = args
-        .windows(2)
-        .find(|w| w[0] == "--robot")
-        .map(|w| w[1].clone())
-        .or_else(|| args.iter().find_map(|a| a.strip_prefix("--robot=").map(str::to_owned)))
-        .or_else(|| {
-            let env = std::fs::read(format!("/proc/{pid}/environ")).ok()?;
-            env.split(|b| *b == 0).find_map(|v| {
-                String::from_utf8_lossy(v).strip_prefix(&format!("{}=", agent_sdk::world::ROBOT_ENV)).map(str::to_owned)
-            })
-        })
-        .unwrap_or_else(|| agent_sdk::world::DEFAULT_ROBOT.to_owned());
-    robot == world.robot().as_str()
+/// A handle of process `pid` if it runs a nerve program of this robot. A
+/// pid file can outlive its process (a crash), and the pid can be reused
+/// meanwhile, by an unrelated program or by another robot's router or agent.
+/// So the process must be one of nerve's ([`ProcessHandle::is_nerve`]: its
+/// executable is `nerve` or `nerve-*`, or it holds a live iceoryx2 node of
+/// this robot; a `tail -f .../logs/t1.log` is neither, whatever its command
+/// line says), and work for this robot ([`ProcessHandle::robot`]: its
+/// `--robot` argument, else its `NERVE_ROBOT`, else the default robot). The
+/// handle is taken first, so every later signal reaches this process only
+/// (reliability review R6).
+pub(crate) fn belongs_to(pid: u32, world: &World) -> Option<ProcessHandle> {
+    let handle = ProcessHandle::take(pid).ok()?;
+    let ours = handle.is_nerve(world) && handle.robot().is_some_and(|r| r == world.robot().as_str());
+    ours.then_some(handle)
 }
 
-fn wait_gone(pids: &[u32], grace: Duration) -> Vec<u32> {
+fn wait_gone(procs: &[ProcessHandle], grace: Duration) -> Vec<ProcessHandle> {
     let t0 = Instant::now();
     loop {
-        let alive: Vec<u32> = pids.iter().copied().filter(|p| pid_alive(*p)).collect();
+        let alive: Vec<ProcessHandle> = procs.iter().filter(|p| p.is_alive()).cloned().collect();
         if alive.is_empty() || t0.elapsed() >= grace {
             return alive;
         }
@@ -252,34 +243,59 @@ fn wait_gone(pids: &[u32], grace: Duration) -> Vec<u32> {
     }
 }
 
-fn signal_all(pids: &[u32], sig: Signal) {
-    for p in pids {
-        let _ = kill(Pid::from_raw(*p as i32), sig);
+fn signal_all(procs: &[ProcessHandle], sig: Signal) {
+    for p in procs {
+        // Gone: it exited (or its pid was reused) since the last look: nothing to do
+        if let Err(e @ ProcessError::Signal { .. }) = p.signal(sig) {
+            tracing::warn!(pid = p.pid(), signal = %sig, "{e}");
+        }
     }
+}
+
+/// What [`down`] did.
+#[derive(Debug, Default)]
+pub struct Stopped {
+    /// the processes it stopped (asked, then signalled if need be)
+    pub processes: Vec<ProcessHandle>,
+    /// how many of them needed SIGKILL
+    pub killed: usize,
 }
 
 /// Stops everything of `world`; returns (processes stopped, processes killed).
 pub fn down(world: &World, grace: Duration) -> (usize, usize) {
-    let mut pids: Vec<u32> = Vec::new();
-    // 1. ask the router to stop each agent, then itself
+    let s = down_procs(world, grace);
+    (s.processes.len(), s.killed)
+}
+
+/// Stops everything of `world` as [`down`] does; returns the processes.
+pub fn down_procs(world: &World, grace: Duration) -> Stopped {
+    let mut procs: Vec<ProcessHandle> = Vec::new();
+    // Each handle is taken before the process is asked to stop, while its
+    // pid is still its own. 1. every process with a pid file: agents started
+    // without a router, and the router
+    for (_, pid, _) in pid_files(world) {
+        if let Some(h) = belongs_to(pid, world) {
+            procs.push(h);
+        }
+    }
+    // 2. ask the router to stop each agent, then itself
     if let Ok(s) = RouterSession::open(world) {
         if let Ok(RouterReply::Agents(agents)) = s.call(CliRequest::Ps) {
             for a in &agents {
-                if a.pid > 0 {
-                    pids.push(a.pid);
+                if a.pid > 0
+                    && !procs.iter().any(|p| p.pid() == a.pid)
+                    && let Some(h) = belongs_to(a.pid, world)
+                {
+                    procs.push(h);
                 }
+            }
+            for a in &agents {
                 let _ = s.call(CliRequest::Stop { name: a.name.clone() });
             }
         }
         let _ = s.call(CliRequest::Shutdown);
     }
-    // 2. every process with a pid file (agents started without a router, the router)
-    for (_, pid, _) in pid_files(world) {
-        if pid > 0 && !pids.contains(&pid) && pid_alive(pid) && belongs_to(pid, world) {
-            pids.push(pid);
-        }
-    }
-    let mut alive = wait_gone(&pids, grace);
+    let mut alive = wait_gone(&procs, grace);
     let mut killed = 0;
     if !alive.is_empty() {
         signal_all(&alive, Signal::SIGTERM);
@@ -290,17 +306,38 @@ pub fn down(world: &World, grace: Duration) -> (usize, usize) {
         signal_all(&alive, Signal::SIGKILL);
         let left = wait_gone(&alive, Duration::from_secs(2));
         for p in left {
-            eprintln!("warning: process {p} survived SIGKILL (uninterruptible sleep?)");
+            eprintln!("warning: process {} survived SIGKILL (uninterruptible sleep?)", p.pid());
         }
     }
-    (pids.len(), killed)
+    Stopped { processes: procs, killed }
+}
+
+/// The robot's nerve processes that [`down`] did not stop and that still
+/// run: CLI clients such as `nerve echo` or `nerve hz` in another terminal
+/// (the `nerve` executable, working for this robot), never this process.
+pub fn other_clients(world: &World, stopped: &[ProcessHandle]) -> Vec<ProcessHandle> {
+    let me = std::process::id();
+    let Ok(rd) = std::fs::read_dir("/proc") else { return vec![] };
+    let mut out: Vec<ProcessHandle> = rd
+        .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|pid| *pid != me && !stopped.iter().any(|p| p.pid() == *pid))
+        .filter_map(|pid| ProcessHandle::take(pid).ok())
+        .filter(|h| {
+            h.exe().is_some_and(|e| {
+                e.file_name().and_then(|n| n.to_str()).is_some_and(|n| n == "nerve" || n == "nerve (deleted)")
+            }) && h.robot().is_some_and(|r| r == world.robot().as_str())
+        })
+        .collect();
+    out.sort_by_key(ProcessHandle::pid);
+    out
 }
 
 /// Removes pid files of dead processes, stale iceoryx2 resources and, when
 /// no process of the robot is left, its shared-memory files.
 pub fn clean(world: &World) -> usize {
     for (_, pid, path) in pid_files(world) {
-        if !pid_alive(pid) {
+        // dead, or its pid now names a process that is not nerve's
+        if !ProcessHandle::take(pid).is_ok_and(|h| h.is_nerve(world)) {
             let _ = std::fs::remove_file(path);
         }
     }
@@ -362,4 +399,68 @@ pub fn stopped_line(stopped: usize, killed: usize) -> String {
         "stopped {stopped} process(es){}",
         if killed > 0 { format!(", {killed} with SIGKILL") } else { String::new() }
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::belongs_to;
+    use agent_sdk::World;
+    use std::process::{Child, Command};
+    use std::time::{Duration, Instant};
+
+    /// Kills and reaps the child when dropped.
+    struct Reaped(Child);
+
+    impl Drop for Reaped {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+
+    /// Waits until the command line of `pid` contains `needle` (after a shell's exec).
+    fn wait_cmdline(pid: u32, needle: &str) {
+        let t0 = Instant::now();
+        while !std::fs::read(format!("/proc/{pid}/cmdline")).is_ok_and(|c| String::from_utf8_lossy(&c).contains(needle))
+        {
+            assert!(t0.elapsed() < Duration::from_secs(10), "pid {pid} never showed {needle:?}");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// A stale pid file whose pid now names a process of the same user
+    /// that mentions nerve and the robot (review R6) must not be signalled:
+    /// a `tail` of the robot's log, a program that calls itself `nerve-x`.
+    #[test]
+    fn a_process_that_only_names_nerve_and_the_robot_does_not_belong_to_it() {
+        let world = World::new(&format!("own{}", std::process::id())).expect("world");
+        let robot = world.robot().to_string();
+        let dir = std::env::temp_dir().join(format!("nerve-own-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("logs")).expect("log dir");
+        let log = dir.join("logs").join("t1.log");
+        std::fs::write(&log, "").expect("log");
+
+        let tail = Reaped(
+            Command::new("tail")
+                .arg("-f")
+                .arg(&log)
+                .env(agent_sdk::world::ROBOT_ENV, &robot)
+                .spawn()
+                .expect("start tail"),
+        );
+        let named = Reaped(
+            std::os::unix::process::CommandExt::arg0(&mut Command::new("sleep"), "nerve-x")
+                .arg("30")
+                .env(agent_sdk::world::ROBOT_ENV, &robot)
+                .spawn()
+                .expect("start sleep"),
+        );
+        wait_cmdline(tail.0.id(), "nerve");
+        wait_cmdline(named.0.id(), "nerve-x");
+        for p in [&tail, &named] {
+            assert!(agent_sdk::process::ProcessHandle::take(p.0.id()).is_ok(), "pid {} runs", p.0.id());
+            assert!(belongs_to(p.0.id(), &world).is_none(), "pid {} would be signalled by `nerve down`", p.0.id());
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -3,8 +3,16 @@
 //! suspended). It holds live agents only: a dead agent is removed by the
 //! liveness check ([`Registry::dead`]) and its supervision decides what
 //! follows.
+//!
+//! A registration's pid is checked before it is believed ([`check_process`]):
+//! a buggy or hostile client could otherwise register another process's pid,
+//! which `nerve kill` and `nerve down` would then signal (reliability review
+//! R10). Each entry keeps a [`ProcessHandle`] taken at registration, so its
+//! liveness and `nerve kill` follow that process, not whatever has its pid
+//! later (R6).
 
-use agent_sdk::world::pid_alive;
+use agent_sdk::World;
+use agent_sdk::process::ProcessHandle;
 use shm_schemas::control::agent_to_router::Registration;
 use shm_schemas::control::cli_to_router::{AgentState, RouterError};
 use shm_schemas::{AgentName, PortRef};
@@ -15,6 +23,8 @@ use std::collections::BTreeMap;
 pub struct Entry {
     /// what it told the router at registration (its period follows `nerve rate`)
     pub reg: Registration,
+    /// its process, as it was when it registered
+    pub process: ProcessHandle,
     /// running or suspended, as last set
     pub state: AgentState,
 }
@@ -26,18 +36,19 @@ pub struct Registry {
 }
 
 impl Registry {
-    /// Adds `reg`, replacing an earlier instance of the same name that is
-    /// dead; refuses a bad name or a name a live process holds.
-    pub fn register(&mut self, reg: Registration) -> Result<(), RouterError> {
+    /// Adds `reg` (of the process `process`, see [`check_process`]),
+    /// replacing an earlier instance of the same name that is dead; refuses
+    /// a bad name or a name a live process holds.
+    pub fn register(&mut self, reg: Registration, process: ProcessHandle) -> Result<(), RouterError> {
         AgentName::new(&reg.name).map_err(|e| RouterError::InvalidName(e.to_string()))?;
         if let Some(existing) = self.agents.get(&reg.name)
             && existing.reg.pid != reg.pid
-            && pid_alive(existing.reg.pid)
+            && existing.process.is_alive()
         {
             return Err(RouterError::DuplicateName { name: reg.name, pid: existing.reg.pid });
         }
         let state = if reg.suspended { AgentState::Suspended } else { AgentState::Running };
-        self.agents.insert(reg.name.clone(), Entry { reg, state });
+        self.agents.insert(reg.name.clone(), Entry { reg, process, state });
         Ok(())
     }
 
@@ -54,7 +65,7 @@ impl Registry {
     /// returns their names and pids.
     pub fn dead(&mut self) -> Vec<(String, u32)> {
         let dead: Vec<(String, u32)> =
-            self.agents.iter().filter(|(_, e)| !pid_alive(e.reg.pid)).map(|(n, e)| (n.clone(), e.reg.pid)).collect();
+            self.agents.iter().filter(|(_, e)| !e.process.is_alive()).map(|(n, e)| (n.clone(), e.reg.pid)).collect();
         for (name, _) in &dead {
             self.agents.remove(name);
         }
@@ -101,5 +112,93 @@ impl Registry {
             direction: if output { "output" } else { "input" }.into(),
             available: ports.iter().map(|s| s.name.clone()).collect(),
         })
+    }
+}
+
+/// The process of a registration, if the router can believe it: the pid
+/// names a live process, of the router's own effective uid, that is one of
+/// nerve's in `world` ([`ProcessHandle::is_nerve`]: a `nerve-*` executable,
+/// or a process holding a live iceoryx2 node of this robot). Anything else
+/// is refused, saying which check failed.
+pub fn check_process(reg: &Registration, world: &World) -> Result<ProcessHandle, RouterError> {
+    let refused = |reason: String| RouterError::RegistrationRefused { name: reg.name.clone(), pid: reg.pid, reason };
+    let process = ProcessHandle::take(reg.pid).map_err(|_| refused("no process has this pid".into()))?;
+    let ours = nix::unistd::geteuid().as_raw();
+    match process.uid() {
+        Some(uid) if uid == ours => {}
+        Some(uid) => return Err(refused(format!("the process runs as uid {uid}, the router as uid {ours}"))),
+        None => return Err(refused("the process exited while it was checked".into())),
+    }
+    if !process.is_nerve(world) {
+        let exe = process.exe().map_or_else(|| "unknown".to_owned(), |e| e.display().to_string());
+        return Err(refused(format!(
+            "the process is not a nerve agent: its executable {exe} is not `nerve-*` and it has no iceoryx2 node of robot {}",
+            world.robot()
+        )));
+    }
+    Ok(process)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_process;
+    use agent_sdk::World;
+    use shm_schemas::control::agent_to_router::{Registration, TaskKind};
+    use shm_schemas::control::cli_to_router::RouterError;
+    use std::process::Command;
+
+    fn registration(pid: u32) -> Registration {
+        Registration {
+            name: "t1".into(),
+            pid,
+            kind: "ticker".into(),
+            executable: String::new(),
+            task: TaskKind::Periodic,
+            period_ns: None,
+            inputs: vec![],
+            outputs: vec![],
+            log_file: None,
+            suspended: false,
+        }
+    }
+
+    fn refusal(pid: u32, world: &World) -> String {
+        match check_process(&registration(pid), world) {
+            Err(e @ RouterError::RegistrationRefused { .. }) => e.to_string(),
+            other => panic!("pid {pid} was not refused: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_registration_naming_a_process_that_is_not_a_nerve_agent_is_refused() {
+        let world = World::new(&format!("regchk{}", std::process::id())).expect("world");
+        // any process of ours that is not an agent: `nerve kill t1` would kill it
+        let mut sleep = Command::new("sleep").arg("30").spawn().expect("start sleep");
+        let e = refusal(sleep.id(), &world);
+        assert!(e.contains("not a nerve agent") && e.contains("sleep") && e.contains("t1"), "{e}");
+        let _ = sleep.kill();
+        let _ = sleep.wait();
+        // a pid nobody has (any more)
+        let e = refusal(sleep.id(), &world);
+        assert!(e.contains("no process has this pid"), "{e}");
+        // this test's own executable is `nerve_router-...`: believed
+        assert!(check_process(&registration(std::process::id()), &world).is_ok());
+    }
+
+    #[test]
+    fn a_registration_of_another_users_process_is_refused() {
+        if !nix::unistd::geteuid().is_root() {
+            eprintln!("skipped: needs root to start a process of another uid");
+            return;
+        }
+        let world = World::new(&format!("reguid{}", std::process::id())).expect("world");
+        let mut other = std::os::unix::process::CommandExt::uid(&mut Command::new("sleep"), 65534)
+            .arg("30")
+            .spawn()
+            .expect("start sleep as nobody");
+        let e = refusal(other.id(), &world);
+        let _ = other.kill();
+        let _ = other.wait();
+        assert!(e.contains("uid 65534"), "{e}");
     }
 }

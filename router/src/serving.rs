@@ -20,7 +20,8 @@ use crate::store::{Connection, Saved, Store, Writer};
 use crate::supervision::{Exit, Supervisor};
 use crate::wiring::Wiring;
 use agent_sdk::control::Responder;
-use agent_sdk::world::{Ipc, World, pid_alive};
+use agent_sdk::process::{ProcessError, ProcessHandle};
+use agent_sdk::world::{Ipc, World};
 use iceoryx2::prelude::Node;
 use shm_schemas::control::ProtocolError;
 use shm_schemas::control::agent_to_router::{AgentToRouter, Registration, TaskKind};
@@ -50,7 +51,7 @@ enum Work {
     /// `rate`, `suspend`, `resume`, `param get/set`, `stop`
     Command { name: String, what: Asked },
     /// `kill`: the process is gone
-    Kill { name: String, pid: u32, until: Instant },
+    Kill { name: String, process: ProcessHandle, until: Instant },
     /// re-applying remembered state or a connection to a re-registered
     /// agent: logged, nobody waits
     Background { name: String, what: String, effect: Asked },
@@ -155,7 +156,14 @@ impl State {
             reg.outputs.iter().map(|p| format!("{}: {}", p.name, p.type_name)).collect::<Vec<_>>().join(", ")
         );
         let pid = reg.pid;
-        if let Err(e) = self.registry.register(reg) {
+        let process = match crate::registry::check_process(&reg, &self.world) {
+            Ok(p) => p,
+            Err(e) => {
+                tracing::warn!(agent = %name, pid, "{e}");
+                return RouterReply::Error(e);
+            }
+        };
+        if let Err(e) = self.registry.register(reg, process) {
             return RouterReply::Error(e);
         }
         tracing::info!(agent = %name, pid, "agent {name} registered: {summary}");
@@ -422,11 +430,18 @@ impl State {
                 Ok(Started::Answer(RouterReply::Ok))
             }
             CliRequest::Kill { name } => {
-                let pid = self.registry.live(&name)?.reg.pid;
-                nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), nix::sys::signal::Signal::SIGKILL)
-                    .map_err(|e| RouterError::Internal(format!("cannot kill pid {pid}: {e}")))?;
-                tracing::info!(agent = %name, pid, "killed agent {name} (pid {pid}) on request");
-                Ok(Started::waiting(vec![], Work::Kill { name, pid, until: Instant::now() + KILL_WAIT }))
+                // through the handle taken at registration: a pid reused since
+                // the agent died (and before the liveness check saw it) is not signalled
+                let process = self.registry.live(&name)?.process.clone();
+                let pid = process.pid();
+                match process.signal(nix::sys::signal::Signal::SIGKILL) {
+                    Ok(()) => tracing::info!(agent = %name, pid, "killed agent {name} (pid {pid}) on request"),
+                    Err(ProcessError::Gone { .. }) => {
+                        tracing::info!(agent = %name, pid, "{name} (pid {pid}) had exited already")
+                    }
+                    Err(e) => return Err(RouterError::Internal(e.to_string())),
+                }
+                Ok(Started::waiting(vec![], Work::Kill { name, process, until: Instant::now() + KILL_WAIT }))
             }
             CliRequest::Shutdown => {
                 self.shutdown = true;
@@ -449,7 +464,7 @@ impl State {
         let mut i = 0;
         while i < self.jobs.len() {
             let ready = match &self.jobs[i].work {
-                Work::Kill { pid, until, .. } => !pid_alive(*pid) || Instant::now() >= *until,
+                Work::Kill { process, until, .. } => !process.is_alive() || Instant::now() >= *until,
                 Work::Saved { saved, .. } => self.writer.outcome(*saved).is_some(),
                 _ => self.jobs[i].waiting.is_empty(),
             };
@@ -517,9 +532,10 @@ impl State {
                 Err(e) => Err(e),
             },
             Work::Command { name, what } => single().map(|reply| self.obeyed(&name, &what, reply)),
-            Work::Kill { name, pid, .. } => {
+            Work::Kill { name, process, .. } => {
                 self.check_liveness();
-                if pid_alive(pid) {
+                let pid = process.pid();
+                if process.is_alive() {
                     tracing::warn!(agent = %name, pid, "{name} (pid {pid}) is still there {KILL_WAIT:?} after SIGKILL");
                 }
                 Ok(RouterReply::Ok)

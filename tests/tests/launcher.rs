@@ -352,3 +352,38 @@ fn down_drops_the_connection_list_unless_kept_and_says_so() {
     assert_eq!(edges(&r), 0, "nothing leaks into the next start: {}", r.graph());
     r.down_and_check_clean();
 }
+
+/// `nerve down` does not stop the robot's CLI clients (`nerve echo` in
+/// another terminal is the user's tool, as `ros2 topic echo` is), but names
+/// them with what they keep (reliability review F1d: three `nerve echo`
+/// held 43 files, silently). Once they exit, `nerve down` cleans up.
+#[test]
+fn down_names_the_clients_it_leaves_running() {
+    use std::io::BufRead as _;
+    let r = Robot::new("downcli");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "20ms"]);
+    let mut echo = r
+        .command("nerve")
+        .args(["echo", "t1/tick"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("start nerve echo");
+    let mut first = String::new();
+    let stdout = echo.stdout.take().expect("echo's stdout");
+    std::io::BufReader::new(stdout).read_line(&mut first).expect("a sample");
+    assert!(!first.is_empty(), "nerve echo printed nothing");
+    let out = r.nerve(&["down", "--grace", "1"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let note = format!("note: 1 nerve client(s) of robot {} still run (pids {})", r.name, echo.id());
+    assert!(err.contains(&note) && err.contains("shared-memory"), "{err}");
+    assert!(alive(echo.id()), "a client was stopped");
+    let _ = echo.kill();
+    let _ = echo.wait();
+    let out = r.nerve(&["down", "--grace", "1"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("note:"), "{err}");
+    r.down_and_check_clean();
+}

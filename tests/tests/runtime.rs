@@ -390,3 +390,63 @@ fn stop_is_clean() {
     assert!(!r.home.join(&r.name).join("pids/t1.pid").exists());
     r.down_and_check_clean();
 }
+
+/// An agent takes `Connect` from anyone who can open its control service
+/// (reliability review R10): a source no agent has, and names that are not
+/// names, are refused with the reason, and nothing is created for them in
+/// /dev/shm or under iceoryx2's root (it used to create a service, its
+/// files and a subscriber for each).
+#[test]
+fn connect_to_a_source_that_does_not_exist_is_refused_and_creates_nothing() {
+    use agent_sdk::World;
+    use agent_sdk::control::{ControlClient, ControlSize};
+    use shm_schemas::AgentName;
+    use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
+
+    let r = Robot::new("ghost");
+    r.router();
+    r.ok(&["start", "relay", "--name", "r1"]);
+    let world = World::new(&r.name).expect("world");
+    let node = world.node(&format!("test-ghost-{}", std::process::id())).expect("node");
+    let ctl = world.robot().ctl_service(&AgentName::new("r1").expect("name"));
+    let client: ControlClient<AgentCommand, AgentReply> =
+        ControlClient::open(&node, &ctl, ControlSize::AGENT).expect("r1's control service");
+    let connect = |from_agent: &str, from_port: &str| {
+        let cmd = AgentCommand::Connect {
+            input: "in".into(),
+            from_agent: from_agent.into(),
+            from_port: from_port.into(),
+            type_name: "nerve::Tick".into(),
+        };
+        match client.call(&cmd, Duration::from_secs(5)).expect("r1 answers") {
+            AgentReply::Error(e) => e,
+            other => panic!("r1 accepted {from_agent}/{from_port}: {other:?}"),
+        }
+    };
+    let files = || {
+        let mut f = world.shm_files();
+        f.extend(world.iox2_files());
+        f.sort();
+        f
+    };
+    // names that are not names: refused before anything is opened
+    for (agent, port) in [("../x", "out"), ("Ghost", "out"), ("ghost", "a/b"), ("", "out")] {
+        let e = connect(agent, port);
+        assert!(e.contains("cannot read"), "{agent}/{port}: {e}");
+    }
+    let before = files();
+    for i in 0..20 {
+        let e = connect(&format!("ghost{i}"), "out");
+        assert!(e.contains("does not exist"), "{e}");
+    }
+    assert_eq!(files(), before, "refused sources left files");
+    let r1 = r.agent("r1").expect("r1 runs");
+    assert!(r1["stats"]["inputs"].as_array().is_none_or(|i| i.is_empty()), "{r1}");
+    // a real source is still taken
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["connect", "t1/tick", "r1/in"]);
+    assert_eq!(r.echo("r1/out", 2).len(), 2);
+    drop(client);
+    drop(node);
+    r.down_and_check_clean();
+}

@@ -236,6 +236,12 @@ impl Checker<'_> {
     fn handle(&self, cmd: AgentCommand, cpu: &CpuMeter) -> AgentReply {
         match cmd {
             AgentCommand::Connect { input, from_agent, from_port, type_name } => {
+                // anyone who can open this service can send a Connect: the
+                // names must be valid, and the source must exist (the input
+                // opens it, never creates it), review R10
+                if let Err(e) = shm_schemas::PortRef::new(&from_agent, &from_port) {
+                    return AgentReply::Error(format!("cannot read {from_agent:?}/{from_port:?}: {e}"));
+                }
                 let inp = match self.find_input(&input) {
                     Ok(i) => i,
                     Err(e) => return AgentReply::Error(e),

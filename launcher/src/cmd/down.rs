@@ -6,6 +6,13 @@
 //! a deliberate `nerve down` forgets it. The ladder and the cleaning are
 //! [`crate::bring::down`] and [`crate::bring::clean`], shared with every
 //! command that brings a robot down.
+//!
+//! CLI clients of the robot (`nerve echo`, `nerve hz`... in other
+//! terminals) are not stopped: as `ros2 topic echo` outlives the nodes it
+//! listens to, they are the user's tools, and may wait for the robot to come
+//! back. But they hold shared memory, so `nerve down` names them, with
+//! their pids and what they keep (reliability review F1d: three `nerve
+//! echo` kept 43 files, silently).
 
 use crate::bring;
 use agent_sdk::World;
@@ -57,7 +64,8 @@ fn connections_after_down(world: &World, keep: bool) -> String {
 
 pub fn down(world: &World, a: DownArgs) -> Result<ExitCode> {
     let grace = Duration::from_secs_f64(a.grace.max(0.0));
-    let (stopped, killed) = bring::down(world, grace);
+    let bring::Stopped { processes, killed } = bring::down_procs(world, grace);
+    let stopped = processes.len();
     let removed = bring::clean(world);
     let connections = connections_after_down(world, a.keep_connections);
     println!(
@@ -70,5 +78,25 @@ pub fn down(world: &World, a: DownArgs) -> Result<ExitCode> {
             String::new()
         }
     );
+    if let Some(note) = clients_note(world, &processes) {
+        eprintln!("{note}");
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The line naming the robot's CLI clients that still run, if any.
+fn clients_note(world: &World, stopped: &[agent_sdk::process::ProcessHandle]) -> Option<String> {
+    let clients = bring::other_clients(world, stopped);
+    if clients.is_empty() {
+        return None;
+    }
+    let pids: Vec<String> = clients.iter().map(|c| c.pid().to_string()).collect();
+    let files = world.shm_files().len() + world.iox2_files().len();
+    Some(format!(
+        "note: {} nerve client(s) of robot {} still run (pids {}): they keep {files} shared-memory and iceoryx2 file(s) until they exit; stop them (Ctrl-C, or `kill {}`), then `nerve down` again removes the files",
+        clients.len(),
+        world.robot(),
+        pids.join(", "),
+        pids.join(" ")
+    ))
 }

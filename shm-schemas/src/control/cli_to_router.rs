@@ -336,4 +336,17 @@ pub enum RouterError {
         /// why it could not be saved
         detail: String,
     },
+    /// A registration whose pid the router cannot believe (reliability
+    /// review R10): no such process, another user's, or not a nerve agent.
+    #[error(
+        "registration of agent {name:?} refused: pid {pid}: {reason}; an agent registers itself with its own pid (agent_sdk::run does this)"
+    )]
+    RegistrationRefused {
+        /// the name it asked for
+        name: String,
+        /// the pid it gave
+        pid: u32,
+        /// which check failed
+        reason: String,
+    },
 }
