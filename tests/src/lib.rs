@@ -17,6 +17,8 @@
 //! ([`sweep_dead_test_robots`]): robot names start with `t<pid>-`, so what
 //! belongs to a dead test process is known by its pid.
 
+pub mod device;
+
 use serde_json::Value;
 use std::path::PathBuf;
 use std::process::{Command, Output};

@@ -1,0 +1,307 @@
+//! The chaos test (reliability issue): the pipeline robot, plus a sonar
+//! agent on a pseudo-terminal standing in for its board, runs while a
+//! seeded monkey SIGKILLs random agents and the router, SIGSTOPs and
+//! SIGCONTs agents, sends garbage into the sonar's serial line, floods the
+//! router with requests and rewires an edge.
+//!
+//! After every fault, within a bound: every agent is back and running; the
+//! router's connection list is what the monkey intends, and equal to what
+//! the agents report they read (their own input statistics); data flows
+//! again on every edge that should carry it. At the end: the router's
+//! memory and descriptors are flat, `nerve down` leaves no process, pid
+//! file or shared-memory file, and no zombie is left.
+//!
+//! The seed is printed; `NERVE_CHAOS_SEED=N` replays a run, and
+//! `NERVE_CHAOS_ROUNDS=N` makes it longer (default 48 faults, about half a minute).
+
+use nerve_tests::device::{FakeDevice, sonar_frame};
+use nerve_tests::{Robot, alive, reap, sigkill, wait_until};
+use serde_json::Value;
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+/// How long the robot may take to be whole again after one fault.
+const RECOVERY: Duration = Duration::from_secs(20);
+
+/// xorshift64*: small, seeded, replayable.
+struct Monkey(u64);
+
+impl Monkey {
+    fn below(&mut self, n: u64) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) % n.max(1)
+    }
+}
+
+fn env_u64(name: &str) -> Option<u64> {
+    std::env::var(name).ok().and_then(|v| v.parse().ok())
+}
+
+const AGENTS: [&str; 4] = ["t1", "r1", "r2", "sonar"];
+
+fn launch_file(r: &Robot) -> PathBuf {
+    // every agent restarted on any exit, with room for the monkey's kills
+    let mut body = String::from("robot = \"chaos\"\n");
+    for (name, kind, extra) in [
+        ("t1", "ticker", "period = \"10ms\"\n"),
+        ("r1", "relay", ""),
+        ("r2", "relay", ""),
+        ("sonar", "sonar", "device = \"{state}/dev/sonar\"\n"),
+    ] {
+        body.push_str(&format!(
+            "\n[[agent]]\nname = \"{name}\"\nkind = \"{kind}\"\n{extra}restart = \"always\"\nmax_restarts = 100\nbackoff = \"100ms\"\n"
+        ));
+    }
+    body.push_str(
+        "\n[[connect]]\nfrom = \"t1/tick\"\nto = \"r1/in\"\n\n[[connect]]\nfrom = \"t1/tick\"\nto = \"r2/in\"\n",
+    );
+    r.launch_file("chaos.toml", &body)
+}
+
+fn pid_file(r: &Robot, name: &str) -> Option<u32> {
+    std::fs::read_to_string(r.home.join(&r.name).join("pids").join(format!("{name}.pid"))).ok()?.trim().parse().ok()
+}
+
+/// Resident memory (kB) and open descriptors of `pid`.
+fn rss_and_fds(pid: u32) -> (u64, usize) {
+    let rss = std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .ok()
+        .and_then(|s| {
+            s.lines().find_map(|l| l.strip_prefix("VmRSS:")).and_then(|v| v.split_whitespace().next()?.parse().ok())
+        })
+        .unwrap_or(0);
+    let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).map(|d| d.count()).unwrap_or(0);
+    (rss, fds)
+}
+
+/// The edges the agents themselves report reading (their input statistics).
+fn edges_read(agents: &[Value]) -> BTreeSet<(String, String)> {
+    let mut out = BTreeSet::new();
+    for a in agents {
+        let name = a["name"].as_str().unwrap_or("");
+        for i in a["stats"]["inputs"].as_array().into_iter().flatten() {
+            let from = format!("{}/{}", i["from_agent"].as_str().unwrap_or(""), i["from_port"].as_str().unwrap_or(""));
+            out.insert((from, format!("{name}/{}", i["input"].as_str().unwrap_or(""))));
+        }
+    }
+    out
+}
+
+fn edges_listed(graph: &Value) -> BTreeSet<(String, String)> {
+    graph["connections"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|c| (c["from"].as_str().unwrap_or("").to_owned(), c["to"].as_str().unwrap_or("").to_owned()))
+        .collect()
+}
+
+/// Whether `port` carries `n` fresh samples within a few seconds.
+fn flows(r: &Robot, port: &str, n: u32) -> bool {
+    let out = r.nerve(&["echo", port, "--count", &n.to_string(), "--json", "--timeout", "3"]);
+    out.status.success() && String::from_utf8_lossy(&out.stdout).lines().count() == n as usize
+}
+
+/// Waits until the robot is whole: every agent running, the list as
+/// intended and equal to what the agents read, data on every edge.
+/// Returns how long it took, or what was still wrong.
+fn whole(r: &Robot, intended: &BTreeSet<(String, String)>) -> Result<Duration, String> {
+    let t0 = Instant::now();
+    let mut last = String::new();
+    while t0.elapsed() < RECOVERY {
+        let ps = r.nerve(&["ps", "--json"]);
+        let agents: Vec<Value> = match serde_json::from_slice::<Value>(&ps.stdout) {
+            Ok(Value::Array(v)) if ps.status.success() => v,
+            _ => {
+                last = format!("ps failed: {}", String::from_utf8_lossy(&ps.stderr).trim());
+                std::thread::sleep(Duration::from_millis(200));
+                continue;
+            }
+        };
+        let running: BTreeSet<&str> =
+            agents.iter().filter(|a| a["state"] == "running").filter_map(|a| a["name"].as_str()).collect();
+        if AGENTS.iter().any(|n| !running.contains(n)) {
+            last = format!("running: {running:?}");
+            std::thread::sleep(Duration::from_millis(200));
+            continue;
+        }
+        let listed = r.nerve(&["graph", "--json"]);
+        let listed = serde_json::from_slice::<Value>(&listed.stdout).map(|g| edges_listed(&g)).unwrap_or_default();
+        let read = edges_read(&agents);
+        if &listed != intended || &read != intended {
+            last = format!("intended {intended:?}, listed {listed:?}, read by the agents {read:?}");
+            std::thread::sleep(Duration::from_millis(200));
+            continue;
+        }
+        let dry: Vec<&str> = ["r1/out", "r2/out", "sonar/scan"]
+            .into_iter()
+            .filter(|p| {
+                let fed = match *p {
+                    "r1/out" => intended.iter().any(|(_, to)| to == "r1/in"),
+                    "r2/out" => intended.iter().any(|(_, to)| to == "r2/in"),
+                    _ => true,
+                };
+                fed && !flows(r, p, 2)
+            })
+            .collect();
+        if !dry.is_empty() {
+            last = format!("no data on {dry:?}");
+            continue;
+        }
+        return Ok(t0.elapsed());
+    }
+    Err(last)
+}
+
+#[test]
+fn the_pipeline_robot_survives_a_seeded_monkey() {
+    let seed = env_u64("NERVE_CHAOS_SEED").unwrap_or_else(|| {
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(1, |d| d.as_nanos() as u64) | 1
+    });
+    let rounds = env_u64("NERVE_CHAOS_ROUNDS").unwrap_or(48);
+    eprintln!("chaos: seed {seed}, {rounds} faults (replay with NERVE_CHAOS_SEED={seed})");
+    let mut monkey = Monkey(seed);
+
+    let r = Robot::new("chaos");
+    // the sonar's board: a frame every 100 ms, garbage when the monkey asks
+    let mut board = FakeDevice::new(&r.home.join(&r.name).join("dev").join("sonar"));
+    let stop = Arc::new(AtomicBool::new(false));
+    let garbage = Arc::new(AtomicU32::new(0));
+    let (s2, g2) = (stop.clone(), garbage.clone());
+    let mut noise = seed;
+    let writer = std::thread::spawn(move || {
+        let mut seq: u16 = 0;
+        while !s2.load(Ordering::Relaxed) {
+            seq = seq.wrapping_add(1);
+            board.write(&sonar_frame(seq, 1500));
+            for _ in 0..g2.swap(0, Ordering::Relaxed) {
+                let junk: Vec<u8> = (0..4096)
+                    .map(|_| {
+                        noise ^= noise << 13;
+                        noise ^= noise >> 7;
+                        noise ^= noise << 17;
+                        (noise >> 24) as u8
+                    })
+                    .collect();
+                board.write(&junk);
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    });
+
+    let file = launch_file(&r);
+    r.ok(&["launch", file.to_str().expect("utf-8 path")]);
+    let mut intended: BTreeSet<(String, String)> =
+        [("t1/tick", "r1/in"), ("t1/tick", "r2/in")].iter().map(|(a, b)| (a.to_string(), b.to_string())).collect();
+    if let Err(e) = whole(&r, &intended) {
+        panic!("the robot never came up whole: {e}");
+    }
+    let router = pid_file(&r, "router").expect("router pid");
+    let (rss0, fds0) = rss_and_fds(router);
+    let mut worst = Duration::ZERO;
+
+    for round in 0..rounds {
+        let victim = AGENTS[monkey.below(AGENTS.len() as u64) as usize];
+        let fault = match monkey.below(6) {
+            0 => {
+                sigkill(r.pid(victim));
+                format!("SIGKILL {victim}")
+            }
+            1 => {
+                let pid = pid_file(&r, "router").expect("router pid");
+                sigkill(pid);
+                assert!(wait_until(Duration::from_secs(5), || {
+                    reap();
+                    !alive(pid)
+                }));
+                r.ok(&["router", "--daemon"]);
+                "SIGKILL the router, start it again".to_owned()
+            }
+            2 => {
+                let pid = r.pid(victim);
+                let held = Duration::from_millis(200 + monkey.below(1000));
+                let _ = std::process::Command::new("kill").args(["-STOP", &pid.to_string()]).status();
+                std::thread::sleep(held);
+                let _ = std::process::Command::new("kill").args(["-CONT", &pid.to_string()]).status();
+                format!("SIGSTOP {victim} for {held:?}")
+            }
+            3 => {
+                let bursts = 1 + monkey.below(8) as u32;
+                garbage.store(bursts, Ordering::Relaxed);
+                format!("{bursts} x 4 KiB of garbage on the sonar's line")
+            }
+            4 => {
+                let flood: Vec<_> = (0..16)
+                    .map(|i| {
+                        let args: &[&str] =
+                            if i % 2 == 0 { &["ps", "--json"] } else { &["param", "get", "t1", "step"] };
+                        r.command("nerve").args(args).output()
+                    })
+                    .collect();
+                let failed = flood.iter().filter(|o| !o.as_ref().is_ok_and(|o| o.status.success())).count();
+                assert_eq!(failed, 0, "round {round}: {failed} of 16 requests of a flood failed (seed {seed})");
+                "a flood of 16 requests".to_owned()
+            }
+            _ => {
+                let edge = ("t1/tick".to_owned(), "r1/in".to_owned());
+                if intended.remove(&edge) {
+                    r.ok(&["disconnect", "t1/tick", "r1/in"]);
+                    "disconnect t1/tick -> r1/in".to_owned()
+                } else {
+                    r.ok(&["connect", "t1/tick", "r1/in"]);
+                    intended.insert(edge);
+                    "connect t1/tick -> r1/in".to_owned()
+                }
+            }
+        };
+        match whole(&r, &intended) {
+            Ok(took) => {
+                eprintln!("round {round}: {fault}: whole again in {took:?}");
+                worst = worst.max(took);
+            }
+            Err(e) => panic!("round {round}: after {fault}, not whole within {RECOVERY:?}: {e} (seed {seed})"),
+        }
+        reap();
+    }
+
+    let router = pid_file(&r, "router").expect("router pid");
+    let (rss1, fds1) = rss_and_fds(router);
+    eprintln!(
+        "chaos: worst recovery {worst:?}; router {rss0} kB, {fds0} fds at the start, {rss1} kB, {fds1} fds at the end"
+    );
+    assert!(rss1 <= rss0 + 16 * 1024, "router memory grew from {rss0} to {rss1} kB (seed {seed})");
+    assert!(fds1 <= fds0 + 16, "router descriptors grew from {fds0} to {fds1} (seed {seed})");
+    let garbage_seen: u64 = r.ok(&["param", "get", "sonar", "garbage_bytes"]).trim().parse().unwrap_or(0);
+    eprintln!("chaos: the sonar's agent counted {garbage_seen} garbage bytes in its current life");
+
+    stop.store(true, Ordering::Relaxed);
+    let _ = writer.join();
+    r.down_and_check_clean();
+    // no zombie of ours: every child that died was collected
+    assert!(
+        wait_until(Duration::from_secs(5), || {
+            reap();
+            zombies_of(std::process::id()).is_empty()
+        }),
+        "zombies left: {:?}",
+        zombies_of(std::process::id())
+    );
+}
+
+/// Zombie children of `parent`.
+fn zombies_of(parent: u32) -> Vec<u32> {
+    let Ok(rd) = std::fs::read_dir("/proc") else { return vec![] };
+    rd.filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|p| {
+            std::fs::read_to_string(format!("/proc/{p}/stat")).is_ok_and(|s| {
+                let f: Vec<&str> = s.rsplit_once(')').map(|(_, r)| r.split_whitespace().collect()).unwrap_or_default();
+                f.first() == Some(&"Z") && f.get(1).and_then(|pp| pp.parse::<u32>().ok()) == Some(parent)
+            })
+        })
+        .collect()
+}
