@@ -41,6 +41,7 @@ mod plot_images;
 mod procs;
 mod raw;
 mod scale;
+mod soak;
 mod stats;
 mod uds;
 mod zenoh_raw;
@@ -172,6 +173,23 @@ enum Scenario {
         #[arg(long)]
         hop_count: Option<usize>,
     },
+    /// The exploration robot plus churn for N minutes: memory, descriptors, files and latencies sampled and plotted.
+    Soak {
+        #[command(flatten)]
+        common: Common,
+        /// How long, in minutes (--quick: a quarter).
+        #[arg(long, default_value_t = 10.0)]
+        minutes: f64,
+        /// Seconds between two samples.
+        #[arg(long, default_value_t = 10.0)]
+        every: f64,
+        /// Seconds between two churn cycles (hot-add, wire, unwire, stop).
+        #[arg(long, default_value_t = 5.0)]
+        churn: f64,
+        /// The robot's launch file (its paths are taken from the folder above the file's).
+        #[arg(long)]
+        launch: Option<PathBuf>,
+    },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
         #[command(flatten)]
@@ -272,6 +290,27 @@ fn run(cli: Cli) -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
             } else {
                 scale::print_tables(&report);
+            }
+        }
+        Scenario::Soak { common, minutes, every, churn, launch } => {
+            let launch =
+                launch.unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../launch/explore.toml"));
+            let opts = soak::SoakOpts {
+                minutes: if common.quick { 0.25 } else { minutes },
+                every_s: if common.quick { 2.0 } else { every },
+                churn_s: churn,
+                launch,
+                verbose: common.verbose,
+            };
+            let report = soak::run(&opts)?;
+            let json = write_json(&common.out, "soak.json", &report)?;
+            let png = common.out.join("soak.png");
+            soak::png(&report, &png)?;
+            eprintln!("soak: results in {} and {} ({:.0} s)", json.display(), png.display(), report.seconds);
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                soak::print_tables(&report);
             }
         }
         Scenario::Hop { common, payloads, rounds, count } => {

@@ -81,6 +81,18 @@ fn scale_quick_measures_cpu_memory_and_ps() {
 }
 
 #[test]
+fn soak_quick_samples_the_exploration_robot_under_churn() {
+    let r = run("soak", &["--churn", "3"]);
+    let samples = r["samples"].as_array().map_or(0, |s| s.len());
+    assert!(samples >= 3, "{samples} samples");
+    assert!(r["router_rss_kib"]["last"].as_f64().unwrap_or(0.0) > 0.0);
+    assert!(r["files"]["last"].as_f64().unwrap_or(0.0) > 0.0);
+    assert!(r["churn_cycles"].as_u64().unwrap_or(0) >= 2, "{}", r["churn_cycles"]);
+    assert_eq!(r["churn_failures"], 0, "every churn cycle works");
+    assert!(r["hot_add"]["n"].as_u64().unwrap_or(0) >= 2);
+}
+
+#[test]
 fn images_quick_reads_every_frame_intact() {
     let r = run("images", &["--resolutions", "320x240", "--readers", "1,4"]);
     let results = r["results"].as_array().expect("results");

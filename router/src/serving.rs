@@ -327,7 +327,8 @@ impl State {
 
     /// Whether jobs wait for something the loop must look at soon.
     pub fn busy(&self) -> bool {
-        self.calls.busy() || self.jobs.iter().any(|j| matches!(j.work, Work::Kill { .. }))
+        // a job waits for agents, a death or a save: each is looked at soon
+        self.calls.busy() || !self.jobs.is_empty()
     }
 
     fn submit(&mut self, name: &str, cmd: AgentCommand, timeout: Duration) -> Result<Ticket, RouterError> {

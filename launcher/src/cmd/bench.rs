@@ -33,6 +33,8 @@ pub enum Scenario {
     Scale,
     /// The Zenoh bridge: one way across it vs raw Zenoh, and its cost on the local round trip.
     Bridge,
+    /// The exploration robot plus churn for N minutes (`--minutes N`): memory, descriptors, files, latencies.
+    Soak,
 }
 
 /// `nerve bench`
