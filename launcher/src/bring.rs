@@ -184,6 +184,7 @@ pub fn up(world: &World, file: &LaunchFile) -> Result<BroughtUp> {
                 window_ns: agent_sdk::clock::nanos(spec.restart_window),
                 backoff_ns: agent_sdk::clock::nanos(spec.backoff),
                 importance: spec.importance,
+                cwd: std::env::current_dir().ok().map(|d| d.display().to_string()),
             }))
             .with_context(|| format!("the router refused to supervise {}", spec.name))?;
     }

@@ -347,6 +347,12 @@ impl Supervisor {
         let stderr = agent_sdk::daemon::open_log(log);
         let mut cmd = std::process::Command::new(program);
         cmd.args(args).stdin(std::process::Stdio::null()).stdout(std::process::Stdio::null());
+        // where it was launched, so that relative paths in its arguments
+        // hold: a router started elsewhere restarted the decision maker
+        // without its knowledge base (found by the chaos test)
+        if let Some(cwd) = self.entries.get(name).and_then(|s| s.spec.cwd.as_deref()) {
+            cmd.current_dir(cwd);
+        }
         // whatever policy the router runs under (SCHED_RESET_ON_FORK covers
         // a real-time one; SCHED_BATCH or IDLE would pass on), the agent
         // starts under the normal one and asks for its own (R13)
@@ -435,6 +441,7 @@ mod tests {
             window_ns: 10_000_000_000,
             backoff_ns: 100_000_000,
             importance: 5,
+            cwd: None,
         }
     }
 
@@ -572,6 +579,29 @@ mod tests {
             std::thread::sleep(Duration::from_millis(10));
         }
         assert_eq!(failed, vec!["bad".to_owned()]);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_restart_starts_where_the_agent_was_launched() {
+        let d = dir("cwd");
+        let launched = d.join("robot-folder");
+        std::fs::create_dir_all(&launched).expect("dir");
+        let mut s = Supervisor::new(&d);
+        let mut spec = spec("kb-user", RestartPolicy::Always);
+        // a relative path in its arguments, as `--kb kb/explore.toml`
+        spec.argv = vec!["sh".into(), "-c".into(), "echo here > relative.txt".into()];
+        spec.cwd = Some(launched.display().to_string());
+        s.supervise(spec.clone(), Instant::now(), |_| false).expect("supervise");
+        s.spawn("kb-user", &spec.argv, &d.join("kb-user.log"), 1);
+        for _ in 0..200 {
+            s.reap();
+            if s.children.is_empty() {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        assert!(launched.join("relative.txt").is_file(), "not started in the launch folder");
         let _ = std::fs::remove_dir_all(&d);
     }
 

@@ -107,10 +107,16 @@ fn flows(r: &Robot, port: &str, n: u32) -> bool {
     out.status.success() && String::from_utf8_lossy(&out.stdout).lines().count() == n as usize
 }
 
-/// Waits until the robot is whole: every agent running, the list as
-/// intended and equal to what the agents read, data on every edge.
+/// Waits until the robot is whole: every agent of `agents` running, the
+/// router's list equal to what the agents report they read (and to
+/// `intended`, when the test knows it), data on every port of `flowing`.
 /// Returns how long it took, or what was still wrong.
-fn whole(r: &Robot, intended: &BTreeSet<(String, String)>) -> Result<Duration, String> {
+fn whole(
+    r: &Robot,
+    agents_expected: &[&str],
+    intended: Option<&BTreeSet<(String, String)>>,
+    flowing: &[&str],
+) -> Result<Duration, String> {
     let t0 = Instant::now();
     let mut last = String::new();
     while t0.elapsed() < RECOVERY {
@@ -123,9 +129,13 @@ fn whole(r: &Robot, intended: &BTreeSet<(String, String)>) -> Result<Duration, S
                 continue;
             }
         };
-        let running: BTreeSet<&str> =
-            agents.iter().filter(|a| a["state"] == "running").filter_map(|a| a["name"].as_str()).collect();
-        if AGENTS.iter().any(|n| !running.contains(n)) {
+        // suspended is a state the robot chose (its decision maker and resource manager suspend agents)
+        let running: BTreeSet<&str> = agents
+            .iter()
+            .filter(|a| a["state"] == "running" || a["state"] == "suspended")
+            .filter_map(|a| a["name"].as_str())
+            .collect();
+        if agents_expected.iter().any(|n| !running.contains(n)) {
             last = format!("running: {running:?}");
             std::thread::sleep(Duration::from_millis(200));
             continue;
@@ -133,22 +143,12 @@ fn whole(r: &Robot, intended: &BTreeSet<(String, String)>) -> Result<Duration, S
         let listed = r.nerve(&["graph", "--json"]);
         let listed = serde_json::from_slice::<Value>(&listed.stdout).map(|g| edges_listed(&g)).unwrap_or_default();
         let read = edges_read(&agents);
-        if &listed != intended || &read != intended {
+        if listed != read || intended.is_some_and(|i| *i != listed) {
             last = format!("intended {intended:?}, listed {listed:?}, read by the agents {read:?}");
             std::thread::sleep(Duration::from_millis(200));
             continue;
         }
-        let dry: Vec<&str> = ["r1/out", "r2/out", "sonar/scan"]
-            .into_iter()
-            .filter(|p| {
-                let fed = match *p {
-                    "r1/out" => intended.iter().any(|(_, to)| to == "r1/in"),
-                    "r2/out" => intended.iter().any(|(_, to)| to == "r2/in"),
-                    _ => true,
-                };
-                fed && !flows(r, p, 2)
-            })
-            .collect();
+        let dry: Vec<&&str> = flowing.iter().filter(|p| !flows(r, p, 2)).collect();
         if !dry.is_empty() {
             last = format!("no data on {dry:?}");
             continue;
@@ -158,11 +158,65 @@ fn whole(r: &Robot, intended: &BTreeSet<(String, String)>) -> Result<Duration, S
     Err(last)
 }
 
+/// The ports of the pipeline robot that carry data with the wiring `intended`.
+fn pipeline_flowing(intended: &BTreeSet<(String, String)>) -> Vec<&'static str> {
+    let fed = |input: &str| intended.iter().any(|(_, to)| to == input);
+    let mut out = vec!["sonar/scan"];
+    if fed("r1/in") {
+        out.push("r1/out");
+    }
+    if fed("r2/in") {
+        out.push("r2/out");
+    }
+    out
+}
+
+/// The seed of a run: `NERVE_CHAOS_SEED`, else the clock.
+fn seed() -> u64 {
+    env_u64("NERVE_CHAOS_SEED").unwrap_or_else(|| {
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(1, |d| d.as_nanos() as u64) | 1
+    })
+}
+
+/// SIGKILLs the router and starts it again.
+fn restart_router(r: &Robot) {
+    let pid = pid_file(r, "router").expect("router pid");
+    sigkill(pid);
+    assert!(wait_until(Duration::from_secs(5), || {
+        reap();
+        !alive(pid)
+    }));
+    r.ok(&["router", "--daemon"]);
+}
+
+/// SIGSTOPs `pid` for `held`, then SIGCONTs it.
+fn hang_for(pid: u32, held: Duration) {
+    let _ = std::process::Command::new("kill").args(["-STOP", &pid.to_string()]).status();
+    std::thread::sleep(held);
+    let _ = std::process::Command::new("kill").args(["-CONT", &pid.to_string()]).status();
+}
+
+/// 16 requests at once (`ps` and `graph`, the heaviest); returns how many failed.
+fn flood(r: &Robot) -> usize {
+    let children: Vec<_> = (0..16)
+        .map(|i| {
+            r.command("nerve")
+                .args([if i % 2 == 0 { "ps" } else { "graph" }, "--json"])
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::null())
+                .spawn()
+        })
+        .collect();
+    children
+        .into_iter()
+        .map(|c| c.and_then(|c| c.wait_with_output()))
+        .filter(|o| !o.as_ref().is_ok_and(|o| o.status.success()))
+        .count()
+}
+
 #[test]
 fn the_pipeline_robot_survives_a_seeded_monkey() {
-    let seed = env_u64("NERVE_CHAOS_SEED").unwrap_or_else(|| {
-        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(1, |d| d.as_nanos() as u64) | 1
-    });
+    let seed = seed();
     let rounds = env_u64("NERVE_CHAOS_ROUNDS").unwrap_or(48);
     eprintln!("chaos: seed {seed}, {rounds} faults (replay with NERVE_CHAOS_SEED={seed})");
     let mut monkey = Monkey(seed);
@@ -198,7 +252,7 @@ fn the_pipeline_robot_survives_a_seeded_monkey() {
     r.ok(&["launch", file.to_str().expect("utf-8 path")]);
     let mut intended: BTreeSet<(String, String)> =
         [("t1/tick", "r1/in"), ("t1/tick", "r2/in")].iter().map(|(a, b)| (a.to_string(), b.to_string())).collect();
-    if let Err(e) = whole(&r, &intended) {
+    if let Err(e) = whole(&r, &AGENTS, Some(&intended), &pipeline_flowing(&intended)) {
         panic!("the robot never came up whole: {e}");
     }
     let router = pid_file(&r, "router").expect("router pid");
@@ -213,21 +267,12 @@ fn the_pipeline_robot_survives_a_seeded_monkey() {
                 format!("SIGKILL {victim}")
             }
             1 => {
-                let pid = pid_file(&r, "router").expect("router pid");
-                sigkill(pid);
-                assert!(wait_until(Duration::from_secs(5), || {
-                    reap();
-                    !alive(pid)
-                }));
-                r.ok(&["router", "--daemon"]);
+                restart_router(&r);
                 "SIGKILL the router, start it again".to_owned()
             }
             2 => {
-                let pid = r.pid(victim);
                 let held = Duration::from_millis(200 + monkey.below(1000));
-                let _ = std::process::Command::new("kill").args(["-STOP", &pid.to_string()]).status();
-                std::thread::sleep(held);
-                let _ = std::process::Command::new("kill").args(["-CONT", &pid.to_string()]).status();
+                hang_for(r.pid(victim), held);
                 format!("SIGSTOP {victim} for {held:?}")
             }
             3 => {
@@ -259,7 +304,7 @@ fn the_pipeline_robot_survives_a_seeded_monkey() {
                 }
             }
         };
-        match whole(&r, &intended) {
+        match whole(&r, &AGENTS, Some(&intended), &pipeline_flowing(&intended)) {
             Ok(took) => {
                 eprintln!("round {round}: {fault}: whole again in {took:?}");
                 worst = worst.max(took);
@@ -304,4 +349,72 @@ fn zombies_of(parent: u32) -> Vec<u32> {
             })
         })
         .collect()
+}
+
+/// The longer variant, over the exploration robot (`launch/explore.toml`:
+/// the simulator and the 13 agents of the first experiment, whose decision
+/// maker rewires the graph itself): agents and the router SIGKILLed,
+/// agents SIGSTOPped, floods. After each fault every agent runs again, the
+/// router's list equals what the agents read, and the sonar and odometry
+/// flow. Run for BENCHMARKS.md: `cargo nextest run -p nerve-tests --test
+/// chaos --run-ignored only` (`NERVE_CHAOS_ROUNDS`, default 40).
+#[test]
+#[ignore = "minutes long; run by hand for BENCHMARKS.md"]
+fn the_exploration_robot_survives_a_seeded_monkey() {
+    let seed = seed();
+    let rounds = env_u64("NERVE_CHAOS_ROUNDS").unwrap_or(40);
+    eprintln!("chaos (exploration robot): seed {seed}, {rounds} faults (replay with NERVE_CHAOS_SEED={seed})");
+    let mut monkey = Monkey(seed);
+    let r = Robot::new("chaosx");
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let out = r.command("nerve").current_dir(&repo).args(["launch", "launch/explore.toml"]).output().expect("launch");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let agents: Vec<String> = r.ps().iter().filter_map(|a| a["name"].as_str().map(str::to_owned)).collect();
+    let names: Vec<&str> = agents.iter().map(String::as_str).collect();
+    let flowing = ["sonar/scan", "motor/odom"];
+    if let Err(e) = whole(&r, &names, None, &flowing) {
+        panic!("the robot never came up whole: {e}");
+    }
+    let (rss0, fds0) = rss_and_fds(pid_file(&r, "router").expect("router pid"));
+    let mut worst = Duration::ZERO;
+    for round in 0..rounds {
+        let victim = names[monkey.below(names.len() as u64) as usize];
+        let fault = match monkey.below(4) {
+            0 => {
+                sigkill(r.pid(victim));
+                format!("SIGKILL {victim}")
+            }
+            1 => {
+                restart_router(&r);
+                "SIGKILL the router, start it again".to_owned()
+            }
+            2 => {
+                let held = Duration::from_millis(200 + monkey.below(1000));
+                hang_for(r.pid(victim), held);
+                format!("SIGSTOP {victim} for {held:?}")
+            }
+            _ => {
+                let failed = flood(&r);
+                assert_eq!(failed, 0, "round {round}: {failed} of 16 requests of a flood failed (seed {seed})");
+                "a flood of 16 requests".to_owned()
+            }
+        };
+        match whole(&r, &names, None, &flowing) {
+            Ok(took) => {
+                eprintln!("round {round}: {fault}: whole again in {took:?}");
+                worst = worst.max(took);
+            }
+            Err(e) => panic!("round {round}: after {fault}, not whole within {RECOVERY:?}: {e} (seed {seed})"),
+        }
+        // on-failure supervision allows 5 restarts a minute per agent
+        std::thread::sleep(Duration::from_millis(1500));
+        reap();
+    }
+    let (rss1, fds1) = rss_and_fds(pid_file(&r, "router").expect("router pid"));
+    eprintln!(
+        "chaos (exploration robot): worst recovery {worst:?}; router {rss0} kB, {fds0} fds at the start, {rss1} kB, {fds1} fds at the end"
+    );
+    assert!(rss1 <= rss0 + 16 * 1024, "router memory grew from {rss0} to {rss1} kB (seed {seed})");
+    assert!(fds1 <= fds0 + 16, "router descriptors grew from {fds0} to {fds1} (seed {seed})");
+    r.down_and_check_clean();
 }

@@ -117,6 +117,11 @@ pub struct Supervision {
     pub backoff_ns: u64,
     /// 1..10, for the resource manager
     pub importance: u8,
+    /// the folder the agent was started in, where relative paths in `argv`
+    /// (a world file, a knowledge base) are found; a restart starts there
+    /// too, wherever the router runs
+    #[serde(default)]
+    pub cwd: Option<String>,
 }
 
 /// Whether an agent's task runs.
