@@ -65,6 +65,8 @@ struct Link {
     reopen: bool,
     queue: VecDeque<Queued>,
     in_flight: Option<InFlight>,
+    /// the agent left while a command was pending: dropped once idle
+    gone: bool,
 }
 
 /// The router's commands to its agents.
@@ -100,13 +102,21 @@ impl Calls {
     pub fn registered(&mut self, name: &str) {
         if let Some(link) = self.links.get_mut(name) {
             link.reopen = true;
+            link.gone = false;
         }
     }
 
     /// The agent is gone for good: drops its client once nothing is pending.
     pub fn left(&mut self, name: &str) {
-        if self.links.get(name).is_some_and(|l| l.in_flight.is_none() && l.queue.is_empty()) {
-            self.links.remove(name);
+        match self.links.get_mut(name) {
+            Some(l) if l.in_flight.is_none() && l.queue.is_empty() => {
+                self.links.remove(name);
+            }
+            // the reply to a `stop` comes after the agent said goodbye:
+            // without this its client stayed for ever, one per agent that
+            // ever stopped (found by the soak benchmark)
+            Some(l) => l.gone = true,
+            None => {}
         }
     }
 
@@ -126,7 +136,10 @@ impl Calls {
                 }
             }
         }
-        self.links.retain(|_, l| l.client.is_some() || l.in_flight.is_some() || !l.queue.is_empty());
+        self.links.retain(|_, l| {
+            let pending = l.in_flight.is_some() || !l.queue.is_empty();
+            pending || (l.client.is_some() && !l.gone)
+        });
         out
     }
 }
@@ -253,5 +266,53 @@ fn open(name: &str, world: &World, node: &Node<Ipc>) -> Option<ControlClient<Age
             tracing::warn!(agent = name, "cannot open the agent's control service: {e}");
             None
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use agent_sdk::control::{ControlServer, ControlSize};
+    use shm_schemas::AgentName;
+
+    /// Removes the test robot's files when dropped, even when the test fails.
+    struct Files(World);
+
+    impl Drop for Files {
+        fn drop(&mut self) {
+            for f in self.0.shm_files().into_iter().chain(self.0.iox2_files()) {
+                let _ = std::fs::remove_file(f);
+            }
+        }
+    }
+
+    #[test]
+    fn an_agent_that_leaves_before_its_reply_has_its_client_dropped_after_it() {
+        let world = World::new(&format!("calls{}", std::process::id())).expect("world");
+        let _files = Files(world.clone());
+        let node = world.node("router").expect("node");
+        let agent = world.node("agent").expect("agent node");
+        let service = world.robot().ctl_service(&AgentName::new("a1").expect("name"));
+        let server: ControlServer<AgentCommand, AgentReply> =
+            ControlServer::create(&agent, &service, ControlSize::AGENT).expect("server");
+        let mut calls = Calls::default();
+        let ticket = calls.submit("a1", AgentCommand::Stop, Duration::from_secs(5));
+        // sent, then the agent says goodbye before it answers (as a stopping agent does)
+        assert!(calls.pump(&world, &node, Instant::now()).is_empty());
+        calls.left("a1");
+        assert!(calls.links.contains_key("a1"), "kept while the reply is pending");
+        let t0 = Instant::now();
+        while server.serve(|_| AgentReply::Ok).expect("serve") == 0 {
+            assert!(t0.elapsed() < Duration::from_secs(5), "the stop never arrived");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let mut outcomes = Vec::new();
+        while outcomes.is_empty() {
+            assert!(t0.elapsed() < Duration::from_secs(5), "no outcome");
+            outcomes = calls.pump(&world, &node, Instant::now());
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert_eq!(outcomes[0].ticket, ticket);
+        assert!(!calls.links.contains_key("a1"), "the client of an agent that left is dropped once idle");
     }
 }
