@@ -364,11 +364,9 @@ fn commands_that_map_shared_memory_check_the_free_space_first() {
     let r = Robot::new("shmfull");
     r.router();
     r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
-    for args in [
-        &["echo", "t1/tick", "--count", "1"][..],
-        &["hz", "t1/tick"][..],
-        &["start", "relay", "--name", "r1"][..],
-    ] {
+    for args in
+        [&["echo", "t1/tick", "--count", "1"][..], &["hz", "t1/tick"][..], &["start", "relay", "--name", "r1"][..]]
+    {
         let out = r.command("nerve").args(args).env("NERVE_SHM_MIN_FREE", "100000G").output().expect("nerve");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success() && err.contains("/dev/shm"), "{args:?}: {err}");
