@@ -296,63 +296,85 @@ mod tests {
         }
     }
 
+    /// An agent's control service, and a `stop` the router sent to it.
+    /// Fields drop in this order: the ports and nodes first, the files last.
+    struct StopSent {
+        server: Option<ControlServer<AgentCommand, AgentReply>>,
+        agent: Option<Node<Ipc>>,
+        calls: Calls,
+        node: Node<Ipc>,
+        ticket: Ticket,
+        t0: Instant,
+        world: World,
+        _files: Files,
+    }
+
+    impl StopSent {
+        fn new(tag: &str, name: &str) -> StopSent {
+            let world = World::new(&format!("{tag}{}", std::process::id())).expect("world");
+            let _files = Files(world.clone());
+            let node = world.node("router").expect("node");
+            let agent = world.node("agent").expect("agent node");
+            let service = world.robot().ctl_service(&AgentName::new(name).expect("name"));
+            let server = ControlServer::create(&agent, &service, ControlSize::AGENT).expect("server");
+            let mut calls = Calls::default();
+            let ticket = calls.submit(name, AgentCommand::Stop, Duration::from_secs(5));
+            assert!(calls.pump(&world, &node, Instant::now()).is_empty(), "sent, not answered yet");
+            StopSent {
+                world,
+                _files,
+                node,
+                agent: Some(agent),
+                server: Some(server),
+                calls,
+                ticket,
+                t0: Instant::now(),
+            }
+        }
+
+        fn server(&self) -> &ControlServer<AgentCommand, AgentReply> {
+            self.server.as_ref().expect("the agent's service")
+        }
+
+        /// Pumps until the stop has an outcome.
+        fn outcome(&mut self) -> Outcome {
+            loop {
+                assert!(self.t0.elapsed() < Duration::from_secs(5), "no outcome");
+                let mut out = self.calls.pump(&self.world, &self.node, Instant::now());
+                if let Some(o) = out.pop() {
+                    assert_eq!(o.ticket, self.ticket);
+                    return o;
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+    }
+
     #[test]
     fn an_agent_that_leaves_before_its_reply_has_its_client_dropped_after_it() {
-        let world = World::new(&format!("calls{}", std::process::id())).expect("world");
-        let _files = Files(world.clone());
-        let node = world.node("router").expect("node");
-        let agent = world.node("agent").expect("agent node");
-        let service = world.robot().ctl_service(&AgentName::new("a1").expect("name"));
-        let server: ControlServer<AgentCommand, AgentReply> =
-            ControlServer::create(&agent, &service, ControlSize::AGENT).expect("server");
-        let mut calls = Calls::default();
-        let ticket = calls.submit("a1", AgentCommand::Stop, Duration::from_secs(5));
-        // sent, then the agent says goodbye before it answers (as a stopping agent does)
-        assert!(calls.pump(&world, &node, Instant::now()).is_empty());
-        calls.left("a1");
-        assert!(calls.links.contains_key("a1"), "kept while the reply is pending");
-        let t0 = Instant::now();
-        while server.serve(|_| AgentReply::Ok).expect("serve") == 0 {
-            assert!(t0.elapsed() < Duration::from_secs(5), "the stop never arrived");
+        let mut s = StopSent::new("calls", "a1");
+        // the agent says goodbye before it answers (as a stopping agent does)
+        s.calls.left("a1");
+        assert!(s.calls.links.contains_key("a1"), "kept while the reply is pending");
+        while s.server().serve(|_| AgentReply::Ok).expect("serve") == 0 {
+            assert!(s.t0.elapsed() < Duration::from_secs(5), "the stop never arrived");
             std::thread::sleep(Duration::from_millis(1));
         }
-        let mut outcomes = Vec::new();
-        while outcomes.is_empty() {
-            assert!(t0.elapsed() < Duration::from_secs(5), "no outcome");
-            outcomes = calls.pump(&world, &node, Instant::now());
-            std::thread::sleep(Duration::from_millis(1));
-        }
-        assert_eq!(outcomes[0].ticket, ticket);
-        assert!(!calls.links.contains_key("a1"), "the client of an agent that left is dropped once idle");
+        s.outcome();
+        assert!(!s.calls.links.contains_key("a1"), "the client of an agent that left is dropped once idle");
     }
 
     #[test]
     fn a_stop_whose_agent_went_away_before_its_answer_arrived_is_done() {
-        let world = World::new(&format!("callstop{}", std::process::id())).expect("world");
-        let _files = Files(world.clone());
-        let node = world.node("router").expect("node");
-        let agent = world.node("agent").expect("agent node");
-        let service = world.robot().ctl_service(&AgentName::new("a2").expect("name"));
-        let server: ControlServer<AgentCommand, AgentReply> =
-            ControlServer::create(&agent, &service, ControlSize::AGENT).expect("server");
-        let mut calls = Calls::default();
-        let stop = calls.submit("a2", AgentCommand::Stop, Duration::from_secs(5));
-        assert!(calls.pump(&world, &node, Instant::now()).is_empty());
+        let mut s = StopSent::new("callstop", "a2");
         // the agent goes away without an answer that arrives
-        let t0 = Instant::now();
-        while server.receive().expect("receive").is_none() {
-            assert!(t0.elapsed() < Duration::from_secs(5), "the stop never arrived");
+        while s.server().receive().expect("receive").is_none() {
+            assert!(s.t0.elapsed() < Duration::from_secs(5), "the stop never arrived");
             std::thread::sleep(Duration::from_millis(1));
         }
-        drop(server);
-        drop(agent);
-        let mut outcomes = Vec::new();
-        while outcomes.is_empty() {
-            assert!(t0.elapsed() < Duration::from_secs(5), "no outcome");
-            outcomes = calls.pump(&world, &node, Instant::now());
-            std::thread::sleep(Duration::from_millis(1));
-        }
-        assert_eq!(outcomes[0].ticket, stop);
-        assert!(matches!(outcomes[0].result, Ok(AgentReply::Ok)), "{:?}", outcomes[0].result);
+        s.server = None;
+        s.agent = None;
+        let o = s.outcome();
+        assert!(matches!(o.result, Ok(AgentReply::Ok)), "{:?}", o.result);
     }
 }

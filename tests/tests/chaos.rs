@@ -23,6 +23,11 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
+/// The pipeline robot's flood: statistics of every agent, and a parameter of one.
+const FLOOD_PIPELINE: &[&[&str]] = &[&["ps", "--json"], &["param", "get", "t1", "step"]];
+/// The exploration robot's flood: the two heaviest requests.
+const FLOOD_EXPLORE: &[&[&str]] = &[&["ps", "--json"], &["graph", "--json"]];
+
 /// How long the robot may take to be whole again after one fault.
 const RECOVERY: Duration = Duration::from_secs(20);
 
@@ -196,12 +201,12 @@ fn hang_for(pid: u32, held: Duration) {
     let _ = std::process::Command::new("kill").args(["-CONT", &pid.to_string()]).status();
 }
 
-/// 16 requests at once (`ps` and `graph`, the heaviest); returns how many failed.
-fn flood(r: &Robot) -> usize {
+/// 16 requests at once, taking turns through `requests`; returns how many failed.
+fn flood(r: &Robot, requests: &[&[&str]]) -> usize {
     let children: Vec<_> = (0..16)
         .map(|i| {
             r.command("nerve")
-                .args([if i % 2 == 0 { "ps" } else { "graph" }, "--json"])
+                .args(requests[i % requests.len()])
                 .stdout(std::process::Stdio::null())
                 .stderr(std::process::Stdio::null())
                 .spawn()
@@ -212,6 +217,62 @@ fn flood(r: &Robot) -> usize {
         .map(|c| c.and_then(|c| c.wait_with_output()))
         .filter(|o| !o.as_ref().is_ok_and(|o| o.status.success()))
         .count()
+}
+
+/// The faults both robots get: `kind` 0 SIGKILLs `victim`, 1 the router
+/// (started again), 2 hangs `victim` for a while, anything else floods the
+/// router with `requests`. Returns what was done.
+fn common_fault(
+    r: &Robot,
+    monkey: &mut Monkey,
+    kind: u64,
+    victim: &str,
+    requests: &[&[&str]],
+    round: u64,
+    seed: u64,
+) -> String {
+    match kind {
+        0 => {
+            sigkill(r.pid(victim));
+            format!("SIGKILL {victim}")
+        }
+        1 => {
+            restart_router(r);
+            "SIGKILL the router, start it again".to_owned()
+        }
+        2 => {
+            let held = Duration::from_millis(200 + monkey.below(1000));
+            hang_for(r.pid(victim), held);
+            format!("SIGSTOP {victim} for {held:?}")
+        }
+        _ => {
+            let failed = flood(r, requests);
+            assert_eq!(failed, 0, "round {round}: {failed} of 16 requests of a flood failed (seed {seed})");
+            "a flood of 16 requests".to_owned()
+        }
+    }
+}
+
+/// After `fault` in `round`: the robot must be whole again (`whole`'s result).
+fn recovered(round: u64, fault: &str, whole: Result<Duration, String>, worst: &mut Duration, seed: u64) {
+    match whole {
+        Ok(took) => {
+            eprintln!("round {round}: {fault}: whole again in {took:?}");
+            *worst = (*worst).max(took);
+        }
+        Err(e) => panic!("round {round}: after {fault}, not whole within {RECOVERY:?}: {e} (seed {seed})"),
+    }
+}
+
+/// The router's memory and descriptors at the end against `start`.
+fn assert_router_flat(r: &Robot, what: &str, start: (u64, usize), worst: Duration, seed: u64) {
+    let (rss0, fds0) = start;
+    let (rss1, fds1) = rss_and_fds(pid_file(r, "router").expect("router pid"));
+    eprintln!(
+        "{what}: worst recovery {worst:?}; router {rss0} kB, {fds0} fds at the start, {rss1} kB, {fds1} fds at the end"
+    );
+    assert!(rss1 <= rss0 + 16 * 1024, "router memory grew from {rss0} to {rss1} kB (seed {seed})");
+    assert!(fds1 <= fds0 + 16, "router descriptors grew from {fds0} to {fds1} (seed {seed})");
 }
 
 #[test]
@@ -255,43 +316,19 @@ fn the_pipeline_robot_survives_a_seeded_monkey() {
     if let Err(e) = whole(&r, &AGENTS, Some(&intended), &pipeline_flowing(&intended)) {
         panic!("the robot never came up whole: {e}");
     }
-    let router = pid_file(&r, "router").expect("router pid");
-    let (rss0, fds0) = rss_and_fds(router);
+    let start = rss_and_fds(pid_file(&r, "router").expect("router pid"));
     let mut worst = Duration::ZERO;
 
     for round in 0..rounds {
         let victim = AGENTS[monkey.below(AGENTS.len() as u64) as usize];
         let fault = match monkey.below(6) {
-            0 => {
-                sigkill(r.pid(victim));
-                format!("SIGKILL {victim}")
-            }
-            1 => {
-                restart_router(&r);
-                "SIGKILL the router, start it again".to_owned()
-            }
-            2 => {
-                let held = Duration::from_millis(200 + monkey.below(1000));
-                hang_for(r.pid(victim), held);
-                format!("SIGSTOP {victim} for {held:?}")
-            }
+            kind @ 0..=2 => common_fault(&r, &mut monkey, kind, victim, FLOOD_PIPELINE, round, seed),
             3 => {
                 let bursts = 1 + monkey.below(8) as u32;
                 garbage.store(bursts, Ordering::Relaxed);
                 format!("{bursts} x 4 KiB of garbage on the sonar's line")
             }
-            4 => {
-                let flood: Vec<_> = (0..16)
-                    .map(|i| {
-                        let args: &[&str] =
-                            if i % 2 == 0 { &["ps", "--json"] } else { &["param", "get", "t1", "step"] };
-                        r.command("nerve").args(args).output()
-                    })
-                    .collect();
-                let failed = flood.iter().filter(|o| !o.as_ref().is_ok_and(|o| o.status.success())).count();
-                assert_eq!(failed, 0, "round {round}: {failed} of 16 requests of a flood failed (seed {seed})");
-                "a flood of 16 requests".to_owned()
-            }
+            4 => common_fault(&r, &mut monkey, 3, victim, FLOOD_PIPELINE, round, seed),
             _ => {
                 let edge = ("t1/tick".to_owned(), "r1/in".to_owned());
                 if intended.remove(&edge) {
@@ -304,23 +341,11 @@ fn the_pipeline_robot_survives_a_seeded_monkey() {
                 }
             }
         };
-        match whole(&r, &AGENTS, Some(&intended), &pipeline_flowing(&intended)) {
-            Ok(took) => {
-                eprintln!("round {round}: {fault}: whole again in {took:?}");
-                worst = worst.max(took);
-            }
-            Err(e) => panic!("round {round}: after {fault}, not whole within {RECOVERY:?}: {e} (seed {seed})"),
-        }
+        recovered(round, &fault, whole(&r, &AGENTS, Some(&intended), &pipeline_flowing(&intended)), &mut worst, seed);
         reap();
     }
 
-    let router = pid_file(&r, "router").expect("router pid");
-    let (rss1, fds1) = rss_and_fds(router);
-    eprintln!(
-        "chaos: worst recovery {worst:?}; router {rss0} kB, {fds0} fds at the start, {rss1} kB, {fds1} fds at the end"
-    );
-    assert!(rss1 <= rss0 + 16 * 1024, "router memory grew from {rss0} to {rss1} kB (seed {seed})");
-    assert!(fds1 <= fds0 + 16, "router descriptors grew from {fds0} to {fds1} (seed {seed})");
+    assert_router_flat(&r, "chaos", start, worst, seed);
     let garbage_seen: u64 = r.ok(&["param", "get", "sonar", "garbage_bytes"]).trim().parse().unwrap_or(0);
     eprintln!("chaos: the sonar's agent counted {garbage_seen} garbage bytes in its current life");
 
@@ -375,46 +400,17 @@ fn the_exploration_robot_survives_a_seeded_monkey() {
     if let Err(e) = whole(&r, &names, None, &flowing) {
         panic!("the robot never came up whole: {e}");
     }
-    let (rss0, fds0) = rss_and_fds(pid_file(&r, "router").expect("router pid"));
+    let start = rss_and_fds(pid_file(&r, "router").expect("router pid"));
     let mut worst = Duration::ZERO;
     for round in 0..rounds {
         let victim = names[monkey.below(names.len() as u64) as usize];
-        let fault = match monkey.below(4) {
-            0 => {
-                sigkill(r.pid(victim));
-                format!("SIGKILL {victim}")
-            }
-            1 => {
-                restart_router(&r);
-                "SIGKILL the router, start it again".to_owned()
-            }
-            2 => {
-                let held = Duration::from_millis(200 + monkey.below(1000));
-                hang_for(r.pid(victim), held);
-                format!("SIGSTOP {victim} for {held:?}")
-            }
-            _ => {
-                let failed = flood(&r);
-                assert_eq!(failed, 0, "round {round}: {failed} of 16 requests of a flood failed (seed {seed})");
-                "a flood of 16 requests".to_owned()
-            }
-        };
-        match whole(&r, &names, None, &flowing) {
-            Ok(took) => {
-                eprintln!("round {round}: {fault}: whole again in {took:?}");
-                worst = worst.max(took);
-            }
-            Err(e) => panic!("round {round}: after {fault}, not whole within {RECOVERY:?}: {e} (seed {seed})"),
-        }
+        let kind = monkey.below(4);
+        let fault = common_fault(&r, &mut monkey, kind, victim, FLOOD_EXPLORE, round, seed);
+        recovered(round, &fault, whole(&r, &names, None, &flowing), &mut worst, seed);
         // on-failure supervision allows 5 restarts a minute per agent
         std::thread::sleep(Duration::from_millis(1500));
         reap();
     }
-    let (rss1, fds1) = rss_and_fds(pid_file(&r, "router").expect("router pid"));
-    eprintln!(
-        "chaos (exploration robot): worst recovery {worst:?}; router {rss0} kB, {fds0} fds at the start, {rss1} kB, {fds1} fds at the end"
-    );
-    assert!(rss1 <= rss0 + 16 * 1024, "router memory grew from {rss0} to {rss1} kB (seed {seed})");
-    assert!(fds1 <= fds0 + 16, "router descriptors grew from {fds0} to {fds1} (seed {seed})");
+    assert_router_flat(&r, "chaos (exploration robot)", start, worst, seed);
     r.down_and_check_clean();
 }
