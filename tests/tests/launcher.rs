@@ -371,8 +371,10 @@ fn down_names_the_clients_it_leaves_running() {
         .spawn()
         .expect("start nerve echo");
     let mut first = String::new();
-    let stdout = echo.stdout.take().expect("echo's stdout");
-    std::io::BufReader::new(stdout).read_line(&mut first).expect("a sample");
+    // the reader lives to the end: echo ends quietly once its pipe closes,
+    // which would make this test race the ticker's next sample
+    let mut reader = std::io::BufReader::new(echo.stdout.take().expect("echo's stdout"));
+    reader.read_line(&mut first).expect("a sample");
     assert!(!first.is_empty(), "nerve echo printed nothing");
     let out = r.nerve(&["down", "--grace", "1"]);
     let err = String::from_utf8_lossy(&out.stderr);
@@ -382,6 +384,7 @@ fn down_names_the_clients_it_leaves_running() {
     assert!(alive(echo.id()), "a client was stopped");
     let _ = echo.kill();
     let _ = echo.wait();
+    drop(reader);
     let out = r.nerve(&["down", "--grace", "1"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!err.contains("note:"), "{err}");
