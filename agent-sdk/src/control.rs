@@ -18,7 +18,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
 use serde::{Serialize, de::DeserializeOwned};
-use shm_schemas::control::{ProtocolError, decode, encode};
+use shm_schemas::control::{ProtocolError, decode, encode, unanswered};
 use std::marker::PhantomData;
 use std::time::{Duration, Instant};
 
@@ -214,7 +214,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
         };
         let req = decode::<Req>(active.payload());
         let responder = Responder {
-            active,
+            active: Some(active),
             service: self.service.clone(),
             max_message: self.size.max_message,
             _types: PhantomData,
@@ -240,11 +240,14 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
 
 /// A request taken by a [`ControlServer`] and not answered yet.
 ///
-/// Dropping it unanswered tells the caller nothing until its time-out: answer
-/// every request, with an error reply if need be.
+/// Dropping it unanswered (a server that stops with requests in hand) sends
+/// the caller [`ProtocolError::Unanswered`]: it learns at once that the
+/// request was taken, and does not send it again (reliability review: a
+/// request dropped unanswered looked like one never taken, and was resent).
 #[derive(Debug)]
 pub struct Responder<Resp> {
-    active: ActiveRequest<Ipc, Bytes, (), Bytes, ()>,
+    /// `None` once answered
+    active: Option<ActiveRequest<Ipc, Bytes, (), Bytes, ()>>,
     service: String,
     max_message: Option<usize>,
     _types: PhantomData<fn(Resp)>,
@@ -254,25 +257,41 @@ impl<Resp: Serialize> Responder<Resp> {
     /// Whether the caller still waits for the answer (it has not given up
     /// or gone).
     pub fn is_connected(&self) -> bool {
-        self.active.is_connected()
+        self.active.as_ref().is_some_and(|a| a.is_connected())
     }
 
     /// Sends `reply`; a reply larger than the service carries is replaced by
     /// `too_large`'s answer to [`ProtocolError::TooLarge`]. Failures to send
     /// are logged: the caller's time-out tells it.
-    pub fn respond_or(self, reply: &Resp, too_large: impl FnOnce(ProtocolError) -> Resp) {
+    pub fn respond_or(mut self, reply: &Resp, too_large: impl FnOnce(ProtocolError) -> Resp) {
         let mut bytes = encode(reply);
         if let Some(max) = self.max_message.filter(|&m| bytes.len() > m) {
             tracing::warn!(service = %self.service, bytes = bytes.len(), max, "a reply exceeds the service's limit");
             bytes = encode(&too_large(ProtocolError::TooLarge { bytes: bytes.len(), max }));
         }
-        match self.active.loan_slice_uninit(bytes.len()) {
+        self.send(&bytes);
+    }
+}
+
+impl<Resp> Responder<Resp> {
+    fn send(&mut self, bytes: &[u8]) {
+        let Some(active) = self.active.take() else { return };
+        match active.loan_slice_uninit(bytes.len()) {
             Ok(resp) => {
-                if let Err(e) = resp.write_from_slice(&bytes).send() {
+                if let Err(e) = resp.write_from_slice(bytes).send() {
                     tracing::warn!(service = %self.service, "could not send a reply: {e:?}");
                 }
             }
             Err(e) => tracing::warn!(service = %self.service, "could not loan a reply: {e:?}"),
+        }
+    }
+}
+
+impl<Resp> Drop for Responder<Resp> {
+    fn drop(&mut self) {
+        if self.active.as_ref().is_some_and(|a| a.is_connected()) {
+            tracing::debug!(service = %self.service, "a request is let go unanswered");
+            self.send(&unanswered());
         }
     }
 }
@@ -416,6 +435,11 @@ impl<Resp: DeserializeOwned> PendingCall<Resp> {
             return Ok(Some(decode::<Resp>(resp.payload())?));
         }
         if !self.pending.is_connected() {
+            // the server may have answered and let go of the request between
+            // the two looks: read once more before calling it gone
+            if let Some(resp) = self.pending.receive().map_err(|e| ipc_err(&self.service, e))? {
+                return Ok(Some(decode::<Resp>(resp.payload())?));
+            }
             return Err(ControlError::NoServer { service: self.service.clone() });
         }
         Ok(None)
@@ -500,40 +524,57 @@ mod tests {
         drop((a, b, r));
     }
 
+    /// A server of `String`s on its own thread, taking each request with
+    /// `take` until the returned flag is set.
+    fn server_thread(
+        world: &World,
+        service: &str,
+        size: ControlSize,
+        mut take: impl FnMut(Result<String, ProtocolError>, Responder<String>) + Send + 'static,
+    ) -> (Arc<AtomicBool>, std::thread::JoinHandle<()>) {
+        let done = Arc::new(AtomicBool::new(false));
+        let (world, service, stop) = (world.clone(), service.to_owned(), done.clone());
+        let thread = std::thread::spawn(move || {
+            let node = world.node("server").expect("node");
+            let server: ControlServer<String, String> = ControlServer::create(&node, &service, size).expect("server");
+            while !stop.load(Ordering::Relaxed) {
+                while let Some((req, responder)) = server.receive().expect("receive") {
+                    take(req, responder);
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        });
+        (done, thread)
+    }
+
+    /// A client of `service`, once its server is up (at most 5 s).
+    fn client_of(node: &Node<Ipc>, service: &str, size: ControlSize) -> ControlClient<String, String> {
+        let t0 = Instant::now();
+        loop {
+            match ControlClient::<String, String>::open(node, service, size) {
+                Ok(c) => return c,
+                Err(_) if t0.elapsed() < Duration::from_secs(5) => std::thread::sleep(Duration::from_millis(10)),
+                Err(e) => panic!("no server: {e}"),
+            }
+        }
+    }
+
     #[test]
     fn oversized_messages_are_refused_or_answered_with_an_error() {
         let world = World::new(&format!("ctl{}", std::process::id())).expect("world");
         let _cleanup = Cleanup(world.clone());
         let size = ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128), reserved_clients: 0 };
         let service = format!("nerve/{}/test/ctl", world.robot());
-        let done = Arc::new(AtomicBool::new(false));
-        let server_thread = {
-            let (world, service, done) = (world.clone(), service.clone(), done.clone());
-            std::thread::spawn(move || {
-                let node = world.node("server").expect("node");
-                let server: ControlServer<String, String> =
-                    ControlServer::create(&node, &service, size).expect("server");
-                while !done.load(Ordering::Relaxed) {
-                    server
-                        .serve(|req| match req {
-                            Ok(r) if r == "big" => "x".repeat(500),
-                            Ok(r) => format!("echo {r}"),
-                            Err(e) => format!("error: {e}"),
-                        })
-                        .expect("serve");
-                    std::thread::sleep(Duration::from_millis(1));
-                }
-            })
+        let handler = |req: Result<String, ProtocolError>| match req {
+            Ok(r) if r == "big" => "x".repeat(500),
+            Ok(r) => format!("echo {r}"),
+            Err(e) => format!("error: {e}"),
         };
+        let (done, server) = server_thread(&world, &service, size, move |req, responder| {
+            responder.respond_or(&handler(req), |e| handler(Err(e)))
+        });
         let node = world.node("client").expect("node");
-        let t0 = Instant::now();
-        let client = loop {
-            match ControlClient::<String, String>::open(&node, &service, size) {
-                Ok(c) => break c,
-                Err(_) if t0.elapsed() < Duration::from_secs(5) => std::thread::sleep(Duration::from_millis(10)),
-                Err(e) => panic!("no server: {e}"),
-            }
-        };
+        let client = client_of(&node, &service, size);
         let timeout = Duration::from_secs(5);
         assert_eq!(client.call(&"hi".to_owned(), timeout).expect("small call"), "echo hi");
         // a request over the limit never leaves the client
@@ -543,6 +584,43 @@ mod tests {
         let reply = client.call(&"big".to_owned(), timeout).expect("an answer");
         assert!(reply.starts_with("error: the reply (") && reply.contains("128 bytes"), "{reply}");
         done.store(true, Ordering::Relaxed);
-        server_thread.join().expect("server thread");
+        server.join().expect("server thread");
+    }
+
+    /// A request the server took is never sent twice: one it lets go
+    /// unanswered says so at once (it used to look untaken and was sent
+    /// three times), and one answered just before the server let go is
+    /// read, not mistaken for a server gone.
+    #[test]
+    fn a_taken_request_is_carried_out_once() {
+        let world = World::new(&format!("once{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let size = ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128), reserved_clients: 0 };
+        let service = format!("nerve/{}/test/ctl", world.robot());
+        let taken = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+        let (done, server) = {
+            let taken = taken.clone();
+            server_thread(&world, &service, size, move |req, responder| {
+                taken.fetch_add(1, Ordering::SeqCst);
+                if req.as_deref() != Ok("drop") {
+                    responder.respond_or(&"ok".to_owned(), |e| e.to_string());
+                }
+            })
+        };
+        let node = world.node("client").expect("node");
+        let client = client_of(&node, &service, size);
+        let timeout = Duration::from_secs(5);
+        let t0 = Instant::now();
+        let e = client.call(&"drop".to_owned(), timeout).expect_err("an unanswered request");
+        assert!(matches!(e, ControlError::Protocol(ProtocolError::Unanswered)), "{e}");
+        assert!(t0.elapsed() < Duration::from_secs(4), "the caller waited for its time-out");
+        assert_eq!(taken.load(Ordering::SeqCst), 1, "the request was sent again");
+        const CALLS: usize = 2000;
+        for i in 0..CALLS {
+            assert_eq!(client.call(&format!("{i}"), timeout).expect("an answer"), "ok");
+        }
+        assert_eq!(taken.load(Ordering::SeqCst), 1 + CALLS, "a request was carried out twice");
+        done.store(true, Ordering::Relaxed);
+        server.join().expect("server thread");
     }
 }

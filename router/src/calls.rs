@@ -16,9 +16,9 @@
 use agent_sdk::control::{ControlClient, ControlError, ControlSize, PendingCall};
 use agent_sdk::world::{Ipc, World};
 use iceoryx2::prelude::Node;
-use shm_schemas::AgentName;
 use shm_schemas::control::cli_to_router::RouterError;
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
+use shm_schemas::{AgentName, ProtocolError};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
 
@@ -175,7 +175,9 @@ impl Link {
                     self.in_flight = Some(f);
                     return false;
                 }
-                Err(ControlError::NoServer { .. }) if matches!(f.queued.cmd, AgentCommand::Stop) => {
+                Err(ControlError::NoServer { .. } | ControlError::Protocol(ProtocolError::Unanswered))
+                    if matches!(f.queued.cmd, AgentCommand::Stop) =>
+                {
                     // A stopping agent answers, then takes its control
                     // service down; the answer can be lost with it. Gone is
                     // what a stop asks for (found by the soak benchmark:

@@ -42,6 +42,13 @@ pub enum ProtocolError {
     /// The bytes are not a valid message.
     #[error("malformed control message: {0}")]
     Malformed(String),
+    /// The server took the request and let it go without an answer (it
+    /// stopped, or dropped the request): it may or may not have been
+    /// carried out, and a caller must not send it again blindly.
+    #[error(
+        "the server took the request and stopped before answering it: it may or may not have been carried out; check (`nerve ps`, `nerve graph`) and try again"
+    )]
+    Unanswered,
     /// A reply is larger than the control service carries.
     #[error("the reply ({bytes} bytes) is larger than the {max} bytes this control service carries")]
     TooLarge {
@@ -58,9 +65,23 @@ pub fn encode<T: Serialize>(body: &T) -> Vec<u8> {
     postcard::to_stdvec(&Envelope { version: PROTOCOL_VERSION, body }).unwrap_or_default()
 }
 
+/// The version word of the reply a server sends for a request it took and
+/// lets go unanswered ([`unanswered`]); never a real protocol version.
+const UNANSWERED: u16 = u16::MAX;
+
+/// The reply to a request the server took and will not answer: decodes as
+/// [`ProtocolError::Unanswered`] whatever the caller expected. It tells the
+/// caller that the request was taken, so that it does not send it again.
+pub fn unanswered() -> Vec<u8> {
+    postcard::to_stdvec(&Envelope { version: UNANSWERED, body: () }).unwrap_or_default()
+}
+
 /// Decodes an envelope, checking the version first.
 pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ProtocolError> {
     let (version, _) = postcard::take_from_bytes::<u16>(bytes).map_err(|e| ProtocolError::Malformed(e.to_string()))?;
+    if version == UNANSWERED {
+        return Err(ProtocolError::Unanswered);
+    }
     if version != PROTOCOL_VERSION {
         return Err(ProtocolError::VersionMismatch { peer: version, ours: PROTOCOL_VERSION });
     }
@@ -85,6 +106,12 @@ mod tests {
         let err = decode::<AgentCommand>(&bytes).expect_err("must refuse");
         assert_eq!(err, ProtocolError::VersionMismatch { peer: 999, ours: PROTOCOL_VERSION });
         assert!(err.to_string().contains("rebuild"));
+    }
+
+    #[test]
+    fn an_unanswered_request_decodes_as_such_whatever_was_expected() {
+        assert_eq!(decode::<AgentCommand>(&unanswered()).unwrap_err(), ProtocolError::Unanswered);
+        assert_eq!(decode::<String>(&unanswered()).unwrap_err(), ProtocolError::Unanswered);
     }
 
     #[test]
