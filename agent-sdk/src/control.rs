@@ -121,18 +121,67 @@ pub enum ControlError {
     /// The peer speaks another protocol or sent garbage.
     #[error(transparent)]
     Protocol(#[from] ProtocolError),
-    /// iceoryx2 failed.
-    #[error("iceoryx2 error on {service}: {detail}")]
+    /// iceoryx2 failed: which operation, and iceoryx2's own error as the
+    /// source (downcast it to that operation's iceoryx2 error type).
+    #[error("iceoryx2 could not {op} of {service}: {source:?}")]
     Ipc {
         /// the service
         service: String,
+        /// what nerve asked of iceoryx2
+        op: IpcOp,
         /// what iceoryx2 said
-        detail: String,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
 }
 
-fn ipc_err(service: &str, e: impl std::fmt::Debug) -> ControlError {
-    ControlError::Ipc { service: service.into(), detail: format!("{e:?}") }
+/// The iceoryx2 operation a [`ControlError::Ipc`] comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IpcOp {
+    /// turn the service's name into an iceoryx2 service name
+    Name,
+    /// open or create the request-response service
+    Service,
+    /// open or create the wake-up event service
+    Event,
+    /// create the server port
+    Server,
+    /// create a client port
+    Client,
+    /// create the wake-up listener
+    Listener,
+    /// create the wake-up notifier
+    Notifier,
+    /// loan memory for a request
+    Loan,
+    /// send a request
+    Send,
+    /// notify the server
+    Notify,
+    /// receive a request or a reply
+    Receive,
+}
+
+impl std::fmt::Display for IpcOp {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            IpcOp::Name => "name the service",
+            IpcOp::Service => "open the service",
+            IpcOp::Event => "open the wake-up event",
+            IpcOp::Server => "create the server",
+            IpcOp::Client => "create a client",
+            IpcOp::Listener => "create the wake-up listener",
+            IpcOp::Notifier => "create the wake-up notifier",
+            IpcOp::Loan => "loan memory for a request",
+            IpcOp::Send => "send a request",
+            IpcOp::Notify => "wake the server",
+            IpcOp::Receive => "receive",
+        })
+    }
+}
+
+fn ipc_err<E: std::error::Error + Send + Sync + 'static>(service: &str, op: IpcOp) -> impl FnOnce(E) -> ControlError {
+    move |e| ControlError::Ipc { service: service.into(), op, source: Box::new(e) }
 }
 
 type Bytes = [u8];
@@ -168,7 +217,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
     /// Serves `service`. Only one server may serve a service at a time: a
     /// second one gets [`ControlError::AlreadyServed`].
     pub fn create(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<Self, ControlError> {
-        let rr = rr_builder(node, service, size)?.open_or_create().map_err(|e| ipc_err(service, e))?;
+        let rr = rr_builder(node, service, size)?.open_or_create().map_err(ipc_err(service, IpcOp::Service))?;
         let server = rr
             .server_builder()
             .initial_max_slice_len(size.slice_len())
@@ -178,10 +227,10 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
                 iceoryx2::service::port_factory::server::ServerCreateError::ExceedsMaxSupportedServers => {
                     ControlError::AlreadyServed { service: service.into() }
                 }
-                e => ipc_err(service, e),
+                e => ipc_err(service, IpcOp::Server)(e),
             })?;
         let ev = open_event(node, service, size)?;
-        let listener = ev.listener_builder().create().map_err(|e| ipc_err(service, e))?;
+        let listener = ev.listener_builder().create().map_err(ipc_err(service, IpcOp::Listener))?;
         Ok(ControlServer { service: service.into(), size, server, listener, _types: PhantomData })
     }
 
@@ -209,7 +258,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
     /// can answer (the router) keeps the responder and goes on serving.
     #[allow(clippy::type_complexity)]
     pub fn receive(&self) -> Result<Option<(Result<Req, ProtocolError>, Responder<Resp>)>, ControlError> {
-        let Some(active) = self.server.receive().map_err(|e| ipc_err(&self.service, e))? else {
+        let Some(active) = self.server.receive().map_err(ipc_err(&self.service, IpcOp::Receive))? else {
             return Ok(None);
         };
         let req = decode::<Req>(active.payload());
@@ -325,7 +374,7 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
             iceoryx2::service::builder::request_response::RequestResponseOpenError::DoesNotExist => {
                 ControlError::NoServer { service: service.into() }
             }
-            e => ipc_err(service, e),
+            e => ipc_err(service, IpcOp::Service)(e),
         })?;
         let max = size.max_clients.saturating_sub(leave);
         let taken = rr.dynamic_config().number_of_clients();
@@ -337,9 +386,9 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
             .initial_max_slice_len(size.slice_len())
             .allocation_strategy(size.allocation())
             .create()
-            .map_err(|e| ipc_err(service, e))?;
+            .map_err(ipc_err(service, IpcOp::Client))?;
         let ev = open_event(node, service, size)?;
-        let notifier = ev.notifier_builder().create().map_err(|e| ipc_err(service, e))?;
+        let notifier = ev.notifier_builder().create().map_err(ipc_err(service, IpcOp::Notifier))?;
         Ok(ControlClient { service: service.into(), size, client, notifier, _types: PhantomData })
     }
 
@@ -408,12 +457,12 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
     }
 
     fn send_bytes(&self, bytes: &[u8]) -> Result<Option<PendingCall<Resp>>, ControlError> {
-        let loan = self.client.loan_slice_uninit(bytes.len()).map_err(|e| ipc_err(&self.service, e))?;
-        let pending = loan.write_from_slice(bytes).send().map_err(|e| ipc_err(&self.service, e))?;
+        let loan = self.client.loan_slice_uninit(bytes.len()).map_err(ipc_err(&self.service, IpcOp::Loan))?;
+        let pending = loan.write_from_slice(bytes).send().map_err(ipc_err(&self.service, IpcOp::Send))?;
         if pending.number_of_server_connections() == 0 {
             return Ok(None);
         }
-        self.notifier.notify().map_err(|e| ipc_err(&self.service, e))?;
+        self.notifier.notify().map_err(ipc_err(&self.service, IpcOp::Notify))?;
         Ok(Some(PendingCall { pending, service: self.service.clone(), _types: PhantomData }))
     }
 }
@@ -431,13 +480,13 @@ impl<Resp: DeserializeOwned> PendingCall<Resp> {
     /// is gone or dropped the request unanswered. Dropping the call
     /// abandons it.
     pub fn poll(&self) -> Result<Option<Resp>, ControlError> {
-        if let Some(resp) = self.pending.receive().map_err(|e| ipc_err(&self.service, e))? {
+        if let Some(resp) = self.pending.receive().map_err(ipc_err(&self.service, IpcOp::Receive))? {
             return Ok(Some(decode::<Resp>(resp.payload())?));
         }
         if !self.pending.is_connected() {
             // the server may have answered and let go of the request between
             // the two looks: read once more before calling it gone
-            if let Some(resp) = self.pending.receive().map_err(|e| ipc_err(&self.service, e))? {
+            if let Some(resp) = self.pending.receive().map_err(ipc_err(&self.service, IpcOp::Receive))? {
                 return Ok(Some(decode::<Resp>(resp.payload())?));
             }
             return Err(ControlError::NoServer { service: self.service.clone() });
@@ -453,7 +502,7 @@ type RrBuilder = iceoryx2::service::builder::request_response::Builder<Bytes, ()
 
 /// The one place that sets up a control service, so that server and clients agree.
 fn rr_builder(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<RrBuilder, ControlError> {
-    let name: ServiceName = service.try_into().map_err(|e| ipc_err(service, e))?;
+    let name: ServiceName = service.try_into().map_err(ipc_err(service, IpcOp::Name))?;
     Ok(node
         .service_builder(&name)
         .request_response::<Bytes, Bytes>()
@@ -471,14 +520,14 @@ fn open_event(
     service: &str,
     size: ControlSize,
 ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Ipc>, ControlError> {
-    let name: ServiceName = service.try_into().map_err(|e| ipc_err(service, e))?;
+    let name: ServiceName = service.try_into().map_err(ipc_err(service, IpcOp::Name))?;
     node.service_builder(&name)
         .event()
         .max_notifiers(size.max_clients + 2)
         .max_listeners(2)
         .max_nodes(size.max_nodes)
         .open_or_create()
-        .map_err(|e| ipc_err(service, e))
+        .map_err(ipc_err(service, IpcOp::Event))
 }
 
 /// Opens the router's service for tools and programs of `world`
@@ -557,6 +606,21 @@ mod tests {
                 Err(e) => panic!("no server: {e}"),
             }
         }
+    }
+
+    #[test]
+    fn an_iceoryx2_error_says_which_operation_failed_and_keeps_its_cause() {
+        let world = World::new(&format!("op{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("tools").expect("node");
+        let size = ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128), reserved_clients: 0 };
+        let service = format!("nerve/{}/{}", world.robot(), "x".repeat(1000));
+        let e = ControlClient::<String, String>::open(&node, &service, size).expect_err("a name iceoryx2 refuses");
+        let ControlError::Ipc { op, source, .. } = &e else { panic!("not an iceoryx2 error: {e}") };
+        assert_eq!(*op, IpcOp::Name);
+        assert!(!source.to_string().is_empty());
+        assert!(std::error::Error::source(&e).is_some(), "the cause is kept");
+        assert!(e.to_string().contains("could not name the service"), "{e}");
     }
 
     #[test]

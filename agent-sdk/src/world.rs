@@ -157,12 +157,14 @@ pub enum WorldError {
         source: std::io::Error,
     },
     /// iceoryx2 refused to create a node.
-    #[error("cannot create an iceoryx2 node {name:?}: {detail}")]
+    #[error("cannot create an iceoryx2 node {name:?}: {source:?}")]
     Node {
         /// node name
         name: String,
-        /// what iceoryx2 said
-        detail: String,
+        /// what iceoryx2 said (its `NodeCreationFailure`, or the error of
+        /// an invalid node name)
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
 }
 
@@ -293,7 +295,7 @@ impl World {
     pub fn node(&self, name: &str) -> Result<Node<Ipc>, WorldError> {
         quiet_iceoryx2();
         let node_name: NodeName =
-            name.try_into().map_err(|e| WorldError::Node { name: name.into(), detail: format!("{e:?}") })?;
+            name.try_into().map_err(|e| WorldError::Node { name: name.into(), source: Box::new(e) })?;
         self.secure_iox2_root()?;
         let mgmt = self.global_mgmt_files();
         check_own_files(&mgmt)?;
@@ -302,7 +304,7 @@ impl World {
             .config(&self.config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<Ipc>()
-            .map_err(|e| WorldError::Node { name: name.into(), detail: format!("{e:?}") })?;
+            .map_err(|e| WorldError::Node { name: name.into(), source: Box::new(e) })?;
         let mgmt = if mgmt.is_empty() { self.global_mgmt_files() } else { mgmt };
         make_private(&mgmt);
         Ok(node)
