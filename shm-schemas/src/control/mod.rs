@@ -110,8 +110,8 @@ mod tests {
 
     #[test]
     fn an_unanswered_request_decodes_as_such_whatever_was_expected() {
-        assert_eq!(decode::<AgentCommand>(&unanswered()).unwrap_err(), ProtocolError::Unanswered);
-        assert_eq!(decode::<String>(&unanswered()).unwrap_err(), ProtocolError::Unanswered);
+        assert_eq!(decode::<AgentCommand>(&unanswered()).expect_err("unanswered"), ProtocolError::Unanswered);
+        assert_eq!(decode::<String>(&unanswered()).expect_err("unanswered"), ProtocolError::Unanswered);
     }
 
     #[test]
