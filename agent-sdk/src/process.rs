@@ -87,6 +87,28 @@ pub fn start_time(pid: u32) -> Option<u64> {
     read_stat(pid).map(|s| s.start_time)
 }
 
+/// What a process holds, from `/proc/<pid>`: its resident memory and its
+/// open descriptors, as the soak benchmark and the chaos test watch them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Holdings {
+    /// resident memory (`VmRSS`), KiB
+    pub rss_kib: u64,
+    /// open file descriptors
+    pub fds: u64,
+}
+
+/// What `pid` holds now; zeros for a process that is gone or unreadable.
+pub fn holdings(pid: u32) -> Holdings {
+    let rss_kib = std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .ok()
+        .and_then(|s| {
+            s.lines().find_map(|l| l.strip_prefix("VmRSS:")).and_then(|v| v.split_whitespace().next()?.parse().ok())
+        })
+        .unwrap_or(0);
+    let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count() as u64);
+    Holdings { rss_kib, fds }
+}
+
 /// Whether `exe` (a path, as `/proc/<pid>/exe` reads) is one of nerve's
 /// executables: its file name starts with [`EXECUTABLE_PREFIX`].
 pub fn is_nerve_executable(exe: &Path) -> bool {

@@ -17,6 +17,7 @@
 use crate::machine::{Machine, command_line};
 use crate::procs::Robot;
 use crate::stats::Summary;
+use agent_sdk::process::holdings;
 use anyhow::{Context as _, Result, anyhow, bail};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -108,18 +109,6 @@ pub struct SoakReport {
     pub samples: Vec<Sample>,
     /// wall time of the scenario, s
     pub seconds: f64,
-}
-
-/// `VmRSS` (KiB) and open descriptors of `pid`.
-fn rss_fds(pid: u32) -> (u64, u64) {
-    let rss = std::fs::read_to_string(format!("/proc/{pid}/status"))
-        .ok()
-        .and_then(|s| {
-            s.lines().find_map(|l| l.strip_prefix("VmRSS:")).and_then(|v| v.split_whitespace().next()?.parse().ok())
-        })
-        .unwrap_or(0);
-    let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count() as u64);
-    (rss, fds)
 }
 
 /// Files under `dir` (recursively) whose names start with `prefix`.
@@ -239,12 +228,13 @@ pub fn run(o: &SoakOpts) -> Result<SoakReport> {
             if ps.is_ok() {
                 ps_ns.push(ps_took.as_nanos() as u64);
             }
-            let (router_rss, router_fds) = rss_fds(router_pid);
+            let router = holdings(router_pid);
+            let (router_rss, router_fds) = (router.rss_kib, router.fds);
             let (mut rss, mut fds) = (router_rss, router_fds);
             for p in &pids {
-                let (r, f) = rss_fds(*p);
-                rss += r;
-                fds += f;
+                let h = holdings(*p);
+                rss += h.rss_kib;
+                fds += h.fds;
             }
             samples.push(Sample {
                 t_s: t0.elapsed().as_secs_f64(),

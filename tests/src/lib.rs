@@ -207,14 +207,10 @@ impl Robot {
     /// This robot's files in /dev/shm.
     pub fn shm_files(&self) -> Vec<String> {
         let prefix = shm_schemas::RobotName::shm_prefix_of(shm_schemas::names::effective_uid(), &self.name);
-        std::fs::read_dir("/dev/shm")
-            .map(|rd| {
-                rd.filter_map(|e| e.ok())
-                    .map(|e| e.file_name().to_string_lossy().into_owned())
-                    .filter(|n| n.starts_with(&prefix))
-                    .collect()
-            })
-            .unwrap_or_default()
+        shm_files_with_prefix(&prefix)
+            .into_iter()
+            .filter_map(|p| Some(p.file_name()?.to_string_lossy().into_owned()))
+            .collect()
     }
 
     /// `nerve down`, then checks that nothing of the robot is left.
@@ -485,6 +481,19 @@ pub fn alive(pid: u32) -> bool {
 pub fn sigkill(pid: u32) {
     // SAFETY: kill has no memory-safety preconditions.
     unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+}
+
+/// The files in /dev/shm whose names start with `prefix` (a robot's files
+/// are `nerve_<uid>_<robot>_*`).
+pub fn shm_files_with_prefix(prefix: &str) -> Vec<std::path::PathBuf> {
+    std::fs::read_dir("/dev/shm")
+        .map(|rd| {
+            rd.filter_map(|e| e.ok())
+                .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
+                .map(|e| e.path())
+                .collect()
+        })
+        .unwrap_or_default()
 }
 
 #[cfg(test)]

@@ -14,6 +14,7 @@
 //! The seed is printed; `NERVE_CHAOS_SEED=N` replays a run, and
 //! `NERVE_CHAOS_ROUNDS=N` makes it longer (default 48 faults, about half a minute).
 
+use agent_sdk::process::{Holdings, holdings};
 use nerve_tests::device::{FakeDevice, sonar_frame};
 use nerve_tests::{Robot, alive, reap, sigkill, wait_until};
 use serde_json::Value;
@@ -70,18 +71,6 @@ fn launch_file(r: &Robot) -> PathBuf {
 
 fn pid_file(r: &Robot, name: &str) -> Option<u32> {
     std::fs::read_to_string(r.home.join(&r.name).join("pids").join(format!("{name}.pid"))).ok()?.trim().parse().ok()
-}
-
-/// Resident memory (kB) and open descriptors of `pid`.
-fn rss_and_fds(pid: u32) -> (u64, usize) {
-    let rss = std::fs::read_to_string(format!("/proc/{pid}/status"))
-        .ok()
-        .and_then(|s| {
-            s.lines().find_map(|l| l.strip_prefix("VmRSS:")).and_then(|v| v.split_whitespace().next()?.parse().ok())
-        })
-        .unwrap_or(0);
-    let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).map(|d| d.count()).unwrap_or(0);
-    (rss, fds)
 }
 
 /// The edges the agents themselves report reading (their input statistics).
@@ -265,9 +254,9 @@ fn recovered(round: u64, fault: &str, whole: Result<Duration, String>, worst: &m
 }
 
 /// The router's memory and descriptors at the end against `start`.
-fn assert_router_flat(r: &Robot, what: &str, start: (u64, usize), worst: Duration, seed: u64) {
-    let (rss0, fds0) = start;
-    let (rss1, fds1) = rss_and_fds(pid_file(r, "router").expect("router pid"));
+fn assert_router_flat(r: &Robot, what: &str, start: Holdings, worst: Duration, seed: u64) {
+    let Holdings { rss_kib: rss0, fds: fds0 } = start;
+    let Holdings { rss_kib: rss1, fds: fds1 } = holdings(pid_file(r, "router").expect("router pid"));
     eprintln!(
         "{what}: worst recovery {worst:?}; router {rss0} kB, {fds0} fds at the start, {rss1} kB, {fds1} fds at the end"
     );
@@ -316,7 +305,7 @@ fn the_pipeline_robot_survives_a_seeded_monkey() {
     if let Err(e) = whole(&r, &AGENTS, Some(&intended), &pipeline_flowing(&intended)) {
         panic!("the robot never came up whole: {e}");
     }
-    let start = rss_and_fds(pid_file(&r, "router").expect("router pid"));
+    let start = holdings(pid_file(&r, "router").expect("router pid"));
     let mut worst = Duration::ZERO;
 
     for round in 0..rounds {
@@ -400,7 +389,7 @@ fn the_exploration_robot_survives_a_seeded_monkey() {
     if let Err(e) = whole(&r, &names, None, &flowing) {
         panic!("the robot never came up whole: {e}");
     }
-    let start = rss_and_fds(pid_file(&r, "router").expect("router pid"));
+    let start = holdings(pid_file(&r, "router").expect("router pid"));
     let mut worst = Duration::ZERO;
     for round in 0..rounds {
         let victim = names[monkey.below(names.len() as u64) as usize];

@@ -4,7 +4,7 @@
 //! throw-away uid the test switches to with `setpriv` (which needs root:
 //! elsewhere the test says it did not run, and passes).
 
-use nerve_tests::{Robot, alive, reap, wait_until};
+use nerve_tests::{Robot, alive, reap, shm_files_with_prefix, wait_until};
 use serde_json::Value;
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::path::{Path, PathBuf};
@@ -99,7 +99,7 @@ impl Drop for OtherUser {
             reap();
             self.processes().is_empty()
         });
-        for f in shm_files(&self.prefix()) {
+        for f in shm_files_with_prefix(&self.prefix()) {
             let _ = std::fs::remove_file(f);
         }
         let _ = std::fs::remove_dir_all(self.iox2_root());
@@ -114,17 +114,6 @@ fn uid_of(pid: u32) -> Option<u32> {
 }
 
 /// Files in /dev/shm starting with `prefix`.
-fn shm_files(prefix: &str) -> Vec<PathBuf> {
-    std::fs::read_dir("/dev/shm")
-        .map(|rd| {
-            rd.filter_map(|e| e.ok())
-                .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
-                .map(|e| e.path())
-                .collect()
-        })
-        .unwrap_or_default()
-}
-
 fn pids(ps: &[Value]) -> Vec<u32> {
     ps.iter().filter_map(|a| a["pid"].as_u64()).map(|p| p as u32).collect()
 }
@@ -169,7 +158,7 @@ fn two_users_run_a_robot_of_the_same_name_side_by_side() {
     assert_eq!(their_echo.lines().count(), 3, "{their_echo}");
 
     let my_prefix = shm_schemas::RobotName::shm_prefix_of(my_uid, &me.name);
-    let (my_files, their_files) = (shm_files(&my_prefix), shm_files(&other.prefix()));
+    let (my_files, their_files) = (shm_files_with_prefix(&my_prefix), shm_files_with_prefix(&other.prefix()));
     assert!(!my_files.is_empty() && !their_files.is_empty(), "{my_files:?} {their_files:?}");
     for (files, uid) in [(&my_files, my_uid), (&their_files, other.uid)] {
         for f in files.iter() {
@@ -187,7 +176,11 @@ fn two_users_run_a_robot_of_the_same_name_side_by_side() {
     // their `down` stops theirs only
     other.ok(&["down", "--grace", "2"]);
     assert!(other.processes().is_empty(), "their processes left: {:?}", other.processes());
-    assert!(shm_files(&other.prefix()).is_empty(), "their files left: {:?}", shm_files(&other.prefix()));
+    assert!(
+        shm_files_with_prefix(&other.prefix()).is_empty(),
+        "their files left: {:?}",
+        shm_files_with_prefix(&other.prefix())
+    );
     assert_eq!(me.ps().len(), 3, "my robot survives their down");
     assert_eq!(me.echo("r1/out", 2).len(), 2, "and my data still flows");
     me.down_and_check_clean();
