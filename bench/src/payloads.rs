@@ -2,14 +2,13 @@
 //! (230,400 B) and one 1920x1080 RGB frame (6,220,800 B) for `hop`, and a
 //! 4 KB message beside 8 B and 230 KB for `bridge`.
 //!
-//! Each is `#[repr(C)]` + `ZeroCopySend` with a stable `nerve::bench::*`
-//! type name and implements [`shm_schemas::Payload`], so the same type
+//! Each is `#[repr(C)]` with `#[derive(Payload)]` and a stable
+//! `nerve::bench::*` type name, so the same type
 //! travels on SDK ports and on the raw iceoryx2 services. The first 8 bytes
 //! carry the sequence number of the round trip; the rest is image data that
 //! the zero-copy transports never touch (a camera would have written it once,
 //! in place) and that the Unix socket copies in full.
 
-use iceoryx2::prelude::ZeroCopySend;
 use serde::{Serialize, Serializer};
 use shm_schemas::Payload;
 
@@ -31,15 +30,13 @@ pub trait BenchPayload: Payload + Default {
 }
 
 /// 8 bytes: just the sequence number.
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::bench::Small8")]
+#[payload(name = "nerve::bench::Small8")]
 pub struct Small8 {
     /// sequence number of the round trip
     pub seq: u64,
 }
-
-impl Payload for Small8 {}
 
 impl BenchPayload for Small8 {
     const LABEL: &'static str = "8 B";
@@ -58,9 +55,9 @@ impl BenchPayload for Small8 {
 macro_rules! frame {
     ($name:ident, $tn:literal, $size:expr, $label:literal, $doc:literal) => {
         #[doc = $doc]
-        #[derive(Clone, Copy, ZeroCopySend)]
+        #[derive(Clone, Copy, Payload)]
         #[repr(C)]
-        #[type_name($tn)]
+        #[payload(name = $tn)]
         pub struct $name {
             /// sequence number of the round trip
             pub seq: u64,
@@ -90,8 +87,6 @@ macro_rules! frame {
                 st.end()
             }
         }
-
-        impl Payload for $name {}
 
         impl BenchPayload for $name {
             const LABEL: &'static str = $label;

@@ -70,6 +70,17 @@ impl<'de> Deserialize<'de> for FixedName {
     }
 }
 
+impl crate::schema::Described for FixedName {
+    fn schema() -> crate::schema::Schema {
+        crate::schema::Schema {
+            type_name: "nerve::FixedName".into(),
+            size: std::mem::size_of::<FixedName>(),
+            align: std::mem::align_of::<FixedName>(),
+            kind: crate::schema::Kind::String { capacity: FIXED_NAME_CAPACITY },
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,6 +14,9 @@
 //!   another version is refused with one shared, actionable message.
 #![warn(missing_docs)]
 
+// `#[derive(Payload)]` names `::shm_schemas`, here too
+extern crate self as shm_schemas;
+
 pub mod control;
 pub mod cycles;
 pub mod fixed;
@@ -21,6 +24,7 @@ pub mod header;
 pub mod names;
 pub mod payloads;
 pub mod ring;
+pub mod schema;
 pub mod services;
 pub mod stats;
 
@@ -28,4 +32,12 @@ pub use control::{PROTOCOL_VERSION, ProtocolError};
 pub use fixed::FixedName;
 pub use header::SampleHeader;
 pub use names::{AgentName, NameError, PortRef, RobotName};
+/// The trait, and `#[derive(Payload)]` (see the `shm-schemas-derive` crate).
 pub use payloads::Payload;
+pub use schema::{Described, Schema};
+
+/// What `#[derive(Payload)]` expands to names; not an interface.
+#[doc(hidden)]
+pub mod __private {
+    pub use iceoryx2::prelude::ZeroCopySend;
+}

@@ -30,7 +30,6 @@
 
 use crate::fixed::FixedName;
 use crate::payloads::Payload;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 use std::sync::atomic::{AtomicU32, AtomicU64};
 
@@ -206,9 +205,9 @@ impl std::fmt::Display for PixelFormat {
 /// The receiver opens (once) the ring named here and reads frame `seq` in
 /// place. The frame may have been overwritten by the time the notice is read;
 /// the ring reader reports that instead of returning torn data.
-#[derive(Debug, Clone, Copy, Default, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::RingNotice")]
+#[payload(name = "nerve::RingNotice")]
 pub struct RingNotice {
     /// The ring's name as text: `cam`, or `id-42` for a numbered ring.
     pub ring: FixedName,
@@ -237,8 +236,6 @@ pub struct RingNotice {
     /// replaced since: the frame is gone).
     pub creation_id: u64,
 }
-
-impl Payload for RingNotice {}
 
 #[cfg(test)]
 mod tests {

@@ -168,7 +168,7 @@ mod tests {
         let tick = t.get("nerve::Tick").expect("tick");
         assert_eq!(
             (tick.info.size, tick.info.fingerprint),
-            (16, shm_schemas::payloads::layout_fingerprint("nerve::Tick", 16, 8))
+            (16, <shm_schemas::payloads::Tick as shm_schemas::Described>::schema().fingerprint())
         );
         assert!(!t.knows("nerve::Nothing"));
     }

@@ -5,13 +5,12 @@
 //! positive up. The head board accepts pan ±100° and tilt ±30°.
 
 use super::Payload;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 
 /// A numeric set-point for the head agent's input `cmd`.
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::HeadCommand")]
+#[payload(name = "nerve::HeadCommand")]
 pub struct HeadCommand {
     /// Pan, radians, positive to the left.
     pub pan_rad: f64,
@@ -21,12 +20,10 @@ pub struct HeadCommand {
     pub stamp_ns: u64,
 }
 
-impl Payload for HeadCommand {}
-
 /// The measured head position, output `state` of the head agent.
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::HeadState")]
+#[payload(name = "nerve::HeadState")]
 pub struct HeadState {
     /// Pan, radians, positive to the left.
     pub pan_rad: f64,
@@ -39,8 +36,6 @@ pub struct HeadState {
     /// CLOCK_MONOTONIC nanoseconds when the board's report was received.
     pub stamp_ns: u64,
 }
-
-impl Payload for HeadState {}
 
 #[cfg(test)]
 mod tests {

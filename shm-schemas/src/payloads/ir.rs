@@ -2,13 +2,12 @@
 //! identification code and which of its four transmitters are received.
 
 use super::Payload;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 
 /// One report of the IR receiver, sent by the `ir` agent (10 Hz).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::IrSighting")]
+#[payload(name = "nerve::IrSighting")]
 pub struct IrSighting {
     /// Report number (the receiver's wrapping counter, unwrapped).
     pub seq: u64,
@@ -24,8 +23,6 @@ pub struct IrSighting {
     /// Padding, zero.
     pub reserved: [u8; 5],
 }
-
-impl Payload for IrSighting {}
 
 impl IrSighting {
     /// The bearing of the robot as seen from the checkpoint, in units of

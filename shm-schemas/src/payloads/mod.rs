@@ -31,15 +31,19 @@ pub use situation::{DangerLevel, Mode, Situation, TargetState};
 pub use sonar::{SONAR_DIRECTIONS, SonarScan};
 pub use tick::Tick;
 
+pub use shm_schemas_derive::Payload;
+
+use crate::schema::Described;
 use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 use std::fmt::Debug;
 
 /// A type that can travel on a nerve port.
 ///
-/// Derive it with `#[derive(ZeroCopySend)]`, `#[repr(C)]` and
-/// `#[type_name("nerve::Thing")]`, then `impl Payload for Thing {}`.
-pub trait Payload: ZeroCopySend + Debug + Copy + Serialize + Send + Sync + 'static {
+/// Derive it: `#[derive(Payload)]` on a `#[repr(C)]` struct with
+/// `#[payload(name = "your_crate::Thing")]` gives the type name,
+/// `ZeroCopySend`, the schema and this trait (see `shm-schemas-derive`).
+pub trait Payload: ZeroCopySend + Described + Debug + Copy + Serialize + Send + Sync + 'static {
     /// The stable type name (`nerve::Tick`), the one iceoryx2 compares.
     fn stable_type_name() -> &'static str {
         // SAFETY: reading the name has no precondition; the unsafety of
@@ -47,30 +51,14 @@ pub trait Payload: ZeroCopySend + Debug + Copy + Serialize + Send + Sync + 'stat
         unsafe { <Self as ZeroCopySend>::type_name() }
     }
 
-    /// A fingerprint of the layout: two builds whose payloads share the type
-    /// name but differ in size or alignment get different fingerprints, so a
-    /// peer across a bridge can refuse a stale build instead of misreading it.
-    /// (Today the layout is summarised by name, size and alignment; a
-    /// field-by-field schema can refine it without changing callers.)
+    /// A fingerprint of the layout, field by field
+    /// ([`crate::Schema::fingerprint`]): two builds whose payloads share the
+    /// type name but differ in any field's name, offset or type get
+    /// different fingerprints, so a peer across a bridge can refuse a stale
+    /// build instead of misreading it.
     fn layout_fingerprint() -> u64 {
-        layout_fingerprint(Self::stable_type_name(), std::mem::size_of::<Self>(), std::mem::align_of::<Self>())
+        Self::schema().fingerprint()
     }
-}
-
-/// The fingerprint of a layout given by type name, size and alignment
-/// (64-bit FNV-1a over the three): what [`Payload::layout_fingerprint`] is
-/// made of, and what a tool that knows a type only by these figures compares.
-pub fn layout_fingerprint(type_name: &str, size: usize, align: usize) -> u64 {
-    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-    const PRIME: u64 = 0x0000_0100_0000_01b3;
-    let mut h = OFFSET;
-    let size = size as u64;
-    let align = align as u64;
-    for b in type_name.bytes().chain([0u8]).chain(size.to_le_bytes()).chain(align.to_le_bytes()) {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(PRIME);
-    }
-    h
 }
 
 /// Calls `$m!(Type)` for every payload type this build knows, so that tools
@@ -122,10 +110,44 @@ mod tests {
 
     #[test]
     fn fingerprints_tell_layouts_apart() {
+        use crate::schema::{Described, Kind, Primitive};
+        let schema = <Tick as Described>::schema();
         let tick = <Tick as Payload>::layout_fingerprint();
-        assert_eq!(tick, layout_fingerprint("nerve::Tick", 16, 8), "stable across builds");
-        assert_ne!(tick, layout_fingerprint("nerve::Tick", 24, 8), "a grown struct differs");
-        assert_ne!(tick, layout_fingerprint("nerve::Tock", 16, 8), "another name differs");
+        assert_eq!(tick, schema.fingerprint());
+        // pinned: a change of the hashing or of Tick's layout shows here
+        assert_eq!(tick, 0xcbc6_bcae_8544_50d0, "stable across builds: {tick:#x}");
+        let changed = |f: &dyn Fn(&mut crate::Schema)| {
+            let mut s = schema.clone();
+            f(&mut s);
+            s.fingerprint()
+        };
+        assert_ne!(tick, changed(&|s| s.size = 24), "a grown struct differs");
+        assert_ne!(tick, changed(&|s| s.type_name = "nerve::Tock".into()), "another name differs");
+        assert_ne!(
+            tick,
+            changed(&|s| if let Kind::Struct { fields } = &mut s.kind {
+                fields[1].name = "stamp".into()
+            }),
+            "a renamed field differs"
+        );
+        assert_ne!(
+            tick,
+            changed(&|s| if let Kind::Struct { fields } = &mut s.kind {
+                fields.swap(0, 1)
+            }),
+            "swapped fields differ"
+        );
+        assert_ne!(
+            tick,
+            changed(&|s| if let Kind::Struct { fields } = &mut s.kind {
+                fields[0].schema = <i64 as Described>::schema()
+            }),
+            "a field of another type differs"
+        );
+        assert!(matches!(
+            &schema.kind,
+            Kind::Struct { fields } if fields[0].schema.kind == Kind::Primitive { primitive: Primitive::U64 }
+        ));
         assert_ne!(tick, <Scalar as Payload>::layout_fingerprint());
     }
 }

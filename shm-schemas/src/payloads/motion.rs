@@ -13,13 +13,12 @@
 //! CLOCK_MONOTONIC nanoseconds.
 
 use super::Payload;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 
 /// A numeric motion command (input `cmd` of the motor agent).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::VelocityCommand")]
+#[payload(name = "nerve::VelocityCommand")]
 pub struct VelocityCommand {
     /// Forward speed, m/s (negative: backwards).
     pub v: f64,
@@ -28,8 +27,6 @@ pub struct VelocityCommand {
     /// When the command was made; the actuator refuses stale commands by it.
     pub stamp_ns: u64,
 }
-
-impl Payload for VelocityCommand {}
 
 /// The terms of the linguistic command language, as carried in
 /// [`LinguisticCommand::term`]. The codes are part of the wire format.
@@ -138,9 +135,9 @@ impl std::fmt::Display for LinguisticTerm {
 }
 
 /// A linguistic command (input `say` of the motor and head agents).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::LinguisticCommand")]
+#[payload(name = "nerve::LinguisticCommand")]
 pub struct LinguisticCommand {
     /// A [`LinguisticTerm`] code; read it with [`LinguisticCommand::term`].
     pub term: u32,
@@ -150,8 +147,6 @@ pub struct LinguisticCommand {
     /// When the command was made; the actuator refuses stale commands by it.
     pub stamp_ns: u64,
 }
-
-impl Payload for LinguisticCommand {}
 
 impl LinguisticCommand {
     /// A command of `term` with `intensity` (clamped to 0 … 1).
@@ -167,9 +162,9 @@ impl LinguisticCommand {
 
 /// A stop from a safety source (input `stop` of the motor agent). An active
 /// stop overrides every other source.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::SafetyStop")]
+#[payload(name = "nerve::SafetyStop")]
 pub struct SafetyStop {
     /// 1: stop; 0: this source releases its stop.
     pub active: u8,
@@ -184,12 +179,10 @@ pub struct SafetyStop {
     pub stamp_ns: u64,
 }
 
-impl Payload for SafetyStop {}
-
 /// Dead-reckoned pose and speeds (output `odom` of the motor agent).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::Odometry")]
+#[payload(name = "nerve::Odometry")]
 pub struct Odometry {
     /// x, metres, in the odometry frame (the start pose is the origin unless configured).
     pub x: f64,
@@ -205,12 +198,10 @@ pub struct Odometry {
     pub stamp_ns: u64,
 }
 
-impl Payload for Odometry {}
-
 /// The simulator's ground truth (output `truth` of the `sim` agent).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::GroundTruth")]
+#[payload(name = "nerve::GroundTruth")]
 pub struct GroundTruth {
     /// Simulated time, s.
     pub sim_time: f64,
@@ -233,8 +224,6 @@ pub struct GroundTruth {
     /// CLOCK_MONOTONIC nanoseconds of the step.
     pub stamp_ns: u64,
 }
-
-impl Payload for GroundTruth {}
 
 #[cfg(test)]
 mod tests {

@@ -24,7 +24,6 @@
 //! return `None` for a code this build does not know.
 
 use super::Payload;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 
 /// Where a pose estimate or correction comes from.
@@ -64,9 +63,9 @@ pub const CORRECTS_POSITION: u8 = 1;
 pub const CORRECTS_HEADING: u8 = 2;
 
 /// The robot's pose in the world frame (output `pose` of the `odometry` agent).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::PoseEstimate")]
+#[payload(name = "nerve::PoseEstimate")]
 pub struct PoseEstimate {
     /// x, metres, world frame.
     pub x: f64,
@@ -90,8 +89,6 @@ pub struct PoseEstimate {
     pub reserved: [u8; 2],
 }
 
-impl Payload for PoseEstimate {}
-
 impl PoseEstimate {
     /// The source, or `None` for an unknown code.
     pub fn source(&self) -> Option<PoseSource> {
@@ -101,9 +98,9 @@ impl PoseEstimate {
 
 /// A corrected pose at the instant of an observation (output `correction`
 /// of the `checkpoint` agent, input `correction` of the `odometry` agent).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::PoseCorrection")]
+#[payload(name = "nerve::PoseCorrection")]
 pub struct PoseCorrection {
     /// Corrected x at `stamp_ns`, metres, world frame.
     pub x: f64,
@@ -134,8 +131,6 @@ pub struct PoseCorrection {
     pub reserved: [u8; 5],
 }
 
-impl Payload for PoseCorrection {}
-
 impl PoseCorrection {
     /// The source, or `None` for an unknown code.
     pub fn source(&self) -> Option<PoseSource> {
@@ -145,9 +140,9 @@ impl PoseCorrection {
 
 /// A checkpoint (or the target) seen by the checkpoint sensor (output
 /// `sighting` of the `checkpoint` agent, input `sighting` of the map builder).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::CheckpointSighting")]
+#[payload(name = "nerve::CheckpointSighting")]
 pub struct CheckpointSighting {
     /// The instant of the observation (the camera frame's stamp).
     pub stamp_ns: u64,
@@ -178,8 +173,6 @@ pub struct CheckpointSighting {
     /// Padding, zero.
     pub reserved: [u8; 7],
 }
-
-impl Payload for CheckpointSighting {}
 
 /// Most via points a [`ViaPath`] carries.
 pub const MAX_VIA_POINTS: usize = 16;
@@ -220,9 +213,9 @@ impl ViaKind {
 
 /// A path of via points (output `path` of the map builder, carried to
 /// robot 2 by the bridge, input `path` of the target achiever).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::ViaPath")]
+#[payload(name = "nerve::ViaPath")]
 pub struct ViaPath {
     /// When the path was made (sender's clock).
     pub stamp_ns: u64,
@@ -241,8 +234,6 @@ pub struct ViaPath {
     /// The checkpoint each point belongs to, 0 for none.
     pub checkpoint_ids: [u8; MAX_VIA_POINTS],
 }
-
-impl Payload for ViaPath {}
 
 impl ViaPath {
     /// The valid points with their kind codes and checkpoint ids (`count`
@@ -292,9 +283,9 @@ impl MissionCode {
 
 /// A mission message between the robots' agents (map builder → target
 /// achiever: "come"; target achiever → robot 1: "via-reached", "arrived").
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::MissionCommand")]
+#[payload(name = "nerve::MissionCommand")]
 pub struct MissionCommand {
     /// When it was made (sender's clock).
     pub stamp_ns: u64,
@@ -311,8 +302,6 @@ pub struct MissionCommand {
     /// Padding, zero.
     pub reserved: u32,
 }
-
-impl Payload for MissionCommand {}
 
 impl MissionCommand {
     /// A message of `code` about `path_id`.
@@ -425,9 +414,9 @@ impl GraspAction {
 
 /// A request to the arm agent (input `cmd` of the `arm` agent; robot 2's
 /// mission agent sends it at the target).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::GraspRequest")]
+#[payload(name = "nerve::GraspRequest")]
 pub struct GraspRequest {
     /// When it was made.
     pub stamp_ns: u64,
@@ -446,8 +435,6 @@ pub struct GraspRequest {
     /// Padding, zero.
     pub reserved: [u8; 2],
 }
-
-impl Payload for GraspRequest {}
 
 impl GraspRequest {
     /// The action, or `None` for an unknown code.
@@ -554,9 +541,9 @@ pub const HELD_NOTHING: u8 = 0xFF;
 
 /// The arm agent's report (output `state` of the `arm` agent), 10 Hz and
 /// at every change of phase.
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::ArmGraspState")]
+#[payload(name = "nerve::ArmGraspState")]
 pub struct ArmGraspState {
     /// When the board's report was read.
     pub stamp_ns: u64,
@@ -576,8 +563,6 @@ pub struct ArmGraspState {
     /// 1 while the arm board is connected.
     pub connected: u8,
 }
-
-impl Payload for ArmGraspState {}
 
 impl ArmGraspState {
     /// The phase, or `None` for an unknown code.

@@ -8,7 +8,6 @@
 
 use super::Payload;
 use crate::fixed::FixedName;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 
 /// Agents a [`ResourceReport`] lists at most (the busiest first).
@@ -53,9 +52,9 @@ pub const ACTION_SLOWED: u8 = 1;
 pub const ACTION_SUSPENDED: u8 = 2;
 
 /// One agent's use of the machine.
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::AgentLoad")]
+#[payload(name = "nerve::AgentLoad")]
 pub struct AgentLoad {
     /// The agent's name.
     pub name: FixedName,
@@ -72,9 +71,9 @@ pub struct AgentLoad {
 }
 
 /// The resource manager's report (output `load` of the `resource` agent).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::ResourceReport")]
+#[payload(name = "nerve::ResourceReport")]
 pub struct ResourceReport {
     /// CLOCK_MONOTONIC nanoseconds of the measurement.
     pub stamp_ns: u64,
@@ -101,8 +100,6 @@ pub struct ResourceReport {
     /// The agents, busiest first; `agent_count` of them are used.
     pub agents: [AgentLoad; MAX_AGENT_LOADS],
 }
-
-impl Payload for ResourceReport {}
 
 impl ResourceReport {
     /// The load level, `None` for an unknown code.

@@ -2,13 +2,12 @@
 //! running agents re-register by themselves.
 
 use super::Payload;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 
 /// Published by the router on `nerve/<robot>/router/epoch` (history 1) when it starts.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::RouterEpoch")]
+#[payload(name = "nerve::RouterEpoch")]
 pub struct RouterEpoch {
     /// A number that differs for every router start.
     pub epoch: u64,
@@ -17,8 +16,6 @@ pub struct RouterEpoch {
     /// Padding, zero.
     pub reserved: u32,
 }
-
-impl Payload for RouterEpoch {}
 
 #[cfg(test)]
 mod tests {

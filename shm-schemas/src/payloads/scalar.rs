@@ -2,21 +2,18 @@
 //! a test value).
 
 use super::Payload;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 
 /// A stamped value.
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::Scalar")]
+#[payload(name = "nerve::Scalar")]
 pub struct Scalar {
     /// The value.
     pub value: f64,
     /// CLOCK_MONOTONIC nanoseconds when it was measured.
     pub stamp_ns: u64,
 }
-
-impl Payload for Scalar {}
 
 #[cfg(test)]
 mod tests {

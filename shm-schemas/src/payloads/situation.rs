@@ -15,7 +15,6 @@
 
 use super::Payload;
 use crate::fixed::FixedName;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 
 /// [`Situation::reports`] bit: the report speaks about danger.
@@ -90,9 +89,9 @@ impl TargetState {
 
 /// A functional agent's report of the situation (output `situation` of the
 /// `safety` and `tracker` agents, input `situation` of the decision maker).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::Situation")]
+#[payload(name = "nerve::Situation")]
 pub struct Situation {
     /// CLOCK_MONOTONIC nanoseconds when the situation was judged.
     pub stamp_ns: u64,
@@ -112,8 +111,6 @@ pub struct Situation {
     /// Padding, zero.
     pub reserved: u8,
 }
-
-impl Payload for Situation {}
 
 impl Situation {
     /// A danger report.
@@ -151,9 +148,9 @@ impl Situation {
 }
 
 /// The decision maker's mode (output `mode` of the `decision` agent).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::Mode")]
+#[payload(name = "nerve::Mode")]
 pub struct Mode {
     /// The mode's name in the knowledge base (`explore`, `track`, `avoid`...).
     pub name: FixedName,
@@ -174,8 +171,6 @@ pub struct Mode {
     /// Padding, zero.
     pub reserved: [u8; 5],
 }
-
-impl Payload for Mode {}
 
 /// Code of an unknown level in [`Mode`].
 pub const UNKNOWN_LEVEL: u8 = 255;

@@ -3,7 +3,6 @@
 //! between two samples (thesis section 4.2.2.1).
 
 use super::Payload;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 
 /// Number of sonar directions in a [`SonarScan`] (H1's ring).
@@ -11,9 +10,9 @@ pub const SONAR_DIRECTIONS: usize = 12;
 
 /// A scan of the sonar ring. Direction `i` points `i * 30°` counter-clockwise
 /// from the robot's forward axis (0 ahead, 3 left, 6 behind, 9 right).
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::SonarScan")]
+#[payload(name = "nerve::SonarScan")]
 pub struct SonarScan {
     /// Scan number from the sonar module (its wrapping counter, unwrapped by the agent).
     pub seq: u64,
@@ -28,8 +27,6 @@ pub struct SonarScan {
     /// Padding, zero.
     pub reserved: [u8; 4],
 }
-
-impl Payload for SonarScan {}
 
 impl SonarScan {
     /// The nearest valid range and its direction, if any echo was heard.

@@ -1,21 +1,18 @@
 //! `nerve::Tick`: the output of the `ticker` example agent.
 
 use super::Payload;
-use iceoryx2::prelude::ZeroCopySend;
 use serde::Serialize;
 
 /// A numbered tick, stamped when it was made.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Payload, Serialize)]
 #[repr(C)]
-#[type_name("nerve::Tick")]
+#[payload(name = "nerve::Tick")]
 pub struct Tick {
     /// Sequence number, starting at 1.
     pub seq: u64,
     /// CLOCK_MONOTONIC nanoseconds when the tick was made.
     pub stamp_ns: u64,
 }
-
-impl Payload for Tick {}
 
 #[cfg(test)]
 mod tests {

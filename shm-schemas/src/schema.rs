@@ -1,0 +1,427 @@
+//! What a payload says about itself: its [`Schema`], the field-by-field
+//! layout of a `#[repr(C)]` type (names, offsets, primitive types, fixed
+//! arrays, fixed strings, nested structs), and the [`Schema::fingerprint`]
+//! of that layout.
+//!
+//! A payload gets its schema from `#[derive(Payload)]` (the
+//! `shm-schemas-derive` crate), which reads the offsets from the compiler
+//! (`core::mem::offset_of!`), so a schema cannot drift from the type it
+//! describes. A tool that holds only the bytes of a sample and the schema
+//! can decode it ([`Schema::decode`]), whatever crate defined the type: that
+//! is what makes a port self-describing.
+//!
+//! Enums travel as their integer (the payloads store `u8` codes), so the
+//! schema has no enum kind.
+//!
+//! A payload of your own, in any crate that depends on `shm-schemas`:
+//!
+//! ```
+//! use shm_schemas::{Described, Payload};
+//!
+//! #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, Payload)]
+//! #[repr(C)]
+//! #[payload(name = "lab::Gripper")]
+//! pub struct Gripper {
+//!     pub width_m: f32,
+//!     pub force_n: f32,
+//!     pub closed: u8,
+//! }
+//!
+//! assert_eq!(Gripper::stable_type_name(), "lab::Gripper");
+//! let schema = Gripper::schema();
+//! assert_eq!(schema.field("force_n").map(|(offset, _)| offset), Some(4));
+//! assert_eq!(Gripper::layout_fingerprint(), schema.fingerprint());
+//! ```
+//!
+//! A layout the compiler may reorder is refused:
+//!
+//! ```compile_fail
+//! #[derive(Debug, Clone, Copy, serde::Serialize, shm_schemas::Payload)]
+//! #[payload(name = "lab::Loose")]
+//! pub struct Loose {
+//!     pub a: u8,
+//! }
+//! ```
+//!
+//! and so is a payload without its stable name:
+//!
+//! ```compile_fail
+//! #[derive(Debug, Clone, Copy, serde::Serialize, shm_schemas::Payload)]
+//! #[repr(C)]
+//! pub struct Nameless {
+//!     pub a: u8,
+//! }
+//! ```
+
+use serde::{Deserialize, Serialize};
+
+/// The layout of a type that can be part of a payload.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Schema {
+    /// The stable type name (`nerve::Tick`; `u64` for a primitive, `[f32; 3]` for an array).
+    pub type_name: String,
+    /// `size_of`, bytes.
+    pub size: usize,
+    /// `align_of`, bytes.
+    pub align: usize,
+    /// What it is made of.
+    pub kind: Kind,
+}
+
+/// What a [`Schema`] describes.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Kind {
+    /// A number or a bool.
+    Primitive {
+        /// which one
+        primitive: Primitive,
+    },
+    /// `[T; N]`
+    Array {
+        /// `N`
+        len: usize,
+        /// `T`
+        element: Box<Schema>,
+    },
+    /// A UTF-8 string of at most `capacity` bytes, stored inline as a `u32`
+    /// length followed by the bytes ([`crate::FixedName`]).
+    String {
+        /// the most bytes it holds
+        capacity: usize,
+    },
+    /// A `#[repr(C)]` struct.
+    Struct {
+        /// Its fields in declaration order.
+        fields: Vec<Field>,
+    },
+}
+
+/// A field of a struct.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Field {
+    /// Its name.
+    pub name: String,
+    /// Its offset from the start of the struct, bytes.
+    pub offset: usize,
+    /// Its type.
+    pub schema: Schema,
+}
+
+/// The primitive types a payload may hold (little-endian, as on every
+/// machine nerve runs on).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+#[allow(missing_docs)]
+pub enum Primitive {
+    U8,
+    U16,
+    U32,
+    U64,
+    I8,
+    I16,
+    I32,
+    I64,
+    F32,
+    F64,
+    Bool,
+}
+
+/// A type that knows its [`Schema`]. Implemented for the primitives, fixed
+/// arrays and [`crate::FixedName`] here, and by `#[derive(Payload)]`.
+pub trait Described {
+    /// The type's layout.
+    fn schema() -> Schema;
+}
+
+macro_rules! primitive {
+    ($($t:ty => $p:ident),* $(,)?) => {$(
+        impl Described for $t {
+            fn schema() -> Schema {
+                Schema {
+                    type_name: stringify!($t).into(),
+                    size: std::mem::size_of::<$t>(),
+                    align: std::mem::align_of::<$t>(),
+                    kind: Kind::Primitive { primitive: Primitive::$p },
+                }
+            }
+        }
+    )*};
+}
+
+primitive!(u8 => U8, u16 => U16, u32 => U32, u64 => U64, i8 => I8, i16 => I16, i32 => I32, i64 => I64,
+    f32 => F32, f64 => F64, bool => Bool);
+
+impl<T: Described, const N: usize> Described for [T; N] {
+    fn schema() -> Schema {
+        let element = T::schema();
+        Schema {
+            type_name: format!("[{}; {N}]", element.type_name),
+            size: std::mem::size_of::<[T; N]>(),
+            align: std::mem::align_of::<[T; N]>(),
+            kind: Kind::Array { len: N, element: Box::new(element) },
+        }
+    }
+}
+
+/// A value decoded from a sample's bytes through its [`Schema`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Value {
+    /// a bool
+    Bool(bool),
+    /// an unsigned integer
+    Unsigned(u64),
+    /// a signed integer
+    Signed(i64),
+    /// a float
+    Float(f64),
+    /// a string (invalid UTF-8 is replaced)
+    String(String),
+    /// an array
+    Array(Vec<Value>),
+    /// a struct's fields in order
+    Struct(Vec<(String, Value)>),
+}
+
+/// Why bytes could not be decoded through a schema.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum DecodeError {
+    /// Fewer bytes than the schema's size.
+    #[error("{type_name} takes {size} bytes, the sample has {got}: the port's type does not match its schema")]
+    Short {
+        /// the type
+        type_name: String,
+        /// its size
+        size: usize,
+        /// the bytes given
+        got: usize,
+    },
+}
+
+impl Schema {
+    /// The fingerprint of the layout (64-bit FNV-1a over the type name,
+    /// size, alignment, and each field's name, offset and schema, in
+    /// order): two builds that disagree on any of them get different
+    /// fingerprints, so a stale build is refused instead of misread.
+    pub fn fingerprint(&self) -> u64 {
+        let mut h = Fnv::new();
+        self.feed(&mut h);
+        h.0
+    }
+
+    fn feed(&self, h: &mut Fnv) {
+        h.bytes(self.type_name.as_bytes());
+        h.bytes(&[0]);
+        h.bytes(&(self.size as u64).to_le_bytes());
+        h.bytes(&(self.align as u64).to_le_bytes());
+        match &self.kind {
+            Kind::Primitive { primitive } => h.bytes(&[1, *primitive as u8]),
+            Kind::Array { len, element } => {
+                h.bytes(&[2]);
+                h.bytes(&(*len as u64).to_le_bytes());
+                element.feed(h);
+            }
+            Kind::String { capacity } => {
+                h.bytes(&[3]);
+                h.bytes(&(*capacity as u64).to_le_bytes());
+            }
+            Kind::Struct { fields } => {
+                h.bytes(&[4]);
+                h.bytes(&(fields.len() as u64).to_le_bytes());
+                for f in fields {
+                    h.bytes(f.name.as_bytes());
+                    h.bytes(&[0]);
+                    h.bytes(&(f.offset as u64).to_le_bytes());
+                    f.schema.feed(h);
+                }
+            }
+        }
+    }
+
+    /// Decodes `bytes` (at least [`Schema::size`] of them, as a sample's
+    /// payload) into a [`Value`].
+    pub fn decode(&self, bytes: &[u8]) -> Result<Value, DecodeError> {
+        let Some(bytes) = bytes.get(..self.size) else {
+            return Err(DecodeError::Short { type_name: self.type_name.clone(), size: self.size, got: bytes.len() });
+        };
+        Ok(self.decode_exact(bytes))
+    }
+
+    /// Decodes `bytes`, which are exactly `self.size` long (checked by the caller).
+    fn decode_exact(&self, bytes: &[u8]) -> Value {
+        match &self.kind {
+            Kind::Primitive { primitive } => primitive.decode(bytes),
+            Kind::Array { len, element } => {
+                // a schema may come from another process: never trust its
+                // figures beyond the bytes at hand
+                let n = bytes.len().checked_div(element.size).map_or(0, |fit| fit.min(*len));
+                Value::Array(bytes.chunks_exact(element.size.max(1)).take(n).map(|b| element.decode_exact(b)).collect())
+            }
+            Kind::String { capacity } => {
+                let len = bytes.get(..4).map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+                let end = 4usize.saturating_add(len.min(*capacity)).min(bytes.len());
+                let text = bytes.get(4..end).unwrap_or_default();
+                Value::String(String::from_utf8_lossy(text).into_owned())
+            }
+            Kind::Struct { fields } => Value::Struct(
+                fields
+                    .iter()
+                    .filter_map(|f| {
+                        let b = bytes.get(f.offset..f.offset.checked_add(f.schema.size)?)?;
+                        Some((f.name.clone(), f.schema.decode_exact(b)))
+                    })
+                    .collect(),
+            ),
+        }
+    }
+
+    /// The schema of the field at `path` (`pose.x`, `ranges_m.3` for an
+    /// array element), with its offset from the start of this type.
+    pub fn field(&self, path: &str) -> Option<(usize, &Schema)> {
+        let mut at = (0usize, self);
+        for part in path.split('.').filter(|p| !p.is_empty()) {
+            let (offset, schema) = at;
+            at = match &schema.kind {
+                Kind::Struct { fields } => {
+                    let f = fields.iter().find(|f| f.name == part)?;
+                    (offset.checked_add(f.offset)?, &f.schema)
+                }
+                Kind::Array { len, element } => {
+                    let i: usize = part.parse().ok().filter(|i| i < len)?;
+                    (offset.checked_add(i.checked_mul(element.size)?)?, element.as_ref())
+                }
+                _ => return None,
+            };
+        }
+        Some(at)
+    }
+}
+
+impl Primitive {
+    fn decode(self, b: &[u8]) -> Value {
+        // a schema from another process may give a primitive too few
+        // bytes: the missing ones read as zero
+        fn le<const N: usize>(b: &[u8]) -> [u8; N] {
+            let mut a = [0u8; N];
+            let n = b.len().min(N);
+            a[..n].copy_from_slice(&b[..n]);
+            a
+        }
+        match self {
+            Primitive::U8 => Value::Unsigned(u64::from(le::<1>(b)[0])),
+            Primitive::U16 => Value::Unsigned(u64::from(u16::from_le_bytes(le(b)))),
+            Primitive::U32 => Value::Unsigned(u64::from(u32::from_le_bytes(le(b)))),
+            Primitive::U64 => Value::Unsigned(u64::from_le_bytes(le(b))),
+            Primitive::I8 => Value::Signed(i64::from(le::<1>(b)[0] as i8)),
+            Primitive::I16 => Value::Signed(i64::from(i16::from_le_bytes(le(b)))),
+            Primitive::I32 => Value::Signed(i64::from(i32::from_le_bytes(le(b)))),
+            Primitive::I64 => Value::Signed(i64::from_le_bytes(le(b))),
+            Primitive::F32 => Value::Float(f64::from(f32::from_le_bytes(le(b)))),
+            Primitive::F64 => Value::Float(f64::from_le_bytes(le(b))),
+            Primitive::Bool => Value::Bool(le::<1>(b)[0] != 0),
+        }
+    }
+}
+
+/// 64-bit FNV-1a.
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Self {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+
+    fn bytes(&mut self, b: &[u8]) {
+        for &x in b {
+            self.0 ^= u64::from(x);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::FixedName;
+    use crate::payloads::{AgentLoad, ResourceReport, SonarScan, Tick};
+
+    fn bytes_of<T: Copy>(v: &T) -> Vec<u8> {
+        // SAFETY: reading the bytes of a Copy #[repr(C)] value; its padding
+        // is whatever it is, and the decoder reads fields only
+        unsafe { std::slice::from_raw_parts((v as *const T).cast::<u8>(), std::mem::size_of::<T>()) }.to_vec()
+    }
+
+    #[test]
+    fn a_sample_decodes_through_its_schema_alone() {
+        let tick = Tick { seq: 7, stamp_ns: 123_456_789 };
+        let v = Tick::schema().decode(&bytes_of(&tick)).expect("decodes");
+        assert_eq!(
+            v,
+            Value::Struct(vec![("seq".into(), Value::Unsigned(7)), ("stamp_ns".into(), Value::Unsigned(123_456_789))])
+        );
+        // nested structs, arrays of structs and fixed strings
+        let mut report = ResourceReport { cpus: 2, agent_count: 2, ..Default::default() };
+        report.agents[1] = AgentLoad { name: FixedName::new("motor"), cpu_percent: 12.5, ..Default::default() };
+        let schema = ResourceReport::schema();
+        let v = schema.decode(&bytes_of(&report)).expect("decodes");
+        let json = serde_json_like(&v);
+        assert!(json.contains(r#""cpus":2"#) && json.contains(r#""name":"motor""#) && json.contains("12.5"), "{json}");
+        let (offset, s) = schema.field("agents.1.cpu_percent").expect("a nested field");
+        assert_eq!(s.kind, Kind::Primitive { primitive: Primitive::F32 });
+        assert_eq!(s.decode(&bytes_of(&report)[offset..]).expect("the field"), Value::Float(12.5));
+        assert!(schema.field("agents.99.name").is_none(), "out of the array");
+        assert!(schema.field("nothing").is_none());
+        let scan = SonarScan::schema();
+        assert!(matches!(scan.field("ranges_m"), Some((_, Schema { kind: Kind::Array { .. }, .. }))));
+    }
+
+    #[test]
+    fn too_few_bytes_are_refused_and_a_lying_schema_never_panics() {
+        let e = Tick::schema().decode(&[0u8; 8]).expect_err("short");
+        assert!(e.to_string().contains("16 bytes, the sample has 8"), "{e}");
+        // a schema from another process may claim anything
+        let lying = Schema {
+            type_name: "x".into(),
+            size: 8,
+            align: 8,
+            kind: Kind::Array {
+                len: usize::MAX,
+                element: Box::new(Schema {
+                    type_name: "f64".into(),
+                    size: 0,
+                    align: 8,
+                    kind: Kind::Primitive { primitive: Primitive::F64 },
+                }),
+            },
+        };
+        assert_eq!(lying.decode(&[0u8; 8]).expect("decodes"), Value::Array(vec![]));
+        let short_field = Schema {
+            type_name: "y".into(),
+            size: 4,
+            align: 4,
+            kind: Kind::Struct { fields: vec![Field { name: "a".into(), offset: usize::MAX, schema: f64::schema() }] },
+        };
+        assert_eq!(short_field.decode(&[1u8; 4]).expect("decodes"), Value::Struct(vec![]));
+        let string = Schema { type_name: "s".into(), size: 6, align: 4, kind: Kind::String { capacity: 1 << 40 } };
+        assert_eq!(string.decode(&[200, 0, 0, 0, b'h', b'i']).expect("decodes"), Value::String("hi".into()));
+    }
+
+    /// A compact JSON-ish rendering for assertions (shm-schemas has no serde_json).
+    fn serde_json_like(v: &Value) -> String {
+        match v {
+            Value::Bool(b) => b.to_string(),
+            Value::Unsigned(u) => u.to_string(),
+            Value::Signed(i) => i.to_string(),
+            Value::Float(f) => f.to_string(),
+            Value::String(s) => format!("{s:?}"),
+            Value::Array(a) => format!("[{}]", a.iter().map(serde_json_like).collect::<Vec<_>>().join(",")),
+            Value::Struct(f) => {
+                format!(
+                    "{{{}}}",
+                    f.iter().map(|(k, v)| format!("{k:?}:{}", serde_json_like(v))).collect::<Vec<_>>().join(",")
+                )
+            }
+        }
+    }
+}
