@@ -480,15 +480,15 @@ impl<Resp: DeserializeOwned> PendingCall<Resp> {
     /// is gone or dropped the request unanswered. Dropping the call
     /// abandons it.
     pub fn poll(&self) -> Result<Option<Resp>, ControlError> {
+        // Look whether the server still holds the request *before* reading:
+        // a server answers, then lets go, so an answer sent by a server seen
+        // gone is already here to read (read first, and the answer could
+        // land between the two looks and be taken for a server gone).
+        let connected = self.pending.is_connected();
         if let Some(resp) = self.pending.receive().map_err(ipc_err(&self.service, IpcOp::Receive))? {
             return Ok(Some(decode::<Resp>(resp.payload())?));
         }
-        if !self.pending.is_connected() {
-            // the server may have answered and let go of the request between
-            // the two looks: read once more before calling it gone
-            if let Some(resp) = self.pending.receive().map_err(ipc_err(&self.service, IpcOp::Receive))? {
-                return Ok(Some(decode::<Resp>(resp.payload())?));
-            }
+        if !connected {
             return Err(ControlError::NoServer { service: self.service.clone() });
         }
         Ok(None)
@@ -554,12 +554,22 @@ mod tests {
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
 
+    /// The size of the tests' services.
+    const SMALL: ControlSize =
+        ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128), reserved_clients: 0 };
+
+    /// A robot of the test's own (removed when the guard drops) and the
+    /// name of its test service.
+    fn test_robot(tag: &str) -> (World, Cleanup, String) {
+        let world = World::new(&format!("{tag}{}", std::process::id())).expect("world");
+        let service = format!("nerve/{}/test/ctl", world.robot());
+        (world.clone(), Cleanup(world), service)
+    }
+
     #[test]
     fn tools_leave_the_reserved_client_slot_for_the_router() {
-        let world = World::new(&format!("slot{}", std::process::id())).expect("world");
-        let _cleanup = Cleanup(world.clone());
+        let (world, _cleanup, service) = test_robot("slot");
         let size = ControlSize { max_clients: 3, max_nodes: 8, max_message: Some(128), reserved_clients: 1 };
-        let service = format!("nerve/{}/test/ctl", world.robot());
         let node = world.node("server").expect("node");
         let _server: ControlServer<String, String> = ControlServer::create(&node, &service, size).expect("server");
         let tools = world.node("tools").expect("node");
@@ -573,14 +583,28 @@ mod tests {
         drop((a, b, r));
     }
 
-    /// A server of `String`s on its own thread, taking each request with
-    /// `take` until the returned flag is set.
+    /// A server of `String`s on its own thread.
+    struct ServerThread {
+        done: Arc<AtomicBool>,
+        thread: std::thread::JoinHandle<()>,
+    }
+
+    impl ServerThread {
+        /// Stops the server and waits for its thread.
+        fn stop(self) {
+            self.done.store(true, Ordering::Relaxed);
+            self.thread.join().expect("server thread");
+        }
+    }
+
+    /// Serves `service` on a thread of its own, taking each request with
+    /// `take`, until [`ServerThread::stop`].
     fn server_thread(
         world: &World,
         service: &str,
         size: ControlSize,
         mut take: impl FnMut(Result<String, ProtocolError>, Responder<String>) + Send + 'static,
-    ) -> (Arc<AtomicBool>, std::thread::JoinHandle<()>) {
+    ) -> ServerThread {
         let done = Arc::new(AtomicBool::new(false));
         let (world, service, stop) = (world.clone(), service.to_owned(), done.clone());
         let thread = std::thread::spawn(move || {
@@ -593,7 +617,7 @@ mod tests {
                 std::thread::sleep(Duration::from_millis(1));
             }
         });
-        (done, thread)
+        ServerThread { done, thread }
     }
 
     /// A client of `service`, once its server is up (at most 5 s).
@@ -610,12 +634,10 @@ mod tests {
 
     #[test]
     fn an_iceoryx2_error_says_which_operation_failed_and_keeps_its_cause() {
-        let world = World::new(&format!("op{}", std::process::id())).expect("world");
-        let _cleanup = Cleanup(world.clone());
+        let (world, _cleanup, _) = test_robot("op");
         let node = world.node("tools").expect("node");
-        let size = ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128), reserved_clients: 0 };
         let service = format!("nerve/{}/{}", world.robot(), "x".repeat(1000));
-        let e = ControlClient::<String, String>::open(&node, &service, size).expect_err("a name iceoryx2 refuses");
+        let e = ControlClient::<String, String>::open(&node, &service, SMALL).expect_err("a name iceoryx2 refuses");
         let ControlError::Ipc { op, source, .. } = &e else { panic!("not an iceoryx2 error: {e}") };
         assert_eq!(*op, IpcOp::Name);
         assert!(!source.to_string().is_empty());
@@ -625,20 +647,17 @@ mod tests {
 
     #[test]
     fn oversized_messages_are_refused_or_answered_with_an_error() {
-        let world = World::new(&format!("ctl{}", std::process::id())).expect("world");
-        let _cleanup = Cleanup(world.clone());
-        let size = ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128), reserved_clients: 0 };
-        let service = format!("nerve/{}/test/ctl", world.robot());
+        let (world, _cleanup, service) = test_robot("ctl");
         let handler = |req: Result<String, ProtocolError>| match req {
             Ok(r) if r == "big" => "x".repeat(500),
             Ok(r) => format!("echo {r}"),
             Err(e) => format!("error: {e}"),
         };
-        let (done, server) = server_thread(&world, &service, size, move |req, responder| {
+        let server = server_thread(&world, &service, SMALL, move |req, responder| {
             responder.respond_or(&handler(req), |e| handler(Err(e)))
         });
         let node = world.node("client").expect("node");
-        let client = client_of(&node, &service, size);
+        let client = client_of(&node, &service, SMALL);
         let timeout = Duration::from_secs(5);
         assert_eq!(client.call(&"hi".to_owned(), timeout).expect("small call"), "echo hi");
         // a request over the limit never leaves the client
@@ -647,8 +666,7 @@ mod tests {
         // a reply over the limit comes back as the handler's error reply, not as a time-out
         let reply = client.call(&"big".to_owned(), timeout).expect("an answer");
         assert!(reply.starts_with("error: the reply (") && reply.contains("128 bytes"), "{reply}");
-        done.store(true, Ordering::Relaxed);
-        server.join().expect("server thread");
+        server.stop();
     }
 
     /// A request the server took is never sent twice: one it lets go
@@ -657,14 +675,11 @@ mod tests {
     /// read, not mistaken for a server gone.
     #[test]
     fn a_taken_request_is_carried_out_once() {
-        let world = World::new(&format!("once{}", std::process::id())).expect("world");
-        let _cleanup = Cleanup(world.clone());
-        let size = ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128), reserved_clients: 0 };
-        let service = format!("nerve/{}/test/ctl", world.robot());
+        let (world, _cleanup, service) = test_robot("once");
         let taken = Arc::new(std::sync::atomic::AtomicUsize::new(0));
-        let (done, server) = {
+        let server = {
             let taken = taken.clone();
-            server_thread(&world, &service, size, move |req, responder| {
+            server_thread(&world, &service, SMALL, move |req, responder| {
                 taken.fetch_add(1, Ordering::SeqCst);
                 if req.as_deref() != Ok("drop") {
                     responder.respond_or(&"ok".to_owned(), |e| e.to_string());
@@ -672,7 +687,7 @@ mod tests {
             })
         };
         let node = world.node("client").expect("node");
-        let client = client_of(&node, &service, size);
+        let client = client_of(&node, &service, SMALL);
         let timeout = Duration::from_secs(5);
         let t0 = Instant::now();
         let e = client.call(&"drop".to_owned(), timeout).expect_err("an unanswered request");
@@ -684,7 +699,6 @@ mod tests {
             assert_eq!(client.call(&format!("{i}"), timeout).expect("an answer"), "ok");
         }
         assert_eq!(taken.load(Ordering::SeqCst), 1 + CALLS, "a request was carried out twice");
-        done.store(true, Ordering::Relaxed);
-        server.join().expect("server thread");
+        server.stop();
     }
 }
