@@ -17,7 +17,7 @@
 use crate::machine::{Machine, command_line};
 use crate::procs::Robot;
 use crate::stats::Summary;
-use agent_sdk::process::holdings;
+use agent_sdk::process::{Holdings, holdings};
 use anyhow::{Context as _, Result, anyhow, bail};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -229,19 +229,16 @@ pub fn run(o: &SoakOpts) -> Result<SoakReport> {
                 ps_ns.push(ps_took.as_nanos() as u64);
             }
             let router = holdings(router_pid);
-            let (router_rss, router_fds) = (router.rss_kib, router.fds);
-            let (mut rss, mut fds) = (router_rss, router_fds);
-            for p in &pids {
-                let h = holdings(*p);
-                rss += h.rss_kib;
-                fds += h.fds;
-            }
+            let robot = pids
+                .iter()
+                .map(|p| holdings(*p))
+                .fold(router, |sum, h| Holdings { rss_kib: sum.rss_kib + h.rss_kib, fds: sum.fds + h.fds });
             samples.push(Sample {
                 t_s: t0.elapsed().as_secs_f64(),
-                router_rss_kib: router_rss,
-                router_fds,
-                robot_rss_kib: rss,
-                robot_fds: fds,
+                router_rss_kib: router.rss_kib,
+                router_fds: router.fds,
+                robot_rss_kib: robot.rss_kib,
+                robot_fds: robot.fds,
                 processes: pids.len() as u64 + 1,
                 shm_files: count_top_files(Path::new("/dev/shm"), &prefix),
                 iox2_files: count_files(world.iox2_root(), &prefix),

@@ -73,7 +73,9 @@ impl<'de> Deserialize<'de> for FixedName {
 impl crate::schema::Described for FixedName {
     fn schema() -> crate::schema::Schema {
         crate::schema::Schema {
-            type_name: "nerve::FixedName".into(),
+            // SAFETY: reading the name has no precondition; the unsafety of
+            // `ZeroCopySend::type_name` concerns implementing it
+            type_name: unsafe { <FixedName as ZeroCopySend>::type_name() }.into(),
             size: std::mem::size_of::<FixedName>(),
             align: std::mem::align_of::<FixedName>(),
             kind: crate::schema::Kind::String { capacity: FIXED_NAME_CAPACITY },
