@@ -109,6 +109,11 @@ impl Outbox {
         self.queue.front().map_or(self.next_seq, |q| q.seq)
     }
 
+    /// The sequence number of the newest message queued (0 before the first).
+    pub fn last_seq(&self) -> u64 {
+        self.next_seq.saturating_sub(1)
+    }
+
     /// Messages queued now.
     pub fn depth(&self) -> usize {
         self.queue.len()

@@ -269,7 +269,8 @@ impl ExportTopic {
     pub fn figures(&self, out: &mut Vec<(String, String)>) {
         let p = format!("export.{}", self.spec.origin());
         let st = lock(&self.state);
-        let (depth, lost, retx) = st.outbox.as_ref().map_or((0, 0, 0), |o| (o.depth(), o.lost(), o.retransmitted()));
+        let (depth, lost, retx, last) =
+            st.outbox.as_ref().map_or((0, 0, 0, 0), |o| (o.depth(), o.lost(), o.retransmitted(), o.last_seq()));
         let importers = lock(&self.importers).len();
         out.extend([
             (format!("{p}.type"), self.info.name.to_string()),
@@ -282,6 +283,7 @@ impl ExportTopic {
             (format!("{p}.lost"), lost.to_string()),
             (format!("{p}.queue"), depth.to_string()),
             (format!("{p}.retransmitted"), retx.to_string()),
+            (format!("{p}.last_seq"), last.to_string()),
         ]);
     }
 }
@@ -466,6 +468,7 @@ impl ImportTopic {
             (format!("{p}.lost"), self.lost.get().to_string()),
             (format!("{p}.refused"), self.refused.get().to_string()),
             (format!("{p}.duplicates"), self.duplicates.get().to_string()),
+            (format!("{p}.acked"), st.inbox.acked().to_string()),
             (format!("{p}.age_ms"), age),
             (format!("{p}.latency_us"), median),
             (format!("{p}.error"), st.last_error.clone().unwrap_or_default()),
