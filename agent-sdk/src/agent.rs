@@ -28,7 +28,7 @@ use crate::params::{Param, ParamTable};
 use crate::ports::{DynInput, Input, Output, PortError};
 use crate::world::{Ipc, World};
 use iceoryx2::prelude::Node;
-use shm_schemas::control::agent_to_router::PortSpec;
+use shm_schemas::control::agent_to_router::{PortSpec, add_schema};
 use shm_schemas::names::validate_port_name;
 use shm_schemas::{AgentName, Payload};
 use std::fmt::Display;
@@ -94,6 +94,8 @@ pub struct Setup {
     pub(crate) args: Vec<String>,
     pub(crate) inputs: Vec<Arc<dyn DynInput>>,
     pub(crate) outputs: Vec<PortSpec>,
+    /// the schema of each type the ports carry, once per layout
+    pub(crate) schemas: Vec<shm_schemas::Schema>,
     pub(crate) params: ParamTable,
 }
 
@@ -104,6 +106,20 @@ impl std::fmt::Debug for Setup {
 }
 
 impl Setup {
+    /// A setup with no port or parameter declared yet.
+    pub(crate) fn new(world: World, name: AgentName, node: Arc<Node<Ipc>>, args: Vec<String>) -> Self {
+        Setup {
+            world,
+            name,
+            node,
+            args,
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            schemas: Vec::new(),
+            params: ParamTable::default(),
+        }
+    }
+
     /// The agent's name.
     pub fn name(&self) -> &str {
         self.name.as_str()
@@ -124,7 +140,8 @@ impl Setup {
         self.check_port(port)?;
         let service = self.world.robot().port_service(self.name.as_str(), port);
         let out = Output::create(&self.node, &service, self.name.as_str())?;
-        self.outputs.push(PortSpec { name: port.into(), type_name: T::stable_type_name().into() });
+        self.outputs.push(PortSpec::of::<T>(port));
+        add_schema(&mut self.schemas, T::schema());
         Ok(out)
     }
 
@@ -133,6 +150,7 @@ impl Setup {
         self.check_port(port)?;
         let (input, inner) = Input::<T>::new(port);
         self.inputs.push(inner);
+        add_schema(&mut self.schemas, T::schema());
         Ok(input)
     }
 

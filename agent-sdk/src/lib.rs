@@ -30,6 +30,7 @@ pub mod meters;
 pub mod params;
 pub mod ports;
 pub mod process;
+pub mod raw_port;
 pub mod rt;
 pub mod runtime;
 pub mod world;

@@ -467,7 +467,6 @@ mod tests {
     /// new one), nor a notice of the old ring in the new file.
     #[test]
     fn notices_resolve_only_in_the_ring_file_that_announced_them() {
-        use crate::params::ParamTable;
         use crate::world::World;
         use crate::world::test_support::Cleanup;
         use shm_schemas::AgentName;
@@ -476,15 +475,7 @@ mod tests {
         let world = World::new(&format!("r18m{}", std::process::id())).expect("world");
         let _cleanup = Cleanup(world.clone());
         let node = Arc::new(world.node("t").expect("node"));
-        let mut setup = Setup {
-            world: world.clone(),
-            name: AgentName::new("t").expect("name"),
-            node,
-            args: Vec::new(),
-            inputs: Vec::new(),
-            outputs: Vec::new(),
-            params: ParamTable::default(),
-        };
+        let mut setup = Setup::new(world.clone(), AgentName::new("t").expect("name"), node, Vec::new());
         let mut out = setup.ring_output("frames", RingSpec::new(4, 64).named("r18")).expect("ring output");
         let mut input = setup.ring_input("in").expect("ring input");
         let old: Vec<RingNotice> =

@@ -18,7 +18,9 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use iceoryx2::service::attribute::{AttributeKey, AttributeValue, AttributeVerifier};
 use iceoryx2::service::port_factory::{event, publish_subscribe};
+use shm_schemas::services::port_attributes::{self, fingerprint_text, parse_fingerprint};
 use shm_schemas::stats::InputStats;
 use shm_schemas::{FixedName, Payload, SampleHeader};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -57,6 +59,23 @@ pub enum PortError {
         service: String,
         /// the type this side asked for
         type_name: String,
+    },
+    /// The service carries the same type name built from another
+    /// definition (another layout fingerprint): a stale build on one side.
+    #[error(
+        "port {service} carries {type_name} with layout {}, this program was built with layout {}: \
+         the two were built from different definitions of {type_name}; rebuild the older one (`cargo build`) and restart it",
+        fingerprint_text(*theirs), fingerprint_text(*ours)
+    )]
+    LayoutMismatch {
+        /// service name
+        service: String,
+        /// the payload type name
+        type_name: String,
+        /// the fingerprint of this side's build
+        ours: u64,
+        /// the fingerprint the service was created with
+        theirs: u64,
     },
     /// The port's wake-up event service could not be opened or created.
     #[error("port {service}: cannot open its wake-up event: {source:?}")]
@@ -203,7 +222,56 @@ fn port_builder<T: Payload>(node: &Node<Ipc>, service: &str) -> Result<PortBuild
         .enable_safe_overflow(true))
 }
 
-/// Opens (or creates) the publish-subscribe service of an output port.
+/// The attributes of the service of output port `service`
+/// (`nerve/ROBOT/AGENT/PORT`) carrying `T`: its type name, layout
+/// fingerprint, agent and port ([`port_attributes`]).
+fn port_attributes<T: Payload>(service: &str) -> Result<AttributeVerifier, PortError> {
+    let mut parts = service.splitn(4, '/').skip(2);
+    let (agent, port) = (parts.next().unwrap_or_default(), parts.next().unwrap_or_default());
+    let fingerprint = fingerprint_text(T::layout_fingerprint());
+    let mut v = AttributeVerifier::new();
+    for (key, value) in [
+        (port_attributes::TYPE, T::stable_type_name()),
+        (port_attributes::FINGERPRINT, fingerprint.as_str()),
+        (port_attributes::AGENT, agent),
+        (port_attributes::PORT, port),
+    ] {
+        if value.is_empty() {
+            continue;
+        }
+        let (Ok(key), Ok(value)) = (AttributeKey::try_from(key), AttributeValue::try_from(value)) else {
+            return Err(perr(service, format!("the attribute {key}={value} does not fit an iceoryx2 attribute")));
+        };
+        v = v.require(&key, &value).map_err(|e| perr(service, e))?;
+    }
+    Ok(v)
+}
+
+/// The layout fingerprint a port's service was created with, if it says.
+pub fn service_fingerprint(factory: &impl iceoryx2::service::port_factory::PortFactory) -> Option<u64> {
+    let key = AttributeKey::try_from(port_attributes::FINGERPRINT).ok()?;
+    parse_fingerprint(&factory.attributes().key_value(&key, 0)?.to_string())
+}
+
+/// Refuses a service created for another layout of `T` than this build's.
+fn check_layout<T: Payload>(
+    service: &str,
+    factory: &impl iceoryx2::service::port_factory::PortFactory,
+) -> Result<(), PortError> {
+    match service_fingerprint(factory) {
+        Some(theirs) if theirs != T::layout_fingerprint() => Err(PortError::LayoutMismatch {
+            service: service.into(),
+            type_name: T::stable_type_name().into(),
+            ours: T::layout_fingerprint(),
+            theirs,
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// Opens (or creates) the publish-subscribe service of an output port. A
+/// service it creates carries the port's attributes ([`port_attributes`]);
+/// one it opens must have been created for the same layout of `T`.
 pub fn port_service<T: Payload>(
     node: &Node<Ipc>,
     service: &str,
@@ -214,8 +282,24 @@ pub fn port_service<T: Payload>(
     let mut attempt = 0;
     loop {
         attempt += 1;
-        match port_builder::<T>(node, service)?.open_or_create() {
+        match port_builder::<T>(node, service)?.open_or_create_with_attributes(&port_attributes::<T>(service)?) {
             Ok(f) => return Ok(f),
+            Err(OpenOrCreate::PublishSubscribeOpenError(Open::IncompatibleAttributes)) => {
+                // created by another build: say which layouts disagree
+                let theirs = port_builder::<T>(node, service)?.open().ok().and_then(|f| service_fingerprint(&f));
+                return Err(match theirs {
+                    Some(theirs) => PortError::LayoutMismatch {
+                        service: service.into(),
+                        type_name: T::stable_type_name().into(),
+                        ours: T::layout_fingerprint(),
+                        theirs,
+                    },
+                    None => PortError::Ipc {
+                        service: service.into(),
+                        detail: "the service exists with other attributes (made by another program?)".into(),
+                    },
+                });
+            }
             Err(OpenOrCreate::PublishSubscribeOpenError(Open::IncompatibleTypes)) => {
                 return Err(PortError::IncompatibleType {
                     service: service.into(),
@@ -263,7 +347,10 @@ fn source_services<T: Payload>(node: &Node<Ipc>, service: &str) -> Result<Source
     let ps = loop {
         attempt += 1;
         match port_builder::<T>(node, service)?.open() {
-            Ok(f) => break f,
+            Ok(f) => {
+                check_layout::<T>(service, &f)?;
+                break f;
+            }
             Err(Open::DoesNotExist) => return Err(PortError::NoSuchPort { service: service.into() }),
             Err(Open::IncompatibleTypes) => {
                 return Err(PortError::IncompatibleType {
@@ -537,6 +624,8 @@ fn lock<X>(m: &Mutex<X>) -> MutexGuard<'_, X> {
 pub(crate) trait DynInput: Send + Sync {
     fn name(&self) -> &str;
     fn type_name(&self) -> &'static str;
+    /// The port's name, type name and layout fingerprint.
+    fn spec(&self) -> shm_schemas::control::agent_to_router::PortSpec;
     /// Subscribes to `from_agent/from_port`; `Ok(false)` when already subscribed.
     fn connect(
         &self,
@@ -558,6 +647,10 @@ impl<T: Payload> DynInput for InputInner<T> {
 
     fn type_name(&self) -> &'static str {
         T::stable_type_name()
+    }
+
+    fn spec(&self) -> shm_schemas::control::agent_to_router::PortSpec {
+        shm_schemas::control::agent_to_router::PortSpec::of::<T>(&self.name)
     }
 
     fn connect(
@@ -628,6 +721,71 @@ mod tests {
     use crate::world::World;
     use crate::world::test_support::Cleanup;
     use shm_schemas::payloads::{Scalar, Tick};
+
+    /// `Pose` as an old build defined it: the same name and size as the
+    /// new one, the fields in another order (iceoryx2 alone cannot tell).
+    mod old {
+        #[derive(Debug, Clone, Copy, Default, serde::Serialize, shm_schemas::Payload)]
+        #[payload(name = "test::Pose")]
+        #[repr(C)]
+        pub struct Pose {
+            pub x: f64,
+            pub y: f64,
+        }
+    }
+    mod new {
+        #[derive(Debug, Clone, Copy, Default, serde::Serialize, shm_schemas::Payload)]
+        #[payload(name = "test::Pose")]
+        #[repr(C)]
+        pub struct Pose {
+            pub y: f64,
+            pub x: f64,
+        }
+    }
+
+    #[test]
+    fn a_port_carries_its_attributes_and_another_layout_of_its_type_is_refused() {
+        use iceoryx2::service::port_factory::PortFactory as _;
+        use shm_schemas::Payload as _;
+        let world = World::new(&format!("layout{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+        let service = robot.port_service("arm", "pose");
+        let out = port_service::<old::Pose>(&node, &service).expect("created");
+        let _ev = port_event(&node, &service).expect("event");
+        let attrs: Vec<String> = out.attributes().iter().map(|a| format!("{}={}", a.key(), a.value())).collect();
+        let fp = old::Pose::layout_fingerprint();
+        assert_ne!(fp, new::Pose::layout_fingerprint());
+        for want in [
+            "nerve.type=test::Pose".to_string(),
+            format!("nerve.fingerprint={fp:#018x}"),
+            "nerve.agent=arm".into(),
+            "nerve.port=pose".into(),
+        ] {
+            assert!(attrs.contains(&want), "{want} in {attrs:?}");
+        }
+        assert_eq!(super::service_fingerprint(&out), Some(fp));
+        // an input of the new build refuses the old port, saying both layouts
+        let (_input, inner) = Input::<new::Pose>::new("in");
+        match inner.connect(&node, &robot, "arm", "pose") {
+            Err(e @ PortError::LayoutMismatch { .. }) => {
+                let text = e.to_string();
+                assert!(text.contains(&format!("{fp:#018x}")) && text.contains("rebuild the older one"), "{text}");
+            }
+            other => panic!("another layout of test::Pose: {:?}", other.err()),
+        }
+        // and so does a second publisher of the new build
+        match port_service::<new::Pose>(&node, &service) {
+            Err(PortError::LayoutMismatch { theirs, ours, .. }) => {
+                assert_eq!((theirs, ours), (fp, new::Pose::layout_fingerprint()))
+            }
+            other => panic!("a publisher of another layout: {:?}", other.err()),
+        }
+        // the same build reads it
+        let (_input, inner) = Input::<old::Pose>::new("in");
+        assert!(inner.connect(&node, &robot, "arm", "pose").expect("same layout"));
+    }
 
     #[test]
     fn a_port_error_says_which_operation_failed_and_keeps_iceoryx2s_cause() {

@@ -13,7 +13,7 @@
 
 use agent_sdk::World;
 use agent_sdk::process::ProcessHandle;
-use shm_schemas::control::agent_to_router::Registration;
+use shm_schemas::control::agent_to_router::{PortSpec, Registration};
 use shm_schemas::control::cli_to_router::{AgentState, RouterError};
 use shm_schemas::{AgentName, PortRef};
 use std::collections::BTreeMap;
@@ -102,16 +102,52 @@ impl Registry {
         RouterError::UnknownAgent { name: name.into(), running: self.agents.keys().cloned().collect() }
     }
 
-    /// The payload type of port `p` (an output when `output`), or why there is none.
-    pub fn port_type(&self, p: &PortRef, output: bool) -> Result<String, RouterError> {
+    /// Port `p` (an output when `output`) as its agent registered it, or why there is none.
+    pub fn port(&self, p: &PortRef, output: bool) -> Result<&PortSpec, RouterError> {
         let entry = self.live(p.agent.as_str())?;
         let ports = if output { &entry.reg.outputs } else { &entry.reg.inputs };
-        ports.iter().find(|s| s.name == p.port).map(|s| s.type_name.clone()).ok_or_else(|| RouterError::UnknownPort {
+        ports.iter().find(|s| s.name == p.port).ok_or_else(|| RouterError::UnknownPort {
             agent: p.agent.to_string(),
             port: p.port.clone(),
             direction: if output { "output" } else { "input" }.into(),
             available: ports.iter().map(|s| s.name.clone()).collect(),
         })
+    }
+
+    /// The type output `from` would send to input `to`, or why they cannot
+    /// be connected: another type, or the same type name built from another
+    /// definition (the agent to rebuild is named when the router can tell).
+    pub fn check_compatible(&self, from: &PortRef, to: &PortRef) -> Result<String, RouterError> {
+        let (f, t) = (self.port(from, true)?, self.port(to, false)?);
+        if f.type_name != t.type_name {
+            return Err(RouterError::TypeMismatch {
+                from: from.to_string(),
+                from_type: f.type_name.clone(),
+                to: to.to_string(),
+                to_type: t.type_name.clone(),
+            });
+        }
+        if f.fingerprint != t.fingerprint {
+            let built = |agent: &str| {
+                let exe = &self.agents.get(agent)?.reg.executable;
+                std::fs::metadata(exe).and_then(|m| m.modified()).ok()
+            };
+            let (fa, ta) = (from.agent.as_str(), to.agent.as_str());
+            let rebuild = match (built(fa), built(ta)) {
+                (Some(a), Some(b)) if a < b => format!("{fa} is the older build: rebuild it and restart it"),
+                (Some(a), Some(b)) if b < a => format!("{ta} is the older build: rebuild it and restart it"),
+                _ => format!("rebuild the one of {fa} and {ta} built from the older definition, and restart it"),
+            };
+            return Err(RouterError::LayoutMismatch {
+                from: from.to_string(),
+                to: to.to_string(),
+                type_name: f.type_name.clone(),
+                from_fingerprint: f.fingerprint,
+                to_fingerprint: t.fingerprint,
+                rebuild,
+            });
+        }
+        Ok(f.type_name.clone())
     }
 }
 
@@ -159,6 +195,7 @@ mod tests {
             outputs: vec![],
             log_file: None,
             suspended: false,
+            schemas: vec![],
         }
     }
 

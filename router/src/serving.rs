@@ -355,16 +355,7 @@ impl State {
                 Ok(Started::waiting(asked.keys().copied().collect(), Work::Views { graph, asked }))
             }
             CliRequest::Connect { from, to, allow_cycle } => {
-                let from_type = self.registry.port_type(&from, true)?;
-                let to_type = self.registry.port_type(&to, false)?;
-                if from_type != to_type {
-                    return Err(RouterError::TypeMismatch {
-                        from: from.to_string(),
-                        from_type,
-                        to: to.to_string(),
-                        to_type,
-                    });
-                }
+                let from_type = self.registry.check_compatible(&from, &to)?;
                 if !allow_cycle {
                     let registry = &self.registry;
                     let event_driven = |n: &str| registry.get(n).is_some_and(|e| e.reg.task == TaskKind::EventDriven);
@@ -624,6 +615,7 @@ impl State {
                 stats,
                 restarts: sup.map(|s| s.total).unwrap_or(0),
                 importance: sup.map(|s| s.spec.importance),
+                schemas: e.reg.schemas.clone(),
             });
         }
         for (name, sup) in self.supervisor.iter() {
@@ -643,6 +635,7 @@ impl State {
                 stats: None,
                 restarts: sup.total,
                 importance: Some(sup.spec.importance),
+                schemas: vec![],
             });
         }
         out.sort_by(|a, b| a.name.cmp(&b.name));

@@ -68,9 +68,11 @@ pub struct Schema {
     pub kind: Kind,
 }
 
-/// What a [`Schema`] describes.
+/// What a [`Schema`] describes. Externally tagged (`{"struct": {...}}` in
+/// JSON): the control protocol's postcard cannot carry internally tagged
+/// enums.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
+#[serde(rename_all = "snake_case")]
 pub enum Kind {
     /// A number or a bool.
     Primitive {
@@ -164,9 +166,10 @@ impl<T: Described, const N: usize> Described for [T; N] {
     }
 }
 
-/// A value decoded from a sample's bytes through its [`Schema`].
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(untagged)]
+/// A value decoded from a sample's bytes through its [`Schema`]. It
+/// serializes as the payload itself would with serde (a struct as a map in
+/// field order, an `f32` as an `f32`), and displays in a compact human form.
+#[derive(Debug, Clone, PartialEq)]
 pub enum Value {
     /// a bool
     Bool(bool),
@@ -174,7 +177,9 @@ pub enum Value {
     Unsigned(u64),
     /// a signed integer
     Signed(i64),
-    /// a float
+    /// an `f32`
+    F32(f32),
+    /// an `f64`
     Float(f64),
     /// a string (invalid UTF-8 is replaced)
     String(String),
@@ -182,6 +187,68 @@ pub enum Value {
     Array(Vec<Value>),
     /// a struct's fields in order
     Struct(Vec<(String, Value)>),
+}
+
+impl Serialize for Value {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::{SerializeMap, SerializeSeq};
+        match self {
+            Value::Bool(b) => s.serialize_bool(*b),
+            Value::Unsigned(u) => s.serialize_u64(*u),
+            Value::Signed(i) => s.serialize_i64(*i),
+            Value::F32(f) => s.serialize_f32(*f),
+            Value::Float(f) => s.serialize_f64(*f),
+            Value::String(t) => s.serialize_str(t),
+            Value::Array(a) => {
+                let mut seq = s.serialize_seq(Some(a.len()))?;
+                for v in a {
+                    seq.serialize_element(v)?;
+                }
+                seq.end()
+            }
+            Value::Struct(fields) => {
+                let mut map = s.serialize_map(Some(fields.len()))?;
+                for (k, v) in fields {
+                    map.serialize_entry(k, v)?;
+                }
+                map.end()
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for Value {
+    /// `{ seq: 7, pose: { x: 1.5, y: -2 }, name: "motor", ranges_m: [1, 2] }`
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Value::Bool(b) => write!(f, "{b}"),
+            Value::Unsigned(u) => write!(f, "{u}"),
+            Value::Signed(i) => write!(f, "{i}"),
+            Value::F32(x) => write!(f, "{x}"),
+            Value::Float(x) => write!(f, "{x}"),
+            Value::String(t) => write!(f, "{t:?}"),
+            Value::Array(a) => {
+                f.write_str("[")?;
+                for (i, v) in a.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(", ")?;
+                    }
+                    write!(f, "{v}")?;
+                }
+                f.write_str("]")
+            }
+            Value::Struct(fields) => {
+                f.write_str("{ ")?;
+                for (i, (k, v)) in fields.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(", ")?;
+                    }
+                    write!(f, "{k}: {v}")?;
+                }
+                f.write_str(" }")
+            }
+        }
+    }
 }
 
 /// Why bytes could not be decoded through a schema.
@@ -317,7 +384,7 @@ impl Primitive {
             Primitive::I16 => Value::Signed(i64::from(i16::from_le_bytes(le(b)))),
             Primitive::I32 => Value::Signed(i64::from(i32::from_le_bytes(le(b)))),
             Primitive::I64 => Value::Signed(i64::from_le_bytes(le(b))),
-            Primitive::F32 => Value::Float(f64::from(f32::from_le_bytes(le(b)))),
+            Primitive::F32 => Value::F32(f32::from_le_bytes(le(b))),
             Primitive::F64 => Value::Float(f64::from_le_bytes(le(b))),
             Primitive::Bool => Value::Bool(le::<1>(b)[0] != 0),
         }
@@ -369,11 +436,49 @@ mod tests {
         assert!(json.contains(r#""cpus":2"#) && json.contains(r#""name":"motor""#) && json.contains("12.5"), "{json}");
         let (offset, s) = schema.field("agents.1.cpu_percent").expect("a nested field");
         assert_eq!(s.kind, Kind::Primitive { primitive: Primitive::F32 });
-        assert_eq!(s.decode(&bytes_of(&report)[offset..]).expect("the field"), Value::Float(12.5));
+        assert_eq!(s.decode(&bytes_of(&report)[offset..]).expect("the field"), Value::F32(12.5));
         assert!(schema.field("agents.99.name").is_none(), "out of the array");
         assert!(schema.field("nothing").is_none());
         let scan = SonarScan::schema();
         assert!(matches!(scan.field("ranges_m"), Some((_, Schema { kind: Kind::Array { .. }, .. }))));
+    }
+
+    /// What `nerve echo --json` prints through the schema is what serde
+    /// prints of the typed value, for every payload this build knows.
+    #[test]
+    fn every_payload_decodes_to_the_json_serde_gives_it() {
+        fn check<T: crate::Payload>() {
+            // a payload is plain data: all-zero bytes are a valid value of it
+            // (bools false, strings empty); then a byte pattern on the numbers
+            // SAFETY: payloads are #[repr(C)] plain data of numbers, bools,
+            // arrays and FixedName, for which all-zero bytes are valid
+            let zero: T = unsafe { std::mem::zeroed() };
+            let typed = serde_json::to_value(zero).expect("serde");
+            let decoded = serde_json::to_value(T::schema().decode(&bytes_of(&zero)).expect("decodes")).expect("json");
+            assert_eq!(typed, decoded, "{}", T::stable_type_name());
+            assert_eq!(
+                serde_json::to_string(&zero).expect("serde"),
+                serde_json::to_string(&T::schema().decode(&bytes_of(&zero)).expect("decodes")).expect("json"),
+                "{}: the same text, fields in the same order",
+                T::stable_type_name()
+            );
+        }
+        macro_rules! each {
+            ($t:ty) => {
+                check::<$t>();
+            };
+        }
+        crate::for_each_payload!(each);
+        let tick = Tick { seq: 3, stamp_ns: 9 };
+        assert_eq!(
+            serde_json::to_string(&Tick::schema().decode(&bytes_of(&tick)).expect("decodes")).expect("json"),
+            r#"{"seq":3,"stamp_ns":9}"#
+        );
+        let mut report = ResourceReport { cpus: 2, agent_count: 1, ..Default::default() };
+        report.agents[0] = AgentLoad { name: FixedName::new("motor"), cpu_percent: 0.1, ..Default::default() };
+        let decoded = ResourceReport::schema().decode(&bytes_of(&report)).expect("decodes");
+        assert_eq!(serde_json::to_string(&decoded).expect("json"), serde_json::to_string(&report).expect("serde"));
+        assert!(decoded.to_string().contains(r#"name: "motor", cpu_percent: 0.1"#), "{decoded}");
     }
 
     #[test]
@@ -414,6 +519,7 @@ mod tests {
             Value::Unsigned(u) => u.to_string(),
             Value::Signed(i) => i.to_string(),
             Value::Float(f) => f.to_string(),
+            Value::F32(f) => f.to_string(),
             Value::String(s) => format!("{s:?}"),
             Value::Array(a) => format!("[{}]", a.iter().map(serde_json_like).collect::<Vec<_>>().join(",")),
             Value::Struct(f) => {

@@ -155,3 +155,42 @@ mod tests {
         assert_eq!(sub.receive().unwrap().map(|s| s.epoch), Some(7));
     }
 }
+
+/// The iceoryx2 service attributes every output port's service carries, so
+/// that tools that know nothing of nerve (iceoryx2's `iox2 service details`)
+/// and nerve's own tools (`nerve echo` without a router) can tell what a
+/// port carries. Values are text.
+pub mod port_attributes {
+    /// The payload's stable type name (`nerve::Tick`).
+    pub const TYPE: &str = "nerve.type";
+    /// The layout fingerprint ([`crate::Schema::fingerprint`]) as `0x` and
+    /// 16 hex digits: an input built from another definition of the type is
+    /// refused.
+    pub const FINGERPRINT: &str = "nerve.fingerprint";
+    /// The agent that owns the port.
+    pub const AGENT: &str = "nerve.agent";
+    /// The port's name.
+    pub const PORT: &str = "nerve.port";
+
+    /// The text of a fingerprint, as the attribute holds it.
+    pub fn fingerprint_text(fingerprint: u64) -> String {
+        format!("{fingerprint:#018x}")
+    }
+
+    /// The fingerprint in an attribute's text, if it is one.
+    pub fn parse_fingerprint(text: &str) -> Option<u64> {
+        u64::from_str_radix(text.strip_prefix("0x")?, 16).ok()
+    }
+
+    #[cfg(test)]
+    mod tests {
+        #[test]
+        fn a_fingerprint_reads_back() {
+            let t = super::fingerprint_text(0xcbc6_bcae_8544_50d0);
+            assert_eq!(t, "0xcbc6bcae854450d0");
+            assert_eq!(super::parse_fingerprint(&t), Some(0xcbc6_bcae_8544_50d0));
+            assert_eq!(super::fingerprint_text(1), "0x0000000000000001");
+            assert_eq!(super::parse_fingerprint("cbc6"), None);
+        }
+    }
+}

@@ -17,7 +17,7 @@ use crate::params::ParamTable;
 use crate::rt;
 use crate::world::World;
 use shm_schemas::AgentName;
-use shm_schemas::control::agent_to_router::{PortSpec, Registration, TaskKind};
+use shm_schemas::control::agent_to_router::{Registration, TaskKind};
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -94,15 +94,8 @@ fn describe<A: Agent>(args: &CommonArgs) -> Result<String, String> {
 fn describe_in<A: Agent>(args: &CommonArgs, world: &World) -> Result<String, String> {
     use shm_schemas::control::describe::Description;
     let node = Arc::new(world.node("describe").map_err(|e| e.to_string())?);
-    let mut setup = Setup {
-        world: world.clone(),
-        name: AgentName::new(A::KIND).map_err(|e| e.to_string())?,
-        node,
-        args: args.args.clone(),
-        inputs: Vec::new(),
-        outputs: Vec::new(),
-        params: ParamTable::default(),
-    };
+    let mut setup =
+        Setup::new(world.clone(), AgentName::new(A::KIND).map_err(|e| e.to_string())?, node, args.args.clone());
     let agent = A::new(&mut setup).map_err(|e| format!("{} could not be set up: {e}", A::KIND))?;
     apply_params(&setup.params, &args.params)?;
     let (task, default_period_ns) = match A::task() {
@@ -114,11 +107,7 @@ fn describe_in<A: Agent>(args: &CommonArgs, world: &World) -> Result<String, Str
         kind: A::KIND.into(),
         task,
         default_period_ns,
-        inputs: setup
-            .inputs
-            .iter()
-            .map(|i| PortSpec { name: i.name().into(), type_name: i.type_name().into() })
-            .collect(),
+        inputs: setup.inputs.iter().map(|i| i.spec()).collect(),
         outputs: setup.outputs.clone(),
         params: setup.params.snapshot(),
     };
@@ -183,19 +172,11 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     let checker_wake = wake_factory.listener_builder().create().map_err(|e| format!("{e:?}"))?;
     let wake = wake_factory.notifier_builder().create().map_err(|e| format!("{e:?}"))?;
 
-    let mut setup = Setup {
-        world: world.clone(),
-        name: agent_name.clone(),
-        node: node.clone(),
-        args: args.args.clone(),
-        inputs: Vec::new(),
-        outputs: Vec::new(),
-        params: ParamTable::default(),
-    };
+    let mut setup = Setup::new(world.clone(), agent_name.clone(), node.clone(), args.args.clone());
     stage("wake-up event created");
     let agent = A::new(&mut setup).map_err(|e| format!("{} {name:?} could not start: {e}", A::KIND))?;
     stage("agent and its ports created");
-    let Setup { inputs, outputs, params, .. } = setup;
+    let Setup { inputs, outputs, schemas, params, .. } = setup;
     apply_params(&params, &args.params)?;
 
     let shared = Arc::new(Shared {
@@ -219,10 +200,11 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
             Task::EventDriven => TaskKind::EventDriven,
         },
         period_ns: period.map(crate::clock::nanos),
-        inputs: inputs.iter().map(|i| PortSpec { name: i.name().into(), type_name: i.type_name().into() }).collect(),
+        inputs: inputs.iter().map(|i| i.spec()).collect(),
         outputs,
         log_file: readiness.pid_file().map(|_| world.log_file(name).display().to_string()),
         suspended: args.suspended,
+        schemas,
     };
     let mut link = RouterLink::new();
     let registered = link.register(&node, &world, &registration, &shared);

@@ -185,6 +185,7 @@ mod tests {
             }),
             restarts: 0,
             importance: None,
+            schemas: vec![],
         };
         let s = status_of(&a);
         assert_eq!(s.peers, vec!["r2/bridge"]);

@@ -1,21 +1,26 @@
 //! `nerve echo` and `nerve hz`: watch an output port from the terminal.
 //!
-//! The port's payload type comes from the router's registry, or, with no
-//! router, by probing the types this build knows. Tools subscribe like any
-//! agent (zero copy) and never disturb the publisher.
+//! Any port, whatever its type: the tools read a sample's bytes
+//! ([`RawPort`]) and decode them through the schema the agent registered
+//! with the router (or, with no router, the schema of a type this build
+//! knows, found by the layout fingerprint in the port's attributes). `hz`
+//! needs no decoding. Tools subscribe like any agent (zero copy) and never
+//! disturb the publisher.
 
 use crate::client::{RouterSession, cli_node};
 use agent_sdk::World;
 use agent_sdk::clock::now_ns;
 use agent_sdk::meters::percentile;
-use agent_sdk::ports::{existing_port_service, port_event};
+use agent_sdk::ports::port_event;
+use agent_sdk::raw_port::{RawPort, port_identity};
 use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use shm_schemas::control::cli_to_router::{CliRequest, RouterError, RouterReply};
-use shm_schemas::payloads::known_type_names;
-use shm_schemas::{Payload, PortRef, SampleHeader, for_each_payload};
+use shm_schemas::schema::Kind;
+use shm_schemas::services::port_attributes::fingerprint_text;
+use shm_schemas::{Described, Payload, PortRef, SampleHeader, Schema, for_each_payload};
 use std::io::Write;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -34,6 +39,9 @@ pub struct EchoArgs {
     /// Give up after this many seconds without a sample (default: wait for ever).
     #[arg(long, value_parser = agent_sdk::clock::parse_seconds)]
     pub timeout: Option<f64>,
+    /// Print only this field (`pose.x`, `ranges_m.3`).
+    #[arg(long)]
+    pub field: Option<String>,
 }
 
 /// `nerve hz`
@@ -52,10 +60,21 @@ pub struct HzArgs {
     pub json: bool,
 }
 
-/// The payload type of `port`: from the router, else by probing known types.
-fn port_type(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<String> {
+/// What a port carries, as far as this tool can learn it.
+struct PortInfo {
+    type_name: String,
+    /// the layout fingerprint, when known
+    fingerprint: Option<u64>,
+    /// the schema to decode it with, when known
+    schema: Option<Schema>,
+}
+
+/// What `port` carries: from the router (the agent registered each port's
+/// type, fingerprint and schema), else from the port's iceoryx2 attributes
+/// and the schemas of the types this build knows.
+fn port_info(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<PortInfo> {
     if let Ok(s) = RouterSession::open(world) {
-        // a router that does not answer (killed, restarting) is no reason to fail: probe instead
+        // a router that does not answer (killed, restarting) is no reason to fail: look at the port itself
         if let Ok(RouterReply::Agents(agents)) = s.call(CliRequest::Ps) {
             let Some(a) = agents.iter().find(|a| a.name == port.agent.as_str()) else {
                 return Err(anyhow!(RouterError::UnknownAgent {
@@ -63,49 +82,59 @@ fn port_type(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<String> 
                     running: agents.iter().map(|a| a.name.clone()).collect(),
                 }));
             };
-            return a.outputs.iter().find(|o| o.name == port.port).map(|o| o.type_name.clone()).ok_or_else(|| {
-                anyhow!(RouterError::UnknownPort {
+            let Some(o) = a.outputs.iter().find(|o| o.name == port.port) else {
+                return Err(anyhow!(RouterError::UnknownPort {
                     agent: port.agent.to_string(),
                     port: port.port.clone(),
                     direction: "output".into(),
                     available: a.outputs.iter().map(|o| o.name.clone()).collect(),
-                })
-            });
+                }));
+            };
+            let schema = a
+                .schemas
+                .iter()
+                .find(|s| s.fingerprint() == o.fingerprint)
+                .cloned()
+                .or_else(|| built_in_schema(o.fingerprint));
+            return Ok(PortInfo { type_name: o.type_name.clone(), fingerprint: Some(o.fingerprint), schema });
         }
     }
     let service = world.robot().port_service(port.agent.as_str(), &port.port);
+    let (type_name, fingerprint) = port_identity(node, &service).ok_or_else(|| {
+        anyhow!("no output port {port} exists on robot {} (and no router runs to ask)", world.robot())
+    })?;
+    Ok(PortInfo { type_name, fingerprint, schema: fingerprint.and_then(built_in_schema) })
+}
+
+/// The schema of the built-in payload type with layout `fingerprint`.
+fn built_in_schema(fingerprint: u64) -> Option<Schema> {
     let mut found = None;
-    macro_rules! probe {
+    macro_rules! look {
         ($t:ty) => {
-            if found.is_none() && existing_port_service::<$t>(node, &service).is_some() {
-                found = Some(<$t as Payload>::stable_type_name().to_string());
+            if found.is_none() && <$t as Payload>::layout_fingerprint() == fingerprint {
+                found = Some(<$t as Described>::schema());
             }
         };
     }
-    for_each_payload!(probe);
-    found.ok_or_else(|| anyhow!("no output port {port} exists on robot {} (and no router runs to ask)", world.robot()))
+    for_each_payload!(look);
+    found
 }
 
-enum Event<'a, T> {
-    Sample(&'a SampleHeader, &'a T),
+enum Event<'a> {
+    Sample(&'a SampleHeader, &'a [u8]),
     Tick,
 }
 
 /// Subscribes to `port` and calls `f` for each sample and every `tick`;
 /// stops when `f` returns false, on Ctrl-C, or after `idle` without samples.
-fn watch<T: Payload>(
+fn watch(
     node: &Node<Ipc>,
     service: &str,
     tick: Duration,
     idle: Option<Duration>,
-    mut f: impl FnMut(Event<'_, T>) -> bool,
+    mut f: impl FnMut(Event<'_>) -> bool,
 ) -> Result<bool> {
-    let ps = existing_port_service::<T>(node, service).ok_or_else(|| anyhow!("the port {service} does not exist"))?;
-    let sub = ps
-        .subscriber_builder()
-        .buffer_size(agent_sdk::ports::SUBSCRIBER_BUFFER)
-        .create()
-        .map_err(|e| anyhow!("{e:?}"))?;
+    let raw = RawPort::open(node, service)?;
     let listener = port_event(node, service)?.listener_builder().create().map_err(|e| anyhow!("{e:?}"))?;
     let ws = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
@@ -121,13 +150,15 @@ fn watch<T: Payload>(
             Err(e) => bail!("wait failed: {e:?}"),
         }
         let _ = listener.try_wait(|_| {});
-        while let Some(sample) = sub.receive().map_err(|e| anyhow!("{e:?}"))? {
+        let mut go_on = true;
+        let n = raw.receive(|h, bytes| {
+            go_on = f(Event::Sample(h, bytes));
+            go_on
+        })?;
+        if n > 0 {
             last_sample = now_ns();
-            if !f(Event::Sample(sample.user_header(), sample.payload())) {
-                return Ok(true);
-            }
         }
-        if !f(Event::Tick) {
+        if !go_on || !f(Event::Tick) {
             return Ok(true);
         }
         if let Some(idle) = idle
@@ -138,49 +169,95 @@ fn watch<T: Payload>(
     }
 }
 
+/// The part of each sample echo prints: the whole payload, or one field.
+fn selection(info: &PortInfo, port: &PortRef, field: Option<&str>) -> Result<(usize, Schema)> {
+    let Some(schema) = info.schema.clone() else {
+        bail!(
+            "port {port} carries {} (layout {}), whose schema this build of nerve does not have and no router \
+             runs to give it: start the router (`nerve up` or `nerve router`) so that the agent registers its schema",
+            info.type_name,
+            info.fingerprint.map_or("unknown".into(), fingerprint_text)
+        )
+    };
+    let Some(path) = field else { return Ok((0, schema)) };
+    match schema.field(path) {
+        Some((offset, s)) => Ok((offset, s.clone())),
+        None => bail!("{} has no field {path:?}; its fields: {}", info.type_name, field_paths(&schema).join(", ")),
+    }
+}
+
+/// Every field path of `schema` (`pose`, `pose.x`, `fingers.<i>` for an
+/// element of an array, `fingers.<i>.force_n`...).
+fn field_paths(schema: &Schema) -> Vec<String> {
+    fn walk(s: &Schema, prefix: &str, out: &mut Vec<String>) {
+        let join = |name: &str| if prefix.is_empty() { name.to_string() } else { format!("{prefix}.{name}") };
+        match &s.kind {
+            Kind::Struct { fields } => {
+                for f in fields {
+                    let path = join(&f.name);
+                    out.push(path.clone());
+                    walk(&f.schema, &path, out);
+                }
+            }
+            Kind::Array { len, element } if *len > 0 => {
+                let path = join("<i>");
+                out.push(format!("{path} (0..{len})"));
+                walk(element, &path, out);
+            }
+            _ => {}
+        }
+    }
+    let mut out = Vec::new();
+    walk(schema, "", &mut out);
+    out
+}
+
 pub fn echo(world: &World, a: EchoArgs) -> Result<ExitCode> {
     let port: PortRef = a.port.parse().context("PORT")?;
     let node = cli_node(world)?;
-    let type_name = port_type(world, &node, &port)?;
-    macro_rules! dispatch {
-        ($t:ty) => {
-            if <$t as Payload>::stable_type_name() == type_name {
-                return echo_typed::<$t>(world, &node, &port, &a);
-            }
-        };
-    }
-    for_each_payload!(dispatch);
-    bail!(
-        "port {port} carries {type_name}, which this build of nerve cannot print (it knows {})",
-        known_type_names().join(", ")
-    )
-}
-
-fn echo_typed<T: Payload>(world: &World, node: &Node<Ipc>, port: &PortRef, a: &EchoArgs) -> Result<ExitCode> {
+    let info = port_info(world, &node, &port)?;
+    let (offset, schema) = selection(&info, &port, a.field.as_deref())?;
     let service = world.robot().port_service(port.agent.as_str(), &port.port);
     let mut n = 0u64;
     let stdout = std::io::stdout();
     let idle = a.timeout.map(Duration::from_secs_f64);
     let mut failed = None;
-    let finished = watch::<T>(node, &service, Duration::from_millis(200), idle, |ev| {
-        let Event::Sample(h, v) = ev else { return true };
+    let finished = watch(&node, &service, Duration::from_millis(200), idle, |ev| {
+        let Event::Sample(h, bytes) = ev else { return true };
+        let value = match bytes.get(offset..).map(|b| schema.decode(b)) {
+            Some(Ok(v)) => v,
+            Some(Err(e)) => {
+                failed = Some(anyhow!("port {port}: {e}"));
+                return false;
+            }
+            None => {
+                failed = Some(anyhow!("port {port}: a {}-byte sample is shorter than its schema", bytes.len()));
+                return false;
+            }
+        };
         let mut out = stdout.lock();
         let r = if a.json {
-            let line = serde_json::json!({
+            let mut line = serde_json::json!({
                 "from": h.sender.as_str(),
                 "seq": h.seq,
                 "stamp_ns": h.stamp_ns,
-                "type": T::stable_type_name(),
-                "data": v,
+                "type": info.type_name,
+                "data": value,
             });
+            if let Some(f) = &a.field {
+                line["field"] = serde_json::json!(f);
+            }
             writeln!(out, "{line}")
         } else {
-            writeln!(out, "[{} #{}] {:?}", h.sender, h.seq, v)
+            match &a.field {
+                Some(f) => writeln!(out, "[{} #{}] {f}: {value}", h.sender, h.seq),
+                None => writeln!(out, "[{} #{}] {} {value}", h.sender, h.seq, info.type_name),
+            }
         };
         if let Err(e) = r.and_then(|_| out.flush()) {
             // a closed pipe (e.g. `| head`) ends echo quietly
             if e.kind() != std::io::ErrorKind::BrokenPipe {
-                failed = Some(e);
+                failed = Some(e.into());
             }
             return false;
         }
@@ -188,7 +265,7 @@ fn echo_typed<T: Payload>(world: &World, node: &Node<Ipc>, port: &PortRef, a: &E
         a.count.is_none_or(|c| n < c)
     })?;
     if let Some(e) = failed {
-        return Err(e.into());
+        return Err(e);
     }
     if !finished {
         bail!("no sample on {port} for {:.1} s", a.timeout.unwrap_or_default());
@@ -199,19 +276,11 @@ fn echo_typed<T: Payload>(world: &World, node: &Node<Ipc>, port: &PortRef, a: &E
 pub fn hz(world: &World, a: HzArgs) -> Result<ExitCode> {
     let port: PortRef = a.port.parse().context("PORT")?;
     let node = cli_node(world)?;
-    let type_name = port_type(world, &node, &port)?;
-    macro_rules! dispatch {
-        ($t:ty) => {
-            if <$t as Payload>::stable_type_name() == type_name {
-                return hz_typed::<$t>(world, &node, &port, &a);
-            }
-        };
-    }
-    for_each_payload!(dispatch);
-    bail!("port {port} carries {type_name}, unknown to this build of nerve")
+    hz_of(world, &node, &port, &a)
 }
 
-fn hz_typed<T: Payload>(world: &World, node: &Node<Ipc>, port: &PortRef, a: &HzArgs) -> Result<ExitCode> {
+/// `hz` needs no decoding: it reads any port by its bytes.
+fn hz_of(world: &World, node: &Node<Ipc>, port: &PortRef, a: &HzArgs) -> Result<ExitCode> {
     if !(a.window.is_finite() && a.window > 0.0) {
         bail!("--window must be a positive number of seconds");
     }
@@ -220,7 +289,7 @@ fn hz_typed<T: Payload>(world: &World, node: &Node<Ipc>, port: &PortRef, a: &HzA
     let mut start = now_ns();
     let mut arrivals: Vec<u64> = Vec::new();
     let mut reports = 0u64;
-    watch::<T>(node, &service, Duration::from_millis(50), None, |ev| {
+    watch(node, &service, Duration::from_millis(50), None, |ev| {
         if let Event::Sample(..) = ev {
             arrivals.push(now_ns());
         }

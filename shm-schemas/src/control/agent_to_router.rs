@@ -1,6 +1,7 @@
 //! What an agent tells the router: who it is when it starts, that it leaves
 //! when it stops.
 
+use crate::{Payload, Schema};
 use serde::{Deserialize, Serialize};
 
 /// How an agent's task is driven.
@@ -22,13 +23,34 @@ impl std::fmt::Display for TaskKind {
     }
 }
 
-/// A port and the type name of what it carries.
+/// A port, the type name of what it carries and the fingerprint of the
+/// layout this build gave that type.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct PortSpec {
     /// Port name, unique among the agent's inputs (or outputs).
     pub name: String,
     /// Stable payload type name, e.g. `nerve::Tick`.
     pub type_name: String,
+    /// [`crate::Schema::fingerprint`] of the type as this agent was built:
+    /// two ports of one type name with different fingerprints come from
+    /// different definitions of it (a stale build), and are never connected.
+    #[serde(default)]
+    pub fingerprint: u64,
+}
+
+impl PortSpec {
+    /// The spec of port `name` carrying `T`.
+    pub fn of<T: Payload>(name: &str) -> Self {
+        PortSpec { name: name.into(), type_name: T::stable_type_name().into(), fingerprint: T::layout_fingerprint() }
+    }
+}
+
+/// Adds `schema` to `schemas` unless a schema of the same layout is there.
+pub fn add_schema(schemas: &mut Vec<Schema>, schema: Schema) {
+    let fp = schema.fingerprint();
+    if !schemas.iter().any(|s| s.fingerprint() == fp) {
+        schemas.push(schema);
+    }
 }
 
 /// Everything the router needs to know about an agent.
@@ -54,6 +76,10 @@ pub struct Registration {
     pub log_file: Option<String>,
     /// Whether the task is suspended at the time of registration.
     pub suspended: bool,
+    /// The schema of each type the ports carry, once per layout: what
+    /// tools need to read a port whose type they were not built with.
+    #[serde(default)]
+    pub schemas: Vec<Schema>,
 }
 
 /// A message from an agent to the router.

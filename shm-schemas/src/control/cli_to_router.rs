@@ -181,6 +181,9 @@ pub struct AgentView {
     /// importance (1..10) when supervised
     #[serde(default)]
     pub importance: Option<u8>,
+    /// the schema of each type its ports carry (by fingerprint)
+    #[serde(default)]
+    pub schemas: Vec<crate::Schema>,
 }
 
 /// One connection as `nerve graph` shows it, with live figures measured at
@@ -270,6 +273,28 @@ pub enum RouterError {
         direction: String,
         /// the ports of that direction
         available: Vec<String>,
+    },
+    /// The two ports carry one type name built from different definitions
+    /// (a stale build on one side): connecting them would misread every
+    /// sample.
+    #[error(
+        "cannot connect {from} to {to}: both carry {type_name}, but built from different definitions of it \
+         ({from} has layout {from_fingerprint:#018x}, {to} has {to_fingerprint:#018x}); {rebuild}"
+    )]
+    LayoutMismatch {
+        /// output port
+        from: String,
+        /// input port
+        to: String,
+        /// the type name both carry
+        type_name: String,
+        /// the output's layout fingerprint
+        from_fingerprint: u64,
+        /// the input's layout fingerprint
+        to_fingerprint: u64,
+        /// what to rebuild: the agent with the older executable, when the
+        /// router can tell
+        rebuild: String,
     },
     /// The two ports carry different types.
     #[error("cannot connect {from} to {to}: {from} sends {from_type} but {to} takes {to_type}")]

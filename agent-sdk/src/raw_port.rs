@@ -1,0 +1,202 @@
+//! Reading an output port by its bytes, whatever type it carries.
+//!
+//! Tools (`nerve echo`, `nerve hz`, the recorder) must read ports whose
+//! payload type they were not built with: an agent crate outside the
+//! workspace with a type of its own. A [`RawPort`] learns the payload's size
+//! and alignment from the service itself (iceoryx2 keeps them in the
+//! service's static configuration, as its own `iox2` tool reads them) and
+//! subscribes with them, zero copy like any input; the bytes are then
+//! decoded through the port's [`shm_schemas::Schema`], which the agent
+//! registered with the router. The service's attributes
+//! ([`shm_schemas::services::port_attributes`]) say the type name and the
+//! layout fingerprint.
+
+use crate::ports::{PortError, SUBSCRIBER_BUFFER};
+use crate::world::Ipc;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::attribute::{AttributeKey, AttributeSet};
+use iceoryx2::service::marker::CustomPayloadMarker;
+use iceoryx2::service::static_config::message_type_details::TypeDetail;
+use shm_schemas::SampleHeader;
+use shm_schemas::services::port_attributes;
+
+/// A subscription to an output port that hands out each sample's bytes.
+pub struct RawPort {
+    service: String,
+    subscriber: Subscriber<Ipc, [CustomPayloadMarker], SampleHeader>,
+    payload: TypeDetail,
+    attributes: Vec<(String, String)>,
+}
+
+impl std::fmt::Debug for RawPort {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RawPort").field("service", &self.service).field("attributes", &self.attributes).finish()
+    }
+}
+
+fn attribute_list(set: &AttributeSet) -> Vec<(String, String)> {
+    set.iter().map(|a| (a.key().to_string(), a.value().to_string())).collect()
+}
+
+impl RawPort {
+    /// Subscribes to the existing output port `service`
+    /// (`nerve/ROBOT/AGENT/PORT`); never creates it.
+    pub fn open(node: &Node<Ipc>, service: &str) -> Result<RawPort, PortError> {
+        let ipc = |detail: String| PortError::Ipc { service: service.into(), detail };
+        let name: ServiceName = service.try_into().map_err(|e| ipc(format!("not a service name: {e:?}")))?;
+        let details = <Ipc as iceoryx2::service::Service>::details(
+            &name,
+            node.config(),
+            iceoryx2::service::messaging_pattern::MessagingPattern::PublishSubscribe,
+        )
+        .map_err(|e| ipc(format!("cannot read the service's details: {e:?}")))?
+        .ok_or_else(|| PortError::NoSuchPort { service: service.into() })?;
+        let types = details.static_details.publish_subscribe().message_type_details();
+        let header = types.user_header;
+        if header.size() != std::mem::size_of::<SampleHeader>() {
+            return Err(ipc(format!(
+                "its samples carry a {}-byte header, not nerve's {}-byte one: not a nerve port",
+                header.size(),
+                std::mem::size_of::<SampleHeader>()
+            )));
+        }
+        let payload = types.payload;
+        // SAFETY: the payload's type details are the service's own, read
+        // just above; the samples are handed out as bytes only (`receive`),
+        // never as a typed value.
+        let builder = unsafe {
+            node.service_builder(&name)
+                .publish_subscribe::<[CustomPayloadMarker]>()
+                .user_header::<SampleHeader>()
+                .__internal_set_payload_type_details(&payload)
+        };
+        let factory = builder.open().map_err(|source| match source {
+            iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::DoesNotExist => {
+                PortError::NoSuchPort { service: service.into() }
+            }
+            source => PortError::OpenService { service: service.into(), source },
+        })?;
+        use iceoryx2::service::port_factory::PortFactory as _;
+        let attributes = attribute_list(factory.attributes());
+        let subscriber = factory
+            .subscriber_builder()
+            .buffer_size(SUBSCRIBER_BUFFER)
+            .create()
+            .map_err(|source| PortError::Subscriber { service: service.into(), source })?;
+        Ok(RawPort { service: service.into(), subscriber, payload, attributes })
+    }
+
+    /// The service's name.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// The payload's size, bytes.
+    pub fn payload_size(&self) -> usize {
+        self.payload.size()
+    }
+
+    /// The service's attributes, `(key, value)`.
+    pub fn attributes(&self) -> &[(String, String)] {
+        &self.attributes
+    }
+
+    /// The value of attribute `key`, if the service has it.
+    pub fn attribute(&self, key: &str) -> Option<&str> {
+        self.attributes.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+    }
+
+    /// The payload's type name, from the service's attributes.
+    pub fn type_name(&self) -> Option<&str> {
+        self.attribute(port_attributes::TYPE)
+    }
+
+    /// The layout fingerprint the port was created with, from its attributes.
+    pub fn fingerprint(&self) -> Option<u64> {
+        port_attributes::parse_fingerprint(self.attribute(port_attributes::FINGERPRINT)?)
+    }
+
+    /// Calls `f` with the header and bytes of every sample waiting; returns
+    /// how many there were. Stops early when `f` returns false.
+    pub fn receive(&self, mut f: impl FnMut(&SampleHeader, &[u8]) -> bool) -> Result<usize, PortError> {
+        let mut n = 0;
+        loop {
+            let sample = self
+                .subscriber
+                .receive()
+                .map_err(|e| PortError::Ipc { service: self.service.clone(), detail: format!("receive: {e:?}") })?;
+            let Some(sample) = sample else { return Ok(n) };
+            n += 1;
+            let payload = sample.payload();
+            // SAFETY: CustomPayloadMarker is a #[repr(C)] wrapper of one u8:
+            // the slice is the sample's payload bytes, alive while `sample` is.
+            let bytes = unsafe { std::slice::from_raw_parts(payload.as_ptr().cast::<u8>(), payload.len()) };
+            if !f(sample.user_header(), bytes) {
+                return Ok(n);
+            }
+        }
+    }
+}
+
+/// The type name and layout fingerprint of the existing output port
+/// `service`, from its attributes, without subscribing.
+pub fn port_identity(node: &Node<Ipc>, service: &str) -> Option<(String, Option<u64>)> {
+    let name: ServiceName = service.try_into().ok()?;
+    let details = <Ipc as iceoryx2::service::Service>::details(
+        &name,
+        node.config(),
+        iceoryx2::service::messaging_pattern::MessagingPattern::PublishSubscribe,
+    )
+    .ok()??;
+    let attrs = details.static_details.attributes();
+    let get = |key: &str| {
+        let key = AttributeKey::try_from(key).ok()?;
+        attrs.key_value(&key, 0).map(|v| v.to_string())
+    };
+    let type_name = get(port_attributes::TYPE)?;
+    Some((type_name, get(port_attributes::FINGERPRINT).and_then(|t| port_attributes::parse_fingerprint(&t))))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{RawPort, port_identity};
+    use crate::ports::{Output, PortError};
+    use crate::world::World;
+    use crate::world::test_support::Cleanup;
+    use shm_schemas::payloads::Scalar;
+    use shm_schemas::{Described, Payload};
+
+    #[test]
+    fn a_port_is_read_by_its_bytes_and_decoded_by_its_schema() {
+        let world = World::new(&format!("raw{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let service = world.robot().port_service("a", "value");
+        match RawPort::open(&node, &service) {
+            Err(PortError::NoSuchPort { .. }) => {}
+            other => panic!("no such port yet: {other:?}"),
+        }
+        let out = Output::<Scalar>::create(&node, &service, "a").expect("output");
+        let raw = RawPort::open(&node, &service).expect("raw");
+        assert_eq!(raw.payload_size(), std::mem::size_of::<Scalar>());
+        assert_eq!(raw.type_name(), Some("nerve::Scalar"));
+        assert_eq!(raw.fingerprint(), Some(Scalar::layout_fingerprint()));
+        assert_eq!(
+            port_identity(&node, &service),
+            Some(("nerve::Scalar".to_string(), Some(Scalar::layout_fingerprint())))
+        );
+        for i in 0..3 {
+            out.send(Scalar { value: f64::from(i) + 0.5, stamp_ns: 7 }).expect("send");
+        }
+        let mut got = Vec::new();
+        let n = raw
+            .receive(|h, bytes| {
+                got.push((h.seq, Scalar::schema().decode(bytes).expect("decodes").to_string()));
+                true
+            })
+            .expect("receive");
+        assert_eq!(n, 3);
+        assert_eq!(got[2], (3, "{ value: 2.5, stamp_ns: 7 }".to_string()), "{got:?}");
+    }
+}
