@@ -21,6 +21,9 @@ use shm_schemas::payloads::RouterEpoch;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
+/// How long the router has to answer a registration.
+const REGISTER_TIMEOUT: Duration = Duration::from_secs(3);
+
 /// Why a registration did not happen.
 pub(super) enum RegisterError {
     /// No router serves the robot.
@@ -159,6 +162,9 @@ impl RouterLink {
         self.epoch_wake.take()
     }
 
+    /// Registers `reg` with the router. A registration too large for the
+    /// router's service (an agent with very many port types) is sent again
+    /// without its schemas rather than not at all.
     pub(super) fn register(
         &mut self,
         node: &Node<Ipc>,
@@ -178,7 +184,22 @@ impl RouterLink {
         reg.suspended = sh.suspended.load(Ordering::Acquire);
         let p = sh.period_ns.load(Ordering::Acquire);
         reg.period_ns = (p > 0).then_some(p);
-        match client.call(&RouterRequest::Agent(AgentToRouter::Register(reg)), Duration::from_secs(3)) {
+        let mut answer = client.call(&RouterRequest::Agent(AgentToRouter::Register(reg.clone())), REGISTER_TIMEOUT);
+        if let Err(ControlError::TooLarge { bytes, max, .. }) = &answer
+            && !reg.schemas.is_empty()
+        {
+            // the ports still carry their fingerprints (stale builds are
+            // still refused); only tools lose the schemas to decode them with
+            tracing::warn!(
+                bytes,
+                max,
+                "the registration with its {} schemas is too large for the router's service; registering without them (`nerve echo` cannot decode these ports)",
+                reg.schemas.len()
+            );
+            reg.schemas.clear();
+            answer = client.call(&RouterRequest::Agent(AgentToRouter::Register(reg)), REGISTER_TIMEOUT);
+        }
+        match answer {
             Ok(RouterReply::Registered { epoch }) => {
                 self.registrar.accepted(epoch, Instant::now());
                 Ok(())
