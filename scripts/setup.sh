@@ -12,6 +12,7 @@ command -v socat >/dev/null || need+=(socat)                       # linked pty 
 command -v systemd-analyze >/dev/null || need+=(systemd)           # `systemd-analyze verify` of the unit files
 ls /usr/lib/llvm-*/lib/libclang*.so >/dev/null 2>&1 || need+=(libclang-dev)  # bindgen for the v4l camera backend
 command -v ip >/dev/null || need+=(iproute2)                       # network namespaces and veth pairs of the bridge tests
+python3 -c 'import ensurepip' 2>/dev/null || need+=(python3-venv)  # the virtual environment of the MCAP reader (tests/tests/record.rs)
 if [ "${1:-}" = "--bench" ]; then
     command -v cyclictest >/dev/null || need+=(rt-tests)           # `nerve bench jitter`
     command -v ddsperf >/dev/null || need+=(cyclonedds-tools)      # `nerve bench hop`: Cyclone DDS

@@ -12,6 +12,13 @@ pub fn now_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// CLOCK_REALTIME in ns since 1970: the stamp that means something on
+/// another machine or in a file (the bridge's one-way latency, a
+/// recording's log time), as good as the clock's synchronisation.
+pub fn unix_now_ns() -> u64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
+}
+
 /// Sleeps until CLOCK_MONOTONIC reaches `deadline_ns` (absolute), restarting
 /// after signals. Returns at once if the deadline has passed.
 pub fn sleep_until_ns(deadline_ns: u64) {

@@ -35,8 +35,8 @@ pub const MAX_SUBSCRIBERS: usize = 16;
 pub const MAX_SOURCES: usize = 64;
 /// Samples a subscription buffers before the oldest is overwritten (and counted as dropped).
 pub const SUBSCRIBER_BUFFER: usize = 16;
-const MAX_PUBLISHERS: usize = 4;
-const MAX_NODES: usize = 40;
+pub(crate) const MAX_PUBLISHERS: usize = 4;
+pub(crate) const MAX_NODES: usize = 40;
 
 /// Why a port could not be made or used. Each variant names the iceoryx2
 /// operation that failed and keeps iceoryx2's own error as its source, so a
@@ -194,7 +194,7 @@ pub enum PortError {
     },
 }
 
-fn perr(service: &str, e: impl std::fmt::Debug) -> PortError {
+pub(crate) fn perr(service: &str, e: impl std::fmt::Debug) -> PortError {
     PortError::Ipc { service: service.into(), detail: format!("{e:?}") }
 }
 
@@ -207,31 +207,46 @@ macro_rules! port_err {
 
 type PortBuilder<T> = iceoryx2::service::builder::publish_subscribe::Builder<T, SampleHeader, Ipc>;
 
+/// The settings of every output port's service, typed or not (a replayed
+/// port, [`crate::raw_port::RawOutput`]), so that every opener agrees.
+macro_rules! port_settings {
+    ($builder:expr) => {
+        $builder
+            .max_publishers($crate::ports::MAX_PUBLISHERS)
+            .max_subscribers($crate::ports::MAX_SUBSCRIBERS)
+            .max_nodes($crate::ports::MAX_NODES)
+            .subscriber_max_buffer_size($crate::ports::SUBSCRIBER_BUFFER)
+            .history_size(0)
+            .enable_safe_overflow(true)
+    };
+}
+pub(crate) use port_settings;
+
 /// The one place that sets up an output port's service, so that every opener agrees.
 fn port_builder<T: Payload>(node: &Node<Ipc>, service: &str) -> Result<PortBuilder<T>, PortError> {
     let name: ServiceName = service.try_into().map_err(|e| perr(service, e))?;
-    Ok(node
-        .service_builder(&name)
-        .publish_subscribe::<T>()
-        .user_header::<SampleHeader>()
-        .max_publishers(MAX_PUBLISHERS)
-        .max_subscribers(MAX_SUBSCRIBERS)
-        .max_nodes(MAX_NODES)
-        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
-        .history_size(0)
-        .enable_safe_overflow(true))
+    Ok(port_settings!(node.service_builder(&name).publish_subscribe::<T>().user_header::<SampleHeader>()))
 }
 
 /// The attributes of the service of output port `service`
 /// (`nerve/ROBOT/AGENT/PORT`) carrying `T`: its type name, layout
 /// fingerprint, agent and port ([`port_attributes`]).
 fn port_attributes<T: Payload>(service: &str) -> Result<AttributeVerifier, PortError> {
+    port_attributes_of(service, T::stable_type_name(), T::layout_fingerprint())
+}
+
+/// The attributes of output port `service` carrying `type_name` of layout `fingerprint`.
+pub(crate) fn port_attributes_of(
+    service: &str,
+    type_name: &str,
+    fingerprint: u64,
+) -> Result<AttributeVerifier, PortError> {
     let mut parts = service.splitn(4, '/').skip(2);
     let (agent, port) = (parts.next().unwrap_or_default(), parts.next().unwrap_or_default());
-    let fingerprint = fingerprint_text(T::layout_fingerprint());
+    let fingerprint = fingerprint_text(fingerprint);
     let mut v = AttributeVerifier::new();
     for (key, value) in [
-        (port_attributes::TYPE, T::stable_type_name()),
+        (port_attributes::TYPE, type_name),
         (port_attributes::FINGERPRINT, fingerprint.as_str()),
         (port_attributes::AGENT, agent),
         (port_attributes::PORT, port),

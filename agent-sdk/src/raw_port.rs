@@ -11,15 +11,18 @@
 //! ([`shm_schemas::services::port_attributes`]) say the type name and the
 //! layout fingerprint.
 
-use crate::ports::{PortError, SUBSCRIBER_BUFFER};
+use crate::ports::{PortError, SUBSCRIBER_BUFFER, port_attributes_of};
 use crate::world::Ipc;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::attribute::{AttributeKey, AttributeSet};
-use iceoryx2::service::marker::CustomPayloadMarker;
-use iceoryx2::service::static_config::message_type_details::TypeDetail;
-use shm_schemas::SampleHeader;
+use iceoryx2::service::builder::publish_subscribe::{PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError};
+use iceoryx2::service::marker::{CustomHeaderMarker, CustomPayloadMarker};
+use iceoryx2::service::static_config::message_type_details::{TypeDetail, TypeVariant};
 use shm_schemas::services::port_attributes;
+use shm_schemas::{FixedName, SampleHeader};
 
 /// A subscription to an output port that hands out each sample's bytes.
 pub struct RawPort {
@@ -139,6 +142,125 @@ impl RawPort {
     }
 }
 
+/// An output port that publishes bytes laid out as a type this build does
+/// not know (`nerve replay`): the service is made with the type's name,
+/// size and alignment, the same settings and attributes as a typed
+/// [`crate::Output`] of it, so the agents built with the type read it as
+/// their own.
+pub struct RawOutput {
+    service: String,
+    publisher: Publisher<Ipc, [CustomPayloadMarker], CustomHeaderMarker>,
+    notifier: Notifier<Ipc>,
+    sender: FixedName,
+    size: usize,
+    seq: u64,
+}
+
+impl std::fmt::Debug for RawOutput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RawOutput").field("service", &self.service).field("size", &self.size).finish()
+    }
+}
+
+impl RawOutput {
+    /// Opens (or creates) output port `service` for samples of `schema`,
+    /// whose layout fingerprint is `fingerprint`, sent as `sender`.
+    pub fn create(
+        node: &Node<Ipc>,
+        service: &str,
+        schema: &shm_schemas::Schema,
+        fingerprint: u64,
+        sender: &str,
+    ) -> Result<RawOutput, PortError> {
+        let ipc = |detail: String| PortError::Ipc { service: service.into(), detail };
+        let name: ServiceName = service.try_into().map_err(|e| ipc(format!("not a service name: {e:?}")))?;
+        let payload =
+            TypeDetail::__internal_new_from_parts(TypeVariant::FixedSize, &schema.type_name, schema.size, schema.align)
+                .map_err(|e| ipc(format!("the type name {:?} is too long for iceoryx2: {e:?}", schema.type_name)))?;
+        // SAFETY: reading the name has no precondition
+        let header_name = unsafe { <SampleHeader as ZeroCopySend>::type_name() };
+        let header = TypeDetail::__internal_new_from_parts(
+            TypeVariant::FixedSize,
+            header_name,
+            std::mem::size_of::<SampleHeader>(),
+            std::mem::align_of::<SampleHeader>(),
+        )
+        .map_err(|e| ipc(format!("{e:?}")))?;
+        // SAFETY: the payload's details are the schema's (the layout the
+        // agents built with the type use, checked by the fingerprint in the
+        // attributes), the header's are SampleHeader's; `send` writes
+        // exactly a SampleHeader and `size` payload bytes.
+        let builder = unsafe {
+            node.service_builder(&name)
+                .publish_subscribe::<[CustomPayloadMarker]>()
+                .user_header::<CustomHeaderMarker>()
+                .__internal_set_user_header_type_details(&header)
+                .__internal_set_payload_type_details(&payload)
+        };
+        let verifier = port_attributes_of(service, &schema.type_name, fingerprint)?;
+        let factory = crate::ports::port_settings!(builder).open_or_create_with_attributes(&verifier).map_err(
+            |source| match source {
+                PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                    PublishSubscribeOpenError::IncompatibleAttributes | PublishSubscribeOpenError::IncompatibleTypes,
+                ) => ipc(format!(
+                    "the port exists with another type or layout than the recorded {} ({}): stop the agent that owns it",
+                    schema.type_name,
+                    port_attributes::fingerprint_text(fingerprint)
+                )),
+                source => PortError::Service { service: service.into(), source },
+            },
+        )?;
+        let publisher = factory
+            .publisher_builder()
+            .create()
+            .map_err(|source| PortError::Publisher { service: service.into(), source })?;
+        let notifier = crate::ports::port_event(node, service)?
+            .notifier_builder()
+            .create()
+            .map_err(|source| PortError::Notifier { service: service.into(), source })?;
+        Ok(RawOutput {
+            service: service.into(),
+            publisher,
+            notifier,
+            sender: FixedName::new(sender),
+            size: schema.size,
+            seq: 0,
+        })
+    }
+
+    /// Publishes `bytes` (exactly the type's size) stamped now, and wakes the readers.
+    pub fn send(&mut self, bytes: &[u8]) -> Result<(), PortError> {
+        if bytes.len() != self.size {
+            return Err(PortError::Ipc {
+                service: self.service.clone(),
+                detail: format!("a {}-byte sample for a {}-byte type", bytes.len(), self.size),
+            });
+        }
+        // SAFETY: one element of a FixedSize type: `size` bytes, all written below
+        let mut sample = unsafe { self.publisher.loan_custom_payload(1) }
+            .map_err(|source| PortError::Loan { service: self.service.clone(), source })?;
+        self.seq += 1;
+        let header = SampleHeader { sender: self.sender, seq: self.seq, stamp_ns: crate::clock::now_ns() };
+        // SAFETY: the service's user header is a SampleHeader (set above);
+        // the marker is a zero-sized stand-in at its address
+        unsafe { (sample.user_header_mut() as *mut CustomHeaderMarker).cast::<SampleHeader>().write(header) };
+        let payload = sample.payload_mut();
+        if payload.len() != bytes.len() {
+            return Err(PortError::Ipc {
+                service: self.service.clone(),
+                detail: format!("loaned {} bytes for a {}-byte sample", payload.len(), bytes.len()),
+            });
+        }
+        // SAFETY: `payload` is `bytes.len()` uninitialised one-byte elements
+        unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), payload.as_mut_ptr().cast::<u8>(), bytes.len()) };
+        // SAFETY: every byte of the payload was written just above
+        let sample = unsafe { sample.assume_init() };
+        sample.send().map_err(|source| PortError::Send { service: self.service.clone(), source })?;
+        self.notifier.notify().map_err(|source| PortError::Notify { service: self.service.clone(), source })?;
+        Ok(())
+    }
+}
+
 /// The type name and layout fingerprint of the existing output port
 /// `service`, from its attributes, without subscribing.
 pub fn port_identity(node: &Node<Ipc>, service: &str) -> Option<(String, Option<u64>)> {
@@ -160,8 +282,8 @@ pub fn port_identity(node: &Node<Ipc>, service: &str) -> Option<(String, Option<
 
 #[cfg(test)]
 mod tests {
-    use super::{RawPort, port_identity};
-    use crate::ports::{Output, PortError};
+    use super::{RawOutput, RawPort, port_identity};
+    use crate::ports::{DynInput as _, Input, Output, PortError};
     use crate::world::World;
     use crate::world::test_support::Cleanup;
     use shm_schemas::payloads::Scalar;
@@ -198,5 +320,33 @@ mod tests {
             .expect("receive");
         assert_eq!(n, 3);
         assert_eq!(got[2], (3, "{ value: 2.5, stamp_ns: 7 }".to_string()), "{got:?}");
+    }
+
+    #[test]
+    fn bytes_published_by_schema_are_read_by_an_agent_built_with_the_type() {
+        let world = World::new(&format!("rawout{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+        let service = robot.port_service("rec", "value");
+        let schema = Scalar::schema();
+        let mut out = RawOutput::create(&node, &service, &schema, Scalar::layout_fingerprint(), "rec").expect("raw");
+        let (input, inner) = Input::<Scalar>::new("in");
+        assert!(inner.connect(&node, &robot, "rec", "value").expect("a typed reader opens it"));
+        let sent = Scalar { value: -0.1, stamp_ns: u64::MAX - 3 };
+        // SAFETY: the bytes of a Copy #[repr(C)] value without padding
+        let bytes =
+            unsafe { std::slice::from_raw_parts((&sent as *const Scalar).cast::<u8>(), std::mem::size_of::<Scalar>()) };
+        out.send(bytes).expect("send");
+        out.send(bytes).expect("send");
+        let (meta, got) = input.recv().expect("a sample");
+        assert_eq!(got.value.to_bits(), sent.value.to_bits());
+        assert_eq!(got.stamp_ns, sent.stamp_ns);
+        assert_eq!((meta.sender.as_str(), meta.seq), ("rec", 1));
+        assert!(out.send(&bytes[1..]).is_err(), "a sample of the wrong size");
+        // another layout of the type on the same port is refused
+        let mut other = schema.clone();
+        other.type_name = "nerve::Other".into();
+        assert!(RawOutput::create(&node, &service, &other, 1, "rec").is_err());
     }
 }

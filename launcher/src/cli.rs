@@ -2,7 +2,9 @@
 //! the list of commands. Each command's own arguments are defined in its
 //! module under `cmd/`, next to the code that reads them.
 
-use crate::cmd::{bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, start, wire};
+use crate::cmd::{
+    bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, record, replay, start, wire,
+};
 use clap::{Parser, Subcommand};
 
 /// nerve: a robot's control system as a society of agents.
@@ -69,6 +71,10 @@ pub enum Command {
     Echo(echo::EchoArgs),
     /// Measure the rate of an output port.
     Hz(echo::HzArgs),
+    /// Record output ports to an MCAP file.
+    Record(record::RecordArgs),
+    /// Publish a recording's ports into the robot again, under the recorded agents' names.
+    Replay(replay::ReplayArgs),
     /// Start a robot from a launch file (router, agents, connections).
     Launch(launch::LaunchArgs),
     /// Stop every agent and the router of the robot, and remove what they left.

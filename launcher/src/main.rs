@@ -15,7 +15,10 @@ use agent_sdk::World;
 use anyhow::Result;
 use clap::{CommandFactory, FromArgMatches};
 use cli::{Cli, Command};
-use cmd::{bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, shm_space, start, wire};
+use cmd::{
+    bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, record, replay, shm_space, start,
+    wire,
+};
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
@@ -76,6 +79,14 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
         Command::Hz(a) => {
             shm_space::ensure_shm_space("hz")?;
             echo::hz(&world, a)
+        }
+        Command::Record(a) => {
+            shm_space::ensure_shm_space("record")?;
+            record::record(&world, a)
+        }
+        Command::Replay(a) => {
+            shm_space::ensure_shm_space("replay")?;
+            replay::replay(&world, a)
         }
         Command::Down(a) => down::down(&world, a),
         Command::Launch(a) => launch::launch(&cli.robot, cli.robot_explicit, a),

@@ -517,7 +517,9 @@ mod tests {
         std::fs::create_dir_all(&pids).expect("pids dir");
         let fake = std::env::temp_dir().join(format!("nerve-sweeptest-{}", std::process::id()));
         std::fs::copy("/bin/sleep", &fake).expect("copy sleep");
-        let mut daemon = Command::new(&fake).arg("600").env("NERVE_HOME", &home).spawn().expect("fake daemon");
+        // (short sleeps: a daemon the sweep misses ends the test with a
+        // message instead of hanging it)
+        let mut daemon = Command::new(&fake).arg("30").env("NERVE_HOME", &home).spawn().expect("fake daemon");
         std::fs::write(pids.join("agent.pid"), format!("{}\n", daemon.id())).expect("pid file");
         let uid = shm_schemas::names::effective_uid();
         let shm = PathBuf::from(format!("/dev/shm/{}ring", shm_schemas::RobotName::shm_prefix_of(uid, &robot)));
@@ -532,12 +534,17 @@ mod tests {
         // a live test process's robot (ours), which must stay
         let mine = PathBuf::from(format!("/dev/shm/{}{}-999-mine_ring", shm_test_prefix(), std::process::id()));
         std::fs::write(&mine, b"").expect("own shm file");
-        let bystander = Command::new(&fake).arg("600").spawn().expect("bystander");
+        let bystander = Command::new(&fake).arg("30").spawn().expect("bystander");
+        let seen = (nerve_process_of(daemon.id(), &home), proc_stat(daemon.id()));
 
         let swept = sweep_dead_test_robots();
         let _ = std::fs::remove_file(&fake);
         let status = daemon.wait().expect("wait for the fake daemon");
-        assert!(!status.success(), "the daemon was not killed: {status}");
+        assert!(
+            !status.success(),
+            "the daemon was not killed: {status}; swept {swept:?}; before the sweep it was a nerve process of the home: {seen:?}; the test pid {dead} alive: {}",
+            alive(dead)
+        );
         assert!(!home.exists() && !shm.exists(), "left: {home:?} {shm:?}");
         assert!(iox.is_none_or(|p| !p.exists()));
         assert!(swept.processes >= 1 && swept.files >= 2, "{swept:?}");

@@ -22,9 +22,7 @@ const LATENCY_WINDOW: usize = 256;
 
 /// CLOCK_REALTIME in ns: the stamp that crosses machines (one-way latency
 /// across hosts is only as good as their clock synchronisation).
-pub fn unix_now_ns() -> u64 {
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
-}
+pub use agent_sdk::clock::unix_now_ns;
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())

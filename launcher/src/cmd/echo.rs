@@ -107,7 +107,7 @@ fn port_info(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<PortInfo
 }
 
 /// The schema of the built-in payload type with layout `fingerprint`.
-fn built_in_schema(fingerprint: u64) -> Option<Schema> {
+pub fn built_in_schema(fingerprint: u64) -> Option<Schema> {
     let mut found = None;
     macro_rules! look {
         ($t:ty) => {

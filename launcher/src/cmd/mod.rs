@@ -14,6 +14,8 @@ pub mod inspect;
 pub mod launch;
 pub mod logs;
 pub mod mem;
+pub mod record;
+pub mod replay;
 pub mod shm_space;
 pub mod start;
 pub mod tap;

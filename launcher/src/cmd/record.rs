@@ -1,0 +1,382 @@
+//! `nerve record`: output ports to an MCAP file.
+//!
+//! The recorder is a subscriber like any other: it reads each port by its
+//! bytes ([`RawPort`]), zero copy, and publishers never wait for it. What it
+//! could not keep up with (a port's buffer overwritten before it read it)
+//! shows as a gap in the sender's sequence numbers: counted per port, shown
+//! on the progress line and reported at the end.
+//!
+//! The file keeps each sample's bytes as they were in shared memory, with
+//! the nerve schema of its type (see `docs/payloads.md` for why): one
+//! channel per port, topic `AGENT/PORT`, message encoding
+//! [`MESSAGE_ENCODING`], schema encoding [`SCHEMA_ENCODING`] (the
+//! [`Schema`] as JSON), and the channel's metadata naming the robot, agent,
+//! port, type and layout fingerprint. A message's log time is when the
+//! recorder read it (CLOCK_REALTIME), its publish time the sample's own
+//! stamp, its sequence the sender's sequence number (low 32 bits).
+
+use crate::client::{RouterSession, cli_node};
+use crate::cmd::echo::built_in_schema;
+use agent_sdk::World;
+use agent_sdk::ports::port_event;
+use agent_sdk::raw_port::RawPort;
+use agent_sdk::world::Ipc;
+use anyhow::{Context as _, Result, anyhow, bail};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
+use shm_schemas::services::port_attributes::fingerprint_text;
+use shm_schemas::{PortRef, Schema};
+use std::collections::BTreeMap;
+use std::io::{BufWriter, IsTerminal as _, Write as _};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::rc::Rc;
+use std::time::{Duration, Instant};
+
+/// The message encoding of nerve's recordings: the sample's bytes as the
+/// `#[repr(C)]` payload lays them out (little-endian).
+pub const MESSAGE_ENCODING: &str = "nerve.raw";
+/// The schema encoding: a [`Schema`] as JSON.
+pub const SCHEMA_ENCODING: &str = "nerve.schema+json";
+
+/// `nerve record`
+#[derive(Debug, clap::Args)]
+pub struct RecordArgs {
+    /// Output ports to record, AGENT/PORT.
+    pub ports: Vec<String>,
+    /// Every output port of the robot, and those of agents started while it records.
+    #[arg(long)]
+    pub all: bool,
+    /// The MCAP file to write (default: `nerve-ROBOT-YYYYmmdd-HHMMSS.mcap` here).
+    #[arg(short = 'o', long)]
+    pub output: Option<PathBuf>,
+    /// Stop after this many seconds (default: at Ctrl-C).
+    #[arg(long, value_parser = agent_sdk::clock::parse_seconds)]
+    pub duration: Option<f64>,
+    /// No progress line.
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
+}
+
+/// An output port the router knows, with what is needed to record it.
+#[derive(Debug, Clone)]
+pub struct Known {
+    /// AGENT/PORT
+    pub port: PortRef,
+    /// its type name
+    pub type_name: String,
+    /// its layout fingerprint
+    pub fingerprint: u64,
+    /// its schema, when the agent registered one (or the type is built in)
+    pub schema: Option<Schema>,
+}
+
+/// Every output port of the robot's live agents, from the router.
+pub fn known_ports(world: &World) -> Result<Vec<Known>> {
+    let session = RouterSession::open(world).context(
+        "recording needs the router (it holds each port's schema): start it with `nerve router --daemon` or `nerve launch`",
+    )?;
+    let RouterReply::Agents(agents) = session.call(CliRequest::Ps)? else {
+        bail!("the router did not answer `ps` with its agents");
+    };
+    let mut out = Vec::new();
+    for a in agents.iter().filter(|a| a.pid != 0) {
+        for o in &a.outputs {
+            let Ok(port) = PortRef::new(&a.name, &o.name) else { continue };
+            let schema = a
+                .schemas
+                .iter()
+                .find(|s| s.fingerprint() == o.fingerprint)
+                .cloned()
+                .or_else(|| built_in_schema(o.fingerprint));
+            out.push(Known { port, type_name: o.type_name.clone(), fingerprint: o.fingerprint, schema });
+        }
+    }
+    Ok(out)
+}
+
+/// A port being recorded.
+struct Recording {
+    known: Known,
+    raw: RawPort,
+    listener: Rc<Listener<Ipc>>,
+    channel: u16,
+    messages: u64,
+    bytes: u64,
+    dropped: u64,
+    last_seq: Option<u64>,
+}
+
+/// The figures of a recording, for the progress line and the summary.
+#[derive(Debug, Default, Clone, Copy)]
+struct Totals {
+    messages: u64,
+    bytes: u64,
+    dropped: u64,
+}
+
+fn default_output(world: &World) -> PathBuf {
+    let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default().as_secs();
+    let (days, secs) = (t / 86_400, t % 86_400);
+    let (y, m, d) = civil_from_days(days as i64);
+    PathBuf::from(format!(
+        "nerve-{}-{y:04}{m:02}{d:02}-{:02}{:02}{:02}.mcap",
+        world.robot(),
+        secs / 3600,
+        secs / 60 % 60,
+        secs % 60
+    ))
+}
+
+/// Year, month, day of a count of days since 1970-01-01 (H. Hinnant's algorithm).
+fn civil_from_days(z: i64) -> (i64, u32, u32) {
+    let z = z + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    (yoe + era * 400 + i64::from(m <= 2), m, d)
+}
+
+pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
+    if a.ports.is_empty() && !a.all {
+        bail!("name the ports to record (AGENT/PORT ...) or give --all");
+    }
+    if let Some(d) = a.duration
+        && !(d.is_finite() && d > 0.0)
+    {
+        bail!("--duration must be a positive number of seconds");
+    }
+    let wanted: Vec<PortRef> =
+        a.ports.iter().map(|p| p.parse::<PortRef>().with_context(|| format!("port {p:?}"))).collect::<Result<_>>()?;
+    let node = cli_node(world)?;
+    let known = known_ports(world)?;
+    for w in &wanted {
+        if !known.iter().any(|k| &k.port == w) {
+            bail!(
+                "no output port {w} on robot {}; its output ports: {}",
+                world.robot(),
+                known.iter().map(|k| k.port.to_string()).collect::<Vec<_>>().join(", ")
+            );
+        }
+    }
+    let path = a.output.clone().unwrap_or_else(|| default_output(world));
+    let file = std::fs::File::create(&path).with_context(|| format!("cannot create {}", path.display()))?;
+    let mut writer = mcap::WriteOptions::new()
+        .compression(None)
+        .profile("")
+        .create(BufWriter::new(file))
+        .with_context(|| format!("cannot start the MCAP file {}", path.display()))?;
+
+    let mut recordings: Vec<Recording> = Vec::new();
+    let add = |k: &Known, writer: &mut mcap::Writer<BufWriter<std::fs::File>>| -> Result<Option<Recording>> {
+        let Some(schema) = &k.schema else {
+            eprintln!(
+                "skipping {}: its type {} has no schema (the agent registered none and it is not built in)",
+                k.port, k.type_name
+            );
+            return Ok(None);
+        };
+        let service = world.robot().port_service(k.port.agent.as_str(), &k.port.port);
+        let raw = match RawPort::open(&node, &service) {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("skipping {}: {e}", k.port);
+                return Ok(None);
+            }
+        };
+        let listener = Rc::new(port_event(&node, &service)?.listener_builder().create().map_err(|e| anyhow!("{e:?}"))?);
+        let schema_id = writer.add_schema(&k.type_name, SCHEMA_ENCODING, &serde_json::to_vec(schema)?)?;
+        let metadata = BTreeMap::from([
+            ("robot".to_string(), world.robot().to_string()),
+            ("agent".to_string(), k.port.agent.to_string()),
+            ("port".to_string(), k.port.port.clone()),
+            ("type".to_string(), k.type_name.clone()),
+            ("fingerprint".to_string(), fingerprint_text(k.fingerprint)),
+        ]);
+        let channel = writer.add_channel(schema_id, &k.port.to_string(), MESSAGE_ENCODING, &metadata)?;
+        Ok(Some(Recording {
+            known: k.clone(),
+            raw,
+            listener,
+            channel,
+            messages: 0,
+            bytes: 0,
+            dropped: 0,
+            last_seq: None,
+        }))
+    };
+    // ports that could not be recorded (said once, not tried again)
+    let mut skipped: Vec<PortRef> = Vec::new();
+    for k in known.iter().filter(|k| a.all || wanted.contains(&k.port)) {
+        match add(k, &mut writer)? {
+            Some(r) => recordings.push(r),
+            None => skipped.push(k.port.clone()),
+        }
+    }
+    if recordings.is_empty() && !a.all {
+        bail!("nothing to record");
+    }
+
+    let start = Instant::now();
+    let until = a.duration.map(|d| start + Duration::from_secs_f64(d));
+    let tty = std::io::stderr().is_terminal();
+    let mut next_progress = start + Duration::from_secs(1);
+    let mut next_look = start + Duration::from_secs(1);
+    let mut interrupted = false;
+    loop {
+        // a fresh wait set each round: --all adds ports as agents appear
+        let ws = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<Ipc>()
+            .map_err(|e| anyhow!("{e:?}"))?;
+        let listeners: Vec<Rc<Listener<Ipc>>> = recordings.iter().map(|r| r.listener.clone()).collect();
+        let mut guards = Vec::new();
+        for l in &listeners {
+            guards.push(ws.attach_notification(l.as_ref()).map_err(|e| anyhow!("{e:?}"))?);
+        }
+        let _tick = ws.attach_interval(Duration::from_millis(100)).map_err(|e| anyhow!("{e:?}"))?;
+        let mut round_done = false;
+        while !round_done {
+            match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                    interrupted = true;
+                    break;
+                }
+                Ok(_) => {}
+                Err(e) => bail!("wait failed: {e:?}"),
+            }
+            for r in &mut recordings {
+                let _ = r.listener.try_wait(|_| {});
+                drain(r, &mut writer)?;
+            }
+            let now = Instant::now();
+            if until.is_some_and(|u| now >= u) {
+                break;
+            }
+            if now >= next_progress && !a.quiet {
+                next_progress = now + Duration::from_secs(1);
+                progress(&recordings, start.elapsed(), tty);
+            }
+            if a.all && now >= next_look {
+                next_look = now + Duration::from_secs(1);
+                // agents started meanwhile: their ports join the recording
+                if let Ok(known) = known_ports(world) {
+                    let new: Vec<&Known> = known
+                        .iter()
+                        .filter(|k| !skipped.contains(&k.port) && !recordings.iter().any(|r| r.known.port == k.port))
+                        .collect();
+                    for k in new {
+                        skipped.push(k.port.clone());
+                        if let Some(r) = add(k, &mut writer)? {
+                            skipped.pop();
+                            eprintln!("{}recording {} too", if tty { "\n" } else { "" }, k.port);
+                            recordings.push(r);
+                            round_done = true;
+                        }
+                    }
+                }
+            }
+        }
+        if interrupted || until.is_some_and(|u| Instant::now() >= u) {
+            break;
+        }
+    }
+    // what arrived until the end
+    for r in &mut recordings {
+        drain(r, &mut writer)?;
+    }
+    writer.finish().with_context(|| format!("cannot finish the MCAP file {}", path.display()))?;
+    drop(writer);
+    let totals = sum(&recordings);
+    if !a.quiet && tty {
+        eprintln!();
+    }
+    println!(
+        "recorded {} ports to {}: {} messages, {:.1} MB in {:.1} s, {} dropped",
+        recordings.len(),
+        path.display(),
+        totals.messages,
+        totals.bytes as f64 / 1e6,
+        start.elapsed().as_secs_f64(),
+        totals.dropped
+    );
+    for r in &recordings {
+        println!(
+            "  {:<32} {:<24} {:>8} messages{}",
+            r.known.port.to_string(),
+            r.known.type_name,
+            r.messages,
+            if r.dropped > 0 { format!(", {} dropped (the recorder fell behind)", r.dropped) } else { String::new() }
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Writes every waiting sample of `r`.
+fn drain(r: &mut Recording, writer: &mut mcap::Writer<BufWriter<std::fs::File>>) -> Result<()> {
+    let mut failed = None;
+    r.raw.receive(|h, bytes| {
+        if let Some(last) = r.last_seq {
+            r.dropped = r.dropped.saturating_add(h.seq.saturating_sub(last).saturating_sub(1));
+        }
+        r.last_seq = Some(h.seq);
+        let header = mcap::records::MessageHeader {
+            channel_id: r.channel,
+            sequence: h.seq as u32,
+            log_time: agent_sdk::clock::unix_now_ns(),
+            publish_time: h.stamp_ns,
+        };
+        if let Err(e) = writer.write_to_known_channel(&header, bytes) {
+            failed = Some(e);
+            return false;
+        }
+        r.messages += 1;
+        r.bytes = r.bytes.saturating_add(bytes.len() as u64);
+        true
+    })?;
+    match failed {
+        Some(e) => Err(anyhow!(e).context("cannot write to the MCAP file")),
+        None => Ok(()),
+    }
+}
+
+fn sum(recordings: &[Recording]) -> Totals {
+    recordings.iter().fold(Totals::default(), |t, r| Totals {
+        messages: t.messages + r.messages,
+        bytes: t.bytes + r.bytes,
+        dropped: t.dropped + r.dropped,
+    })
+}
+
+fn progress(recordings: &[Recording], elapsed: Duration, tty: bool) {
+    let t = sum(recordings);
+    let line = format!(
+        "recording {} ports: {} messages, {:.1} MB, {} dropped ({:.0} s)",
+        recordings.len(),
+        t.messages,
+        t.bytes as f64 / 1e6,
+        t.dropped,
+        elapsed.as_secs_f64()
+    );
+    let mut err = std::io::stderr().lock();
+    let _ = if tty { write!(err, "\r{line}   ") } else { writeln!(err, "{line}") };
+    let _ = err.flush();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::civil_from_days;
+
+    #[test]
+    fn days_become_dates() {
+        assert_eq!(civil_from_days(0), (1970, 1, 1));
+        assert_eq!(civil_from_days(20_416), (2025, 11, 24));
+        assert_eq!(civil_from_days(11_016), (2000, 2, 29));
+    }
+}

@@ -1,0 +1,63 @@
+"""Reads an MCAP file that `nerve record` wrote with the `mcap` package from
+PyPI (a reader nobody here wrote) and prints what it found as JSON: each
+channel with its schema, message count, and its messages decoded through the
+nerve schema embedded in the file (offsets and primitive types, nothing
+else). Used by tests/tests/record.rs."""
+
+import json
+import struct
+import sys
+
+from mcap.reader import make_reader
+
+FORMATS = {"u8": "<B", "u16": "<H", "u32": "<I", "u64": "<Q", "i8": "<b", "i16": "<h",
+           "i32": "<i", "i64": "<q", "f32": "<f", "f64": "<d", "bool": "<?"}
+
+
+def decode(schema, data, at=0):
+    kind = schema["kind"]
+    if "primitive" in kind:
+        fmt = FORMATS[kind["primitive"]["primitive"]]
+        return struct.unpack_from(fmt, data, at)[0]
+    if "array" in kind:
+        element = kind["array"]["element"]
+        return [decode(element, data, at + i * element["size"]) for i in range(kind["array"]["len"])]
+    if "string" in kind:
+        (n,) = struct.unpack_from("<I", data, at)
+        n = min(n, kind["string"]["capacity"])
+        return data[at + 4:at + 4 + n].decode("utf-8", "replace")
+    return {f["name"]: decode(f["schema"], data, at + f["offset"]) for f in kind["struct"]["fields"]}
+
+
+def main(path):
+    channels = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        for schema, channel, message in reader.iter_messages():
+            c = channels.setdefault(channel.topic, {
+                "message_encoding": channel.message_encoding,
+                "metadata": dict(channel.metadata),
+                "schema_name": schema.name,
+                "schema_encoding": schema.encoding,
+                "messages": [],
+            })
+            nerve_schema = json.loads(schema.data)
+            c["messages"].append({
+                "sequence": message.sequence,
+                "log_time": message.log_time,
+                "publish_time": message.publish_time,
+                "size": len(message.data),
+                "hex": message.data.hex(),
+                "data": decode(nerve_schema, message.data),
+            })
+    out = {
+        "message_count": summary.statistics.message_count if summary and summary.statistics else None,
+        "channel_count": len(summary.channels) if summary else None,
+        "channels": channels,
+    }
+    json.dump(out, sys.stdout)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
