@@ -71,6 +71,9 @@ pub enum Command {
     Echo(echo::EchoArgs),
     /// Measure the rate of an output port.
     Hz(echo::HzArgs),
+    /// Print this robot's iceoryx2 configuration, for iceoryx2's own tools (`iox2`).
+    #[command(name = "iox2-config")]
+    Iox2Config,
     /// Record output ports to an MCAP file.
     Record(record::RecordArgs),
     /// Publish a recording's ports into the robot again, under the recorded agents' names.

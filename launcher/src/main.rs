@@ -16,8 +16,8 @@ use anyhow::Result;
 use clap::{CommandFactory, FromArgMatches};
 use cli::{Cli, Command};
 use cmd::{
-    bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, record, replay, shm_space, start,
-    wire,
+    bench, bridge, calibrate, demo, down, drive, echo, inspect, iox2, launch, logs, mem, record, replay, shm_space,
+    start, wire,
 };
 use std::process::ExitCode;
 
@@ -80,6 +80,7 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
             shm_space::ensure_shm_space("hz")?;
             echo::hz(&world, a)
         }
+        Command::Iox2Config => iox2::iox2_config(&world),
         Command::Record(a) => {
             shm_space::ensure_shm_space("record")?;
             record::record(&world, a)

@@ -11,6 +11,7 @@ pub mod down;
 pub mod drive;
 pub mod echo;
 pub mod inspect;
+pub mod iox2;
 pub mod launch;
 pub mod logs;
 pub mod mem;
