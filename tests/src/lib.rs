@@ -193,6 +193,15 @@ impl Robot {
         self.agent(name).and_then(|a| a["pid"].as_u64()).unwrap_or_else(|| panic!("agent {name} not in ps")) as u32
     }
 
+    /// The pid in `NAME.pid` of this robot's pid files (`router`, an agent), if it holds one.
+    pub fn pid_file(&self, name: &str) -> Option<u32> {
+        std::fs::read_to_string(self.home.join(&self.name).join("pids").join(format!("{name}.pid")))
+            .ok()?
+            .trim()
+            .parse()
+            .ok()
+    }
+
     /// `nerve graph --json`.
     pub fn graph(&self) -> Value {
         serde_json::from_str(&self.ok(&["graph", "--json"])).expect("graph json")

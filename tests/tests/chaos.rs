@@ -69,10 +69,6 @@ fn launch_file(r: &Robot) -> PathBuf {
     r.launch_file("chaos.toml", &body)
 }
 
-fn pid_file(r: &Robot, name: &str) -> Option<u32> {
-    std::fs::read_to_string(r.home.join(&r.name).join("pids").join(format!("{name}.pid"))).ok()?.trim().parse().ok()
-}
-
 /// The edges the agents themselves report reading (their input statistics).
 fn edges_read(agents: &[Value]) -> BTreeSet<(String, String)> {
     let mut out = BTreeSet::new();
@@ -174,7 +170,7 @@ fn seed() -> u64 {
 
 /// SIGKILLs the router and starts it again.
 fn restart_router(r: &Robot) {
-    let pid = pid_file(r, "router").expect("router pid");
+    let pid = r.pid_file("router").expect("router pid");
     sigkill(pid);
     assert!(wait_until(Duration::from_secs(5), || {
         reap();
@@ -256,7 +252,7 @@ fn recovered(round: u64, fault: &str, whole: Result<Duration, String>, worst: &m
 /// The router's memory and descriptors at the end against `start`.
 fn assert_router_flat(r: &Robot, what: &str, start: Holdings, worst: Duration, seed: u64) {
     let Holdings { rss_kib: rss0, fds: fds0 } = start;
-    let Holdings { rss_kib: rss1, fds: fds1 } = holdings(pid_file(r, "router").expect("router pid"));
+    let Holdings { rss_kib: rss1, fds: fds1 } = holdings(r.pid_file("router").expect("router pid"));
     eprintln!(
         "{what}: worst recovery {worst:?}; router {rss0} kB, {fds0} fds at the start, {rss1} kB, {fds1} fds at the end"
     );
@@ -305,7 +301,7 @@ fn the_pipeline_robot_survives_a_seeded_monkey() {
     if let Err(e) = whole(&r, &AGENTS, Some(&intended), &pipeline_flowing(&intended)) {
         panic!("the robot never came up whole: {e}");
     }
-    let start = holdings(pid_file(&r, "router").expect("router pid"));
+    let start = holdings(r.pid_file("router").expect("router pid"));
     let mut worst = Duration::ZERO;
 
     for round in 0..rounds {
@@ -389,7 +385,7 @@ fn the_exploration_robot_survives_a_seeded_monkey() {
     if let Err(e) = whole(&r, &names, None, &flowing) {
         panic!("the robot never came up whole: {e}");
     }
-    let start = holdings(pid_file(&r, "router").expect("router pid"));
+    let start = holdings(r.pid_file("router").expect("router pid"));
     let mut worst = Duration::ZERO;
     for round in 0..rounds {
         let victim = names[monkey.below(names.len() as u64) as usize];

@@ -76,11 +76,7 @@ fn a_type_nerve_was_not_built_with_is_echoed_by_its_schema() {
     // with no router the port's attributes say the type: a built-in one is
     // decoded with this build's own schema, a foreign one waits for the router
     r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
-    let router_pid: u32 = std::fs::read_to_string(r.home.join(&r.name).join("pids/router.pid"))
-        .expect("router pid file")
-        .trim()
-        .parse()
-        .expect("pid");
+    let router_pid = r.pid_file("router").expect("router pid file");
     sigkill(router_pid);
     assert!(wait_until(Duration::from_secs(2), || !alive(router_pid)));
     let e = r.fails(&["echo", "g/state", "--count", "1", "--timeout", "3"]);

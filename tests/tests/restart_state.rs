@@ -31,10 +31,7 @@ fn really_suspended(r: &Robot, name: &str) -> bool {
 
 /// The router's pid, from its pid file.
 fn router_pid(r: &Robot) -> u32 {
-    std::fs::read_to_string(r.home.join(&r.name).join("pids").join("router.pid"))
-        .ok()
-        .and_then(|s| s.trim().parse().ok())
-        .expect("the router's pid file")
+    r.pid_file("router").expect("the router's pid file")
 }
 
 /// Kills agent `name` and waits until the router has noticed.

@@ -283,11 +283,7 @@ fn router_crash_keeps_data_flowing_and_restart_restores() {
     r.ok(&["start", "relay", "--name", "r1"]);
     r.ok(&["connect", "t1/tick", "r1/in"]);
     r.echo("r1/out", 1);
-    let router_pid: u32 = std::fs::read_to_string(r.home.join(&r.name).join("pids/router.pid"))
-        .expect("router pid file")
-        .trim()
-        .parse()
-        .expect("pid");
+    let router_pid = r.pid_file("router").expect("router pid file");
     sigkill(router_pid);
     assert!(wait_until(Duration::from_secs(2), || !alive(router_pid)));
     // data keeps flowing with no router

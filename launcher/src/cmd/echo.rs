@@ -17,7 +17,7 @@ use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
-use shm_schemas::control::cli_to_router::{CliRequest, RouterError, RouterReply};
+use shm_schemas::control::cli_to_router::{AgentView, CliRequest, RouterError, RouterReply};
 use shm_schemas::schema::Kind;
 use shm_schemas::services::port_attributes::fingerprint_text;
 use shm_schemas::{Described, Payload, PortRef, SampleHeader, Schema, for_each_payload};
@@ -90,12 +90,7 @@ fn port_info(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<PortInfo
                     available: a.outputs.iter().map(|o| o.name.clone()).collect(),
                 }));
             };
-            let schema = a
-                .schemas
-                .iter()
-                .find(|s| s.fingerprint() == o.fingerprint)
-                .cloned()
-                .or_else(|| built_in_schema(o.fingerprint));
+            let schema = schema_of(a, o.fingerprint);
             return Ok(PortInfo { type_name: o.type_name.clone(), fingerprint: Some(o.fingerprint), schema });
         }
     }
@@ -106,8 +101,14 @@ fn port_info(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<PortInfo
     Ok(PortInfo { type_name, fingerprint, schema: fingerprint.and_then(built_in_schema) })
 }
 
+/// The schema of layout `fingerprint` on a port of `agent`: the one it
+/// registered, else a built-in type's.
+pub fn schema_of(agent: &AgentView, fingerprint: u64) -> Option<Schema> {
+    agent.schemas.iter().find(|s| s.fingerprint() == fingerprint).cloned().or_else(|| built_in_schema(fingerprint))
+}
+
 /// The schema of the built-in payload type with layout `fingerprint`.
-pub fn built_in_schema(fingerprint: u64) -> Option<Schema> {
+fn built_in_schema(fingerprint: u64) -> Option<Schema> {
     let mut found = None;
     macro_rules! look {
         ($t:ty) => {

@@ -16,7 +16,7 @@
 //! stamp, its sequence the sender's sequence number (low 32 bits).
 
 use crate::client::{RouterSession, cli_node};
-use crate::cmd::echo::built_in_schema;
+use crate::cmd::echo::schema_of;
 use agent_sdk::World;
 use agent_sdk::ports::port_event;
 use agent_sdk::raw_port::RawPort;
@@ -85,12 +85,7 @@ pub fn known_ports(world: &World) -> Result<Vec<Known>> {
     for a in agents.iter().filter(|a| a.pid != 0) {
         for o in &a.outputs {
             let Ok(port) = PortRef::new(&a.name, &o.name) else { continue };
-            let schema = a
-                .schemas
-                .iter()
-                .find(|s| s.fingerprint() == o.fingerprint)
-                .cloned()
-                .or_else(|| built_in_schema(o.fingerprint));
+            let schema = schema_of(a, o.fingerprint);
             out.push(Known { port, type_name: o.type_name.clone(), fingerprint: o.fingerprint, schema });
         }
     }

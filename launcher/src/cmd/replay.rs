@@ -129,11 +129,8 @@ pub fn replay(world: &World, a: ReplayArgs) -> Result<ExitCode> {
         messages.push((ch.id, m.log_time, m.data));
     }
     messages.sort_by_key(|(_, t, _)| *t);
-    let recorded: Vec<String> = {
-        let mut v: Vec<String> = tracks.values().map(|t| t.agent.clone()).collect();
-        v.dedup();
-        v
-    };
+    let recorded: Vec<String> =
+        tracks.values().map(|t| t.agent.clone()).collect::<std::collections::BTreeSet<_>>().into_iter().collect();
     for c in chosen.keys() {
         if !recorded.contains(c) {
             bail!("the recording has no agent {c}; it has {}", recorded.join(", "));
