@@ -35,6 +35,7 @@
 //!   user's wiring, persisted, and is never dropped behind their back.
 
 pub mod calls;
+pub mod events;
 pub mod registry;
 pub mod remembered;
 mod serving;
@@ -158,6 +159,7 @@ impl Router {
                 remembered: remembered::Remembered::default(),
                 calls: calls::Calls::default(),
                 jobs: Vec::new(),
+                events: events::EventLog::default(),
                 shutdown: false,
                 last_gc: Instant::now(),
             },

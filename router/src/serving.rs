@@ -14,6 +14,7 @@
 //! obeyed, and a `Stop` cancels the agent's restarts only when it obeyed.
 
 use crate::calls::{AGENT_TIMEOUT, Calls, Outcome, STATS_TIMEOUT, Ticket};
+use crate::events::EventLog;
 use crate::registry::Registry;
 use crate::remembered::{self, FORGET_AFTER, Remembered};
 use crate::store::{Connection, Saved, Store, Writer};
@@ -26,7 +27,7 @@ use iceoryx2::prelude::Node;
 use shm_schemas::control::ProtocolError;
 use shm_schemas::control::agent_to_router::{AgentToRouter, Registration, TaskKind};
 use shm_schemas::control::cli_to_router::{
-    AgentState, AgentView, CliRequest, GraphView, RouterError, RouterReply, RouterRequest,
+    AgentState, AgentView, CliRequest, EventKind, GraphView, RouterError, RouterReply, RouterRequest,
 };
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
 use shm_schemas::cycles::event_cycle;
@@ -98,6 +99,8 @@ pub struct State {
     pub(crate) remembered: Remembered,
     pub(crate) calls: Calls,
     pub(crate) jobs: Vec<Job>,
+    /// what happened in the graph, for `CliRequest::Events`
+    pub(crate) events: EventLog,
     pub(crate) shutdown: bool,
     pub(crate) last_gc: Instant,
 }
@@ -129,6 +132,7 @@ impl State {
             RouterRequest::Agent(AgentToRouter::Unregister { name, pid }) => {
                 if self.registry.unregister(&name, pid) {
                     tracing::info!(agent = %name, pid, "agent {name} (pid {pid}) left");
+                    self.events.push(EventKind::Left { agent: name.clone(), pid });
                     self.calls.left(&name);
                     self.exited(&name, false);
                 }
@@ -167,6 +171,7 @@ impl State {
             return RouterReply::Error(e);
         }
         tracing::info!(agent = %name, pid, "agent {name} registered: {summary}");
+        self.events.push(EventKind::Registered { agent: name.clone(), pid });
         self.supervisor.registered(&name);
         self.calls.registered(&name);
         // Sent after this reply, by the next pump: the agent goes on starting
@@ -258,6 +263,7 @@ impl State {
         }
         for (name, pid) in &dead {
             tracing::warn!(agent = %name, pid, "agent {name} (pid {pid}) died; its connections are kept for its restart");
+            self.events.push(EventKind::Died { agent: name.clone(), pid: *pid });
             self.calls.left(name);
             self.exited(name, true);
         }
@@ -354,6 +360,11 @@ impl State {
                 }
                 Ok(Started::waiting(asked.keys().copied().collect(), Work::Views { graph, asked }))
             }
+            CliRequest::Events { after } => Ok(Started::Answer(RouterReply::Events {
+                epoch: self.epoch,
+                next: self.events.next(),
+                events: self.events.after(after),
+            })),
             CliRequest::Connect { from, to, allow_cycle } => {
                 let from_type = self.registry.check_compatible(&from, &to)?;
                 if !allow_cycle {
@@ -378,6 +389,7 @@ impl State {
                 if !self.registry.contains(to.agent.as_str()) {
                     // nobody reads it: the list is the whole truth
                     self.wiring.remove(&f, &t);
+                    self.events.push(EventKind::Disconnected { from: f.clone(), to: t.clone() });
                     let saved = self.persist_wiring();
                     tracing::info!(from = %f, to = %t, "disconnected {f} -> {t}");
                     return Ok(Started::Job(Self::when_saved(saved, format!("disconnected {f} -> {t}"))));
@@ -497,7 +509,9 @@ impl State {
                 Ok(_) => {
                     tracing::info!(from = %conn.from, to = %conn.to, "connected {} -> {}", conn.from, conn.to);
                     let what = format!("connected {} -> {}", conn.from, conn.to);
+                    let event = EventKind::Connected { from: conn.from.clone(), to: conn.to.clone() };
                     if self.wiring.add(conn) {
+                        self.events.push(event);
                         let saved = self.persist_wiring();
                         return self.jobs.push(Job { reply, ..Self::when_saved(saved, what) });
                     }
@@ -509,6 +523,7 @@ impl State {
                 // it let go, or it did not have it: either way nothing flows
                 Ok(_) | Err(RouterError::AgentRefused { .. }) => {
                     self.wiring.remove(&conn.from, &conn.to);
+                    self.events.push(EventKind::Disconnected { from: conn.from.clone(), to: conn.to.clone() });
                     let saved = self.persist_wiring();
                     tracing::info!(from = %conn.from, to = %conn.to, "disconnected {} -> {}", conn.from, conn.to);
                     let what = format!("disconnected {} -> {}", conn.from, conn.to);

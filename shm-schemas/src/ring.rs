@@ -237,6 +237,20 @@ pub struct RingNotice {
     pub creation_id: u64,
 }
 
+impl RingNotice {
+    /// A notice from a sample's bytes (a tool that reads ports untyped,
+    /// such as the recorder); `None` unless `bytes` is exactly one notice.
+    pub fn from_bytes(bytes: &[u8]) -> Option<RingNotice> {
+        if bytes.len() != std::mem::size_of::<RingNotice>() {
+            return None;
+        }
+        // SAFETY: the length is checked; every field is an integer or an
+        // integer array (FixedName: u32 and bytes, read back clamped), so any
+        // bit pattern is a valid RingNotice; read_unaligned needs no alignment.
+        Some(unsafe { std::ptr::read_unaligned(bytes.as_ptr().cast::<RingNotice>()) })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -265,6 +279,20 @@ mod tests {
         assert_eq!(offset_of!(RingNotice, seq), 48);
         assert_eq!(offset_of!(RingNotice, creation_id), 88);
         assert_eq!(<RingNotice as Payload>::stable_type_name(), "nerve::RingNotice");
+    }
+
+    #[test]
+    fn a_notice_comes_back_from_its_bytes() {
+        let n = RingNotice { ring: FixedName::new("cam"), seq: 42, width: 640, creation_id: 7, ..Default::default() };
+        // SAFETY: a live, initialized value, viewed as its bytes for the test
+        let bytes =
+            unsafe { std::slice::from_raw_parts((&n as *const RingNotice).cast::<u8>(), size_of::<RingNotice>()) };
+        let back = RingNotice::from_bytes(bytes).expect("a whole notice");
+        assert_eq!((back.ring.as_str(), back.seq, back.width, back.creation_id), ("cam", 42, 640, 7));
+        assert!(RingNotice::from_bytes(&bytes[1..]).is_none(), "a short slice is no notice");
+        let mut garbage = vec![0xffu8; size_of::<RingNotice>()];
+        garbage[0] = 200;
+        assert_eq!(RingNotice::from_bytes(&garbage).map(|n| n.ring.as_str().len()), Some(1), "any bytes read safely");
     }
 
     #[test]

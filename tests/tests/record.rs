@@ -18,8 +18,9 @@ use std::time::Duration;
 fn python_with_mcap() -> PathBuf {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("target").join("nerve-py");
     let python = dir.join("bin").join("python");
-    let has_mcap =
-        |p: &Path| Command::new(p).args(["-c", "import mcap.reader"]).output().is_ok_and(|o| o.status.success());
+    let has_mcap = |p: &Path| {
+        Command::new(p).args(["-c", "import mcap.reader, google.protobuf"]).output().is_ok_and(|o| o.status.success())
+    };
     if !has_mcap(&python) {
         let st = Command::new("python3").arg("-m").arg("venv").arg(&dir).status().expect("python3");
         assert!(
@@ -27,10 +28,10 @@ fn python_with_mcap() -> PathBuf {
             "python3 -m venv failed (Debian: apt-get install python3-venv; scripts/setup.sh does it)"
         );
         let st = Command::new(dir.join("bin").join("pip"))
-            .args(["install", "--quiet", "--disable-pip-version-check", "mcap==1.6.0"])
+            .args(["install", "--quiet", "--disable-pip-version-check", "mcap==1.6.0", "protobuf==5.29.3"])
             .status()
             .expect("pip");
-        assert!(st.success(), "pip install mcap failed (PyPI must be reachable)");
+        assert!(st.success(), "pip install mcap protobuf failed (PyPI must be reachable)");
     }
     assert!(has_mcap(&python), "the mcap package does not import");
     python
@@ -41,6 +42,17 @@ fn read_with_python(file: &Path) -> Value {
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("py").join("read_mcap.py");
     let out = Command::new(python_with_mcap()).arg(script).arg(file).output().expect("python");
     assert!(out.status.success(), "the reader failed: {}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).expect("reader json")
+}
+
+/// What `tests/py/read_images.py` finds in `file`: every foxglove.RawImage,
+/// decoded through the descriptor set in the file, with a count of the
+/// pixels of `colour` in each.
+fn images_with_python(file: &Path, colour: [u8; 3]) -> Value {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("py").join("read_images.py");
+    let colour = format!("{},{},{}", colour[0], colour[1], colour[2]);
+    let out = Command::new(python_with_mcap()).arg(script).arg(file).arg(colour).output().expect("python");
+    assert!(out.status.success(), "the image reader failed: {}", String::from_utf8_lossy(&out.stderr));
     serde_json::from_slice(&out.stdout).expect("reader json")
 }
 
@@ -140,6 +152,75 @@ fn a_recording_reads_in_an_independent_reader_and_replays_bit_exact() {
     assert!(deviation < 5.0, "median spacing deviation {deviation:.2} ms: {orig:?} vs {rep:?}");
     let (span_o, span_r): (f64, f64) = (orig.iter().sum(), rep.iter().sum());
     assert!((span_r - span_o).abs() < 0.2 * span_o, "span {span_r:.0} ms vs recorded {span_o:.0} ms");
+    r.down_and_check_clean();
+}
+
+/// A camera's ring notices are recorded with the frames they name, as
+/// `foxglove.RawImage` on `cam/frames/image`, and the file decodes in
+/// Google's protobuf through the schema it carries: the test pattern's
+/// size, encoding and red disc are in every frame. A replay of the file
+/// replays the notices and leaves the images aside.
+#[test]
+fn ring_frames_are_recorded_as_foxglove_images() {
+    let r = Robot::new("recimg");
+    r.router();
+    r.ok(&[
+        "start",
+        "camera",
+        "--name",
+        "cam",
+        "--",
+        "--source",
+        "test-pattern",
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--fps",
+        "25",
+    ]);
+    assert!(wait_until(Duration::from_secs(10), || r.agent("cam").is_some()), "camera did not start");
+    let file = r.home.join("cam.mcap");
+    let file_s = file.display().to_string();
+    let out = r.ok(&["record", "cam/frames", "-o", &file_s, "--duration", "2", "-q"]);
+    assert!(out.contains("cam/frames/image") && out.contains("foxglove.RawImage"), "{out}");
+    let notices = messages(&read_with_python(&file), "cam/frames").len();
+    assert!(notices >= 25, "2 s at 25 fps: {notices} notices\n{out}");
+
+    let got = images_with_python(&file, [220, 30, 35]);
+    let ch = &got["channels"]["cam/frames/image"];
+    assert_eq!(ch["schema_name"], "foxglove.RawImage");
+    assert_eq!(ch["schema_encoding"], "protobuf");
+    assert_eq!(ch["metadata"]["agent"], "cam");
+    let frames = ch["frames"].as_array().expect("frames");
+    // every notice's frame, unless the camera overwrote it first (counted)
+    let dropped = out
+        .lines()
+        .find(|l| l.contains("cam/frames/image"))
+        .and_then(|l| {
+            l.split(", ")
+                .find_map(|p| p.strip_suffix(" dropped (overwritten in the ring before the recorder read them)"))
+        })
+        .map_or(0, |n| n.trim().parse::<usize>().unwrap_or(0));
+    assert_eq!(frames.len() + dropped, notices, "{out}");
+    assert!(frames.len() >= notices * 9 / 10, "{} of {notices} frames\n{out}", frames.len());
+    for f in frames {
+        assert_eq!((f["width"].as_u64(), f["height"].as_u64()), (Some(160), Some(120)), "{f}");
+        assert_eq!(f["encoding"], "rgb8");
+        assert_eq!(f["step"].as_u64(), Some(160 * 3));
+        assert_eq!(f["len"].as_u64(), Some(160 * 120 * 3));
+        assert_eq!(f["frame_id"], "cam/cam");
+        assert!(f["colour"].as_u64().unwrap_or(0) > 100, "the red disc: {f}");
+        assert!(f["sec"].as_u64().unwrap_or(0) > 1_700_000_000, "a wall-clock stamp: {f}");
+    }
+    let seqs: Vec<u64> = frames.iter().filter_map(|f| f["sequence"].as_u64()).collect();
+    assert!(seqs.windows(2).all(|w| w[1] > w[0]), "frames in order: {seqs:?}");
+
+    // a replay takes the notices and leaves the images
+    r.ok(&["stop", "cam"]);
+    assert!(wait_until(Duration::from_secs(5), || r.agent("cam").is_none()), "cam did not stop");
+    let said = r.ok(&["replay", &file_s, "--fast", "-q"]);
+    assert!(said.contains("cam"), "{said}");
     r.down_and_check_clean();
 }
 

@@ -6,14 +6,12 @@
 //! shows as a gap in the sender's sequence numbers: counted per port, shown
 //! on the progress line and reported at the end.
 //!
-//! The file keeps each sample's bytes as they were in shared memory, with
-//! the nerve schema of its type (see `docs/payloads.md` for why): one
-//! channel per port, topic `AGENT/PORT`, message encoding
-//! [`MESSAGE_ENCODING`], schema encoding [`SCHEMA_ENCODING`] (the
-//! [`Schema`] as JSON), and the channel's metadata naming the robot, agent,
-//! port, type and layout fingerprint. A message's log time is when the
-//! recorder read it (CLOCK_REALTIME), its publish time the sample's own
-//! stamp, its sequence the sender's sequence number (low 32 bits).
+//! The file is in nerve's recording format ([`nerve_recording`]): each
+//! sample's bytes as they were in shared memory, with the nerve schema of
+//! its type. A port that carries ring notices (`nerve::RingNotice`) gets a
+//! second channel, `AGENT/PORT/image`, with each noticed frame read from the
+//! short-term-memory ring as a `foxglove.RawImage`; a frame the writer
+//! overwrote before the recorder read it is counted as a dropped image.
 
 use crate::client::{RouterSession, cli_node};
 use crate::cmd::echo::schema_of;
@@ -25,21 +23,19 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
+use nerve_recording::{PortChannel, RecordingWriter, Sample, foxglove};
+use nerve_stm::{RingName, RingReader};
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
-use shm_schemas::services::port_attributes::fingerprint_text;
-use shm_schemas::{PortRef, Schema};
-use std::collections::BTreeMap;
+use shm_schemas::ring::RingNotice;
+use shm_schemas::{Payload, PortRef, RobotName, Schema};
 use std::io::{BufWriter, IsTerminal as _, Write as _};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::rc::Rc;
 use std::time::{Duration, Instant};
 
-/// The message encoding of nerve's recordings: the sample's bytes as the
-/// `#[repr(C)]` payload lays them out (little-endian).
-pub const MESSAGE_ENCODING: &str = "nerve.raw";
-/// The schema encoding: a [`Schema`] as JSON.
-pub const SCHEMA_ENCODING: &str = "nerve.schema+json";
+/// The file being written.
+type Out = RecordingWriter<BufWriter<std::fs::File>>;
 
 /// `nerve record`
 #[derive(Debug, clap::Args)]
@@ -102,6 +98,104 @@ struct Recording {
     bytes: u64,
     dropped: u64,
     last_seq: Option<u64>,
+    /// the frames of the ring its notices name, when it carries notices
+    images: Option<Images>,
+}
+
+/// The image channel of a port that carries ring notices.
+pub struct Images {
+    channel: u16,
+    robot: RobotName,
+    agent: String,
+    /// the ring, opened at the first notice (and again when it changes)
+    reader: Option<RingReader>,
+    /// the encoded message, reused
+    buf: Vec<u8>,
+    /// hsi8 frames converted to rgb8
+    rgb: Vec<u8>,
+    /// frames written
+    pub frames: u64,
+    /// frames overwritten before they were read, or unreadable
+    pub dropped: u64,
+    /// bytes of pixels written
+    pub bytes: u64,
+}
+
+impl Images {
+    /// Adds the image channel of `AGENT/PORT`'s ring to `out`.
+    pub fn add<W: std::io::Write + std::io::Seek>(
+        out: &mut RecordingWriter<W>,
+        robot: &RobotName,
+        port: &PortRef,
+    ) -> Result<Images> {
+        let channel = out.add_images(robot.as_str(), port.agent.as_str(), &port.port)?;
+        Ok(Images {
+            channel,
+            robot: robot.clone(),
+            agent: port.agent.to_string(),
+            reader: None,
+            buf: Vec::new(),
+            rgb: Vec::new(),
+            frames: 0,
+            dropped: 0,
+            bytes: 0,
+        })
+    }
+
+    /// Writes the frame `notice_bytes` announces (log time `log_ns`).
+    pub fn write<W: std::io::Write + std::io::Seek>(
+        &mut self,
+        out: &mut RecordingWriter<W>,
+        notice_bytes: &[u8],
+        log_ns: u64,
+    ) -> Result<()> {
+        let Some(notice) = RingNotice::from_bytes(notice_bytes) else { return Ok(()) };
+        let Ok(name) = RingName::from_notice(&notice) else {
+            self.dropped += 1;
+            return Ok(());
+        };
+        if self.reader.as_ref().is_none_or(|r| r.name() != &name || r.check_notice(&notice).is_err()) {
+            self.reader = RingReader::open(&self.robot, &name).ok();
+        }
+        let Some(reader) = &self.reader else {
+            self.dropped += 1;
+            return Ok(());
+        };
+        let (buf, rgb) = (&mut self.buf, &mut self.rgb);
+        let frame_id = format!("{}/{}", self.agent, name);
+        let encoded = reader.read_with(notice.seq, |meta, px| {
+            let Some((encoding, bpp)) = meta.format().and_then(foxglove::encoding_of) else { return false };
+            let data: &[u8] = if meta.format() == Some(nerve_stm::PixelFormat::Hsi8) {
+                *rgb = nerve_stm::hsi8_to_rgb8(px);
+                rgb
+            } else {
+                px
+            };
+            foxglove::encode_raw_image(
+                buf,
+                &foxglove::RawImage {
+                    unix_ns: log_ns.saturating_sub(nerve_stm::monotonic_ns().saturating_sub(meta.stamp_ns)),
+                    frame_id: &frame_id,
+                    width: meta.width,
+                    height: meta.height,
+                    encoding,
+                    step: meta.width.saturating_mul(bpp),
+                    data,
+                },
+            );
+            true
+        });
+        match encoded {
+            Ok(true) => {
+                out.write_image(self.channel, notice.seq, log_ns, &self.buf)?;
+                self.frames += 1;
+                self.bytes = self.bytes.saturating_add(notice.size);
+            }
+            Ok(false) => {} // raw data, not an image
+            Err(_) => self.dropped += 1,
+        }
+        Ok(())
+    }
 }
 
 /// The figures of a recording, for the progress line and the summary.
@@ -162,14 +256,11 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
     }
     let path = a.output.clone().unwrap_or_else(|| default_output(world));
     let file = std::fs::File::create(&path).with_context(|| format!("cannot create {}", path.display()))?;
-    let mut writer = mcap::WriteOptions::new()
-        .compression(None)
-        .profile("")
-        .create(BufWriter::new(file))
+    let mut writer = RecordingWriter::new(BufWriter::new(file))
         .with_context(|| format!("cannot start the MCAP file {}", path.display()))?;
 
     let mut recordings: Vec<Recording> = Vec::new();
-    let add = |k: &Known, writer: &mut mcap::Writer<BufWriter<std::fs::File>>| -> Result<Option<Recording>> {
+    let add = |k: &Known, writer: &mut Out| -> Result<Option<Recording>> {
         let Some(schema) = &k.schema else {
             eprintln!(
                 "skipping {}: its type {} has no schema (the agent registered none and it is not built in)",
@@ -186,15 +277,19 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
             }
         };
         let listener = Rc::new(port_event(&node, &service)?.listener_builder().create().map_err(|e| anyhow!("{e:?}"))?);
-        let schema_id = writer.add_schema(&k.type_name, SCHEMA_ENCODING, &serde_json::to_vec(schema)?)?;
-        let metadata = BTreeMap::from([
-            ("robot".to_string(), world.robot().to_string()),
-            ("agent".to_string(), k.port.agent.to_string()),
-            ("port".to_string(), k.port.port.clone()),
-            ("type".to_string(), k.type_name.clone()),
-            ("fingerprint".to_string(), fingerprint_text(k.fingerprint)),
-        ]);
-        let channel = writer.add_channel(schema_id, &k.port.to_string(), MESSAGE_ENCODING, &metadata)?;
+        let channel = writer.add_port(&PortChannel {
+            robot: world.robot().as_str(),
+            agent: k.port.agent.as_str(),
+            port: &k.port.port,
+            type_name: &k.type_name,
+            fingerprint: k.fingerprint,
+            schema,
+        })?;
+        let images = if k.type_name == <RingNotice as Payload>::stable_type_name() {
+            Some(Images::add(writer, world.robot(), &k.port)?)
+        } else {
+            None
+        };
         Ok(Some(Recording {
             known: k.clone(),
             raw,
@@ -204,6 +299,7 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
             bytes: 0,
             dropped: 0,
             last_seq: None,
+            images,
         }))
     };
     // ports that could not be recorded (said once, not tried again)
@@ -287,7 +383,6 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
         drain(r, &mut writer)?;
     }
     writer.finish().with_context(|| format!("cannot finish the MCAP file {}", path.display()))?;
-    drop(writer);
     let totals = sum(&recordings);
     if !a.quiet && tty {
         eprintln!();
@@ -309,43 +404,63 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
             r.messages,
             if r.dropped > 0 { format!(", {} dropped (the recorder fell behind)", r.dropped) } else { String::new() }
         );
+        if let Some(i) = &r.images {
+            println!(
+                "  {:<32} {:<24} {:>8} frames, {:.1} MB{}",
+                format!("{}{}", r.known.port, nerve_recording::IMAGE_TOPIC_SUFFIX),
+                foxglove::RAW_IMAGE,
+                i.frames,
+                i.bytes as f64 / 1e6,
+                if i.dropped > 0 {
+                    format!(", {} dropped (overwritten in the ring before the recorder read them)", i.dropped)
+                } else {
+                    String::new()
+                }
+            );
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
 
-/// Writes every waiting sample of `r`.
-fn drain(r: &mut Recording, writer: &mut mcap::Writer<BufWriter<std::fs::File>>) -> Result<()> {
+/// Writes every waiting sample of `r` (and the frames its notices name).
+fn drain(r: &mut Recording, writer: &mut Out) -> Result<()> {
     let mut failed = None;
     r.raw.receive(|h, bytes| {
         if let Some(last) = r.last_seq {
             r.dropped = r.dropped.saturating_add(h.seq.saturating_sub(last).saturating_sub(1));
         }
         r.last_seq = Some(h.seq);
-        let header = mcap::records::MessageHeader {
-            channel_id: r.channel,
-            sequence: h.seq as u32,
-            log_time: agent_sdk::clock::unix_now_ns(),
-            publish_time: h.stamp_ns,
-        };
-        if let Err(e) = writer.write_to_known_channel(&header, bytes) {
-            failed = Some(e);
+        let log_ns = agent_sdk::clock::unix_now_ns();
+        let sample = Sample { seq: h.seq, log_time_ns: log_ns, stamp_ns: h.stamp_ns, bytes };
+        if let Err(e) = writer.write_sample(r.channel, &sample) {
+            failed = Some(anyhow!(e));
             return false;
         }
         r.messages += 1;
         r.bytes = r.bytes.saturating_add(bytes.len() as u64);
+        if let Some(images) = &mut r.images
+            && let Err(e) = images.write(writer, bytes, log_ns)
+        {
+            failed = Some(e);
+            return false;
+        }
         true
     })?;
     match failed {
-        Some(e) => Err(anyhow!(e).context("cannot write to the MCAP file")),
+        Some(e) => Err(e.context("cannot write to the MCAP file")),
         None => Ok(()),
     }
 }
 
 fn sum(recordings: &[Recording]) -> Totals {
-    recordings.iter().fold(Totals::default(), |t, r| Totals {
-        messages: t.messages + r.messages,
-        bytes: t.bytes + r.bytes,
-        dropped: t.dropped + r.dropped,
+    recordings.iter().fold(Totals::default(), |t, r| {
+        let (frames, image_bytes, image_drops) =
+            r.images.as_ref().map_or((0, 0, 0), |i| (i.frames, i.bytes, i.dropped));
+        Totals {
+            messages: t.messages + r.messages + frames,
+            bytes: t.bytes + r.bytes + image_bytes,
+            dropped: t.dropped + r.dropped + image_drops,
+        }
     })
 }
 

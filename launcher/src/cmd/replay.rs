@@ -12,11 +12,11 @@
 //! and the recorded bytes unchanged.
 
 use crate::client::cli_node;
-use crate::cmd::record::{MESSAGE_ENCODING, SCHEMA_ENCODING};
 use agent_sdk::World;
 use agent_sdk::control::{ControlServer, ControlSize, agent_router_client};
 use agent_sdk::raw_port::RawOutput;
 use anyhow::{Context as _, Result, anyhow, bail};
+use nerve_recording::{MESSAGE_ENCODING, SCHEMA_ENCODING, foxglove};
 use shm_schemas::control::agent_to_router::{AgentToRouter, PortSpec, Registration, TaskKind};
 use shm_schemas::control::cli_to_router::{RouterReply, RouterRequest};
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
@@ -123,6 +123,11 @@ pub fn replay(world: &World, a: ReplayArgs) -> Result<ExitCode> {
     for m in stream {
         let m = m.map_err(|e| not_ours(format!("not a readable MCAP file, or a damaged one ({e})")))?;
         let ch = &m.channel;
+        if ch.message_encoding == foxglove::MESSAGE_ENCODING && ch.topic.ends_with(nerve_recording::IMAGE_TOPIC_SUFFIX)
+        {
+            // a ring's images: for people and viewers; their notices replay
+            continue;
+        }
         if let std::collections::btree_map::Entry::Vacant(slot) = tracks.entry(ch.id) {
             slot.insert(track_of(ch).map_err(not_ours)?);
         }

@@ -22,6 +22,12 @@ pub enum CliRequest {
     Ps,
     /// The connection list, with live figures per connection.
     Graph,
+    /// What happened in the graph since event `after` (0: all the router
+    /// still holds): agents registered, left, died; edges made and removed.
+    Events {
+        /// the sequence number of the last event the caller has seen
+        after: u64,
+    },
     /// Connect an output port to an input port.
     Connect {
         /// output port
@@ -152,6 +158,73 @@ impl std::fmt::Display for AgentState {
     }
 }
 
+/// How many events the router keeps; a caller that fell further behind
+/// sees a gap in the sequence numbers.
+pub const EVENTS_KEPT: usize = 1024;
+
+/// Something that happened in the graph, as the router saw it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RouterEvent {
+    /// from 1, one more per event
+    pub seq: u64,
+    /// CLOCK_REALTIME nanoseconds when the router saw it
+    pub unix_ns: u64,
+    /// what happened
+    pub what: EventKind,
+}
+
+/// What a [`RouterEvent`] reports.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum EventKind {
+    /// An agent registered.
+    Registered {
+        /// its name
+        agent: String,
+        /// its process
+        pid: u32,
+    },
+    /// An agent unregistered and left cleanly.
+    Left {
+        /// its name
+        agent: String,
+        /// its process
+        pid: u32,
+    },
+    /// An agent's process ended without unregistering: killed, crashed, aborted.
+    Died {
+        /// its name
+        agent: String,
+        /// its process
+        pid: u32,
+    },
+    /// An edge was made.
+    Connected {
+        /// output port
+        from: String,
+        /// input port
+        to: String,
+    },
+    /// An edge was removed.
+    Disconnected {
+        /// output port
+        from: String,
+        /// input port
+        to: String,
+    },
+}
+
+impl std::fmt::Display for EventKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            EventKind::Registered { agent, pid } => write!(f, "{agent} (pid {pid}) registered"),
+            EventKind::Left { agent, pid } => write!(f, "{agent} (pid {pid}) left"),
+            EventKind::Died { agent, pid } => write!(f, "{agent} (pid {pid}) died"),
+            EventKind::Connected { from, to } => write!(f, "connected {from} -> {to}"),
+            EventKind::Disconnected { from, to } => write!(f, "disconnected {from} -> {to}"),
+        }
+    }
+}
+
 /// One live agent as `nerve ps` shows it.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct AgentView {
@@ -233,6 +306,15 @@ pub enum RouterReply {
     Graph(GraphView),
     /// The value of a parameter.
     Param(String),
+    /// Events since the asked one, oldest first.
+    Events {
+        /// the router's epoch: a new router numbers its events from 1 again
+        epoch: u64,
+        /// the sequence number the next event will get
+        next: u64,
+        /// the events, at most [`EVENTS_KEPT`]
+        events: Vec<RouterEvent>,
+    },
     /// Refused.
     Error(RouterError),
 }
