@@ -3,7 +3,7 @@
 //! module under `cmd/`, next to the code that reads them.
 
 use crate::cmd::{
-    bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, record, replay, start, wire,
+    bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, plot, record, replay, start, wire,
 };
 use clap::{Parser, Subcommand};
 
@@ -78,6 +78,10 @@ pub enum Command {
     Record(record::RecordArgs),
     /// Publish a recording's ports into the robot again, under the recorded agents' names.
     Replay(replay::ReplayArgs),
+    /// Plot numeric fields of output ports over time (PNG or SVG), from a recording or live.
+    Plot(plot::PlotArgs),
+    /// Write the black box's last seconds to an MCAP file (a `blackbox` agent keeps them).
+    Snapshot(crate::cmd::snapshot::SnapshotArgs),
     /// Start a robot from a launch file (router, agents, connections).
     Launch(launch::LaunchArgs),
     /// Stop every agent and the router of the robot, and remove what they left.

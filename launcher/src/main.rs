@@ -89,6 +89,8 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
             shm_space::ensure_shm_space("replay")?;
             replay::replay(&world, a)
         }
+        Command::Plot(a) => cmd::plot::plot(&world, a),
+        Command::Snapshot(a) => cmd::snapshot::snapshot(&world, a),
         Command::Down(a) => down::down(&world, a),
         Command::Launch(a) => launch::launch(&cli.robot, cli.robot_explicit, a),
         Command::Logs(a) => logs::logs(&world, a),

@@ -167,3 +167,112 @@ impl<W: Write + Seek> RecordingWriter<W> {
         Ok(())
     }
 }
+
+/// What became of a noticed frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameOutcome {
+    /// Encoded as a `foxglove.RawImage`; the frame's sequence number in its ring.
+    Encoded(u64),
+    /// The ring holds raw data, not an image: nothing to show.
+    NotImage,
+    /// The frame could not be read: overwritten before it was read, or the
+    /// ring is gone or not a ring.
+    Lost,
+}
+
+/// Reads the frames that ring notices name, and encodes them as
+/// `foxglove.RawImage`: the recorder and the black box keep a port's
+/// images this way. Opens the ring at the first notice, and again when a
+/// notice names another ring or a newer file of it.
+#[derive(Debug)]
+pub struct RingFrames {
+    robot: shm_schemas::RobotName,
+    agent: String,
+    reader: Option<nerve_stm::RingReader>,
+    rgb: Vec<u8>,
+}
+
+impl RingFrames {
+    /// For the notices that `agent` publishes on robot `robot`.
+    pub fn new(robot: &shm_schemas::RobotName, agent: &str) -> RingFrames {
+        RingFrames { robot: robot.clone(), agent: agent.to_string(), reader: None, rgb: Vec::new() }
+    }
+
+    /// Encodes into `buf` the frame that the notice in `notice_bytes`
+    /// names; its time is the frame's stamp on the wall clock, found from
+    /// `log_ns` (CLOCK_REALTIME, now).
+    pub fn encode(&mut self, notice_bytes: &[u8], log_ns: u64, buf: &mut Vec<u8>) -> FrameOutcome {
+        use nerve_stm::{PixelFormat, RingName, RingReader};
+        let Some(notice) = shm_schemas::ring::RingNotice::from_bytes(notice_bytes) else { return FrameOutcome::Lost };
+        let Ok(name) = RingName::from_notice(&notice) else { return FrameOutcome::Lost };
+        if self.reader.as_ref().is_none_or(|r| r.name() != &name || r.check_notice(&notice).is_err()) {
+            self.reader = RingReader::open(&self.robot, &name).ok();
+        }
+        let Some(reader) = &self.reader else { return FrameOutcome::Lost };
+        let rgb = &mut self.rgb;
+        let frame_id = format!("{}/{}", self.agent, name);
+        let read = reader.read_with(notice.seq, |meta, px| {
+            let Some((encoding, bpp)) = meta.format().and_then(foxglove::encoding_of) else { return false };
+            let data: &[u8] = if meta.format() == Some(PixelFormat::Hsi8) {
+                *rgb = nerve_stm::hsi8_to_rgb8(px);
+                rgb
+            } else {
+                px
+            };
+            let age = nerve_stm::monotonic_ns().saturating_sub(meta.stamp_ns);
+            foxglove::encode_raw_image(
+                buf,
+                &foxglove::RawImage {
+                    unix_ns: log_ns.saturating_sub(age),
+                    frame_id: &frame_id,
+                    width: meta.width,
+                    height: meta.height,
+                    encoding,
+                    step: meta.width.saturating_mul(bpp),
+                    data,
+                },
+            );
+            true
+        });
+        match read {
+            Ok(true) => FrameOutcome::Encoded(notice.seq),
+            Ok(false) => FrameOutcome::NotImage,
+            Err(_) => FrameOutcome::Lost,
+        }
+    }
+}
+
+/// `YYYYmmdd-HHMMSS` (UTC) of CLOCK_REALTIME nanoseconds: the stamp in
+/// the names of recordings and snapshots, which sort by it.
+pub fn file_stamp(unix_ns: u64) -> String {
+    let secs = unix_ns / 1_000_000_000;
+    let (days, s) = (secs / 86_400, secs % 86_400);
+    let (y, m, d) = civil_from_days(days as i64);
+    format!("{y:04}{m:02}{d:02}-{:02}{:02}{:02}", s / 3600, s / 60 % 60, s % 60)
+}
+
+/// Year, month, day of a count of days since 1970-01-01 (H. Hinnant's algorithm).
+fn civil_from_days(z: i64) -> (i64, u32, u32) {
+    let z = z + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    (yoe + era * 400 + i64::from(m <= 2), m, d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn days_become_dates() {
+        assert_eq!(civil_from_days(0), (1970, 1, 1));
+        assert_eq!(civil_from_days(20_416), (2025, 11, 24));
+        assert_eq!(civil_from_days(11_016), (2000, 2, 29));
+        assert_eq!(file_stamp(1_764_000_000_123_000_000), "20251124-160000");
+    }
+}

@@ -129,6 +129,21 @@ pub enum Primitive {
     Bool,
 }
 
+/// The schema of the built-in payload type with layout `fingerprint`, for
+/// tools that meet a port of a type whose agent registered no schema.
+pub fn built_in(fingerprint: u64) -> Option<Schema> {
+    let mut found = None;
+    macro_rules! look {
+        ($t:ty) => {
+            if found.is_none() && <$t as crate::Payload>::layout_fingerprint() == fingerprint {
+                found = Some(<$t as Described>::schema());
+            }
+        };
+    }
+    crate::for_each_payload!(look);
+    found
+}
+
 /// A type that knows its [`Schema`]. Implemented for the primitives, fixed
 /// arrays and [`crate::FixedName`] here, and by `#[derive(Payload)]`.
 pub trait Described {
@@ -341,6 +356,14 @@ impl Schema {
                     .collect(),
             ),
         }
+    }
+
+    /// The value of the field at `path` in a sample's `bytes`; `None` when
+    /// the type has no such field or the bytes are too short.
+    pub fn decode_field(&self, path: &str, bytes: &[u8]) -> Option<Value> {
+        let (offset, schema) = self.field(path)?;
+        let b = bytes.get(offset..offset.checked_add(schema.size)?)?;
+        Some(schema.decode_exact(b))
     }
 
     /// The schema of the field at `path` (`pose.x`, `ranges_m.3` for an

@@ -18,6 +18,7 @@
 //! belongs to a dead test process is known by its pid.
 
 pub mod device;
+pub mod py;
 
 use serde_json::Value;
 use std::path::PathBuf;

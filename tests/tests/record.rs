@@ -7,58 +7,22 @@
 //! and recorded again: every sample comes back bit-exact and in order, with
 //! the recorded spacing.
 
+use nerve_tests::py::{messages, read_mcap, run_reader};
 use nerve_tests::{Robot, wait_until};
 use serde_json::Value;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 use std::time::Duration;
-
-/// A Python with the `mcap` package: the workspace's `target/nerve-py`
-/// virtual environment, made and filled here when it lacks it.
-fn python_with_mcap() -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("target").join("nerve-py");
-    let python = dir.join("bin").join("python");
-    let has_mcap = |p: &Path| {
-        Command::new(p).args(["-c", "import mcap.reader, google.protobuf"]).output().is_ok_and(|o| o.status.success())
-    };
-    if !has_mcap(&python) {
-        let st = Command::new("python3").arg("-m").arg("venv").arg(&dir).status().expect("python3");
-        assert!(
-            st.success(),
-            "python3 -m venv failed (Debian: apt-get install python3-venv; scripts/setup.sh does it)"
-        );
-        let st = Command::new(dir.join("bin").join("pip"))
-            .args(["install", "--quiet", "--disable-pip-version-check", "mcap==1.6.0", "protobuf==5.29.3"])
-            .status()
-            .expect("pip");
-        assert!(st.success(), "pip install mcap protobuf failed (PyPI must be reachable)");
-    }
-    assert!(has_mcap(&python), "the mcap package does not import");
-    python
-}
 
 /// What `tests/py/read_mcap.py` finds in `file`.
 fn read_with_python(file: &Path) -> Value {
-    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("py").join("read_mcap.py");
-    let out = Command::new(python_with_mcap()).arg(script).arg(file).output().expect("python");
-    assert!(out.status.success(), "the reader failed: {}", String::from_utf8_lossy(&out.stderr));
-    serde_json::from_slice(&out.stdout).expect("reader json")
+    read_mcap(file)
 }
 
 /// What `tests/py/read_images.py` finds in `file`: every foxglove.RawImage,
 /// decoded through the descriptor set in the file, with a count of the
 /// pixels of `colour` in each.
 fn images_with_python(file: &Path, colour: [u8; 3]) -> Value {
-    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("py").join("read_images.py");
-    let colour = format!("{},{},{}", colour[0], colour[1], colour[2]);
-    let out = Command::new(python_with_mcap()).arg(script).arg(file).arg(colour).output().expect("python");
-    assert!(out.status.success(), "the image reader failed: {}", String::from_utf8_lossy(&out.stderr));
-    serde_json::from_slice(&out.stdout).expect("reader json")
-}
-
-/// The messages of `topic` in the reader's answer.
-fn messages<'a>(got: &'a Value, topic: &str) -> &'a Vec<Value> {
-    got["channels"][topic]["messages"].as_array().unwrap_or_else(|| panic!("no channel {topic}"))
+    run_reader("read_images.py", file, &[&format!("{},{},{}", colour[0], colour[1], colour[2])])
 }
 
 /// Log-time gaps between consecutive messages, ms.

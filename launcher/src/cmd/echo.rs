@@ -17,10 +17,10 @@ use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
-use shm_schemas::control::cli_to_router::{AgentView, CliRequest, RouterError, RouterReply};
+use shm_schemas::control::cli_to_router::{CliRequest, RouterError, RouterReply};
 use shm_schemas::schema::Kind;
 use shm_schemas::services::port_attributes::fingerprint_text;
-use shm_schemas::{Described, Payload, PortRef, SampleHeader, Schema, for_each_payload};
+use shm_schemas::{PortRef, SampleHeader, Schema};
 use std::io::Write;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -61,18 +61,18 @@ pub struct HzArgs {
 }
 
 /// What a port carries, as far as this tool can learn it.
-struct PortInfo {
-    type_name: String,
+pub(crate) struct PortInfo {
+    pub(crate) type_name: String,
     /// the layout fingerprint, when known
-    fingerprint: Option<u64>,
+    pub(crate) fingerprint: Option<u64>,
     /// the schema to decode it with, when known
-    schema: Option<Schema>,
+    pub(crate) schema: Option<Schema>,
 }
 
 /// What `port` carries: from the router (the agent registered each port's
 /// type, fingerprint and schema), else from the port's iceoryx2 attributes
 /// and the schemas of the types this build knows.
-fn port_info(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<PortInfo> {
+pub(crate) fn port_info(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<PortInfo> {
     if let Ok(s) = RouterSession::open(world) {
         // a router that does not answer (killed, restarting) is no reason to fail: look at the port itself
         if let Ok(RouterReply::Agents(agents)) = s.call(CliRequest::Ps) {
@@ -90,7 +90,7 @@ fn port_info(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<PortInfo
                     available: a.outputs.iter().map(|o| o.name.clone()).collect(),
                 }));
             };
-            let schema = schema_of(a, o.fingerprint);
+            let schema = a.schema_for(o.fingerprint);
             return Ok(PortInfo { type_name: o.type_name.clone(), fingerprint: Some(o.fingerprint), schema });
         }
     }
@@ -98,27 +98,7 @@ fn port_info(world: &World, node: &Node<Ipc>, port: &PortRef) -> Result<PortInfo
     let (type_name, fingerprint) = port_identity(node, &service).ok_or_else(|| {
         anyhow!("no output port {port} exists on robot {} (and no router runs to ask)", world.robot())
     })?;
-    Ok(PortInfo { type_name, fingerprint, schema: fingerprint.and_then(built_in_schema) })
-}
-
-/// The schema of layout `fingerprint` on a port of `agent`: the one it
-/// registered, else a built-in type's.
-pub fn schema_of(agent: &AgentView, fingerprint: u64) -> Option<Schema> {
-    agent.schemas.iter().find(|s| s.fingerprint() == fingerprint).cloned().or_else(|| built_in_schema(fingerprint))
-}
-
-/// The schema of the built-in payload type with layout `fingerprint`.
-fn built_in_schema(fingerprint: u64) -> Option<Schema> {
-    let mut found = None;
-    macro_rules! look {
-        ($t:ty) => {
-            if found.is_none() && <$t as Payload>::layout_fingerprint() == fingerprint {
-                found = Some(<$t as Described>::schema());
-            }
-        };
-    }
-    for_each_payload!(look);
-    found
+    Ok(PortInfo { type_name, fingerprint, schema: fingerprint.and_then(shm_schemas::schema::built_in) })
 }
 
 enum Event<'a> {

@@ -14,7 +14,6 @@
 //! overwrote before the recorder read it is counted as a dropped image.
 
 use crate::client::{RouterSession, cli_node};
-use crate::cmd::echo::schema_of;
 use agent_sdk::World;
 use agent_sdk::ports::port_event;
 use agent_sdk::raw_port::RawPort;
@@ -23,8 +22,7 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
-use nerve_recording::{PortChannel, RecordingWriter, Sample, foxglove};
-use nerve_stm::{RingName, RingReader};
+use nerve_recording::{FrameOutcome, PortChannel, RecordingWriter, RingFrames, Sample, foxglove};
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::ring::RingNotice;
 use shm_schemas::{Payload, PortRef, RobotName, Schema};
@@ -81,7 +79,7 @@ pub fn known_ports(world: &World) -> Result<Vec<Known>> {
     for a in agents.iter().filter(|a| a.pid != 0) {
         for o in &a.outputs {
             let Ok(port) = PortRef::new(&a.name, &o.name) else { continue };
-            let schema = schema_of(a, o.fingerprint);
+            let schema = a.schema_for(o.fingerprint);
             out.push(Known { port, type_name: o.type_name.clone(), fingerprint: o.fingerprint, schema });
         }
     }
@@ -105,94 +103,35 @@ struct Recording {
 /// The image channel of a port that carries ring notices.
 pub struct Images {
     channel: u16,
-    robot: RobotName,
-    agent: String,
-    /// the ring, opened at the first notice (and again when it changes)
-    reader: Option<RingReader>,
+    frames_of: RingFrames,
     /// the encoded message, reused
     buf: Vec<u8>,
-    /// hsi8 frames converted to rgb8
-    rgb: Vec<u8>,
     /// frames written
     pub frames: u64,
     /// frames overwritten before they were read, or unreadable
     pub dropped: u64,
-    /// bytes of pixels written
+    /// bytes of messages written
     pub bytes: u64,
 }
 
 impl Images {
     /// Adds the image channel of `AGENT/PORT`'s ring to `out`.
-    pub fn add<W: std::io::Write + std::io::Seek>(
-        out: &mut RecordingWriter<W>,
-        robot: &RobotName,
-        port: &PortRef,
-    ) -> Result<Images> {
+    fn add(out: &mut Out, robot: &RobotName, port: &PortRef) -> Result<Images> {
         let channel = out.add_images(robot.as_str(), port.agent.as_str(), &port.port)?;
-        Ok(Images {
-            channel,
-            robot: robot.clone(),
-            agent: port.agent.to_string(),
-            reader: None,
-            buf: Vec::new(),
-            rgb: Vec::new(),
-            frames: 0,
-            dropped: 0,
-            bytes: 0,
-        })
+        let frames_of = RingFrames::new(robot, port.agent.as_str());
+        Ok(Images { channel, frames_of, buf: Vec::new(), frames: 0, dropped: 0, bytes: 0 })
     }
 
     /// Writes the frame `notice_bytes` announces (log time `log_ns`).
-    pub fn write<W: std::io::Write + std::io::Seek>(
-        &mut self,
-        out: &mut RecordingWriter<W>,
-        notice_bytes: &[u8],
-        log_ns: u64,
-    ) -> Result<()> {
-        let Some(notice) = RingNotice::from_bytes(notice_bytes) else { return Ok(()) };
-        let Ok(name) = RingName::from_notice(&notice) else {
-            self.dropped += 1;
-            return Ok(());
-        };
-        if self.reader.as_ref().is_none_or(|r| r.name() != &name || r.check_notice(&notice).is_err()) {
-            self.reader = RingReader::open(&self.robot, &name).ok();
-        }
-        let Some(reader) = &self.reader else {
-            self.dropped += 1;
-            return Ok(());
-        };
-        let (buf, rgb) = (&mut self.buf, &mut self.rgb);
-        let frame_id = format!("{}/{}", self.agent, name);
-        let encoded = reader.read_with(notice.seq, |meta, px| {
-            let Some((encoding, bpp)) = meta.format().and_then(foxglove::encoding_of) else { return false };
-            let data: &[u8] = if meta.format() == Some(nerve_stm::PixelFormat::Hsi8) {
-                *rgb = nerve_stm::hsi8_to_rgb8(px);
-                rgb
-            } else {
-                px
-            };
-            foxglove::encode_raw_image(
-                buf,
-                &foxglove::RawImage {
-                    unix_ns: log_ns.saturating_sub(nerve_stm::monotonic_ns().saturating_sub(meta.stamp_ns)),
-                    frame_id: &frame_id,
-                    width: meta.width,
-                    height: meta.height,
-                    encoding,
-                    step: meta.width.saturating_mul(bpp),
-                    data,
-                },
-            );
-            true
-        });
-        match encoded {
-            Ok(true) => {
-                out.write_image(self.channel, notice.seq, log_ns, &self.buf)?;
+    fn write(&mut self, out: &mut Out, notice_bytes: &[u8], log_ns: u64) -> Result<()> {
+        match self.frames_of.encode(notice_bytes, log_ns, &mut self.buf) {
+            FrameOutcome::Encoded(seq) => {
+                out.write_image(self.channel, seq, log_ns, &self.buf)?;
                 self.frames += 1;
-                self.bytes = self.bytes.saturating_add(notice.size);
+                self.bytes = self.bytes.saturating_add(self.buf.len() as u64);
             }
-            Ok(false) => {} // raw data, not an image
-            Err(_) => self.dropped += 1,
+            FrameOutcome::NotImage => {}
+            FrameOutcome::Lost => self.dropped += 1,
         }
         Ok(())
     }
@@ -206,30 +145,10 @@ struct Totals {
     dropped: u64,
 }
 
-fn default_output(world: &World) -> PathBuf {
-    let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default().as_secs();
-    let (days, secs) = (t / 86_400, t % 86_400);
-    let (y, m, d) = civil_from_days(days as i64);
-    PathBuf::from(format!(
-        "nerve-{}-{y:04}{m:02}{d:02}-{:02}{:02}{:02}.mcap",
-        world.robot(),
-        secs / 3600,
-        secs / 60 % 60,
-        secs % 60
-    ))
-}
-
-/// Year, month, day of a count of days since 1970-01-01 (H. Hinnant's algorithm).
-fn civil_from_days(z: i64) -> (i64, u32, u32) {
-    let z = z + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    (yoe + era * 400 + i64::from(m <= 2), m, d)
+/// `PREFIX-ROBOT-YYYYmmdd-HHMMSS.mcap` in the current folder.
+pub fn dated_file(prefix: &str, world: &World) -> PathBuf {
+    let stamp = nerve_recording::file_stamp(agent_sdk::clock::unix_now_ns());
+    PathBuf::from(format!("{prefix}-{}-{stamp}.mcap", world.robot()))
 }
 
 pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
@@ -254,7 +173,7 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
             );
         }
     }
-    let path = a.output.clone().unwrap_or_else(|| default_output(world));
+    let path = a.output.clone().unwrap_or_else(|| dated_file("nerve", world));
     let file = std::fs::File::create(&path).with_context(|| format!("cannot create {}", path.display()))?;
     let mut writer = RecordingWriter::new(BufWriter::new(file))
         .with_context(|| format!("cannot start the MCAP file {}", path.display()))?;
@@ -477,16 +396,4 @@ fn progress(recordings: &[Recording], elapsed: Duration, tty: bool) {
     let mut err = std::io::stderr().lock();
     let _ = if tty { write!(err, "\r{line}   ") } else { writeln!(err, "{line}") };
     let _ = err.flush();
-}
-
-#[cfg(test)]
-mod tests {
-    use super::civil_from_days;
-
-    #[test]
-    fn days_become_dates() {
-        assert_eq!(civil_from_days(0), (1970, 1, 1));
-        assert_eq!(civil_from_days(20_416), (2025, 11, 24));
-        assert_eq!(civil_from_days(11_016), (2000, 2, 29));
-    }
 }

@@ -259,6 +259,18 @@ pub struct AgentView {
     pub schemas: Vec<crate::Schema>,
 }
 
+impl AgentView {
+    /// The schema of layout `fingerprint` on one of its ports: the one it
+    /// registered, else a built-in type's.
+    pub fn schema_for(&self, fingerprint: u64) -> Option<crate::Schema> {
+        self.schemas
+            .iter()
+            .find(|s| s.fingerprint() == fingerprint)
+            .cloned()
+            .or_else(|| crate::schema::built_in(fingerprint))
+    }
+}
+
 /// One connection as `nerve graph` shows it, with live figures measured at
 /// the receiving input.
 #[derive(Debug, Clone, Serialize, Deserialize)]

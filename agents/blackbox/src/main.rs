@@ -1,0 +1,449 @@
+//! `blackbox`: keeps the last seconds of chosen ports in memory and writes
+//! them as MCAP when asked (`nerve snapshot`) or by itself when an agent
+//! dies or a watched field changes. See the library (`nerve_blackbox`) for
+//! the configuration file.
+//!
+//! ```text
+//! nerve start blackbox --name blackbox -- --config blackbox.toml
+//! nerve snapshot -o crash.mcap
+//! ```
+//!
+//! The black box is a subscriber like any other: it reads each kept port by
+//! its bytes, publishers never wait for it. It learns of deaths from the
+//! router's event log (`CliRequest::Events`), which tells a death from a
+//! clean stop. Snapshots are written on their own threads, so the black box
+//! keeps taking samples meanwhile; a file appears whole (renamed into place).
+//!
+//! Parameter `snapshot`: an absolute path ending in `.mcap`; setting it
+//! writes the kept seconds there (`nerve snapshot` sets it). Figures:
+//! `snapshots` (written so far), `last_snapshot`, `kept_mb`, `ports`.
+
+use agent_sdk::control::{ControlClient, router_client};
+use agent_sdk::raw_port::RawPort;
+use agent_sdk::world::Ipc;
+use agent_sdk::{Agent, AgentError, Context, Param, Setup, Task, World};
+use clap::Parser;
+use iceoryx2::prelude::Node;
+use nerve_blackbox::{Config, Kept, KeptImage, Memory, PortHistory, write_snapshot};
+use nerve_recording::{FrameOutcome, RingFrames};
+use shm_schemas::control::cli_to_router::{CliRequest, EventKind, RouterReply, RouterRequest};
+use shm_schemas::ring::RingNotice;
+use shm_schemas::{Payload, PortRef};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+type RouterClient = ControlClient<RouterRequest, RouterReply>;
+
+/// How long a call to the router may take (it answers these at once).
+const ROUTER_TIMEOUT: Duration = Duration::from_secs(2);
+/// How often the robot's ports are looked at (new agents, `*`).
+const LOOK_PERIOD: Duration = Duration::from_secs(1);
+/// How often the router's events are read.
+const EVENTS_PERIOD: Duration = Duration::from_millis(200);
+
+/// The black box's options (after `--`).
+#[derive(Debug, Clone, Parser)]
+#[command(name = "nerve-blackbox --", about = "black box options")]
+struct Args {
+    /// The configuration file (TOML; see the nerve_blackbox docs).
+    #[arg(long)]
+    config: PathBuf,
+}
+
+/// A kept port with its subscription.
+struct Watched {
+    raw: RawPort,
+    /// its index in the memory
+    index: usize,
+    /// ring frames, for a port of ring notices
+    frames: Option<RingFrames>,
+    /// watched fields: (path, last value)
+    fields: Vec<(String, Option<String>)>,
+}
+
+/// A snapshot to write when its time comes.
+struct Pending {
+    at: Instant,
+    from_ns: u64,
+    to_ns: u64,
+    path: PathBuf,
+    why: String,
+}
+
+/// Figures the message checker reads.
+#[derive(Default)]
+struct Figures {
+    snapshots: AtomicU64,
+    kept_bytes: AtomicU64,
+    ports: AtomicU64,
+    last: Mutex<String>,
+}
+
+struct Blackbox {
+    /// its own name (its ports are not kept)
+    name: String,
+    config: Config,
+    world: World,
+    node: Node<Ipc>,
+    router: Option<RouterClient>,
+    memory: Memory,
+    watched: Vec<Watched>,
+    /// ports that could not be kept, said once
+    refused: Vec<PortRef>,
+    snapshot: Param<String>,
+    figures: Arc<Figures>,
+    pending: Vec<Pending>,
+    writing: Vec<JoinHandle<()>>,
+    events_after: Option<(u64, u64)>,
+    last_look: Option<Instant>,
+    last_events: Option<Instant>,
+    last_fired: Option<Instant>,
+    buf: Vec<u8>,
+}
+
+/// The check of `snapshot`: empty, or an absolute `.mcap` path in an existing folder.
+fn check_snapshot(v: &String) -> Result<(), String> {
+    if v.is_empty() {
+        return Ok(());
+    }
+    let p = Path::new(v);
+    if !p.is_absolute() || p.extension().is_none_or(|e| e != "mcap") {
+        return Err(format!("snapshot {v:?}: give an absolute path ending in .mcap (`nerve snapshot -o FILE` does)"));
+    }
+    match p.parent() {
+        Some(d) if d.is_dir() => Ok(()),
+        _ => Err(format!("snapshot {v:?}: its folder does not exist")),
+    }
+}
+
+impl Blackbox {
+    fn call(&mut self, req: CliRequest) -> Option<RouterReply> {
+        if self.router.is_none() {
+            self.router = router_client(&self.world, &self.node).ok();
+        }
+        let client = self.router.as_ref()?;
+        match client.call(&RouterRequest::Cli(req), ROUTER_TIMEOUT) {
+            Ok(RouterReply::Error(e)) => {
+                tracing::debug!("the router refused: {e}");
+                None
+            }
+            Ok(r) => Some(r),
+            Err(e) => {
+                tracing::debug!("the router did not answer: {e}");
+                self.router = None;
+                None
+            }
+        }
+    }
+
+    /// Subscribes to the kept ports that appeared.
+    fn look(&mut self) {
+        let Some(RouterReply::Agents(agents)) = self.call(CliRequest::Ps) else { return };
+        for a in agents.iter().filter(|a| a.pid != 0 && a.name != self.name) {
+            for o in &a.outputs {
+                let Ok(port) = PortRef::new(&a.name, &o.name) else { continue };
+                if !self.config.keeps(&port)
+                    || self.refused.contains(&port)
+                    || self.memory.ports.iter().any(|h| h.port == port)
+                {
+                    continue;
+                }
+                let Some(schema) = a.schema_for(o.fingerprint) else {
+                    tracing::warn!(port = %port, "not keeping {port}: its type {} has no schema", o.type_name);
+                    self.refused.push(port);
+                    continue;
+                };
+                let service = self.world.robot().port_service(&a.name, &o.name);
+                let raw = match RawPort::open(&self.node, &service) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        tracing::warn!(port = %port, "not keeping {port}: {e}");
+                        self.refused.push(port);
+                        continue;
+                    }
+                };
+                let name = port.to_string();
+                let fields: Vec<(String, Option<String>)> = self
+                    .config
+                    .fire
+                    .on_change
+                    .iter()
+                    .filter(|w| w.port == name)
+                    .filter_map(|w| {
+                        if schema.field(&w.field).is_some() {
+                            Some((w.field.clone(), None))
+                        } else {
+                            tracing::warn!(port = %port, "{port} has no field {:?}: not watched", w.field);
+                            None
+                        }
+                    })
+                    .collect();
+                let frames = (o.type_name == <RingNotice as Payload>::stable_type_name())
+                    .then(|| RingFrames::new(self.world.robot(), &a.name));
+                tracing::info!(port = %port, "keeping {port} ({})", o.type_name);
+                self.memory.ports.push(PortHistory::new(port, o.type_name.clone(), o.fingerprint, schema));
+                self.watched.push(Watched { raw, index: self.memory.ports.len() - 1, frames, fields });
+            }
+        }
+        self.figures.ports.store(self.watched.len() as u64, Ordering::Relaxed);
+    }
+
+    /// Takes every waiting sample; returns the watched fields that changed.
+    fn take(&mut self) -> Vec<String> {
+        let mut changed = Vec::new();
+        for w in &mut self.watched {
+            let h = &self.memory.ports[w.index];
+            let (schema, port) = (h.schema.clone(), h.port.clone());
+            let mut got: Vec<Kept> = Vec::new();
+            let mut images: Vec<KeptImage> = Vec::new();
+            let buf = &mut self.buf;
+            let frames = &mut w.frames;
+            let fields = &mut w.fields;
+            let r = w.raw.receive(|hdr, bytes| {
+                let log_ns = agent_sdk::clock::unix_now_ns();
+                if let Some(f) = frames
+                    && let FrameOutcome::Encoded(seq) = f.encode(bytes, log_ns, buf)
+                {
+                    images.push(KeptImage { seq, log_ns, encoded: buf.as_slice().into() });
+                }
+                if !fields.is_empty() {
+                    for (path, last) in fields.iter_mut() {
+                        let now = schema.decode_field(path, bytes).map(|x| x.to_string());
+                        if last.is_some() && now != *last {
+                            changed.push(format!(
+                                "{port} {path} {} -> {}",
+                                last.as_deref().unwrap_or("?"),
+                                now.as_deref().unwrap_or("?")
+                            ));
+                        }
+                        *last = now;
+                    }
+                }
+                got.push(Kept { seq: hdr.seq, log_ns, stamp_ns: hdr.stamp_ns, bytes: bytes.into() });
+                true
+            });
+            if let Err(e) = r {
+                tracing::debug!(port = %port, "receive: {e}");
+            }
+            for k in got {
+                self.memory.push(w.index, k);
+            }
+            for i in images {
+                self.memory.push_image(w.index, i);
+            }
+        }
+        changed
+    }
+
+    /// Deaths the router saw since the last look.
+    fn deaths(&mut self) -> Vec<String> {
+        let after = self.events_after.map_or(0, |(_, next)| next.saturating_sub(1));
+        let Some(RouterReply::Events { epoch, next, events }) = self.call(CliRequest::Events { after }) else {
+            return vec![];
+        };
+        let first_look = self.events_after.is_none_or(|(e, _)| e != epoch);
+        self.events_after = Some((epoch, next));
+        if first_look {
+            // what happened before the black box (or this router) started is not its business
+            return vec![];
+        }
+        events
+            .into_iter()
+            .filter_map(|e| match e.what {
+                EventKind::Died { agent, pid } => Some(format!("{agent} (pid {pid}) died")),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn fire(&mut self, why: &str, slug: &str) {
+        let now = Instant::now();
+        if self.last_fired.is_some_and(|t| now.duration_since(t).as_secs_f64() < self.config.fire.min_gap) {
+            tracing::info!("{why}: within fire.min_gap of the last snapshot, not written again");
+            return;
+        }
+        self.last_fired = Some(now);
+        let unix = agent_sdk::clock::unix_now_ns();
+        let after = Duration::from_secs_f64(self.config.after);
+        let name = format!("blackbox-{}-{}.mcap", stamp(unix), slug);
+        let path = self.config.dir.join(name);
+        tracing::warn!(file = %path.display(), "{why}: writing the black box to {} in {after:?}", path.display());
+        self.pending.push(Pending {
+            at: now + after,
+            from_ns: unix.saturating_sub((self.config.seconds * 1e9) as u64),
+            to_ns: unix.saturating_add(after.as_nanos() as u64),
+            path,
+            why: why.to_string(),
+        });
+    }
+
+    /// Starts writing the snapshots whose time has come.
+    fn write_due(&mut self, now: Instant) {
+        let (due, later): (Vec<Pending>, Vec<Pending>) = self.pending.drain(..).partition(|p| p.at <= now);
+        self.pending = later;
+        for p in due {
+            let ports = self.memory.window(p.from_ns, p.to_ns);
+            let robot = self.world.robot().to_string();
+            let figures = self.figures.clone();
+            self.writing.push(std::thread::spawn(move || match write_snapshot(&p.path, &robot, &ports) {
+                Ok(w) => {
+                    tracing::info!(
+                        file = %p.path.display(),
+                        messages = w.messages,
+                        images = w.images,
+                        "black box written ({}): {} messages, {} images, {:.1} MB to {}",
+                        p.why,
+                        w.messages,
+                        w.images,
+                        w.bytes as f64 / 1e6,
+                        p.path.display()
+                    );
+                    figures.snapshots.fetch_add(1, Ordering::Relaxed);
+                    *figures.last.lock().unwrap_or_else(|e| e.into_inner()) = p.path.display().to_string();
+                }
+                Err(e) => {
+                    tracing::error!(file = %p.path.display(), "cannot write the black box to {}: {e}", p.path.display())
+                }
+            }));
+        }
+        self.writing.retain(|h| !h.is_finished());
+    }
+}
+
+/// `YYYYmmdd-HHMMSS.mmm` of CLOCK_REALTIME ns (UTC).
+fn stamp(unix_ns: u64) -> String {
+    format!("{}.{:03}", nerve_recording::file_stamp(unix_ns), unix_ns / 1_000_000 % 1000)
+}
+
+/// A file-name-safe form of `text`.
+fn slug(text: &str) -> String {
+    text.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '-' }).collect()
+}
+
+impl Agent for Blackbox {
+    const KIND: &'static str = "blackbox";
+
+    fn task() -> Task {
+        Task::Periodic(Duration::from_millis(10))
+    }
+
+    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+        let args =
+            Args::try_parse_from(std::iter::once("nerve-blackbox --".to_string()).chain(setup.args().iter().cloned()))
+                .map_err(|e| AgentError::Config(e.to_string()))?;
+        let config = Config::load(&args.config).map_err(|e| AgentError::Config(e.to_string()))?;
+        std::fs::create_dir_all(&config.dir).map_err(|e| {
+            AgentError::Config(format!(
+                "cannot make the snapshot folder {} (dir in {}): {e}",
+                config.dir.display(),
+                args.config.display()
+            ))
+        })?;
+        let world = setup.world().clone();
+        let node = world
+            .node(&format!("{}-ports", setup.name()))
+            .map_err(|e| AgentError::Config(format!("cannot join the robot's shared memory: {e}")))?;
+        let snapshot = setup.param_checked("snapshot", String::new(), check_snapshot);
+        let figures = Arc::new(Figures::default());
+        let f = figures.clone();
+        setup.figures(move || {
+            vec![
+                ("snapshots".into(), f.snapshots.load(Ordering::Relaxed).to_string()),
+                ("last_snapshot".into(), f.last.lock().map(|s| s.clone()).unwrap_or_default()),
+                ("kept_mb".into(), format!("{:.1}", f.kept_bytes.load(Ordering::Relaxed) as f64 / 1e6)),
+                ("ports".into(), f.ports.load(Ordering::Relaxed).to_string()),
+            ]
+        });
+        let memory = Memory::new(config.seconds, config.max_mb);
+        Ok(Blackbox {
+            name: setup.name().to_string(),
+            config,
+            world,
+            node,
+            router: None,
+            memory,
+            watched: Vec::new(),
+            refused: Vec::new(),
+            snapshot,
+            figures,
+            pending: Vec::new(),
+            writing: Vec::new(),
+            events_after: None,
+            last_look: None,
+            last_events: None,
+            last_fired: None,
+            buf: Vec::new(),
+        })
+    }
+
+    fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        let now = Instant::now();
+        if self.last_look.is_none_or(|t| now.duration_since(t) >= LOOK_PERIOD) {
+            self.last_look = Some(now);
+            self.look();
+        }
+        for why in self.take() {
+            self.fire(&why, "change");
+        }
+        if self.config.fire.on_death && self.last_events.is_none_or(|t| now.duration_since(t) >= EVENTS_PERIOD) {
+            self.last_events = Some(now);
+            for why in self.deaths() {
+                let agent = why.split(' ').next().unwrap_or("agent").to_string();
+                self.fire(&why, &format!("died-{}", slug(&agent)));
+            }
+        }
+        let asked = self.snapshot.get();
+        if !asked.is_empty() {
+            self.snapshot.set(String::new());
+            let unix = agent_sdk::clock::unix_now_ns();
+            self.pending.push(Pending {
+                at: now,
+                from_ns: unix.saturating_sub((self.config.seconds * 1e9) as u64),
+                to_ns: unix,
+                path: PathBuf::from(&asked),
+                why: "asked".into(),
+            });
+        }
+        self.memory.trim(agent_sdk::clock::unix_now_ns());
+        self.figures.kept_bytes.store(self.memory.bytes() as u64, Ordering::Relaxed);
+        self.write_due(now);
+        Ok(())
+    }
+
+    fn stop(&mut self, _ctx: &mut Context) {
+        // what is due is written before the black box leaves
+        let now = Instant::now() + Duration::from_secs(3600);
+        self.write_due(now);
+        for h in self.writing.drain(..) {
+            let _ = h.join();
+        }
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    agent_sdk::run::<Blackbox>()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn snapshot_paths_are_checked() {
+        assert!(check_snapshot(&String::new()).is_ok());
+        assert!(check_snapshot(&"rel.mcap".to_string()).is_err());
+        assert!(check_snapshot(&"/tmp/x.txt".to_string()).is_err());
+        assert!(check_snapshot(&"/no/such/folder/x.mcap".to_string()).is_err());
+        assert!(check_snapshot(&"/tmp/x.mcap".to_string()).is_ok());
+    }
+
+    #[test]
+    fn stamps_and_slugs_make_file_names() {
+        assert_eq!(stamp(0), "19700101-000000.000");
+        assert_eq!(stamp(1_764_000_000_123_000_000), "20251124-160000.123");
+        assert_eq!(slug("t1 (pid 4)"), "t1--pid-4-");
+    }
+}

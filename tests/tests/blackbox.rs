@@ -1,0 +1,111 @@
+//! The black box end to end: a `blackbox` agent keeps the last seconds of a
+//! ticker and of a gripper (a type nerve was not built with); `nerve
+//! snapshot` writes them, and the file, read by the `mcap` package from
+//! PyPI, holds the last seconds and no more, every sample in order. When
+//! the gripper is killed the black box writes a file by itself that holds
+//! the seconds before the death and the moment after; a clean stop fires
+//! nothing. A configuration with a typo is refused at its line.
+
+use nerve_tests::py::{messages, read_mcap};
+use nerve_tests::{Robot, wait_until, write_file};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+fn log_times(msgs: &[Value]) -> Vec<u64> {
+    msgs.iter().map(|m| m["log_time"].as_u64().expect("log_time")).collect()
+}
+
+fn snapshots(dir: &Path, what: &str) -> Vec<PathBuf> {
+    std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.to_string_lossy().contains(what) && p.extension().is_some_and(|e| e == "mcap"))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+fn unix_now_ns() -> u64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
+}
+
+#[test]
+fn the_black_box_holds_the_last_seconds_and_fires_on_a_death() {
+    let r = Robot::new("bbox");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["start", "gripper", "--name", "g"]);
+    let config = write_file(
+        &r.home,
+        "bb.toml",
+        "seconds = 3\nports = [\"t1/tick\", \"g/state\"]\nafter = 0.5\ndir = \"snaps\"\n[fire]\non_death = true\nmin_gap = 0\n",
+    );
+    let config_s = config.display().to_string();
+    r.ok(&["start", "blackbox", "--name", "blackbox", "--", "--config", &config_s]);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.agent("blackbox").is_some() && r.figure_u64("blackbox", "ports") == 2),
+        "the black box does not keep both ports: {:?}",
+        r.ps()
+    );
+    // more than the kept seconds go by
+    std::thread::sleep(Duration::from_millis(4500));
+
+    // asked: the last 3 s
+    let manual = r.home.join("manual.mcap");
+    let said = r.ok(&["snapshot", "-o", &manual.display().to_string()]);
+    assert!(said.contains("t1/tick") && said.contains("g/state"), "{said}");
+    let got = read_mcap(&manual);
+    assert_eq!(got["channels"]["g/state"]["schema_name"], "acme::Gripper");
+    let ticks = messages(&got, "t1/tick");
+    let t = log_times(ticks);
+    let span = (t[t.len() - 1] - t[0]) as f64 / 1e9;
+    assert!((2.5..=3.05).contains(&span), "the last 3 s and no more: {span:.2} s of ticks");
+    assert!(ticks.len() >= 150, "3 s of a 10 ms ticker: {}", ticks.len());
+    for w in ticks.windows(2) {
+        assert_eq!(w[1]["sequence"].as_u64(), w[0]["sequence"].as_u64().map(|s| s + 1), "every tick, in order");
+    }
+    let e = r.fails(&["snapshot", "-o", &manual.display().to_string()]);
+    assert!(e.contains("exists"), "a snapshot does not overwrite: {e}");
+
+    // fired: g dies
+    let killed_at = unix_now_ns();
+    r.ok(&["kill", "g"]);
+    let dir = r.home.join("snaps");
+    assert!(
+        wait_until(Duration::from_secs(10), || !snapshots(&dir, "died-g").is_empty()),
+        "no snapshot after g's death in {}: {:?}",
+        dir.display(),
+        std::fs::read_dir(&dir).map(|d| d.filter_map(|e| e.ok()).map(|e| e.file_name()).collect::<Vec<_>>())
+    );
+    let fired = snapshots(&dir, "died-g").remove(0);
+    let got = read_mcap(&fired);
+    let g = log_times(messages(&got, "g/state"));
+    let ms = |t: u64| (t as f64 - killed_at as f64) / 1e6;
+    assert!(ms(g[g.len() - 1]) < 100.0, "g's last sample is from before its death: {:.0} ms", ms(g[g.len() - 1]));
+    assert!(ms(g[0]) < -2000.0, "the seconds before the death are there: first g sample {:.0} ms", ms(g[0]));
+    let counts: Vec<u64> = messages(&got, "g/state").iter().filter_map(|m| m["data"]["count"].as_u64()).collect();
+    assert!(counts.windows(2).all(|w| w[1] == w[0] + 1), "every g sample up to its death, in order");
+    let t = log_times(messages(&got, "t1/tick"));
+    assert!(ms(t[t.len() - 1]) > 300.0, "and the moment after it: last tick {:.0} ms", ms(t[t.len() - 1]));
+
+    // a clean stop is no death
+    r.ok(&["stop", "t1"]);
+    assert!(wait_until(Duration::from_secs(5), || r.agent("t1").is_none()), "t1 did not stop");
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(snapshots(&dir, "died-t1").is_empty(), "a clean stop fired the black box");
+    assert_eq!(snapshots(&dir, "died").len(), 1, "one death, one file");
+    r.down_and_check_clean();
+}
+
+#[test]
+fn a_bad_configuration_is_refused_at_its_line() {
+    let r = Robot::new("bboxcfg");
+    r.router();
+    let config = write_file(&r.home, "bb.toml", "seconds = 3\nports = [\"t1/tick\"]\nsecnds = 4\n");
+    let e = r.fails(&["start", "blackbox", "--name", "bb", "--", "--config", &config.display().to_string()]);
+    assert!(e.contains("secnds") && e.contains("line 3"), "{e}");
+    let e = r.fails(&["snapshot", "--agent", "nobb"]);
+    assert!(e.contains("no black box named \"nobb\""), "{e}");
+    r.down_and_check_clean();
+}
