@@ -40,6 +40,7 @@ mod plot;
 mod plot_images;
 mod procs;
 mod raw;
+mod recording;
 mod scale;
 mod soak;
 mod stats;
@@ -190,6 +191,20 @@ enum Scenario {
         #[arg(long)]
         launch: Option<PathBuf>,
     },
+    /// What recording costs: one hop with `nerve record --all` vs without, camera frames to MCAP, echo of a custom type.
+    Record {
+        #[command(flatten)]
+        common: Common,
+        /// Payload sizes of the hop, in bytes.
+        #[arg(long, value_delimiter = ',', default_values_t = [8usize, 230_400])]
+        payloads: Vec<usize>,
+        /// Measured hop rounds (each condition one batch per round, interleaved).
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// Seconds per image recording (default 60; 10 with --quick).
+        #[arg(long)]
+        seconds: Option<f64>,
+    },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
         #[command(flatten)]
@@ -273,6 +288,27 @@ fn run(cli: Cli) -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
             } else {
                 pipeline::print_tables(&report);
+            }
+        }
+        Scenario::Record { common, payloads, rounds, seconds } => {
+            let opts = recording::RecordOpts {
+                quick: common.quick,
+                sizes: payloads,
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 7 }).max(1),
+                image_seconds: seconds.unwrap_or(if common.quick { 10.0 } else { 60.0 }).max(1.0),
+                echo_runs: if common.quick { 3 } else { 9 },
+                verbose: common.verbose,
+                work: recording::work_dir(&common.out),
+            };
+            let report = recording::run(&opts);
+            let _ = std::fs::remove_dir_all(&opts.work);
+            let report = report?;
+            let json = write_json(&common.out, "record.json", &report)?;
+            eprintln!("record: results in {} ({:.0} s)", json.display(), report.seconds);
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
+            } else {
+                recording::print_tables(&report);
             }
         }
         Scenario::Scale { common, agents, period_ms, window } => {

@@ -98,6 +98,37 @@ fn the_black_box_holds_the_last_seconds_and_fires_on_a_death() {
     r.down_and_check_clean();
 }
 
+/// A watched field that changes (here the tool a gripper reports holding,
+/// as a safety stop's `active` or a mode would) fires a snapshot that
+/// holds the change; samples that repeat the value fire nothing.
+#[test]
+fn a_watched_field_that_changes_fires_the_black_box() {
+    let r = Robot::new("bboxchg");
+    r.router();
+    r.ok(&["start", "gripper", "--name", "g"]);
+    let config = write_file(
+        &r.home,
+        "bb.toml",
+        "seconds = 2\nports = []\nafter = 0.3\ndir = \"snaps\"\n[[fire.on_change]]\nport = \"g/state\"\nfield = \"tool\"\n",
+    );
+    r.ok(&["start", "blackbox", "--name", "bb", "--", "--config", &config.display().to_string()]);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.agent("bb").is_some() && r.figure_u64("bb", "ports") == 1),
+        "the black box does not keep g/state: {:?}",
+        r.ps()
+    );
+    let dir = r.home.join("snaps");
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(snapshots(&dir, "change").is_empty(), "an unchanged field fired");
+    r.ok(&["param", "set", "g", "tool", "hammer"]);
+    assert!(wait_until(Duration::from_secs(10), || !snapshots(&dir, "change").is_empty()), "the change did not fire");
+    let got = read_mcap(&snapshots(&dir, "change").remove(0));
+    let tools: Vec<&str> = messages(&got, "g/state").iter().filter_map(|m| m["data"]["tool"].as_str()).collect();
+    let first_hammer = tools.iter().position(|t| *t == "hammer").expect("the change is in the file");
+    assert!(first_hammer > 10 && tools[..first_hammer].iter().all(|t| *t == "screwdriver"), "{tools:?}");
+    r.down_and_check_clean();
+}
+
 #[test]
 fn a_bad_configuration_is_refused_at_its_line() {
     let r = Robot::new("bboxcfg");

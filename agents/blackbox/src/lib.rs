@@ -453,6 +453,12 @@ mod tests {
     }
 
     #[test]
+    fn the_example_configuration_reads() {
+        let c = Config::parse(include_str!("../../../launch/blackbox.toml")).expect("launch/blackbox.toml");
+        assert!(c.all_ports() && c.fire.on_death);
+    }
+
+    #[test]
     fn memory_keeps_the_last_seconds_within_its_budget() {
         let s = 1_000_000_000u64;
         let mut m = Memory::new(2.0, 1);

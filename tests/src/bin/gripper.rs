@@ -4,11 +4,12 @@
 //! echo, watch and connect it by its schema alone.
 //!
 //! Periodic (20 ms): output `state` counts up; input `cmd` takes the same
-//! type. `-- --layout old` runs the same agent with the type as an older
-//! build defined it (same name and size, the fields in another order), the
-//! stale build that must be refused.
+//! type; parameter `tool` (text) is the tool it reports holding.
+//! `-- --layout old` runs the same agent with the type as an older build
+//! defined it (same name and size, the fields in another order), the stale
+//! build that must be refused.
 
-use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use shm_schemas::{FixedName, Payload};
 use std::time::Duration;
 
@@ -66,7 +67,7 @@ pub mod old {
 
 /// What the agent needs of either layout.
 trait Sample: Payload + Default {
-    fn make(n: u64) -> Self;
+    fn make(n: u64, tool: &str) -> Self;
 }
 
 fn fingers(n: u64) -> [Finger; 3] {
@@ -74,24 +75,24 @@ fn fingers(n: u64) -> [Finger; 3] {
 }
 
 impl Sample for Gripper {
-    fn make(n: u64) -> Self {
+    fn make(n: u64, tool: &str) -> Self {
         Gripper {
             count: n,
             opening_m: n as f64 * 0.001,
             fingers: fingers(n),
-            tool: FixedName::new("screwdriver"),
+            tool: FixedName::new(tool),
             temp_cdeg: -250,
         }
     }
 }
 
 impl Sample for old::Gripper {
-    fn make(n: u64) -> Self {
+    fn make(n: u64, tool: &str) -> Self {
         old::Gripper {
             opening_m: n as f64 * 0.001,
             count: n,
             fingers: fingers(n),
-            tool: FixedName::new("screwdriver"),
+            tool: FixedName::new(tool),
             temp_cdeg: -250,
         }
     }
@@ -100,6 +101,7 @@ impl Sample for old::Gripper {
 struct GripperAgent<T: Sample> {
     cmd: Input<T>,
     state: Output<T>,
+    tool: Param<String>,
     n: u64,
 }
 
@@ -111,13 +113,18 @@ impl<T: Sample> Agent for GripperAgent<T> {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        Ok(GripperAgent { cmd: setup.input("cmd")?, state: setup.output("state")?, n: 0 })
+        Ok(GripperAgent {
+            cmd: setup.input("cmd")?,
+            state: setup.output("state")?,
+            tool: setup.param("tool", "screwdriver".to_string()),
+            n: 0,
+        })
     }
 
     fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
         while self.cmd.recv().is_some() {}
         self.n += 1;
-        self.state.send(T::make(self.n))?;
+        self.state.send(T::make(self.n, &self.tool.get()))?;
         Ok(())
     }
 }
