@@ -80,6 +80,8 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     /// Plot numeric fields of output ports over time (PNG or SVG), from a recording or live.
     Plot(plot::PlotArgs),
+    /// Copy a recording with every sample as JSON, for viewers such as Foxglove and Lichtblick.
+    Export(crate::cmd::export::ExportArgs),
     /// Write the black box's last seconds to an MCAP file (a `blackbox` agent keeps them).
     Snapshot(crate::cmd::snapshot::SnapshotArgs),
     /// Start a robot from a launch file (router, agents, connections).

@@ -91,6 +91,7 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
         }
         Command::Plot(a) => cmd::plot::plot(&world, a),
         Command::Snapshot(a) => cmd::snapshot::snapshot(&world, a),
+        Command::Export(a) => cmd::export::export(a),
         Command::Down(a) => down::down(&world, a),
         Command::Launch(a) => launch::launch(&cli.robot, cli.robot_explicit, a),
         Command::Logs(a) => logs::logs(&world, a),

@@ -16,6 +16,7 @@
 //! Lichtblick show as images.
 
 pub mod foxglove;
+pub mod json;
 
 use shm_schemas::Schema;
 use shm_schemas::services::port_attributes::fingerprint_text;

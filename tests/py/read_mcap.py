@@ -2,7 +2,8 @@
 PyPI (a reader nobody here wrote) and prints what it found as JSON: each
 channel with its schema, message count, and its messages decoded through the
 nerve schema embedded in the file (offsets and primitive types, nothing
-else). Channels in another encoding are listed with their message sizes. Used by tests/tests/record.rs."""
+else). Channels of `nerve export` (JSON) are read as JSON; channels in
+another encoding are listed with their message sizes. Used by tests/tests/record.rs."""
 
 import json
 import struct
@@ -42,6 +43,12 @@ def main(path):
                 "schema_encoding": schema.encoding,
                 "messages": [],
             })
+            if schema.encoding == "jsonschema":
+                # `nerve export`: the message is JSON, its schema a JSON Schema
+                c["json_schema"] = json.loads(schema.data)
+                c["messages"].append({"sequence": message.sequence, "log_time": message.log_time,
+                                      "data": json.loads(message.data)})
+                continue
             if schema.encoding != "nerve.schema+json":
                 # another format (a ring's foxglove.RawImage): read_images.py reads it
                 c["messages"].append({"sequence": message.sequence, "size": len(message.data)})

@@ -3,6 +3,7 @@
 //! MCAP; the file is read by the `mcap` package from PyPI (a reader nobody
 //! here wrote, installed by this test into a virtual environment) and its
 //! channels, schemas, message count and decoded contents are checked; then
+//! the recording is exported as JSON for viewers and read back the same; then
 //! the recording is replayed into the robot under the recorded agent's name
 //! and recorded again: every sample comes back bit-exact and in order, with
 //! the recorded spacing.
@@ -23,6 +24,22 @@ fn read_with_python(file: &Path) -> Value {
 /// pixels of `colour` in each.
 fn images_with_python(file: &Path, colour: [u8; 3]) -> Value {
     run_reader("read_images.py", file, &[&format!("{},{},{}", colour[0], colour[1], colour[2])])
+}
+
+/// Equal JSON values, floats within a part in a million (f32 printed by
+/// two decoders may differ in their last digits).
+fn same(a: &Value, b: &Value) -> bool {
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) if x.is_f64() || y.is_f64() => {
+            let (x, y) = (x.as_f64().unwrap_or(f64::NAN), y.as_f64().unwrap_or(f64::NAN));
+            (x - y).abs() <= 1e-6 * x.abs().max(y.abs()).max(1.0)
+        }
+        (Value::Array(x), Value::Array(y)) => x.len() == y.len() && x.iter().zip(y).all(|(x, y)| same(x, y)),
+        (Value::Object(x), Value::Object(y)) => {
+            x.len() == y.len() && x.iter().all(|(k, v)| y.get(k).is_some_and(|w| same(v, w)))
+        }
+        _ => a == b,
+    }
 }
 
 /// Log-time gaps between consecutive messages, ms.
@@ -77,6 +94,25 @@ fn a_recording_reads_in_an_independent_reader_and_replays_bit_exact() {
     assert_eq!(recorded[0]["data"]["fingers"].as_array().map(Vec::len), Some(3));
     let ticks = messages(&got, "t1/tick");
     assert!(ticks.windows(2).all(|w| w[1]["data"]["seq"].as_u64() > w[0]["data"]["seq"].as_u64()));
+
+    // exported for JSON viewers: the same samples, as the independent decoder read them
+    let json_file = r.home.join("run-json.mcap");
+    let said = r.ok(&["export", &file_s, "-o", &json_file.display().to_string()]);
+    assert!(said.contains(&format!("{total} messages as JSON")), "{said}");
+    let exported = read_with_python(&json_file);
+    let g = &exported["channels"]["g/state"];
+    assert_eq!(g["message_encoding"], "json");
+    assert_eq!(g["schema_encoding"], "jsonschema");
+    assert_eq!(g["json_schema"]["properties"]["fingers"]["items"]["properties"]["contact"]["type"], "boolean");
+    assert_eq!(g["metadata"]["fingerprint"], format!("{fp:#018x}"));
+    for topic in ["g/state", "t1/tick"] {
+        let (raw, js) = (messages(&got, topic), messages(&exported, topic));
+        assert_eq!(raw.len(), js.len(), "{topic}: every message");
+        for (a, b) in raw.iter().zip(js) {
+            assert!(same(&a["data"], &b["data"]), "{topic}: {} exported as {}", a["data"], b["data"]);
+            assert_eq!((&a["sequence"], &a["log_time"]), (&b["sequence"], &b["log_time"]));
+        }
+    }
 
     // the replay, recorded again
     r.ok(&["stop", "g"]);

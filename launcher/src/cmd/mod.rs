@@ -10,6 +10,7 @@ pub mod demo;
 pub mod down;
 pub mod drive;
 pub mod echo;
+pub mod export;
 pub mod inspect;
 pub mod iox2;
 pub mod launch;
