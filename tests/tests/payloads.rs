@@ -117,3 +117,25 @@ fn a_stale_build_of_a_type_is_refused_on_connect() {
     assert!(e.contains("different definitions"), "{e}");
     r.down_and_check_clean();
 }
+
+/// An agent whose registration would not fit the router's service with its
+/// schemas (`acme::Wide`, 900 nested fields) registers without them: it
+/// runs and is listed with its fingerprints, its log says why, `nerve hz`
+/// counts its port, and `nerve echo` says why it cannot decode it.
+#[test]
+fn a_registration_too_large_for_its_schemas_registers_without_them() {
+    let r = Robot::new("wide");
+    r.router();
+    r.ok(&["start", "gripper", "--name", "w", "--", "--layout", "wide"]);
+    let w = r.agent("w").expect("w is registered");
+    assert_eq!(w["outputs"][0]["type_name"], "acme::Wide");
+    assert!(w["outputs"][0]["fingerprint"].as_u64().is_some_and(|fp| fp != 0), "{w}");
+    assert!(w["schemas"].as_array().is_some_and(Vec::is_empty), "no schemas: {}", w["schemas"]);
+    let log = r.ok(&["logs", "w"]);
+    assert!(log.contains("too large") && log.contains("registering without them"), "{log}");
+    let hz = r.ok(&["hz", "w/state", "--count", "1", "--json"]);
+    assert!(hz.contains("rate_hz") || hz.contains("hz"), "{hz}");
+    let e = r.fails(&["echo", "w/state", "--count", "1"]);
+    assert!(e.contains("registered no schema") && e.contains("nerve logs w"), "{e}");
+    r.down_and_check_clean();
+}

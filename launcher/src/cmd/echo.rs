@@ -67,6 +67,32 @@ pub(crate) struct PortInfo {
     pub(crate) fingerprint: Option<u64>,
     /// the schema to decode it with, when known
     pub(crate) schema: Option<Schema>,
+    /// whether the router told (else the port's attributes did)
+    pub(crate) from_router: bool,
+}
+
+impl PortInfo {
+    /// The schema to decode `port` with, or why there is none and what to do.
+    pub(crate) fn schema_or_why(&self, port: &PortRef) -> Result<&Schema> {
+        let layout = self.fingerprint.map_or("unknown".into(), fingerprint_text);
+        match &self.schema {
+            Some(s) => Ok(s),
+            None if self.from_router => bail!(
+                "port {port} carries {} (layout {layout}), and {} registered no schema for it (its registration \
+                 was too large for the router with its schemas: see `nerve logs {}`); `nerve hz` and `nerve record` \
+                 of built-in types still work",
+                self.type_name,
+                port.agent,
+                port.agent
+            ),
+            None => bail!(
+                "port {port} carries {} (layout {layout}), whose schema this build of nerve does not have and no \
+                 router runs to give it: start the router (`nerve router --daemon` or `nerve launch`) so that the \
+                 agent registers its schema",
+                self.type_name
+            ),
+        }
+    }
 }
 
 /// What `port` carries: from the router (the agent registered each port's
@@ -91,14 +117,24 @@ pub(crate) fn port_info(world: &World, node: &Node<Ipc>, port: &PortRef) -> Resu
                 }));
             };
             let schema = a.schema_for(o.fingerprint);
-            return Ok(PortInfo { type_name: o.type_name.clone(), fingerprint: Some(o.fingerprint), schema });
+            return Ok(PortInfo {
+                type_name: o.type_name.clone(),
+                fingerprint: Some(o.fingerprint),
+                schema,
+                from_router: true,
+            });
         }
     }
     let service = world.robot().port_service(port.agent.as_str(), &port.port);
     let (type_name, fingerprint) = port_identity(node, &service).ok_or_else(|| {
         anyhow!("no output port {port} exists on robot {} (and no router runs to ask)", world.robot())
     })?;
-    Ok(PortInfo { type_name, fingerprint, schema: fingerprint.and_then(shm_schemas::schema::built_in) })
+    Ok(PortInfo {
+        type_name,
+        fingerprint,
+        schema: fingerprint.and_then(shm_schemas::schema::built_in),
+        from_router: false,
+    })
 }
 
 enum Event<'a> {
@@ -152,14 +188,7 @@ fn watch(
 
 /// The part of each sample echo prints: the whole payload, or one field.
 fn selection(info: &PortInfo, port: &PortRef, field: Option<&str>) -> Result<(usize, Schema)> {
-    let Some(schema) = info.schema.clone() else {
-        bail!(
-            "port {port} carries {} (layout {}), whose schema this build of nerve does not have and no router \
-             runs to give it: start the router (`nerve up` or `nerve router`) so that the agent registers its schema",
-            info.type_name,
-            info.fingerprint.map_or("unknown".into(), fingerprint_text)
-        )
-    };
+    let schema = info.schema_or_why(port)?.clone();
     let Some(path) = field else { return Ok((0, schema)) };
     match schema.field(path) {
         Some((offset, s)) => Ok((offset, s.clone())),

@@ -30,7 +30,6 @@ use nerve_recording::{MESSAGE_ENCODING, SCHEMA_ENCODING};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use shm_schemas::schema::{Kind, Value};
-use shm_schemas::services::port_attributes::fingerprint_text;
 use shm_schemas::{PortRef, Schema};
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{IsTerminal as _, Write as _};
@@ -371,14 +370,7 @@ fn live(world: &World, ports: &[PortRef], fields: &[String], duration: f64, quie
     let mut watched = Vec::new();
     for port in ports {
         let info = port_info(world, &node, port)?;
-        let Some(schema) = &info.schema else {
-            bail!(
-                "port {port} carries {} (layout {}), whose schema this build of nerve does not have and no router \
-                 runs to give it: start the router (`nerve up` or `nerve router`) so that the agent registers its schema",
-                info.type_name,
-                info.fingerprint.map_or("unknown".into(), fingerprint_text)
-            )
-        };
+        let schema = info.schema_or_why(port)?;
         let fields = Fields::of(schema, port, fields)?;
         let service = world.robot().port_service(port.agent.as_str(), &port.port);
         let raw = RawPort::open(&node, &service).with_context(|| format!("cannot subscribe to {port}"))?;
