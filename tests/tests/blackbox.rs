@@ -100,18 +100,20 @@ fn the_black_box_holds_the_last_seconds_and_fires_on_a_death() {
 
 /// A watched field that changes (here the tool a gripper reports holding,
 /// as a safety stop's `active` or a mode would) fires a snapshot that
-/// holds the change; samples that repeat the value fire nothing.
+/// holds the change; samples that repeat the value fire nothing. The
+/// gripper starts after the black box, which finds it when it registers.
 #[test]
 fn a_watched_field_that_changes_fires_the_black_box() {
     let r = Robot::new("bboxchg");
     r.router();
-    r.ok(&["start", "gripper", "--name", "g"]);
     let config = write_file(
         &r.home,
         "bb.toml",
         "seconds = 2\nports = []\nafter = 0.3\ndir = \"snaps\"\n[[fire.on_change]]\nport = \"g/state\"\nfield = \"tool\"\n",
     );
     r.ok(&["start", "blackbox", "--name", "bb", "--", "--config", &config.display().to_string()]);
+    // started after the black box: found when it registers
+    r.ok(&["start", "gripper", "--name", "g"]);
     assert!(
         wait_until(Duration::from_secs(10), || r.agent("bb").is_some() && r.figure_u64("bb", "ports") == 1),
         "the black box does not keep g/state: {:?}",

@@ -39,7 +39,8 @@ type RouterClient = ControlClient<RouterRequest, RouterReply>;
 
 /// How long a call to the router may take (it answers these at once).
 const ROUTER_TIMEOUT: Duration = Duration::from_secs(2);
-/// How often the robot's ports are looked at (new agents, `*`).
+/// How often the robot's ports are looked at while the router does not
+/// answer for its events (else only when an agent registered).
 const LOOK_PERIOD: Duration = Duration::from_secs(1);
 /// How often the router's events are read.
 const EVENTS_PERIOD: Duration = Duration::from_millis(200);
@@ -99,6 +100,8 @@ struct Blackbox {
     writing: Vec<JoinHandle<()>>,
     events_after: Option<(u64, u64)>,
     last_look: Option<Instant>,
+    /// a port could not be opened: look again at the next events
+    look_again: bool,
     last_events: Option<Instant>,
     last_fired: Option<Instant>,
     buf: Vec<u8>,
@@ -141,6 +144,7 @@ impl Blackbox {
 
     /// Subscribes to the kept ports that appeared.
     fn look(&mut self) {
+        self.look_again = false;
         let Some(RouterReply::Agents(agents)) = self.call(CliRequest::Ps) else { return };
         for a in agents.iter().filter(|a| a.pid != 0 && a.name != self.name) {
             for o in &a.outputs {
@@ -160,8 +164,9 @@ impl Blackbox {
                 let raw = match RawPort::open(&self.node, &service) {
                     Ok(r) => r,
                     Err(e) => {
-                        tracing::warn!(port = %port, "not keeping {port}: {e}");
-                        self.refused.push(port);
+                        // a port being made or remade: tried again at the next events
+                        tracing::debug!(port = %port, "cannot keep {port} yet: {e}");
+                        self.look_again = true;
                         continue;
                     }
                 };
@@ -238,25 +243,30 @@ impl Blackbox {
         changed
     }
 
-    /// Deaths the router saw since the last look.
-    fn deaths(&mut self) -> Vec<String> {
+    /// What the router saw since the last look: the deaths, and whether an
+    /// agent registered (whose ports may be kept). `None` when the router
+    /// did not answer.
+    fn events(&mut self) -> Option<(Vec<(String, String)>, bool)> {
         let after = self.events_after.map_or(0, |(_, next)| next.saturating_sub(1));
         let Some(RouterReply::Events { epoch, next, events }) = self.call(CliRequest::Events { after }) else {
-            return vec![];
+            return None;
         };
         let first_look = self.events_after.is_none_or(|(e, _)| e != epoch);
         self.events_after = Some((epoch, next));
         if first_look {
-            // what happened before the black box (or this router) started is not its business
-            return vec![];
+            // what happened before the black box (or this router) started is
+            // not its business; the agents there are found by the first look
+            return Some((vec![], true));
         }
-        events
+        let registered = events.iter().any(|e| matches!(e.what, EventKind::Registered { .. }));
+        let deaths = events
             .into_iter()
             .filter_map(|e| match e.what {
-                EventKind::Died { agent, pid } => Some(format!("{agent} (pid {pid}) died")),
+                EventKind::Died { agent, pid } => Some((format!("{agent} (pid {pid}) died"), agent)),
                 _ => None,
             })
-            .collect()
+            .collect();
+        Some((deaths, registered))
     }
 
     fn fire(&mut self, why: &str, slug: &str) {
@@ -373,6 +383,7 @@ impl Agent for Blackbox {
             writing: Vec::new(),
             events_after: None,
             last_look: None,
+            look_again: false,
             last_events: None,
             last_fired: None,
             buf: Vec::new(),
@@ -381,19 +392,27 @@ impl Agent for Blackbox {
 
     fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
         let now = Instant::now();
-        if self.last_look.is_none_or(|t| now.duration_since(t) >= LOOK_PERIOD) {
-            self.last_look = Some(now);
-            self.look();
+        // the router's events say when to look for new ports (an agent
+        // registered) and who died; a look every LOOK_PERIOD catches up
+        // with a router that did not answer
+        if self.last_events.is_none_or(|t| now.duration_since(t) >= EVENTS_PERIOD) {
+            self.last_events = Some(now);
+            let (deaths, registered) = match self.events() {
+                Some(e) => e,
+                None => (vec![], self.last_look.is_none_or(|t| now.duration_since(t) >= LOOK_PERIOD)),
+            };
+            if registered || self.look_again {
+                self.last_look = Some(now);
+                self.look();
+            }
+            if self.config.fire.on_death {
+                for (why, agent) in deaths {
+                    self.fire(&why, &format!("died-{}", slug(&agent)));
+                }
+            }
         }
         for why in self.take() {
             self.fire(&why, "change");
-        }
-        if self.config.fire.on_death && self.last_events.is_none_or(|t| now.duration_since(t) >= EVENTS_PERIOD) {
-            self.last_events = Some(now);
-            for why in self.deaths() {
-                let agent = why.split(' ').next().unwrap_or("agent").to_string();
-                self.fire(&why, &format!("died-{}", slug(&agent)));
-            }
         }
         let asked = self.snapshot.get();
         if !asked.is_empty() {
