@@ -31,6 +31,7 @@ pub mod params;
 pub mod ports;
 pub mod process;
 pub mod raw_port;
+pub mod router_events;
 pub mod rt;
 pub mod runtime;
 pub mod world;

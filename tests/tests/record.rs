@@ -224,6 +224,37 @@ fn ring_frames_are_recorded_as_foxglove_images() {
     r.down_and_check_clean();
 }
 
+/// `nerve record --all` follows the robot: an agent started while it
+/// records joins the file, from soon after it registered.
+#[test]
+fn record_all_follows_agents_started_while_it_records() {
+    let r = Robot::new("recall");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    let file = r.home.join("all.mcap");
+    let recorder = r
+        .command("nerve")
+        .args(["record", "--all", "-o", &file.display().to_string(), "--duration", "4", "-q"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("recorder");
+    std::thread::sleep(Duration::from_millis(1500));
+    let started = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
+    r.ok(&["start", "gripper", "--name", "g"]);
+    let out = recorder.wait_with_output().expect("recorder");
+    let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{stdout}{stderr}");
+    assert!(stderr.contains("recording g/state too"), "{stderr}");
+    let got = read_with_python(&file);
+    let g = messages(&got, "g/state");
+    assert!(g.len() >= 50, "about 2.5 s of a 20 ms agent: {}\n{stdout}", g.len());
+    let first_ms = (g[0]["log_time"].as_u64().unwrap_or(0) as f64 - started as f64) / 1e6;
+    assert!(first_ms < 1500.0, "g/state recorded from {first_ms:.0} ms after g was started");
+    assert!(messages(&got, "t1/tick").len() >= 200, "and t1 throughout");
+    r.down_and_check_clean();
+}
+
 #[test]
 fn replay_refuses_what_it_cannot_do() {
     let r = Robot::new("recbad");

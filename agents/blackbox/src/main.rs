@@ -9,10 +9,11 @@
 //! ```
 //!
 //! The black box is a subscriber like any other: it reads each kept port by
-//! its bytes, publishers never wait for it. It learns of deaths from the
-//! router's event log (`CliRequest::Events`), which tells a death from a
-//! clean stop. Snapshots are written on their own threads, so the black box
-//! keeps taking samples meanwhile; a file appears whole (renamed into place).
+//! its bytes, publishers never wait for it. It learns of deaths and of new
+//! agents from the router's event log (`agent_sdk::router_events`), which
+//! tells a death from a clean stop. Snapshots are written on their own
+//! threads, so the black box keeps taking samples meanwhile; a file appears
+//! whole (renamed into place).
 //!
 //! Parameter `snapshot`: an absolute path ending in `.mcap`; setting it
 //! writes the kept seconds there (`nerve snapshot` sets it). Figures:
@@ -20,6 +21,7 @@
 
 use agent_sdk::control::{ControlClient, router_client};
 use agent_sdk::raw_port::RawPort;
+use agent_sdk::router_events::{EventFollower, Look};
 use agent_sdk::world::Ipc;
 use agent_sdk::{Agent, AgentError, Context, Param, Setup, Task, World};
 use clap::Parser;
@@ -98,7 +100,8 @@ struct Blackbox {
     figures: Arc<Figures>,
     pending: Vec<Pending>,
     writing: Vec<JoinHandle<()>>,
-    events_after: Option<(u64, u64)>,
+    /// the router's event log
+    events: EventFollower,
     last_look: Option<Instant>,
     /// a port could not be opened: look again at the next events
     look_again: bool,
@@ -243,30 +246,27 @@ impl Blackbox {
         changed
     }
 
-    /// What the router saw since the last look: the deaths, and whether an
-    /// agent registered (whose ports may be kept). `None` when the router
-    /// did not answer.
-    fn events(&mut self) -> Option<(Vec<(String, String)>, bool)> {
-        let after = self.events_after.map_or(0, |(_, next)| next.saturating_sub(1));
-        let Some(RouterReply::Events { epoch, next, events }) = self.call(CliRequest::Events { after }) else {
-            return None;
-        };
-        let first_look = self.events_after.is_none_or(|(e, _)| e != epoch);
-        self.events_after = Some((epoch, next));
-        if first_look {
+    /// What the router saw since the last look: the deaths (why, agent),
+    /// and whether to look for new ports (an agent registered, or the
+    /// router cannot say).
+    fn events(&mut self, now: Instant) -> (Vec<(String, String)>, bool) {
+        match self.events.look() {
             // what happened before the black box (or this router) started is
-            // not its business; the agents there are found by the first look
-            return Some((vec![], true));
+            // not its business; the agents there are found by a look
+            Look::Fresh => (vec![], true),
+            Look::NoRouter => (vec![], self.last_look.is_none_or(|t| now.duration_since(t) >= LOOK_PERIOD)),
+            Look::Events(events) => {
+                let registered = events.iter().any(|e| matches!(e.what, EventKind::Registered { .. }));
+                let deaths = events
+                    .into_iter()
+                    .filter_map(|e| match e.what {
+                        EventKind::Died { agent, pid } => Some((format!("{agent} (pid {pid}) died"), agent)),
+                        _ => None,
+                    })
+                    .collect();
+                (deaths, registered)
+            }
         }
-        let registered = events.iter().any(|e| matches!(e.what, EventKind::Registered { .. }));
-        let deaths = events
-            .into_iter()
-            .filter_map(|e| match e.what {
-                EventKind::Died { agent, pid } => Some((format!("{agent} (pid {pid}) died"), agent)),
-                _ => None,
-            })
-            .collect();
-        Some((deaths, registered))
     }
 
     fn fire(&mut self, why: &str, slug: &str) {
@@ -356,6 +356,10 @@ impl Agent for Blackbox {
         let node = world
             .node(&format!("{}-ports", setup.name()))
             .map_err(|e| AgentError::Config(format!("cannot join the robot's shared memory: {e}")))?;
+        let events_node = world
+            .node(&format!("{}-events", setup.name()))
+            .map_err(|e| AgentError::Config(format!("cannot join the robot's shared memory: {e}")))?;
+        let events = EventFollower::new(&world, events_node);
         let snapshot = setup.param_checked("snapshot", String::new(), check_snapshot);
         let figures = Arc::new(Figures::default());
         let f = figures.clone();
@@ -381,7 +385,7 @@ impl Agent for Blackbox {
             figures,
             pending: Vec::new(),
             writing: Vec::new(),
-            events_after: None,
+            events,
             last_look: None,
             look_again: false,
             last_events: None,
@@ -397,10 +401,7 @@ impl Agent for Blackbox {
         // with a router that did not answer
         if self.last_events.is_none_or(|t| now.duration_since(t) >= EVENTS_PERIOD) {
             self.last_events = Some(now);
-            let (deaths, registered) = match self.events() {
-                Some(e) => e,
-                None => (vec![], self.last_look.is_none_or(|t| now.duration_since(t) >= LOOK_PERIOD)),
-            };
+            let (deaths, registered) = self.events(now);
             if registered || self.look_again {
                 self.last_look = Some(now);
                 self.look();

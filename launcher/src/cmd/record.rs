@@ -17,13 +17,14 @@ use crate::client::{RouterSession, cli_node};
 use agent_sdk::World;
 use agent_sdk::ports::port_event;
 use agent_sdk::raw_port::RawPort;
+use agent_sdk::router_events::{EventFollower, Look};
 use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use nerve_recording::{FrameOutcome, PortChannel, RecordingWriter, RingFrames, Sample, foxglove};
-use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
+use shm_schemas::control::cli_to_router::{CliRequest, EventKind, RouterReply};
 use shm_schemas::ring::RingNotice;
 use shm_schemas::{Payload, PortRef, RobotName, Schema};
 use std::io::{BufWriter, IsTerminal as _, Write as _};
@@ -237,7 +238,11 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
     let until = a.duration.map(|d| start + Duration::from_secs_f64(d));
     let tty = std::io::stderr().is_terminal();
     let mut next_progress = start + Duration::from_secs(1);
-    let mut next_look = start + Duration::from_secs(1);
+    let mut next_look = start + Duration::from_millis(500);
+    let events_node =
+        world.node(&format!("cli-{}-events", std::process::id())).context("cannot join the robot's shared memory")?;
+    let mut events = EventFollower::new(world, events_node);
+    let _ = events.look();
     let mut interrupted = false;
     loop {
         // a fresh wait set each round: --all adds ports as agents appear
@@ -274,9 +279,14 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
                 progress(&recordings, start.elapsed(), tty);
             }
             if a.all && now >= next_look {
-                next_look = now + Duration::from_secs(1);
-                // agents started meanwhile: their ports join the recording
-                if let Ok(known) = known_ports(world) {
+                next_look = now + Duration::from_millis(500);
+                // agents started meanwhile (the router's events say when one
+                // registered): their ports join the recording
+                let registered = match events.look() {
+                    Look::Events(ev) => ev.iter().any(|e| matches!(e.what, EventKind::Registered { .. })),
+                    Look::Fresh | Look::NoRouter => true,
+                };
+                if let Some(known) = registered.then(|| known_ports(world).ok()).flatten() {
                     let new: Vec<&Known> = known
                         .iter()
                         .filter(|k| !skipped.contains(&k.port) && !recordings.iter().any(|r| r.known.port == k.port))
