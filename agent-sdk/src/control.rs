@@ -20,7 +20,6 @@ use iceoryx2::prelude::*;
 use serde::{Serialize, de::DeserializeOwned};
 use shm_schemas::control::{ProtocolError, decode, encode, unanswered};
 use std::marker::PhantomData;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// How big a control service is.
@@ -197,14 +196,12 @@ const MAX_ACTIVE_REQUESTS: usize = 2;
 /// grow it by powers of two.
 const INITIAL_MESSAGE_BYTES: usize = 512;
 
-/// The longest a waiting caller sleeps between two looks for its reply when
-/// no wake-up comes. A server notifies the service's reply event after each
-/// answer ([`reply_event`]), so a caller wakes when its reply is there, not
-/// at the next tick of a poll (it polled every 200 µs before, and a control
-/// call nests: a `nerve connect` waits for the router, which waits for the
-/// agent). This bound only covers a wake-up that never comes (a server that
-/// died after answering, before notifying).
-const MAX_REPLY_WAIT: Duration = Duration::from_millis(5);
+/// The longest sleep between two looks for a reply. A control call nests
+/// (a `nerve connect` waits for the router, which waits for the agent), so
+/// each level's polling granularity adds up: at 2 ms it was a good part of a
+/// 10 ms rewire. A waiting caller now looks at least every 200 µs, which
+/// costs a few thousand wake-ups a second only while a call is pending.
+const MAX_POLL_INTERVAL: Duration = Duration::from_micros(200);
 
 /// The serving side: receives requests and answers them.
 #[derive(Debug)]
@@ -213,8 +210,6 @@ pub struct ControlServer<Req, Resp> {
     size: ControlSize,
     server: Server<Ipc, Bytes, (), Bytes, ()>,
     listener: Listener<Ipc>,
-    /// wakes the callers when a reply is sent
-    replied: Arc<Notifier<Ipc>>,
     _types: PhantomData<fn(Req) -> Resp>,
 }
 
@@ -236,9 +231,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
             })?;
         let ev = open_event(node, service, size)?;
         let listener = ev.listener_builder().create().map_err(ipc_err(service, IpcOp::Listener))?;
-        let replies = reply_event(node, service, size)?;
-        let replied = Arc::new(replies.notifier_builder().create().map_err(ipc_err(service, IpcOp::Notifier))?);
-        Ok(ControlServer { service: service.into(), size, server, listener, replied, _types: PhantomData })
+        Ok(ControlServer { service: service.into(), size, server, listener, _types: PhantomData })
     }
 
     /// The listener that wakes when a request arrives (attach it to a WaitSet).
@@ -271,7 +264,6 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
         let req = decode::<Req>(active.payload());
         let responder = Responder {
             active: Some(active),
-            replied: self.replied.clone(),
             service: self.service.clone(),
             max_message: self.size.max_message,
             _types: PhantomData,
@@ -305,8 +297,6 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
 pub struct Responder<Resp> {
     /// `None` once answered
     active: Option<ActiveRequest<Ipc, Bytes, (), Bytes, ()>>,
-    /// the server's reply event
-    replied: Arc<Notifier<Ipc>>,
     service: String,
     max_message: Option<usize>,
     _types: PhantomData<fn(Resp)>,
@@ -340,10 +330,6 @@ impl<Resp> Responder<Resp> {
                 if let Err(e) = resp.write_from_slice(bytes).send() {
                     tracing::warn!(service = %self.service, "could not send a reply: {e:?}");
                 }
-                // wake the caller; one that misses it looks again within MAX_REPLY_WAIT
-                if let Err(e) = self.replied.notify() {
-                    tracing::debug!(service = %self.service, "could not signal the reply: {e:?}");
-                }
             }
             Err(e) => tracing::warn!(service = %self.service, "could not loan a reply: {e:?}"),
         }
@@ -366,8 +352,6 @@ pub struct ControlClient<Req, Resp> {
     size: ControlSize,
     client: Client<Ipc, Bytes, (), Bytes, ()>,
     notifier: Notifier<Ipc>,
-    /// wakes when the server has sent a reply (to this client or another)
-    replies: Listener<Ipc>,
     _types: PhantomData<fn(Req) -> Resp>,
 }
 
@@ -405,22 +389,7 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
             .map_err(ipc_err(service, IpcOp::Client))?;
         let ev = open_event(node, service, size)?;
         let notifier = ev.notifier_builder().create().map_err(ipc_err(service, IpcOp::Notifier))?;
-        let replies =
-            reply_event(node, service, size)?.listener_builder().create().map_err(ipc_err(service, IpcOp::Listener))?;
-        Ok(ControlClient { service: service.into(), size, client, notifier, replies, _types: PhantomData })
-    }
-
-    /// The listener that wakes when the server has sent a reply (to this
-    /// client or another of the service): a caller that keeps several calls
-    /// pending ([`ControlClient::send`]) attaches it to its WaitSet, and
-    /// drains it with [`ControlClient::drain_replies`] before it polls.
-    pub fn replies(&self) -> &Listener<Ipc> {
-        &self.replies
-    }
-
-    /// Takes the reply wake-ups that came, so that the next one wakes again.
-    pub fn drain_replies(&self) {
-        let _ = self.replies.try_wait(|_| {});
+        Ok(ControlClient { service: service.into(), size, client, notifier, _types: PhantomData })
     }
 
     /// The service this client calls.
@@ -458,9 +427,8 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
     /// Sends the request once and waits for the reply; `None` when no server
     /// took it (none connected, or the request was dropped unanswered).
     fn attempt(&self, bytes: &[u8], start: Instant, timeout: Duration) -> Result<Option<Resp>, ControlError> {
-        // wake-ups of earlier replies (to other callers) are no news for this one
-        self.drain_replies();
         let Some(pending) = self.send_bytes(bytes)? else { return Ok(None) };
+        let mut backoff = Duration::from_micros(10);
         loop {
             match pending.poll() {
                 Ok(Some(resp)) => return Ok(Some(resp)),
@@ -468,15 +436,11 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
                 Err(ControlError::NoServer { .. }) => return Ok(None),
                 Err(e) => return Err(e),
             }
-            let elapsed = start.elapsed();
-            if elapsed > timeout {
+            if start.elapsed() > timeout {
                 return Err(ControlError::Timeout { service: self.service.clone(), timeout });
             }
-            // a reply sent since the poll above has notified already: the wait returns at once
-            let wait = (timeout - elapsed).min(MAX_REPLY_WAIT);
-            if self.replies.timed_wait(|_| {}, wait).is_err() {
-                std::thread::sleep(wait.min(Duration::from_micros(200)));
-            }
+            std::thread::sleep(backoff);
+            backoff = (backoff * 2).min(MAX_POLL_INTERVAL);
         }
     }
 
@@ -561,25 +525,6 @@ fn open_event(
         .event()
         .max_notifiers(size.max_clients + 2)
         .max_listeners(2)
-        .max_nodes(size.max_nodes)
-        .open_or_create()
-        .map_err(ipc_err(service, IpcOp::Event))
-}
-
-/// The event a server notifies after each reply, which its waiting callers
-/// listen to: `SERVICE/replies`. One per service, shared by its callers (a
-/// caller woken by another's reply looks, finds nothing, and waits again).
-fn reply_event(
-    node: &Node<Ipc>,
-    service: &str,
-    size: ControlSize,
-) -> Result<iceoryx2::service::port_factory::event::PortFactory<Ipc>, ControlError> {
-    let replies = format!("{service}/replies");
-    let name: ServiceName = replies.as_str().try_into().map_err(ipc_err(service, IpcOp::Name))?;
-    node.service_builder(&name)
-        .event()
-        .max_notifiers(2)
-        .max_listeners(size.max_clients + 2)
         .max_nodes(size.max_nodes)
         .open_or_create()
         .map_err(ipc_err(service, IpcOp::Event))

@@ -15,7 +15,6 @@
 
 use agent_sdk::control::{ControlClient, ControlError, ControlSize, PendingCall};
 use agent_sdk::world::{Ipc, World};
-use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::Node;
 use shm_schemas::control::cli_to_router::RouterError;
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
@@ -127,19 +126,7 @@ impl Calls {
     }
 
     /// Sends what can be sent, collects replies and time-outs.
-    /// The reply listeners of the agents that owe a reply, for the router's
-    /// WaitSet: the router wakes when one answers instead of looking again
-    /// after a while.
-    pub fn reply_listeners(&self) -> impl Iterator<Item = &Listener<Ipc>> {
-        self.links.values().filter(|l| l.in_flight.is_some()).filter_map(|l| l.client.as_ref().map(|c| c.replies()))
-    }
-
     pub fn pump(&mut self, world: &World, node: &Node<Ipc>, now: Instant) -> Vec<Outcome> {
-        for l in self.links.values().filter(|l| l.in_flight.is_some()) {
-            if let Some(c) = &l.client {
-                c.drain_replies();
-            }
-        }
         let mut out = Vec::new();
         for (name, link) in self.links.iter_mut() {
             // at most a few rounds: a reply, then the next command sent

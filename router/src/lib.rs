@@ -61,10 +61,8 @@ pub use calls::{AGENT_TIMEOUT, STATS_TIMEOUT};
 /// How often liveness is checked.
 pub const LIVENESS_PERIOD: Duration = Duration::from_millis(250);
 /// The longest sleep between two looks for agents' replies while commands
-/// are in flight. An agent's reply wakes the router (its reply event is
-/// attached to the WaitSet while it owes one), so this only bounds a wake-up
-/// that never comes; it was the whole wait, at 200 µs, before replies woke.
-const MAX_POLL_INTERVAL: Duration = Duration::from_millis(2);
+/// are in flight.
+const MAX_POLL_INTERVAL: Duration = Duration::from_micros(200);
 
 /// Why the router could not start.
 #[derive(Debug, thiserror::Error)]
@@ -189,17 +187,8 @@ impl Router {
         loop {
             // While agents owe replies, look again soon; else sleep until a
             // request or the tick.
-            let busy = self.state.busy();
-            let wait = if busy { poll } else { LIVENESS_PERIOD };
-            // the agents that owe a reply wake the router when they answer
-            let replies: Vec<_> = if busy {
-                self.state.calls.reply_listeners().filter_map(|l| ws.attach_notification(l).ok()).collect()
-            } else {
-                Vec::new()
-            };
-            let waited = ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, wait);
-            drop(replies);
-            match waited {
+            let wait = if self.state.busy() { poll } else { LIVENESS_PERIOD };
+            match ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, wait) {
                 Ok(WaitSetRunResult::TerminationRequest) => break,
                 Ok(_) => {}
                 Err(e) => {
