@@ -366,6 +366,36 @@ impl Schema {
         Some(schema.decode_exact(b))
     }
 
+    /// Calls `visit(path, schema, lens)` for every field inside this type,
+    /// depth first in declaration order: `path` as [`Schema::field`] takes
+    /// it with `<i>` for an array's element (`fingers`, `fingers.<i>`,
+    /// `fingers.<i>.force_n`), `lens` the lengths of the arrays crossed to
+    /// get there, the last one that of the array an `<i>` node is the
+    /// element of. Empty arrays are not entered. For the lists tools print
+    /// when a path is wrong.
+    pub fn visit_fields(&self, mut visit: impl FnMut(&str, &Schema, &[usize])) {
+        fn walk(s: &Schema, prefix: &str, lens: &[usize], visit: &mut dyn FnMut(&str, &Schema, &[usize])) {
+            let join = |name: &str| if prefix.is_empty() { name.to_string() } else { format!("{prefix}.{name}") };
+            match &s.kind {
+                Kind::Struct { fields } => {
+                    for f in fields {
+                        let path = join(&f.name);
+                        visit(&path, &f.schema, lens);
+                        walk(&f.schema, &path, lens, visit);
+                    }
+                }
+                Kind::Array { len, element } if *len > 0 => {
+                    let path = join("<i>");
+                    let lens = [lens, &[*len]].concat();
+                    visit(&path, element, &lens);
+                    walk(element, &path, &lens, visit);
+                }
+                _ => {}
+            }
+        }
+        walk(self, "", &[], &mut visit);
+    }
+
     /// The schema of the field at `path` (`pose.x`, `ranges_m.3` for an
     /// array element), with its offset from the start of this type.
     pub fn field(&self, path: &str) -> Option<(usize, &Schema)> {

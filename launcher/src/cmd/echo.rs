@@ -18,7 +18,6 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use shm_schemas::control::cli_to_router::{CliRequest, RouterError, RouterReply};
-use shm_schemas::schema::Kind;
 use shm_schemas::services::port_attributes::fingerprint_text;
 use shm_schemas::{PortRef, SampleHeader, Schema};
 use std::io::Write;
@@ -196,29 +195,14 @@ fn selection(info: &PortInfo, port: &PortRef, field: Option<&str>) -> Result<(us
     }
 }
 
-/// Every field path of `schema` (`pose`, `pose.x`, `fingers.<i>` for an
-/// element of an array, `fingers.<i>.force_n`...).
+/// Every field path of `schema` (`pose`, `pose.x`, `fingers.<i> (0..3)`
+/// for an element of an array, `fingers.<i>.force_n`...).
 fn field_paths(schema: &Schema) -> Vec<String> {
-    fn walk(s: &Schema, prefix: &str, out: &mut Vec<String>) {
-        let join = |name: &str| if prefix.is_empty() { name.to_string() } else { format!("{prefix}.{name}") };
-        match &s.kind {
-            Kind::Struct { fields } => {
-                for f in fields {
-                    let path = join(&f.name);
-                    out.push(path.clone());
-                    walk(&f.schema, &path, out);
-                }
-            }
-            Kind::Array { len, element } if *len > 0 => {
-                let path = join("<i>");
-                out.push(format!("{path} (0..{len})"));
-                walk(element, &path, out);
-            }
-            _ => {}
-        }
-    }
     let mut out = Vec::new();
-    walk(schema, "", &mut out);
+    schema.visit_fields(|path, _, lens| match (path.ends_with("<i>"), lens.last()) {
+        (true, Some(len)) => out.push(format!("{path} (0..{len})")),
+        _ => out.push(path.to_string()),
+    });
     out
 }
 

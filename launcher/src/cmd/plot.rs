@@ -118,26 +118,13 @@ pub fn numeric(v: &Value) -> Option<f64> {
 /// Every numeric field path of `schema`: `pose.x`, and `ranges_m.<i>` or
 /// `fingers.<i>.force_n` for the elements of an array (with the indices it has).
 pub fn numeric_paths(schema: &Schema) -> Vec<String> {
-    fn walk(s: &Schema, prefix: &str, ranges: &[usize], out: &mut Vec<String>) {
-        let join = |name: &str| if prefix.is_empty() { name.to_string() } else { format!("{prefix}.{name}") };
-        match &s.kind {
-            Kind::Primitive { .. } if !prefix.is_empty() => {
-                let note: Vec<String> = ranges.iter().map(|len| format!("<i> < {len}")).collect();
-                out.push(if note.is_empty() { prefix.to_string() } else { format!("{prefix} ({})", note.join(", ")) });
-            }
-            Kind::Struct { fields } => {
-                for f in fields {
-                    walk(&f.schema, &join(&f.name), ranges, out);
-                }
-            }
-            Kind::Array { len, element } if *len > 0 => {
-                walk(element, &join("<i>"), &[ranges, &[*len]].concat(), out);
-            }
-            _ => {}
-        }
-    }
     let mut out = Vec::new();
-    walk(schema, "", &[], &mut out);
+    schema.visit_fields(|path, s, lens| {
+        if matches!(s.kind, Kind::Primitive { .. }) {
+            let note: Vec<String> = lens.iter().map(|len| format!("<i> < {len}")).collect();
+            out.push(if note.is_empty() { path.to_string() } else { format!("{path} ({})", note.join(", ")) });
+        }
+    });
     out
 }
 
