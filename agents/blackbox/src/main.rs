@@ -204,7 +204,7 @@ impl Blackbox {
         let mut changed = Vec::new();
         for w in &mut self.watched {
             let h = &self.memory.ports[w.index];
-            let (schema, port) = (h.schema.clone(), h.port.clone());
+            let (schema, port) = (&h.schema, &h.port);
             let mut got: Vec<Kept> = Vec::new();
             let mut images: Vec<KeptImage> = Vec::new();
             let buf = &mut self.buf;
