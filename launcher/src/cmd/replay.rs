@@ -44,8 +44,9 @@ pub struct ReplayArgs {
     #[arg(long = "loop")]
     pub repeat: bool,
     /// Replay only these recorded agents (`NAME`), or under another name
-    /// (`NAME=NEW`). Default: every agent of the recording, under its own name.
-    #[arg(long = "as", value_name = "AGENT[=NEW]")]
+    /// (`NAME=NEW`); several may follow one `--as` (`--as g t1`), or each
+    /// its own. Default: every agent of the recording, under its own name.
+    #[arg(long = "as", value_name = "AGENT[=NEW]", num_args = 1..)]
     pub agents: Vec<String>,
     /// Seconds to wait after the replayed agents registered, before the
     /// first sample (time for readers to connect).
