@@ -60,6 +60,13 @@ pub use supervision::{MAX_BACKOFF, MAX_SUPERVISED};
 pub use calls::{AGENT_TIMEOUT, STATS_TIMEOUT};
 /// How often liveness is checked.
 pub const LIVENESS_PERIOD: Duration = Duration::from_millis(250);
+/// How often the shared memory of dead processes that are not agents (a
+/// killed `nerve echo`, a crashed program) is cleaned up. The router is the
+/// robot's janitor: agents and tools no longer scan every node of the robot
+/// when they create or drop their own (iceoryx2's
+/// `cleanup_dead_nodes_on_creation`/`_on_destruction`, see
+/// [`agent_sdk::world::World::new`]); a dead agent's are cleaned at once.
+const SWEEP_PERIOD: Duration = Duration::from_secs(5);
 /// The longest sleep between two looks for agents' replies while commands
 /// are in flight.
 const MAX_POLL_INTERVAL: Duration = Duration::from_micros(200);
@@ -153,6 +160,7 @@ impl Router {
                 registry: registry::Registry::default(),
                 wiring: wiring::Wiring::new(connections),
                 store,
+                saves: store::ListSaves::default(),
                 writer: store::Writer::start()
                     .map_err(|e| StartError::Other(format!("cannot start the persisting thread: {e}")))?,
                 supervisor,
@@ -181,28 +189,51 @@ impl Router {
         let _cli = ws.attach_notification(self.cli_server.listener()).map_err(|e| format!("{e:?}"))?;
         let _tick = ws.attach_interval(LIVENESS_PERIOD).map_err(|e| format!("{e:?}"))?;
         let mut last_liveness = Instant::now();
+        let mut last_sweep = Instant::now();
         let watchdog = agent_sdk::daemon::watchdog_interval();
         let mut last_ping = Instant::now();
         let mut poll = Duration::from_micros(10);
+        let mut tidy = Tidy::default();
         loop {
-            // While agents owe replies, look again soon; else sleep until a
-            // request or the tick.
-            let wait = if self.state.busy() { poll } else { LIVENESS_PERIOD };
-            match ws.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, wait) {
-                Ok(WaitSetRunResult::TerminationRequest) => break,
-                Ok(_) => {}
-                Err(e) => {
-                    tracing::warn!("router wait failed: {e:?}");
-                    std::thread::sleep(Duration::from_millis(50));
+            // While agents owe replies (or the disk a write), look again
+            // soon; else sleep until a request or the tick. The WaitSet
+            // counts its time-out in whole milliseconds (epoll), which made
+            // every stage of a rewire wait 1 ms: a busy router sleeps by
+            // itself instead, and a request coming meanwhile is taken at the
+            // next look, at most MAX_POLL_INTERVAL later. A SIGTERM meanwhile
+            // is kept by iceoryx2's handler for the next wait (a busy spell
+            // ends with its jobs' time-outs).
+            if self.state.busy() {
+                std::thread::sleep(poll);
+            } else {
+                let wait = tidy.next().map_or(LIVENESS_PERIOD, |at| at.saturating_duration_since(Instant::now()));
+                match ws
+                    .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, wait.min(LIVENESS_PERIOD))
+                {
+                    Ok(WaitSetRunResult::TerminationRequest) => break,
+                    Ok(_) => {}
+                    Err(e) => {
+                        tracing::warn!("router wait failed: {e:?}");
+                        std::thread::sleep(Duration::from_millis(50));
+                    }
                 }
             }
             let mut progressed = false;
-            for server in [&self.server, &self.cli_server] {
+            for (server, tool) in [(&self.server, false), (&self.cli_server, true)] {
                 server.drain_wakeups();
                 loop {
-                    match server.receive() {
+                    let t = Instant::now();
+                    let got = server.receive();
+                    if t.elapsed() > Duration::from_micros(300) {
+                        // iceoryx2 connected a new client or cleaned up one that left
+                        tracing::debug!(us = t.elapsed().as_micros() as u64, tool, "slow receive");
+                    }
+                    match got {
                         Ok(Some((req, responder))) => {
                             progressed = true;
+                            if tool {
+                                tidy.after_request(Instant::now());
+                            }
                             self.state.accept(req, responder);
                         }
                         Ok(None) => break,
@@ -218,9 +249,18 @@ impl Router {
             if self.state.shutdown && self.state.jobs.is_empty() {
                 break;
             }
+            if tidy.due(Instant::now()) {
+                let t = Instant::now();
+                self.cli_server.tidy();
+                tracing::trace!(us = t.elapsed().as_micros() as u64, "tidied the tools' service");
+            }
             if last_liveness.elapsed() >= LIVENESS_PERIOD {
                 last_liveness = Instant::now();
                 self.state.check_liveness();
+                if last_sweep.elapsed() >= SWEEP_PERIOD {
+                    last_sweep = Instant::now();
+                    self.state.sweep();
+                }
                 self.state.run_restarts();
                 self.state.forget_gone();
                 self.server.tidy();
@@ -237,6 +277,46 @@ impl Router {
         self.state.writer.flush();
         tracing::info!("router stopped");
         Ok(())
+    }
+}
+
+/// When to tidy the tools' service after a request. A `nerve` command exits
+/// a few milliseconds after its reply, and iceoryx2 cleans up a client that
+/// left at the server's next `receive`, walking every slot of its connection
+/// (about 1 ms, 3.6 ms before [`agent_sdk::control`] trimmed the slots): on
+/// the next caller's time, unless the router does it first while idle. It
+/// looks every [`Tidy::EVERY`] for [`Tidy::FOR`] after each request (a look
+/// that finds nobody gone costs a read of the service's client list); a
+/// command still there after that is left for the liveness tick.
+#[derive(Debug, Default)]
+struct Tidy {
+    next: Option<Instant>,
+    until: Option<Instant>,
+}
+
+impl Tidy {
+    const EVERY: Duration = Duration::from_millis(4);
+    const FOR: Duration = Duration::from_millis(60);
+
+    fn after_request(&mut self, now: Instant) {
+        self.next = Some(now + Self::EVERY);
+        self.until = Some(now + Self::FOR);
+    }
+
+    /// The next look, if one is due.
+    fn next(&self) -> Option<Instant> {
+        self.next
+    }
+
+    /// Whether a look is due at `now`; takes it and plans the next.
+    fn due(&mut self, now: Instant) -> bool {
+        match (self.next, self.until) {
+            (Some(at), Some(until)) if at <= now => {
+                self.next = Some(now + Self::EVERY).filter(|n| *n <= until);
+                true
+            }
+            _ => false,
+        }
     }
 }
 
@@ -275,6 +355,31 @@ pub fn reset_realtime_on_fork() {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_tools_service_is_tidied_for_a_while_after_a_request_and_then_left_alone() {
+        let t0 = Instant::now();
+        let mut tidy = Tidy::default();
+        assert_eq!(tidy.next(), None);
+        assert!(!tidy.due(t0));
+        tidy.after_request(t0);
+        assert_eq!(tidy.next(), Some(t0 + Tidy::EVERY));
+        assert!(!tidy.due(t0));
+        let mut looks = 0;
+        let mut now = t0;
+        while let Some(at) = tidy.next() {
+            now = at;
+            assert!(tidy.due(now));
+            looks += 1;
+            assert!(looks <= 100, "the looks end");
+        }
+        assert_eq!(looks, (Tidy::FOR.as_millis() / Tidy::EVERY.as_millis()) as usize);
+        assert!(now <= t0 + Tidy::FOR);
+        assert!(!tidy.due(t0 + Duration::from_secs(1)));
+        // a new request starts the looks again
+        tidy.after_request(now);
+        assert!(tidy.due(now + Tidy::EVERY));
+    }
 
     #[test]
     fn a_real_time_router_starts_its_children_under_the_normal_policy() {

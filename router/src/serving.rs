@@ -17,7 +17,7 @@ use crate::calls::{AGENT_TIMEOUT, Calls, Outcome, STATS_TIMEOUT, Ticket};
 use crate::events::EventLog;
 use crate::registry::Registry;
 use crate::remembered::{self, FORGET_AFTER, Remembered};
-use crate::store::{Connection, Saved, Store, Writer};
+use crate::store::{Connection, ListSaves, Saved, Store, Writer};
 use crate::supervision::{Exit, Supervisor};
 use crate::wiring::Wiring;
 use agent_sdk::control::Responder;
@@ -56,9 +56,24 @@ enum Work {
     /// re-applying remembered state or a connection to a re-registered
     /// agent: logged, nobody waits
     Background { name: String, what: String, effect: Asked },
-    /// `connect`/`disconnect` done: answered once the connection list is on
-    /// disk (review R11a)
-    Saved { saved: Saved, what: String },
+    /// `connect`/`disconnect` done (or refused: `refused`): answered once
+    /// the connection list is on disk (review R11a)
+    Saved { saved: Saved, what: String, refused: Option<RouterError> },
+}
+
+impl Work {
+    /// A short name for the debug log.
+    fn label(&self) -> &'static str {
+        match self {
+            Work::Views { .. } => "views",
+            Work::Connect { .. } => "connect",
+            Work::Disconnect { .. } => "disconnect",
+            Work::Command { .. } => "command",
+            Work::Kill { .. } => "kill",
+            Work::Background { .. } => "background",
+            Work::Saved { .. } => "saved",
+        }
+    }
 }
 
 /// A command whose success changes what the router records.
@@ -84,6 +99,9 @@ pub struct Job {
     waiting: Vec<Ticket>,
     outcomes: Vec<Outcome>,
     work: Work,
+    /// when the request came (kept across the wait for the disk), for the
+    /// debug log's timings
+    since: Instant,
 }
 
 /// Everything the router knows.
@@ -95,6 +113,8 @@ pub struct State {
     pub(crate) wiring: Wiring,
     pub(crate) store: Store,
     pub(crate) writer: Writer,
+    /// the connection list's saves
+    pub(crate) saves: ListSaves,
     pub(crate) supervisor: Supervisor,
     pub(crate) remembered: Remembered,
     pub(crate) calls: Calls,
@@ -142,7 +162,7 @@ impl State {
                 Ok(Started::Answer(reply)) => responder.respond_or(&reply, protocol_error),
                 Ok(Started::Job(mut job)) => {
                     job.reply = Some(responder);
-                    self.jobs.push(job);
+                    self.jobs.push(*job);
                 }
                 Err(e) => responder.respond_or(&RouterReply::Error(e), protocol_error),
             },
@@ -210,7 +230,7 @@ impl State {
         for (cmd, what, effect) in todo {
             let ticket = self.calls.submit(name, cmd, AGENT_TIMEOUT);
             let work = Work::Background { name: name.into(), what: format!("re-applied to {name}: {what}"), effect };
-            self.jobs.push(Job { reply: None, waiting: vec![ticket], outcomes: vec![], work });
+            self.jobs.push(Job { reply: None, waiting: vec![ticket], outcomes: vec![], work, since: Instant::now() });
         }
     }
 
@@ -225,7 +245,7 @@ impl State {
                 what: format!("rewired {} -> {}", c.from, c.to),
                 effect: Asked::Nothing,
             };
-            self.jobs.push(Job { reply: None, waiting: vec![ticket], outcomes: vec![], work });
+            self.jobs.push(Job { reply: None, waiting: vec![ticket], outcomes: vec![], work, since: Instant::now() });
         }
     }
 
@@ -267,6 +287,11 @@ impl State {
             self.calls.left(name);
             self.exited(name, true);
         }
+        self.sweep();
+    }
+
+    /// Cleans up after dead processes that were not agents (tools, programs).
+    pub fn sweep(&mut self) {
         let cleaned = self.world.cleanup_dead_nodes();
         if cleaned > 0 {
             tracing::info!(cleaned, "cleaned the shared-memory resources of {cleaned} dead node(s)");
@@ -322,13 +347,35 @@ impl State {
 
     /// Hands the connection list to the writer thread, which saves it off
     /// the request path (its fsyncs take 10-60 ms on a busy disk).
-    fn persist_wiring(&self) -> Saved {
-        self.writer.save(&self.store, self.wiring.list())
+    fn persist_wiring(&mut self) -> Saved {
+        let list = self.wiring.list().to_vec();
+        self.persist_list(&list)
+    }
+
+    /// Queues `list` for the disk (see [`ListSaves`]: a rewire queues the
+    /// list it expects while the agent works).
+    fn persist_list(&mut self, list: &[Connection]) -> Saved {
+        self.saves.save(&self.writer, &self.store, list)
+    }
+
+    /// Answers a rewire the agent refused once the list is back on disk as
+    /// it is: the list it was expected to become may have been written
+    /// meanwhile ([`State::persist_list`]).
+    fn answer_when_written_back(&mut self, reply: Option<Responder<RouterReply>>, since: Instant, e: RouterError) {
+        let saved = self.persist_wiring();
+        let work = Work::Saved { saved, what: String::new(), refused: Some(e) };
+        self.jobs.push(Job { reply, waiting: Vec::new(), outcomes: Vec::new(), work, since });
     }
 
     /// The job that answers `what` (done) once save `saved` is on disk.
     fn when_saved(saved: Saved, what: String) -> Job {
-        Job { reply: None, waiting: Vec::new(), outcomes: Vec::new(), work: Work::Saved { saved, what } }
+        Job {
+            reply: None,
+            waiting: Vec::new(),
+            outcomes: Vec::new(),
+            work: Work::Saved { saved, what, refused: None },
+            since: Instant::now(),
+        }
     }
 
     /// Whether jobs wait for something the loop must look at soon.
@@ -379,6 +426,10 @@ impl State {
                 let conn = Connection { from: from.to_string(), to: to.to_string(), type_name: from_type, allow_cycle };
                 let (agent, cmd) = Wiring::connect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
+                let mut expected = Wiring::new(self.wiring.list().to_vec());
+                if expected.add(conn.clone()) {
+                    self.persist_list(expected.list());
+                }
                 Ok(Started::waiting(vec![ticket], Work::Connect { conn }))
             }
             CliRequest::Disconnect { from, to } => {
@@ -392,10 +443,13 @@ impl State {
                     self.events.push(EventKind::Disconnected { from: f.clone(), to: t.clone() });
                     let saved = self.persist_wiring();
                     tracing::info!(from = %f, to = %t, "disconnected {f} -> {t}");
-                    return Ok(Started::Job(Self::when_saved(saved, format!("disconnected {f} -> {t}"))));
+                    return Ok(Started::Job(Box::new(Self::when_saved(saved, format!("disconnected {f} -> {t}")))));
                 }
                 let (agent, cmd) = Wiring::disconnect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
+                let mut expected = Wiring::new(self.wiring.list().to_vec());
+                expected.remove(&f, &t);
+                self.persist_list(expected.list());
                 Ok(Started::waiting(vec![ticket], Work::Disconnect { conn }))
             }
             CliRequest::Rate { name, period_ns } => {
@@ -482,7 +536,9 @@ impl State {
     }
 
     fn finish(&mut self, job: Job) {
-        let Job { reply, mut outcomes, work, .. } = job;
+        let Job { reply, mut outcomes, work, since, .. } = job;
+        let label = work.label();
+        tracing::debug!(job = label, us = since.elapsed().as_micros() as u64, "job ready");
         let mut single = || {
             outcomes
                 .pop()
@@ -513,11 +569,11 @@ impl State {
                     if self.wiring.add(conn) {
                         self.events.push(event);
                         let saved = self.persist_wiring();
-                        return self.jobs.push(Job { reply, ..Self::when_saved(saved, what) });
+                        return self.jobs.push(Job { reply, since, ..Self::when_saved(saved, what) });
                     }
                     Ok(RouterReply::Ok)
                 }
-                Err(e) => Err(e),
+                Err(e) => return self.answer_when_written_back(reply, since, e),
             },
             Work::Disconnect { conn } => match single() {
                 // it let go, or it did not have it: either way nothing flows
@@ -527,16 +583,19 @@ impl State {
                     let saved = self.persist_wiring();
                     tracing::info!(from = %conn.from, to = %conn.to, "disconnected {} -> {}", conn.from, conn.to);
                     let what = format!("disconnected {} -> {}", conn.from, conn.to);
-                    return self.jobs.push(Job { reply, ..Self::when_saved(saved, what) });
+                    return self.jobs.push(Job { reply, since, ..Self::when_saved(saved, what) });
                 }
-                Err(RouterError::AgentUnreachable { name, detail }) => Err(RouterError::AgentUnreachable {
-                    detail: format!(
-                        "{detail}; {} -> {} stays in the connection list since {name} may still read it: try again, or `nerve kill {name}` and disconnect then",
-                        conn.from, conn.to
-                    ),
-                    name,
-                }),
-                Err(e) => Err(e),
+                Err(RouterError::AgentUnreachable { name, detail }) => {
+                    let e = RouterError::AgentUnreachable {
+                        detail: format!(
+                            "{detail}; {} -> {} stays in the connection list since {name} may still read it: try again, or `nerve kill {name}` and disconnect then",
+                            conn.from, conn.to
+                        ),
+                        name,
+                    };
+                    return self.answer_when_written_back(reply, since, e);
+                }
+                Err(e) => return self.answer_when_written_back(reply, since, e),
             },
             Work::Command { name, what } => single().map(|reply| self.obeyed(&name, &what, reply)),
             Work::Kill { name, process, .. } => {
@@ -547,7 +606,8 @@ impl State {
                 }
                 Ok(RouterReply::Ok)
             }
-            Work::Saved { saved, what } => match self.writer.outcome(saved) {
+            Work::Saved { refused: Some(e), .. } => Err(e),
+            Work::Saved { saved, what, refused: None } => match self.writer.outcome(saved) {
                 Some(Err(detail)) => {
                     Err(RouterError::NotSaved { what, file: self.store.path().display().to_string(), detail })
                 }
@@ -564,6 +624,9 @@ impl State {
                 return;
             }
         };
+        if reply.is_some() {
+            tracing::debug!(job = label, us = since.elapsed().as_micros() as u64, "answered");
+        }
         answer(reply, result);
     }
 
@@ -663,11 +726,11 @@ enum Started {
     /// answered at once
     Answer(RouterReply),
     /// waits for agents
-    Job(Job),
+    Job(Box<Job>),
 }
 
 impl Started {
     fn waiting(tickets: Vec<Ticket>, work: Work) -> Started {
-        Started::Job(Job { reply: None, waiting: tickets, outcomes: Vec::new(), work })
+        Started::Job(Box::new(Job { reply: None, waiting: tickets, outcomes: Vec::new(), work, since: Instant::now() }))
     }
 }
