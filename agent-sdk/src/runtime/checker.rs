@@ -77,13 +77,20 @@ impl Checker<'_> {
             tracing::error!("cannot attach the control service to the WaitSet");
             return;
         };
+        let mut cpu = CpuMeter::default();
+        // The router sends a hot-added agent its connections as soon as it
+        // has registered: they are served before the epoch is watched
+        // (about 1 ms of iceoryx2 set-up), which is not on that path.
+        if self.serve(server, &cpu) {
+            return;
+        }
+        link.watch_epoch(self.world, self.node);
         // a restarted router wakes the checker at once (its epoch event)
         let epoch_wake = link.take_epoch_wake();
         let epoch_guard = epoch_wake.as_ref().and_then(|l| ws.attach_notification(l).ok());
         let watchdog = watchdog_interval();
         let tick = housekeeping_interval(watchdog);
         let mut guard = self.guard.borrow_mut().take();
-        let mut cpu = CpuMeter::default();
         let mut last_cpu = 0u64;
         let mut last_ping = Instant::now();
         let mut next_tick = Instant::now() + tick;
@@ -127,22 +134,7 @@ impl Checker<'_> {
             if let Some((task, g, priority)) = &mut guard {
                 self.guard_task(task, g, *priority, now_ns);
             }
-            let mut stop_now = false;
-            if let Err(e) = server.serve(|req| match req {
-                Ok(AgentCommand::Stop) => {
-                    stop_now = true;
-                    AgentReply::Ok
-                }
-                Ok(cmd) => self.handle(cmd, &cpu),
-                Err(e) => AgentReply::Error(e.to_string()),
-            }) {
-                tracing::warn!("control service failed: {e}");
-            }
-            if stop_now {
-                tracing::info!("stop requested");
-                return;
-            }
-            if self.shared.stopping() {
+            if self.serve(server, &cpu) || self.shared.stopping() {
                 return;
             }
             // cheap (one receive on the epoch subscriber) unless registering is due
@@ -160,6 +152,25 @@ impl Checker<'_> {
                 }
             }
         }
+    }
+
+    /// Answers the commands that came; whether one was a stop.
+    fn serve(&self, server: &ControlServer<AgentCommand, AgentReply>, cpu: &CpuMeter) -> bool {
+        let mut stop_now = false;
+        if let Err(e) = server.serve(|req| match req {
+            Ok(AgentCommand::Stop) => {
+                stop_now = true;
+                AgentReply::Ok
+            }
+            Ok(cmd) => self.handle(cmd, cpu),
+            Err(e) => AgentReply::Error(e.to_string()),
+        }) {
+            tracing::warn!("control service failed: {e}");
+        }
+        if stop_now {
+            tracing::info!("stop requested");
+        }
+        stop_now
     }
 
     /// Demotes a real-time task that runs away, and restores it once calm
@@ -252,20 +263,23 @@ impl Checker<'_> {
                         inp.type_name()
                     ));
                 }
+                let _rewire =
+                    tracing::info_span!("connect", input = %input, peer = %format_args!("{from_agent}/{from_port}"))
+                        .entered();
                 let t0 = now_ns();
                 match inp.connect(self.node, self.world.robot(), &from_agent, &from_port) {
                     Ok(changed) => {
-                        tracing::debug!(
-                            "subscribed {input} to {from_agent}/{from_port} in {} us",
-                            (now_ns() - t0) / 1000
-                        );
+                        tracing::debug!(us = (now_ns() - t0) / 1000, "subscribed");
                         if changed {
                             tracing::info!("input {input} now reads {from_agent}/{from_port}");
                             self.changed_inputs();
                         }
                         AgentReply::Ok
                     }
-                    Err(e) => AgentReply::Error(e.to_string()),
+                    Err(e) => {
+                        tracing::warn!("cannot subscribe: {e}");
+                        AgentReply::Error(e.to_string())
+                    }
                 }
             }
             AgentCommand::Disconnect { input, from_agent, from_port } => {
@@ -273,6 +287,9 @@ impl Checker<'_> {
                     Ok(i) => i,
                     Err(e) => return AgentReply::Error(e),
                 };
+                let _rewire =
+                    tracing::info_span!("disconnect", input = %input, peer = %format_args!("{from_agent}/{from_port}"))
+                        .entered();
                 if inp.disconnect(&from_agent, &from_port) {
                     tracing::info!("input {input} no longer reads {from_agent}/{from_port}");
                     self.changed_inputs();

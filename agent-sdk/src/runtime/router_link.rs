@@ -135,8 +135,9 @@ impl RouterLink {
         RouterLink { client: None, epoch: None, epoch_wake: None, router_pid: None, registrar: Registrar::new() }
     }
 
-    /// Subscribes to the router's epoch. Done after the first registration,
-    /// which is on the path of a hot-add: the subscription keeps the latest
+    /// Subscribes to the router's epoch. Done by the message checker once it
+    /// has served the connections the router sent at registration, which
+    /// are on the path of a hot-add: the subscription keeps the latest
     /// epoch (history 1), so a router that restarted in between is still
     /// noticed by the next [`RouterLink::poll`].
     pub(super) fn watch_epoch(&mut self, world: &World, node: &Node<Ipc>) {

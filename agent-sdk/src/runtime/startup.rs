@@ -8,7 +8,7 @@ use super::router_link::{RegisterError, RouterLink};
 use super::runaway;
 use super::task::{SuspendGate, task_main};
 use super::{Shared, TaskFigures};
-use crate::agent::{Agent, Setup, Task};
+use crate::agent::{Agent, AgentError, Setup, Task};
 use crate::cli::CommonArgs;
 use crate::clock::{now_ns, parse_duration};
 use crate::control::{ControlError, ControlServer, ControlSize};
@@ -27,6 +27,86 @@ use std::time::{Duration, Instant};
 /// Exit code when the agent could not start (bad arguments, duplicate name, device).
 pub const EXIT_STARTUP: u8 = 1;
 
+/// Why an agent could not start. Each keeps its cause; the message is what
+/// `nerve start` prints.
+#[derive(Debug, thiserror::Error)]
+pub enum StartupError {
+    /// The robot's world (its folders, its iceoryx2 node).
+    #[error(transparent)]
+    World(#[from] crate::world::WorldError),
+    /// `--name` is not a valid agent name.
+    #[error("invalid --name: {0}")]
+    Name(#[source] shm_schemas::NameError),
+    /// `--period` cannot be read, or is given to an event-driven agent.
+    #[error("--period: {0}")]
+    Period(String),
+    /// Another agent of this name runs.
+    #[error(
+        "an agent named {name:?} is already running on robot {robot}; choose another --name, or stop it first with `nerve stop {name}`"
+    )]
+    AlreadyRunning {
+        /// the name
+        name: String,
+        /// the robot
+        robot: String,
+    },
+    /// The agent's control service could not be served.
+    #[error(transparent)]
+    Control(#[from] ControlError),
+    /// The task's wake-up event could not be made.
+    #[error("cannot create the task's wake-up event {service}: {source}")]
+    WakeEvent {
+        /// the event service
+        service: String,
+        /// what iceoryx2 said
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// The agent's own `new` or `start` failed (a port, a device, its configuration).
+    #[error("{kind} {name:?} could not start: {source}")]
+    Agent {
+        /// its kind
+        kind: &'static str,
+        /// its name
+        name: String,
+        /// what it said
+        #[source]
+        source: AgentError,
+    },
+    /// A `--param KEY=VALUE` setting was refused.
+    #[error("--param {setting}: {reason}")]
+    Param {
+        /// the setting as given
+        setting: String,
+        /// why
+        reason: String,
+    },
+    /// The router refused the registration.
+    #[error(transparent)]
+    Refused(shm_schemas::control::cli_to_router::RouterError),
+    /// The task thread could not be started.
+    #[error("cannot start the task thread: {0}")]
+    Thread(#[source] std::io::Error),
+    /// The task ended while the agent started (a panic, a stop).
+    #[error("{kind} {name:?} stopped while starting")]
+    StoppedWhileStarting {
+        /// its kind
+        kind: &'static str,
+        /// its name
+        name: String,
+    },
+    /// It could not become a daemon.
+    #[error("cannot daemonize: {0}")]
+    Daemon(#[source] std::io::Error),
+    /// `--describe` could not write the description.
+    #[error("cannot describe the agent: {0}")]
+    Describe(#[source] serde_json::Error),
+}
+
+fn wake_err<E: std::error::Error + Send + Sync + 'static>(service: &str) -> impl FnOnce(E) -> StartupError {
+    move |e| StartupError::WakeEvent { service: service.into(), source: Box::new(e) }
+}
+
 /// Runs agent `A` with the common command line; the body of an agent's `main`.
 pub fn run<A: Agent>() -> ExitCode {
     let args = <CommonArgs as clap::Parser>::parse();
@@ -39,10 +119,10 @@ pub fn run_with_args<A: Agent>(args: CommonArgs) -> ExitCode {
     let mut readiness = Readiness::foreground();
     let world = match World::new(&args.robot) {
         Ok(w) => w,
-        Err(e) => return startup_error(&mut readiness, &e.to_string()),
+        Err(e) => return startup_error(&mut readiness, &e.into()),
     };
     if let Err(e) = AgentName::new(&name) {
-        return startup_error(&mut readiness, &format!("invalid --name: {e}"));
+        return startup_error(&mut readiness, &StartupError::Name(e));
     }
     if args.describe {
         return match describe::<A>(&args) {
@@ -55,21 +135,23 @@ pub fn run_with_args<A: Agent>(args: CommonArgs) -> ExitCode {
     }
     if args.daemon {
         if let Err(e) = world.ensure_state_dirs() {
-            return startup_error(&mut readiness, &e.to_string());
+            return startup_error(&mut readiness, &e.into());
         }
         match daemonize(&world.log_file(&name), &world.pid_file(&name)) {
             Ok(r) => readiness = r,
-            Err(e) => return startup_error(&mut readiness, &format!("cannot daemonize: {e}")),
+            Err(e) => return startup_error(&mut readiness, &StartupError::Daemon(e)),
         }
     }
     init_logging(&name, args.log_level.as_deref());
     match start::<A>(&args, &name, world, &mut readiness) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(msg) => startup_error(&mut readiness, &msg),
+        Err(e) => startup_error(&mut readiness, &e),
     }
 }
 
-fn startup_error(readiness: &mut Readiness, msg: &str) -> ExitCode {
+fn startup_error(readiness: &mut Readiness, e: &StartupError) -> ExitCode {
+    let msg = e.to_string();
+    let msg = msg.as_str();
     tracing::error!("{msg}");
     if readiness.pid_file().is_none() {
         eprintln!("error: {msg}");
@@ -80,8 +162,8 @@ fn startup_error(readiness: &mut Readiness, msg: &str) -> ExitCode {
 
 /// The agent's description, made by running [`Agent::new`] in a private,
 /// throw-away world (so authors must open devices in [`Agent::start`], not in `new`).
-fn describe<A: Agent>(args: &CommonArgs) -> Result<String, String> {
-    let world = World::new(&format!("describe-{}", std::process::id())).map_err(|e| e.to_string())?;
+fn describe<A: Agent>(args: &CommonArgs) -> Result<String, StartupError> {
+    let world = World::new(&format!("describe-{}", std::process::id()))?;
     let result = describe_in::<A>(args, &world);
     // iceoryx2 keeps a management file per prefix; this world is private and
     // gone, whether the agent could be described or not
@@ -91,12 +173,13 @@ fn describe<A: Agent>(args: &CommonArgs) -> Result<String, String> {
     result
 }
 
-fn describe_in<A: Agent>(args: &CommonArgs, world: &World) -> Result<String, String> {
+fn describe_in<A: Agent>(args: &CommonArgs, world: &World) -> Result<String, StartupError> {
     use shm_schemas::control::describe::Description;
-    let node = Arc::new(world.node("describe").map_err(|e| e.to_string())?);
+    let node = Arc::new(world.node("describe")?);
     let mut setup =
-        Setup::new(world.clone(), AgentName::new(A::KIND).map_err(|e| e.to_string())?, node, args.args.clone());
-    let agent = A::new(&mut setup).map_err(|e| format!("{} could not be set up: {e}", A::KIND))?;
+        Setup::new(world.clone(), AgentName::new(A::KIND).map_err(StartupError::Name)?, node, args.args.clone());
+    let agent =
+        A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::KIND, name: A::KIND.into(), source })?;
     apply_params(&setup.params, &args.params)?;
     let (task, default_period_ns) = match A::task() {
         Task::Periodic(p) => (TaskKind::Periodic, Some(crate::clock::nanos(p))),
@@ -113,26 +196,28 @@ fn describe_in<A: Agent>(args: &CommonArgs, world: &World) -> Result<String, Str
     };
     drop(agent);
     drop(setup);
-    serde_json::to_string(&d).map_err(|e| e.to_string())
+    serde_json::to_string(&d).map_err(StartupError::Describe)
 }
 
 /// Applies `--param KEY=VALUE` settings.
-fn apply_params(table: &ParamTable, settings: &[String]) -> Result<(), String> {
+fn apply_params(table: &ParamTable, settings: &[String]) -> Result<(), StartupError> {
     for s in settings {
-        let (k, v) = s.split_once('=').ok_or_else(|| format!("--param {s:?}: write KEY=VALUE"))?;
-        table.set(k.trim(), v).map_err(|e| format!("--param {s}: {e}"))?;
+        let (k, v) = s
+            .split_once('=')
+            .ok_or_else(|| StartupError::Param { setting: format!("{s:?}"), reason: "write KEY=VALUE".into() })?;
+        table.set(k.trim(), v).map_err(|reason| StartupError::Param { setting: s.clone(), reason })?;
     }
     Ok(())
 }
 
-fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut Readiness) -> Result<(), String> {
-    let agent_name = AgentName::new(name).map_err(|e| e.to_string())?;
+fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut Readiness) -> Result<(), StartupError> {
+    let agent_name = AgentName::new(name).map_err(StartupError::Name)?;
     let task_kind = A::task();
     let period = match (task_kind, &args.period) {
         (Task::Periodic(default), None) => Some(default),
-        (Task::Periodic(_), Some(p)) => Some(parse_duration(p).map_err(|e| format!("--period: {e}"))?),
+        (Task::Periodic(_), Some(p)) => Some(parse_duration(p).map_err(|e| StartupError::Period(e.to_string()))?),
         (Task::EventDriven, Some(_)) => {
-            return Err(format!("agent kind {} is event-driven; it takes no --period", A::KIND));
+            return Err(StartupError::Period(format!("agent kind {} is event-driven; it takes no --period", A::KIND)));
         }
         (Task::EventDriven, None) => None,
     };
@@ -144,37 +229,39 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         }
     }
 
+    // every line of the start-up says so, with the agent's name and kind
+    let startup = tracing::info_span!("start-up", agent = name, kind = A::KIND).entered();
     let t_start = Instant::now();
-    let stage = |what: &str| tracing::debug!("start-up: {what} at {} us", t_start.elapsed().as_micros());
-    let node = Arc::new(world.node(name).map_err(|e| e.to_string())?);
+    let stage = |what: &str| tracing::debug!(us = t_start.elapsed().as_micros() as u64, "{what}");
+    let node = Arc::new(world.node(name)?);
     stage("node created");
     let ctl_service = world.robot().ctl_service(&agent_name);
-    let server: ControlServer<AgentCommand, AgentReply> = ControlServer::create(&node, &ctl_service, ControlSize::AGENT)
-        .map_err(|e| match e {
-            ControlError::AlreadyServed { .. } => format!(
-                "an agent named {name:?} is already running on robot {}; choose another --name, or stop it first with `nerve stop {name}`",
-                world.robot()
-            ),
-            e => e.to_string(),
+    let server: ControlServer<AgentCommand, AgentReply> =
+        ControlServer::create(&node, &ctl_service, ControlSize::AGENT).map_err(|e| match e {
+            ControlError::AlreadyServed { .. } => {
+                StartupError::AlreadyRunning { name: name.into(), robot: world.robot().to_string() }
+            }
+            e => e.into(),
         })?;
 
     stage("control service created");
     let wake_service = format!("nerve/{}/{}/_wake", world.robot(), name);
     let wake_factory = node
-        .service_builder(&wake_service.as_str().try_into().map_err(|e| format!("{e:?}"))?)
+        .service_builder(&wake_service.as_str().try_into().map_err(wake_err(&wake_service))?)
         .event()
         .max_listeners(2)
         .max_notifiers(2)
         .open_or_create()
-        .map_err(|e| format!("cannot create {wake_service}: {e:?}"))?;
-    let wake_listener = wake_factory.listener_builder().create().map_err(|e| format!("{e:?}"))?;
+        .map_err(wake_err(&wake_service))?;
+    let wake_listener = wake_factory.listener_builder().create().map_err(wake_err(&wake_service))?;
     // the message checker's own listener: the task wakes it when it stops
-    let checker_wake = wake_factory.listener_builder().create().map_err(|e| format!("{e:?}"))?;
-    let wake = wake_factory.notifier_builder().create().map_err(|e| format!("{e:?}"))?;
+    let checker_wake = wake_factory.listener_builder().create().map_err(wake_err(&wake_service))?;
+    let wake = wake_factory.notifier_builder().create().map_err(wake_err(&wake_service))?;
 
     let mut setup = Setup::new(world.clone(), agent_name.clone(), node.clone(), args.args.clone());
     stage("wake-up event created");
-    let agent = A::new(&mut setup).map_err(|e| format!("{} {name:?} could not start: {e}", A::KIND))?;
+    let agent =
+        A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::KIND, name: name.into(), source })?;
     stage("agent and its ports created");
     let Setup { inputs, outputs, schemas, params, .. } = setup;
     apply_params(&params, &args.params)?;
@@ -209,11 +296,9 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     let mut link = RouterLink::new();
     let registered = link.register(&node, &world, &registration, &shared);
     stage("registration answered");
-    link.watch_epoch(&world, &node);
-    stage("router epoch subscribed");
     match registered {
         Ok(()) => {}
-        Err(RegisterError::Refused(e)) => return Err(e.to_string()),
+        Err(RegisterError::Refused(e)) => return Err(StartupError::Refused(e)),
         Err(RegisterError::NoRouter) => tracing::warn!(
             "no router runs for robot {}; running unregistered, and registering as soon as one starts (`nerve router --robot {}`)",
             world.robot(),
@@ -228,7 +313,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     let name_owned = name.to_owned();
     let want_rt = !args.no_realtime;
     let prio = args.priority;
-    let (started_tx, started_rx) = std::sync::mpsc::channel::<Result<(), String>>();
+    let (started_tx, started_rx) = std::sync::mpsc::channel::<Result<(), AgentError>>();
     let handle = std::thread::Builder::new()
         .name("task".into())
         .spawn(move || {
@@ -244,7 +329,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
             }
             task_main(agent, &name_owned, &task_shared, &task_inputs, wake_listener, task_kind, started_tx)
         })
-        .map_err(|e| format!("cannot start the task thread: {e}"))?;
+        .map_err(StartupError::Thread)?;
     if want_rt {
         let _ = rt::set_thread_fifo((prio + 1).min(99));
     }
@@ -253,11 +338,13 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     // exit without leaving the router, so supervision counts it as a failure
     match started_rx.recv_timeout(START_TIMEOUT) {
         Ok(Ok(())) => stage("agent started"),
-        Ok(Err(e)) => {
+        Ok(Err(source)) => {
             let _ = handle.join();
-            return Err(format!("{} {name:?} could not start: {e}", A::KIND));
+            return Err(StartupError::Agent { kind: A::KIND, name: name.into(), source });
         }
-        Err(_) if handle.is_finished() => return Err(format!("{} {name:?} stopped while starting", A::KIND)),
+        Err(_) if handle.is_finished() => {
+            return Err(StartupError::StoppedWhileStarting { kind: A::KIND, name: name.into() });
+        }
         Err(_) => tracing::warn!(
             "the agent's start has not finished after {} s; reporting ready anyway",
             START_TIMEOUT.as_secs()
@@ -276,6 +363,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     );
     readiness.ready(&startup_msg);
     let _ = sd_notify("READY=1");
+    drop(startup);
 
     let guard = if shared.realtime.load(Ordering::Relaxed) {
         use std::os::unix::thread::JoinHandleExt;

@@ -4,7 +4,7 @@
 //! held while the agent is suspended, and the agent's `stop`.
 
 use super::Shared;
-use crate::agent::{Agent, Context, Task};
+use crate::agent::{Agent, AgentError, Context, Task};
 use crate::clock::{now_ns, sleep_until_ns};
 use crate::ports::DynInput;
 use crate::world::Ipc;
@@ -21,7 +21,7 @@ pub(super) fn task_main<A: Agent>(
     inputs: &[Arc<dyn DynInput>],
     wake: Listener<Ipc>,
     kind: Task,
-    started: std::sync::mpsc::Sender<Result<(), String>>,
+    started: std::sync::mpsc::Sender<Result<(), AgentError>>,
 ) {
     let mut ctx = Context {
         name: name.to_owned(),
@@ -35,7 +35,7 @@ pub(super) fn task_main<A: Agent>(
     if let Err(e) = agent.start(&mut ctx) {
         tracing::error!("start failed: {e}; stopping");
         sh.request_stop();
-        let _ = started.send(Err(e.to_string()));
+        let _ = started.send(Err(e));
         return;
     }
     let _ = started.send(Ok(()));
