@@ -341,7 +341,7 @@ impl World {
     /// with no router, or with a mistyped name, thus leaves nothing behind
     /// (review F7). Returns how many files and folders were removed.
     pub fn forget_if_unused(&self) -> usize {
-        if !self.live_node_pids().is_empty() {
+        if self.has_live_node() {
             return 0;
         }
         let mut removed = 0;
@@ -422,6 +422,22 @@ impl World {
             }
         }
         n
+    }
+
+    /// Whether any iceoryx2 node of this world is alive: the listing stops
+    /// at the first one, where [`World::live_node_pids`] reads every node's
+    /// record (with 100 agents that was most of a `nerve ps`: each command
+    /// asks this as it exits).
+    pub fn has_live_node(&self) -> bool {
+        let mut alive = false;
+        let _ = Node::<Ipc>::list(&self.config, |state| {
+            if let NodeState::Alive(_) = state {
+                alive = true;
+                return CallbackProgression::Stop;
+            }
+            CallbackProgression::Continue
+        });
+        alive
     }
 
     /// Pids of the live iceoryx2 nodes of this world.
