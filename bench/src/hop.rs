@@ -10,7 +10,25 @@
 //! * `iox2-waitset-fill`: as `iox2-waitset`, but every send first writes
 //!   `P::default()` into the sample, as `Output::send_with` does: it shows how
 //!   much of nerve's gap is that fill;
-//! * `uds`: a blocking Unix stream socket, copying.
+//! * `uds`: a blocking Unix stream socket, copying;
+//! * `ddsperf`: Cyclone DDS's own ping-pong, when installed ([`crate::dds`]);
+//! * `dora`: two dora-rs nodes on dora's Rust node API, one `dora run` per
+//!   batch, when `scripts/setup.sh --bench` has built them ([`crate::dora`]).
+//!
+//! With dora come two more rows, in dora's own pattern (its
+//! `examples/benchmark`: one sample every 5 ms, latency taken at the
+//! receiver), one way instead of round trips, reported apart:
+//!
+//! * `nerve-5ms`: an SDK sender (`__agent-bsend`, event-driven, a batch per
+//!   `nerve resume`) stamps CLOCK_MONOTONIC into the first 8 bytes of a
+//!   sample every 5 ms on absolute deadlines (`Output::send_uninit`, nothing
+//!   else written); an SDK sink (`__agent-bsink`) wired to it with `nerve
+//!   connect` records `arrival - stamp`: the agents of the `bridge`
+//!   scenario, here in one robot without a bridge;
+//! * `dora-5ms`: the same with the dora nodes (see [`crate::dora`]).
+//!
+//! The ratios dora/nerve (p50, per size, both patterns) go with the others;
+//! the target is dora ≥ [`DORA_TARGET`] times nerve's latency (issue 18).
 //!
 //! The benchmark's own ping side runs at the agents' SCHED_FIFO priority (20)
 //! with locked memory, like the SDK's task thread, so that only the code
@@ -18,7 +36,9 @@
 //! so is a whole first round.
 
 use crate::agents::read_values;
+use crate::bridge_agents::read_rows;
 use crate::dds::{self, DdsPeer};
+use crate::dora::{self, DoraPeer, Pattern};
 use crate::machine::{Machine, command_line};
 use crate::payloads::{BenchPayload, SIZES, label};
 use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file};
@@ -26,19 +46,37 @@ use crate::raw::{Mode, Side};
 use crate::stats::{Rounds, Summary, median_f64, ratio};
 use crate::uds::UdsPing;
 use crate::with_payload;
-use anyhow::{Context as _, Result, anyhow, bail};
+use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
+use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 /// Samples dropped at the start of every batch.
 const DISCARD: usize = 5;
 /// The transports, in the order of the tables.
-pub const TRANSPORTS: [&str; 8] =
-    ["nerve", "iox2-waitset", "iox2-listener", "iox2-waitset-fill", "uds", "ddsperf", "nerve-poll", "iox2-poll"];
+pub const TRANSPORTS: [&str; 9] = [
+    "nerve",
+    "iox2-waitset",
+    "iox2-listener",
+    "iox2-waitset-fill",
+    "uds",
+    "ddsperf",
+    "dora",
+    "nerve-poll",
+    "iox2-poll",
+];
+/// The rows in dora's pattern (one way, a sample every 5 ms), in table order.
+pub const PERIODIC: [&str; 2] = ["nerve-5ms", "dora-5ms"];
 /// nerve may be this much slower than raw iceoryx2 (the issue's target).
 pub const TARGET_RATIO: f64 = 1.1;
+/// dora should take at least this many times nerve's latency (issue 18).
+pub const DORA_TARGET: f64 = 10.0;
+/// Samples per batch in the 5 ms pattern (a second; a fifth with --quick).
+const PERIODIC_COUNT: (usize, usize) = (200, 40);
+/// How long a 5 ms sink waits for its batch file once the sender is done.
+const SETTLE: Duration = Duration::from_millis(300);
 
 /// Options of the hop scenario.
 #[derive(Debug, Clone)]
@@ -72,6 +110,21 @@ pub struct HopResult {
     pub round_p50_ns: Vec<u64>,
 }
 
+/// Results of one system at one payload size in dora's pattern (a sample every 5 ms).
+#[derive(Debug, Clone, Serialize)]
+pub struct OneWayResult {
+    /// `nerve-5ms` or `dora-5ms`
+    pub transport: String,
+    /// payload bytes
+    pub size: usize,
+    /// payload label
+    pub label: String,
+    /// all measured one-way latencies pooled (sender's stamp to the receiver's code)
+    pub one_way: Summary,
+    /// median one-way latency of each round, ns
+    pub round_p50_ns: Vec<u64>,
+}
+
 /// nerve against the others at one payload size.
 #[derive(Debug, Clone, Serialize)]
 pub struct HopRatio {
@@ -97,6 +150,16 @@ pub struct HopRatio {
     pub dds_vs_nerve_p50: Option<f64>,
     /// nerve-poll p50 / iox2-poll p50
     pub nerve_poll_vs_iox2_poll_p50: Option<f64>,
+    /// dora p50 / nerve p50, ping-pong round trips (None without dora)
+    pub dora_vs_nerve_p50: Option<f64>,
+    /// dora p99 / nerve p99, ping-pong round trips
+    pub dora_vs_nerve_p99: Option<f64>,
+    /// dora-5ms p50 / nerve-5ms p50: one way, a sample every 5 ms (None without dora)
+    pub dora_5ms_vs_nerve_5ms_p50: Option<f64>,
+    /// dora-5ms p99 / nerve-5ms p99
+    pub dora_5ms_vs_nerve_5ms_p99: Option<f64>,
+    /// whether both dora p50 ratios are at least [`DORA_TARGET`] (None without dora)
+    pub dora_target_met: Option<bool>,
     /// whether nerve p50 is within the target of iox2-waitset p50
     pub target_met: bool,
 }
@@ -125,12 +188,20 @@ pub struct HopReport {
     pub rounds: usize,
     /// round trips per batch, by size
     pub batch: Vec<(usize, usize)>,
-    /// per transport and size
+    /// per transport and size: round trips
     pub results: Vec<HopResult>,
+    /// `nerve-5ms` and `dora-5ms` per size: one way, a sample every 5 ms
+    pub periodic: Vec<OneWayResult>,
+    /// samples per batch of the 5 ms rows
+    pub periodic_batch: usize,
+    /// what `dora --version` said (None: no dora rows)
+    pub dora_version: Option<String>,
     /// per size
     pub ratios: Vec<HopRatio>,
     /// target ratio (nerve / iox2-waitset, p50)
     pub target_ratio: f64,
+    /// target ratio dora / nerve (p50, both patterns): at least this
+    pub dora_target_ratio: f64,
     /// cost of filling a payload once, by size
     pub fill_cost: Vec<FillCost>,
     /// wall time of the run, s
@@ -250,6 +321,85 @@ impl Pinger for NervePing {
     }
 }
 
+/// nerve in dora's pattern: the `bridge` scenario's SDK sender and sink
+/// wired directly; each batch is a `nerve suspend` + `nerve resume` of the
+/// sender, which sends `count` samples 5 ms apart and writes `sent-<k>.txt`;
+/// the sink writes `batch-<k>.txt` (stamp, header stamp, arrival per sample).
+struct NervePeriodic {
+    src: String,
+    sink: String,
+    src_dir: PathBuf,
+    sink_dir: PathBuf,
+    count: usize,
+    next: u64,
+}
+
+impl Pinger for NervePeriodic {
+    fn batch(&mut self, robot: &Robot, _count: usize) -> Result<Vec<u64>> {
+        self.next += 1;
+        let k = self.next;
+        robot.run(&["suspend", &self.src])?;
+        robot.run(&["resume", &self.src])?;
+        let sent = self.src_dir.join(format!("sent-{k}.txt"));
+        let expected = Duration::from_micros(dora::PERIOD_US * self.count as u64);
+        if !wait_file(&sent, expected + Duration::from_secs(20), &mut [])? {
+            bail!("the sender {} wrote no batch {k} ({})", self.src, sent.display());
+        }
+        let _ = std::fs::remove_file(&sent);
+        let path = self.sink_dir.join(format!("batch-{k}.txt"));
+        let mut done = wait_file(&path, SETTLE, &mut [])?;
+        // samples were lost: the sink closes the batch when resumed after its input went quiet
+        for _ in 0..20 {
+            if done {
+                break;
+            }
+            robot.run(&["suspend", &self.sink])?;
+            robot.run(&["resume", &self.sink])?;
+            done = wait_file(&path, SETTLE, &mut [])?;
+        }
+        if !done {
+            bail!("the sink {} wrote no batch {k} ({})", self.sink, path.display());
+        }
+        let rows = read_rows(&path)?;
+        let _ = std::fs::remove_file(&path);
+        Ok(rows.iter().map(|r| r[2].saturating_sub(r[0])).collect())
+    }
+}
+
+/// A dora batch: one `dora run` (see [`crate::dora`]).
+struct DoraPinger {
+    peer: Rc<DoraPeer>,
+    size: usize,
+    pattern: Pattern,
+    count: Option<usize>,
+}
+
+impl Pinger for DoraPinger {
+    fn batch(&mut self, _robot: &Robot, count: usize) -> Result<Vec<u64>> {
+        self.peer.batch(self.size, self.pattern, self.count.unwrap_or(count))
+    }
+}
+
+/// Starts a sender or sink of the `bridge` scenario (`sub`: `__agent-bsend`
+/// or `__agent-bsink`) in `robot`, writing its batch files into `dir`.
+fn spawn_periodic_agent(
+    robot: &Robot,
+    sub: &str,
+    name: &str,
+    size: usize,
+    count: usize,
+    dir: &Path,
+) -> Result<ChildGuard> {
+    let mut cmd = self_command(sub)?;
+    cmd.args(["--robot", &robot.name, "--name", name, "--"]);
+    cmd.args(["--size", &size.to_string(), "--count", &count.to_string()]);
+    cmd.args(["--interval-us", &dora::PERIOD_US.to_string()]);
+    cmd.arg("--out").arg(dir);
+    cmd.env("NERVE_HOME", &robot.home);
+    robot.quiet(&mut cmd);
+    ChildGuard::spawn(&format!("agent {name}"), cmd)
+}
+
 /// The short form of a payload size in agent names: `8`, `4k`, `230k`, `6m`.
 pub(crate) fn size_tag(size: usize) -> &'static str {
     match size {
@@ -305,6 +455,19 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     let _router = robot.start_router()?;
     let mut children: Vec<ChildGuard> = Vec::new();
 
+    // dora, when built; with it, nerve in dora's pattern
+    let dora_peer = match DoraPeer::find(&opts.work, opts.verbose) {
+        Ok(p) => {
+            eprintln!("hop: {} with its nodes from {}", p.version, p.cache.display());
+            Some(Rc::new(p))
+        }
+        Err(e) => {
+            eprintln!("hop: warning: no dora rows ({e:#}); `scripts/setup.sh --bench` builds dora");
+            None
+        }
+    };
+    let periodic_count = if opts.quick { PERIODIC_COUNT.1 } else { PERIODIC_COUNT.0 };
+
     // nerve agents, wired through the router
     let mut names = Vec::new();
     for &size in &opts.sizes {
@@ -318,6 +481,15 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             children.push(spawn_bench_agent(&robot, role, &name, size, count_of(size), d)?);
             names.push(name);
         }
+        if dora_peer.is_some() {
+            for (sub, role) in [("__agent-bsend", "psend"), ("__agent-bsink", "psink")] {
+                let name = agent_name(role, size);
+                let dir = opts.work.join(&name);
+                std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+                children.push(spawn_periodic_agent(&robot, sub, &name, size, periodic_count, &dir)?);
+                names.push(name);
+            }
+        }
     }
     let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
     robot.wait_registered(&name_refs, Duration::from_secs(15))?;
@@ -329,6 +501,10 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         let (ping, pong) = (agent_name("poll-ping", size), agent_name("poll-pong", size));
         robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
         robot.run(&["connect", &format!("{pong}/out"), &format!("{ping}/in")])?;
+        if dora_peer.is_some() {
+            let (src, sink) = (agent_name("psend", size), agent_name("psink", size));
+            robot.run(&["connect", &format!("{src}/out"), &format!("{sink}/in")])?;
+        }
     }
     eprintln!("hop: nerve agents running and connected");
 
@@ -391,6 +567,16 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         }
         let path = robot.home.join(format!("uds-{size}.sock"));
         pingers.push((size, "uds", Box::new(UdsPing::connect(&path, size)?)));
+        if let Some(peer) = &dora_peer {
+            let (src, sink) = (agent_name("psend", size), agent_name("psink", size));
+            let (src_dir, sink_dir) = (opts.work.join(&src), opts.work.join(&sink));
+            let p = NervePeriodic { src, sink, src_dir, sink_dir, count: periodic_count, next: 0 };
+            pingers.push((size, "nerve-5ms", Box::new(p)));
+            for (pattern, count) in [(Pattern::PingPong, None), (Pattern::Periodic, Some(periodic_count))] {
+                let p = DoraPinger { peer: Rc::clone(peer), size, pattern, count };
+                pingers.push((size, pattern.transport(), Box::new(p)));
+            }
+        }
     }
     // Cyclone DDS, when installed
     let dds_peer = if dds::available() {
@@ -457,6 +643,8 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     let keys: Vec<(usize, &'static str)> = pingers.iter().map(|p| (p.0, p.1)).collect();
     drop(pingers);
     drop(dds_peer);
+    let dora_version = dora_peer.as_ref().map(|p| p.version.clone());
+    drop(dora_peer);
     for mut c in children.drain(..) {
         c.stop(Duration::from_secs(2));
     }
@@ -477,10 +665,12 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 }
                 continue;
             }
-            let i = keys
-                .iter()
-                .position(|k| *k == (size, t))
-                .ok_or_else(|| anyhow!("internal: no samples for {t} {size}"))?;
+            let Some(i) = keys.iter().position(|k| *k == (size, t)) else {
+                if t == "dora" {
+                    continue;
+                }
+                bail!("internal: no samples for {t} {size}");
+            };
             results.push(HopResult {
                 transport: t.into(),
                 size,
@@ -490,7 +680,22 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             });
         }
     }
+    let mut periodic = Vec::new();
+    for &size in &opts.sizes {
+        for t in PERIODIC {
+            if let Some(i) = keys.iter().position(|k| *k == (size, t)) {
+                periodic.push(OneWayResult {
+                    transport: t.into(),
+                    size,
+                    label: label(size).into(),
+                    one_way: Summary::of(&rounds.samples[i]),
+                    round_p50_ns: rounds.round_p50[i].clone(),
+                });
+            }
+        }
+    }
     let find = |t: &str, s: usize| results.iter().find(|r| r.transport == t && r.size == s);
+    let find_periodic = |t: &str, s: usize| periodic.iter().find(|r| r.transport == t && r.size == s);
     let mut ratios = Vec::new();
     for &size in &opts.sizes {
         let (Some(n), Some(w), Some(l), Some(f), Some(u)) = (
@@ -504,6 +709,14 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         };
         let per_round: Vec<f64> = n.round_p50_ns.iter().zip(&w.round_p50_ns).map(|(a, b)| ratio(*a, *b)).collect();
         let r = ratio(n.rtt.p50_ns, w.rtt.p50_ns);
+        let dora = find("dora", size);
+        let dora_5ms = match (find_periodic("dora-5ms", size), find_periodic("nerve-5ms", size)) {
+            (Some(d), Some(n5)) => {
+                Some((ratio(d.one_way.p50_ns, n5.one_way.p50_ns), ratio(d.one_way.p99_ns, n5.one_way.p99_ns)))
+            }
+            _ => None,
+        };
+        let dora_p50 = dora.map(|d| ratio(d.rtt.p50_ns, n.rtt.p50_ns));
         ratios.push(HopRatio {
             size,
             nerve_vs_waitset_p50: r,
@@ -519,6 +732,14 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 (Some(a), Some(b)) => Some(ratio(a.rtt.p50_ns, b.rtt.p50_ns)),
                 _ => None,
             },
+            dora_vs_nerve_p50: dora_p50,
+            dora_vs_nerve_p99: dora.map(|d| ratio(d.rtt.p99_ns, n.rtt.p99_ns)),
+            dora_5ms_vs_nerve_5ms_p50: dora_5ms.map(|x| x.0),
+            dora_5ms_vs_nerve_5ms_p99: dora_5ms.map(|x| x.1),
+            dora_target_met: match (dora_p50, dora_5ms) {
+                (Some(a), Some((b, _))) => Some(a >= DORA_TARGET && b >= DORA_TARGET),
+                _ => None,
+            },
             target_met: r <= TARGET_RATIO,
         });
     }
@@ -531,8 +752,12 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         rounds: opts.rounds,
         batch: counts,
         results,
+        periodic,
+        periodic_batch: periodic_count,
+        dora_version,
         ratios,
         target_ratio: TARGET_RATIO,
+        dora_target_ratio: DORA_TARGET,
         fill_cost: opts.sizes.iter().map(|&s| measure_fill(s)).collect(),
         seconds: started.elapsed().as_secs_f64(),
     })
@@ -575,6 +800,52 @@ pub fn print_tables(r: &HopReport) {
             opt(x.nerve_poll_vs_iox2_poll_p50),
             if x.target_met { "met" } else { "missed" }
         );
+    }
+    if !r.periodic.is_empty() {
+        println!();
+        println!(
+            "One way, one sample every {} ms (dora's own pattern), {} samples per batch:",
+            dora::PERIOD_US / 1000,
+            r.periodic_batch
+        );
+        println!();
+        println!("| payload | system | n | median µs | p99 µs | max µs |");
+        println!("|---|---|---:|---:|---:|---:|");
+        for x in &r.periodic {
+            println!(
+                "| {} | {} | {} | {} | {} | {} |",
+                x.label,
+                x.transport,
+                x.one_way.n,
+                crate::stats::us(x.one_way.p50_ns),
+                crate::stats::us(x.one_way.p99_ns),
+                crate::stats::us(x.one_way.max_ns)
+            );
+        }
+    }
+    if let Some(v) = &r.dora_version {
+        println!();
+        println!("dora ({v}) against nerve, same run:");
+        println!();
+        println!(
+            "| payload | dora/nerve p50 (round trip) | p99 | dora-5ms/nerve-5ms p50 (one way, 5 ms) | p99 | target ≥{DORA_TARGET} |"
+        );
+        println!("|---|---:|---:|---:|---:|---|");
+        for x in &r.ratios {
+            println!(
+                "| {} | {} | {} | {} | {} | {} |",
+                label(x.size),
+                opt(x.dora_vs_nerve_p50),
+                opt(x.dora_vs_nerve_p99),
+                opt(x.dora_5ms_vs_nerve_5ms_p50),
+                opt(x.dora_5ms_vs_nerve_5ms_p99),
+                match x.dora_target_met {
+                    Some(true) => "met",
+                    Some(false) => "missed",
+                    None => "-",
+                }
+            );
+        }
     }
     println!();
     for f in &r.fill_cost {

@@ -8,7 +8,9 @@
 //! ```
 //!
 //! * `hop`: one-hop round-trip latency, event-driven, nerve SDK agents
-//!   against raw iceoryx2 (WaitSet and listener) and a Unix socket.
+//!   against raw iceoryx2 (WaitSet and listener) and a Unix socket, and,
+//!   when installed, Cyclone DDS (`ddsperf`) and dora-rs (two nodes run by
+//!   `dora run`, built by `scripts/setup.sh --bench`).
 //! * `jitter`: lateness of a periodic SDK agent against `cyclictest`.
 //! * `control`: hot-add, rewire and launch latencies of the control plane.
 //! * `bridge`: one way across the Zenoh bridge agent against raw Zenoh, and
@@ -30,6 +32,7 @@ mod bridge;
 mod bridge_agents;
 mod control;
 mod dds;
+mod dora;
 mod hop;
 mod images;
 mod jitter;

@@ -19,7 +19,7 @@ const BENCH_PROGRAM: &str = "nerve-bench";
 /// The benchmark scenarios (issue 7 of the project; `bridge`: issue 11).
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum Scenario {
-    /// One hop: nerve ports vs raw iceoryx2 vs a Unix socket vs Cyclone DDS (ddsperf), 8 B to 1080p.
+    /// One hop: nerve ports vs raw iceoryx2 vs a Unix socket vs Cyclone DDS (ddsperf) vs dora-rs, 8 B to 1080p.
     Hop,
     /// Three hops end to end (sonar → safety → motor shape) against one hop.
     Pipeline,
