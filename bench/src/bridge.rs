@@ -34,7 +34,7 @@
 //! to find them).
 
 use crate::agents::read_values;
-use crate::bridge_agents::read_rows;
+use crate::bridge_agents::{SETTLE, read_rows, take_sink_batch};
 use crate::hop::{NervePing, size_tag, spawn_bench_agent};
 use crate::machine::{Machine, command_line};
 use crate::payloads::label;
@@ -66,8 +66,6 @@ pub const LOCAL: [&str; 3] = ["alone", "bridged", "bridged-100hz"];
 /// `tput_ms`, so that every throughput batch is bounded by time (the SDK
 /// sender, zero copy, puts out over a million samples a second).
 const TPUT_CAP: usize = 20_000_000;
-/// How long the benchmark waits for a batch file after the batch is sent, before it pokes the sink.
-const SETTLE: Duration = Duration::from_millis(300);
 
 /// Options of the bridge scenario.
 #[derive(Debug, Clone)]
@@ -337,21 +335,7 @@ impl SdkPath {
         let _ = std::fs::remove_file(&sent_path);
         let [sent, t_start, t_end] = v[..] else { bail!("{}: expected 3 values", sent_path.display()) };
         let path = self.sink_dir.join(format!("batch-{}.txt", self.sink_next));
-        let mut done = wait_file(&path, SETTLE, &mut [])?;
-        // samples were lost: the sink closes the batch when resumed after its input went quiet
-        for _ in 0..20 {
-            if done {
-                break;
-            }
-            b.run(&["suspend", &self.sink])?;
-            b.run(&["resume", &self.sink])?;
-            done = wait_file(&path, SETTLE, &mut [])?;
-        }
-        if !done {
-            bail!("the sink {} wrote no batch {} ({})", self.sink, self.sink_next, path.display());
-        }
-        let rows = read_rows(&path)?;
-        let _ = std::fs::remove_file(&path);
+        let rows = take_sink_batch(b, &self.sink, &path)?;
         Ok(Batch { sent, t_start, t_end, rows })
     }
 }

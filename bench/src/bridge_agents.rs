@@ -69,6 +69,32 @@ pub fn write_rows(path: &Path, rows: &[[u64; 3]]) -> std::io::Result<()> {
     std::fs::rename(&tmp, path)
 }
 
+/// How long a benchmark waits for a sink's batch file once the batch is
+/// sent, before it pokes the sink.
+pub const SETTLE: std::time::Duration = std::time::Duration::from_millis(300);
+
+/// Takes the sink agent `sink`'s batch file `path` (its rows, the file
+/// removed). Samples were lost when it is not there: the sink closes a batch
+/// when resumed after its input went quiet, so it is suspended and resumed,
+/// up to 20 times, [`SETTLE`] apart.
+pub fn take_sink_batch(robot: &crate::procs::Robot, sink: &str, path: &Path) -> anyhow::Result<Vec<[u64; 3]>> {
+    let mut done = crate::procs::wait_file(path, SETTLE, &mut [])?;
+    for _ in 0..20 {
+        if done {
+            break;
+        }
+        robot.run(&["suspend", sink])?;
+        robot.run(&["resume", sink])?;
+        done = crate::procs::wait_file(path, SETTLE, &mut [])?;
+    }
+    if !done {
+        anyhow::bail!("the sink {sink} wrote no batch ({})", path.display());
+    }
+    let rows = read_rows(path)?;
+    let _ = std::fs::remove_file(path);
+    Ok(rows)
+}
+
 /// Reads the rows [`write_rows`] wrote (or any file of whitespace-separated
 /// numbers, missing columns read 0).
 pub fn read_rows(path: &Path) -> anyhow::Result<Vec<[u64; 3]>> {

@@ -36,11 +36,11 @@
 //! no process uses it.
 
 use crate::agents::read_values;
+use crate::procs::spawn_dying_with_us;
 use anyhow::{Context as _, Result, bail};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use std::cell::Cell;
-use std::os::unix::process::CommandExt as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -200,16 +200,7 @@ struct DoraRun {
 
 impl DoraRun {
     fn spawn(mut cmd: Command, pid_dir: &Path) -> Result<Self> {
-        // SAFETY: prctl is async-signal-safe and touches no memory of the parent.
-        unsafe {
-            cmd.pre_exec(|| {
-                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong, 0, 0, 0) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                Ok(())
-            });
-        }
-        let child = cmd.spawn().with_context(|| format!("cannot start {cmd:?}"))?;
+        let child = spawn_dying_with_us(&mut cmd).with_context(|| format!("cannot start {cmd:?}"))?;
         Ok(DoraRun { child, pid_dir: pid_dir.to_owned(), reaped: false, zenoh_before: Vec::new() })
     }
 

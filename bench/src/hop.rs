@@ -36,7 +36,7 @@
 //! so is a whole first round.
 
 use crate::agents::read_values;
-use crate::bridge_agents::read_rows;
+use crate::bridge_agents::take_sink_batch;
 use crate::dds::{self, DdsPeer};
 use crate::dora::{self, DoraPeer, Pattern};
 use crate::machine::{Machine, command_line};
@@ -75,8 +75,6 @@ pub const TARGET_RATIO: f64 = 1.1;
 pub const DORA_TARGET: f64 = 10.0;
 /// Samples per batch in the 5 ms pattern (a second; a fifth with --quick).
 const PERIODIC_COUNT: (usize, usize) = (200, 40);
-/// How long a 5 ms sink waits for its batch file once the sender is done.
-const SETTLE: Duration = Duration::from_millis(300);
 
 /// Options of the hop scenario.
 #[derive(Debug, Clone)]
@@ -347,21 +345,7 @@ impl Pinger for NervePeriodic {
         }
         let _ = std::fs::remove_file(&sent);
         let path = self.sink_dir.join(format!("batch-{k}.txt"));
-        let mut done = wait_file(&path, SETTLE, &mut [])?;
-        // samples were lost: the sink closes the batch when resumed after its input went quiet
-        for _ in 0..20 {
-            if done {
-                break;
-            }
-            robot.run(&["suspend", &self.sink])?;
-            robot.run(&["resume", &self.sink])?;
-            done = wait_file(&path, SETTLE, &mut [])?;
-        }
-        if !done {
-            bail!("the sink {} wrote no batch {k} ({})", self.sink, path.display());
-        }
-        let rows = read_rows(&path)?;
-        let _ = std::fs::remove_file(&path);
+        let rows = take_sink_batch(robot, &self.sink, &path)?;
         Ok(rows.iter().map(|r| r[2].saturating_sub(r[0])).collect())
     }
 }
@@ -763,21 +747,24 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     })
 }
 
-/// Prints the tables of a hop report (markdown).
-pub fn print_tables(r: &HopReport) {
-    println!("| payload | transport | n | median µs | p99 µs | max µs |");
+/// A markdown table of latencies: payload, `who` (transport or system), n, median, p99, max.
+fn latency_table<'a>(who: &str, rows: impl Iterator<Item = (&'a str, &'a str, &'a Summary)>) {
+    println!("| payload | {who} | n | median µs | p99 µs | max µs |");
     println!("|---|---|---:|---:|---:|---:|");
-    for x in &r.results {
+    for (label, transport, x) in rows {
         println!(
-            "| {} | {} | {} | {} | {} | {} |",
-            x.label,
-            x.transport,
-            x.rtt.n,
-            crate::stats::us(x.rtt.p50_ns),
-            crate::stats::us(x.rtt.p99_ns),
-            crate::stats::us(x.rtt.max_ns)
+            "| {label} | {transport} | {} | {} | {} | {} |",
+            x.n,
+            crate::stats::us(x.p50_ns),
+            crate::stats::us(x.p99_ns),
+            crate::stats::us(x.max_ns)
         );
     }
+}
+
+/// Prints the tables of a hop report (markdown).
+pub fn print_tables(r: &HopReport) {
+    latency_table("transport", r.results.iter().map(|x| (x.label.as_str(), x.transport.as_str(), &x.rtt)));
     println!();
     println!(
         "| payload | nerve/iox2-waitset p50 | (median of rounds) | p99 | nerve/iox2-listener p50 | p99 | nerve/iox2-waitset-fill p50 | p99 | uds/nerve p50 | ddsperf/nerve p50 | nerve-poll/iox2-poll p50 | target ≤{TARGET_RATIO} |"
@@ -809,19 +796,7 @@ pub fn print_tables(r: &HopReport) {
             r.periodic_batch
         );
         println!();
-        println!("| payload | system | n | median µs | p99 µs | max µs |");
-        println!("|---|---|---:|---:|---:|---:|");
-        for x in &r.periodic {
-            println!(
-                "| {} | {} | {} | {} | {} | {} |",
-                x.label,
-                x.transport,
-                x.one_way.n,
-                crate::stats::us(x.one_way.p50_ns),
-                crate::stats::us(x.one_way.p99_ns),
-                crate::stats::us(x.one_way.max_ns)
-            );
-        }
+        latency_table("system", r.periodic.iter().map(|x| (x.label.as_str(), x.transport.as_str(), &x.one_way)));
     }
     if let Some(v) = &r.dora_version {
         println!();

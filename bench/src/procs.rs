@@ -21,19 +21,25 @@ pub struct ChildGuard {
     child: Child,
 }
 
+/// Spawns `cmd` so that the child gets SIGTERM if this process dies
+/// (`PR_SET_PDEATHSIG`): a benchmark killed half-way leaves no process behind.
+pub fn spawn_dying_with_us(cmd: &mut Command) -> std::io::Result<Child> {
+    // SAFETY: prctl is async-signal-safe and touches no memory of the parent.
+    unsafe {
+        cmd.pre_exec(|| {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong, 0, 0, 0) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    cmd.spawn()
+}
+
 impl ChildGuard {
     /// Spawns `cmd`; the child gets SIGTERM if this process dies.
     pub fn spawn(name: &str, mut cmd: Command) -> Result<Self> {
-        // SAFETY: prctl is async-signal-safe and touches no memory of the parent.
-        unsafe {
-            cmd.pre_exec(|| {
-                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong, 0, 0, 0) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                Ok(())
-            });
-        }
-        let child = cmd.spawn().with_context(|| format!("cannot start {name} ({cmd:?})"))?;
+        let child = spawn_dying_with_us(&mut cmd).with_context(|| format!("cannot start {name} ({cmd:?})"))?;
         Ok(ChildGuard { name: name.into(), child })
     }
 
