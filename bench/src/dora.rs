@@ -126,7 +126,10 @@ impl DoraPeer {
         if !version.contains(VERSION) {
             bail!("{} is {version:?}, not {VERSION}", dora.display());
         }
-        let work = work.join("dora");
+        // absolute: `dora run` runs in each batch's folder, and reads the
+        // dataflow's paths (and the nodes their output files) from there; a
+        // relative `--out` (the default, bench-results) named files it could not find
+        let work = std::path::absolute(work.join("dora")).context("cannot make the work folder's path absolute")?;
         std::fs::create_dir_all(&work).with_context(|| format!("cannot create {}", work.display()))?;
         Ok(DoraPeer { dora, ping, pong, version, cache: dir, work, verbose, next: Cell::new(0) })
     }
