@@ -358,7 +358,7 @@ where
             self.who
         )?;
         // the spans the event happened in, outermost first, with their
-        // fields: `rewire{input=in peer=t2/tick}: ...`
+        // fields: `connect{input=in peer=t2/tick}: ...`
         if let Some(scope) = ctx.event_scope() {
             for span in scope.from_root() {
                 write!(writer, "{}", span.name())?;

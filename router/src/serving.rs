@@ -104,6 +104,14 @@ pub struct Job {
     since: Instant,
 }
 
+impl Job {
+    /// A job waiting for `waiting`, answered to nobody yet (the caller's
+    /// responder is set when a request made it), timed from now.
+    fn new(waiting: Vec<Ticket>, work: Work) -> Job {
+        Job { reply: None, waiting, outcomes: Vec::new(), work, since: Instant::now() }
+    }
+}
+
 /// Everything the router knows.
 pub struct State {
     pub(crate) world: World,
@@ -230,7 +238,7 @@ impl State {
         for (cmd, what, effect) in todo {
             let ticket = self.calls.submit(name, cmd, AGENT_TIMEOUT);
             let work = Work::Background { name: name.into(), what: format!("re-applied to {name}: {what}"), effect };
-            self.jobs.push(Job { reply: None, waiting: vec![ticket], outcomes: vec![], work, since: Instant::now() });
+            self.jobs.push(Job::new(vec![ticket], work));
         }
     }
 
@@ -245,7 +253,7 @@ impl State {
                 what: format!("rewired {} -> {}", c.from, c.to),
                 effect: Asked::Nothing,
             };
-            self.jobs.push(Job { reply: None, waiting: vec![ticket], outcomes: vec![], work, since: Instant::now() });
+            self.jobs.push(Job::new(vec![ticket], work));
         }
     }
 
@@ -348,8 +356,7 @@ impl State {
     /// Hands the connection list to the writer thread, which saves it off
     /// the request path (its fsyncs take 10-60 ms on a busy disk).
     fn persist_wiring(&mut self) -> Saved {
-        let list = self.wiring.list().to_vec();
-        self.persist_list(&list)
+        self.saves.save(&self.writer, &self.store, self.wiring.list())
     }
 
     /// Queues `list` for the disk (see [`ListSaves`]: a rewire queues the
@@ -364,18 +371,12 @@ impl State {
     fn answer_when_written_back(&mut self, reply: Option<Responder<RouterReply>>, since: Instant, e: RouterError) {
         let saved = self.persist_wiring();
         let work = Work::Saved { saved, what: String::new(), refused: Some(e) };
-        self.jobs.push(Job { reply, waiting: Vec::new(), outcomes: Vec::new(), work, since });
+        self.jobs.push(Job { reply, since, ..Job::new(Vec::new(), work) });
     }
 
     /// The job that answers `what` (done) once save `saved` is on disk.
     fn when_saved(saved: Saved, what: String) -> Job {
-        Job {
-            reply: None,
-            waiting: Vec::new(),
-            outcomes: Vec::new(),
-            work: Work::Saved { saved, what, refused: None },
-            since: Instant::now(),
-        }
+        Job::new(Vec::new(), Work::Saved { saved, what, refused: None })
     }
 
     /// Whether jobs wait for something the loop must look at soon.
@@ -731,6 +732,6 @@ enum Started {
 
 impl Started {
     fn waiting(tickets: Vec<Ticket>, work: Work) -> Started {
-        Started::Job(Box::new(Job { reply: None, waiting: tickets, outcomes: Vec::new(), work, since: Instant::now() }))
+        Started::Job(Box::new(Job::new(tickets, work)))
     }
 }
