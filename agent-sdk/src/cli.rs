@@ -24,6 +24,10 @@ pub struct CommonArgs {
     /// Do not ask for SCHED_FIFO and locked memory.
     #[arg(long)]
     pub no_realtime: bool,
+    /// Wake-up latency bound a real-time agent holds on the CPUs while it
+    /// runs (PM QoS, /dev/cpu_dma_latency), in µs, or `off`.
+    #[arg(long, env = "NERVE_CPU_LATENCY", default_value = "0", value_name = "US|off")]
+    pub cpu_latency: crate::cpu_latency::CpuLatencySetting,
     /// SCHED_FIFO priority of the task (the message checker runs one above).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(i32).range(1..=98))]
     pub priority: i32,

@@ -13,7 +13,8 @@
 //!   [`Context::woken_by`]);
 //! * the common command line (`--robot`, `--name`, `--period`, `--daemon`,
 //!   `--log-level`), registration with the router and re-registration with a
-//!   restarted one, SCHED_FIFO and locked memory where permitted, sd_notify,
+//!   restarted one, SCHED_FIFO, locked memory and a PM QoS wake-up bound
+//!   ([`cpu_latency`]) where permitted, sd_notify,
 //!   clean stop on SIGTERM and SIGINT.
 //!
 //! Ports are iceoryx2 publish-subscribe services of `#[repr(C)]` payloads
@@ -24,6 +25,7 @@ pub mod agent;
 pub mod cli;
 pub mod clock;
 pub mod control;
+pub mod cpu_latency;
 pub mod daemon;
 pub mod memory;
 pub mod meters;

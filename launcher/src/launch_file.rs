@@ -8,6 +8,7 @@
 //! period = "10ms"
 //! params = { step = 1 }
 //! restart = "on-failure"         # never | on-failure | always
+//! cpu_latency = "off"            # PM QoS bound in µs, or "off" (also top-level, for all)
 //! [[agent]]
 //! name = "r1"
 //! kind = "relay"
@@ -24,6 +25,7 @@
 
 use crate::kinds::resolve_kind;
 use agent_sdk::World;
+use agent_sdk::cpu_latency::CpuLatencySetting;
 use serde::Deserialize;
 use shm_schemas::control::agent_to_router::TaskKind;
 use shm_schemas::control::describe::Description;
@@ -49,6 +51,7 @@ pub enum RestartPolicy {
 #[serde(deny_unknown_fields)]
 struct RawFile {
     robot: Option<Spanned<String>>,
+    cpu_latency: Option<Spanned<toml::Value>>,
     #[serde(default)]
     agent: Vec<RawAgent>,
     #[serde(default)]
@@ -75,6 +78,7 @@ struct RawAgent {
     #[serde(default)]
     suspended: bool,
     log_level: Option<String>,
+    cpu_latency: Option<Spanned<toml::Value>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -115,6 +119,8 @@ pub struct AgentSpec {
     pub suspended: bool,
     /// log filter
     pub log_level: Option<String>,
+    /// PM QoS bound (`cpu_latency`, the agent's or the file's); None: the agent's default
+    pub cpu_latency: Option<CpuLatencySetting>,
     /// the agent's own description
     pub description: Description,
 }
@@ -135,6 +141,9 @@ impl AgentSpec {
         }
         if let Some(l) = &self.log_level {
             v.extend(["--log-level".into(), l.clone()]);
+        }
+        if let Some(c) = &self.cpu_latency {
+            v.extend(["--cpu-latency".into(), c.to_string()]);
         }
         if self.suspended {
             v.push("--suspended".into());
@@ -256,6 +265,16 @@ pub fn describe(exe: &Path, params: &[String], args: &[String]) -> Result<Descri
     Ok(d)
 }
 
+/// A `cpu_latency` value: `"off"`, a number of µs, or a string such as `"20us"`.
+fn cpu_latency_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<CpuLatencySetting> {
+    let parsed = match v.get_ref() {
+        toml::Value::String(s) => s.parse(),
+        toml::Value::Integer(i) => i.to_string().parse(),
+        other => Err(format!("{other} is neither \"off\" nor a number of microseconds")),
+    };
+    parsed.map_err(|e| cx.err(v, format!("cpu_latency: {e}"))).ok()
+}
+
 /// Reads and checks a launch file for `world` (the robot the file runs on):
 /// `cli_robot` when it was named explicitly (`--robot`, `NERVE_ROBOT`), else
 /// the file's `robot`, else `cli_robot` (the default).
@@ -301,6 +320,7 @@ pub fn load(
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let dir = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
 
+    let robot_cpu_latency = raw.cpu_latency.as_ref().and_then(|v| cpu_latency_of(&mut cx, v));
     let mut agents = Vec::new();
     let mut seen: HashMap<String, usize> = HashMap::new();
     // one `--describe` per distinct (executable, parameters, arguments)
@@ -419,6 +439,7 @@ pub fn load(
             importance,
             suspended: a.suspended,
             log_level: a.log_level.clone(),
+            cpu_latency: a.cpu_latency.as_ref().and_then(|v| cpu_latency_of(&mut cx, v)).or(robot_cpu_latency),
             description,
         });
     }

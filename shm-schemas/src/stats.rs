@@ -21,6 +21,33 @@ pub struct InputStats {
     pub dropped: u64,
 }
 
+/// The wake-up latency bound an agent holds on the CPUs (PM QoS,
+/// `/dev/cpu_dma_latency`; see the SDK's `cpu_latency` module).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CpuLatency {
+    /// Nothing held: `--cpu-latency off`, or not a real-time agent.
+    #[default]
+    Off,
+    /// A bound of `us` microseconds held for as long as the agent runs.
+    Held {
+        /// the bound, µs
+        us: u32,
+    },
+    /// Asked for, but the device could not be written (permissions).
+    Refused,
+}
+
+impl std::fmt::Display for CpuLatency {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CpuLatency::Off => f.write_str("off"),
+            CpuLatency::Held { us } => write!(f, "{us}us"),
+            CpuLatency::Refused => f.write_str("refused"),
+        }
+    }
+}
+
 /// An agent's view of itself.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct AgentStats {
@@ -42,6 +69,8 @@ pub struct AgentStats {
     pub rss_bytes: u64,
     /// whether the task thread got SCHED_FIFO
     pub realtime: bool,
+    /// the wake-up latency bound (PM QoS) the agent holds
+    pub cpu_latency: CpuLatency,
     /// per input subscription
     pub inputs: Vec<InputStats>,
     /// read-only figures the agent reports about its own work, (name, value)

@@ -353,6 +353,7 @@ impl Checker<'_> {
             cpu_percent: cpu.percent(),
             rss_bytes: rss_bytes(),
             realtime: self.shared.realtime.load(Ordering::Relaxed),
+            cpu_latency: self.shared.cpu_latency,
             inputs: self.inputs.iter().flat_map(|i| i.stats(now)).collect(),
             figures: self.params.figures(),
         }

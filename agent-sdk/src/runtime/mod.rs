@@ -59,6 +59,8 @@ struct Shared {
     stop: AtomicBool,
     generation: AtomicU64,
     realtime: AtomicBool,
+    /// the PM QoS bound held (fixed at start-up)
+    cpu_latency: shm_schemas::stats::CpuLatency,
     figures: Mutex<TaskFigures>,
     gate: task::SuspendGate,
     wake: Notifier<Ipc>,

@@ -231,6 +231,12 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
 
     // every line of the start-up says so, with the agent's name and kind
     let startup = tracing::info_span!("start-up", agent = name, kind = A::KIND).entered();
+    // held until this function returns, or the kernel drops it when the process ends
+    let (_cpu_latency_hold, cpu_latency) = if args.no_realtime {
+        (None, shm_schemas::stats::CpuLatency::Off)
+    } else {
+        crate::cpu_latency::apply(args.cpu_latency)
+    };
     let t_start = Instant::now();
     let stage = |what: &str| tracing::debug!(us = t_start.elapsed().as_micros() as u64, "{what}");
     let node = Arc::new(world.node(name)?);
@@ -272,6 +278,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         stop: AtomicBool::new(false),
         generation: AtomicU64::new(0),
         realtime: AtomicBool::new(false),
+        cpu_latency,
         figures: Mutex::new(TaskFigures { last_cycle_ns: now_ns(), ..TaskFigures::default() }),
         gate: SuspendGate::default(),
         wake,

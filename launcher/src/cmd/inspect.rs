@@ -43,7 +43,7 @@ fn ports(p: &[shm_schemas::control::agent_to_router::PortSpec]) -> String {
 }
 
 pub fn print_agents(agents: &[AgentView]) {
-    const HEADER: [&str; 12] = [
+    const HEADER: [&str; 13] = [
         "NAME",
         "PID",
         "KIND",
@@ -54,12 +54,17 @@ pub fn print_agents(agents: &[AgentView]) {
         "JITTER p50/p99/max",
         "OVR",
         "CPU%",
+        "WAKE",
         "RST",
         "INPUTS",
     ];
-    let [n, p, k, st, t, pe, r, j, o, c, rs, i] = HEADER;
-    println!("{n:<16} {p:>8} {k:<10} {st:<12} {t:<13} {pe:>8} {r:>9} {j:>24} {o:>5} {c:>6} {rs:>4}  {i:<24} OUTPUTS");
+    let [n, p, k, st, t, pe, r, j, o, c, w, rs, i] = HEADER;
+    println!(
+        "{n:<16} {p:>8} {k:<10} {st:<12} {t:<13} {pe:>8} {r:>9} {j:>24} {o:>5} {c:>6} {w:>7} {rs:>4}  {i:<24} OUTPUTS"
+    );
     for a in agents {
+        // the PM QoS bound the agent holds: `0us`, `off`, `refused`
+        let wake = a.stats.as_ref().map(|s| s.cpu_latency.to_string()).unwrap_or_else(|| "?".into());
         let (rate, jitter, ovr, cpu) = match &a.stats {
             Some(s) => (
                 format!("{:.1}Hz", s.rate_hz),
@@ -74,7 +79,7 @@ pub fn print_agents(agents: &[AgentView]) {
             None => ("?".into(), "?".into(), "?".into(), "?".into()),
         };
         println!(
-            "{:<16} {:>8} {:<10} {:<12} {:<13} {:>8} {:>9} {:>24} {:>5} {:>6} {:>4}  {:<24} {}",
+            "{:<16} {:>8} {:<10} {:<12} {:<13} {:>8} {:>9} {:>24} {:>5} {:>6} {:>7} {:>4}  {:<24} {}",
             a.name,
             a.pid,
             a.kind,
@@ -85,6 +90,7 @@ pub fn print_agents(agents: &[AgentView]) {
             jitter,
             ovr,
             cpu,
+            wake,
             a.restarts,
             ports(&a.inputs),
             ports(&a.outputs)

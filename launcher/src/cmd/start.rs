@@ -37,6 +37,10 @@ pub struct StartArgs {
     /// Start with the task suspended.
     #[arg(long)]
     pub suspended: bool,
+    /// Wake-up latency bound (PM QoS) the agent holds while it runs, in µs,
+    /// or `off` (default: the agent's, 0 unless NERVE_CPU_LATENCY says otherwise).
+    #[arg(long, value_name = "US|off")]
+    pub cpu_latency: Option<agent_sdk::cpu_latency::CpuLatencySetting>,
     /// Arguments for the agent itself.
     #[arg(last = true)]
     pub args: Vec<String>,
@@ -95,6 +99,9 @@ pub fn start(world: &World, a: StartArgs) -> Result<ExitCode> {
     }
     if a.suspended {
         cmd.arg("--suspended");
+    }
+    if let Some(c) = a.cpu_latency {
+        cmd.arg("--cpu-latency").arg(c.to_string());
     }
     if !a.args.is_empty() {
         cmd.arg("--").args(&a.args);
