@@ -10,7 +10,11 @@
 //! * `iox2-waitset-fill`: as `iox2-waitset`, but every send first writes
 //!   `P::default()` into the sample, as `Output::send_with` does: it shows how
 //!   much of nerve's gap is that fill;
-//! * `uds`: a blocking Unix stream socket, copying;
+//! * `uds`: a blocking Unix stream socket, copying: the floor of a copying
+//!   transport at every size;
+//! * `futex`: two processes ping-ponging a sequence number through a futex
+//!   in shared memory ([`crate::futex`]): the floor of any wake-up, with the
+//!   share of round trips whose two ends ran on one CPU (placement);
 //! * `ddsperf`: Cyclone DDS's own ping-pong, when installed ([`crate::dds`]);
 //! * `dora`: two dora-rs nodes on dora's Rust node API, one `dora run` per
 //!   batch, when `scripts/setup.sh --bench` has built them ([`crate::dora`]).
@@ -27,6 +31,17 @@
 //!   scenario, here in one robot without a bridge;
 //! * `dora-5ms`: the same with the dora nodes (see [`crate::dora`]).
 //!
+//! Every agent of the run holds no PM QoS bound (`NERVE_CPU_LATENCY=off`),
+//! so that the rows above measure the machine as it idles by default. The
+//! rows `nerve-pmqos`, `iox2-waitset-pmqos`, `uds-pmqos` and `futex-pmqos`
+//! are the same pairs with this process holding `/dev/cpu_dma_latency` at 0
+//! for the batch only ([`agent_sdk::cpu_latency`]); the kernel honours one
+//! bound for the whole machine, whoever holds it, so `nerve-pmqos` is what
+//! nerve's agents get by default (each real-time agent holds 0 while it
+//! runs). Batches of all rows interleave, so both states are measured in
+//! one run. Before the batches, [`crate::idle`] measures where the CPUs of
+//! the idle robot spend their time with and without the bound.
+//!
 //! The ratios dora/nerve (p50, per size, both patterns) go with the others;
 //! the target is dora ≥ [`DORA_TARGET`] times nerve's latency (issue 18).
 //!
@@ -39,6 +54,8 @@ use crate::agents::read_values;
 use crate::bridge_agents::take_sink_batch;
 use crate::dds::{self, DdsPeer};
 use crate::dora::{self, DoraPeer, Pattern};
+use crate::futex::FutexPing;
+use crate::idle::IdleShare;
 use crate::machine::{Machine, command_line};
 use crate::payloads::{BenchPayload, SIZES, label};
 use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file};
@@ -50,23 +67,33 @@ use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
+use std::cell::RefCell;
 use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 /// Samples dropped at the start of every batch.
 const DISCARD: usize = 5;
 /// The transports, in the order of the tables.
-pub const TRANSPORTS: [&str; 9] = [
+pub const TRANSPORTS: [&str; 14] = [
     "nerve",
+    "nerve-pmqos",
     "iox2-waitset",
+    "iox2-waitset-pmqos",
     "iox2-listener",
     "iox2-waitset-fill",
     "uds",
+    "uds-pmqos",
+    "futex",
+    "futex-pmqos",
     "ddsperf",
     "dora",
     "nerve-poll",
     "iox2-poll",
 ];
+/// The transports measured again under a PM QoS bound of 0 µs (row `T-pmqos`).
+const UNDER_PM_QOS: [&str; 4] = ["nerve", "iox2-waitset", "uds", "futex"];
+/// nerve's round trip (with its default PM QoS bound) may be this many times the futex floor's (issue 17).
+pub const FUTEX_TARGET: f64 = 1.5;
 /// The rows in dora's pattern (one way, a sample every 5 ms), in table order.
 pub const PERIODIC: [&str; 2] = ["nerve-5ms", "dora-5ms"];
 /// nerve may be this much slower than raw iceoryx2 (the issue's target).
@@ -106,6 +133,8 @@ pub struct HopResult {
     pub rtt: Summary,
     /// median round trip of each round, ns
     pub round_p50_ns: Vec<u64>,
+    /// share of round trips whose two ends ran on the same CPU (the futex rows)
+    pub same_cpu_share: Option<f64>,
 }
 
 /// Results of one system at one payload size in dora's pattern (a sample every 5 ms).
@@ -160,6 +189,19 @@ pub struct HopRatio {
     pub dora_target_met: Option<bool>,
     /// whether nerve p50 is within the target of iox2-waitset p50
     pub target_met: bool,
+    /// nerve p50 / futex p50, neither holding PM QoS
+    pub nerve_vs_futex_p50: Option<f64>,
+    /// nerve-pmqos p50 / futex-pmqos p50: both under a bound of 0 µs
+    pub nerve_pmqos_vs_futex_pmqos_p50: Option<f64>,
+    /// nerve-pmqos p50 / futex p50: nerve as it runs by default against the
+    /// floor of a machine left as it idles by default
+    pub nerve_pmqos_vs_futex_p50: Option<f64>,
+    /// whether nerve-pmqos p50 ≤ [`FUTEX_TARGET`] × futex-pmqos p50 (same settings)
+    pub futex_target_met: Option<bool>,
+    /// nerve-pmqos p50 / iox2-waitset-pmqos p50
+    pub nerve_pmqos_vs_waitset_pmqos_p50: Option<f64>,
+    /// nerve p50 / nerve-pmqos p50: what the bound buys nerve
+    pub pmqos_gain_nerve: Option<f64>,
 }
 
 /// Time to write a whole payload once (what `Output::send_with` adds per send).
@@ -202,6 +244,10 @@ pub struct HopReport {
     pub dora_target_ratio: f64,
     /// cost of filling a payload once, by size
     pub fill_cost: Vec<FillCost>,
+    /// where the idle robot's CPUs spent their time, without and with PM QoS
+    pub idle: Vec<IdleShare>,
+    /// nerve-pmqos / futex-pmqos p50 target
+    pub futex_target_ratio: f64,
     /// wall time of the run, s
     pub seconds: f64,
 }
@@ -220,6 +266,48 @@ pub(crate) fn default_count(size: usize, quick: bool) -> usize {
 /// Something that runs a batch of round trips.
 trait Pinger {
     fn batch(&mut self, robot: &Robot, count: usize) -> Result<Vec<u64>>;
+    /// round trips of the last batch whose two ends shared a CPU, where known
+    fn same_cpu(&self) -> Option<usize> {
+        None
+    }
+}
+
+/// A pinger measured in two rows: as it is, and under PM QoS.
+type SharedPinger = Rc<RefCell<Box<dyn Pinger>>>;
+
+/// The row of a [`SharedPinger`]: its batches run with or without this
+/// process holding a PM QoS bound of 0 µs for the batch.
+struct Row {
+    pinger: SharedPinger,
+    pm_qos: bool,
+}
+
+impl Pinger for Row {
+    fn batch(&mut self, robot: &Robot, count: usize) -> Result<Vec<u64>> {
+        let _hold = if self.pm_qos {
+            let h = agent_sdk::cpu_latency::hold(0).context("the -pmqos rows need /dev/cpu_dma_latency (run as root)")?;
+            // idle CPUs re-pick their state when the bound changes
+            std::thread::sleep(Duration::from_millis(2));
+            Some(h)
+        } else {
+            None
+        };
+        self.pinger.borrow_mut().batch(robot, count)
+    }
+
+    fn same_cpu(&self) -> Option<usize> {
+        self.pinger.borrow().same_cpu()
+    }
+}
+
+impl Pinger for FutexPing {
+    fn batch(&mut self, _robot: &Robot, count: usize) -> Result<Vec<u64>> {
+        self.ping_batch(count)
+    }
+
+    fn same_cpu(&self) -> Option<usize> {
+        Some(self.same_cpu)
+    }
 }
 
 impl<P: BenchPayload> Pinger for Side<P> {
@@ -428,7 +516,9 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     let count_of = |s: usize| counts.iter().find(|(x, _)| *x == s).map(|(_, c)| *c).unwrap_or(100);
 
     // the robot first: dropped last, so `nerve down` runs after every child stopped
-    let robot = Robot::new("h", opts.verbose)?;
+    // no agent holds PM QoS: the -pmqos rows hold it for their batches only
+    let robot = Robot::new("h", opts.verbose)?.with_cpu_latency("off");
+    eprintln!("hop: {}", machine.idle_line());
     eprintln!(
         "hop: robot {} (sizes {:?}, {} rounds{})",
         robot.name,
@@ -515,10 +605,31 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         c.await_ready("socket pong")?;
         children.push(c);
     }
+    // futex pongs: each maps the page its ping made, then unlinks it
+    let mut futex_pings = Vec::new();
+    for &size in &opts.sizes {
+        let path = PathBuf::from(format!("/dev/shm/nerve-bench-futex-{}-{size}", std::process::id()));
+        let ping = FutexPing::create(&path)?;
+        let mut cmd = self_command("__futex-pong")?;
+        cmd.arg("--path").arg(&path).stdout(Stdio::piped());
+        if !opts.verbose {
+            cmd.stderr(Stdio::null());
+        }
+        let mut c = ChildGuard::spawn(&format!("futex pong {size}"), cmd)?;
+        let ready = c.await_ready("futex pong");
+        let _ = std::fs::remove_file(&path);
+        ready?;
+        children.push(c);
+        futex_pings.push((size, ping));
+    }
 
     // the ping sides; from here on this thread runs like an agent's task
     let mut pingers: Vec<(usize, &'static str, Box<dyn Pinger>)> = Vec::new();
+    let mut futex_pings = futex_pings.into_iter();
     for &size in &opts.sizes {
+        if let Some((s, f)) = futex_pings.next() {
+            pingers.push((s, "futex", Box::new(f)));
+        }
         pingers.push((
             size,
             "nerve",
@@ -562,6 +673,24 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             }
         }
     }
+    // the rows measured again under PM QoS share their pinger with the plain row
+    let mut pingers: Vec<(usize, &'static str, Box<dyn Pinger>)> = pingers
+        .into_iter()
+        .flat_map(|(size, t, p)| {
+            let Some(&pmqos) = UNDER_PM_QOS.iter().find(|x| **x == t) else {
+                return vec![(size, t, p)];
+            };
+            let shared: SharedPinger = Rc::new(RefCell::new(p));
+            let pmqos_name = TRANSPORTS.iter().copied().find(|x| x.strip_suffix("-pmqos") == Some(pmqos)).unwrap_or(t);
+            vec![
+                (size, t, Box::new(Row { pinger: Rc::clone(&shared), pm_qos: false }) as Box<dyn Pinger>),
+                (size, pmqos_name, Box::new(Row { pinger: shared, pm_qos: true })),
+            ]
+        })
+        .collect();
+    // where an idle robot's CPUs spend their time, without and with the bound
+    let idle_span = Duration::from_secs(if opts.quick { 1 } else { 3 });
+    let idle = vec![crate::idle::measure(false, idle_span), crate::idle::measure(true, idle_span)];
     // Cyclone DDS, when installed
     let dds_peer = if dds::available() {
         Some(DdsPeer::start(opts.verbose)?)
@@ -574,6 +703,8 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     realtime_like_an_agent(20);
 
     let mut rounds = Rounds::new(pingers.len(), DISCARD);
+    // (round trips on one CPU, round trips) per pinger, measured rounds
+    let mut placement = vec![(0usize, 0usize); pingers.len()];
     let result = (|| -> Result<()> {
         // a quick run has no warm-up round (the first samples of each batch are still dropped)
         for round in usize::from(opts.quick)..=opts.rounds {
@@ -586,6 +717,12 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                         .batch(&robot, count_of(size))
                         .with_context(|| format!("{} at {} B, round {round}", pingers[i].1, size))?;
                     rounds.keep(i, round, &v);
+                    if round > 0
+                        && let Some(same) = pingers[i].2.same_cpu()
+                    {
+                        placement[i].0 += same;
+                        placement[i].1 += v.len();
+                    }
                 }
                 if let Some(peer) = &dds_peer {
                     let secs = if opts.quick {
@@ -645,6 +782,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                         label: label(size).into(),
                         rtt: dds::summarise(iv),
                         round_p50_ns: dds_round_p50.clone(),
+                        same_cpu_share: None,
                     });
                 }
                 continue;
@@ -661,6 +799,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 label: label(size).into(),
                 rtt: Summary::of(&rounds.samples[i]),
                 round_p50_ns: rounds.round_p50[i].clone(),
+                same_cpu_share: (placement[i].1 > 0).then(|| placement[i].0 as f64 / placement[i].1 as f64),
             });
         }
     }
@@ -701,6 +840,9 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             _ => None,
         };
         let dora_p50 = dora.map(|d| ratio(d.rtt.p50_ns, n.rtt.p50_ns));
+        let p50 = |t: &str| find(t, size).map(|x| x.rtt.p50_ns);
+        let both = |a: Option<u64>, b: Option<u64>| a.zip(b).map(|(a, b)| ratio(a, b));
+        let nerve_pmqos_vs_futex_pmqos = both(p50("nerve-pmqos"), p50("futex-pmqos"));
         ratios.push(HopRatio {
             size,
             nerve_vs_waitset_p50: r,
@@ -725,6 +867,12 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 _ => None,
             },
             target_met: r <= TARGET_RATIO,
+            nerve_vs_futex_p50: both(p50("nerve"), p50("futex")),
+            nerve_pmqos_vs_futex_pmqos_p50: nerve_pmqos_vs_futex_pmqos,
+            nerve_pmqos_vs_futex_p50: both(p50("nerve-pmqos"), p50("futex")),
+            futex_target_met: nerve_pmqos_vs_futex_pmqos.map(|x| x <= FUTEX_TARGET),
+            nerve_pmqos_vs_waitset_pmqos_p50: both(p50("nerve-pmqos"), p50("iox2-waitset-pmqos")),
+            pmqos_gain_nerve: both(p50("nerve"), p50("nerve-pmqos")),
         });
     }
     drop(_router);
@@ -743,6 +891,8 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         target_ratio: TARGET_RATIO,
         dora_target_ratio: DORA_TARGET,
         fill_cost: opts.sizes.iter().map(|&s| measure_fill(s)).collect(),
+        idle,
+        futex_target_ratio: FUTEX_TARGET,
         seconds: started.elapsed().as_secs_f64(),
     })
 }
@@ -786,6 +936,48 @@ pub fn print_tables(r: &HopReport) {
             opt(x.dds_vs_nerve_p50),
             opt(x.nerve_poll_vs_iox2_poll_p50),
             if x.target_met { "met" } else { "missed" }
+        );
+    }
+    println!();
+    println!("The wake-up floor and PM QoS, same run (nerve-pmqos is nerve as its agents run by default):");
+    println!();
+    println!(
+        "| payload | nerve/futex p50 (no PM QoS) | nerve-pmqos/futex-pmqos | nerve-pmqos/futex | nerve-pmqos/iox2-waitset-pmqos | nerve/nerve-pmqos | target ≤{FUTEX_TARGET} |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---|");
+    for x in &r.ratios {
+        println!(
+            "| {} | {} | {} | {} | {} | {} | {} |",
+            label(x.size),
+            opt(x.nerve_vs_futex_p50),
+            opt(x.nerve_pmqos_vs_futex_pmqos_p50),
+            opt(x.nerve_pmqos_vs_futex_p50),
+            opt(x.nerve_pmqos_vs_waitset_pmqos_p50),
+            opt(x.pmqos_gain_nerve),
+            match x.futex_target_met {
+                Some(true) => "met",
+                Some(false) => "missed",
+                None => "-",
+            }
+        );
+    }
+    let placed: Vec<String> = r
+        .results
+        .iter()
+        .filter_map(|x| x.same_cpu_share.map(|s| format!("{} {}: {:.0}%", x.transport, x.label, s * 100.0)))
+        .collect();
+    if !placed.is_empty() {
+        println!();
+        println!("round trips whose two ends ran on one CPU: {}", placed.join(", "));
+    }
+    for i in &r.idle {
+        let states: Vec<String> = i.states.iter().map(|(n, v)| format!("{n} {:.1}%", v * 100.0)).collect();
+        println!(
+            "idle robot, {:.0} s {}: CPUs busy {:.1}%, idle in {}",
+            i.seconds,
+            if i.pm_qos { "holding PM QoS at 0" } else { "without PM QoS" },
+            i.busy * 100.0,
+            states.join(", ")
         );
     }
     if !r.periodic.is_empty() {

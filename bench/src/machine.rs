@@ -1,4 +1,7 @@
-//! What machine a result came from: cores, CPU model, kernel, load.
+//! What machine a result came from: cores, CPU model, kernel, load, and
+//! how its idle CPUs sleep (the idle driver, its states and their exit
+//! latencies, and the PM QoS bound in force when the run started: what a
+//! wake-up costs depends on them, issue 17).
 
 use serde::Serialize;
 
@@ -13,6 +16,15 @@ pub struct Machine {
     pub kernel: String,
     /// 1-minute load average when the run started
     pub loadavg_1m: f64,
+    /// the cpuidle driver (`haltpoll`, `intel_idle`, `acpi_idle`...), `none` without one
+    pub idle_driver: String,
+    /// the cpuidle governor
+    pub idle_governor: String,
+    /// CPU 0's idle states: (name, exit latency µs)
+    pub idle_states: Vec<(String, u64)>,
+    /// the PM QoS bound in force when the run started, µs (2000000000: none
+    /// held; lower: some process holds one, and rows "without" it are not)
+    pub pm_qos_bound_us: Option<u32>,
 }
 
 impl Machine {
@@ -33,7 +45,38 @@ impl Machine {
             .ok()
             .and_then(|s| s.split_whitespace().next().and_then(|v| v.parse().ok()))
             .unwrap_or(0.0);
-        Machine { nproc: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0), cpu, kernel, loadavg_1m }
+        let read = |p: &str| std::fs::read_to_string(p).map(|s| s.trim().to_owned()).unwrap_or_else(|_| "none".into());
+        let mut idle_states = Vec::new();
+        for k in 0..16 {
+            let dir = format!("/sys/devices/system/cpu/cpu0/cpuidle/state{k}");
+            let Ok(name) = std::fs::read_to_string(format!("{dir}/name")) else { break };
+            let latency = std::fs::read_to_string(format!("{dir}/latency"))
+                .ok()
+                .and_then(|s| s.trim().parse().ok())
+                .unwrap_or(0);
+            idle_states.push((name.trim().to_owned(), latency));
+        }
+        Machine {
+            nproc: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0),
+            cpu,
+            kernel,
+            loadavg_1m,
+            idle_driver: read("/sys/devices/system/cpu/cpuidle/current_driver"),
+            idle_governor: read("/sys/devices/system/cpu/cpuidle/current_governor"),
+            idle_states,
+            pm_qos_bound_us: agent_sdk::cpu_latency::current_bound_us(),
+        }
+    }
+
+    /// One line for a run's header: the idle driver and states, and any PM QoS bound already held.
+    pub fn idle_line(&self) -> String {
+        let states: Vec<String> = self.idle_states.iter().map(|(n, l)| format!("{n} ({l} µs)")).collect();
+        let qos = match self.pm_qos_bound_us {
+            Some(b) if b < 2_000_000_000 => format!("; WARNING: a PM QoS bound of {b} µs is already held by some process, so rows without PM QoS are not"),
+            Some(_) => "; no PM QoS bound held".into(),
+            None => String::new(),
+        };
+        format!("idle driver {} (governor {}), states {}{qos}", self.idle_driver, self.idle_governor, states.join(", "))
     }
 }
 

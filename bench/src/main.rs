@@ -23,7 +23,7 @@
 //!
 //! The same executable also runs the processes of the benchmarks, through
 //! hidden subcommands: `__agent-ping`, `__agent-pong`, `__agent-jitter` (SDK
-//! agents), `__raw-pong`, `__uds-pong` and `__busy`; for `bridge`,
+//! agents), `__raw-pong`, `__uds-pong`, `__futex-pong` and `__busy`; for `bridge`,
 //! `__agent-bsend`, `__agent-bsink`, `__bridge` (the bridge agent, carrying
 //! the benchmark's payloads), `__zenoh-pub` and `__zenoh-sub`.
 
@@ -33,7 +33,9 @@ mod bridge_agents;
 mod control;
 mod dds;
 mod dora;
+mod futex;
 mod hop;
+mod idle;
 mod images;
 mod jitter;
 mod machine;
@@ -234,6 +236,7 @@ fn main() -> ExitCode {
             }
             "__raw-pong" => return raw::pong_main(rest),
             "__uds-pong" => return uds::pong_main(rest),
+            "__futex-pong" => return futex::pong_main(rest),
             "__busy" => return jitter::busy_main(),
             "__agent-bsend" | "__agent-bsink" => return bridge_agents::run_agent(&first, rest),
             "__bridge" => return bridge_agents::bridge_main(rest),

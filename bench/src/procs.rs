@@ -137,6 +137,8 @@ pub struct Robot {
     /// NERVE_HOME of the run (a private temp dir, removed at the end)
     pub home: PathBuf,
     verbose: bool,
+    /// `NERVE_CPU_LATENCY` of every process the robot starts (None: the agents' default)
+    cpu_latency: Option<&'static str>,
 }
 
 impl Robot {
@@ -145,13 +147,24 @@ impl Robot {
         let name = format!("b{}{tag}", std::process::id());
         let home = std::env::temp_dir().join(format!("nerve-bench-{name}"));
         std::fs::create_dir_all(&home).with_context(|| format!("cannot create {}", home.display()))?;
-        Ok(Robot { name, nerve: nerve_bin()?, home, verbose })
+        Ok(Robot { name, nerve: nerve_bin()?, home, verbose, cpu_latency: None })
+    }
+
+    /// Every agent of this robot holds `value` (`off`, or µs) as its PM QoS
+    /// bound instead of its default: set in the environment of every `nerve`
+    /// command and child started through [`Robot::quiet`].
+    pub fn with_cpu_latency(mut self, value: &'static str) -> Self {
+        self.cpu_latency = Some(value);
+        self
     }
 
     /// A `nerve --robot NAME ...` command.
     pub fn nerve(&self) -> Command {
         let mut c = Command::new(&self.nerve);
         c.arg("--robot").arg(&self.name).env("NERVE_HOME", &self.home);
+        if let Some(v) = self.cpu_latency {
+            c.env("NERVE_CPU_LATENCY", v);
+        }
         c
     }
 
@@ -217,8 +230,12 @@ impl Robot {
         serde_json::from_str(&out).context("cannot parse `nerve ps --json`")
     }
 
-    /// Silences a child's output unless `--verbose`.
+    /// Silences a child's output unless `--verbose`, and gives it the
+    /// robot's agent environment ([`Robot::with_cpu_latency`]).
     pub fn quiet(&self, cmd: &mut Command) {
+        if let Some(v) = self.cpu_latency {
+            cmd.env("NERVE_CPU_LATENCY", v);
+        }
         if !self.verbose {
             cmd.stdout(Stdio::null()).stderr(Stdio::null());
         }

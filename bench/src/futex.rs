@@ -1,0 +1,232 @@
+//! The wake-up floor: two processes ping-ponging through a futex in shared
+//! memory, nothing else. A round trip is two wake-ups of a blocked process
+//! and four atomic stores; no payload moves (the sequence number is the
+//! message). Whatever a transport adds above this row is its own code; what
+//! this row costs is the kernel and the CPU's idle state (issue 17).
+//!
+//! The pong side (`nerve-bench __futex-pong`) also writes the CPU it ran on
+//! into the shared page, so each round trip knows whether the two ends
+//! shared a CPU: the *placement* the scheduler chose.
+//!
+//! The shared page is a file in `/dev/shm` made by the ping side, mapped by
+//! both and unlinked as soon as the pong has mapped it: nothing is left
+//! behind, even after a crash of either.
+
+use crate::procs::{exit_status, parse_sub, realtime_like_an_agent};
+use agent_sdk::clock::now_ns;
+use anyhow::{Context as _, Result, bail};
+use clap::Parser;
+use std::io::Write as _;
+use std::os::fd::AsRawFd as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::Duration;
+
+/// How long either side waits for the other before it gives up.
+const PATIENCE: Duration = Duration::from_secs(2);
+
+/// The shared page: each word on a cache line of its own.
+#[repr(C, align(64))]
+struct Line(AtomicU32);
+
+#[repr(C)]
+struct Page {
+    /// the ping's sequence number
+    ping: Line,
+    /// the pong's answer (the same number)
+    pong: Line,
+    /// the CPU the pong ran on when it answered
+    pong_cpu: Line,
+    /// 1: the pong stops
+    stop: Line,
+}
+
+/// A mapping of the shared page.
+struct Mapping {
+    ptr: *mut Page,
+}
+
+impl Mapping {
+    /// Maps the page of the open file `f` (at least a page long).
+    fn of(f: &std::fs::File) -> Result<Self> {
+        let len = std::mem::size_of::<Page>();
+        // SAFETY: a shared mapping of a file this process holds open, of the page's size; checked below.
+        let ptr = unsafe {
+            libc::mmap(
+                std::ptr::null_mut(),
+                len,
+                libc::PROT_READ | libc::PROT_WRITE,
+                libc::MAP_SHARED,
+                f.as_raw_fd(),
+                0,
+            )
+        };
+        if ptr == libc::MAP_FAILED {
+            return Err(std::io::Error::last_os_error()).context("cannot map the futex page");
+        }
+        Ok(Mapping { ptr: ptr.cast() })
+    }
+
+    fn page(&self) -> &Page {
+        // SAFETY: the mapping is valid, aligned to a page and as long as a Page for
+        // our whole life; Page holds only atomics, which may be shared across processes.
+        unsafe { &*self.ptr }
+    }
+}
+
+impl Drop for Mapping {
+    fn drop(&mut self) {
+        // SAFETY: unmaps exactly what `of` mapped; no reference outlives self.
+        unsafe { libc::munmap(self.ptr.cast(), std::mem::size_of::<Page>()) };
+    }
+}
+
+/// Waits while `word` still holds `expected`, at most `timeout` (a shared,
+/// not process-private, futex: the two ends are different processes).
+fn futex_wait(word: &AtomicU32, expected: u32, timeout: Duration) {
+    let ts = libc::timespec {
+        tv_sec: timeout.as_secs() as libc::time_t,
+        tv_nsec: libc::c_long::from(timeout.subsec_nanos() as i32),
+    };
+    // SAFETY: FUTEX_WAIT reads the word through a valid pointer; ts is valid.
+    unsafe {
+        libc::syscall(libc::SYS_futex, word.as_ptr(), libc::FUTEX_WAIT, expected, &ts as *const libc::timespec)
+    };
+}
+
+/// Wakes one waiter on `word`.
+fn futex_wake(word: &AtomicU32) {
+    // SAFETY: FUTEX_WAKE only uses the address as a key.
+    unsafe { libc::syscall(libc::SYS_futex, word.as_ptr(), libc::FUTEX_WAKE, 1) };
+}
+
+/// The CPU the calling thread runs on.
+fn this_cpu() -> u32 {
+    // SAFETY: sched_getcpu takes no arguments.
+    let c = unsafe { libc::sched_getcpu() };
+    u32::try_from(c).unwrap_or(u32::MAX)
+}
+
+/// The ping side: the shared page, and the placement of the last batch.
+pub struct FutexPing {
+    map: Mapping,
+    seq: u32,
+    /// round trips of the last batch whose pong ran on the ping's CPU
+    pub same_cpu: usize,
+}
+
+impl std::fmt::Debug for FutexPing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FutexPing").field("seq", &self.seq).finish()
+    }
+}
+
+impl FutexPing {
+    /// Makes the shared page at `path` (which must not exist) for a pong to map.
+    pub fn create(path: &Path) -> Result<Self> {
+        let f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
+        f.set_len(4096).with_context(|| format!("cannot size {}", path.display()))?;
+        Ok(FutexPing { map: Mapping::of(&f)?, seq: 0, same_cpu: 0 })
+    }
+
+    /// One batch of `count` round trips; returns their times in ns.
+    pub fn ping_batch(&mut self, count: usize) -> Result<Vec<u64>> {
+        let p = self.map.page();
+        let mut rtts = Vec::with_capacity(count);
+        self.same_cpu = 0;
+        for _ in 0..count {
+            self.seq = self.seq.wrapping_add(1).max(1);
+            let seq = self.seq;
+            let t0 = now_ns();
+            let cpu = this_cpu();
+            p.ping.0.store(seq, Ordering::Release);
+            futex_wake(&p.ping.0);
+            let deadline = t0 + PATIENCE.as_nanos() as u64;
+            loop {
+                let v = p.pong.0.load(Ordering::Acquire);
+                if v == seq {
+                    break;
+                }
+                if now_ns() > deadline {
+                    bail!("the futex pong did not answer {seq} within {PATIENCE:?}");
+                }
+                futex_wait(&p.pong.0, v, PATIENCE);
+            }
+            rtts.push(now_ns().saturating_sub(t0));
+            if p.pong_cpu.0.load(Ordering::Relaxed) == cpu {
+                self.same_cpu += 1;
+            }
+        }
+        Ok(rtts)
+    }
+}
+
+impl Drop for FutexPing {
+    fn drop(&mut self) {
+        let p = self.map.page();
+        p.stop.0.store(1, Ordering::Release);
+        p.ping.0.fetch_add(1, Ordering::Release);
+        futex_wake(&p.ping.0);
+    }
+}
+
+/// Arguments of `nerve-bench __futex-pong`.
+#[derive(Debug, Parser)]
+#[command(name = "nerve-bench __futex-pong")]
+struct PongArgs {
+    /// the shared page the ping made
+    #[arg(long)]
+    path: PathBuf,
+}
+
+/// Entry of `nerve-bench __futex-pong`: maps the page, unlinks it, prints
+/// `ready`, answers until told to stop (or the ping is silent for long).
+pub fn pong_main(args: Vec<String>) -> ExitCode {
+    match parse_sub::<PongArgs>("__futex-pong", args) {
+        Ok(a) => exit_status("futex pong", pong(&a)),
+        Err(code) => code,
+    }
+}
+
+fn pong(a: &PongArgs) -> Result<()> {
+    realtime_like_an_agent(20);
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&a.path)
+        .with_context(|| format!("cannot open {}", a.path.display()))?;
+    let map = Mapping::of(&f)?;
+    drop(f);
+    std::fs::remove_file(&a.path).with_context(|| format!("cannot remove {}", a.path.display()))?;
+    println!("ready");
+    std::io::stdout().flush().context("stdout")?;
+    let p = map.page();
+    let mut last = p.ping.0.load(Ordering::Acquire);
+    // the ping's batches come seconds apart; five silent minutes mean it is gone
+    let mut idle = 0u32;
+    loop {
+        if p.stop.0.load(Ordering::Acquire) == 1 {
+            return Ok(());
+        }
+        let v = p.ping.0.load(Ordering::Acquire);
+        if v != last {
+            last = v;
+            idle = 0;
+            p.pong_cpu.0.store(this_cpu(), Ordering::Relaxed);
+            p.pong.0.store(v, Ordering::Release);
+            futex_wake(&p.pong.0);
+            continue;
+        }
+        idle += 1;
+        if idle > 150 {
+            bail!("the ping side has been silent for five minutes");
+        }
+        futex_wait(&p.ping.0, v, PATIENCE);
+    }
+}
