@@ -12,14 +12,14 @@
 //! both and unlinked as soon as the pong has mapped it: nothing is left
 //! behind, even after a crash of either.
 
-use crate::procs::{exit_status, parse_sub, realtime_like_an_agent};
+use crate::procs::{ChildGuard, exit_status, parse_sub, realtime_like_an_agent, self_command};
 use agent_sdk::clock::now_ns;
 use anyhow::{Context as _, Result, bail};
 use clap::Parser;
 use std::io::Write as _;
 use std::os::fd::AsRawFd as _;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
+use std::process::{ExitCode, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
@@ -133,6 +133,23 @@ impl FutexPing {
             .with_context(|| format!("cannot create {}", path.display()))?;
         f.set_len(4096).with_context(|| format!("cannot size {}", path.display()))?;
         Ok(FutexPing { map: Mapping::of(&f)?, seq: 0, same_cpu: 0 })
+    }
+
+    /// Makes a page and starts a pong (`__futex-pong`) on it; `tag` tells
+    /// the pages of one run apart. The page's file is gone once this returns.
+    pub fn with_pong(tag: &str, verbose: bool) -> Result<(ChildGuard, Self)> {
+        let path = PathBuf::from(format!("/dev/shm/nerve-bench-futex-{}-{tag}", std::process::id()));
+        let ping = FutexPing::create(&path)?;
+        let mut cmd = self_command("__futex-pong")?;
+        cmd.arg("--path").arg(&path).stdout(Stdio::piped());
+        if !verbose {
+            cmd.stderr(Stdio::null());
+        }
+        let spawned = ChildGuard::spawn(&format!("futex pong {tag}"), cmd);
+        let ready = spawned.and_then(|mut c| c.await_ready("futex pong").map(|()| c));
+        // the pong unlinks it once mapped; this covers a pong that never got there
+        let _ = std::fs::remove_file(&path);
+        Ok((ready?, ping))
     }
 
     /// One batch of `count` round trips; returns their times in ns.

@@ -264,7 +264,7 @@ pub(crate) fn default_count(size: usize, quick: bool) -> usize {
 }
 
 /// Something that runs a batch of round trips.
-trait Pinger {
+pub(crate) trait Pinger {
     fn batch(&mut self, robot: &Robot, count: usize) -> Result<Vec<u64>>;
     /// round trips of the last batch whose two ends shared a CPU, where known
     fn same_cpu(&self) -> Option<usize> {
@@ -273,13 +273,21 @@ trait Pinger {
 }
 
 /// A pinger measured in two rows: as it is, and under PM QoS.
-type SharedPinger = Rc<RefCell<Box<dyn Pinger>>>;
+pub(crate) type SharedPinger = Rc<RefCell<Box<dyn Pinger>>>;
 
 /// The row of a [`SharedPinger`]: its batches run with or without this
 /// process holding a PM QoS bound of 0 µs for the batch.
-struct Row {
-    pinger: SharedPinger,
-    pm_qos: bool,
+pub(crate) struct Row {
+    pub(crate) pinger: SharedPinger,
+    pub(crate) pm_qos: bool,
+}
+
+impl Row {
+    /// The two rows of one pinger: as it is, and under PM QoS.
+    pub(crate) fn both(p: Box<dyn Pinger>) -> (Row, Row) {
+        let shared: SharedPinger = Rc::new(RefCell::new(p));
+        (Row { pinger: Rc::clone(&shared), pm_qos: false }, Row { pinger: shared, pm_qos: true })
+    }
 }
 
 impl Pinger for Row {
@@ -582,7 +590,8 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     }
     eprintln!("hop: nerve agents running and connected");
 
-    // raw iceoryx2 and socket pongs
+    // raw iceoryx2, socket and futex pongs
+    let (mut uds_pings, mut futex_pings) = (Vec::new(), Vec::new());
     for &size in &opts.sizes {
         for mode in ["waitset", "listener", "waitset-fill", "poll"] {
             let mut cmd = self_command("__raw-pong")?;
@@ -595,40 +604,21 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             c.await_ready("raw iceoryx2 pong")?;
             children.push(c);
         }
-        let path = robot.home.join(format!("uds-{size}.sock"));
-        let mut cmd = self_command("__uds-pong")?;
-        cmd.arg("--path").arg(&path).args(["--size", &size.to_string()]).stdout(Stdio::piped());
-        if !opts.verbose {
-            cmd.stderr(Stdio::null());
-        }
-        let mut c = ChildGuard::spawn(&format!("socket pong {size}"), cmd)?;
-        c.await_ready("socket pong")?;
+        let (c, ping) = UdsPing::with_pong(&robot.home, size, opts.verbose)?;
         children.push(c);
-    }
-    // futex pongs: each maps the page its ping made, then unlinks it
-    let mut futex_pings = Vec::new();
-    for &size in &opts.sizes {
-        let path = PathBuf::from(format!("/dev/shm/nerve-bench-futex-{}-{size}", std::process::id()));
-        let ping = FutexPing::create(&path)?;
-        let mut cmd = self_command("__futex-pong")?;
-        cmd.arg("--path").arg(&path).stdout(Stdio::piped());
-        if !opts.verbose {
-            cmd.stderr(Stdio::null());
-        }
-        let mut c = ChildGuard::spawn(&format!("futex pong {size}"), cmd)?;
-        let ready = c.await_ready("futex pong");
-        let _ = std::fs::remove_file(&path);
-        ready?;
+        uds_pings.push(ping);
+        let (c, ping) = FutexPing::with_pong(&format!("{size}"), opts.verbose)?;
         children.push(c);
-        futex_pings.push((size, ping));
+        futex_pings.push(ping);
     }
 
     // the ping sides; from here on this thread runs like an agent's task
     let mut pingers: Vec<(usize, &'static str, Box<dyn Pinger>)> = Vec::new();
-    let mut futex_pings = futex_pings.into_iter();
+    let (mut uds_pings, mut futex_pings) = (uds_pings.into_iter(), futex_pings.into_iter());
     for &size in &opts.sizes {
-        if let Some((s, f)) = futex_pings.next() {
-            pingers.push((s, "futex", Box::new(f)));
+        if let (Some(u), Some(f)) = (uds_pings.next(), futex_pings.next()) {
+            pingers.push((size, "uds", Box::new(u)));
+            pingers.push((size, "futex", Box::new(f)));
         }
         pingers.push((
             size,
@@ -660,8 +650,6 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             let p: Box<dyn Pinger> = with_payload!(size, P => Box::new(Side::<P>::open(&robot.name, mode, "ping", "pong", "raw-ping")?), _ => bail!("size"));
             pingers.push((size, t, p));
         }
-        let path = robot.home.join(format!("uds-{size}.sock"));
-        pingers.push((size, "uds", Box::new(UdsPing::connect(&path, size)?)));
         if let Some(peer) = &dora_peer {
             let (src, sink) = (agent_name("psend", size), agent_name("psink", size));
             let (src_dir, sink_dir) = (opts.work.join(&src), opts.work.join(&sink));
@@ -680,12 +668,9 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             let Some(&pmqos) = UNDER_PM_QOS.iter().find(|x| **x == t) else {
                 return vec![(size, t, p)];
             };
-            let shared: SharedPinger = Rc::new(RefCell::new(p));
             let pmqos_name = TRANSPORTS.iter().copied().find(|x| x.strip_suffix("-pmqos") == Some(pmqos)).unwrap_or(t);
-            vec![
-                (size, t, Box::new(Row { pinger: Rc::clone(&shared), pm_qos: false }) as Box<dyn Pinger>),
-                (size, pmqos_name, Box::new(Row { pinger: shared, pm_qos: true })),
-            ]
+            let (plain, held) = Row::both(p);
+            vec![(size, t, Box::new(plain) as Box<dyn Pinger>), (size, pmqos_name, Box::new(held))]
         })
         .collect();
     // where an idle robot's CPUs spend their time, without and with the bound

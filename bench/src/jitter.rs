@@ -8,10 +8,18 @@
 //!   deadlines with `clock_nanosleep`) records every wake-up's lateness
 //!   itself; `nerve ps --json` gives the SDK's own figures (p99 over the last
 //!   2048 cycles, max since start) as a cross-check.
-//! * `cyclictest`: `cyclictest -m -p 20 -i US -l N -q --laptop -h 20000`;
-//!   `--laptop` keeps it from holding `/dev/cpu_dma_latency` at 0, which the
-//!   SDK does not do either. `cyclictest-pmqos` is the same without
-//!   `--laptop` (its default), to show what that setting is worth.
+//!   Like every real-time agent it holds `/dev/cpu_dma_latency` at 0 while
+//!   it runs (its default since issue 17). `nerve-nopmqos` is the same agent
+//!   with `--cpu-latency off`.
+//! * `cyclictest-pmqos`: `cyclictest -m -p 20 -i US -l N -q -h 20000`, which
+//!   holds `/dev/cpu_dma_latency` at 0 by default: the pair to `nerve`.
+//! * `cyclictest`: the same with `--laptop`, which keeps it from holding the
+//!   bound: the pair to `nerve-nopmqos`.
+//!
+//! Each chunk is its own process, so a bound is held for its chunk only.
+//! The ratios compare like with like: `nerve` / `cyclictest-pmqos` (the
+//! target of issue 17: median ≤ [`TARGET_P50`] times, p99 beside it) and
+//! `nerve-nopmqos` / `cyclictest`.
 
 use crate::agents::read_values;
 use crate::machine::{Machine, command_line};
@@ -24,7 +32,9 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// The systems compared.
-pub const SYSTEMS: [&str; 3] = ["nerve", "cyclictest", "cyclictest-pmqos"];
+pub const SYSTEMS: [&str; 4] = ["nerve", "nerve-nopmqos", "cyclictest", "cyclictest-pmqos"];
+/// nerve's median lateness may be this many times cyclictest's (both holding PM QoS; issue 17).
+pub const TARGET_P50: f64 = 1.1;
 
 /// Options of the jitter scenario.
 #[derive(Debug, Clone)]
@@ -44,7 +54,7 @@ pub struct JitterOpts {
 /// Results of one system under one condition.
 #[derive(Debug, Clone, Serialize)]
 pub struct JitterResult {
-    /// nerve, cyclictest, cyclictest-pmqos
+    /// nerve, nerve-nopmqos, cyclictest, cyclictest-pmqos
     pub system: String,
     /// Hz
     pub rate_hz: u64,
@@ -65,14 +75,20 @@ pub struct JitterRatio {
     pub rate_hz: u64,
     /// idle or busy
     pub load: String,
-    /// nerve p99 / cyclictest (--laptop) p99, pooled
+    /// nerve p99 / cyclictest-pmqos p99, pooled (both holding PM QoS at 0)
     pub p99_ratio: f64,
     /// median over chunks of the per-chunk p99 ratio
     pub p99_ratio_chunk_median: f64,
-    /// nerve p50 / cyclictest p50
+    /// nerve p50 / cyclictest-pmqos p50
     pub p50_ratio: f64,
-    /// nerve max / cyclictest max
+    /// nerve max / cyclictest-pmqos max
     pub max_ratio: f64,
+    /// whether p50_ratio ≤ [`TARGET_P50`]
+    pub p50_target_met: bool,
+    /// nerve-nopmqos p50 / cyclictest (--laptop) p50: neither holding PM QoS
+    pub nopmqos_p50_ratio: Option<f64>,
+    /// nerve-nopmqos p99 / cyclictest p99
+    pub nopmqos_p99_ratio: Option<f64>,
 }
 
 /// The jitter report.
@@ -148,11 +164,15 @@ fn nerve_chunk(
     rate: u64,
     cycles: usize,
     chunk: usize,
+    pm_qos: bool,
 ) -> Result<(Vec<u64>, (u64, u64, u64))> {
     let name = format!("jit-{rate}-{chunk}");
     let file = opts.work.join(format!("{name}.txt"));
     let mut cmd = self_command("__agent-jitter")?;
     cmd.args(["--robot", &robot.name, "--name", &name, "--period", &format!("{}us", 1_000_000 / rate)]);
+    if !pm_qos {
+        cmd.args(["--cpu-latency", "off"]);
+    }
     cmd.args(["--", "--cycles", &cycles.to_string()]).arg("--out").arg(&file);
     cmd.env("NERVE_HOME", &robot.home);
     robot.quiet(&mut cmd);
@@ -208,10 +228,11 @@ pub fn run(opts: &JitterOpts) -> Result<JitterReport> {
                     chunk_no += 1;
                     let v = match SYSTEMS[i] {
                         "nerve" => {
-                            let (v, o) = nerve_chunk(&robot, opts, rate, cycles, chunk_no)?;
+                            let (v, o) = nerve_chunk(&robot, opts, rate, cycles, chunk_no, true)?;
                             own.push(o);
                             v
                         }
+                        "nerve-nopmqos" => nerve_chunk(&robot, opts, rate, cycles, chunk_no, false)?.0,
                         "cyclictest" => cyclictest(1_000_000 / rate, cycles, false)?.0,
                         _ => cyclictest(1_000_000 / rate, cycles, true)?.0,
                     };
@@ -245,15 +266,20 @@ pub fn run(opts: &JitterOpts) -> Result<JitterReport> {
     for &rate in &opts.rates {
         for load in ["idle", "busy"] {
             let f = |s: &str| results.iter().find(|r| r.system == s && r.rate_hz == rate && r.load == load);
-            if let (Some(n), Some(c)) = (f("nerve"), f("cyclictest")) {
+            if let (Some(n), Some(c)) = (f("nerve"), f("cyclictest-pmqos")) {
                 let per: Vec<f64> = n.chunk_p99_ns.iter().zip(&c.chunk_p99_ns).map(|(a, b)| ratio(*a, *b)).collect();
+                let off = f("nerve-nopmqos").zip(f("cyclictest"));
+                let p50_ratio = ratio(n.lateness.p50_ns, c.lateness.p50_ns);
                 ratios.push(JitterRatio {
                     rate_hz: rate,
                     load: load.into(),
                     p99_ratio: ratio(n.lateness.p99_ns, c.lateness.p99_ns),
                     p99_ratio_chunk_median: median_f64(&per),
-                    p50_ratio: ratio(n.lateness.p50_ns, c.lateness.p50_ns),
+                    p50_ratio,
                     max_ratio: ratio(n.lateness.max_ns, c.lateness.max_ns),
+                    p50_target_met: p50_ratio <= TARGET_P50,
+                    nopmqos_p50_ratio: off.map(|(a, b)| ratio(a.lateness.p50_ns, b.lateness.p50_ns)),
+                    nopmqos_p99_ratio: off.map(|(a, b)| ratio(a.lateness.p99_ns, b.lateness.p99_ns)),
                 });
             }
         }
@@ -295,12 +321,23 @@ pub fn print_tables(r: &JitterReport) {
         );
     }
     println!();
-    println!("| rate | load | nerve/cyclictest p50 | p99 | p99 (median of chunks) | max |");
-    println!("|---|---|---:|---:|---:|---:|");
+    println!(
+        "| rate | load | nerve/cyclictest-pmqos p50 | p99 | p99 (median of chunks) | max | target p50 ≤{TARGET_P50} | nerve-nopmqos/cyclictest p50 | p99 |"
+    );
+    println!("|---|---|---:|---:|---:|---:|---|---:|---:|");
+    let opt = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
     for x in &r.ratios {
         println!(
-            "| {} Hz | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
-            x.rate_hz, x.load, x.p50_ratio, x.p99_ratio, x.p99_ratio_chunk_median, x.max_ratio
+            "| {} Hz | {} | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} | {} |",
+            x.rate_hz,
+            x.load,
+            x.p50_ratio,
+            x.p99_ratio,
+            x.p99_ratio_chunk_median,
+            x.max_ratio,
+            if x.p50_target_met { "met" } else { "missed" },
+            opt(x.nopmqos_p50_ratio),
+            opt(x.nopmqos_p99_ratio)
         );
     }
 }

@@ -11,7 +11,13 @@ use std::path::Path;
 pub(crate) fn colour(t: &str) -> RGBColor {
     match t {
         "nerve" | "stm" => RGBColor(200, 30, 30),
+        "nerve-pmqos" => RGBColor(255, 110, 80),
         "iox2-waitset" | "iox2-slice" => RGBColor(30, 90, 200),
+        "iox2-waitset-pmqos" => RGBColor(110, 160, 250),
+        "futex" => RGBColor(0, 0, 0),
+        "futex-pmqos" => RGBColor(90, 90, 90),
+        "uds" => RGBColor(160, 160, 60),
+        "uds-pmqos" => RGBColor(200, 200, 120),
         "iox2-listener" => RGBColor(20, 150, 60),
         "iox2-waitset-fill" => RGBColor(230, 140, 20),
         "ddsperf" => RGBColor(140, 60, 170),

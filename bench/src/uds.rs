@@ -3,14 +3,14 @@
 //! child process (`nerve-bench __uds-pong`), the ping side in the benchmark
 //! process; both at the same SCHED_FIFO priority as an agent's task.
 
-use crate::procs::{exit_status, parse_sub, realtime_like_an_agent};
+use crate::procs::{ChildGuard, exit_status, parse_sub, realtime_like_an_agent, self_command};
 use agent_sdk::clock::now_ns;
 use anyhow::{Context as _, Result, bail};
 use clap::Parser;
 use std::io::{Read as _, Write as _};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
+use std::process::{ExitCode, Stdio};
 
 /// The ping side: a connected socket and a buffer of the payload size.
 #[derive(Debug)]
@@ -25,6 +25,20 @@ impl UdsPing {
     pub fn connect(path: &Path, size: usize) -> Result<Self> {
         let stream = UnixStream::connect(path).with_context(|| format!("cannot connect to {}", path.display()))?;
         Ok(UdsPing { stream, buf: vec![0u8; size.max(8)], seq: 0 })
+    }
+
+    /// Starts a pong (`__uds-pong`) listening in `dir` for `size`-byte
+    /// messages, and connects to it.
+    pub fn with_pong(dir: &Path, size: usize, verbose: bool) -> Result<(ChildGuard, Self)> {
+        let path = dir.join(format!("uds-{size}.sock"));
+        let mut cmd = self_command("__uds-pong")?;
+        cmd.arg("--path").arg(&path).args(["--size", &size.to_string()]).stdout(Stdio::piped());
+        if !verbose {
+            cmd.stderr(Stdio::null());
+        }
+        let mut c = ChildGuard::spawn(&format!("socket pong {size}"), cmd)?;
+        c.await_ready("socket pong")?;
+        Ok((c, UdsPing::connect(&path, size)?))
     }
 
     /// One batch of `count` round trips; returns the round-trip times in ns.
