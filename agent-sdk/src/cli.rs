@@ -28,6 +28,10 @@ pub struct CommonArgs {
     /// runs (PM QoS, /dev/cpu_dma_latency), in µs, or `off`.
     #[arg(long, env = "NERVE_CPU_LATENCY", default_value = "0", value_name = "US|off")]
     pub cpu_latency: crate::cpu_latency::CpuLatencySetting,
+    /// Keep the agent on these CPUs: 1, 0,1, 0-3. Two agents that pass
+    /// samples back and forth wake each other fastest on one CPU.
+    #[arg(long, value_name = "LIST")]
+    pub cpus: Option<crate::rt::CpuList>,
     /// SCHED_FIFO priority of the task (the message checker runs one above).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(i32).range(1..=98))]
     pub priority: i32,

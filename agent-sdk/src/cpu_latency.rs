@@ -178,9 +178,9 @@ mod tests {
         assert_eq!("0".parse(), Ok(CpuLatencySetting::Bound(0)));
         assert_eq!("20us".parse(), Ok(CpuLatencySetting::Bound(20)));
         assert_eq!("20 µs".parse(), Ok(CpuLatencySetting::Bound(20)));
-        assert!("2000000".parse::<CpuLatencySetting>().unwrap_err().contains("above"));
+        assert!("2000000".parse::<CpuLatencySetting>().expect_err("above the limit").contains("above"));
         assert!("-1".parse::<CpuLatencySetting>().is_err());
-        assert!("fast".parse::<CpuLatencySetting>().unwrap_err().contains("neither"));
+        assert!("fast".parse::<CpuLatencySetting>().expect_err("not a number").contains("neither"));
         for s in [CpuLatencySetting::Off, CpuLatencySetting::Bound(0), CpuLatencySetting::Bound(50)] {
             assert_eq!(s.to_string().parse(), Ok(s), "the command line reads back what it writes");
         }

@@ -114,9 +114,98 @@ pub fn drop_realtime() {
     let _ = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_OTHER, &param) };
 }
 
+/// A set of CPUs an agent is kept on (`--cpus 0,2-3`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CpuList(pub Vec<usize>);
+
+impl std::str::FromStr for CpuList {
+    type Err = String;
+
+    /// Numbers and ranges separated by commas: `1`, `0,1`, `0-3,6`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        const MAX_CPU: usize = 1023;
+        let mut cpus = Vec::new();
+        for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let bad = || format!("{s:?}: write CPU numbers and ranges such as 0,2-3");
+            let (a, b) = match part.split_once('-') {
+                Some((a, b)) => {
+                    (a.trim().parse::<usize>().map_err(|_| bad())?, b.trim().parse::<usize>().map_err(|_| bad())?)
+                }
+                None => {
+                    let n = part.parse::<usize>().map_err(|_| bad())?;
+                    (n, n)
+                }
+            };
+            if a > b || b > MAX_CPU {
+                return Err(bad());
+            }
+            cpus.extend(a..=b);
+        }
+        if cpus.is_empty() {
+            return Err(format!("{s:?} names no CPU"));
+        }
+        cpus.sort_unstable();
+        cpus.dedup();
+        Ok(CpuList(cpus))
+    }
+}
+
+impl std::fmt::Display for CpuList {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let parts: Vec<String> = self.0.iter().map(usize::to_string).collect();
+        f.write_str(&parts.join(","))
+    }
+}
+
+/// Keeps the calling process's current thread, and every thread it starts
+/// afterwards, on `cpus`. Fails when a CPU does not exist or is not allowed
+/// (a cgroup's cpuset), naming the CPUs this process may use.
+pub fn set_affinity(cpus: &CpuList) -> Result<(), String> {
+    // SAFETY: cpu_set_t is plain data; CPU_ZERO/CPU_SET write within it.
+    let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+    for &c in &cpus.0 {
+        if c >= libc::CPU_SETSIZE as usize {
+            return Err(format!("CPU {c} is beyond what this system supports"));
+        }
+        // SAFETY: c < CPU_SETSIZE, checked above.
+        unsafe { libc::CPU_SET(c, &mut set) };
+    }
+    // SAFETY: a valid cpu_set_t of the size given, for the calling thread (0).
+    let rc = unsafe { libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) };
+    if rc == 0 {
+        return Ok(());
+    }
+    let e = std::io::Error::last_os_error();
+    let allowed = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0);
+    Err(format!(
+        "cannot keep the agent on CPUs {cpus} ({e}); this process may use {allowed} CPU(s): see `nproc` and `taskset -p $$`"
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cpu_lists_read_as_taskset_writes_them() {
+        assert_eq!("1".parse(), Ok(CpuList(vec![1])));
+        assert_eq!("0,1".parse(), Ok(CpuList(vec![0, 1])));
+        assert_eq!("0-3,6, 2".parse(), Ok(CpuList(vec![0, 1, 2, 3, 6])));
+        assert!("3-1".parse::<CpuList>().is_err());
+        assert!("x".parse::<CpuList>().is_err());
+        assert!("".parse::<CpuList>().is_err());
+        assert!("0-5000".parse::<CpuList>().is_err());
+        assert_eq!(CpuList(vec![0, 2]).to_string().parse(), Ok(CpuList(vec![0, 2])));
+    }
+
+    #[test]
+    fn affinity_to_a_missing_cpu_is_refused_with_what_to_do() {
+        // CPU 1023 exists on no machine these tests run on; run in a thread
+        // so that a surprise success does not pin the test process
+        let e = std::thread::spawn(|| set_affinity(&CpuList(vec![1023]))).join().expect("thread");
+        let msg = e.expect_err("no machine here has 1024 CPUs");
+        assert!(msg.contains("1023") && msg.contains("nproc"), "{msg}");
+    }
 
     #[test]
     fn a_finite_memlock_limit_never_locks_future_mappings() {

@@ -90,9 +90,7 @@ fn futex_wait(word: &AtomicU32, expected: u32, timeout: Duration) {
         tv_nsec: libc::c_long::from(timeout.subsec_nanos() as i32),
     };
     // SAFETY: FUTEX_WAIT reads the word through a valid pointer; ts is valid.
-    unsafe {
-        libc::syscall(libc::SYS_futex, word.as_ptr(), libc::FUTEX_WAIT, expected, &ts as *const libc::timespec)
-    };
+    unsafe { libc::syscall(libc::SYS_futex, word.as_ptr(), libc::FUTEX_WAIT, expected, &ts as *const libc::timespec) };
 }
 
 /// Wakes one waiter on `word`.
@@ -137,11 +135,15 @@ impl FutexPing {
 
     /// Makes a page and starts a pong (`__futex-pong`) on it; `tag` tells
     /// the pages of one run apart. The page's file is gone once this returns.
-    pub fn with_pong(tag: &str, verbose: bool) -> Result<(ChildGuard, Self)> {
+    /// With `cpu`, the pong is kept on that CPU.
+    pub fn with_pong(tag: &str, cpu: Option<usize>, verbose: bool) -> Result<(ChildGuard, Self)> {
         let path = PathBuf::from(format!("/dev/shm/nerve-bench-futex-{}-{tag}", std::process::id()));
         let ping = FutexPing::create(&path)?;
         let mut cmd = self_command("__futex-pong")?;
         cmd.arg("--path").arg(&path).stdout(Stdio::piped());
+        if let Some(c) = cpu {
+            cmd.args(["--cpu", &c.to_string()]);
+        }
         if !verbose {
             cmd.stderr(Stdio::null());
         }
@@ -200,6 +202,9 @@ struct PongArgs {
     /// the shared page the ping made
     #[arg(long)]
     path: PathBuf,
+    /// keep the pong on this CPU
+    #[arg(long)]
+    cpu: Option<usize>,
 }
 
 /// Entry of `nerve-bench __futex-pong`: maps the page, unlinks it, prints
@@ -212,6 +217,9 @@ pub fn pong_main(args: Vec<String>) -> ExitCode {
 }
 
 fn pong(a: &PongArgs) -> Result<()> {
+    if let Some(c) = a.cpu {
+        agent_sdk::rt::set_affinity(&agent_sdk::rt::CpuList(vec![c])).map_err(anyhow::Error::msg)?;
+    }
     realtime_like_an_agent(20);
     let f = std::fs::OpenOptions::new()
         .read(true)

@@ -31,6 +31,10 @@
 //!   scenario, here in one robot without a bridge;
 //! * `dora-5ms`: the same with the dora nodes (see [`crate::dora`]).
 //!
+//! `nerve-pinned` and `futex-pinned` are the pairs with both ends kept on
+//! one CPU (`--cpus 0` for the agents; the futex ping thread for its batch):
+//! what placement buys, without PM QoS.
+//!
 //! Every agent of the run holds no PM QoS bound (`NERVE_CPU_LATENCY=off`),
 //! so that the rows above measure the machine as it idles by default. The
 //! rows `nerve-pmqos`, `iox2-waitset-pmqos`, `uds-pmqos` and `futex-pmqos`
@@ -65,16 +69,16 @@ use crate::uds::UdsPing;
 use crate::with_payload;
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
+use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
-use std::cell::RefCell;
 use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 /// Samples dropped at the start of every batch.
 const DISCARD: usize = 5;
 /// The transports, in the order of the tables.
-pub const TRANSPORTS: [&str; 14] = [
+pub const TRANSPORTS: [&str; 16] = [
     "nerve",
     "nerve-pmqos",
     "iox2-waitset",
@@ -85,11 +89,15 @@ pub const TRANSPORTS: [&str; 14] = [
     "uds-pmqos",
     "futex",
     "futex-pmqos",
+    "nerve-pinned",
+    "futex-pinned",
     "ddsperf",
     "dora",
     "nerve-poll",
     "iox2-poll",
 ];
+/// The CPU the `-pinned` rows keep both ends on.
+pub(crate) const PINNED_CPU: usize = 0;
 /// The transports measured again under a PM QoS bound of 0 µs (row `T-pmqos`).
 const UNDER_PM_QOS: [&str; 4] = ["nerve", "iox2-waitset", "uds", "futex"];
 /// nerve's round trip (with its default PM QoS bound) may be this many times the futex floor's (issue 17).
@@ -202,6 +210,10 @@ pub struct HopRatio {
     pub nerve_pmqos_vs_waitset_pmqos_p50: Option<f64>,
     /// nerve p50 / nerve-pmqos p50: what the bound buys nerve
     pub pmqos_gain_nerve: Option<f64>,
+    /// nerve p50 / nerve-pinned p50: what one CPU for both ends buys nerve
+    pub pinned_gain_nerve: Option<f64>,
+    /// nerve-pinned p50 / futex-pinned p50
+    pub nerve_pinned_vs_futex_pinned_p50: Option<f64>,
 }
 
 /// Time to write a whole payload once (what `Output::send_with` adds per send).
@@ -293,7 +305,8 @@ impl Row {
 impl Pinger for Row {
     fn batch(&mut self, robot: &Robot, count: usize) -> Result<Vec<u64>> {
         let _hold = if self.pm_qos {
-            let h = agent_sdk::cpu_latency::hold(0).context("the -pmqos rows need /dev/cpu_dma_latency (run as root)")?;
+            let h =
+                agent_sdk::cpu_latency::hold(0).context("the -pmqos rows need /dev/cpu_dma_latency (run as root)")?;
             // idle CPUs re-pick their state when the bound changes
             std::thread::sleep(Duration::from_millis(2));
             Some(h)
@@ -305,6 +318,37 @@ impl Pinger for Row {
 
     fn same_cpu(&self) -> Option<usize> {
         self.pinger.borrow().same_cpu()
+    }
+}
+
+/// Whether this process may hold a PM QoS bound; says so when not (the
+/// `-pmqos` rows are left out, as a missing peer's are).
+pub(crate) fn pm_qos_permitted(scenario: &str) -> bool {
+    match agent_sdk::cpu_latency::hold(0) {
+        Ok(_) => true,
+        Err(e) => {
+            eprintln!("{scenario}: warning: no -pmqos rows: {e}");
+            false
+        }
+    }
+}
+
+/// A pinger whose batches run with this thread kept on [`PINNED_CPU`]
+/// (the pong was started there): placement without PM QoS.
+pub(crate) struct Pinned(pub(crate) Box<dyn Pinger>);
+
+impl Pinger for Pinned {
+    fn batch(&mut self, robot: &Robot, count: usize) -> Result<Vec<u64>> {
+        let all =
+            agent_sdk::rt::CpuList((0..std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).collect());
+        agent_sdk::rt::set_affinity(&agent_sdk::rt::CpuList(vec![PINNED_CPU])).map_err(anyhow::Error::msg)?;
+        let r = self.0.batch(robot, count);
+        agent_sdk::rt::set_affinity(&all).map_err(anyhow::Error::msg)?;
+        r
+    }
+
+    fn same_cpu(&self) -> Option<usize> {
+        self.0.same_cpu()
     }
 }
 
@@ -340,8 +384,16 @@ pub(crate) fn spawn_bench_agent(
     count: usize,
     dir: &Path,
 ) -> Result<ChildGuard> {
+    // `pin-ping`, `pin-pong`: the same agents kept on CPU 0
+    let (role, pinned) = match role.strip_prefix("pin-") {
+        Some(r) => (r, true),
+        None => (role, false),
+    };
     let mut cmd = self_command(&format!("__agent-{role}"))?;
     cmd.args(["--robot", &robot.name, "--name", name]);
+    if pinned {
+        cmd.args(["--cpus", &PINNED_CPU.to_string()]);
+    }
     if role == "ping" || role.starts_with("poll-") {
         cmd.arg("--suspended");
     }
@@ -557,9 +609,17 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let poll_dir = opts.work.join(agent_name("nerve-poll", size));
         std::fs::create_dir_all(&poll_dir).with_context(|| format!("cannot create {}", poll_dir.display()))?;
-        for role in ["ping", "pong", "poll-ping", "poll-pong"] {
+        let pin_dir = opts.work.join(agent_name("nerve-pinned", size));
+        std::fs::create_dir_all(&pin_dir).with_context(|| format!("cannot create {}", pin_dir.display()))?;
+        for role in ["ping", "pong", "poll-ping", "poll-pong", "pin-ping", "pin-pong"] {
             let name = agent_name(role, size);
-            let d = if role.starts_with("poll-") { &poll_dir } else { &dir };
+            let d = if role.starts_with("poll-") {
+                &poll_dir
+            } else if role.starts_with("pin-") {
+                &pin_dir
+            } else {
+                &dir
+            };
             children.push(spawn_bench_agent(&robot, role, &name, size, count_of(size), d)?);
             names.push(name);
         }
@@ -579,6 +639,9 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         let (ping, pong) = (agent_name("ping", size), agent_name("pong", size));
         robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
         // ping and pong answer one sample with one: the loop is the benchmark
+        robot.run(&["connect", "--allow-cycle", &format!("{pong}/out"), &format!("{ping}/in")])?;
+        let (ping, pong) = (agent_name("pin-ping", size), agent_name("pin-pong", size));
+        robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
         robot.run(&["connect", "--allow-cycle", &format!("{pong}/out"), &format!("{ping}/in")])?;
         let (ping, pong) = (agent_name("poll-ping", size), agent_name("poll-pong", size));
         robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
@@ -607,19 +670,31 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         let (c, ping) = UdsPing::with_pong(&robot.home, size, opts.verbose)?;
         children.push(c);
         uds_pings.push(ping);
-        let (c, ping) = FutexPing::with_pong(&format!("{size}"), opts.verbose)?;
+        let (c, ping) = FutexPing::with_pong(&format!("{size}"), None, opts.verbose)?;
         children.push(c);
-        futex_pings.push(ping);
+        let (c2, pinned) = FutexPing::with_pong(&format!("{size}-pinned"), Some(PINNED_CPU), opts.verbose)?;
+        children.push(c2);
+        futex_pings.push((ping, pinned));
     }
 
     // the ping sides; from here on this thread runs like an agent's task
     let mut pingers: Vec<(usize, &'static str, Box<dyn Pinger>)> = Vec::new();
     let (mut uds_pings, mut futex_pings) = (uds_pings.into_iter(), futex_pings.into_iter());
     for &size in &opts.sizes {
-        if let (Some(u), Some(f)) = (uds_pings.next(), futex_pings.next()) {
+        if let (Some(u), Some((f, fp))) = (uds_pings.next(), futex_pings.next()) {
             pingers.push((size, "uds", Box::new(u)));
             pingers.push((size, "futex", Box::new(f)));
+            pingers.push((size, "futex-pinned", Box::new(Pinned(Box::new(fp)))));
         }
+        pingers.push((
+            size,
+            "nerve-pinned",
+            Box::new(NervePing {
+                name: agent_name("pin-ping", size),
+                dir: opts.work.join(agent_name("nerve-pinned", size)),
+                next: 0,
+            }),
+        ));
         pingers.push((
             size,
             "nerve",
@@ -662,10 +737,11 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         }
     }
     // the rows measured again under PM QoS share their pinger with the plain row
+    let pm_qos = pm_qos_permitted("hop");
     let mut pingers: Vec<(usize, &'static str, Box<dyn Pinger>)> = pingers
         .into_iter()
         .flat_map(|(size, t, p)| {
-            let Some(&pmqos) = UNDER_PM_QOS.iter().find(|x| **x == t) else {
+            let Some(&pmqos) = UNDER_PM_QOS.iter().find(|x| **x == t && pm_qos) else {
                 return vec![(size, t, p)];
             };
             let pmqos_name = TRANSPORTS.iter().copied().find(|x| x.strip_suffix("-pmqos") == Some(pmqos)).unwrap_or(t);
@@ -858,6 +934,8 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             futex_target_met: nerve_pmqos_vs_futex_pmqos.map(|x| x <= FUTEX_TARGET),
             nerve_pmqos_vs_waitset_pmqos_p50: both(p50("nerve-pmqos"), p50("iox2-waitset-pmqos")),
             pmqos_gain_nerve: both(p50("nerve"), p50("nerve-pmqos")),
+            pinned_gain_nerve: both(p50("nerve"), p50("nerve-pinned")),
+            nerve_pinned_vs_futex_pinned_p50: both(p50("nerve-pinned"), p50("futex-pinned")),
         });
     }
     drop(_router);
@@ -927,18 +1005,20 @@ pub fn print_tables(r: &HopReport) {
     println!("The wake-up floor and PM QoS, same run (nerve-pmqos is nerve as its agents run by default):");
     println!();
     println!(
-        "| payload | nerve/futex p50 (no PM QoS) | nerve-pmqos/futex-pmqos | nerve-pmqos/futex | nerve-pmqos/iox2-waitset-pmqos | nerve/nerve-pmqos | target ≤{FUTEX_TARGET} |"
+        "| payload | nerve/futex p50 (no PM QoS) | nerve-pmqos/futex-pmqos | nerve-pmqos/futex | nerve-pmqos/iox2-waitset-pmqos | nerve/nerve-pmqos | nerve/nerve-pinned | nerve-pinned/futex-pinned | target ≤{FUTEX_TARGET} |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---|");
     for x in &r.ratios {
         println!(
-            "| {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             label(x.size),
             opt(x.nerve_vs_futex_p50),
             opt(x.nerve_pmqos_vs_futex_pmqos_p50),
             opt(x.nerve_pmqos_vs_futex_p50),
             opt(x.nerve_pmqos_vs_waitset_pmqos_p50),
             opt(x.pmqos_gain_nerve),
+            opt(x.pinned_gain_nerve),
+            opt(x.nerve_pinned_vs_futex_pinned_p50),
             match x.futex_target_met {
                 Some(true) => "met",
                 Some(false) => "missed",

@@ -50,10 +50,8 @@ impl Machine {
         for k in 0..16 {
             let dir = format!("/sys/devices/system/cpu/cpu0/cpuidle/state{k}");
             let Ok(name) = std::fs::read_to_string(format!("{dir}/name")) else { break };
-            let latency = std::fs::read_to_string(format!("{dir}/latency"))
-                .ok()
-                .and_then(|s| s.trim().parse().ok())
-                .unwrap_or(0);
+            let latency =
+                std::fs::read_to_string(format!("{dir}/latency")).ok().and_then(|s| s.trim().parse().ok()).unwrap_or(0);
             idle_states.push((name.trim().to_owned(), latency));
         }
         Machine {
@@ -72,7 +70,9 @@ impl Machine {
     pub fn idle_line(&self) -> String {
         let states: Vec<String> = self.idle_states.iter().map(|(n, l)| format!("{n} ({l} µs)")).collect();
         let qos = match self.pm_qos_bound_us {
-            Some(b) if b < 2_000_000_000 => format!("; WARNING: a PM QoS bound of {b} µs is already held by some process, so rows without PM QoS are not"),
+            Some(b) if b < 2_000_000_000 => format!(
+                "; WARNING: a PM QoS bound of {b} µs is already held by some process, so rows without PM QoS are not"
+            ),
             Some(_) => "; no PM QoS bound held".into(),
             None => String::new(),
         };

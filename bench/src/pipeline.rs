@@ -24,12 +24,12 @@
 //! batch: the `-pmqos` rows are nerve as its agents run by default.
 
 use crate::futex::FutexPing;
-use crate::hop::{NervePing, Pinger, Row, default_count, size_tag, spawn_bench_agent};
-use crate::uds::UdsPing;
+use crate::hop::{NervePing, Pinger, Row, default_count, pm_qos_permitted, size_tag, spawn_bench_agent};
 use crate::machine::{Machine, command_line};
 use crate::payloads::{SIZES, label};
 use crate::procs::{ChildGuard, Robot};
 use crate::stats::{Rounds, Summary, median_f64, ratio, us};
+use crate::uds::UdsPing;
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -140,6 +140,7 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
     let _router = robot.start_router()?;
     let mut children: Vec<ChildGuard> = Vec::new();
     let mut names = Vec::new();
+    let pm_qos = pm_qos_permitted("pipeline");
     // (size, path, hops, ping)
     let mut paths: Vec<(usize, &'static str, u32, Box<dyn Pinger>)> = Vec::new();
     for &(size, count) in &counts {
@@ -153,18 +154,23 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
             names.push(name.clone());
         }
         for (path, hops, name) in [("one-hop", 2, &p1), ("three-hop", 3, &p3)] {
-            let (plain, held) = Row::both(Box::new(NervePing { name: name.clone(), dir: opts.work.join(name), next: 0 }));
+            let (plain, held) =
+                Row::both(Box::new(NervePing { name: name.clone(), dir: opts.work.join(name), next: 0 }));
             paths.push((size, path, hops, Box::new(plain)));
-            paths.push((size, if hops == 2 { "one-hop-pmqos" } else { "three-hop-pmqos" }, hops, Box::new(held)));
+            if pm_qos {
+                paths.push((size, if hops == 2 { "one-hop-pmqos" } else { "three-hop-pmqos" }, hops, Box::new(held)));
+            }
         }
         let (c, ping) = UdsPing::with_pong(&robot.home, size, opts.verbose)?;
         children.push(c);
         paths.push((size, "uds", 2, Box::new(ping)));
-        let (c, ping) = FutexPing::with_pong(&format!("p{size}"), opts.verbose)?;
+        let (c, ping) = FutexPing::with_pong(&format!("p{size}"), None, opts.verbose)?;
         children.push(c);
         let (plain, held) = Row::both(Box::new(ping));
         paths.push((size, "futex", 2, Box::new(plain)));
-        paths.push((size, "futex-pmqos", 2, Box::new(held)));
+        if pm_qos {
+            paths.push((size, "futex-pmqos", 2, Box::new(held)));
+        }
     }
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
     robot.wait_registered(&refs, Duration::from_secs(20))?;

@@ -16,6 +16,8 @@ pub(crate) fn colour(t: &str) -> RGBColor {
         "iox2-waitset-pmqos" => RGBColor(110, 160, 250),
         "futex" => RGBColor(0, 0, 0),
         "futex-pmqos" => RGBColor(90, 90, 90),
+        "nerve-pinned" => RGBColor(150, 0, 60),
+        "futex-pinned" => RGBColor(60, 60, 160),
         "uds" => RGBColor(160, 160, 60),
         "uds-pmqos" => RGBColor(200, 200, 120),
         "iox2-listener" => RGBColor(20, 150, 60),

@@ -44,29 +44,60 @@ fn run(scenario: &str, extra: &[&str]) -> Value {
     report
 }
 
+/// Whether this process may write the PM QoS device (the `-pmqos` rows need it).
+fn may_hold_pm_qos() -> bool {
+    std::fs::OpenOptions::new().write(true).open("/dev/cpu_dma_latency").is_ok()
+}
+
 #[test]
 fn hop_quick_8_bytes_produces_results() {
     let r = run("hop", &["--payloads", "8", "--count", "50"]);
+    assert!(may_hold_pm_qos(), "the tests run as root, as CI does: the -pmqos rows need /dev/cpu_dma_latency");
     let results = r["results"].as_array().expect("results");
-    for t in ["nerve", "iox2-waitset", "iox2-listener", "uds", "nerve-poll", "iox2-poll"] {
+    for t in [
+        "nerve",
+        "nerve-pmqos",
+        "nerve-pinned",
+        "iox2-waitset",
+        "iox2-waitset-pmqos",
+        "iox2-listener",
+        "uds",
+        "uds-pmqos",
+        "futex",
+        "futex-pmqos",
+        "futex-pinned",
+        "nerve-poll",
+        "iox2-poll",
+    ] {
         let x = results.iter().find(|x| x["transport"] == t && x["size"] == 8).expect("a result per transport");
         assert!(x["rtt"]["n"].as_u64().unwrap_or(0) > 0, "{t}: no samples");
     }
+    // the pinned futex pair ran on one CPU every time; the placement is reported
+    let pinned = results.iter().find(|x| x["transport"] == "futex-pinned").expect("futex-pinned");
+    assert_eq!(pinned["same_cpu_share"].as_f64(), Some(1.0), "{pinned}");
     let ratios = r["ratios"].as_array().expect("ratios");
     assert!(ratios[0]["nerve_vs_waitset_p50"].as_f64().is_some());
+    assert!(ratios[0]["nerve_pmqos_vs_futex_pmqos_p50"].as_f64().is_some_and(|v| v > 0.0));
+    assert!(ratios[0]["futex_target_met"].is_boolean());
+    let idle = r["idle"].as_array().expect("idle shares");
+    assert_eq!(idle.len(), 2, "without and with PM QoS");
+    assert_eq!(idle[1]["pm_qos"], true, "the run holds the bound (as root)");
+    assert!(r["machine"]["idle_driver"].is_string());
 }
 
 #[test]
 fn pipeline_quick_measures_one_and_three_hops() {
     let r = run("pipeline", &["--payloads", "8"]);
     let results = r["results"].as_array().expect("results");
-    for path in ["one-hop", "three-hop"] {
+    for path in ["one-hop", "three-hop", "one-hop-pmqos", "three-hop-pmqos", "uds", "futex", "futex-pmqos"] {
         let x = results.iter().find(|x| x["path"] == path).expect("a result per path");
         assert!(x["latency"]["n"].as_u64().unwrap_or(0) > 0, "{path}: no samples");
     }
     let ratio = &r["ratios"][0];
     assert!(ratio["three_vs_one_p50"].as_f64().is_some_and(|v| v > 0.0));
     assert!(ratio["target_met"].is_boolean());
+    assert!(ratio["three_vs_one_pmqos_p50"].as_f64().is_some_and(|v| v > 0.0));
+    assert!(ratio["one_hop_vs_futex_p50"].as_f64().is_some_and(|v| v > 0.0));
 }
 
 #[test]

@@ -9,6 +9,7 @@
 //! params = { step = 1 }
 //! restart = "on-failure"         # never | on-failure | always
 //! cpu_latency = "off"            # PM QoS bound in µs, or "off" (also top-level, for all)
+//! cpus = [0]                     # keep the agent on these CPUs (or "0-1")
 //! [[agent]]
 //! name = "r1"
 //! kind = "relay"
@@ -26,6 +27,7 @@
 use crate::kinds::resolve_kind;
 use agent_sdk::World;
 use agent_sdk::cpu_latency::CpuLatencySetting;
+use agent_sdk::rt::CpuList;
 use serde::Deserialize;
 use shm_schemas::control::agent_to_router::TaskKind;
 use shm_schemas::control::describe::Description;
@@ -79,6 +81,7 @@ struct RawAgent {
     suspended: bool,
     log_level: Option<String>,
     cpu_latency: Option<Spanned<toml::Value>>,
+    cpus: Option<Spanned<toml::Value>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -121,6 +124,8 @@ pub struct AgentSpec {
     pub log_level: Option<String>,
     /// PM QoS bound (`cpu_latency`, the agent's or the file's); None: the agent's default
     pub cpu_latency: Option<CpuLatencySetting>,
+    /// CPUs the agent is kept on (`cpus`)
+    pub cpus: Option<CpuList>,
     /// the agent's own description
     pub description: Description,
 }
@@ -144,6 +149,9 @@ impl AgentSpec {
         }
         if let Some(c) = &self.cpu_latency {
             v.extend(["--cpu-latency".into(), c.to_string()]);
+        }
+        if let Some(c) = &self.cpus {
+            v.extend(["--cpus".into(), c.to_string()]);
         }
         if self.suspended {
             v.push("--suspended".into());
@@ -273,6 +281,35 @@ fn cpu_latency_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<CpuLatencySe
         other => Err(format!("{other} is neither \"off\" nor a number of microseconds")),
     };
     parsed.map_err(|e| cx.err(v, format!("cpu_latency: {e}"))).ok()
+}
+
+/// A `cpus` value: `[0, 1]`, `0` or a string such as `"0-1"`; a CPU this
+/// machine lacks is refused here, before anything starts.
+fn cpus_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<CpuList> {
+    let text = match v.get_ref() {
+        toml::Value::String(s) => Ok(s.clone()),
+        toml::Value::Integer(i) => Ok(i.to_string()),
+        toml::Value::Array(a) => a
+            .iter()
+            .map(|x| x.as_integer().map(|i| i.to_string()).ok_or(()))
+            .collect::<Result<Vec<_>, _>>()
+            .map(|v| v.join(","))
+            .map_err(|()| "a list of CPU numbers".to_string()),
+        _ => Err("a list of CPU numbers such as [0, 1], or a string such as \"0-1\"".to_string()),
+    };
+    let parsed = text.and_then(|t| t.parse::<CpuList>());
+    let n = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(usize::MAX);
+    match parsed {
+        Ok(c) if c.0.iter().any(|&k| k >= n) => {
+            cx.err(v, format!("cpus: this machine has CPUs 0-{} (`nproc`: {n})", n.saturating_sub(1)));
+            None
+        }
+        Ok(c) => Some(c),
+        Err(e) => {
+            cx.err(v, format!("cpus: {e}"));
+            None
+        }
+    }
 }
 
 /// Reads and checks a launch file for `world` (the robot the file runs on):
@@ -440,6 +477,7 @@ pub fn load(
             suspended: a.suspended,
             log_level: a.log_level.clone(),
             cpu_latency: a.cpu_latency.as_ref().and_then(|v| cpu_latency_of(&mut cx, v)).or(robot_cpu_latency),
+            cpus: a.cpus.as_ref().and_then(|v| cpus_of(&mut cx, v)),
             description,
         });
     }

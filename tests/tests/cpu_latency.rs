@@ -1,9 +1,10 @@
-//! PM QoS, end to end (issue 17): a real-time agent holds
+//! PM QoS and CPU placement, end to end (issue 17). A real-time agent holds
 //! `/dev/cpu_dma_latency` for as long as it runs and no longer; `nerve ps`
 //! says what each agent holds; `--cpu-latency`, `NERVE_CPU_LATENCY` and a
 //! launch file's `cpu_latency` set or turn off the bound; an agent that may
-//! not write the device says so and runs on. Real agent processes, the
-//! kernel's own device (the tests run as root, as CI does).
+//! not write the device says so and runs on. `--cpus` and a launch file's
+//! `cpus` keep every thread of an agent on the CPUs named. Real agent
+//! processes, the kernel's own device (the tests run as root, as CI does).
 
 use nerve_tests::{Robot, alive, wait_until};
 use serde_json::Value;
@@ -117,10 +118,8 @@ cpu_latency = 7
     assert!(!holds_device(r.pid("l2")) && holds_device(r.pid("l3")));
 
     // a bad value is refused with its line, before anything starts
-    let bad = r.launch_file(
-        "bad.toml",
-        "robot = \"x\"\n[[agent]]\nname = \"z\"\nkind = \"relay\"\ncpu_latency = \"fast\"\n",
-    );
+    let bad =
+        r.launch_file("bad.toml", "robot = \"x\"\n[[agent]]\nname = \"z\"\nkind = \"relay\"\ncpu_latency = \"fast\"\n");
     let err = r.fails(&["launch", bad.to_str().expect("utf-8 path")]);
     assert!(err.contains("bad.toml:5:") && err.contains("cpu_latency"), "{err}");
     assert!(r.agent("z").is_none());
@@ -149,5 +148,41 @@ fn an_agent_that_may_not_hold_the_bound_says_so_and_runs_on() {
         wait_until(Duration::from_secs(5), || r.agent("d").and_then(|a| a["stats"]["cycles"].as_u64()) > Some(3)),
         "the refused agent does not run"
     );
+    r.down_and_check_clean();
+}
+
+/// The `Cpus_allowed_list` of every thread of `pid`.
+fn thread_cpus(pid: u32) -> Vec<String> {
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).expect("the agent's threads");
+    tasks
+        .flatten()
+        .filter_map(|t| std::fs::read_to_string(t.path().join("status")).ok())
+        .filter_map(|s| s.lines().find_map(|l| l.strip_prefix("Cpus_allowed_list:")).map(|v| v.trim().to_owned()))
+        .collect()
+}
+
+#[test]
+fn cpus_keep_every_thread_of_an_agent_where_they_are_told() {
+    let r = Robot::new("cpus");
+    r.router();
+    r.ok(&["start", "relay", "--name", "a", "--cpus", "0"]);
+    let threads = thread_cpus(r.pid("a"));
+    assert!(threads.len() >= 2, "the checker and the task at least: {threads:?}");
+    assert!(threads.iter().all(|c| c == "0"), "every thread on CPU 0: {threads:?}");
+
+    let lf = r.launch_file("cpus.toml", "robot = \"x\"\n[[agent]]\nname = \"b\"\nkind = \"relay\"\ncpus = [0]\n");
+    r.ok(&["launch", lf.to_str().expect("utf-8 path")]);
+    assert!(thread_cpus(r.pid("b")).iter().all(|c| c == "0"));
+
+    // a CPU the machine lacks: refused with its line before anything starts,
+    // and by the agent itself when started by hand
+    let bad = r.launch_file("bad.toml", "robot = \"x\"\n[[agent]]\nname = \"z\"\nkind = \"relay\"\ncpus = [1000]\n");
+    let err = r.fails(&["launch", bad.to_str().expect("utf-8 path")]);
+    assert!(err.contains("bad.toml:5:") && err.contains("nproc"), "{err}");
+    let out = r.nerve(&["start", "relay", "--name", "y", "--cpus", "1000"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--cpus") && err.contains("1000"), "{err}");
+    assert!(r.agent("y").is_none() && r.agent("z").is_none());
     r.down_and_check_clean();
 }

@@ -37,6 +37,9 @@ pub enum StartupError {
     /// `--name` is not a valid agent name.
     #[error("invalid --name: {0}")]
     Name(#[source] shm_schemas::NameError),
+    /// `--cpus` names CPUs the agent may not run on.
+    #[error("--cpus: {0}")]
+    Cpus(String),
     /// `--period` cannot be read, or is given to an event-driven agent.
     #[error("--period: {0}")]
     Period(String),
@@ -222,6 +225,10 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         (Task::EventDriven, None) => None,
     };
 
+    // before any thread starts: they all inherit it
+    if let Some(cpus) = &args.cpus {
+        rt::set_affinity(cpus).map_err(StartupError::Cpus)?;
+    }
     if !args.no_realtime {
         match rt::lock_memory() {
             Ok(()) => tracing::debug!("memory locked (mlockall, on fault)"),

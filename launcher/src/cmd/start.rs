@@ -41,6 +41,9 @@ pub struct StartArgs {
     /// or `off` (default: the agent's, 0 unless NERVE_CPU_LATENCY says otherwise).
     #[arg(long, value_name = "US|off")]
     pub cpu_latency: Option<agent_sdk::cpu_latency::CpuLatencySetting>,
+    /// Keep the agent on these CPUs: 1, 0,1, 0-3.
+    #[arg(long, value_name = "LIST")]
+    pub cpus: Option<agent_sdk::rt::CpuList>,
     /// Arguments for the agent itself.
     #[arg(last = true)]
     pub args: Vec<String>,
@@ -102,6 +105,9 @@ pub fn start(world: &World, a: StartArgs) -> Result<ExitCode> {
     }
     if let Some(c) = a.cpu_latency {
         cmd.arg("--cpu-latency").arg(c.to_string());
+    }
+    if let Some(c) = &a.cpus {
+        cmd.arg("--cpus").arg(c.to_string());
     }
     if !a.args.is_empty() {
         cmd.arg("--").args(&a.args);
