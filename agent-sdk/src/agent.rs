@@ -210,6 +210,8 @@ pub struct Context {
     pub(crate) cycle: u64,
     pub(crate) now_ns: u64,
     pub(crate) period: Option<Duration>,
+    /// the deadline this periodic step was woken for (0: event-driven)
+    pub(crate) deadline_ns: u64,
     pub(crate) stop: bool,
     /// the input ports, in the order they were declared
     pub(crate) inputs: Vec<String>,
@@ -236,6 +238,13 @@ impl Context {
     /// The current period of a periodic task.
     pub fn period(&self) -> Option<Duration> {
         self.period
+    }
+
+    /// The absolute deadline (CLOCK_MONOTONIC ns) this step of a periodic
+    /// task was woken for; `now_ns() - deadline_ns()` is how late it woke.
+    /// `None` for an event-driven task.
+    pub fn deadline_ns(&self) -> Option<u64> {
+        (self.deadline_ns != 0).then_some(self.deadline_ns)
     }
 
     /// The inputs whose new samples woke this step of an event-driven task
@@ -269,6 +278,7 @@ mod tests {
             cycle: 0,
             now_ns: 0,
             period: None,
+            deadline_ns: 0,
             stop: false,
             inputs: inputs.iter().map(|s| s.to_string()).collect(),
             woken: vec![false; inputs.len()],

@@ -28,6 +28,7 @@ pub(super) fn task_main<A: Agent>(
         cycle: 0,
         now_ns: now_ns(),
         period: None,
+        deadline_ns: 0,
         stop: false,
         inputs: inputs.iter().map(|i| i.name().to_owned()).collect(),
         woken: vec![false; inputs.len()],
@@ -138,6 +139,7 @@ fn periodic_loop<A: Agent>(agent: &mut A, sh: &Shared, ctx: &mut Context) {
         last = woke;
         ctx.now_ns = woke;
         ctx.period = Some(Duration::from_nanos(period));
+        ctx.deadline_ns = next.max(1);
         run_step(agent, sh, ctx);
         let done = now_ns();
         {
