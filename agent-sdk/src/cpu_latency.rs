@@ -106,14 +106,6 @@ pub enum CpuLatencyError {
 #[derive(Debug)]
 pub struct CpuLatencyHold {
     _file: File,
-    us: u32,
-}
-
-impl CpuLatencyHold {
-    /// The bound held, µs.
-    pub fn us(&self) -> u32 {
-        self.us
-    }
 }
 
 /// The device file: [`DEVICE_ENV`] when set, else [`DEVICE`].
@@ -137,7 +129,7 @@ pub fn hold(us: u32) -> Result<CpuLatencyHold, CpuLatencyError> {
         us,
         source,
     })?;
-    Ok(CpuLatencyHold { _file: file, us })
+    Ok(CpuLatencyHold { _file: file })
 }
 
 /// Applies `setting` for a real-time agent and says what came of it: the

@@ -13,91 +13,30 @@
 //! behind, even after a crash of either.
 
 use crate::procs::{ChildGuard, exit_status, parse_sub, realtime_like_an_agent, self_command};
+use crate::shared_page::{SharedPage, futex_wait, futex_wake};
 use agent_sdk::clock::now_ns;
 use anyhow::{Context as _, Result, bail};
 use clap::Parser;
 use std::io::Write as _;
-use std::os::fd::AsRawFd as _;
 use std::path::{Path, PathBuf};
 use std::process::{ExitCode, Stdio};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 /// How long either side waits for the other before it gives up.
 const PATIENCE: Duration = Duration::from_secs(2);
 
-/// The shared page: each word on a cache line of its own.
-#[repr(C, align(64))]
-struct Line(AtomicU32);
-
-#[repr(C)]
-struct Page {
-    /// the ping's sequence number
-    ping: Line,
-    /// the pong's answer (the same number)
-    pong: Line,
-    /// the CPU the pong ran on when it answered
-    pong_cpu: Line,
-    /// 1: the pong stops
-    stop: Line,
-}
-
-/// A mapping of the shared page.
-struct Mapping {
-    ptr: *mut Page,
-}
-
-impl Mapping {
-    /// Maps the page of the open file `f` (at least a page long).
-    fn of(f: &std::fs::File) -> Result<Self> {
-        let len = std::mem::size_of::<Page>();
-        // SAFETY: a shared mapping of a file this process holds open, of the page's size; checked below.
-        let ptr = unsafe {
-            libc::mmap(
-                std::ptr::null_mut(),
-                len,
-                libc::PROT_READ | libc::PROT_WRITE,
-                libc::MAP_SHARED,
-                f.as_raw_fd(),
-                0,
-            )
-        };
-        if ptr == libc::MAP_FAILED {
-            return Err(std::io::Error::last_os_error()).context("cannot map the futex page");
-        }
-        Ok(Mapping { ptr: ptr.cast() })
-    }
-
-    fn page(&self) -> &Page {
-        // SAFETY: the mapping is valid, aligned to a page and as long as a Page for
-        // our whole life; Page holds only atomics, which may be shared across processes.
-        unsafe { &*self.ptr }
-    }
-}
-
-impl Drop for Mapping {
-    fn drop(&mut self) {
-        // SAFETY: unmaps exactly what `of` mapped; no reference outlives self.
-        unsafe { libc::munmap(self.ptr.cast(), std::mem::size_of::<Page>()) };
-    }
-}
-
-/// Waits while `word` still holds `expected`, at most `timeout` (a shared,
-/// not process-private, futex: the two ends are different processes).
-fn futex_wait(word: &AtomicU32, expected: u32, timeout: Duration) {
-    let ts = libc::timespec {
-        tv_sec: timeout.as_secs() as libc::time_t,
-        tv_nsec: libc::c_long::from(timeout.subsec_nanos() as i32),
-    };
-    // SAFETY: FUTEX_WAIT reads the word through a valid pointer; ts is valid.
-    unsafe { libc::syscall(libc::SYS_futex, word.as_ptr(), libc::FUTEX_WAIT, expected, &ts as *const libc::timespec) };
-}
-
-/// Wakes one waiter on `word`.
-fn futex_wake(word: &AtomicU32) {
-    // SAFETY: FUTEX_WAKE only uses the address as a key.
-    unsafe { libc::syscall(libc::SYS_futex, word.as_ptr(), libc::FUTEX_WAKE, 1) };
-}
+/// The page's words, each on a cache line of its own (16 words apart).
+/// The ping's sequence number:
+const PING: usize = 0;
+/// The pong's answer (the same number):
+const PONG: usize = 16;
+/// The CPU the pong ran on when it answered:
+const PONG_CPU: usize = 32;
+/// 1: the pong stops.
+const STOP: usize = 48;
+/// The bytes mapped (and the file's length).
+const PAGE: usize = 4096;
 
 /// The CPU the calling thread runs on.
 fn this_cpu() -> u32 {
@@ -108,7 +47,7 @@ fn this_cpu() -> u32 {
 
 /// The ping side: the shared page, and the placement of the last batch.
 pub struct FutexPing {
-    map: Mapping,
+    page: SharedPage,
     seq: u32,
     /// round trips of the last batch whose pong ran on the ping's CPU
     pub same_cpu: usize,
@@ -129,8 +68,8 @@ impl FutexPing {
             .create_new(true)
             .open(path)
             .with_context(|| format!("cannot create {}", path.display()))?;
-        f.set_len(4096).with_context(|| format!("cannot size {}", path.display()))?;
-        Ok(FutexPing { map: Mapping::of(&f)?, seq: 0, same_cpu: 0 })
+        f.set_len(PAGE as u64).with_context(|| format!("cannot size {}", path.display()))?;
+        Ok(FutexPing { page: SharedPage::map(path, PAGE)?, seq: 0, same_cpu: 0 })
     }
 
     /// Makes a page and starts a pong (`__futex-pong`) on it; `tag` tells
@@ -156,7 +95,7 @@ impl FutexPing {
 
     /// One batch of `count` round trips; returns their times in ns.
     pub fn ping_batch(&mut self, count: usize) -> Result<Vec<u64>> {
-        let p = self.map.page();
+        let (ping, pong, pong_cpu) = (self.page.word(PING), self.page.word(PONG), self.page.word(PONG_CPU));
         let mut rtts = Vec::with_capacity(count);
         self.same_cpu = 0;
         for _ in 0..count {
@@ -164,21 +103,21 @@ impl FutexPing {
             let seq = self.seq;
             let t0 = now_ns();
             let cpu = this_cpu();
-            p.ping.0.store(seq, Ordering::Release);
-            futex_wake(&p.ping.0);
+            ping.store(seq, Ordering::Release);
+            futex_wake(ping, 1);
             let deadline = t0 + PATIENCE.as_nanos() as u64;
             loop {
-                let v = p.pong.0.load(Ordering::Acquire);
+                let v = pong.load(Ordering::Acquire);
                 if v == seq {
                     break;
                 }
                 if now_ns() > deadline {
                     bail!("the futex pong did not answer {seq} within {PATIENCE:?}");
                 }
-                futex_wait(&p.pong.0, v, PATIENCE);
+                futex_wait(pong, v, PATIENCE);
             }
             rtts.push(now_ns().saturating_sub(t0));
-            if p.pong_cpu.0.load(Ordering::Relaxed) == cpu {
+            if pong_cpu.load(Ordering::Relaxed) == cpu {
                 self.same_cpu += 1;
             }
         }
@@ -188,10 +127,9 @@ impl FutexPing {
 
 impl Drop for FutexPing {
     fn drop(&mut self) {
-        let p = self.map.page();
-        p.stop.0.store(1, Ordering::Release);
-        p.ping.0.fetch_add(1, Ordering::Release);
-        futex_wake(&p.ping.0);
+        self.page.word(STOP).store(1, Ordering::Release);
+        self.page.word(PING).fetch_add(1, Ordering::Release);
+        futex_wake(self.page.word(PING), 1);
     }
 }
 
@@ -221,37 +159,31 @@ fn pong(a: &PongArgs) -> Result<()> {
         agent_sdk::rt::set_affinity(&agent_sdk::rt::CpuList(vec![c])).map_err(anyhow::Error::msg)?;
     }
     realtime_like_an_agent(20);
-    let f = std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .open(&a.path)
-        .with_context(|| format!("cannot open {}", a.path.display()))?;
-    let map = Mapping::of(&f)?;
-    drop(f);
+    let page = SharedPage::map(&a.path, PAGE)?;
     std::fs::remove_file(&a.path).with_context(|| format!("cannot remove {}", a.path.display()))?;
     println!("ready");
     std::io::stdout().flush().context("stdout")?;
-    let p = map.page();
-    let mut last = p.ping.0.load(Ordering::Acquire);
+    let (ping, pong, pong_cpu, stop) = (page.word(PING), page.word(PONG), page.word(PONG_CPU), page.word(STOP));
+    let mut last = ping.load(Ordering::Acquire);
     // the ping's batches come seconds apart; five silent minutes mean it is gone
     let mut idle = 0u32;
     loop {
-        if p.stop.0.load(Ordering::Acquire) == 1 {
+        if stop.load(Ordering::Acquire) == 1 {
             return Ok(());
         }
-        let v = p.ping.0.load(Ordering::Acquire);
+        let v = ping.load(Ordering::Acquire);
         if v != last {
             last = v;
             idle = 0;
-            p.pong_cpu.0.store(this_cpu(), Ordering::Relaxed);
-            p.pong.0.store(v, Ordering::Release);
-            futex_wake(&p.pong.0);
+            pong_cpu.store(this_cpu(), Ordering::Relaxed);
+            pong.store(v, Ordering::Release);
+            futex_wake(pong, 1);
             continue;
         }
         idle += 1;
         if idle > 150 {
             bail!("the ping side has been silent for five minutes");
         }
-        futex_wait(&p.ping.0, v, PATIENCE);
+        futex_wait(ping, v, PATIENCE);
     }
 }

@@ -64,7 +64,7 @@ use crate::machine::{Machine, command_line};
 use crate::payloads::{BenchPayload, SIZES, label};
 use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file};
 use crate::raw::{Mode, Side};
-use crate::stats::{Rounds, Summary, median_f64, ratio};
+use crate::stats::{Rounds, Summary, median_f64, ratio, ratio_cell, verdict};
 use crate::uds::UdsPing;
 use crate::with_payload;
 use anyhow::{Context as _, Result, bail};
@@ -983,7 +983,6 @@ pub fn print_tables(r: &HopReport) {
         "| payload | nerve/iox2-waitset p50 | (median of rounds) | p99 | nerve/iox2-listener p50 | p99 | nerve/iox2-waitset-fill p50 | p99 | uds/nerve p50 | ddsperf/nerve p50 | nerve-poll/iox2-poll p50 | target ≤{TARGET_RATIO} |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
-    let opt = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
     for x in &r.ratios {
         println!(
             "| {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} | {} |",
@@ -996,8 +995,8 @@ pub fn print_tables(r: &HopReport) {
             x.nerve_vs_waitset_fill_p50,
             x.nerve_vs_waitset_fill_p99,
             x.uds_vs_nerve_p50,
-            opt(x.dds_vs_nerve_p50),
-            opt(x.nerve_poll_vs_iox2_poll_p50),
+            ratio_cell(x.dds_vs_nerve_p50),
+            ratio_cell(x.nerve_poll_vs_iox2_poll_p50),
             if x.target_met { "met" } else { "missed" }
         );
     }
@@ -1012,18 +1011,14 @@ pub fn print_tables(r: &HopReport) {
         println!(
             "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             label(x.size),
-            opt(x.nerve_vs_futex_p50),
-            opt(x.nerve_pmqos_vs_futex_pmqos_p50),
-            opt(x.nerve_pmqos_vs_futex_p50),
-            opt(x.nerve_pmqos_vs_waitset_pmqos_p50),
-            opt(x.pmqos_gain_nerve),
-            opt(x.pinned_gain_nerve),
-            opt(x.nerve_pinned_vs_futex_pinned_p50),
-            match x.futex_target_met {
-                Some(true) => "met",
-                Some(false) => "missed",
-                None => "-",
-            }
+            ratio_cell(x.nerve_vs_futex_p50),
+            ratio_cell(x.nerve_pmqos_vs_futex_pmqos_p50),
+            ratio_cell(x.nerve_pmqos_vs_futex_p50),
+            ratio_cell(x.nerve_pmqos_vs_waitset_pmqos_p50),
+            ratio_cell(x.pmqos_gain_nerve),
+            ratio_cell(x.pinned_gain_nerve),
+            ratio_cell(x.nerve_pinned_vs_futex_pinned_p50),
+            verdict(x.futex_target_met)
         );
     }
     let placed: Vec<String> = r
@@ -1067,15 +1062,11 @@ pub fn print_tables(r: &HopReport) {
             println!(
                 "| {} | {} | {} | {} | {} | {} |",
                 label(x.size),
-                opt(x.dora_vs_nerve_p50),
-                opt(x.dora_vs_nerve_p99),
-                opt(x.dora_5ms_vs_nerve_5ms_p50),
-                opt(x.dora_5ms_vs_nerve_5ms_p99),
-                match x.dora_target_met {
-                    Some(true) => "met",
-                    Some(false) => "missed",
-                    None => "-",
-                }
+                ratio_cell(x.dora_vs_nerve_p50),
+                ratio_cell(x.dora_vs_nerve_p99),
+                ratio_cell(x.dora_5ms_vs_nerve_5ms_p50),
+                ratio_cell(x.dora_5ms_vs_nerve_5ms_p99),
+                verdict(x.dora_target_met)
             );
         }
     }

@@ -24,7 +24,7 @@
 use crate::agents::read_values;
 use crate::machine::{Machine, command_line};
 use crate::procs::{ChildGuard, Robot, self_command, wait_file};
-use crate::stats::{Summary, median_f64, ratio};
+use crate::stats::{Summary, median_f64, ratio, ratio_cell};
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -325,7 +325,6 @@ pub fn print_tables(r: &JitterReport) {
         "| rate | load | nerve/cyclictest-pmqos p50 | p99 | p99 (median of chunks) | max | target p50 ≤{TARGET_P50} | nerve-nopmqos/cyclictest p50 | p99 |"
     );
     println!("|---|---|---:|---:|---:|---:|---|---:|---:|");
-    let opt = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
     for x in &r.ratios {
         println!(
             "| {} Hz | {} | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} | {} |",
@@ -336,8 +335,8 @@ pub fn print_tables(r: &JitterReport) {
             x.p99_ratio_chunk_median,
             x.max_ratio,
             if x.p50_target_met { "met" } else { "missed" },
-            opt(x.nopmqos_p50_ratio),
-            opt(x.nopmqos_p99_ratio)
+            ratio_cell(x.nopmqos_p50_ratio),
+            ratio_cell(x.nopmqos_p99_ratio)
         );
     }
 }

@@ -47,6 +47,7 @@ mod procs;
 mod raw;
 mod recording;
 mod scale;
+mod shared_page;
 mod soak;
 mod stats;
 mod uds;

@@ -28,7 +28,7 @@ use crate::hop::{NervePing, Pinger, Row, default_count, pm_qos_permitted, size_t
 use crate::machine::{Machine, command_line};
 use crate::payloads::{SIZES, label};
 use crate::procs::{ChildGuard, Robot};
-use crate::stats::{Rounds, Summary, median_f64, ratio, us};
+use crate::stats::{Rounds, Summary, median_f64, ratio, ratio_cell, us, verdict};
 use crate::uds::UdsPing;
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
@@ -314,19 +314,14 @@ pub fn print_tables(r: &PipelineReport) {
         "| payload | three / one p50, PM QoS 0 | target ≤{TARGET_RATIO} | one-hop / futex round trip | the same, PM QoS 0 |"
     );
     println!("|---|---:|---|---:|---:|");
-    let opt = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
     for x in &r.ratios {
         println!(
             "| {} | {} | {} | {} | {} |",
             label(x.size),
-            opt(x.three_vs_one_pmqos_p50),
-            match x.target_met_pmqos {
-                Some(true) => "met",
-                Some(false) => "missed",
-                None => "-",
-            },
-            opt(x.one_hop_vs_futex_p50),
-            opt(x.one_hop_vs_futex_pmqos_p50)
+            ratio_cell(x.three_vs_one_pmqos_p50),
+            verdict(x.target_met_pmqos),
+            ratio_cell(x.one_hop_vs_futex_p50),
+            ratio_cell(x.one_hop_vs_futex_pmqos_p50)
         );
     }
 }

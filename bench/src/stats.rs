@@ -94,6 +94,20 @@ pub fn median_f64(v: &[f64]) -> f64 {
     if n % 2 == 1 { s[n / 2] } else { (s[n / 2 - 1] + s[n / 2]) / 2.0 }
 }
 
+/// A table cell of an optional ratio: two decimals, `-` when not measured.
+pub fn ratio_cell(x: Option<f64>) -> String {
+    x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into())
+}
+
+/// A table cell of an optional target check: `met`, `missed`, `-` when not measured.
+pub fn verdict(met: Option<bool>) -> &'static str {
+    match met {
+        Some(true) => "met",
+        Some(false) => "missed",
+        None => "-",
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

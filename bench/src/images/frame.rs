@@ -18,6 +18,7 @@
 //!   a shared file and a futex, identical for all transports;
 //! * the text files between the processes and their parsers.
 
+use crate::shared_page::{SharedPage, futex_wait, futex_wake};
 use agent_sdk::clock::{now_ns, sleep_until_ns};
 use anyhow::{Context as _, Result, anyhow, bail};
 use std::io::Write as _;
@@ -328,12 +329,8 @@ pub fn write_atomic(path: &Path, text: &str) -> std::io::Result<()> {
 /// a futex (the same for all transports).
 #[derive(Debug)]
 pub struct Acks {
-    ptr: *mut AtomicU32,
-    len: usize,
+    page: SharedPage,
 }
-
-// SAFETY: the mapping is process-wide and only accessed through the atomic.
-unsafe impl Send for Acks {}
 
 impl Acks {
     /// Creates the file (64 zero bytes).
@@ -343,33 +340,11 @@ impl Acks {
 
     /// Maps the file.
     pub fn open(path: &Path) -> Result<Acks> {
-        use std::os::fd::AsRawFd as _;
-        let f = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(path)
-            .with_context(|| format!("cannot open {}", path.display()))?;
-        let len = 64;
-        // SAFETY: a fresh shared mapping of a 64-byte file we opened read-write.
-        let p = unsafe {
-            libc::mmap(
-                std::ptr::null_mut(),
-                len,
-                libc::PROT_READ | libc::PROT_WRITE,
-                libc::MAP_SHARED,
-                f.as_raw_fd(),
-                0,
-            )
-        };
-        if p == libc::MAP_FAILED {
-            bail!("cannot map {}: {}", path.display(), std::io::Error::last_os_error());
-        }
-        Ok(Acks { ptr: p.cast(), len })
+        Ok(Acks { page: SharedPage::map(path, 64)? })
     }
 
     fn word(&self) -> &AtomicU32 {
-        // SAFETY: the mapping is 64 bytes, page aligned, alive as long as self.
-        unsafe { &*self.ptr }
+        self.page.word(0)
     }
 
     /// Writer: no acknowledgement yet (before publishing a frame).
@@ -380,8 +355,7 @@ impl Acks {
     /// Reader: one more reader has read the frame; the `n`-th wakes the writer.
     pub fn ack(&self, n: u32) {
         if self.word().fetch_add(1, Ordering::SeqCst) + 1 >= n {
-            // SAFETY: futex on a valid, aligned u32 in a shared mapping.
-            unsafe { libc::syscall(libc::SYS_futex, self.ptr, libc::FUTEX_WAKE, i32::MAX, 0, 0, 0) };
+            futex_wake(self.word(), i32::MAX);
         }
     }
 
@@ -397,23 +371,8 @@ impl Acks {
             if now >= end {
                 return false;
             }
-            let left = end - now;
-            let ts = libc::timespec {
-                tv_sec: (left / 1_000_000_000) as libc::time_t,
-                tv_nsec: (left % 1_000_000_000) as libc::c_long,
-            };
-            // SAFETY: futex on a valid, aligned u32 in a shared mapping; a relative timeout.
-            unsafe {
-                libc::syscall(libc::SYS_futex, self.ptr, libc::FUTEX_WAIT, v, &ts as *const libc::timespec, 0, 0)
-            };
+            futex_wait(self.word(), v, Duration::from_nanos(end - now));
         }
-    }
-}
-
-impl Drop for Acks {
-    fn drop(&mut self) {
-        // SAFETY: unmapping our own mapping once.
-        unsafe { libc::munmap(self.ptr.cast(), self.len) };
     }
 }
 
