@@ -9,6 +9,7 @@
 //! `nerve param get` like parameters, refused by `nerve param set`, and
 //! travel in the agent's statistics (`nerve ps --json`, field `figures`).
 
+use shm_schemas::control::router_to_agent::ParamInfo;
 use std::collections::BTreeMap;
 use std::fmt::Display;
 use std::str::FromStr;
@@ -93,11 +94,26 @@ trait DynParam: Send + Sync {
     fn get(&self) -> String;
     fn set(&self, s: &str) -> Result<(), String>;
     fn type_name(&self) -> &'static str;
+    fn default(&self) -> &str;
+    fn bounds(&self) -> Option<&str>;
 }
 
 struct Slot<T> {
     value: Arc<Mutex<T>>,
     check: Option<ParamCheck<T>>,
+    default: String,
+    /// What the check says when it refuses an out-of-range value.
+    bounds: Option<String>,
+}
+
+/// Values a check is tried with, once, at declaration, to learn what it
+/// allows: a check's refusal says what values must be ("gain is in (0, 5]").
+/// Each is parsed with the parameter's type; those that do not parse are
+/// skipped.
+const BOUND_PROBES: [&str; 6] = ["-1", "0", "1e300", "18446744073709551615", "-9223372036854775808", "NaN"];
+
+fn probe_bounds<T: FromStr>(check: &ParamCheck<T>) -> Option<String> {
+    BOUND_PROBES.iter().filter_map(|p| p.parse::<T>().ok()).find_map(|v| check(&v).err())
 }
 
 impl<T> DynParam for Slot<T>
@@ -120,6 +136,14 @@ where
 
     fn type_name(&self) -> &'static str {
         short_type_name::<T>()
+    }
+
+    fn default(&self) -> &str {
+        &self.default
+    }
+
+    fn bounds(&self) -> Option<&str> {
+        self.bounds.as_deref()
     }
 }
 
@@ -151,8 +175,10 @@ impl ParamTable {
         T: FromStr + Display + Send + 'static,
         T::Err: Display,
     {
-        let value = Arc::new(Mutex::new(default));
-        self.params.insert(key.into(), Box::new(Slot { value: value.clone(), check }));
+        let bounds = check.as_ref().and_then(probe_bounds);
+        let slot = Slot { default: default.to_string(), value: Arc::new(Mutex::new(default)), check, bounds };
+        let value = slot.value.clone();
+        self.params.insert(key.into(), Box::new(slot));
         Param { value }
     }
 
@@ -197,6 +223,28 @@ impl ParamTable {
         self.params.iter().map(|(k, v)| (k.clone(), v.get())).collect()
     }
 
+    /// Every parameter, then every figure, with type, default and bounds
+    /// (`nerve param list`).
+    pub fn list(&self) -> Vec<ParamInfo> {
+        let params = self.params.iter().map(|(k, p)| ParamInfo {
+            key: k.clone(),
+            type_name: p.type_name().into(),
+            value: p.get(),
+            default: p.default().into(),
+            bounds: p.bounds().map(str::to_owned),
+            read_only: false,
+        });
+        let figures = self.figures().into_iter().map(|(key, value)| ParamInfo {
+            key,
+            type_name: "figure".into(),
+            value,
+            default: String::new(),
+            bounds: None,
+            read_only: true,
+        });
+        params.chain(figures).collect()
+    }
+
     fn unknown(&self, key: &str) -> String {
         let known: Vec<String> = self.params.iter().map(|(k, v)| format!("{k} ({})", v.type_name())).collect();
         format!(
@@ -232,6 +280,28 @@ mod tests {
         assert!(t.set("gain", "fast").expect_err("not a number").contains("not a valid f64"));
         assert!(t.set("gain", "-1").expect_err("checked").contains(">= 0"));
         assert!(t.get("speed").expect_err("unknown").contains("gain (f64)"));
+    }
+
+    #[test]
+    fn the_list_has_types_defaults_bounds_and_figures() {
+        let mut t = ParamTable::default();
+        t.checked("range_m", 2.0f32, |v| in_range_above_zero("range_m", *v, 5.0, "m"));
+        t.checked("count", 3u64, |v| in_range("count", *v, &(1..=10), ""));
+        t.checked("speed", 0.5f64, positive);
+        let label = t.declare("label", String::from("a"), None);
+        label.set("b".into());
+        t.set_figures(Box::new(|| vec![("peers".into(), "2".into())]));
+        let l = t.list();
+        let by = |k: &str| l.iter().find(|p| p.key == k).unwrap_or_else(|| panic!("{k} in {l:?}"));
+        assert_eq!(by("range_m").bounds.as_deref(), Some("range_m is in (0, 5] m"));
+        assert_eq!(by("range_m").type_name, "f32");
+        assert_eq!(by("count").bounds.as_deref(), Some("count is in [1, 10]"));
+        assert_eq!(by("speed").bounds.as_deref(), Some("must be a number > 0"));
+        let label = by("label");
+        assert_eq!((label.value.as_str(), label.default.as_str(), label.bounds.as_ref()), ("b", "a", None));
+        let peers = by("peers");
+        assert!(peers.read_only && peers.type_name == "figure" && peers.value == "2");
+        assert_eq!(l.last().map(|p| p.key.as_str()), Some("peers"), "figures come after parameters");
     }
 
     #[test]

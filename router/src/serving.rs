@@ -83,6 +83,7 @@ enum Asked {
     Suspend,
     Resume,
     ParamGet,
+    ParamList,
     ParamSet {
         key: String,
         value: String,
@@ -459,6 +460,7 @@ impl State {
             CliRequest::Suspend { name } => command(self, name, AgentCommand::Suspend, Asked::Suspend),
             CliRequest::Resume { name } => command(self, name, AgentCommand::Resume, Asked::Resume),
             CliRequest::ParamGet { name, key } => command(self, name, AgentCommand::ParamGet { key }, Asked::ParamGet),
+            CliRequest::ParamList { name } => command(self, name, AgentCommand::ParamList, Asked::ParamList),
             CliRequest::ParamSet { name, key, value } => {
                 let cmd = AgentCommand::ParamSet { key: key.clone(), value: value.clone() };
                 command(self, name, cmd, Asked::ParamSet { key, value })
@@ -651,6 +653,12 @@ impl State {
             Asked::ParamGet => {
                 return match reply {
                     AgentReply::Param(v) => RouterReply::Param(v),
+                    other => RouterReply::Error(RouterError::Internal(format!("unexpected reply {other:?}"))),
+                };
+            }
+            Asked::ParamList => {
+                return match reply {
+                    AgentReply::Params(v) => RouterReply::Params(v),
                     other => RouterReply::Error(RouterError::Internal(format!("unexpected reply {other:?}"))),
                 };
             }

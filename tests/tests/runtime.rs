@@ -180,6 +180,40 @@ fn a_new_period_takes_effect_at_once_and_absurd_ones_are_refused() {
     r.down_and_check_clean();
 }
 
+/// `nerve start --param` sets a parameter before the task starts, and
+/// `nerve param list` shows every parameter with its type, value, default and
+/// what the agent allows (issue 15: what a new user tripped on).
+#[test]
+fn parameters_are_set_at_start_and_listed() {
+    let r = Robot::new("params");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms", "--param", "step=3"]);
+    let ticks = r.echo("t1/tick", 3);
+    let seqs: Vec<u64> = ticks.iter().filter_map(|t| t["data"]["seq"].as_u64()).collect();
+    assert!(seqs.len() == 3 && seqs.windows(2).all(|w| w[1] == w[0] + 3), "step 3 from the start: {seqs:?}");
+    let table = r.ok(&["param", "list", "t1"]);
+    let row = table.lines().find(|l| l.starts_with("step ")).unwrap_or_else(|| panic!("no step row:\n{table}"));
+    let cells: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(&cells[..4], ["step", "u64", "3", "1"], "key, type, value, default:\n{table}");
+    assert!(row.contains("step is in [1, 1000000]"), "the allowed range:\n{table}");
+    let json: Value = serde_json::from_str(&r.ok(&["param", "list", "t1", "--json"])).expect("param list --json");
+    let step = json.as_array().and_then(|a| a.iter().find(|p| p["key"] == "step")).expect("step in the JSON");
+    assert_eq!(
+        (&step["value"], &step["default"], &step["read_only"]),
+        (&Value::from("3"), &Value::from("1"), &Value::from(false))
+    );
+    r.ok(&["param", "set", "t1", "step", "7"]);
+    assert!(r.ok(&["param", "list", "t1"]).lines().any(|l| l.split_whitespace().take(4).eq(["step", "u64", "7", "1"])));
+    // refused values and keys, with what to do
+    let err = r.fails(&["start", "ticker", "--name", "t2", "--param", "step=0"]);
+    assert!(err.contains("step is in [1, 1000000]"), "{err}");
+    let err = r.fails(&["start", "ticker", "--name", "t2", "--param", "step"]);
+    assert!(err.contains("KEY=VALUE"), "{err}");
+    let err = r.fails(&["param", "list", "nobody"]);
+    assert!(err.contains("nobody"), "{err}");
+    r.down_and_check_clean();
+}
+
 /// A rejected duplicate leaves the live agent's pid file alone, so `nerve
 /// down` still stops the agent with the router gone (review R15, F3f).
 #[test]

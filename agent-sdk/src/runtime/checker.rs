@@ -334,6 +334,7 @@ impl Checker<'_> {
                 }
                 Err(e) => AgentReply::Error(e),
             },
+            AgentCommand::ParamList => AgentReply::Params(self.params.list()),
             AgentCommand::Stats => AgentReply::Stats(self.stats(cpu)),
             AgentCommand::Stop => AgentReply::Ok,
         }

@@ -44,9 +44,21 @@ pub struct StartArgs {
     /// Keep the agent on these CPUs: 1, 0,1, 0-3.
     #[arg(long, value_name = "LIST")]
     pub cpus: Option<agent_sdk::rt::CpuList>,
+    /// Set a parameter before the task starts (repeatable): `--param gain=2`.
+    /// `nerve param list NAME` shows an agent's parameters.
+    #[arg(long = "param", value_name = "KEY=VALUE", value_parser = parse_param)]
+    pub params: Vec<String>,
     /// Arguments for the agent itself.
     #[arg(last = true)]
     pub args: Vec<String>,
+}
+
+/// A `--param` value: `KEY=VALUE` with a non-empty key (the agent checks the value).
+fn parse_param(s: &str) -> Result<String, String> {
+    match s.split_once('=') {
+        Some((k, _)) if !k.trim().is_empty() => Ok(s.to_owned()),
+        _ => Err(format!("{s:?} is not KEY=VALUE (e.g. --param gain=2)")),
+    }
 }
 
 /// `nerve exec`
@@ -108,6 +120,9 @@ pub fn start(world: &World, a: StartArgs) -> Result<ExitCode> {
     }
     if let Some(c) = &a.cpus {
         cmd.arg("--cpus").arg(c.to_string());
+    }
+    for p in &a.params {
+        cmd.arg("--param").arg(p);
     }
     if !a.args.is_empty() {
         cmd.arg("--").args(&a.args);

@@ -7,6 +7,7 @@ use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
 use shm_schemas::PortRef;
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
+use shm_schemas::control::router_to_agent::ParamInfo;
 use std::process::ExitCode;
 
 /// `nerve connect` / `nerve disconnect`
@@ -33,6 +34,14 @@ pub struct ConnectArgs {
 /// `nerve param`
 #[derive(Debug, clap::Subcommand)]
 pub enum ParamCmd {
+    /// List an agent's parameters (type, value, default, bounds) and its read-only figures.
+    List {
+        /// agent name
+        name: String,
+        /// Print JSON (one object per parameter) instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Print a parameter's value.
     Get {
         /// agent name
@@ -49,6 +58,48 @@ pub enum ParamCmd {
         /// new value
         value: String,
     },
+}
+
+/// `nerve param list` as a table: parameters, then figures.
+fn param_table(agent: &str, list: &[ParamInfo]) -> String {
+    if list.is_empty() {
+        return format!("{agent} has no parameters\n");
+    }
+    let rows: Vec<[String; 5]> = list
+        .iter()
+        .map(|p| {
+            let bounds = match (&p.bounds, p.read_only) {
+                (_, true) => "read-only figure".to_owned(),
+                (Some(b), false) => b.clone(),
+                (None, false) => "any".to_owned(),
+            };
+            let default = if p.read_only { "-".to_owned() } else { p.default.clone() };
+            [p.key.clone(), p.type_name.clone(), p.value.clone(), default, bounds]
+        })
+        .collect();
+    let head = ["KEY", "TYPE", "VALUE", "DEFAULT", "BOUNDS"];
+    let mut w = head.map(str::len);
+    for r in &rows {
+        for (i, c) in r.iter().enumerate() {
+            w[i] = w[i].max(c.chars().count());
+        }
+    }
+    let line = |c: [&str; 5]| {
+        let mut l = String::new();
+        for (i, x) in c.iter().enumerate() {
+            if i + 1 == c.len() {
+                l.push_str(x);
+            } else {
+                l.push_str(&format!("{x:<width$}  ", width = w[i]));
+            }
+        }
+        l.trim_end().to_owned() + "\n"
+    };
+    let mut out = line(head);
+    for r in &rows {
+        out.push_str(&line([&r[0], &r[1], &r[2], &r[3], &r[4]]));
+    }
+    out
 }
 
 fn refs(a: &WireArgs) -> Result<(PortRef, PortRef)> {
@@ -106,6 +157,11 @@ pub fn simple(world: &World, what: Simple, name: &str) -> Result<ExitCode> {
 pub fn param(world: &World, p: ParamCmd) -> Result<ExitCode> {
     let s = RouterSession::open(world)?;
     match p {
+        ParamCmd::List { name, json } => match s.call(CliRequest::ParamList { name: name.clone() })? {
+            RouterReply::Params(list) if json => println!("{}", serde_json::to_string_pretty(&list)?),
+            RouterReply::Params(list) => print!("{}", param_table(&name, &list)),
+            other => bail!("unexpected reply from the router: {other:?}"),
+        },
         ParamCmd::Get { name, key } => match s.call(CliRequest::ParamGet { name, key })? {
             RouterReply::Param(v) => println!("{v}"),
             other => bail!("unexpected reply from the router: {other:?}"),

@@ -69,6 +69,11 @@ pub enum CliRequest {
         /// parameter
         key: String,
     },
+    /// List an agent's parameters and figures.
+    ParamList {
+        /// agent
+        name: String,
+    },
     /// Change a parameter of an agent.
     ParamSet {
         /// agent
@@ -318,6 +323,8 @@ pub enum RouterReply {
     Graph(GraphView),
     /// The value of a parameter.
     Param(String),
+    /// An agent's parameters and figures.
+    Params(Vec<super::router_to_agent::ParamInfo>),
     /// Events since the asked one, oldest first.
     Events {
         /// the router's epoch: a new router numbers its events from 1 again

@@ -50,6 +50,8 @@ pub enum AgentCommand {
         /// new value, as text; the agent parses it with the parameter's type
         value: String,
     },
+    /// List the parameters and figures, with types, defaults and bounds.
+    ParamList,
     /// Stop the agent cleanly.
     Stop,
     /// Report statistics.
@@ -65,6 +67,28 @@ pub enum AgentReply {
     Error(String),
     /// The value of a parameter.
     Param(String),
+    /// The parameters and figures, sorted by key (parameters first).
+    Params(Vec<ParamInfo>),
     /// Statistics.
     Stats(AgentStats),
+}
+
+/// One parameter (or read-only figure) of an agent, for `nerve param list`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ParamInfo {
+    /// the key `nerve param get/set` takes
+    pub key: String,
+    /// the value's type as the agent parses it (`f64`, `u32`, `bool`,
+    /// `String`...); `figure` for a read-only figure
+    pub type_name: String,
+    /// the current value, as text
+    pub value: String,
+    /// the value declared in the agent's code (before `--param` and
+    /// `nerve param set`); empty for a figure
+    pub default: String,
+    /// what the agent's check says values must be (`gain is in (0, 5]`),
+    /// when it checks them and refuses an out-of-range value
+    pub bounds: Option<String>,
+    /// a figure the agent computes: read with `get`, refused by `set`
+    pub read_only: bool,
 }
