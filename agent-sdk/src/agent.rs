@@ -70,10 +70,14 @@ pub trait Agent: Sized + Send + 'static {
     /// How the task is driven.
     fn task() -> Task;
 
-    /// Creates the agent: declare ports and parameters on `setup`, open devices.
+    /// Creates the agent: declare its ports and parameters on `setup`. Open
+    /// devices in [`Agent::start`], not here: `new` also runs for
+    /// `--describe` (what `nerve launch` checks a launch file with), which
+    /// must touch no device.
     fn new(setup: &mut Setup) -> Result<Self, AgentError>;
 
-    /// Called once in the task thread before the first step.
+    /// Called once in the task thread before the first step: open devices
+    /// here.
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
         Ok(())
     }

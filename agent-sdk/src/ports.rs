@@ -588,6 +588,32 @@ impl<T: Payload> Input<T> {
     /// keep the caller in the loop for ever. What is left stays queued (and
     /// the oldest of it is overwritten, and counted, if the sender goes on).
     pub fn drain_up_to(&self, max: usize, mut f: impl FnMut(&Meta, &T)) -> usize {
+        let done: Result<usize, std::convert::Infallible> = self.try_drain_up_to(max, |m, v| {
+            f(m, v);
+            Ok(())
+        });
+        match done {
+            Ok(n) => n,
+        }
+    }
+
+    /// Like [`Input::drain`], but `f` may fail: the first error ends the
+    /// drain and is returned, so that a step can use `?` on what it does with
+    /// each sample:
+    ///
+    /// ```ignore
+    /// self.input.try_drain(|_, tick| self.out.send(*tick))?;
+    /// ```
+    ///
+    /// The sample `f` failed on is consumed; those after it stay queued for
+    /// the next step.
+    pub fn try_drain<E>(&self, f: impl FnMut(&Meta, &T) -> Result<(), E>) -> Result<usize, E> {
+        self.try_drain_up_to(SUBSCRIBER_BUFFER, f)
+    }
+
+    /// [`Input::try_drain`] with at most `max` samples from each source (see
+    /// [`Input::drain_up_to`]).
+    pub fn try_drain_up_to<E>(&self, max: usize, mut f: impl FnMut(&Meta, &T) -> Result<(), E>) -> Result<usize, E> {
         let mut subs = self.subs();
         let mut count = 0;
         for sub in subs.iter_mut() {
@@ -598,8 +624,8 @@ impl<T: Payload> Input<T> {
                     Ok(Some(sample)) => {
                         let h = *sample.user_header();
                         sub.account(&h, now_ns());
-                        f(&Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }, sample.payload());
                         count += 1;
+                        f(&Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }, sample.payload())?;
                     }
                     Ok(None) => break,
                     Err(e) => {
@@ -609,7 +635,7 @@ impl<T: Payload> Input<T> {
                 }
             }
         }
-        count
+        Ok(count)
     }
 
     /// Drains every waiting sample and returns the newest (by stamp).

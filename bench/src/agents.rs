@@ -159,15 +159,12 @@ impl<P: BenchPayload> PingSide<P> {
 
 /// Echoes every sample of `input` on `out`, writing only the sequence number in place.
 fn echo_all<P: BenchPayload>(input: &Input<P>, out: &Output<P>) -> Result<(), AgentError> {
-    let mut result = Ok(());
-    input.drain(|_, p| {
+    input.try_drain(|_, p| {
         let seq = p.seq();
         // SAFETY: as in `PingSide::send_next`: any bytes are valid beside the sequence number.
-        if let Err(e) = unsafe { out.send_uninit(|q| P::write_seq_raw(q.as_mut_ptr(), seq)) } {
-            result = Err(e);
-        }
-    });
-    Ok(result?)
+        unsafe { out.send_uninit(|q| P::write_seq_raw(q.as_mut_ptr(), seq)) }
+    })?;
+    Ok(())
 }
 
 /// The ping side of the SDK round trip.

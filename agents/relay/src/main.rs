@@ -22,13 +22,10 @@ impl Agent for Relay {
     }
 
     fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        let mut result = Ok(());
-        self.input.drain(|_, tick| {
-            if let Err(e) = self.out.send(*tick) {
-                result = Err(e);
-            }
-        });
-        Ok(result?)
+        // a failed send ends the step with its error; the samples after it
+        // wait for the next step
+        self.input.try_drain(|_, tick| self.out.send(*tick))?;
+        Ok(())
     }
 }
 
