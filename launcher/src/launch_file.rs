@@ -4,7 +4,7 @@
 //! robot = "demo"                 # optional
 //! [[agent]]
 //! name = "t1"
-//! kind = "ticker"                # or exe = "path/to/agent"
+//! kind = "ticker"                # or exe = "path/to/agent" (relative: to this file's folder)
 //! period = "10ms"
 //! params = { step = 1 }
 //! restart = "on-failure"         # never | on-failure | always
@@ -298,10 +298,12 @@ fn cpus_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<CpuList> {
         _ => Err("a list of CPU numbers such as [0, 1], or a string such as \"0-1\"".to_string()),
     };
     let parsed = text.and_then(|t| t.parse::<CpuList>());
-    let n = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(usize::MAX);
+    // the CPUs this process may use: a container's or `taskset`'s, not 0..nproc
+    let allowed = agent_sdk::rt::allowed_cpus();
     match parsed {
-        Ok(c) if c.0.iter().any(|&k| k >= n) => {
-            cx.err(v, format!("cpus: this machine has CPUs 0-{} (`nproc`: {n})", n.saturating_sub(1)));
+        Ok(c) if allowed.as_ref().is_some_and(|a| c.0.iter().any(|k| !a.0.contains(k))) => {
+            let a = allowed.map(|a| a.to_string()).unwrap_or_default();
+            cx.err(v, format!("cpus: nerve may use CPUs {a} here (`taskset -p $$`, `nproc`); {c} is not among them"));
             None
         }
         Ok(c) => Some(c),
@@ -389,7 +391,8 @@ pub fn load(
                 }
             },
             (None, Some(x)) => {
-                let p = PathBuf::from(expand_in(x.get_ref(), &world, &dir));
+                // a relative path is the launch file's, wherever nerve runs from
+                let p = dir.join(expand_in(x.get_ref(), &world, &dir));
                 match resolve_kind(&p.display().to_string()) {
                     Ok(exe) => (p.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(), exe),
                     Err(_) => {

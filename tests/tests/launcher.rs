@@ -61,6 +61,29 @@ fn the_robot_named_on_the_command_line_wins() {
     r.down_and_check_clean();
 }
 
+/// A relative `exe` is the launch file's, not the current folder's: the same
+/// file launches from anywhere.
+#[test]
+fn a_relative_exe_is_found_from_the_launch_files_folder() {
+    let r = Robot::new("relexe");
+    let bin = r.home.join("bin");
+    for d in [&bin, &r.home.join("robots")] {
+        std::fs::create_dir_all(d).expect("folders");
+    }
+    std::os::unix::fs::symlink(nerve_tests::bin_dir().join("nerve-ticker"), bin.join("my-ticker")).expect("link");
+    let file = r.home.join("robots").join("mine.toml");
+    std::fs::write(
+        &file,
+        format!("robot = \"{}\"\n[[agent]]\nname = \"t1\"\nexe = \"../bin/my-ticker\"\nperiod = \"10ms\"\n", r.name),
+    )
+    .expect("launch file");
+    // run from a folder where ../bin/my-ticker is not
+    let out = r.command("nerve").arg("launch").arg(&file).current_dir("/").output().expect("launch");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(r.echo("t1/tick", 2).len(), 2);
+    r.down_and_check_clean();
+}
+
 /// Every kind of bad launch file is refused with file and line, and nothing starts.
 #[test]
 fn bad_launch_files_are_refused_with_file_and_line() {
