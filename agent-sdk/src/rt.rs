@@ -176,10 +176,26 @@ pub fn set_affinity(cpus: &CpuList) -> Result<(), String> {
         return Ok(());
     }
     let e = std::io::Error::last_os_error();
-    let allowed = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0);
+    let allowed = allowed_cpus().map_or_else(|| "?".to_owned(), |c| c.to_string());
     Err(format!(
-        "cannot keep the agent on CPUs {cpus} ({e}); this process may use {allowed} CPU(s): see `nproc` and `taskset -p $$`"
+        "cannot keep the agent on CPUs {cpus} ({e}); this process may use CPUs {allowed}: see `nproc` and `taskset -p $$`"
     ))
+}
+
+/// The CPUs the calling thread may run on (its affinity mask, which a
+/// cgroup's cpuset or `taskset` narrows), or `None` when the kernel does not
+/// say. CPU numbers need not be contiguous: a container may get CPUs 2 and 3.
+pub fn allowed_cpus() -> Option<CpuList> {
+    // SAFETY: cpu_set_t is plain data, filled by the kernel.
+    let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+    // SAFETY: a valid cpu_set_t of the size given, for the calling thread (0).
+    let rc = unsafe { libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set) };
+    if rc != 0 {
+        return None;
+    }
+    // SAFETY: c < CPU_SETSIZE; CPU_ISSET reads within the set.
+    let cpus: Vec<usize> = (0..libc::CPU_SETSIZE as usize).filter(|&c| unsafe { libc::CPU_ISSET(c, &set) }).collect();
+    (!cpus.is_empty()).then_some(CpuList(cpus))
 }
 
 #[cfg(test)]
@@ -205,6 +221,20 @@ mod tests {
         let e = std::thread::spawn(|| set_affinity(&CpuList(vec![1023]))).join().expect("thread");
         let msg = e.expect_err("no machine here has 1024 CPUs");
         assert!(msg.contains("1023") && msg.contains("nproc"), "{msg}");
+    }
+
+    #[test]
+    fn the_allowed_cpus_are_this_threads_affinity() {
+        let all = allowed_cpus().expect("sched_getaffinity answers on Linux");
+        assert_eq!(all.0.len(), std::thread::available_parallelism().map_or(0, |n| n.get()));
+        let first = CpuList(vec![all.0[0]]);
+        let seen = std::thread::spawn(move || {
+            set_affinity(&first).expect("one of our own CPUs");
+            allowed_cpus()
+        })
+        .join()
+        .expect("thread");
+        assert_eq!(seen, Some(CpuList(vec![all.0[0]])));
     }
 
     #[test]
