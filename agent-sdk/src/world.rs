@@ -341,7 +341,11 @@ impl World {
     /// with no router, or with a mistyped name, thus leaves nothing behind
     /// (review F7). Returns how many files and folders were removed.
     pub fn forget_if_unused(&self) -> usize {
-        if self.has_live_node() {
+        // the quick answer first: a live daemon router keeps the robot in use.
+        // Listing the nodes reads the folder every robot of the user shares
+        // (12 ms of a 17 ms `nerve param get` beside a 100-agent robot)
+        let router_runs = crate::daemon::read_pid(&self.pid_file("router")).is_some_and(crate::daemon::nerve_process_alive);
+        if router_runs || self.has_live_node() {
             return 0;
         }
         let mut removed = 0;
