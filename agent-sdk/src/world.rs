@@ -344,7 +344,8 @@ impl World {
         // the quick answer first: a live daemon router keeps the robot in use.
         // Listing the nodes reads the folder every robot of the user shares
         // (12 ms of a 17 ms `nerve param get` beside a 100-agent robot)
-        let router_runs = crate::daemon::read_pid(&self.pid_file("router")).is_some_and(crate::daemon::nerve_process_alive);
+        let router_runs =
+            crate::daemon::read_pid(&self.pid_file("router")).is_some_and(crate::daemon::nerve_process_alive);
         if router_runs || self.has_live_node() {
             return 0;
         }
