@@ -3,7 +3,8 @@
 //! module under `cmd/`, next to the code that reads them.
 
 use crate::cmd::{
-    bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, plot, record, replay, start, wire,
+    bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, new, plot, record, replay, start,
+    wire,
 };
 use clap::{Parser, Subcommand};
 
@@ -27,6 +28,8 @@ pub struct Cli {
 pub enum Command {
     /// Run the router of the robot (registry and connection list).
     Router(start::RouterArgs),
+    /// Make a new agent project: the agent, its tests, a launch file, a README.
+    New(new::NewArgs),
     /// Start an agent as a daemon while the others run (hot add).
     Start(start::StartArgs),
     /// List the live agents with their statistics.

@@ -57,6 +57,7 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
     let world = world.clone();
     match cli.command {
         Command::Router(a) => start::router(&world, a),
+        Command::New(a) => cmd::new::new(a),
         Command::Start(a) => start::start(&world, a),
         Command::Ps(a) => inspect::ps(&world, a),
         Command::Graph(a) => inspect::graph(&world, a),

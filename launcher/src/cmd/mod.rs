@@ -16,6 +16,7 @@ pub mod iox2;
 pub mod launch;
 pub mod logs;
 pub mod mem;
+pub mod new;
 pub mod plot;
 pub mod record;
 pub mod replay;

@@ -1,0 +1,230 @@
+//! `nerve new NAME`: a ready agent project outside nerve's workspace, as
+//! `cargo new` makes a crate: the agent (one input, one output, one checked
+//! parameter, periodic or event-driven), tests of its algorithm, a launch
+//! file that wires it to a ticker, a README. `cargo test`, `cargo build` and
+//! `nerve launch launch.toml` work on it as made. The templates are
+//! `launcher/templates/rust/*.in`, built into the `nerve` program.
+
+use anyhow::{Context as _, Result, bail};
+use shm_schemas::AgentName;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// `nerve new`
+#[derive(Debug, clap::Args)]
+pub struct NewArgs {
+    /// The agent's name: its folder, crate, executable, kind and name in the
+    /// launch file (lowercase letters, digits and `-`, starting with a letter).
+    pub name: String,
+    /// A periodic agent, run every PERIOD (10ms, 1s, 100hz) on the newest input.
+    #[arg(long, value_name = "PERIOD", conflicts_with = "event")]
+    pub periodic: Option<String>,
+    /// An event-driven agent, woken by every input sample (the default).
+    #[arg(long)]
+    pub event: bool,
+    /// The language of the agent.
+    #[arg(long, value_enum, default_value_t = Lang::Rust)]
+    pub lang: Lang,
+    /// Where to make the project: DIR/NAME (default: the current folder).
+    #[arg(long, value_name = "DIR")]
+    pub dir: Option<PathBuf>,
+    /// nerve's source tree, which the project depends on by path (default:
+    /// the one this `nerve` was built from).
+    #[arg(long, value_name = "PATH", env = "NERVE_SRC")]
+    pub nerve_src: Option<PathBuf>,
+}
+
+/// The language of a new agent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Lang {
+    /// A Rust crate on nerve's agent SDK.
+    Rust,
+    /// A Python agent (not available yet).
+    Python,
+}
+
+const CARGO_TOML: &str = include_str!("../../templates/rust/Cargo.toml.in");
+const MAIN_RS: &str = include_str!("../../templates/rust/main.rs.in");
+const LAUNCH_TOML: &str = include_str!("../../templates/rust/launch.toml.in");
+const README_MD: &str = include_str!("../../templates/rust/README.md.in");
+const GITIGNORE: &str = include_str!("../../templates/rust/gitignore.in");
+
+/// Names the generated code already uses: a struct of one of these names
+/// would clash, so it gets `Agent` appended.
+const TAKEN: [&str; 9] = ["Agent", "AgentError", "Context", "Input", "Output", "Param", "Setup", "Task", "Tick"];
+
+/// How the new agent's task is driven.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Drive {
+    Event,
+    /// the period as written, and as a duration
+    Periodic(String, std::time::Duration),
+}
+
+pub fn new(a: NewArgs) -> Result<ExitCode> {
+    if a.lang == Lang::Python {
+        bail!(
+            "Python agents are not available yet (issue 15: the SDK's Python bindings are still to be built); make a Rust agent with `--lang rust`"
+        );
+    }
+    check_name(&a.name)?;
+    let drive = match &a.periodic {
+        Some(p) => {
+            let d = agent_sdk::clock::parse_duration(p).map_err(anyhow::Error::msg).context("--periodic")?;
+            Drive::Periodic(p.clone(), d)
+        }
+        None => Drive::Event,
+    };
+    let nerve = nerve_source(a.nerve_src.as_deref())?;
+    let dir = a.dir.unwrap_or_else(|| PathBuf::from("."));
+    let root = dir.join(&a.name);
+    if root.exists() {
+        bail!("{} already exists; choose another name, or another folder with --dir", root.display());
+    }
+    let files = render(&a.name, &drive, &nerve);
+    std::fs::create_dir_all(root.join("src")).with_context(|| format!("cannot create {}", root.display()))?;
+    for (path, text) in &files {
+        let p = root.join(path);
+        std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    // the versions nerve is built and tested with, so that the first build
+    // resolves nothing anew (and works offline when nerve has been built)
+    let lock = nerve.join("Cargo.lock");
+    if lock.is_file() {
+        std::fs::copy(&lock, root.join("Cargo.lock")).with_context(|| format!("cannot copy {}", lock.display()))?;
+    }
+    let kind = match &drive {
+        Drive::Event => "event-driven".to_owned(),
+        Drive::Periodic(p, _) => format!("periodic, every {p}"),
+    };
+    println!("made agent {} ({kind}) in {}:", a.name, root.display());
+    for (path, _) in &files {
+        println!("  {path}");
+    }
+    println!(
+        "next:\n  cd {}\n  cargo test\n  cargo build && nerve launch launch.toml\n  nerve echo {}/out --count 3",
+        root.display(),
+        a.name
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// An agent name that is also a Cargo package and executable name.
+fn check_name(name: &str) -> Result<()> {
+    let ok = name.chars().next().is_some_and(|c| c.is_ascii_lowercase())
+        && name.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-')
+        && !name.ends_with('-');
+    if !ok {
+        bail!(
+            "{name:?} cannot name an agent project: use lowercase letters, digits and `-`, starting with a letter (e.g. gripper-driver)"
+        );
+    }
+    AgentName::new(name)?;
+    Ok(())
+}
+
+/// nerve's source tree: given, or the one this program was built from.
+fn nerve_source(given: Option<&Path>) -> Result<PathBuf> {
+    let dir = match given {
+        Some(d) => d.to_path_buf(),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join(".."),
+    };
+    let sdk = dir.join("agent-sdk").join("Cargo.toml");
+    if !sdk.is_file() {
+        bail!(
+            "cannot find nerve's source tree at {} (no agent-sdk/Cargo.toml there); give it with --nerve-src PATH or NERVE_SRC",
+            dir.display()
+        );
+    }
+    dir.canonicalize().with_context(|| format!("cannot resolve {}", dir.display()))
+}
+
+/// `gripper-driver` → `GripperDriver`, with `Agent` appended to a name the
+/// generated code already uses.
+fn type_name(name: &str) -> String {
+    let camel: String = name
+        .split('-')
+        .filter(|p| !p.is_empty())
+        .map(|p| {
+            let mut c = p.chars();
+            c.next().map(|f| f.to_ascii_uppercase().to_string() + c.as_str()).unwrap_or_default()
+        })
+        .collect();
+    if TAKEN.contains(&camel.as_str()) { camel + "Agent" } else { camel }
+}
+
+/// The project's files, by path in it.
+fn render(name: &str, drive: &Drive, nerve: &Path) -> Vec<(String, String)> {
+    let (what, task, step, imports, period_line, task_words) = match drive {
+        Drive::Event => (
+            "an event-driven agent that sends every tick arriving on `in` on `out`, its sequence number multiplied by the parameter `gain`.".to_owned(),
+            "Task::EventDriven".to_owned(),
+            "        // every waiting sample, in place; a failed send ends the step with its error\n        self.input.try_drain(|_, tick| self.out.send(transform(tick, gain)))?;".to_owned(),
+            String::new(),
+            String::new(),
+            "event-driven: woken by every sample on `in`".to_owned(),
+        ),
+        Drive::Periodic(p, d) => (
+            format!(
+                "a periodic agent that, every {p}, sends the newest tick that arrived on `in` on `out`, its sequence number multiplied by the parameter `gain`."
+            ),
+            format!(
+                "// every {p} by default; `--period`, a launch file's `period` and\n        // `nerve rate` change it\n        Task::Periodic(Duration::from_nanos({}))",
+                d.as_nanos()
+            ),
+            "        // the newest sample since the last cycle, if any\n        if let Some((_, tick)) = self.input.latest() {\n            self.out.send(transform(&tick, gain))?;\n        }".to_owned(),
+            "use std::time::Duration;\n".to_owned(),
+            format!("period = \"{p}\"\n"),
+            format!("periodic, every {p} by default"),
+        ),
+    };
+    let fill = |t: &str| {
+        t.replace("{{what}}", &what)
+            .replace("{{task}}", &task)
+            .replace("{{step}}", &step)
+            .replace("{{imports}}", &imports)
+            .replace("{{period_line}}", &period_line)
+            .replace("{{task_words}}", &task_words)
+            .replace("{{type}}", &type_name(name))
+            .replace("{{nerve}}", &nerve.display().to_string())
+            .replace("{{name}}", name)
+    };
+    vec![
+        ("Cargo.toml".into(), fill(CARGO_TOML)),
+        ("src/main.rs".into(), fill(MAIN_RS)),
+        ("launch.toml".into(), fill(LAUNCH_TOML)),
+        ("README.md".into(), fill(README_MD)),
+        (".gitignore".into(), fill(GITIGNORE)),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_become_types_that_clash_with_nothing() {
+        assert_eq!(type_name("gripper-driver"), "GripperDriver");
+        assert_eq!(type_name("scaler"), "Scaler");
+        assert_eq!(type_name("tick"), "TickAgent");
+        assert_eq!(type_name("agent"), "AgentAgent");
+    }
+
+    #[test]
+    fn bad_names_are_refused_with_an_example() {
+        for bad in ["Gripper", "9lives", "a_b", "a b", "", "x-", "a/b"] {
+            assert!(check_name(bad).is_err(), "{bad:?} must be refused");
+        }
+        check_name("gripper-2").expect("a good name");
+        assert!(format!("{:#}", check_name("Gripper").expect_err("capital")).contains("gripper-driver"));
+    }
+
+    #[test]
+    fn every_placeholder_is_filled() {
+        for drive in [Drive::Event, Drive::Periodic("50ms".into(), std::time::Duration::from_millis(50))] {
+            for (path, text) in render("my-agent", &drive, Path::new("/src/nerve")) {
+                assert!(!text.contains("{{"), "{path} keeps a placeholder:\n{text}");
+            }
+        }
+    }
+}

@@ -1,0 +1,117 @@
+//! `nerve new`, as a new user runs it: make an agent project in a temp
+//! folder, run its tests with `cargo test`, build it, and launch its
+//! `launch.toml` as made, with data flowing from the ticker through it.
+//!
+//! The project's `target` is linked to this workspace's own target folder,
+//! so that the dependencies nerve's build compiled already are not compiled
+//! again (the project pins nerve's Cargo.lock and profiles), and cargo runs
+//! offline. The first build still compiles iceoryx2 and the SDK (about a
+//! minute and a half here: nerve's workspace unifies other features), so
+//! these tests run in the `demo-runs` group, away from the timed end-to-end
+//! runs.
+
+use nerve_tests::{Robot, bin_dir};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// `cargo ARGS` in `dir`, offline; panics with its output unless it succeeds.
+fn cargo(dir: &Path, args: &[&str]) -> String {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let out = Command::new(cargo)
+        .args(args)
+        .arg("--offline")
+        .current_dir(dir)
+        .env_remove("CARGO_TARGET_DIR")
+        .env_remove("RUSTFLAGS")
+        .output()
+        .expect("run cargo");
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "`cargo {}` in {} failed:\n{text}", args.join(" "), dir.display());
+    text
+}
+
+/// Makes project `name` under the robot's home with `nerve new NAME EXTRA`,
+/// its `target` the workspace's; returns its folder.
+fn make(r: &Robot, name: &str, extra: &[&str]) -> PathBuf {
+    let out = r.ok(&[&["new", name, "--dir"], &[r.home.to_str().expect("utf-8 path")][..], extra].concat());
+    let dir = r.home.join(name);
+    for f in ["Cargo.toml", "Cargo.lock", "src/main.rs", "launch.toml", "README.md", ".gitignore"] {
+        assert!(dir.join(f).is_file(), "{f} was not made: {out}");
+    }
+    let target = bin_dir().parent().expect("target folder").to_path_buf();
+    std::os::unix::fs::symlink(&target, dir.join("target")).expect("link target");
+    dir
+}
+
+/// The workspace's copy of a project's executable, removed when the test ends.
+struct Built(PathBuf);
+
+impl Drop for Built {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+        let _ = std::fs::remove_file(self.0.with_extension("d"));
+    }
+}
+
+#[test]
+fn a_new_event_driven_agent_tests_builds_and_runs_from_its_launch_file() {
+    let r = Robot::new("newev");
+    let name = format!("scaler-{}", std::process::id());
+    let dir = make(&r, &name, &["--event"]);
+    let _built = Built(bin_dir().join(&name));
+    let tests = cargo(&dir, &["test"]);
+    assert!(tests.contains("test result: ok. 2 passed"), "the generated tests ran:\n{tests}");
+    cargo(&dir, &["build"]);
+    let out = r.command("nerve").arg("launch").arg(dir.join("launch.toml")).output().expect("launch");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // the ticker's ticks, multiplied by the launch file's gain (2)
+    let ticks = r.echo(&format!("{name}/out"), 3);
+    let seqs: Vec<u64> = ticks.iter().filter_map(|t| t["data"]["seq"].as_u64()).collect();
+    assert!(seqs.len() == 3 && seqs.iter().all(|s| s % 2 == 0), "gain 2 from the launch file: {seqs:?}");
+    assert!(seqs.windows(2).all(|w| w[1] == w[0] + 2), "every tick, in order: {seqs:?}");
+    let list = r.ok(&["param", "list", &name]);
+    assert!(list.contains("gain is in [1, 1000]"), "{list}");
+    r.ok(&["param", "set", &name, "gain", "5"]);
+    assert!(
+        nerve_tests::wait_until(std::time::Duration::from_secs(5), || r
+            .echo(&format!("{name}/out"), 1)
+            .first()
+            .and_then(|t| t["data"]["seq"].as_u64())
+            .is_some_and(|s| s % 5 == 0 && s % 2 != 0)),
+        "the new gain takes effect"
+    );
+    r.down_and_check_clean();
+}
+
+#[test]
+fn a_new_periodic_agent_builds_and_describes_itself() {
+    let r = Robot::new("newper");
+    let name = format!("sampler-{}", std::process::id());
+    let dir = make(&r, &name, &["--periodic", "50ms"]);
+    let _built = Built(bin_dir().join(&name));
+    let main = std::fs::read_to_string(dir.join("src/main.rs")).expect("main.rs");
+    assert!(main.contains("Task::Periodic(Duration::from_nanos(50000000))"), "{main}");
+    // its tests are the event-driven one's; building is what differs
+    cargo(&dir, &["build"]);
+    let out = Command::new(bin_dir().join(&name)).arg("--describe").output().expect("describe");
+    let d: serde_json::Value = serde_json::from_slice(&out.stdout).expect("--describe prints JSON");
+    assert_eq!(d["default_period_ns"], 50_000_000, "{d}");
+    assert_eq!(d["kind"], name.as_str());
+}
+
+#[test]
+fn bad_requests_are_refused_with_what_to_do() {
+    let r = Robot::new("newbad");
+    let dir = r.home.to_str().expect("utf-8 path");
+    let err = r.fails(&["new", "Gripper", "--dir", dir]);
+    assert!(err.contains("gripper-driver"), "{err}");
+    let err = r.fails(&["new", "py", "--lang", "python", "--dir", dir]);
+    assert!(err.contains("--lang rust"), "{err}");
+    let err = r.fails(&["new", "x", "--periodic", "soon", "--dir", dir]);
+    assert!(err.contains("--periodic"), "{err}");
+    r.ok(&["new", "twice", "--dir", dir]);
+    let err = r.fails(&["new", "twice", "--dir", dir]);
+    assert!(err.contains("already exists"), "{err}");
+    let err = r.fails(&["new", "lost", "--dir", dir, "--nerve-src", "/nonexistent"]);
+    assert!(err.contains("--nerve-src"), "{err}");
+}
