@@ -116,8 +116,22 @@ pub fn run<A: Agent>() -> ExitCode {
     run_with_args::<A>(args)
 }
 
+/// A panic anywhere in an agent ends its process, in any build. nerve's
+/// own profiles say `panic = "abort"`; a crate built with unwinding (one that
+/// changed its profile) would otherwise lose only the thread that panicked,
+/// and an agent whose task died alone answers the router but never steps
+/// again, which its supervisor cannot see.
+fn abort_on_panic() {
+    let report = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        report(info);
+        std::process::abort();
+    }));
+}
+
 /// Runs agent `A` with already parsed arguments.
 pub fn run_with_args<A: Agent>(args: CommonArgs) -> ExitCode {
+    abort_on_panic();
     let name = args.name.clone().unwrap_or_else(|| A::KIND.to_owned());
     let mut readiness = Readiness::foreground();
     let world = match World::new(&args.robot) {
