@@ -90,11 +90,27 @@ pub trait Agent: Sized + Send + 'static {
     fn stop(&mut self, _ctx: &mut Context) {}
 }
 
+/// What the ports an agent declares are bound to. The SDK chooses it
+/// before it calls [`Agent::new`]; the agent never needs to know which.
+pub(crate) enum Binding {
+    /// `--describe`: nothing is made (no iceoryx2 node, no shared memory)
+    Nothing,
+    /// a running agent: iceoryx2 services of the robot, through its node
+    Shm(Arc<Node<Ipc>>),
+    /// a test ([`crate::testing`]): in-memory queues and lists
+    Memory(Arc<crate::testing::Bus>),
+}
+
 /// What [`Agent::new`] gets: the place to declare ports and parameters.
+///
+/// Declaring is all `new` does: the same declarations serve a running
+/// agent (ports bound to iceoryx2), `--describe` (bound to nothing, so
+/// describing makes no shared memory) and a test
+/// ([`crate::testing::Harness`], ports bound to in-memory queues).
 pub struct Setup {
     pub(crate) world: World,
     pub(crate) name: AgentName,
-    pub(crate) node: Arc<Node<Ipc>>,
+    pub(crate) binding: Binding,
     pub(crate) args: Vec<String>,
     pub(crate) inputs: Vec<Arc<dyn DynInput>>,
     pub(crate) outputs: Vec<PortSpec>,
@@ -111,11 +127,11 @@ impl std::fmt::Debug for Setup {
 
 impl Setup {
     /// A setup with no port or parameter declared yet.
-    pub(crate) fn new(world: World, name: AgentName, node: Arc<Node<Ipc>>, args: Vec<String>) -> Self {
+    pub(crate) fn new(world: World, name: AgentName, binding: Binding, args: Vec<String>) -> Self {
         Setup {
             world,
             name,
-            node,
+            binding,
             args,
             inputs: Vec::new(),
             outputs: Vec::new(),
@@ -143,7 +159,15 @@ impl Setup {
     pub fn output<T: Payload>(&mut self, port: &str) -> Result<Output<T>, AgentError> {
         self.check_port(port)?;
         let service = self.world.robot().port_service(self.name.as_str(), port);
-        let out = Output::create(&self.node, &service, self.name.as_str())?;
+        let out = match &self.binding {
+            Binding::Shm(node) => Output::create(node, &service, self.name.as_str())?,
+            Binding::Nothing => Output::unbound(&service, self.name.as_str()),
+            Binding::Memory(bus) => {
+                let (out, collected) = Output::in_memory(&service, self.name.as_str(), bus.clock());
+                bus.add_output(port, collected);
+                out
+            }
+        };
         self.outputs.push(PortSpec::of::<T>(port));
         add_schema(&mut self.schemas, T::schema());
         Ok(out)

@@ -36,6 +36,7 @@ pub mod raw_port;
 pub mod router_events;
 pub mod rt;
 pub mod runtime;
+pub mod testing;
 pub mod world;
 
 pub use agent::{Agent, AgentError, Context, Setup, Task};

@@ -475,7 +475,8 @@ mod tests {
         let world = World::new(&format!("r18m{}", std::process::id())).expect("world");
         let _cleanup = Cleanup(world.clone());
         let node = Arc::new(world.node("t").expect("node"));
-        let mut setup = Setup::new(world.clone(), AgentName::new("t").expect("name"), node, Vec::new());
+        let mut setup =
+            Setup::new(world.clone(), AgentName::new("t").expect("name"), crate::agent::Binding::Shm(node), Vec::new());
         let mut out = setup.ring_output("frames", RingSpec::new(4, 64).named("r18")).expect("ring output");
         let mut input = setup.ring_input("in").expect("ring input");
         let old: Vec<RingNotice> =

@@ -23,6 +23,7 @@ use iceoryx2::service::port_factory::{event, publish_subscribe};
 use shm_schemas::services::port_attributes::{self, fingerprint_text, parse_fingerprint};
 use shm_schemas::stats::InputStats;
 use shm_schemas::{FixedName, Payload, SampleHeader};
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -419,13 +420,45 @@ pub struct Meta {
 }
 
 /// An output port of payload type `T`.
+///
+/// What it is bound to is the SDK's choice, never the agent's: an iceoryx2
+/// service in a running agent, nothing while the agent is described
+/// (`--describe`), an in-memory list in a test ([`crate::testing`]).
 #[derive(Debug)]
 pub struct Output<T: Payload> {
     service: String,
     sender: FixedName,
-    publisher: Publisher<Ipc, T, SampleHeader>,
-    notifier: Notifier<Ipc>,
+    sink: Sink<T>,
     seq: AtomicU64,
+}
+
+/// Where an output's samples go.
+// A running agent's variant is the large one and the only one on the data
+// path; boxing it would add a pointer hop to every send.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug)]
+enum Sink<T: Payload> {
+    /// a running agent: the port's iceoryx2 service and its wake-up event
+    Shm { publisher: Publisher<Ipc, T, SampleHeader>, notifier: Notifier<Ipc> },
+    /// a test: the harness collects them
+    Memory(Arc<Collected<T>>),
+    /// `--describe`: the agent never steps, nothing is sent
+    Nothing,
+}
+
+/// The samples an output sent in a test, in order, for [`crate::testing`].
+#[derive(Debug)]
+pub(crate) struct Collected<T: Payload> {
+    samples: Mutex<Vec<(Meta, Box<T>)>>,
+    /// the harness's clock, which stamps them
+    clock: Arc<AtomicU64>,
+}
+
+impl<T: Payload> Collected<T> {
+    /// Takes every sample sent since the last call.
+    pub(crate) fn take(&self) -> Vec<(Meta, Box<T>)> {
+        std::mem::take(&mut *lock(&self.samples))
+    }
 }
 
 impl<T: Payload> Output<T> {
@@ -433,13 +466,22 @@ impl<T: Payload> Output<T> {
         let ps = port_service::<T>(node, service)?;
         let publisher = ps.publisher_builder().create().map_err(port_err!(Publisher, service))?;
         let notifier = port_event(node, service)?.notifier_builder().create().map_err(port_err!(Notifier, service))?;
-        Ok(Output {
-            service: service.into(),
-            sender: FixedName::new(sender),
-            publisher,
-            notifier,
-            seq: AtomicU64::new(0),
-        })
+        Ok(Self::with_sink(service, sender, Sink::Shm { publisher, notifier }))
+    }
+
+    /// An output bound to nothing (`--describe`): no service is made.
+    pub(crate) fn unbound(service: &str, sender: &str) -> Self {
+        Self::with_sink(service, sender, Sink::Nothing)
+    }
+
+    /// An output whose samples a test collects, stamped by `clock`.
+    pub(crate) fn in_memory(service: &str, sender: &str, clock: Arc<AtomicU64>) -> (Self, Arc<Collected<T>>) {
+        let collected = Arc::new(Collected { samples: Mutex::new(Vec::new()), clock });
+        (Self::with_sink(service, sender, Sink::Memory(collected.clone())), collected)
+    }
+
+    fn with_sink(service: &str, sender: &str, sink: Sink<T>) -> Self {
+        Output { service: service.into(), sender: FixedName::new(sender), sink, seq: AtomicU64::new(0) }
     }
 
     /// The iceoryx2 service name of this port.
@@ -449,10 +491,16 @@ impl<T: Payload> Output<T> {
 
     /// Sends `value` (written once, in place, into shared memory) and wakes the readers.
     pub fn send(&self, value: T) -> Result<(), PortError> {
-        let mut sample = self.publisher.loan_uninit().map_err(port_err!(Loan, &self.service))?;
-        *sample.user_header_mut() = self.next_header();
-        sample.write_payload(value).send().map_err(port_err!(Send, &self.service))?;
-        self.notifier.notify().map_err(port_err!(Notify, &self.service))?;
+        match &self.sink {
+            Sink::Shm { publisher, notifier } => {
+                let mut sample = publisher.loan_uninit().map_err(port_err!(Loan, &self.service))?;
+                *sample.user_header_mut() = self.next_header();
+                sample.write_payload(value).send().map_err(port_err!(Send, &self.service))?;
+                notifier.notify().map_err(port_err!(Notify, &self.service))?;
+            }
+            Sink::Memory(c) => self.collect(c, Box::new(value)),
+            Sink::Nothing => {}
+        }
         Ok(())
     }
 
@@ -461,12 +509,22 @@ impl<T: Payload> Output<T> {
     where
         T: Default,
     {
-        let mut sample = self.publisher.loan_uninit().map_err(port_err!(Loan, &self.service))?;
-        *sample.user_header_mut() = self.next_header();
-        let mut sample = sample.write_payload(T::default());
-        fill(sample.payload_mut());
-        sample.send().map_err(port_err!(Send, &self.service))?;
-        self.notifier.notify().map_err(port_err!(Notify, &self.service))?;
+        match &self.sink {
+            Sink::Shm { publisher, notifier } => {
+                let mut sample = publisher.loan_uninit().map_err(port_err!(Loan, &self.service))?;
+                *sample.user_header_mut() = self.next_header();
+                let mut sample = sample.write_payload(T::default());
+                fill(sample.payload_mut());
+                sample.send().map_err(port_err!(Send, &self.service))?;
+                notifier.notify().map_err(port_err!(Notify, &self.service))?;
+            }
+            Sink::Memory(c) => {
+                let mut value = Box::<T>::default();
+                fill(&mut value);
+                self.collect(c, value);
+            }
+            Sink::Nothing => {}
+        }
         Ok(())
     }
 
@@ -478,32 +536,67 @@ impl<T: Payload> Output<T> {
     /// look at written, and only bit patterns valid for `T` in the rest (for
     /// plain numeric and byte-array payloads any bytes are valid).
     pub unsafe fn send_uninit(&self, fill: impl FnOnce(&mut std::mem::MaybeUninit<T>)) -> Result<(), PortError> {
-        let mut sample = self.publisher.loan_uninit().map_err(port_err!(Loan, &self.service))?;
-        *sample.user_header_mut() = self.next_header();
-        fill(sample.payload_mut());
-        // SAFETY: the caller guarantees that `fill` initialised the payload.
-        let sample = unsafe { sample.assume_init() };
-        sample.send().map_err(port_err!(Send, &self.service))?;
-        self.notifier.notify().map_err(port_err!(Notify, &self.service))?;
+        match &self.sink {
+            Sink::Shm { publisher, notifier } => {
+                let mut sample = publisher.loan_uninit().map_err(port_err!(Loan, &self.service))?;
+                *sample.user_header_mut() = self.next_header();
+                fill(sample.payload_mut());
+                // SAFETY: the caller guarantees that `fill` initialised the payload.
+                let sample = unsafe { sample.assume_init() };
+                sample.send().map_err(port_err!(Send, &self.service))?;
+                notifier.notify().map_err(port_err!(Notify, &self.service))?;
+            }
+            Sink::Memory(c) => {
+                let mut value = Box::<T>::new_uninit();
+                fill(&mut value);
+                // SAFETY: the caller guarantees that `fill` initialised the payload.
+                self.collect(c, unsafe { value.assume_init() });
+            }
+            Sink::Nothing => {}
+        }
         Ok(())
     }
 
+    fn collect(&self, c: &Collected<T>, value: Box<T>) {
+        let h = self.header_at(c.clock.load(Ordering::Acquire));
+        lock(&c.samples).push((Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }, value));
+    }
+
     fn next_header(&self) -> SampleHeader {
+        self.header_at(now_ns())
+    }
+
+    fn header_at(&self, stamp_ns: u64) -> SampleHeader {
         let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
-        SampleHeader { sender: self.sender, seq, stamp_ns: now_ns() }
+        SampleHeader { sender: self.sender, seq, stamp_ns }
     }
 }
 
-struct Subscription<T: Payload> {
-    from_agent: String,
-    from_port: String,
-    subscriber: Subscriber<Ipc, T, SampleHeader>,
-    listener: Arc<Listener<Ipc>>,
+/// Where an input's samples from one source come from.
+enum Source<T: Payload> {
+    /// a running agent: a subscription to the source port and its wake-up event
+    Shm { subscriber: Subscriber<Ipc, T, SampleHeader>, listener: Arc<Listener<Ipc>> },
+    /// a test: samples the harness queued, at most [`SUBSCRIBER_BUFFER`]
+    /// (the oldest is overwritten past it, as iceoryx2 does), and how many
+    /// were queued in all (the sender's sequence number)
+    Memory { queue: VecDeque<(SampleHeader, Box<T>)>, sent: u64 },
+}
+
+/// What an input counts about one source.
+#[derive(Default)]
+struct Tally {
     received: u64,
     dropped: u64,
     last_seq: u64,
     last_ns: Option<u64>,
     rate: RateMeter,
+}
+
+struct Subscription<T: Payload> {
+    from_agent: String,
+    from_port: String,
+    source: Source<T>,
+    tally: Tally,
 }
 
 /// Samples lost between `last_seq` and `seq` on one sender's port. A sender
@@ -513,13 +606,39 @@ fn gap(last_seq: u64, seq: u64) -> u64 {
     if last_seq == 0 { 0 } else { seq.saturating_sub(last_seq.saturating_add(1)) }
 }
 
-impl<T: Payload> Subscription<T> {
+impl Tally {
     fn account(&mut self, h: &SampleHeader, now: u64) {
         self.received = self.received.saturating_add(1);
         self.dropped = self.dropped.saturating_add(gap(self.last_seq, h.seq));
         self.last_seq = h.seq;
         self.last_ns = Some(now);
         self.rate.record(now);
+    }
+}
+
+impl<T: Payload> Subscription<T> {
+    /// Takes this source's next sample, if one waits, and hands it to `f`
+    /// in place; `None` when none waits or receiving failed (logged).
+    fn take<R>(&mut self, input: &str, f: impl FnOnce(&SampleHeader, &T) -> R) -> Option<R> {
+        match &mut self.source {
+            Source::Shm { subscriber, .. } => match subscriber.receive() {
+                Ok(Some(sample)) => {
+                    let h = *sample.user_header();
+                    self.tally.account(&h, now_ns());
+                    Some(f(&h, sample.payload()))
+                }
+                Ok(None) => None,
+                Err(e) => {
+                    tracing::warn!(input, "receive failed: {e:?}");
+                    None
+                }
+            },
+            Source::Memory { queue, .. } => {
+                let (h, value) = queue.pop_front()?;
+                self.tally.account(&h, now_ns());
+                Some(f(&h, &value))
+            }
+        }
     }
 }
 
@@ -560,14 +679,10 @@ impl<T: Payload> Input<T> {
         let start = self.inner.next.fetch_add(1, Ordering::Relaxed) as usize;
         for i in 0..n {
             let sub = &mut subs[(start + i) % n];
-            match sub.subscriber.receive() {
-                Ok(Some(sample)) => {
-                    let h = *sample.user_header();
-                    sub.account(&h, now_ns());
-                    return Some((Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }, *sample.payload()));
-                }
-                Ok(None) => {}
-                Err(e) => tracing::warn!(input = %self.inner.name, "receive failed: {e:?}"),
+            let got =
+                sub.take(&self.inner.name, |h, v| (Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }, *v));
+            if got.is_some() {
+                return got;
             }
         }
         None
@@ -617,21 +732,14 @@ impl<T: Payload> Input<T> {
         let mut subs = self.subs();
         let mut count = 0;
         for sub in subs.iter_mut() {
-            let mut taken = 0usize;
-            while taken < max {
-                taken += 1;
-                match sub.subscriber.receive() {
-                    Ok(Some(sample)) => {
-                        let h = *sample.user_header();
-                        sub.account(&h, now_ns());
+            for _ in 0..max {
+                let meta = |h: &SampleHeader| Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns };
+                match sub.take(&self.inner.name, |h, v| f(&meta(h), v)) {
+                    Some(done) => {
                         count += 1;
-                        f(&Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }, sample.payload())?;
+                        done?;
                     }
-                    Ok(None) => break,
-                    Err(e) => {
-                        tracing::warn!(input = %self.inner.name, "receive failed: {e:?}");
-                        break;
-                    }
+                    None => break,
                 }
             }
         }
@@ -679,6 +787,47 @@ pub(crate) trait DynInput: Send + Sync {
     fn disconnect(&self, from_agent: &str, from_port: &str) -> bool;
     fn listeners(&self) -> Vec<Arc<Listener<Ipc>>>;
     fn stats(&self, now: u64) -> Vec<InputStats>;
+    /// Whether a sample waits in memory (a test's input; always false for iceoryx2 sources).
+    fn has_queued(&self) -> bool;
+    /// For a test to find the typed input ([`InputInner::queue`]).
+    fn as_any(&self) -> &dyn std::any::Any;
+}
+
+impl<T: Payload> InputInner<T> {
+    /// Queues `value` from `sender`'s port `port` as a test's sample,
+    /// stamped `stamp_ns`; the source is added at its first sample. Past
+    /// [`SUBSCRIBER_BUFFER`] waiting samples the oldest is overwritten and
+    /// counted as dropped, as with iceoryx2.
+    pub(crate) fn queue(&self, sender: &str, port: &str, value: T, stamp_ns: u64) -> Result<(), PortError> {
+        let mut subs = lock(&self.subs);
+        let at = match subs.iter().position(|s| s.from_agent == sender && s.from_port == port) {
+            Some(at) => at,
+            None => {
+                if subs.len() >= MAX_SOURCES {
+                    return Err(PortError::TooManySources { input: self.name.clone(), max: MAX_SOURCES });
+                }
+                subs.push(Subscription {
+                    from_agent: sender.into(),
+                    from_port: port.into(),
+                    source: Source::Memory { queue: VecDeque::new(), sent: 0 },
+                    tally: Tally::default(),
+                });
+                subs.len() - 1
+            }
+        };
+        let Source::Memory { queue, sent } = &mut subs[at].source else {
+            return Err(perr(&self.name, format!("{sender}/{port} is an iceoryx2 source, not a test's")));
+        };
+        // numbered as a sender numbers its samples, so that an overwritten
+        // one shows as a gap and is counted as dropped
+        *sent = sent.saturating_add(1);
+        let seq = *sent;
+        if queue.len() >= SUBSCRIBER_BUFFER {
+            queue.pop_front();
+        }
+        queue.push_back((SampleHeader { sender: FixedName::new(sender), seq, stamp_ns }, Box::new(value)));
+        Ok(())
+    }
 }
 
 impl<T: Payload> DynInput for InputInner<T> {
@@ -718,13 +867,8 @@ impl<T: Payload> DynInput for InputInner<T> {
         lock(&self.subs).push(Subscription {
             from_agent: from_agent.into(),
             from_port: from_port.into(),
-            subscriber,
-            listener: Arc::new(listener),
-            received: 0,
-            dropped: 0,
-            last_seq: 0,
-            last_ns: None,
-            rate: RateMeter::default(),
+            source: Source::Shm { subscriber, listener: Arc::new(listener) },
+            tally: Tally::default(),
         });
         Ok(true)
     }
@@ -737,7 +881,13 @@ impl<T: Payload> DynInput for InputInner<T> {
     }
 
     fn listeners(&self) -> Vec<Arc<Listener<Ipc>>> {
-        lock(&self.subs).iter().map(|s| s.listener.clone()).collect()
+        lock(&self.subs)
+            .iter()
+            .filter_map(|s| match &s.source {
+                Source::Shm { listener, .. } => Some(listener.clone()),
+                Source::Memory { .. } => None,
+            })
+            .collect()
     }
 
     fn stats(&self, now: u64) -> Vec<InputStats> {
@@ -747,12 +897,20 @@ impl<T: Payload> DynInput for InputInner<T> {
                 input: self.name.clone(),
                 from_agent: s.from_agent.clone(),
                 from_port: s.from_port.clone(),
-                received: s.received,
-                rate_hz: s.rate.rate(now),
-                last_age_ns: s.last_ns.map(|t| now.saturating_sub(t)),
-                dropped: s.dropped,
+                received: s.tally.received,
+                rate_hz: s.tally.rate.rate(now),
+                last_age_ns: s.tally.last_ns.map(|t| now.saturating_sub(t)),
+                dropped: s.tally.dropped,
             })
             .collect()
+    }
+
+    fn has_queued(&self) -> bool {
+        lock(&self.subs).iter().any(|s| matches!(&s.source, Source::Memory { queue, .. } if !queue.is_empty()))
+    }
+
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
     }
 }
 

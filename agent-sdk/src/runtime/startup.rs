@@ -8,7 +8,7 @@ use super::router_link::{RegisterError, RouterLink};
 use super::runaway;
 use super::task::{SuspendGate, task_main};
 use super::{Shared, TaskFigures};
-use crate::agent::{Agent, AgentError, Setup, Task};
+use crate::agent::{Agent, AgentError, Binding, Setup, Task};
 use crate::cli::CommonArgs;
 use crate::clock::{now_ns, parse_duration};
 use crate::control::{ControlError, ControlServer, ControlSize};
@@ -177,24 +177,16 @@ fn startup_error(readiness: &mut Readiness, e: &StartupError) -> ExitCode {
     ExitCode::from(EXIT_STARTUP)
 }
 
-/// The agent's description, made by running [`Agent::new`] in a private,
-/// throw-away world (so authors must open devices in [`Agent::start`], not in `new`).
+/// The agent's description, made by running [`Agent::new`] with its ports
+/// bound to nothing: no iceoryx2 node, no shared memory, no device (authors
+/// open devices in [`Agent::start`], which describing never runs). The
+/// world the agent sees is a private robot's (`describe-PID`), so that a
+/// check of what else runs (a ring's writer) never refuses a description.
 fn describe<A: Agent>(args: &CommonArgs) -> Result<String, StartupError> {
-    let world = World::new(&format!("describe-{}", std::process::id()))?;
-    let result = describe_in::<A>(args, &world);
-    // iceoryx2 keeps a management file per prefix; this world is private and
-    // gone, whether the agent could be described or not
-    for f in world.shm_files() {
-        let _ = std::fs::remove_file(f);
-    }
-    result
-}
-
-fn describe_in<A: Agent>(args: &CommonArgs, world: &World) -> Result<String, StartupError> {
     use shm_schemas::control::describe::Description;
-    let node = Arc::new(world.node("describe")?);
+    let world = World::new(&format!("describe-{}", std::process::id()))?;
     let mut setup =
-        Setup::new(world.clone(), AgentName::new(A::KIND).map_err(StartupError::Name)?, node, args.args.clone());
+        Setup::new(world, AgentName::new(A::KIND).map_err(StartupError::Name)?, Binding::Nothing, args.args.clone());
     let agent =
         A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::KIND, name: A::KIND.into(), source })?;
     apply_params(&setup.params, &args.params)?;
@@ -285,7 +277,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     let checker_wake = wake_factory.listener_builder().create().map_err(wake_err(&wake_service))?;
     let wake = wake_factory.notifier_builder().create().map_err(wake_err(&wake_service))?;
 
-    let mut setup = Setup::new(world.clone(), agent_name.clone(), node.clone(), args.args.clone());
+    let mut setup = Setup::new(world.clone(), agent_name.clone(), Binding::Shm(node.clone()), args.args.clone());
     stage("wake-up event created");
     let agent =
         A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::KIND, name: name.into(), source })?;
