@@ -296,21 +296,13 @@ impl Agent for SimAgent {
             std::iter::once("nerve-sim --".to_owned()).chain(setup.args().iter().cloned()),
         )
         .map_err(|e| AgentError::Config(format!("simulator arguments (after `--`): {e}")))?;
-        let describing = setup.world().robot().as_str().starts_with("describe-");
+        // the world is loaded (and checked) here if given; that it is given,
+        // and the device directory, is checked in `start`: describing the
+        // simulator, or testing it, needs neither
         let world = match &args.world {
             Some(path) => Some(World::load(path).map_err(|e| AgentError::Config(e.to_string()))?),
-            None if describing => None,
-            None => {
-                return Err(AgentError::Config(
-                    "no world: run `nerve start sim -- --world worlds/test-room.toml --dev-dir DIR`".into(),
-                ));
-            }
+            None => None,
         };
-        if args.dev_dir.is_none() && !describing {
-            return Err(AgentError::Config(
-                "no device directory: add `--dev-dir DIR` after `--` (launch files use `{state}/dev`)".into(),
-            ));
-        }
         if !(args.fps > 0.0 && args.fps <= 100.0) {
             return Err(AgentError::Config(format!("--fps {} must be in (0, 100]", args.fps)));
         }
@@ -385,8 +377,15 @@ impl Agent for SimAgent {
     }
 
     fn start(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
-        let (Some(world), Some(dev_dir)) = (self.world.clone(), self.args.dev_dir.clone()) else {
-            return Err(AgentError::Config("--world and --dev-dir are required".into()));
+        let Some(world) = self.world.clone() else {
+            return Err(AgentError::Config(
+                "no world: run `nerve start sim -- --world worlds/test-room.toml --dev-dir DIR`".into(),
+            ));
+        };
+        let Some(dev_dir) = self.args.dev_dir.clone() else {
+            return Err(AgentError::Config(
+                "no device directory: add `--dev-dir DIR` after `--` (launch files use `{state}/dev`)".into(),
+            ));
         };
         let dt = ctx.period().map_or(0.01, |p| p.as_secs_f64());
         let sim = self.build(world, dt)?;

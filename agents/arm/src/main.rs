@@ -27,6 +27,10 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
+/// What `start` says when no `--device` was given.
+const NO_DEVICE: &str =
+    "no device: give the arm board's serial port after `--`, e.g. `nerve start arm -- --device /dev/ttyUSB4`";
+
 /// Arguments after `--`.
 #[derive(Debug, clap::Parser)]
 struct Args {
@@ -142,11 +146,6 @@ impl Agent for Arm {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
-        nerve_devlink::require_device(
-            setup,
-            &args.device,
-            "no device: give the arm board's serial port after `--`, e.g. `nerve start arm -- --device /dev/ttyUSB4`",
-        )?;
         let d = Settings::default();
         let figures = Arc::new(Figures::default());
         let f2 = figures.clone();
@@ -174,7 +173,7 @@ impl Agent for Arm {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.link = Some(nerve_devlink::open_link(&self.device, "arm")?);
+        self.link = Some(nerve_devlink::open_link(&self.device, "arm", NO_DEVICE)?);
         Ok(())
     }
 

@@ -370,31 +370,13 @@ impl Worker {
     }
 }
 
-/// Whether `setup` is the throw-away world of `--describe` (which runs
-/// `Agent::new` only to list ports and parameters): agents then accept a
-/// missing `--device` and open nothing.
-pub fn describing(setup: &agent_sdk::Setup) -> bool {
-    setup.world().robot().as_str().starts_with("describe-")
-}
-
-/// Checks, in `Agent::new`, that a device agent was given its `--device`;
-/// `missing` tells the user what to give. Describing needs no device.
-pub fn require_device(
-    setup: &agent_sdk::Setup,
-    device: &Option<PathBuf>,
-    missing: &str,
-) -> Result<(), agent_sdk::AgentError> {
-    if device.is_none() && !describing(setup) {
-        return Err(agent_sdk::AgentError::Config(missing.into()));
-    }
-    Ok(())
-}
-
 /// Starts the device thread on `device`, in `Agent::start` (never in `new`,
-/// which `--describe` runs); `label` names the device in logs.
-pub fn open_link(device: &Option<PathBuf>, label: &str) -> Result<DeviceLink, agent_sdk::AgentError> {
+/// which `--describe` and test harnesses run without a device); `label`
+/// names the device in logs, `missing` tells the user what to give when no
+/// `--device` was (`nerve start` prints it).
+pub fn open_link(device: &Option<PathBuf>, label: &str, missing: &str) -> Result<DeviceLink, agent_sdk::AgentError> {
     let Some(path) = device else {
-        return Err(agent_sdk::AgentError::Config("no --device given".into()));
+        return Err(agent_sdk::AgentError::Config(missing.into()));
     };
     DeviceLink::spawn(path, LinkOptions { backoff: Default::default(), label: label.into() })
         .map_err(|e| agent_sdk::AgentError::Device(e.to_string()))

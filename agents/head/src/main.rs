@@ -26,6 +26,10 @@ use shm_schemas::payloads::{HeadCommand, HeadState, LinguisticCommand};
 use std::path::PathBuf;
 use std::time::Duration;
 
+/// What `start` says when no `--device` was given.
+const NO_DEVICE: &str =
+    "no device: give the head board's serial port after `--`, e.g. `nerve start head -- --device /dev/ttyUSB3`";
+
 /// Arguments after `--`.
 #[derive(Debug, clap::Parser)]
 struct Args {
@@ -65,11 +69,6 @@ impl Agent for Head {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
-        nerve_devlink::require_device(
-            setup,
-            &args.device,
-            "no device: give the head board's serial port after `--`, e.g. `nerve start head -- --device /dev/ttyUSB3`",
-        )?;
         let read_only = |_: &u64| Err::<(), String>("this is a read-only counter kept by the agent".into());
         Ok(Head {
             device: args.device,
@@ -95,7 +94,7 @@ impl Agent for Head {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.link = Some(nerve_devlink::open_link(&self.device, "head")?);
+        self.link = Some(nerve_devlink::open_link(&self.device, "head", NO_DEVICE)?);
         Ok(())
     }
 

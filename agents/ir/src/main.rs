@@ -21,6 +21,10 @@ use shm_schemas::payloads::IrSighting;
 use std::path::PathBuf;
 use std::time::Duration;
 
+/// What `start` says when no `--device` was given.
+const NO_DEVICE: &str =
+    "no device: give the IR receiver's serial port after `--`, e.g. `nerve start ir -- --device /dev/ttyUSB2`";
+
 /// Arguments after `--`.
 #[derive(Debug, clap::Parser)]
 struct Args {
@@ -48,11 +52,6 @@ impl Agent for Ir {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
-        nerve_devlink::require_device(
-            setup,
-            &args.device,
-            "no device: give the IR receiver's serial port after `--`, e.g. `nerve start ir -- --device /dev/ttyUSB2`",
-        )?;
         Ok(Ir {
             device: args.device,
             link: None,
@@ -65,7 +64,7 @@ impl Agent for Ir {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.link = Some(nerve_devlink::open_link(&self.device, "ir")?);
+        self.link = Some(nerve_devlink::open_link(&self.device, "ir", NO_DEVICE)?);
         Ok(())
     }
 

@@ -36,6 +36,10 @@ use shm_schemas::payloads::{LinguisticCommand, Odometry, SafetyStop, VelocityCom
 use std::path::PathBuf;
 use std::time::Duration;
 
+/// What `start` says when no `--device` was given.
+const NO_DEVICE: &str = "no device: give the motor board's serial port after `--`, e.g. `nerve start motor -- --device /dev/ttyUSB1` \
+                 (with the simulator: `-- --device <state dir>/dev/motor`)";
+
 /// Arguments after `--`.
 #[derive(Debug, clap::Parser)]
 struct Args {
@@ -139,12 +143,6 @@ impl Agent for Motor {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
-        nerve_devlink::require_device(
-            setup,
-            &args.device,
-            "no device: give the motor board's serial port after `--`, e.g. `nerve start motor -- --device /dev/ttyUSB1` \
-                 (with the simulator: `-- --device <state dir>/dev/motor`)",
-        )?;
         let (limits, geometry, wheel_max) = match args.robot_model.as_str() {
             "h2" => (Limits::H2, DiffDriveGeometry::H2, 600.0),
             _ => (Limits::H1, DiffDriveGeometry::H1, 800.0),
@@ -195,7 +193,7 @@ impl Agent for Motor {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.link = Some(nerve_devlink::open_link(&self.device, "motor")?);
+        self.link = Some(nerve_devlink::open_link(&self.device, "motor", NO_DEVICE)?);
         Ok(())
     }
 
@@ -295,4 +293,156 @@ impl Agent for Motor {
 
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<Motor>()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use agent_sdk::testing::Harness;
+    use nerve_devices::FrameDecoder;
+    use std::io::Read;
+    use std::os::fd::OwnedFd;
+    use std::time::Instant;
+
+    /// A pseudo-terminal standing in for the wheel board (raw mode): the
+    /// agent opens the slave, the test reads what it sends from the master.
+    struct Board {
+        master: std::fs::File,
+        _slave: OwnedFd,
+        tty: PathBuf,
+        decoder: FrameDecoder,
+    }
+
+    impl Board {
+        fn new() -> Board {
+            use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+            let pair = nix::pty::openpty(None, None).expect("openpty");
+            let mut t = tcgetattr(&pair.slave).expect("tcgetattr");
+            cfmakeraw(&mut t);
+            tcsetattr(&pair.slave, SetArg::TCSANOW, &t).expect("raw mode");
+            let tty = nix::unistd::ttyname(&pair.slave).expect("ttyname");
+            let master = std::fs::File::from(pair.master);
+            let flags = nix::fcntl::fcntl(&master, nix::fcntl::FcntlArg::F_GETFL).expect("flags");
+            let flags = nix::fcntl::OFlag::from_bits_truncate(flags) | nix::fcntl::OFlag::O_NONBLOCK;
+            nix::fcntl::fcntl(&master, nix::fcntl::FcntlArg::F_SETFL(flags)).expect("non-blocking");
+            Board { master, _slave: pair.slave, tty, decoder: FrameDecoder::new() }
+        }
+
+        /// The wheel commands the agent wrote, read until one satisfies
+        /// `enough` (at most 5 s).
+        fn wheels_until(&mut self, enough: impl Fn(&WheelCommand) -> bool) -> Vec<WheelCommand> {
+            let mut got: Vec<WheelCommand> = Vec::new();
+            let end = Instant::now() + Duration::from_secs(5);
+            let mut buf = [0u8; 256];
+            while !got.iter().any(&enough) && Instant::now() < end {
+                match self.master.read(&mut buf) {
+                    Ok(n) if n > 0 => got.extend(self.decoder.push(&buf[..n]).filter_map(|m| match m {
+                        Message::WheelCommand(w) => Some(w),
+                        _ => None,
+                    })),
+                    _ => std::thread::sleep(Duration::from_millis(5)),
+                }
+            }
+            got
+        }
+    }
+
+    fn cmd(v: f64, omega: f64, stamp_ns: u64) -> VelocityCommand {
+        VelocityCommand { v, omega, stamp_ns }
+    }
+
+    /// The motor agent as it runs, on a pseudo-terminal board: commands of
+    /// two senders are fused by the weights set at run time and ramp up
+    /// within the acceleration limit; a safety stop brakes to zero whatever
+    /// they say; stale commands stop the base (dead man); and the wheel
+    /// commands reach the board.
+    #[test]
+    fn commands_are_fused_by_weight_a_stop_wins_and_the_board_hears_the_wheels() {
+        let mut board = Board::new();
+        let tty = board.tty.display().to_string();
+        let mut h = Harness::<Motor>::builder()
+            .args(["--device", tty.as_str()])
+            .param("weights", "planner:3,joystick:1")
+            .start()
+            .expect("the motor starts on the board");
+        let period = h.period().expect("periodic");
+        assert_eq!(period, Duration::from_millis(50));
+        // the device thread opens the line on its own: wait for it (5 s at most)
+        let end = Instant::now() + Duration::from_secs(5);
+        while !h.agent().link.as_ref().is_some_and(|l| l.stats().connected) && Instant::now() < end {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+
+        // two senders, each at its own speed, every cycle for 2 s
+        let mut applied = Vec::new();
+        for _ in 0..40 {
+            let t = h.now_ns() + agent_sdk::clock::nanos(period);
+            h.send_from("cmd", "planner", cmd(0.4, 0.0, t)).expect("send");
+            h.send_from("cmd", "joystick", cmd(0.0, 0.0, t)).expect("send");
+            h.step().expect("step");
+            applied.extend(h.output::<VelocityCommand>("applied").expect("applied").iter().map(|c| c.v));
+        }
+        assert_eq!(applied.len(), 40);
+        let fused = (3.0 * 0.4 + 0.0) / 4.0;
+        assert!((applied[39] - fused).abs() < 1e-6, "weighted 3:1 -> {fused}: {applied:?}");
+        for w in applied.windows(2) {
+            assert!(w[1] - w[0] <= Limits::H1.accel_max * 0.05 + 1e-9, "ramped within accel_max: {applied:?}");
+        }
+        assert_eq!(h.param("accepted").as_deref(), Ok("80"));
+
+        // the board hears the wheels turning forward, both alike
+        let wheels = board.wheels_until(|w| w.left_mm_s > 0);
+        let forward = wheels.iter().find(|w| w.left_mm_s > 0);
+        assert!(forward.is_some_and(|w| w.left_mm_s == w.right_mm_s), "{wheels:?}");
+
+        // a safety stop brakes to zero, whatever the senders say
+        for _ in 0..20 {
+            let t = h.now_ns() + agent_sdk::clock::nanos(period);
+            h.send_from("cmd", "planner", cmd(0.4, 0.0, t)).expect("send");
+            h.send_from(
+                "stop",
+                "safety",
+                SafetyStop { active: 1, allow_turn: 0, reserved: [0; 2], hold_ms: 500, stamp_ns: t },
+            )
+            .expect("stop");
+            h.step().expect("step");
+        }
+        let v = h.output::<VelocityCommand>("applied").expect("applied").last().map(|c| c.v);
+        assert_eq!(v, Some(0.0));
+
+        // released, then silence: after stale_ms the base stops by itself
+        h.set_param("stale_ms", "200").expect("stale_ms");
+        for _ in 0..10 {
+            let t = h.now_ns() + agent_sdk::clock::nanos(period);
+            h.send_from("stop", "safety", SafetyStop { active: 0, stamp_ns: t, ..Default::default() })
+                .expect("release");
+            h.send_from("cmd", "planner", cmd(0.4, 0.0, t)).expect("send");
+            h.step().expect("step");
+        }
+        let moving = h.output::<VelocityCommand>("applied").expect("applied");
+        assert!(moving.last().is_some_and(|c| c.v > 0.2), "driving again: {moving:?}");
+        h.advance(Duration::from_secs(2)).expect("silence");
+        let v = h.output::<VelocityCommand>("applied").expect("applied").last().map(|c| c.v);
+        assert_eq!(v, Some(0.0), "dead man");
+
+        // a command that is too old is refused and counted
+        let refused = h.param("refused").expect("refused");
+        h.send_from("cmd", "late", cmd(0.3, 0.0, h.now_ns().saturating_sub(1_000_000_000))).expect("send");
+        h.step().expect("step");
+        assert_ne!(h.param("refused").expect("refused"), refused);
+        // stopping zeroes the wheels on the board
+        drop(h.stop());
+        let wheels = board.wheels_until(|w| w.left_mm_s == 0 && w.right_mm_s == 0);
+        assert!(wheels.iter().any(|w| (w.left_mm_s, w.right_mm_s) == (0, 0)), "{wheels:?}");
+    }
+
+    /// Without a device the agent is declared (described, tested) but does
+    /// not start, and says what to give.
+    #[test]
+    fn without_a_device_the_start_says_what_to_give() {
+        match Harness::<Motor>::new() {
+            Err(e) => assert!(e.to_string().contains("--device /dev/ttyUSB1"), "{e}"),
+            Ok(_) => panic!("a motor without a device started"),
+        }
+    }
 }

@@ -27,6 +27,10 @@ use shm_schemas::payloads::SonarScan;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+/// What `start` says when no `--device` was given.
+const NO_DEVICE: &str = "no device: give the sonar module's serial port after `--`, e.g. `nerve start sonar -- --device /dev/ttyUSB0` \
+                 (with the simulator: `-- --device <state dir>/dev/sonar`)";
+
 /// Arguments after `--`.
 #[derive(Debug, clap::Parser)]
 struct Args {
@@ -60,12 +64,6 @@ impl Agent for Sonar {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
-        nerve_devlink::require_device(
-            setup,
-            &args.device,
-            "no device: give the sonar module's serial port after `--`, e.g. `nerve start sonar -- --device /dev/ttyUSB0` \
-                 (with the simulator: `-- --device <state dir>/dev/sonar`)",
-        )?;
         let d = RiskParams::default();
         let read_only = |_: &u64| Err::<(), String>("this is a read-only counter kept by the agent".into());
         Ok(Sonar {
@@ -88,7 +86,7 @@ impl Agent for Sonar {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.link = Some(nerve_devlink::open_link(&self.device, "sonar")?);
+        self.link = Some(nerve_devlink::open_link(&self.device, "sonar", NO_DEVICE)?);
         Ok(())
     }
 
