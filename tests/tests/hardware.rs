@@ -153,17 +153,46 @@ fn start_sim(r: &Robot, dev: &Path) {
 
 // ---------------------------------------------------------------- tests
 
-/// Every hardware agent describes itself without a device or a world.
+/// Every hardware agent describes itself without a device or a world, and
+/// describing touches neither a device nor shared memory: with a device
+/// path that does not exist and an iceoryx2 root that cannot be made (a
+/// path under a regular file), `--describe` still works, and nothing of
+/// its private robot appears in /dev/shm.
 #[test]
 fn hardware_agents_describe_themselves() {
     let r = Robot::new("descr");
+    let blocked_root = r.home.join("not-a-dir");
+    std::fs::write(&blocked_root, b"a file: no iceoryx2 root can be made under it").expect("write");
     for (kind, port) in [("sim", "truth"), ("sonar", "scan"), ("ir", "sighting"), ("motor", "odom"), ("head", "state")]
     {
-        let out = r.command(&format!("nerve-{kind}")).arg("--describe").output().expect("run");
-        assert!(out.status.success(), "nerve-{kind} --describe: {}", String::from_utf8_lossy(&out.stderr));
-        let d: Value = serde_json::from_slice(&out.stdout).expect("json");
-        assert_eq!(d["kind"], kind);
-        assert!(d["outputs"].as_array().expect("outputs").iter().any(|p| p["name"] == port), "{d}");
+        for device_args in [&[][..], &["--", "--device", "/nonexistent/ttyNERVE"][..]] {
+            if kind == "sim" && !device_args.is_empty() {
+                continue;
+            }
+            let child = r
+                .command(&format!("nerve-{kind}"))
+                .arg("--describe")
+                .args(device_args)
+                .env("NERVE_IOX2_ROOT", blocked_root.join("iox2"))
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("run");
+            let pid = child.id();
+            let out = child.wait_with_output().expect("wait");
+            assert!(out.status.success(), "nerve-{kind} --describe: {}", String::from_utf8_lossy(&out.stderr));
+            let d: Value = serde_json::from_slice(&out.stdout).expect("json");
+            assert_eq!(d["kind"], kind);
+            assert!(d["outputs"].as_array().expect("outputs").iter().any(|p| p["name"] == port), "{d}");
+            let made: Vec<String> = std::fs::read_dir("/dev/shm")
+                .into_iter()
+                .flatten()
+                .flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.contains(&format!("describe-{pid}_")))
+                .collect();
+            assert!(made.is_empty(), "nerve-{kind} --describe made shared memory: {made:?}");
+        }
     }
     // a missing device is refused at start, saying what to do
     r.router();

@@ -60,7 +60,8 @@ fn a_new_event_driven_agent_tests_builds_and_runs_from_its_launch_file() {
     let dir = make(&r, &name, &["--event"]);
     let _built = Built(bin_dir().join(&name));
     let tests = cargo(&dir, &["test"]);
-    assert!(tests.contains("test result: ok. 2 passed"), "the generated tests ran:\n{tests}");
+    assert!(tests.contains("test result: ok. 3 passed"), "the generated tests ran:\n{tests}");
+    assert!(tests.contains("the_agent_passes_ticks_on_multiplied_by_gain ... ok"), "the harness test ran:\n{tests}");
     cargo(&dir, &["build"]);
     let out = r.command("nerve").arg("launch").arg(dir.join("launch.toml")).output().expect("launch");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -91,7 +92,9 @@ fn a_new_periodic_agent_builds_and_describes_itself() {
     let _built = Built(bin_dir().join(&name));
     let main = std::fs::read_to_string(dir.join("src/main.rs")).expect("main.rs");
     assert!(main.contains("Task::Periodic(Duration::from_nanos(50000000))"), "{main}");
-    // its tests are the event-driven one's; building is what differs
+    // the same tests, the harness one now driving it by its clock
+    let tests = cargo(&dir, &["test"]);
+    assert!(tests.contains("the_agent_passes_ticks_on_multiplied_by_gain ... ok"), "the harness test ran:\n{tests}");
     cargo(&dir, &["build"]);
     let out = Command::new(bin_dir().join(&name)).arg("--describe").output().expect("describe");
     let d: serde_json::Value = serde_json::from_slice(&out.stdout).expect("--describe prints JSON");

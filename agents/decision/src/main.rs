@@ -135,3 +135,80 @@ impl Agent for Decision {
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<Decision>()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use agent_sdk::testing::Harness;
+    use shm_schemas::payloads::{DangerLevel, TargetState};
+
+    fn decision() -> Harness<Decision> {
+        let kb = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../kb/explore.toml");
+        Harness::<Decision>::builder()
+            .args(["--kb".to_owned(), kb.display().to_string()])
+            .start()
+            .expect("the decision maker starts with kb/explore.toml")
+    }
+
+    /// Runs `steps` cycles with the safety monitor and the tracker reporting
+    /// `danger` and `target` every cycle; returns the mode of the last one.
+    fn report(h: &mut Harness<Decision>, steps: u32, danger: DangerLevel, target: TargetState) -> String {
+        for _ in 0..steps {
+            let now = h.now_ns();
+            h.send_from("situation", "safety", Situation::danger(danger, 0.5, now)).expect("danger");
+            h.send_from("situation", "tracker", Situation::target(target, 0.1, 0.0, now)).expect("target");
+            h.step().expect("step");
+        }
+        let modes = h.output::<Mode>("mode").expect("mode");
+        assert_eq!(modes.len(), steps as usize, "one mode report per cycle");
+        modes.last().map(|m| m.name.as_str().to_owned()).unwrap_or_default()
+    }
+
+    /// The decision maker as it runs on kb/explore.toml, on the test clock:
+    /// the table picks the mode, a new mode waits out the dwell time unless
+    /// urgent, and a silent reporter becomes "unknown" after the report
+    /// timeout, which the table treats as danger.
+    #[test]
+    fn modes_follow_the_reports_with_dwell_urgency_and_timeouts() {
+        let mut h = decision();
+        assert_eq!(report(&mut h, 3, DangerLevel::None, TargetState::None), "explore");
+        let m = h.output::<Mode>("mode").expect("mode");
+        assert!(m.is_empty());
+
+        // a seen target: tracking, but only once explore held its dwell (750 ms)
+        let since = h.now_ns();
+        let mut switched_after = None;
+        for k in 1..=20u64 {
+            if report(&mut h, 1, DangerLevel::Low, TargetState::Seen) == "track" {
+                switched_after = Some(k);
+                break;
+            }
+        }
+        let waited_ms = (h.now_ns() - since) / 1_000_000;
+        assert!(switched_after.is_some(), "never switched to track");
+        assert!(waited_ms <= 800, "switched after {waited_ms} ms");
+
+        // danger is urgent: avoid at the very next cycle
+        assert_eq!(report(&mut h, 1, DangerLevel::High, TargetState::Seen), "avoid");
+
+        // both reporters fall silent: after the report timeout (1 s) danger
+        // is unknown, and unknown danger is avoided
+        h.advance(Duration::from_secs(3)).expect("silence");
+        let modes = h.output::<Mode>("mode").expect("mode");
+        assert_eq!(modes.len(), 30);
+        let last = modes.last().expect("a mode");
+        assert_eq!(last.name.as_str(), "avoid");
+        assert_eq!(last.danger_level, UNKNOWN_LEVEL, "the silent monitor's danger is unknown");
+    }
+
+    /// A knowledge base that does not load fails `new`, naming the file.
+    #[test]
+    fn a_missing_knowledge_base_is_refused_by_name() {
+        let e = Harness::<Decision>::builder()
+            .args(["--kb", "/nonexistent/kb.toml"])
+            .start()
+            .expect_err("no such file")
+            .to_string();
+        assert!(e.contains("/nonexistent/kb.toml"), "{e}");
+    }
+}

@@ -205,6 +205,107 @@ fn main() -> std::process::ExitCode {
 mod tests {
     use super::*;
     use agent_sdk::params::ParamTable;
+    use agent_sdk::testing::Harness;
+    use shm_schemas::payloads::SONAR_DIRECTIONS;
+
+    /// A scan with every direction at `far` metres and no risk.
+    fn scan(far: f32) -> SonarScan {
+        SonarScan { ranges_m: [far; SONAR_DIRECTIONS], valid: [1; SONAR_DIRECTIONS], ..Default::default() }
+    }
+
+    /// The monitor as it runs, driven step by step: blind until the first
+    /// scan, speeding up smoothly in open space, stopping (turning allowed)
+    /// when something comes too close, releasing, then blind again when the
+    /// sonar falls silent past its timeout.
+    #[test]
+    fn the_monitor_stops_when_blind_or_close_and_ramps_up_in_open_space() {
+        let mut h = Harness::<Safety>::new().expect("safety starts");
+        assert_eq!(h.period(), Some(Duration::from_millis(100)));
+        // no scan yet: blind, so stopped
+        h.step().expect("step");
+        let stops = h.output::<SafetyStop>("stop").expect("stop");
+        assert_eq!(stops.len(), 1);
+        assert!(stops[0].active == 1 && stops[0].allow_turn == 1, "{stops:?}");
+        assert!(h.output::<VelocityCommand>("cmd").expect("cmd").is_empty(), "no command while blind");
+        let sit = h.output::<Situation>("situation").expect("situation");
+        assert_eq!(sit[0].danger_level(), Some(DangerLevel::Stop));
+
+        // open space: the stop is released once, the speed ramps up by at most ACCEL
+        let mut speeds = Vec::new();
+        for _ in 0..10 {
+            h.send("scan", scan(3.0)).expect("scan");
+            h.step().expect("step");
+            speeds.extend(h.output::<VelocityCommand>("cmd").expect("cmd").iter().map(|c| c.v));
+        }
+        let releases = h.output::<SafetyStop>("stop").expect("stop");
+        assert_eq!(releases.iter().map(|s| s.active).collect::<Vec<_>>(), [0], "released once: {releases:?}");
+        let cruise = f64::from(Settings::default().cruise);
+        assert!((speeds[speeds.len() - 1] - cruise).abs() < 1e-6, "reaches cruise: {speeds:?}");
+        for w in speeds.windows(2) {
+            assert!(w[1] >= w[0] && w[1] - w[0] <= f64::from(ACCEL) * 0.1 + 1e-6, "a smooth ramp: {speeds:?}");
+        }
+        assert_eq!(
+            h.output::<Situation>("situation").expect("s").last().map(|s| s.danger_level()),
+            Some(Some(DangerLevel::None))
+        );
+
+        // a lower cruise set at run time is obeyed at the next steps
+        h.set_param("cruise", "0.2").expect("cruise");
+        assert!(h.set_param("cruise", "5").expect_err("over the board's limit").contains("cruise is in (0, 0.8]"));
+        h.send("scan", scan(3.0)).expect("scan");
+        h.advance(Duration::from_secs(1)).expect("steps");
+        let v = h.output::<VelocityCommand>("cmd").expect("cmd").last().map(|c| c.v);
+        assert!(v.is_some_and(|v| (v - 0.2).abs() < 1e-6), "{v:?}");
+
+        // something too close: stopped, not moving
+        let mut close = scan(3.0);
+        close.ranges_m[0] = 0.2;
+        h.send("scan", close).expect("scan");
+        h.step().expect("step");
+        assert_eq!(h.output::<SafetyStop>("stop").expect("stop").last().map(|s| s.active), Some(1));
+        assert_eq!(h.output::<VelocityCommand>("cmd").expect("cmd").last().map(|c| c.v), Some(0.0));
+
+        // the sonar falls silent: the last scan counts for its timeout (1 s), then blind
+        h.output::<Situation>("situation").expect("s");
+        let before = h.cycles();
+        assert_eq!(h.advance(Duration::from_millis(2000)).expect("steps"), 20);
+        assert_eq!(h.cycles() - before, 20);
+        let levels: Vec<_> = h.output::<Situation>("situation").expect("s").iter().map(|s| s.danger_level()).collect();
+        assert_eq!(levels.len(), 20);
+        assert!(levels.iter().all(|l| *l == Some(DangerLevel::Stop)), "{levels:?}");
+        assert!(h.output::<VelocityCommand>("cmd").expect("cmd").len() < 20, "commands stop once blind");
+    }
+
+    /// A bad pair of distances set at run time fails the step, saying how to
+    /// fix it, and sends nothing; fixing it resumes the monitor.
+    #[test]
+    fn a_stop_distance_beyond_the_slow_distance_fails_the_step_until_fixed() {
+        let mut h =
+            Harness::<Safety>::builder().param("stop_dist", "2").param("slow_dist", "1").start().expect("start");
+        h.send("scan", scan(3.0)).expect("scan");
+        let e = h.step().expect_err("stop_dist >= slow_dist");
+        assert!(e.to_string().contains("nerve param set"), "{e}");
+        assert_eq!(h.errors(), 1);
+        assert!(h.output::<VelocityCommand>("cmd").expect("cmd").is_empty());
+        h.set_param("stop_dist", "0.35").expect("fix");
+        h.set_param("slow_dist", "1.2").expect("fix");
+        h.step().expect("fixed");
+        assert_eq!(h.output::<VelocityCommand>("cmd").expect("cmd").len(), 1);
+    }
+
+    /// A suspended monitor sends nothing; resumed, it steps on the scan it
+    /// missed (the newest of those that waited).
+    #[test]
+    fn a_suspended_monitor_sends_nothing() {
+        let mut h = Harness::<Safety>::new().expect("start");
+        h.suspend();
+        h.send("scan", scan(3.0)).expect("scan");
+        assert_eq!(h.advance(Duration::from_secs(1)).expect("advance"), 0);
+        assert!(h.output::<SafetyStop>("stop").expect("stop").is_empty());
+        h.resume().expect("resume");
+        h.step().expect("step");
+        assert_eq!(h.output::<VelocityCommand>("cmd").expect("cmd").len(), 1, "the waiting scan is judged");
+    }
 
     #[test]
     fn every_numeric_parameter_is_bounded_above_and_says_its_range() {

@@ -161,3 +161,103 @@ impl Agent for Tracker {
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<Tracker>()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use agent_sdk::memory::stm::RingWriter;
+    use agent_sdk::memory::{FrameDesc, RingName, RingOptions};
+    use agent_sdk::testing::Harness;
+    use std::time::Duration;
+
+    const W: usize = 320;
+    const H: usize = 240;
+
+    /// A gray8 mask with a filled square of side `side` centred at column `cx`.
+    fn mask(cx: usize, side: usize) -> Vec<u8> {
+        let mut px = vec![0u8; W * H];
+        let (x0, y0) = (cx.saturating_sub(side / 2), (H - side) / 2);
+        for y in y0..y0 + side {
+            for x in x0..(x0 + side).min(W) {
+                px[y * W + x] = 255;
+            }
+        }
+        px
+    }
+
+    /// The tracker as it runs, reading masks from a real ring of the
+    /// harness's robot (the image agent's `red` output stood in by a ring
+    /// writer): a target to the right turns the head and the foot right, a large one stops the robot, and losing it for
+    /// `lost_frames` frames brings the head home.
+    #[test]
+    fn the_tracker_follows_a_target_in_the_masks_and_brings_the_head_home_when_it_is_lost() {
+        let mut h = Harness::<Tracker>::builder().param("lost_frames", "3").start().expect("start");
+        let ring = RingName::text("mask").expect("ring name");
+        let mut writer =
+            RingWriter::create_with(&RingOptions::default(), h.world().robot(), &ring, 4, W * H).expect("ring");
+        let mut show = |h: &mut Harness<Tracker>, px: &[u8]| {
+            let notice = writer
+                .write_with(FrameDesc::image(W as u32, H as u32, PixelFormat::Gray8), px.len(), |b| {
+                    b.copy_from_slice(px)
+                })
+                .expect("write");
+            h.send("mask", notice).expect("notice");
+            h.advance(Duration::from_millis(66)).expect("time");
+            h.step().expect("step");
+        };
+
+        // a small target right of centre: seen; head and foot turn right, the foot drives on
+        for _ in 0..5 {
+            show(&mut h, &mask(280, 20));
+        }
+        let sit = h.output::<Situation>("situation").expect("situation");
+        assert_eq!(sit.len(), 5);
+        assert!(sit.iter().all(|s| s.target_state() == Some(TargetState::Seen)), "{sit:?}");
+        assert!(sit[4].target_bearing_rad < 0.0, "to the right: {:?}", sit[4]);
+        let head = h.output::<HeadCommand>("head_cmd").expect("head");
+        assert!(head.last().is_some_and(|c| c.pan_rad < 0.0), "{head:?}");
+        // (the head keeps turning toward it, so the bearing grows and the foot
+        // slows to turn on the spot)
+        let cmd = h.output::<VelocityCommand>("cmd").expect("cmd");
+        assert!(cmd[0].v > 0.0 && cmd.iter().all(|c| c.omega < 0.0), "{cmd:?}");
+
+        // large and straight ahead: close, the foot stops (ramping down)
+        for _ in 0..10 {
+            show(&mut h, &mask(W / 2, 140));
+        }
+        let sit = h.output::<Situation>("situation").expect("situation");
+        assert_eq!(sit.last().and_then(|s| s.target_state()), Some(TargetState::Close));
+        assert_eq!(h.output::<VelocityCommand>("cmd").expect("cmd").last().map(|c| c.v), Some(0.0));
+
+        // gone: after 3 empty masks the head is sent home, once
+        h.output::<HeadCommand>("head_cmd").expect("head");
+        for _ in 0..5 {
+            show(&mut h, &mask(0, 0));
+        }
+        let head = h.output::<HeadCommand>("head_cmd").expect("head");
+        assert_eq!(head.len(), 1, "{head:?}");
+        assert_eq!((head[0].pan_rad, head[0].tilt_rad), (0.0, 0.0));
+
+        // a wake-up without a notice (the head's state) changes nothing
+        h.send("head", HeadState::default()).expect("head state");
+        h.step().expect("step");
+        assert!(h.output::<Situation>("situation").expect("situation").len() == 5);
+        writer.remove().expect("remove the ring");
+    }
+
+    /// Frames that are not gray8 masks fail the step with what to connect.
+    #[test]
+    fn a_frame_that_is_not_a_mask_is_refused_with_what_to_connect() {
+        let mut h = Harness::<Tracker>::new().expect("start");
+        let ring = RingName::text("rgb").expect("ring name");
+        let mut writer =
+            RingWriter::create_with(&RingOptions::default(), h.world().robot(), &ring, 2, W * H * 3).expect("ring");
+        let notice = writer
+            .write_with(FrameDesc::image(W as u32, H as u32, PixelFormat::Rgb8), W * H * 3, |b| b.fill(0))
+            .expect("write");
+        h.send("mask", notice).expect("notice");
+        let e = h.step().expect_err("an rgb frame").to_string();
+        assert!(e.contains("red"), "{e}");
+        writer.remove().expect("remove the ring");
+    }
+}
