@@ -161,8 +161,16 @@ fn start_sim(r: &Robot, dev: &Path) {
 #[test]
 fn hardware_agents_describe_themselves() {
     let r = Robot::new("descr");
-    let blocked_root = r.home.join("not-a-dir");
+    // short: the root's length is checked against Unix socket paths
+    let blocked_root = std::path::PathBuf::from(format!("/tmp/nerve-nd-{}", std::process::id()));
     std::fs::write(&blocked_root, b"a file: no iceoryx2 root can be made under it").expect("write");
+    struct Remove(std::path::PathBuf);
+    impl Drop for Remove {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_file(&self.0);
+        }
+    }
+    let _remove = Remove(blocked_root.clone());
     for (kind, port) in [("sim", "truth"), ("sonar", "scan"), ("ir", "sighting"), ("motor", "odom"), ("head", "state")]
     {
         for device_args in [&[][..], &["--", "--device", "/nonexistent/ttyNERVE"][..]] {
@@ -173,7 +181,7 @@ fn hardware_agents_describe_themselves() {
                 .command(&format!("nerve-{kind}"))
                 .arg("--describe")
                 .args(device_args)
-                .env("NERVE_IOX2_ROOT", blocked_root.join("iox2"))
+                .env("NERVE_IOX2_ROOT", blocked_root.join("x"))
                 .stdout(std::process::Stdio::piped())
                 .stderr(std::process::Stdio::piped())
                 .spawn()
