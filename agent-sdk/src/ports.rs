@@ -419,6 +419,13 @@ pub struct Meta {
     pub stamp_ns: u64,
 }
 
+impl Meta {
+    /// The metadata a sample's header carries.
+    pub(crate) fn of(h: &SampleHeader) -> Self {
+        Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }
+    }
+}
+
 /// An output port of payload type `T`.
 ///
 /// What it is bound to is the SDK's choice, never the agent's: an iceoryx2
@@ -559,7 +566,7 @@ impl<T: Payload> Output<T> {
 
     fn collect(&self, c: &Collected<T>, value: Box<T>) {
         let h = self.header_at(c.clock.load(Ordering::Acquire));
-        lock(&c.samples).push((Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }, value));
+        lock(&c.samples).push((Meta::of(&h), value));
     }
 
     fn next_header(&self) -> SampleHeader {
@@ -679,8 +686,7 @@ impl<T: Payload> Input<T> {
         let start = self.inner.next.fetch_add(1, Ordering::Relaxed) as usize;
         for i in 0..n {
             let sub = &mut subs[(start + i) % n];
-            let got =
-                sub.take(&self.inner.name, |h, v| (Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns }, *v));
+            let got = sub.take(&self.inner.name, |h, v| (Meta::of(h), *v));
             if got.is_some() {
                 return got;
             }
@@ -733,8 +739,7 @@ impl<T: Payload> Input<T> {
         let mut count = 0;
         for sub in subs.iter_mut() {
             for _ in 0..max {
-                let meta = |h: &SampleHeader| Meta { sender: h.sender, seq: h.seq, stamp_ns: h.stamp_ns };
-                match sub.take(&self.inner.name, |h, v| f(&meta(h), v)) {
+                match sub.take(&self.inner.name, |h, v| f(&Meta::of(h), v)) {
                     Some(done) => {
                         count += 1;
                         done?;

@@ -312,16 +312,12 @@ impl<A: Agent> Harness<A> {
 
     /// The agent, to look at its state.
     pub fn agent(&self) -> &A {
-        self.running()
+        self.agent.as_ref().expect("the harness holds its agent until it is stopped")
     }
 
     /// The agent, to change its state.
     pub fn agent_mut(&mut self) -> &mut A {
         self.agent.as_mut().expect("the harness holds its agent until it is stopped")
-    }
-
-    fn running(&self) -> &A {
-        self.agent.as_ref().expect("the harness holds its agent until it is stopped")
     }
 
     /// The clock the agent sees (CLOCK_MONOTONIC ns in a running agent);

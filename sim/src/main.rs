@@ -299,10 +299,8 @@ impl Agent for SimAgent {
         // the world is loaded (and checked) here if given; that it is given,
         // and the device directory, is checked in `start`: describing the
         // simulator, or testing it, needs neither
-        let world = match &args.world {
-            Some(path) => Some(World::load(path).map_err(|e| AgentError::Config(e.to_string()))?),
-            None => None,
-        };
+        let world =
+            args.world.as_deref().map(World::load).transpose().map_err(|e| AgentError::Config(e.to_string()))?;
         if !(args.fps > 0.0 && args.fps <= 100.0) {
             return Err(AgentError::Config(format!("--fps {} must be in (0, 100]", args.fps)));
         }

@@ -370,6 +370,20 @@ impl Worker {
     }
 }
 
+/// A pseudo-terminal in raw mode, standing in for a board's serial line:
+/// `(master, slave, path of the slave)`. A device agent is given the path;
+/// whoever plays the board reads and writes the master. Keeping the slave
+/// open keeps what the master writes queued for whoever opens the path next.
+pub fn raw_pty() -> nix::Result<(std::os::fd::OwnedFd, std::os::fd::OwnedFd, PathBuf)> {
+    use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+    let pair = nix::pty::openpty(None, None)?;
+    let mut t = tcgetattr(&pair.slave)?;
+    cfmakeraw(&mut t);
+    tcsetattr(&pair.slave, SetArg::TCSANOW, &t)?;
+    let tty = nix::unistd::ttyname(&pair.slave)?;
+    Ok((pair.master, pair.slave, tty))
+}
+
 /// Starts the device thread on `device`, in `Agent::start` (never in `new`,
 /// which `--describe` and test harnesses run without a device); `label`
 /// names the device in logs, `missing` tells the user what to give when no
@@ -484,13 +498,8 @@ mod tests {
 
     impl Line {
         fn new() -> Line {
-            use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
-            let pair = nix::pty::openpty(None, None).expect("openpty");
-            let mut t = tcgetattr(&pair.slave).expect("tcgetattr");
-            cfmakeraw(&mut t);
-            tcsetattr(&pair.slave, SetArg::TCSANOW, &t).expect("raw mode");
-            let tty = nix::unistd::ttyname(&pair.slave).expect("ttyname");
-            Line { master: std::fs::File::from(pair.master), _slave: pair.slave, tty }
+            let (master, slave, tty) = raw_pty().expect("a pseudo-terminal in raw mode");
+            Line { master: std::fs::File::from(master), _slave: slave, tty }
         }
 
         fn scan(&mut self, seq: u16) {

@@ -315,17 +315,12 @@ mod tests {
 
     impl Board {
         fn new() -> Board {
-            use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
-            let pair = nix::pty::openpty(None, None).expect("openpty");
-            let mut t = tcgetattr(&pair.slave).expect("tcgetattr");
-            cfmakeraw(&mut t);
-            tcsetattr(&pair.slave, SetArg::TCSANOW, &t).expect("raw mode");
-            let tty = nix::unistd::ttyname(&pair.slave).expect("ttyname");
-            let master = std::fs::File::from(pair.master);
+            let (master, slave, tty) = nerve_devlink::raw_pty().expect("a pseudo-terminal in raw mode");
+            let master = std::fs::File::from(master);
             let flags = nix::fcntl::fcntl(&master, nix::fcntl::FcntlArg::F_GETFL).expect("flags");
             let flags = nix::fcntl::OFlag::from_bits_truncate(flags) | nix::fcntl::OFlag::O_NONBLOCK;
             nix::fcntl::fcntl(&master, nix::fcntl::FcntlArg::F_SETFL(flags)).expect("non-blocking");
-            Board { master, _slave: pair.slave, tty, decoder: FrameDecoder::new() }
+            Board { master, _slave: slave, tty, decoder: FrameDecoder::new() }
         }
 
         /// The wheel commands the agent wrote, read until one satisfies
