@@ -24,13 +24,14 @@
 //! fn main() -> std::process::ExitCode { agent_sdk::run::<Ticker>() }
 //! ```
 
+use crate::dynamic::{SchemaInput, SchemaOutput};
 use crate::params::{Param, ParamTable};
 use crate::ports::{DynInput, Input, Output, PortError};
 use crate::world::{Ipc, World};
 use iceoryx2::prelude::Node;
 use shm_schemas::control::agent_to_router::{PortSpec, add_schema};
 use shm_schemas::names::validate_port_name;
-use shm_schemas::{AgentName, Payload};
+use shm_schemas::{AgentName, Payload, Schema};
 use std::fmt::Display;
 use std::str::FromStr;
 use std::sync::Arc;
@@ -69,6 +70,12 @@ pub trait Agent: Sized + Send + 'static {
 
     /// How the task is driven.
     fn task() -> Task;
+
+    /// The kind the SDK reports: [`Agent::KIND`], unless the kind is only
+    /// known at run time (a Python agent's class names it).
+    fn kind() -> &'static str {
+        Self::KIND
+    }
 
     /// Creates the agent: declare its ports and parameters on `setup`. Open
     /// devices in [`Agent::start`], not here: `new` also runs for
@@ -182,6 +189,39 @@ impl Setup {
         Ok(input)
     }
 
+    /// Declares an output port of the payload layout `schema`, for an agent
+    /// that learns its types at run time (a Python agent): the port is the
+    /// one a [`Setup::output`] of a Rust type of that layout makes.
+    pub fn output_of(&mut self, port: &str, schema: Schema) -> Result<SchemaOutput, AgentError> {
+        self.check_port(port)?;
+        let service = self.world.robot().port_service(self.name.as_str(), port);
+        let out = match &self.binding {
+            Binding::Shm(node) => SchemaOutput::create(node, &service, schema.clone(), self.name.as_str())?,
+            Binding::Nothing => SchemaOutput::unbound(&service, schema.clone()),
+            Binding::Memory(_) => return Err(untestable(port)),
+        };
+        self.outputs.push(PortSpec {
+            name: port.into(),
+            type_name: schema.type_name.clone(),
+            fingerprint: schema.fingerprint(),
+        });
+        add_schema(&mut self.schemas, schema);
+        Ok(out)
+    }
+
+    /// Declares an input port of the payload layout `schema` (see
+    /// [`Setup::output_of`]); the router connects it to outputs of that layout.
+    pub fn input_of(&mut self, port: &str, schema: Schema) -> Result<SchemaInput, AgentError> {
+        self.check_port(port)?;
+        if let Binding::Memory(_) = &self.binding {
+            return Err(untestable(port));
+        }
+        let (input, inner) = SchemaInput::new(port, schema.clone());
+        self.inputs.push(inner);
+        add_schema(&mut self.schemas, schema);
+        Ok(input)
+    }
+
     /// Declares a parameter with a default value.
     pub fn param<T>(&mut self, key: &str, default: T) -> Param<T>
     where
@@ -219,6 +259,14 @@ impl Setup {
         }
         Ok(())
     }
+}
+
+/// The test harness queues and collects typed samples only.
+fn untestable(port: &str) -> AgentError {
+    AgentError::Config(format!(
+        "port {port:?}: a port declared by its layout cannot be bound in the test harness \
+         (it runs Rust agents of typed ports); test the agent in a robot"
+    ))
 }
 
 impl crate::params::Declare for Setup {

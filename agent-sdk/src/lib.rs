@@ -27,6 +27,7 @@ pub mod clock;
 pub mod control;
 pub mod cpu_latency;
 pub mod daemon;
+pub mod dynamic;
 pub mod memory;
 pub mod meters;
 pub mod params;

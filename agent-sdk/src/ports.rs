@@ -357,7 +357,6 @@ type SourceServices<T> = (publish_subscribe::PortFactory<Ipc, T, SampleHeader>, 
 /// never creates them, so a source that no agent has is refused
 /// ([`PortError::NoSuchPort`]) and leaves no file behind.
 fn source_services<T: Payload>(node: &Node<Ipc>, service: &str) -> Result<SourceServices<T>, PortError> {
-    use iceoryx2::service::builder::event::EventOpenError;
     use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as Open;
     let mut attempt = 0;
     let ps = loop {
@@ -381,9 +380,15 @@ fn source_services<T: Payload>(node: &Node<Ipc>, service: &str) -> Result<Source
             Err(source) => return Err(PortError::OpenService { service: service.into(), source }),
         }
     };
+    Ok((ps, source_event(node, service)?))
+}
+
+/// Opens the event service of an existing output port, for an input's
+/// listener: never creates it.
+pub(crate) fn source_event(node: &Node<Ipc>, service: &str) -> Result<event::PortFactory<Ipc>, PortError> {
+    use iceoryx2::service::builder::event::EventOpenError;
     let name: ServiceName = service.try_into().map_err(|e| perr(service, e))?;
-    let ev = node
-        .service_builder(&name)
+    node.service_builder(&name)
         .event()
         .max_listeners(MAX_SUBSCRIBERS + 4)
         .max_notifiers(MAX_PUBLISHERS + 4)
@@ -392,8 +397,7 @@ fn source_services<T: Payload>(node: &Node<Ipc>, service: &str) -> Result<Source
         .map_err(|source| match source {
             EventOpenError::DoesNotExist => PortError::NoSuchPort { service: service.into() },
             source => PortError::OpenEvent { service: service.into(), source },
-        })?;
-    Ok((ps, ev))
+        })
 }
 
 /// Opens (or creates) the event service paired with an output port.
@@ -591,7 +595,7 @@ enum Source<T: Payload> {
 
 /// What an input counts about one source.
 #[derive(Default)]
-struct Tally {
+pub(crate) struct Tally {
     received: u64,
     dropped: u64,
     last_seq: u64,
@@ -614,12 +618,25 @@ fn gap(last_seq: u64, seq: u64) -> u64 {
 }
 
 impl Tally {
-    fn account(&mut self, h: &SampleHeader, now: u64) {
+    pub(crate) fn account(&mut self, h: &SampleHeader, now: u64) {
         self.received = self.received.saturating_add(1);
         self.dropped = self.dropped.saturating_add(gap(self.last_seq, h.seq));
         self.last_seq = h.seq;
         self.last_ns = Some(now);
         self.rate.record(now);
+    }
+
+    /// What `nerve ps` shows of input `input`'s source `from_agent/from_port`.
+    pub(crate) fn stats(&self, input: &str, from_agent: &str, from_port: &str, now: u64) -> InputStats {
+        InputStats {
+            input: input.into(),
+            from_agent: from_agent.into(),
+            from_port: from_port.into(),
+            received: self.received,
+            rate_hz: self.rate.rate(now),
+            last_age_ns: self.last_ns.map(|t| now.saturating_sub(t)),
+            dropped: self.dropped,
+        }
     }
 }
 
@@ -768,7 +785,7 @@ impl<T: Payload> Input<T> {
     }
 }
 
-fn lock<X>(m: &Mutex<X>) -> MutexGuard<'_, X> {
+pub(crate) fn lock<X>(m: &Mutex<X>) -> MutexGuard<'_, X> {
     // A panic in another thread aborts the process (panic = "abort"), so a
     // poisoned lock cannot be observed; recover the guard regardless.
     m.lock().unwrap_or_else(|p| p.into_inner())
@@ -777,7 +794,7 @@ fn lock<X>(m: &Mutex<X>) -> MutexGuard<'_, X> {
 /// The type-erased side of an input, used by the message checker and the runtime.
 pub(crate) trait DynInput: Send + Sync {
     fn name(&self) -> &str;
-    fn type_name(&self) -> &'static str;
+    fn type_name(&self) -> &str;
     /// The port's name, type name and layout fingerprint.
     fn spec(&self) -> shm_schemas::control::agent_to_router::PortSpec;
     /// Subscribes to `from_agent/from_port`; `Ok(false)` when already subscribed.
@@ -840,7 +857,7 @@ impl<T: Payload> DynInput for InputInner<T> {
         &self.name
     }
 
-    fn type_name(&self) -> &'static str {
+    fn type_name(&self) -> &str {
         T::stable_type_name()
     }
 
@@ -896,18 +913,7 @@ impl<T: Payload> DynInput for InputInner<T> {
     }
 
     fn stats(&self, now: u64) -> Vec<InputStats> {
-        lock(&self.subs)
-            .iter()
-            .map(|s| InputStats {
-                input: self.name.clone(),
-                from_agent: s.from_agent.clone(),
-                from_port: s.from_port.clone(),
-                received: s.tally.received,
-                rate_hz: s.tally.rate.rate(now),
-                last_age_ns: s.tally.last_ns.map(|t| now.saturating_sub(t)),
-                dropped: s.tally.dropped,
-            })
-            .collect()
+        lock(&self.subs).iter().map(|s| s.tally.stats(&self.name, &s.from_agent, &s.from_port, now)).collect()
     }
 
     fn has_queued(&self) -> bool {

@@ -17,6 +17,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::attribute::{AttributeKey, AttributeSet};
 use iceoryx2::service::builder::publish_subscribe::{PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError};
 use iceoryx2::service::marker::{CustomHeaderMarker, CustomPayloadMarker};
@@ -174,9 +175,7 @@ impl RawOutput {
     ) -> Result<RawOutput, PortError> {
         let ipc = |detail: String| PortError::Ipc { service: service.into(), detail };
         let name: ServiceName = service.try_into().map_err(|e| ipc(format!("not a service name: {e:?}")))?;
-        let payload =
-            TypeDetail::__internal_new_from_parts(TypeVariant::FixedSize, &schema.type_name, schema.size, schema.align)
-                .map_err(|e| ipc(format!("the type name {:?} is too long for iceoryx2: {e:?}", schema.type_name)))?;
+        let payload = crate::dynamic::payload_details(service, schema)?;
         // SAFETY: reading the name has no precondition
         let header_name = unsafe { <SampleHeader as ZeroCopySend>::type_name() };
         let header = TypeDetail::__internal_new_from_parts(
@@ -236,28 +235,99 @@ impl RawOutput {
                 detail: format!("a {}-byte sample for a {}-byte type", bytes.len(), self.size),
             });
         }
-        // SAFETY: one element of a FixedSize type: `size` bytes, all written below
+        let mut loan = self.loan(false)?;
+        loan.bytes_mut().copy_from_slice(bytes);
+        self.send_loan(loan)
+    }
+
+    /// Loans a sample of the type's size to write in place; its bytes are
+    /// zero when `zeroed`, else what the slot last held.
+    pub fn loan(&self, zeroed: bool) -> Result<Loan, PortError> {
+        // SAFETY: one element of a FixedSize type: `size` bytes
         let mut sample = unsafe { self.publisher.loan_custom_payload(1) }
             .map_err(|source| PortError::Loan { service: self.service.clone(), source })?;
-        self.seq += 1;
-        let header = SampleHeader { sender: self.sender, seq: self.seq, stamp_ns: crate::clock::now_ns() };
-        // SAFETY: the service's user header is a SampleHeader (set above);
-        // the marker is a zero-sized stand-in at its address
-        unsafe { (sample.user_header_mut() as *mut CustomHeaderMarker).cast::<SampleHeader>().write(header) };
         let payload = sample.payload_mut();
-        if payload.len() != bytes.len() {
+        if payload.len() != self.size {
             return Err(PortError::Ipc {
                 service: self.service.clone(),
-                detail: format!("loaned {} bytes for a {}-byte sample", payload.len(), bytes.len()),
+                detail: format!("loaned {} bytes for a {}-byte sample", payload.len(), self.size),
             });
         }
-        // SAFETY: `payload` is `bytes.len()` uninitialised one-byte elements
-        unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), payload.as_mut_ptr().cast::<u8>(), bytes.len()) };
-        // SAFETY: every byte of the payload was written just above
-        let sample = unsafe { sample.assume_init() };
+        if zeroed {
+            // SAFETY: `payload` is `size` one-byte elements, writable
+            unsafe { std::ptr::write_bytes(payload.as_mut_ptr().cast::<u8>(), 0, payload.len()) };
+        }
+        // SAFETY: the payload lies in the service's shared memory, which is
+        // zero when mapped and holds earlier samples' bytes after: every
+        // byte is initialised (zeroed above, or as the slot was last
+        // written), and any bytes are valid for a byte buffer.
+        Ok(Loan(LoanInner::Shm(unsafe { sample.assume_init() })))
+    }
+
+    /// Sends a sample loaned by [`RawOutput::loan`], stamped now, and wakes the readers.
+    pub fn send_loan(&mut self, loan: Loan) -> Result<(), PortError> {
+        let LoanInner::Shm(mut sample) = loan.0 else {
+            return Err(PortError::Ipc {
+                service: self.service.clone(),
+                detail: "the sample was not loaned from this port".into(),
+            });
+        };
+        self.seq += 1;
+        let header = SampleHeader { sender: self.sender, seq: self.seq, stamp_ns: crate::clock::now_ns() };
+        // SAFETY: the service's user header is a SampleHeader (set in
+        // `create`); the marker is a zero-sized stand-in at its address
+        unsafe { (sample.user_header_mut() as *mut CustomHeaderMarker).cast::<SampleHeader>().write(header) };
         sample.send().map_err(|source| PortError::Send { service: self.service.clone(), source })?;
         self.notifier.notify().map_err(|source| PortError::Notify { service: self.service.clone(), source })?;
         Ok(())
+    }
+}
+
+/// A sample loaned from an output port, written in place before it is sent.
+pub struct Loan(LoanInner);
+
+enum LoanInner {
+    /// a slot of the port's shared memory
+    Shm(SampleMut<Ipc, [CustomPayloadMarker], CustomHeaderMarker>),
+    /// an agent being described sends nothing: bytes of its own
+    Detached(Box<[u8]>),
+}
+
+impl std::fmt::Debug for Loan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Loan").field("len", &self.bytes().len()).finish()
+    }
+}
+
+impl Loan {
+    /// Zeroed bytes of no port, for an agent that is only described.
+    pub(crate) fn detached(size: usize) -> Self {
+        Loan(LoanInner::Detached(vec![0; size].into_boxed_slice()))
+    }
+
+    /// The payload's bytes.
+    pub fn bytes(&self) -> &[u8] {
+        match &self.0 {
+            LoanInner::Shm(sample) => {
+                let payload = sample.payload();
+                // SAFETY: CustomPayloadMarker wraps one u8 (#[repr(C)]);
+                // the bytes live as long as the sample
+                unsafe { std::slice::from_raw_parts(payload.as_ptr().cast::<u8>(), payload.len()) }
+            }
+            LoanInner::Detached(b) => b,
+        }
+    }
+
+    /// The payload's bytes, to write.
+    pub fn bytes_mut(&mut self) -> &mut [u8] {
+        match &mut self.0 {
+            LoanInner::Shm(sample) => {
+                let payload = sample.payload_mut();
+                // SAFETY: as in `bytes`, and the loan is the only writer
+                unsafe { std::slice::from_raw_parts_mut(payload.as_mut_ptr().cast::<u8>(), payload.len()) }
+            }
+            LoanInner::Detached(b) => b,
+        }
     }
 }
 

@@ -1,5 +1,6 @@
 //! Agent kinds: kind `ticker` is the executable `nerve-ticker`, found next to
-//! the `nerve` program or on `PATH`; a path names any agent executable. Used
+//! the `nerve` program or on `PATH`; a path names any agent executable (a
+//! Python agent is an executable script, `#!/usr/bin/env python3`). Used
 //! by `nerve start`, `nerve exec` and the launch-file checks (and, through
 //! [`find_program`], by `nerve bench` to find `nerve-bench`).
 
@@ -14,6 +15,12 @@ pub const AGENT_PREFIX: &str = "nerve-";
 pub fn resolve_kind(kind: &str) -> Result<PathBuf> {
     if kind.contains('/') {
         let p = PathBuf::from(kind);
+        if !is_executable(&p) && p.is_file() && p.extension().is_some_and(|e| e == "py") {
+            bail!(
+                "{kind} is a Python agent that is not executable: give it `#!/usr/bin/env python3` as its first \
+                 line (the interpreter with the nerve package) and `chmod +x {kind}`"
+            );
+        }
         if !is_executable(&p) {
             bail!("{kind} is not an executable file; give the path of a built agent, or a kind such as `ticker`");
         }

@@ -55,3 +55,34 @@ pub fn read_mcap(file: &Path) -> Value {
 pub fn messages<'a>(got: &'a Value, topic: &str) -> &'a Vec<Value> {
     got["channels"][topic]["messages"].as_array().unwrap_or_else(|| panic!("no channel {topic} in {got}"))
 }
+
+/// The Python of `target/nerve-py` with nerve's own package (`python/`)
+/// installed, built here when it is missing (`.ci/run` installs it), and
+/// the folder of its programs, to put first on `PATH` so that a Python
+/// agent's `#!/usr/bin/env python3` finds it.
+pub fn python_with_nerve() -> (PathBuf, PathBuf) {
+    let python = python_with_mcap();
+    let bin = python.parent().map(Path::to_path_buf).unwrap_or_default();
+    let imports = |p: &Path| {
+        Command::new(p).args(["-c", "import nerve._native, numpy"]).output().is_ok_and(|o| o.status.success())
+    };
+    if !imports(&python) {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+        let st = Command::new(bin.join("pip"))
+            .args(["install", "--quiet", "--disable-pip-version-check", "maturin>=1.9,<2", "numpy>=1.26,<3"])
+            .status()
+            .expect("pip");
+        assert!(st.success(), "pip install maturin numpy failed (PyPI must be reachable)");
+        let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default());
+        let st = Command::new(bin.join("pip"))
+            .args(["install", "--quiet", "--disable-pip-version-check", "--no-build-isolation"])
+            .arg(root.join("python"))
+            .env("PATH", path)
+            .env("MATURIN_PEP517_ARGS", "--profile dev")
+            .status()
+            .expect("pip");
+        assert!(st.success(), "pip install ./python failed");
+    }
+    assert!(imports(&python), "the nerve package does not import in {}", python.display());
+    (python, bin)
+}

@@ -131,8 +131,15 @@ fn abort_on_panic() {
 
 /// Runs agent `A` with already parsed arguments.
 pub fn run_with_args<A: Agent>(args: CommonArgs) -> ExitCode {
+    ExitCode::from(run_status::<A>(args))
+}
+
+/// [`run_with_args`], returning the process's exit status as a number (0,
+/// or [`EXIT_STARTUP`] when the agent could not start), for a host that
+/// ends the process itself (the Python package's `nerve.run`).
+pub fn run_status<A: Agent>(args: CommonArgs) -> u8 {
     abort_on_panic();
-    let name = args.name.clone().unwrap_or_else(|| A::KIND.to_owned());
+    let name = args.name.clone().unwrap_or_else(|| A::kind().to_owned());
     let mut readiness = Readiness::foreground();
     let world = match World::new(&args.robot) {
         Ok(w) => w,
@@ -145,7 +152,7 @@ pub fn run_with_args<A: Agent>(args: CommonArgs) -> ExitCode {
         return match describe::<A>(&args) {
             Ok(json) => {
                 println!("{json}");
-                ExitCode::SUCCESS
+                0
             }
             Err(e) => startup_error(&mut readiness, &e),
         };
@@ -161,12 +168,12 @@ pub fn run_with_args<A: Agent>(args: CommonArgs) -> ExitCode {
     }
     init_logging(&name, args.log_level.as_deref());
     match start::<A>(&args, &name, world, &mut readiness) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) => 0,
         Err(e) => startup_error(&mut readiness, &e),
     }
 }
 
-fn startup_error(readiness: &mut Readiness, e: &StartupError) -> ExitCode {
+fn startup_error(readiness: &mut Readiness, e: &StartupError) -> u8 {
     let msg = e.to_string();
     let msg = msg.as_str();
     tracing::error!("{msg}");
@@ -174,7 +181,7 @@ fn startup_error(readiness: &mut Readiness, e: &StartupError) -> ExitCode {
         eprintln!("error: {msg}");
     }
     readiness.fail(msg);
-    ExitCode::from(EXIT_STARTUP)
+    EXIT_STARTUP
 }
 
 /// The agent's description, made by running [`Agent::new`] with its ports
@@ -186,9 +193,9 @@ fn describe<A: Agent>(args: &CommonArgs) -> Result<String, StartupError> {
     use shm_schemas::control::describe::Description;
     let world = World::new(&format!("describe-{}", std::process::id()))?;
     let mut setup =
-        Setup::new(world, AgentName::new(A::KIND).map_err(StartupError::Name)?, Binding::Nothing, args.args.clone());
+        Setup::new(world, AgentName::new(A::kind()).map_err(StartupError::Name)?, Binding::Nothing, args.args.clone());
     let agent =
-        A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::KIND, name: A::KIND.into(), source })?;
+        A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::kind(), name: A::kind().into(), source })?;
     apply_params(&setup.params, &args.params)?;
     let (task, default_period_ns) = match A::task() {
         Task::Periodic(p) => (TaskKind::Periodic, Some(crate::clock::nanos(p))),
@@ -196,7 +203,7 @@ fn describe<A: Agent>(args: &CommonArgs) -> Result<String, StartupError> {
     };
     let d = Description {
         protocol: shm_schemas::PROTOCOL_VERSION,
-        kind: A::KIND.into(),
+        kind: A::kind().into(),
         task,
         default_period_ns,
         inputs: setup.inputs.iter().map(|i| i.spec()).collect(),
@@ -226,7 +233,10 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         (Task::Periodic(default), None) => Some(default),
         (Task::Periodic(_), Some(p)) => Some(parse_duration(p).map_err(|e| StartupError::Period(e.to_string()))?),
         (Task::EventDriven, Some(_)) => {
-            return Err(StartupError::Period(format!("agent kind {} is event-driven; it takes no --period", A::KIND)));
+            return Err(StartupError::Period(format!(
+                "agent kind {} is event-driven; it takes no --period",
+                A::kind()
+            )));
         }
         (Task::EventDriven, None) => None,
     };
@@ -243,7 +253,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     }
 
     // every line of the start-up says so, with the agent's name and kind
-    let startup = tracing::info_span!("start-up", agent = name, kind = A::KIND).entered();
+    let startup = tracing::info_span!("start-up", agent = name, kind = A::kind()).entered();
     // held until this function returns, or the kernel drops it when the process ends
     let (_cpu_latency_hold, cpu_latency) = if args.no_realtime {
         (None, shm_schemas::stats::CpuLatency::Off)
@@ -280,7 +290,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     let mut setup = Setup::new(world.clone(), agent_name.clone(), Binding::Shm(node.clone()), args.args.clone());
     stage("wake-up event created");
     let agent =
-        A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::KIND, name: name.into(), source })?;
+        A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::kind(), name: name.into(), source })?;
     stage("agent and its ports created");
     let Setup { inputs, outputs, schemas, params, .. } = setup;
     apply_params(&params, &args.params)?;
@@ -300,7 +310,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     let registration = Registration {
         name: name.to_owned(),
         pid: std::process::id(),
-        kind: A::KIND.to_owned(),
+        kind: A::kind().to_owned(),
         executable: std::env::current_exe().map(|p| p.display().to_string()).unwrap_or_default(),
         task: match task_kind {
             Task::Periodic(_) => TaskKind::Periodic,
@@ -360,10 +370,10 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         Ok(Ok(())) => stage("agent started"),
         Ok(Err(source)) => {
             let _ = handle.join();
-            return Err(StartupError::Agent { kind: A::KIND, name: name.into(), source });
+            return Err(StartupError::Agent { kind: A::kind(), name: name.into(), source });
         }
         Err(_) if handle.is_finished() => {
-            return Err(StartupError::StoppedWhileStarting { kind: A::KIND, name: name.into() });
+            return Err(StartupError::StoppedWhileStarting { kind: A::kind(), name: name.into() });
         }
         Err(_) => tracing::warn!(
             "the agent's start has not finished after {} s; reporting ready anyway",
@@ -374,7 +384,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     let startup_msg = format!("{name} started (pid {}, robot {})", std::process::id(), world.robot());
     tracing::info!(
         "started: kind {}, {}{}",
-        A::KIND,
+        A::kind(),
         match period {
             Some(p) => format!("periodic every {}", crate::clock::format_duration(p)),
             None => "event-driven".into(),

@@ -1,0 +1,588 @@
+//! `nerve._native`: the agent SDK for Python agents, as PyO3 bindings.
+//!
+//! The Python package (`python/nerve/__init__.py`) is what authors use; this
+//! module is the part it stands on. A Python agent is an ordinary SDK agent
+//! ([`PyAgent`]) whose `new`, `start`, `step` and `stop` call the Python
+//! object's: the SDK's runtime (message checker, task thread, registration,
+//! rewiring, period, suspend/resume, statistics, clean stop) is the one
+//! every Rust agent runs. Its ports are declared by layout
+//! ([`agent_sdk::dynamic`]), so a Python agent and a Rust agent built with
+//! a type of the same layout read each other's samples in place.
+//!
+//! Samples reach Python zero copy: a received sample ([`Received`]) and a
+//! loaned one ([`Loan`]) export their shared-memory bytes through the
+//! buffer protocol, and the package views them as numpy records.
+
+use agent_sdk::dynamic::{SchemaInput, SchemaOutput};
+use agent_sdk::{Agent, AgentError, CommonArgs, Context as SdkContext, Param, Setup as SdkSetup, Task};
+use pyo3::exceptions::{PyBufferError, PyRuntimeError, PyValueError};
+use pyo3::ffi;
+use pyo3::prelude::*;
+use shm_schemas::{Described, Schema};
+use std::os::raw::c_int;
+use std::sync::{Mutex, OnceLock};
+use std::time::Duration;
+
+/// The Python agent this process runs: set once by [`run`].
+struct Spec {
+    kind: &'static str,
+    task: Task,
+    /// the agent's class, called with no argument to make the agent
+    class: Py<PyAny>,
+}
+
+static SPEC: OnceLock<Spec> = OnceLock::new();
+
+/// An SDK agent whose algorithm is a Python object.
+struct PyAgent {
+    obj: Py<PyAny>,
+}
+
+/// A Python exception as an agent error, with its traceback.
+fn agent_error(py: Python<'_>, e: PyErr) -> AgentError {
+    let trace = e.traceback(py).and_then(|tb| tb.format().ok()).map(|t| format!("\n{t}")).unwrap_or_default();
+    AgentError::Other(format!("{}{trace}", e.value(py)))
+}
+
+fn spec() -> Result<&'static Spec, AgentError> {
+    SPEC.get().ok_or_else(|| AgentError::Other("no Python agent class was given to nerve.run".into()))
+}
+
+impl Agent for PyAgent {
+    const KIND: &'static str = "python";
+
+    fn kind() -> &'static str {
+        SPEC.get().map_or(Self::KIND, |s| s.kind)
+    }
+
+    fn task() -> Task {
+        SPEC.get().map_or(Task::EventDriven, |s| s.task)
+    }
+
+    fn new(setup: &mut SdkSetup) -> Result<Self, AgentError> {
+        let spec = spec()?;
+        Python::attach(|py| {
+            let obj = spec.class.call0(py).map_err(|e| agent_error(py, e))?;
+            let handle = Py::new(py, Setup { ptr: setup as *mut SdkSetup }).map_err(|e| agent_error(py, e))?;
+            let done = obj.call_method1(py, "_nerve_new", (handle.clone_ref(py),));
+            // the setup lives only for this call: a handle kept by the agent goes dead
+            handle.borrow_mut(py).ptr = std::ptr::null_mut();
+            done.map_err(|e| agent_error(py, e))?;
+            Ok(PyAgent { obj })
+        })
+    }
+
+    fn start(&mut self, ctx: &mut SdkContext) -> Result<(), AgentError> {
+        self.call("_nerve_start", ctx)
+    }
+
+    fn step(&mut self, ctx: &mut SdkContext) -> Result<(), AgentError> {
+        self.call("_nerve_step", ctx)
+    }
+
+    fn stop(&mut self, ctx: &mut SdkContext) {
+        if let Err(e) = self.call("_nerve_stop", ctx) {
+            eprintln!("error: the agent's stop failed: {e}");
+        }
+    }
+}
+
+impl PyAgent {
+    /// Calls the Python agent's `method` with the cycle's context.
+    fn call(&mut self, method: &str, ctx: &mut SdkContext) -> Result<(), AgentError> {
+        Python::attach(|py| {
+            let handle = Py::new(py, Context { ptr: ctx as *mut SdkContext }).map_err(|e| agent_error(py, e))?;
+            let done = self.obj.call_method1(py, method, (handle.clone_ref(py),));
+            handle.borrow_mut(py).ptr = std::ptr::null_mut();
+            done.map(|_| ()).map_err(|e| agent_error(py, e))
+        })
+    }
+}
+
+fn dead(what: &str) -> PyErr {
+    PyRuntimeError::new_err(format!(
+        "this {what} was given to one call of the agent (new, or one step) and is no longer valid"
+    ))
+}
+
+fn schema_from(json: &str) -> PyResult<Schema> {
+    serde_json::from_str(json).map_err(|e| PyValueError::new_err(format!("not a payload layout: {e}")))
+}
+
+fn to_py_err(e: impl std::fmt::Display) -> PyErr {
+    PyRuntimeError::new_err(e.to_string())
+}
+
+/// What `new` declares ports and parameters on (the SDK's `Setup`), valid
+/// during that call only.
+#[pyclass(unsendable, module = "nerve._native")]
+struct Setup {
+    ptr: *mut SdkSetup,
+}
+
+impl Setup {
+    fn get(&mut self) -> PyResult<&mut SdkSetup> {
+        // SAFETY: `ptr` is the setup `PyAgent::new` holds a unique borrow
+        // of for the whole Python call it was made for; it is nulled when
+        // that call returns, and the handle never leaves this thread
+        // (unsendable).
+        unsafe { self.ptr.as_mut() }.ok_or_else(|| dead("setup"))
+    }
+}
+
+#[pymethods]
+impl Setup {
+    /// The agent's name.
+    #[getter]
+    fn name(&mut self) -> PyResult<String> {
+        Ok(self.get()?.name().to_owned())
+    }
+
+    /// The robot's name.
+    #[getter]
+    fn robot(&mut self) -> PyResult<String> {
+        Ok(self.get()?.world().robot().to_string())
+    }
+
+    /// The arguments after `--` on the agent's command line.
+    #[getter]
+    fn args(&mut self) -> PyResult<Vec<String>> {
+        Ok(self.get()?.args().to_vec())
+    }
+
+    /// Declares input `port` of the layout `schema` (JSON).
+    fn input(&mut self, port: &str, schema: &str) -> PyResult<Input> {
+        let schema = schema_from(schema)?;
+        let input = self.get()?.input_of(port, schema).map_err(to_py_err)?;
+        Ok(Input { input })
+    }
+
+    /// Declares output `port` of the layout `schema` (JSON).
+    fn output(&mut self, port: &str, schema: &str) -> PyResult<Output> {
+        let schema = schema_from(schema)?;
+        let output = self.get()?.output_of(port, schema).map_err(to_py_err)?;
+        Ok(Output { output })
+    }
+
+    /// Declares parameter `key` with `default` (a float, int, bool or str:
+    /// the parameter keeps that type).
+    fn param(&mut self, key: &str, default: &Bound<'_, PyAny>) -> PyResult<ParamHandle> {
+        let setup = self.get()?;
+        // bool first: a Python bool is also an int
+        let param = if let Ok(b) = default.cast::<pyo3::types::PyBool>() {
+            AnyParam::Bool(setup.param(key, b.is_true()))
+        } else if let Ok(i) = default.cast::<pyo3::types::PyInt>() {
+            AnyParam::Int(setup.param(key, i.extract::<i64>()?))
+        } else if let Ok(f) = default.cast::<pyo3::types::PyFloat>() {
+            AnyParam::Float(setup.param(key, f.value()))
+        } else if let Ok(s) = default.extract::<String>() {
+            AnyParam::Text(setup.param(key, s))
+        } else {
+            return Err(PyValueError::new_err(format!(
+                "parameter {key:?}: a default of type {} (give a float, int, bool or str)",
+                default.get_type().name()?
+            )));
+        };
+        Ok(ParamHandle { param })
+    }
+}
+
+enum AnyParam {
+    Float(Param<f64>),
+    Int(Param<i64>),
+    Bool(Param<bool>),
+    Text(Param<String>),
+}
+
+/// A parameter: its value changes when `nerve param set` changes it.
+#[pyclass(module = "nerve._native")]
+struct ParamHandle {
+    param: AnyParam,
+}
+
+#[pymethods]
+impl ParamHandle {
+    /// The current value.
+    fn get<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        Ok(match &self.param {
+            AnyParam::Float(p) => p.get().into_pyobject(py)?.into_any(),
+            AnyParam::Int(p) => p.get().into_pyobject(py)?.into_any(),
+            AnyParam::Bool(p) => p.get().into_pyobject(py)?.to_owned().into_any(),
+            AnyParam::Text(p) => p.get().into_pyobject(py)?.into_any(),
+        })
+    }
+
+    /// Changes the value from inside the agent.
+    fn set(&self, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        match &self.param {
+            AnyParam::Float(p) => p.set(value.extract()?),
+            AnyParam::Int(p) => p.set(value.extract()?),
+            AnyParam::Bool(p) => p.set(value.extract()?),
+            AnyParam::Text(p) => p.set(value.extract()?),
+        }
+        Ok(())
+    }
+}
+
+/// What each step gets (the SDK's `Context`), valid during that call only.
+#[pyclass(unsendable, module = "nerve._native")]
+struct Context {
+    ptr: *mut SdkContext,
+}
+
+impl Context {
+    fn get(&mut self) -> PyResult<&mut SdkContext> {
+        // SAFETY: as for `Setup::get`: the context `PyAgent::call` holds a
+        // unique borrow of during the Python call, nulled after it.
+        unsafe { self.ptr.as_mut() }.ok_or_else(|| dead("context"))
+    }
+}
+
+#[pymethods]
+impl Context {
+    /// The agent's name.
+    #[getter]
+    fn name(&mut self) -> PyResult<String> {
+        Ok(self.get()?.name().to_owned())
+    }
+
+    /// The number of this step, from 1.
+    #[getter]
+    fn cycle(&mut self) -> PyResult<u64> {
+        Ok(self.get()?.cycle())
+    }
+
+    /// When this step started (CLOCK_MONOTONIC, ns).
+    #[getter]
+    fn now_ns(&mut self) -> PyResult<u64> {
+        Ok(self.get()?.now_ns())
+    }
+
+    /// The period now, in seconds; None for an event-driven agent.
+    #[getter]
+    fn period(&mut self) -> PyResult<Option<f64>> {
+        Ok(self.get()?.period().map(|p| p.as_secs_f64()))
+    }
+
+    /// This step's deadline (ns); None for an event-driven agent.
+    #[getter]
+    fn deadline_ns(&mut self) -> PyResult<Option<u64>> {
+        Ok(self.get()?.deadline_ns())
+    }
+
+    /// The inputs with new samples that woke this step.
+    #[getter]
+    fn woken_by(&mut self) -> PyResult<Vec<String>> {
+        Ok(self.get()?.woken_by().map(str::to_owned).collect())
+    }
+
+    /// Whether input `input` woke this step.
+    fn has_new(&mut self, input: &str) -> PyResult<bool> {
+        Ok(self.get()?.has_new(input))
+    }
+
+    /// Stops the agent after this step.
+    fn request_stop(&mut self) -> PyResult<()> {
+        self.get()?.request_stop();
+        Ok(())
+    }
+}
+
+/// An input port.
+#[pyclass(module = "nerve._native")]
+struct Input {
+    input: SchemaInput,
+}
+
+#[pymethods]
+impl Input {
+    /// The next waiting sample, read in place; None when none waits.
+    fn take(&self) -> PyResult<Option<Received>> {
+        Ok(self.input.take().map_err(to_py_err)?.map(|sample| Received { sample: Mutex::new(sample) }))
+    }
+
+    /// How many output ports feed it now.
+    fn sources(&self) -> usize {
+        self.input.sources()
+    }
+}
+
+/// A received sample: its bytes are the sender's, in shared memory, while
+/// this object (or a view of it) lives.
+#[pyclass(module = "nerve._native")]
+struct Received {
+    // iceoryx2's samples may move between threads but not be shared: the
+    // lock makes the object shareable, as Python objects are
+    sample: Mutex<agent_sdk::dynamic::Received>,
+}
+
+impl Received {
+    fn meta(&self) -> agent_sdk::Meta {
+        lock(&self.sample).meta()
+    }
+}
+
+fn lock<X>(m: &Mutex<X>) -> std::sync::MutexGuard<'_, X> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+#[pymethods]
+impl Received {
+    /// The sending agent.
+    #[getter]
+    fn sender(&self) -> String {
+        self.meta().sender.as_str().to_owned()
+    }
+
+    /// Its number on the sending port.
+    #[getter]
+    fn seq(&self) -> u64 {
+        self.meta().seq
+    }
+
+    /// When it was sent (CLOCK_MONOTONIC, ns).
+    #[getter]
+    fn stamp_ns(&self) -> u64 {
+        self.meta().stamp_ns
+    }
+
+    fn __len__(&self) -> usize {
+        lock(&self.sample).bytes().len()
+    }
+
+    unsafe fn __getbuffer__(slf: Bound<'_, Self>, view: *mut ffi::Py_buffer, flags: c_int) -> PyResult<()> {
+        if flags & ffi::PyBUF_WRITABLE != 0 {
+            return Err(PyBufferError::new_err("a received sample is read-only"));
+        }
+        let (ptr, len) = {
+            let me = slf.borrow();
+            let sample = lock(&me.sample);
+            let bytes = sample.bytes();
+            (bytes.as_ptr(), bytes.len())
+        };
+        // SAFETY: the bytes live as long as the sample, which `view` keeps
+        // alive (PyBuffer_FillInfo takes a reference to `slf`)
+        unsafe { fill_buffer(&slf, view, ptr.cast_mut(), len, true, flags) }
+    }
+
+    unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {}
+}
+
+/// Fills `view` with `len` bytes at `ptr`, owned by `owner`.
+///
+/// # Safety
+/// `view` is the buffer the interpreter asked for; the bytes stay valid
+/// while `owner` lives.
+unsafe fn fill_buffer<T>(
+    owner: &Bound<'_, T>,
+    view: *mut ffi::Py_buffer,
+    ptr: *mut u8,
+    len: usize,
+    readonly: bool,
+    flags: c_int,
+) -> PyResult<()> {
+    let len = ffi::Py_ssize_t::try_from(len).map_err(|_| PyBufferError::new_err("a sample too large to view"))?;
+    // SAFETY: the caller's contract; PyBuffer_FillInfo takes a new reference to `owner`
+    let rc = unsafe { ffi::PyBuffer_FillInfo(view, owner.as_ptr(), ptr.cast(), len, c_int::from(readonly), flags) };
+    if rc == 0 { Ok(()) } else { Err(PyErr::fetch(owner.py())) }
+}
+
+/// An output port.
+#[pyclass(module = "nerve._native")]
+struct Output {
+    output: SchemaOutput,
+}
+
+#[pymethods]
+impl Output {
+    /// A sample to write in place: zeroed, or (`zeroed=False`) holding what
+    /// its slot last held.
+    #[pyo3(signature = (zeroed = true))]
+    fn loan(&self, zeroed: bool) -> PyResult<Loan> {
+        Ok(Loan { loan: Mutex::new(Some(self.output.loan(zeroed).map_err(to_py_err)?)) })
+    }
+
+    /// Sends a loaned sample and wakes the readers; the loan is spent.
+    fn send(&mut self, loan: &Bound<'_, Loan>) -> PyResult<()> {
+        let taken =
+            lock(&loan.borrow().loan).take().ok_or_else(|| PyRuntimeError::new_err("this loan was sent already"))?;
+        self.output.send(taken).map_err(to_py_err)
+    }
+
+    /// Sends a copy of `data` (bytes of exactly the layout's size).
+    fn send_bytes(&mut self, data: &[u8]) -> PyResult<()> {
+        self.output.send_bytes(data).map_err(to_py_err)
+    }
+
+    /// The port's iceoryx2 service name.
+    #[getter]
+    fn service(&self) -> String {
+        self.output.service().to_owned()
+    }
+}
+
+/// A loaned sample: its bytes are a slot of the port's shared memory until
+/// it is sent.
+#[pyclass(module = "nerve._native")]
+struct Loan {
+    /// as for [`Received`]; None once sent
+    loan: Mutex<Option<agent_sdk::dynamic::Loan>>,
+}
+
+#[pymethods]
+impl Loan {
+    unsafe fn __getbuffer__(slf: Bound<'_, Self>, view: *mut ffi::Py_buffer, flags: c_int) -> PyResult<()> {
+        let (ptr, len) = {
+            let me = slf.borrow();
+            let mut held = lock(&me.loan);
+            let loan = held.as_mut().ok_or_else(|| PyBufferError::new_err("this loan was sent already"))?;
+            let bytes = loan.bytes_mut();
+            (bytes.as_mut_ptr(), bytes.len())
+        };
+        // SAFETY: the slot stays mapped while the port lives; the loan's
+        // bytes are written only before it is sent (the package's views
+        // of a sent loan are documented as dead)
+        unsafe { fill_buffer(&slf, view, ptr, len, false, flags) }
+    }
+
+    unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {}
+}
+
+/// The layout (JSON) of the built-in payload type `type_name`, or None.
+#[pyfunction]
+fn builtin_schema(type_name: &str) -> Option<String> {
+    let mut found = None;
+    macro_rules! look {
+        ($t:ty) => {
+            if found.is_none() && <$t as shm_schemas::Payload>::stable_type_name() == type_name {
+                found = Some(<$t as Described>::schema());
+            }
+        };
+    }
+    shm_schemas::for_each_payload!(look);
+    if found.is_none() && type_name == "nerve::FixedName" {
+        found = Some(<shm_schemas::FixedName as Described>::schema());
+    }
+    found.and_then(|s| serde_json::to_string(&s).ok())
+}
+
+/// The type names of the built-in payloads.
+#[pyfunction]
+fn builtin_types() -> Vec<&'static str> {
+    shm_schemas::payloads::known_type_names()
+}
+
+/// The layout (JSON) of primitive `name` (`u8` ... `f64`, `bool`).
+#[pyfunction]
+fn primitive_schema(name: &str) -> PyResult<String> {
+    macro_rules! prim {
+        ($($t:ty),*) => {
+            match name {
+                $(stringify!($t) => <$t as Described>::schema(),)*
+                _ => return Err(PyValueError::new_err(format!(
+                    "{name:?} is not a primitive type (u8, u16, u32, u64, i8, i16, i32, i64, f32, f64, bool)"
+                ))),
+            }
+        };
+    }
+    let s = prim!(u8, u16, u32, u64, i8, i16, i32, i64, f32, f64, bool);
+    serde_json::to_string(&s).map_err(to_py_err)
+}
+
+/// The layout (JSON) of `[element; len]`.
+#[pyfunction]
+fn array_schema(element: &str, len: usize) -> PyResult<String> {
+    let element = schema_from(element)?;
+    let size = element.size.checked_mul(len).ok_or_else(|| PyValueError::new_err("an array too large"))?;
+    let s = Schema {
+        type_name: format!("[{}; {len}]", element.type_name),
+        size,
+        align: element.align,
+        kind: shm_schemas::schema::Kind::Array { len, element: Box::new(element) },
+    };
+    serde_json::to_string(&s).map_err(to_py_err)
+}
+
+/// The layout (JSON) of the `#[repr(C)]` struct `type_name` with `fields`
+/// (name, layout JSON) in order: each field at the next offset its
+/// alignment allows, the size rounded up to the largest alignment, as
+/// Rust lays out `#[repr(C)]`.
+#[pyfunction]
+fn struct_schema(type_name: &str, fields: Vec<(String, String)>) -> PyResult<String> {
+    let round = |at: usize, align: usize| at.div_ceil(align).checked_mul(align);
+    let too_large = || PyValueError::new_err(format!("{type_name}: a layout too large"));
+    let mut at = 0usize;
+    let mut align = 1usize;
+    let mut laid = Vec::with_capacity(fields.len());
+    for (name, schema) in fields {
+        let schema = schema_from(&schema)?;
+        if schema.align == 0 || !schema.align.is_power_of_two() {
+            return Err(PyValueError::new_err(format!(
+                "field {name:?}: alignment {} is not a power of two",
+                schema.align
+            )));
+        }
+        let offset = round(at, schema.align).ok_or_else(too_large)?;
+        at = offset.checked_add(schema.size).ok_or_else(too_large)?;
+        align = align.max(schema.align);
+        laid.push(shm_schemas::schema::Field { name, offset, schema });
+    }
+    let size = round(at, align).ok_or_else(too_large)?;
+    let s =
+        Schema { type_name: type_name.into(), size, align, kind: shm_schemas::schema::Kind::Struct { fields: laid } };
+    serde_json::to_string(&s).map_err(to_py_err)
+}
+
+/// The layout fingerprint of a layout (JSON): what the router compares.
+#[pyfunction]
+fn fingerprint(schema: &str) -> PyResult<u64> {
+    Ok(schema_from(schema)?.fingerprint())
+}
+
+/// Runs the agent made by `class()` under the SDK with command line `argv`
+/// (without the program name): `kind` as `nerve ps` shows it, `period_s`
+/// for a periodic agent, None for an event-driven one. Returns the exit
+/// status. The interpreter's lock is released while the SDK runs; the task
+/// thread takes it for each call of the agent.
+#[pyfunction]
+#[pyo3(signature = (class, kind, period_s, argv))]
+fn run(py: Python<'_>, class: Py<PyAny>, kind: String, period_s: Option<f64>, argv: Vec<String>) -> PyResult<u8> {
+    let task = match period_s {
+        None => Task::EventDriven,
+        Some(p) if p.is_finite() && p > 0.0 => Task::Periodic(Duration::from_secs_f64(p)),
+        Some(p) => return Err(PyValueError::new_err(format!("a period of {p} s (give a positive number of seconds)"))),
+    };
+    shm_schemas::AgentName::new(&kind).map_err(|e| PyValueError::new_err(format!("kind {kind:?}: {e}")))?;
+    let kind: &'static str = Box::leak(kind.into_boxed_str());
+    SPEC.set(Spec { kind, task, class })
+        .map_err(|_| PyRuntimeError::new_err("nerve.run runs one agent per process, and it ran already"))?;
+    let args = match <CommonArgs as clap::Parser>::try_parse_from(std::iter::once(kind.to_owned()).chain(argv)) {
+        Ok(a) => a,
+        Err(e) => {
+            // --help and --version print and succeed; a bad argument prints and fails
+            let _ = e.print();
+            return Ok(if e.use_stderr() { 2 } else { 0 });
+        }
+    };
+    Ok(py.detach(|| agent_sdk::runtime::run_status::<PyAgent>(args)))
+}
+
+/// The module Python imports as `nerve._native`.
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Setup>()?;
+    m.add_class::<Context>()?;
+    m.add_class::<Input>()?;
+    m.add_class::<Output>()?;
+    m.add_class::<Received>()?;
+    m.add_class::<Loan>()?;
+    m.add_class::<ParamHandle>()?;
+    m.add_function(wrap_pyfunction!(builtin_schema, m)?)?;
+    m.add_function(wrap_pyfunction!(builtin_types, m)?)?;
+    m.add_function(wrap_pyfunction!(primitive_schema, m)?)?;
+    m.add_function(wrap_pyfunction!(array_schema, m)?)?;
+    m.add_function(wrap_pyfunction!(struct_schema, m)?)?;
+    m.add_function(wrap_pyfunction!(fingerprint, m)?)?;
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    Ok(())
+}
