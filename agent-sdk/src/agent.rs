@@ -198,7 +198,12 @@ impl Setup {
         let out = match &self.binding {
             Binding::Shm(node) => SchemaOutput::create(node, &service, schema.clone(), self.name.as_str())?,
             Binding::Nothing => SchemaOutput::unbound(&service, schema.clone()),
-            Binding::Memory(_) => return Err(untestable(port)),
+            Binding::Memory(bus) => {
+                let (out, collected) =
+                    SchemaOutput::in_memory(&service, schema.clone(), self.name.as_str(), bus.clock());
+                bus.add_bytes_output(port, &schema.type_name, collected);
+                out
+            }
         };
         self.outputs.push(PortSpec {
             name: port.into(),
@@ -213,9 +218,6 @@ impl Setup {
     /// [`Setup::output_of`]); the router connects it to outputs of that layout.
     pub fn input_of(&mut self, port: &str, schema: Schema) -> Result<SchemaInput, AgentError> {
         self.check_port(port)?;
-        if let Binding::Memory(_) = &self.binding {
-            return Err(untestable(port));
-        }
         let (input, inner) = SchemaInput::new(port, schema.clone());
         self.inputs.push(inner);
         add_schema(&mut self.schemas, schema);
@@ -259,14 +261,6 @@ impl Setup {
         }
         Ok(())
     }
-}
-
-/// The test harness queues and collects typed samples only.
-fn untestable(port: &str) -> AgentError {
-    AgentError::Config(format!(
-        "port {port:?}: a port declared by its layout cannot be bound in the test harness \
-         (it runs Rust agents of typed ports); test the agent in a robot"
-    ))
 }
 
 impl crate::params::Declare for Setup {

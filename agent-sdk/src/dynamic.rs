@@ -28,7 +28,8 @@ use iceoryx2::service::marker::CustomPayloadMarker;
 use iceoryx2::service::static_config::message_type_details::{TypeDetail, TypeVariant};
 use shm_schemas::control::agent_to_router::PortSpec;
 use shm_schemas::stats::InputStats;
-use shm_schemas::{SampleHeader, Schema};
+use shm_schemas::{FixedName, SampleHeader, Schema};
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -47,8 +48,13 @@ pub(crate) fn payload_details(service: &str, schema: &Schema) -> Result<TypeDeta
 /// A sample received on a [`SchemaInput`], read in place: its bytes stay in
 /// shared memory, and the slot is not reused by the sender, until it is
 /// dropped.
-pub struct Received {
-    sample: Sample<Ipc, [CustomPayloadMarker], SampleHeader>,
+pub struct Received(ReceivedInner);
+
+enum ReceivedInner {
+    /// a slot of the source port's shared memory
+    Shm(Sample<Ipc, [CustomPayloadMarker], SampleHeader>),
+    /// a test's sample ([`crate::testing`])
+    Memory(SampleHeader, Box<[u8]>),
 }
 
 impl std::fmt::Debug for Received {
@@ -60,15 +66,24 @@ impl std::fmt::Debug for Received {
 impl Received {
     /// Who sent it, its number and stamp.
     pub fn meta(&self) -> Meta {
-        Meta::of(self.sample.user_header())
+        match &self.0 {
+            ReceivedInner::Shm(sample) => Meta::of(sample.user_header()),
+            ReceivedInner::Memory(h, _) => Meta::of(h),
+        }
     }
 
     /// The payload's bytes, as the sender wrote them (the schema's layout).
     pub fn bytes(&self) -> &[u8] {
-        let payload = self.sample.payload();
-        // SAFETY: CustomPayloadMarker is a #[repr(C)] wrapper of one u8: the
-        // slice is the sample's payload bytes, alive while the sample is.
-        unsafe { std::slice::from_raw_parts(payload.as_ptr().cast::<u8>(), payload.len()) }
+        match &self.0 {
+            ReceivedInner::Shm(sample) => {
+                let payload = sample.payload();
+                // SAFETY: CustomPayloadMarker is a #[repr(C)] wrapper of one
+                // u8: the slice is the sample's payload bytes, alive while
+                // the sample is.
+                unsafe { std::slice::from_raw_parts(payload.as_ptr().cast::<u8>(), payload.len()) }
+            }
+            ReceivedInner::Memory(_, bytes) => bytes,
+        }
     }
 }
 
@@ -76,9 +91,39 @@ impl Received {
 struct Source {
     from_agent: String,
     from_port: String,
-    subscriber: Subscriber<Ipc, [CustomPayloadMarker], SampleHeader>,
-    listener: Arc<Listener<Ipc>>,
+    feed: Feed,
     tally: Tally,
+}
+
+/// Where a source's samples come from.
+enum Feed {
+    /// a running agent: a subscription to the source port and its wake-up event
+    Shm { subscriber: Subscriber<Ipc, [CustomPayloadMarker], SampleHeader>, listener: Arc<Listener<Ipc>> },
+    /// a test: the samples the harness queued, at most [`SUBSCRIBER_BUFFER`]
+    /// (the oldest overwritten past it), and how many were queued in all
+    Memory { queue: VecDeque<(SampleHeader, Box<[u8]>)>, sent: u64 },
+}
+
+impl Source {
+    /// The next waiting sample of this source, if any.
+    fn take(&mut self, input: &str) -> Result<Option<Received>, PortError> {
+        let got = match &mut self.feed {
+            Feed::Shm { subscriber, .. } => subscriber
+                .receive()
+                .map_err(|e| PortError::Ipc {
+                    service: format!("{}/{}", self.from_agent, self.from_port),
+                    detail: format!(
+                        "input {input:?} cannot take another sample ({e:?}): drop the ones held, or keep copies"
+                    ),
+                })?
+                .map(|sample| (*sample.user_header(), Received(ReceivedInner::Shm(sample)))),
+            Feed::Memory { queue, .. } => queue.pop_front().map(|(h, b)| (h, Received(ReceivedInner::Memory(h, b)))),
+        };
+        Ok(got.map(|(h, r)| {
+            self.tally.account(&h, now_ns());
+            r
+        }))
+    }
 }
 
 pub(crate) struct SchemaInputInner {
@@ -134,17 +179,8 @@ impl SchemaInput {
         }
         let start = self.inner.next.fetch_add(1, Ordering::Relaxed) as usize;
         for i in 0..n {
-            let src = &mut subs[(start + i) % n];
-            let sample = src.subscriber.receive().map_err(|e| PortError::Ipc {
-                service: format!("{}/{}", src.from_agent, src.from_port),
-                detail: format!(
-                    "input {:?} cannot take another sample ({e:?}): drop the ones held, or keep copies",
-                    self.inner.name
-                ),
-            })?;
-            if let Some(sample) = sample {
-                src.tally.account(sample.user_header(), now_ns());
-                return Ok(Some(Received { sample }));
+            if let Some(r) = subs[(start + i) % n].take(&self.inner.name)? {
+                return Ok(Some(r));
             }
         }
         Ok(None)
@@ -157,6 +193,53 @@ impl SchemaInput {
 }
 
 impl SchemaInputInner {
+    /// Queues `bytes` (exactly the layout's size) from `sender`'s port
+    /// `port` as a test's sample, stamped `stamp_ns`; as
+    /// [`crate::ports::InputInner`]'s `queue` does for a typed input.
+    pub(crate) fn queue(&self, sender: &str, port: &str, bytes: &[u8], stamp_ns: u64) -> Result<(), PortError> {
+        if bytes.len() != self.schema.size {
+            return Err(PortError::Ipc {
+                service: format!("{sender}/{port}"),
+                detail: format!(
+                    "a {}-byte sample for input {:?} of {}-byte {}",
+                    bytes.len(),
+                    self.name,
+                    self.schema.size,
+                    self.schema.type_name
+                ),
+            });
+        }
+        let mut subs = lock(&self.subs);
+        let at = match subs.iter().position(|s| s.from_agent == sender && s.from_port == port) {
+            Some(at) => at,
+            None => {
+                if subs.len() >= MAX_SOURCES {
+                    return Err(PortError::TooManySources { input: self.name.clone(), max: MAX_SOURCES });
+                }
+                subs.push(Source {
+                    from_agent: sender.into(),
+                    from_port: port.into(),
+                    feed: Feed::Memory { queue: VecDeque::new(), sent: 0 },
+                    tally: Tally::default(),
+                });
+                subs.len() - 1
+            }
+        };
+        let Feed::Memory { queue, sent } = &mut subs[at].feed else {
+            return Err(PortError::Ipc {
+                service: format!("{sender}/{port}"),
+                detail: "an iceoryx2 source, not a test's".into(),
+            });
+        };
+        *sent = sent.saturating_add(1);
+        let seq = *sent;
+        if queue.len() >= SUBSCRIBER_BUFFER {
+            queue.pop_front();
+        }
+        queue.push_back((SampleHeader { sender: FixedName::new(sender), seq, stamp_ns }, bytes.into()));
+        Ok(())
+    }
+
     /// Opens the source port `service` with this input's layout: never
     /// creates it, and refuses another type or another layout of the type.
     fn open(
@@ -239,8 +322,7 @@ impl DynInput for SchemaInputInner {
         lock(&self.subs).push(Source {
             from_agent: from_agent.into(),
             from_port: from_port.into(),
-            subscriber,
-            listener: Arc::new(listener),
+            feed: Feed::Shm { subscriber, listener: Arc::new(listener) },
             tally: Tally::default(),
         });
         Ok(true)
@@ -254,7 +336,13 @@ impl DynInput for SchemaInputInner {
     }
 
     fn listeners(&self) -> Vec<Arc<Listener<Ipc>>> {
-        lock(&self.subs).iter().map(|s| s.listener.clone()).collect()
+        lock(&self.subs)
+            .iter()
+            .filter_map(|s| match &s.feed {
+                Feed::Shm { listener, .. } => Some(listener.clone()),
+                Feed::Memory { .. } => None,
+            })
+            .collect()
     }
 
     fn stats(&self, now: u64) -> Vec<InputStats> {
@@ -262,7 +350,7 @@ impl DynInput for SchemaInputInner {
     }
 
     fn has_queued(&self) -> bool {
-        false
+        lock(&self.subs).iter().any(|s| matches!(&s.feed, Feed::Memory { queue, .. } if !queue.is_empty()))
     }
 
     fn as_any(&self) -> &dyn std::any::Any {
@@ -275,18 +363,70 @@ impl DynInput for SchemaInputInner {
 pub struct SchemaOutput {
     service: String,
     schema: Schema,
-    /// the iceoryx2 port; none while the agent is described (`--describe`)
-    raw: Option<RawOutput>,
+    sink: Sink,
+}
+
+/// Where a [`SchemaOutput`]'s samples go.
+// A running agent's variant is the large one and the only one on the data
+// path; boxing it would add a pointer hop to every send (as `ports::Sink`).
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug)]
+enum Sink {
+    /// a running agent: the port's iceoryx2 service
+    Shm(RawOutput),
+    /// a test: the harness collects them
+    Memory(Arc<CollectedBytes>),
+    /// `--describe`: nothing is sent
+    Nothing,
+}
+
+/// The samples a [`SchemaOutput`] sent in a test, in order, for [`crate::testing`].
+#[derive(Debug)]
+pub(crate) struct CollectedBytes {
+    samples: Mutex<Vec<(Meta, Vec<u8>)>>,
+    /// the harness's clock, which stamps them
+    clock: Arc<AtomicU64>,
+    sender: FixedName,
+    seq: AtomicU64,
+}
+
+impl CollectedBytes {
+    /// Takes every sample sent since the last call.
+    pub(crate) fn take(&self) -> Vec<(Meta, Vec<u8>)> {
+        std::mem::take(&mut *lock(&self.samples))
+    }
+
+    fn push(&self, bytes: &[u8]) {
+        let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
+        let meta = Meta { sender: self.sender, seq, stamp_ns: self.clock.load(Ordering::Acquire) };
+        lock(&self.samples).push((meta, bytes.to_vec()));
+    }
 }
 
 impl SchemaOutput {
     pub(crate) fn create(node: &Node<Ipc>, service: &str, schema: Schema, sender: &str) -> Result<Self, PortError> {
         let raw = RawOutput::create(node, service, &schema, schema.fingerprint(), sender)?;
-        Ok(SchemaOutput { service: service.into(), schema, raw: Some(raw) })
+        Ok(SchemaOutput { service: service.into(), schema, sink: Sink::Shm(raw) })
     }
 
     pub(crate) fn unbound(service: &str, schema: Schema) -> Self {
-        SchemaOutput { service: service.into(), schema, raw: None }
+        SchemaOutput { service: service.into(), schema, sink: Sink::Nothing }
+    }
+
+    /// An output whose samples a test collects, stamped by `clock`.
+    pub(crate) fn in_memory(
+        service: &str,
+        schema: Schema,
+        sender: &str,
+        clock: Arc<AtomicU64>,
+    ) -> (Self, Arc<CollectedBytes>) {
+        let collected = Arc::new(CollectedBytes {
+            samples: Mutex::new(Vec::new()),
+            clock,
+            sender: FixedName::new(sender),
+            seq: AtomicU64::new(0),
+        });
+        (SchemaOutput { service: service.into(), schema, sink: Sink::Memory(collected.clone()) }, collected)
     }
 
     /// The iceoryx2 service name of this port.
@@ -304,25 +444,111 @@ impl SchemaOutput {
     /// writer must write every field a reader looks at (a large frame then
     /// costs one write, not two).
     pub fn loan(&self, zeroed: bool) -> Result<Loan, PortError> {
-        match &self.raw {
-            Some(raw) => raw.loan(zeroed),
-            None => Ok(Loan::detached(self.schema.size)),
+        match &self.sink {
+            Sink::Shm(raw) => raw.loan(zeroed),
+            Sink::Memory(_) | Sink::Nothing => Ok(Loan::detached(self.schema.size)),
         }
     }
 
     /// Sends a loaned sample, stamped now, and wakes the readers.
     pub fn send(&mut self, loan: Loan) -> Result<(), PortError> {
-        match &mut self.raw {
-            Some(raw) => raw.send_loan(loan),
-            None => Ok(()),
+        match &mut self.sink {
+            Sink::Shm(raw) => raw.send_loan(loan),
+            Sink::Memory(c) => {
+                c.push(loan.bytes());
+                Ok(())
+            }
+            Sink::Nothing => Ok(()),
         }
     }
 
     /// Sends `bytes` (exactly the layout's size), copied into a loaned sample.
     pub fn send_bytes(&mut self, bytes: &[u8]) -> Result<(), PortError> {
-        match &mut self.raw {
-            Some(raw) => raw.send(bytes),
-            None => Ok(()),
+        match &mut self.sink {
+            Sink::Shm(raw) => raw.send(bytes),
+            Sink::Memory(c) if bytes.len() == self.schema.size => {
+                c.push(bytes);
+                Ok(())
+            }
+            Sink::Memory(_) => Err(PortError::Ipc {
+                service: self.service.clone(),
+                detail: format!("a {}-byte sample for a {}-byte type", bytes.len(), self.schema.size),
+            }),
+            Sink::Nothing => Ok(()),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{SchemaInput, SchemaOutput};
+    use crate::ports::{DynInput as _, Input, Output, PortError};
+    use crate::world::World;
+    use crate::world::test_support::Cleanup;
+    use shm_schemas::payloads::Scalar;
+    use shm_schemas::{Described as _, Payload as _};
+
+    fn bytes_of(v: &Scalar) -> &[u8] {
+        // SAFETY: the bytes of a Copy #[repr(C)] value without padding
+        unsafe { std::slice::from_raw_parts((v as *const Scalar).cast::<u8>(), std::mem::size_of::<Scalar>()) }
+    }
+
+    #[test]
+    fn ports_by_layout_and_ports_by_type_read_each_other_in_place() {
+        let world = World::new(&format!("dyn{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+        assert_eq!(Scalar::schema().fingerprint(), Scalar::layout_fingerprint());
+
+        // a typed output, read by layout
+        let typed = Output::<Scalar>::create(&node, &robot.port_service("rust", "value"), "rust").expect("output");
+        let (by_layout, inner) = SchemaInput::new("in", Scalar::schema());
+        assert!(inner.connect(&node, &robot, "rust", "value").expect("the same layout opens"));
+        assert!(!inner.connect(&node, &robot, "rust", "value").expect("twice"), "already subscribed");
+        for i in 0..3 {
+            typed.send(Scalar { value: f64::from(i) + 0.25, stamp_ns: 9 }).expect("send");
+        }
+        let first = by_layout.take().expect("take").expect("a sample");
+        let second = by_layout.take().expect("take").expect("a sample");
+        assert_eq!(first.bytes(), bytes_of(&Scalar { value: 0.25, stamp_ns: 9 }));
+        assert_eq!((first.meta().sender.as_str(), first.meta().seq, second.meta().seq), ("rust", 1, 2));
+        // iceoryx2 lends two samples per source: a third is refused, saying what to do
+        match by_layout.take() {
+            Err(e) => assert!(e.to_string().contains("drop the ones held"), "{e}"),
+            Ok(s) => panic!("a third sample lent: {s:?}"),
+        }
+        drop((first, second));
+        let third = by_layout.take().expect("take").expect("the third");
+        assert_eq!(third.meta().seq, 3);
+        assert_eq!(inner.stats(crate::clock::now_ns())[0].received, 3);
+
+        // an output by layout, read by type, written in place
+        let service = robot.port_service("py", "value");
+        let mut out = SchemaOutput::create(&node, &service, Scalar::schema(), "py").expect("output by layout");
+        let (typed_in, typed_inner) = Input::<Scalar>::new("in");
+        assert!(typed_inner.connect(&node, &robot, "py", "value").expect("a typed reader opens it"));
+        let mut loan = out.loan(true).expect("loan");
+        assert!(loan.bytes().iter().all(|b| *b == 0), "zeroed");
+        loan.bytes_mut().copy_from_slice(bytes_of(&Scalar { value: -2.5, stamp_ns: 77 }));
+        out.send(loan).expect("send");
+        out.send_bytes(bytes_of(&Scalar { value: 1.0, stamp_ns: 78 })).expect("send bytes");
+        let (meta, got) = typed_in.recv().expect("a sample");
+        assert_eq!((got.value, got.stamp_ns, meta.sender.as_str(), meta.seq), (-2.5, 77, "py", 1));
+        assert_eq!(typed_in.recv().map(|(m, v)| (m.seq, v.value)), Some((2, 1.0)));
+
+        // another layout of the type is refused on both sides
+        let mut other = Scalar::schema();
+        if let shm_schemas::schema::Kind::Struct { fields } = &mut other.kind {
+            fields.swap(0, 1);
+            fields[0].offset = 0;
+            fields[1].offset = 8;
+        }
+        let (_, wrong) = SchemaInput::new("in2", other.clone());
+        match wrong.connect(&node, &robot, "rust", "value") {
+            Err(PortError::LayoutMismatch { .. } | PortError::IncompatibleType { .. }) => {}
+            other => panic!("another layout read: {other:?}"),
+        }
+        assert!(SchemaOutput::create(&node, &service, other, "py").is_err(), "another layout published");
     }
 }

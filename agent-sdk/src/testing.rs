@@ -51,6 +51,7 @@
 //! files the harness removes when dropped.
 
 use crate::agent::{Agent, AgentError, Binding, Context, Setup, Task};
+use crate::dynamic::{CollectedBytes, SchemaInputInner};
 use crate::params::ParamTable;
 use crate::ports::{Collected, DynInput, InputInner, Meta, PortError};
 use crate::world::{World, WorldError};
@@ -131,10 +132,11 @@ pub(crate) struct Bus {
     outputs: Mutex<Vec<Collector>>,
 }
 
-/// One output's collected samples, typed behind `Any`.
+/// One output's collected samples, typed behind `Any` (a typed port's
+/// `Collected<T>`, a port declared by layout's `CollectedBytes`).
 struct Collector {
     port: String,
-    type_name: &'static str,
+    type_name: String,
     samples: Arc<dyn Any + Send + Sync>,
 }
 
@@ -144,7 +146,12 @@ impl Bus {
     }
 
     pub(crate) fn add_output<T: Payload>(&self, port: &str, collected: Arc<Collected<T>>) {
-        let c = Collector { port: port.into(), type_name: T::stable_type_name(), samples: collected };
+        let c = Collector { port: port.into(), type_name: T::stable_type_name().into(), samples: collected };
+        self.outputs.lock().unwrap_or_else(|p| p.into_inner()).push(c);
+    }
+
+    pub(crate) fn add_bytes_output(&self, port: &str, type_name: &str, collected: Arc<CollectedBytes>) {
+        let c = Collector { port: port.into(), type_name: type_name.into(), samples: collected };
         self.outputs.lock().unwrap_or_else(|p| p.into_inner()).push(c);
     }
 }
@@ -168,7 +175,7 @@ pub struct HarnessBuilder<A: Agent> {
 
 impl<A: Agent> std::fmt::Debug for HarnessBuilder<A> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("HarnessBuilder").field("kind", &A::KIND).field("args", &self.args).finish()
+        f.debug_struct("HarnessBuilder").field("kind", &A::kind()).field("args", &self.args).finish()
     }
 }
 
@@ -208,13 +215,14 @@ impl<A: Agent> HarnessBuilder<A> {
     pub fn start(self) -> Result<Harness<A>, HarnessError> {
         let n = HARNESSES.fetch_add(1, Ordering::Relaxed);
         let world = World::new(&format!("test-{}-{n}", std::process::id()))?;
-        let name = self.name.unwrap_or_else(|| A::KIND.to_owned());
+        let name = self.name.unwrap_or_else(|| A::kind().to_owned());
         let agent_name = AgentName::new(&name).map_err(|source| HarnessError::Name { name: name.clone(), source })?;
         let bus = Arc::new(Bus { clock: Arc::new(AtomicU64::new(START_NS)), outputs: Mutex::new(Vec::new()) });
         let mut setup = Setup::new(world.clone(), agent_name, Binding::Memory(bus.clone()), self.args);
         // from here on the world's files are removed, whatever happens
         let cleanup = WorldCleanup(world);
-        let agent = A::new(&mut setup).map_err(|source| HarnessError::Agent { kind: A::KIND, stage: "new", source })?;
+        let agent =
+            A::new(&mut setup).map_err(|source| HarnessError::Agent { kind: A::kind(), stage: "new", source })?;
         let Setup { inputs, params, .. } = setup;
         for (key, value) in self.params {
             params.set(&key, &value).map_err(|reason| HarnessError::Param { key, value, reason })?;
@@ -234,7 +242,7 @@ impl<A: Agent> HarnessBuilder<A> {
             woken: vec![false; inputs.len()],
         };
         let mut agent = agent;
-        agent.start(&mut ctx).map_err(|source| HarnessError::Agent { kind: A::KIND, stage: "start", source })?;
+        agent.start(&mut ctx).map_err(|source| HarnessError::Agent { kind: A::kind(), stage: "start", source })?;
         Ok(Harness {
             agent: Some(agent),
             ctx,
@@ -284,7 +292,7 @@ pub struct Harness<A: Agent> {
 impl<A: Agent> std::fmt::Debug for Harness<A> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Harness")
-            .field("kind", &A::KIND)
+            .field("kind", &A::kind())
             .field("now_ns", &self.ctx.now_ns)
             .field("cycles", &self.ctx.cycle)
             .finish()
@@ -367,14 +375,16 @@ impl<A: Agent> Harness<A> {
         Ok(())
     }
 
+    fn find_input(&self, input: &str) -> Result<&Arc<dyn DynInput>, HarnessError> {
+        self.inputs.iter().find(|i| i.name() == input).ok_or_else(|| HarnessError::NoSuchPort {
+            direction: "input",
+            port: input.into(),
+            known: self.inputs.iter().map(|i| i.name().to_owned()).collect(),
+        })
+    }
+
     fn input_port<T: Payload>(&self, input: &str) -> Result<&InputInner<T>, HarnessError> {
-        let Some(port) = self.inputs.iter().find(|i| i.name() == input) else {
-            return Err(HarnessError::NoSuchPort {
-                direction: "input",
-                port: input.into(),
-                known: self.inputs.iter().map(|i| i.name().to_owned()).collect(),
-            });
-        };
+        let port = self.find_input(input)?;
         port.as_any().downcast_ref::<InputInner<T>>().ok_or_else(|| HarnessError::WrongType {
             port: input.into(),
             carries: port.type_name().into(),
@@ -399,10 +409,43 @@ impl<A: Agent> Harness<A> {
         };
         let collected = c.samples.downcast_ref::<Collected<T>>().ok_or_else(|| HarnessError::WrongType {
             port: port.into(),
-            carries: c.type_name.into(),
+            carries: c.type_name.clone(),
             asked: T::stable_type_name(),
         })?;
         Ok(collected.take().into_iter().map(|(m, v)| (m, *v)).collect())
+    }
+
+    /// Queues `bytes` on input `input`, declared by layout
+    /// ([`Setup::input_of`]), from agent `sender` (its output `out`),
+    /// stamped now; as [`Harness::send_from`] does for a typed input.
+    pub fn send_bytes_from(&mut self, input: &str, sender: &str, bytes: &[u8]) -> Result<(), HarnessError> {
+        let port = self.find_input(input)?;
+        let inner = port.as_any().downcast_ref::<SchemaInputInner>().ok_or_else(|| HarnessError::WrongType {
+            port: input.into(),
+            carries: port.type_name().into(),
+            asked: "bytes of a layout",
+        })?;
+        inner.queue(sender, "out", bytes, self.ctx.now_ns)?;
+        Ok(())
+    }
+
+    /// Takes what output `port`, declared by layout ([`Setup::output_of`]),
+    /// sent since the last call, oldest first, as bytes.
+    pub fn output_bytes(&mut self, port: &str) -> Result<Vec<(Meta, Vec<u8>)>, HarnessError> {
+        let outputs = self.bus.outputs.lock().unwrap_or_else(|p| p.into_inner());
+        let Some(c) = outputs.iter().find(|c| c.port == port) else {
+            return Err(HarnessError::NoSuchPort {
+                direction: "output",
+                port: port.into(),
+                known: outputs.iter().map(|c| c.port.clone()).collect(),
+            });
+        };
+        let collected = c.samples.downcast_ref::<CollectedBytes>().ok_or_else(|| HarnessError::WrongType {
+            port: port.into(),
+            carries: c.type_name.clone(),
+            asked: "bytes of a layout",
+        })?;
+        Ok(collected.take())
     }
 
     /// What each input counts about each source (`nerve ps --json`'s

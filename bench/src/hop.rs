@@ -17,7 +17,11 @@
 //!   share of round trips whose two ends ran on one CPU (placement);
 //! * `ddsperf`: Cyclone DDS's own ping-pong, when installed ([`crate::dds`]);
 //! * `dora`: two dora-rs nodes on dora's Rust node API, one `dora run` per
-//!   batch, when `scripts/setup.sh --bench` has built them ([`crate::dora`]).
+//!   batch, when `scripts/setup.sh --bench` has built them ([`crate::dora`]);
+//! * `nerve-python`: the SDK ping against a Python pong (`bench/py/pong.py`,
+//!   the `nerve` package: read in place, the number written in place in a
+//!   loaned sample), when the package is installed (`NERVE_PYTHON`, else
+//!   `target/nerve-py`); its ratio to `nerve` is issue 15's target.
 //!
 //! With dora come two more rows, in dora's own pattern (its
 //! `examples/benchmark`: one sample every 5 ms, latency taken at the
@@ -71,15 +75,16 @@ use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
-use std::process::Stdio;
+use std::process::{Command, Stdio};
 use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 /// Samples dropped at the start of every batch.
 const DISCARD: usize = 5;
 /// The transports, in the order of the tables.
-pub const TRANSPORTS: [&str; 16] = [
+pub const TRANSPORTS: [&str; 17] = [
     "nerve",
+    "nerve-python",
     "nerve-pmqos",
     "iox2-waitset",
     "iox2-waitset-pmqos",
@@ -106,6 +111,8 @@ pub const FUTEX_TARGET: f64 = 1.5;
 pub const PERIODIC: [&str; 2] = ["nerve-5ms", "dora-5ms"];
 /// nerve may be this much slower than raw iceoryx2 (the issue's target).
 pub const TARGET_RATIO: f64 = 1.1;
+/// A Python agent's round trip may be this many times a Rust agent's (issue 15).
+pub const PYTHON_TARGET: f64 = 1.5;
 /// dora should take at least this many times nerve's latency (issue 18).
 pub const DORA_TARGET: f64 = 10.0;
 /// Samples per batch in the 5 ms pattern (a second; a fifth with --quick).
@@ -214,6 +221,12 @@ pub struct HopRatio {
     pub pinned_gain_nerve: Option<f64>,
     /// nerve-pinned p50 / futex-pinned p50
     pub nerve_pinned_vs_futex_pinned_p50: Option<f64>,
+    /// nerve-python p50 / nerve p50: a Python pong against a Rust one (None without the package)
+    pub python_vs_nerve_p50: Option<f64>,
+    /// nerve-python p99 / nerve p99
+    pub python_vs_nerve_p99: Option<f64>,
+    /// whether nerve-python p50 ≤ [`PYTHON_TARGET`] × nerve p50
+    pub python_target_met: Option<bool>,
 }
 
 /// Time to write a whole payload once (what `Output::send_with` adds per send).
@@ -417,6 +430,38 @@ pub(crate) fn spawn_bench_agent(
     ChildGuard::spawn(&format!("agent {name}"), cmd)
 }
 
+/// The Python that has nerve's package: `NERVE_PYTHON`, else the
+/// workspace's `target/nerve-py` (where `.ci/run` installs it).
+fn python_with_nerve() -> Result<PathBuf> {
+    let python = match std::env::var_os("NERVE_PYTHON") {
+        Some(p) => PathBuf::from(p),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/nerve-py/bin/python"),
+    };
+    let ok = Command::new(&python)
+        .args(["-c", "import nerve._native, numpy"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        bail!(
+            "{} cannot import the nerve package; install it (docs/python.md) or name a Python that has it with NERVE_PYTHON",
+            python.display()
+        );
+    }
+    Ok(python)
+}
+
+/// Starts `bench/py/pong.py` as agent `name` with `python`.
+fn spawn_python_pong(robot: &Robot, python: &Path, name: &str, size: usize) -> Result<ChildGuard> {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("py").join("pong.py");
+    let mut cmd = Command::new(python);
+    cmd.arg(&script).args(["--robot", &robot.name, "--name", name, "--", "--size", &size.to_string()]);
+    cmd.env("NERVE_HOME", &robot.home).stdin(Stdio::null());
+    robot.quiet(&mut cmd);
+    ChildGuard::spawn(&format!("agent {name}"), cmd)
+}
+
 /// The polling SDK agents: the pong is resumed for the batch only (it polls
 /// at 100 kHz while it runs), then the ping as [`NervePing`] does.
 struct NervePollPing {
@@ -601,6 +646,17 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         }
     };
     let periodic_count = if opts.quick { PERIODIC_COUNT.1 } else { PERIODIC_COUNT.0 };
+    // a Python pong beside the Rust one, when the package is installed
+    let python = match python_with_nerve() {
+        Ok(p) => {
+            eprintln!("hop: Python agents with {}", p.display());
+            Some(p)
+        }
+        Err(e) => {
+            eprintln!("hop: warning: no nerve-python row ({e:#})");
+            None
+        }
+    };
 
     // nerve agents, wired through the router
     let mut names = Vec::new();
@@ -623,6 +679,15 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             children.push(spawn_bench_agent(&robot, role, &name, size, count_of(size), d)?);
             names.push(name);
         }
+        if let Some(python) = &python {
+            let dir = opts.work.join(agent_name("nerve-python", size));
+            std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+            let ping = agent_name("pyping", size);
+            children.push(spawn_bench_agent(&robot, "ping", &ping, size, count_of(size), &dir)?);
+            let pong = agent_name("pypong", size);
+            children.push(spawn_python_pong(&robot, python, &pong, size)?);
+            names.extend([ping, pong]);
+        }
         if dora_peer.is_some() {
             for (sub, role) in [("__agent-bsend", "psend"), ("__agent-bsink", "psink")] {
                 let name = agent_name(role, size);
@@ -640,6 +705,11 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
         // ping and pong answer one sample with one: the loop is the benchmark
         robot.run(&["connect", "--allow-cycle", &format!("{pong}/out"), &format!("{ping}/in")])?;
+        if python.is_some() {
+            let (ping, pong) = (agent_name("pyping", size), agent_name("pypong", size));
+            robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
+            robot.run(&["connect", "--allow-cycle", &format!("{pong}/out"), &format!("{ping}/in")])?;
+        }
         let (ping, pong) = (agent_name("pin-ping", size), agent_name("pin-pong", size));
         robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
         robot.run(&["connect", "--allow-cycle", &format!("{pong}/out"), &format!("{ping}/in")])?;
@@ -704,6 +774,17 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 next: 0,
             }),
         ));
+        if python.is_some() {
+            pingers.push((
+                size,
+                "nerve-python",
+                Box::new(NervePing {
+                    name: agent_name("pyping", size),
+                    dir: opts.work.join(agent_name("nerve-python", size)),
+                    next: 0,
+                }),
+            ));
+        }
         pingers.push((
             size,
             "nerve-poll",
@@ -849,7 +930,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 continue;
             }
             let Some(i) = keys.iter().position(|k| *k == (size, t)) else {
-                if t == "dora" {
+                if t == "dora" || t == "nerve-python" {
                     continue;
                 }
                 bail!("internal: no samples for {t} {size}");
@@ -936,6 +1017,9 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             pmqos_gain_nerve: both(p50("nerve"), p50("nerve-pmqos")),
             pinned_gain_nerve: both(p50("nerve"), p50("nerve-pinned")),
             nerve_pinned_vs_futex_pinned_p50: both(p50("nerve-pinned"), p50("futex-pinned")),
+            python_vs_nerve_p50: both(p50("nerve-python"), p50("nerve")),
+            python_vs_nerve_p99: find("nerve-python", size).map(|x| ratio(x.rtt.p99_ns, n.rtt.p99_ns)),
+            python_target_met: both(p50("nerve-python"), p50("nerve")).map(|x| x <= PYTHON_TARGET),
         });
     }
     drop(_router);
@@ -1049,6 +1133,22 @@ pub fn print_tables(r: &HopReport) {
         );
         println!();
         latency_table("system", r.periodic.iter().map(|x| (x.label.as_str(), x.transport.as_str(), &x.one_way)));
+    }
+    if r.ratios.iter().any(|x| x.python_vs_nerve_p50.is_some()) {
+        println!();
+        println!("A Python pong (bench/py/pong.py, the nerve package) against a Rust one, same run:");
+        println!();
+        println!("| payload | nerve-python/nerve p50 | p99 | target ≤{PYTHON_TARGET} |");
+        println!("|---|---:|---:|---|");
+        for x in &r.ratios {
+            println!(
+                "| {} | {} | {} | {} |",
+                label(x.size),
+                ratio_cell(x.python_vs_nerve_p50),
+                ratio_cell(x.python_vs_nerve_p99),
+                verdict(x.python_target_met)
+            );
+        }
     }
     if let Some(v) = &r.dora_version {
         println!();

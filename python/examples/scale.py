@@ -30,7 +30,7 @@ class Scale(nerve.Agent):
             self.value.send(value=self.seen * self.gain.get(), stamp_ns=ctx.now_ns)
         # written in place, in shared memory
         msg = self.out.loan()
-        msg.seq = ctx.cycle
+        msg.seq = ctx.cycle + 1  # numbers start at 1, as a ticker's do
         msg.stamp_ns = ctx.now_ns
         self.out.send(msg)
 

@@ -36,15 +36,16 @@ received message is read in place, a loaned one written in place.
 
 from __future__ import annotations
 
+import json
 import re
 import sys
-import json
+from typing import NamedTuple
 
 import numpy as np
 
 from . import _native
 
-__all__ = ["Agent", "Payload", "payload", "builtin", "run", "Message", "Input", "Output", "Setup"]
+__all__ = ["Agent", "Payload", "payload", "builtin", "run", "Message", "Meta", "Input", "Output", "Setup"]
 
 _PRIMITIVES = {
     "u8": "<u1", "u16": "<u2", "u32": "<u4", "u64": "<u8",
@@ -131,6 +132,14 @@ def _payload_of(t) -> Payload:
     return t if isinstance(t, Payload) else builtin(t)
 
 
+class Meta(NamedTuple):
+    """Who sent a message, its number on the sending port and when it was sent."""
+
+    sender: str
+    seq: int
+    stamp_ns: int
+
+
 class Message:
     """One sample of a payload, viewed in place: ``msg.field`` reads a field
     (an array field is a numpy view, no copy), ``msg.field = v`` writes one
@@ -177,8 +186,10 @@ class Message:
         return (self._a.dtype.metadata or {}).get("nerve", "payload")
 
     def copy(self) -> "Message":
-        """A copy that holds no shared memory."""
-        return Message(self._a.copy(), self.meta)
+        """A copy that holds no shared memory (nor the sample: its slot is
+        the sender's again once the original is dropped)."""
+        m = self.meta
+        return Message(self._a.copy(), None if m is None else Meta(m.sender, m.seq, m.stamp_ns))
 
     def to_dict(self) -> dict:
         """The fields as Python values (arrays as lists)."""
@@ -271,6 +282,9 @@ class Setup:
 
     def __init__(self, native):
         self._n = native
+        # what was declared, by port: the test harness reads them
+        self.inputs: dict = {}
+        self.outputs: dict = {}
 
     @property
     def name(self) -> str:
@@ -288,12 +302,16 @@ class Setup:
     def input(self, port: str, type) -> Input:
         """Declares input ``port`` of payload ``type`` (a name or a ``Payload``)."""
         p = _payload_of(type)
-        return Input(self._n.input(port, p.schema_json), p)
+        made = Input(self._n.input(port, p.schema_json), p)
+        self.inputs[port] = p
+        return made
 
     def output(self, port: str, type) -> Output:
         """Declares output ``port`` of payload ``type`` (a name or a ``Payload``)."""
         p = _payload_of(type)
-        return Output(self._n.output(port, p.schema_json), p)
+        made = Output(self._n.output(port, p.schema_json), p)
+        self.outputs[port] = p
+        return made
 
     def param(self, key: str, default):
         """Declares parameter ``key`` (float, int, bool or str, as ``default``);
@@ -328,7 +346,9 @@ class Agent:
 
     # what the SDK calls
     def _nerve_new(self, native):
-        self.new(Setup(native))
+        setup = Setup(native)
+        self.new(setup)
+        self._nerve_ports = (setup.inputs, setup.outputs)
 
     def _nerve_start(self, ctx):
         self.start(ctx)

@@ -108,8 +108,8 @@ fn bad_requests_are_refused_with_what_to_do() {
     let dir = r.home.to_str().expect("utf-8 path");
     let err = r.fails(&["new", "Gripper", "--dir", dir]);
     assert!(err.contains("gripper-driver"), "{err}");
-    let err = r.fails(&["new", "py", "--lang", "python", "--dir", dir]);
-    assert!(err.contains("--lang rust"), "{err}");
+    let err = r.fails(&["new", "Py", "--lang", "python", "--dir", dir]);
+    assert!(err.contains("gripper-driver"), "{err}");
     let err = r.fails(&["new", "x", "--periodic", "soon", "--dir", dir]);
     assert!(err.contains("--periodic"), "{err}");
     r.ok(&["new", "twice", "--dir", dir]);
@@ -117,4 +117,50 @@ fn bad_requests_are_refused_with_what_to_do() {
     assert!(err.contains("already exists"), "{err}");
     let err = r.fails(&["new", "lost", "--dir", dir, "--nerve-src", "/nonexistent"]);
     assert!(err.contains("--nerve-src"), "{err}");
+}
+
+/// `nerve new --lang python`: the generated tests pass with the package's
+/// Python, and the launch file runs with data flowing through the agent,
+/// whose parameter changes at run time.
+#[test]
+fn a_new_python_agent_tests_and_runs_from_its_launch_file() {
+    let (python, bin) = nerve_tests::py::python_with_nerve();
+    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default());
+    for (tag, extra) in [("pyev", &[][..]), ("pyper", &["--periodic", "20ms"][..])] {
+        let r = Robot::new(tag);
+        let name = format!("py-{tag}");
+        r.ok(&[&["new", &name, "--lang", "python", "--dir"], &[r.home.to_str().expect("utf-8 path")][..], extra]
+            .concat());
+        let dir = r.home.join(&name);
+        let module = name.replace('-', "_");
+        for f in [format!("{module}.py"), format!("test_{module}.py"), "launch.toml".into(), "README.md".into()] {
+            assert!(dir.join(&f).is_file(), "{f} was not made");
+        }
+        let out = Command::new(&python)
+            .args(["-m", "unittest", "-v"])
+            .current_dir(&dir)
+            .env("PATH", &path)
+            .env("NERVE_HOME", &r.home)
+            .output()
+            .expect("unittest");
+        let text = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success() && text.contains("Ran 3 tests") && text.contains("OK"), "{text}");
+        let out =
+            r.command("nerve").arg("launch").arg(dir.join("launch.toml")).env("PATH", &path).output().expect("launch");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let seqs: Vec<u64> =
+            r.echo(&format!("{name}/out"), 3).iter().filter_map(|t| t["data"]["seq"].as_u64()).collect();
+        assert!(seqs.len() == 3 && seqs.iter().all(|s| s % 2 == 0 && *s > 0), "gain 2: {seqs:?}");
+        assert!(seqs.windows(2).all(|w| w[1] > w[0]), "in order: {seqs:?}");
+        r.ok(&["param", "set", &name, "gain", "5"]);
+        assert!(
+            nerve_tests::wait_until(std::time::Duration::from_secs(5), || r
+                .echo(&format!("{name}/out"), 1)
+                .first()
+                .and_then(|t| t["data"]["seq"].as_u64())
+                .is_some_and(|s| s % 5 == 0 && s % 2 != 0)),
+            "the new gain takes effect"
+        );
+        r.down_and_check_clean();
+    }
 }

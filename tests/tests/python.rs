@@ -187,3 +187,17 @@ fn a_layout_written_in_python_is_the_rust_types() {
     let refusal = lines.next().unwrap_or("");
     assert!(refusal.contains("nerve::Nope") && refusal.contains("nerve.payload"), "{refusal}");
 }
+
+/// The package's own tests (`python/tests`): layouts, and Python agents run
+/// by the in-process harness (`nerve.testing.Harness`), among them 1000
+/// cycles of a periodic agent (its wall time is printed).
+#[test]
+fn the_packages_tests_pass_in_the_tests_own_process() {
+    let (python, _bin) = python_with_nerve();
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("python").join("tests");
+    let out = Command::new(python).args(["-m", "unittest", "-v"]).current_dir(&dir).output().expect("unittest");
+    let text = String::from_utf8_lossy(&out.stderr);
+    eprintln!("{text}");
+    assert!(out.status.success() && text.contains("Ran 6 tests") && text.contains("OK"), "{text}");
+    assert!(text.contains("1000 cycles of a Python agent in"), "{text}");
+}

@@ -2,8 +2,10 @@
 //! `cargo new` makes a crate: the agent (one input, one output, one checked
 //! parameter, periodic or event-driven), tests of its algorithm, a launch
 //! file that wires it to a ticker, a README. `cargo test`, `cargo build` and
-//! `nerve launch launch.toml` work on it as made. The templates are
-//! `launcher/templates/rust/*.in`, built into the `nerve` program.
+//! `nerve launch launch.toml` work on it as made. `--lang python` makes a
+//! Python agent on the `nerve` package instead (an executable script, its
+//! `unittest` tests, a launch file, a README). The templates are
+//! `launcher/templates/{rust,python}/*.in`, built into the `nerve` program.
 
 use anyhow::{Context as _, Result, bail};
 use shm_schemas::AgentName;
@@ -39,7 +41,7 @@ pub struct NewArgs {
 pub enum Lang {
     /// A Rust crate on nerve's agent SDK.
     Rust,
-    /// A Python agent (not available yet).
+    /// A Python agent on the `nerve` Python package (`python/`).
     Python,
 }
 
@@ -48,6 +50,11 @@ const MAIN_RS: &str = include_str!("../../templates/rust/main.rs.in");
 const LAUNCH_TOML: &str = include_str!("../../templates/rust/launch.toml.in");
 const README_MD: &str = include_str!("../../templates/rust/README.md.in");
 const GITIGNORE: &str = include_str!("../../templates/rust/gitignore.in");
+const PY_AGENT: &str = include_str!("../../templates/python/agent.py.in");
+const PY_TEST: &str = include_str!("../../templates/python/test_agent.py.in");
+const PY_LAUNCH_TOML: &str = include_str!("../../templates/python/launch.toml.in");
+const PY_README_MD: &str = include_str!("../../templates/python/README.md.in");
+const PY_GITIGNORE: &str = include_str!("../../templates/python/gitignore.in");
 
 /// Names the generated code already uses: a struct of one of these names
 /// would clash, so it gets `Agent` appended.
@@ -62,11 +69,6 @@ enum Drive {
 }
 
 pub fn new(a: NewArgs) -> Result<ExitCode> {
-    if a.lang == Lang::Python {
-        bail!(
-            "Python agents are not available yet (issue 15: the SDK's Python bindings are still to be built); make a Rust agent with `--lang rust`"
-        );
-    }
     check_name(&a.name)?;
     let drive = match &a.periodic {
         Some(p) => {
@@ -75,12 +77,15 @@ pub fn new(a: NewArgs) -> Result<ExitCode> {
         }
         None => Drive::Event,
     };
-    let nerve = nerve_source(a.nerve_src.as_deref())?;
-    let dir = a.dir.unwrap_or_else(|| PathBuf::from("."));
+    let dir = a.dir.clone().unwrap_or_else(|| PathBuf::from("."));
     let root = dir.join(&a.name);
     if root.exists() {
         bail!("{} already exists; choose another name, or another folder with --dir", root.display());
     }
+    if a.lang == Lang::Python {
+        return new_python(&a.name, &drive, &root);
+    }
+    let nerve = nerve_source(a.nerve_src.as_deref())?;
     let files = render(&a.name, &drive, &nerve);
     std::fs::create_dir_all(root.join("src")).with_context(|| format!("cannot create {}", root.display()))?;
     for (path, text) in &files {
@@ -93,11 +98,7 @@ pub fn new(a: NewArgs) -> Result<ExitCode> {
     if lock.is_file() {
         std::fs::copy(&lock, root.join("Cargo.lock")).with_context(|| format!("cannot copy {}", lock.display()))?;
     }
-    let kind = match &drive {
-        Drive::Event => "event-driven".to_owned(),
-        Drive::Periodic(p, _) => format!("periodic, every {p}"),
-    };
-    println!("made agent {} ({kind}) in {}:", a.name, root.display());
+    println!("made agent {} ({}) in {}:", a.name, drive_words(&drive), root.display());
     for (path, _) in &files {
         println!("  {path}");
     }
@@ -107,6 +108,83 @@ pub fn new(a: NewArgs) -> Result<ExitCode> {
         a.name
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// `nerve new --lang python`: the agent as an executable script, its tests
+/// (`python3 -m unittest`), a launch file and a README.
+fn new_python(name: &str, drive: &Drive, root: &Path) -> Result<ExitCode> {
+    let files = render_python(name, drive);
+    std::fs::create_dir_all(root).with_context(|| format!("cannot create {}", root.display()))?;
+    for (path, text) in &files {
+        let p = root.join(path);
+        std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    // the agent is started as any agent is: an executable
+    let script = root.join(format!("{}.py", module_name(name)));
+    use std::os::unix::fs::PermissionsExt as _;
+    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755))
+        .with_context(|| format!("cannot make {} executable", script.display()))?;
+    println!("made Python agent {name} ({}) in {}:", drive_words(drive), root.display());
+    for (path, _) in &files {
+        println!("  {path}");
+    }
+    println!(
+        "next (with the Python that has the nerve package, see nerve's docs/python.md):\n  cd {}\n  python3 -m unittest\n  nerve launch launch.toml\n  nerve echo {name}/out --count 3",
+        root.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn drive_words(drive: &Drive) -> String {
+    match drive {
+        Drive::Event => "event-driven".to_owned(),
+        Drive::Periodic(p, _) => format!("periodic, every {p}"),
+    }
+}
+
+/// `gripper-driver` → `gripper_driver`: the Python module of the agent.
+fn module_name(name: &str) -> String {
+    name.replace('-', "_")
+}
+
+/// The Python project's files, by path in it.
+fn render_python(name: &str, drive: &Drive) -> Vec<(String, String)> {
+    let (what, period, step, period_line, task_words) = match drive {
+        Drive::Event => (
+            "an event-driven agent that sends every tick arriving on `in` on `out`, its sequence number multiplied by the parameter `gain`.".to_owned(),
+            "None".to_owned(),
+            "        # every waiting sample, read in place in shared memory\n        for tick in self.input.drain():\n            self.out.send(seq=transform(int(tick.seq), gain), stamp_ns=int(tick.stamp_ns))".to_owned(),
+            String::new(),
+            "event-driven: woken by every sample on `in`".to_owned(),
+        ),
+        Drive::Periodic(p, d) => (
+            format!(
+                "a periodic agent that, every {p}, sends the newest tick that arrived on `in` on `out`, its sequence number multiplied by the parameter `gain`."
+            ),
+            format!("{}  # seconds; `--period`, a launch file's `period` and `nerve rate` change it", d.as_secs_f64()),
+            "        # the newest sample since the last cycle, if any\n        tick = self.input.latest()\n        if tick is not None:\n            self.out.send(seq=transform(int(tick.seq), gain), stamp_ns=int(tick.stamp_ns))".to_owned(),
+            format!("period = \"{p}\"\n"),
+            format!("periodic, every {p} by default"),
+        ),
+    };
+    let module = module_name(name);
+    let fill = |t: &str| {
+        t.replace("{{what}}", &what)
+            .replace("{{period}}", &period)
+            .replace("{{step}}", &step)
+            .replace("{{period_line}}", &period_line)
+            .replace("{{task_words}}", &task_words)
+            .replace("{{type}}", &type_name(name))
+            .replace("{{module}}", &module)
+            .replace("{{name}}", name)
+    };
+    vec![
+        (format!("{module}.py"), fill(PY_AGENT)),
+        (format!("test_{module}.py"), fill(PY_TEST)),
+        ("launch.toml".into(), fill(PY_LAUNCH_TOML)),
+        ("README.md".into(), fill(PY_README_MD)),
+        (".gitignore".into(), fill(PY_GITIGNORE)),
+    ]
 }
 
 /// An agent name that is also a Cargo package and executable name.
@@ -223,6 +301,9 @@ mod tests {
     fn every_placeholder_is_filled() {
         for drive in [Drive::Event, Drive::Periodic("50ms".into(), std::time::Duration::from_millis(50))] {
             for (path, text) in render("my-agent", &drive, Path::new("/src/nerve")) {
+                assert!(!text.contains("{{"), "{path} keeps a placeholder:\n{text}");
+            }
+            for (path, text) in render_python("my-agent", &drive) {
                 assert!(!text.contains("{{"), "{path} keeps a placeholder:\n{text}");
             }
         }
