@@ -82,9 +82,10 @@ use std::time::{Duration, Instant};
 /// Samples dropped at the start of every batch.
 const DISCARD: usize = 5;
 /// The transports, in the order of the tables.
-pub const TRANSPORTS: [&str; 17] = [
+pub const TRANSPORTS: [&str; 18] = [
     "nerve",
     "nerve-python",
+    "nerve-python-pmqos",
     "nerve-pmqos",
     "iox2-waitset",
     "iox2-waitset-pmqos",
@@ -104,7 +105,7 @@ pub const TRANSPORTS: [&str; 17] = [
 /// The CPU the `-pinned` rows keep both ends on.
 pub(crate) const PINNED_CPU: usize = 0;
 /// The transports measured again under a PM QoS bound of 0 µs (row `T-pmqos`).
-const UNDER_PM_QOS: [&str; 4] = ["nerve", "iox2-waitset", "uds", "futex"];
+const UNDER_PM_QOS: [&str; 5] = ["nerve", "nerve-python", "iox2-waitset", "uds", "futex"];
 /// nerve's round trip (with its default PM QoS bound) may be this many times the futex floor's (issue 17).
 pub const FUTEX_TARGET: f64 = 1.5;
 /// The rows in dora's pattern (one way, a sample every 5 ms), in table order.
@@ -227,6 +228,8 @@ pub struct HopRatio {
     pub python_vs_nerve_p99: Option<f64>,
     /// whether nerve-python p50 ≤ [`PYTHON_TARGET`] × nerve p50
     pub python_target_met: Option<bool>,
+    /// nerve-python-pmqos p50 / nerve-pmqos p50: both holding PM QoS, as agents run by default
+    pub python_pmqos_vs_nerve_pmqos_p50: Option<f64>,
 }
 
 /// Time to write a whole payload once (what `Output::send_with` adds per send).
@@ -930,7 +933,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 continue;
             }
             let Some(i) = keys.iter().position(|k| *k == (size, t)) else {
-                if t == "dora" || t == "nerve-python" {
+                if t == "dora" || t.starts_with("nerve-python") {
                     continue;
                 }
                 bail!("internal: no samples for {t} {size}");
@@ -1020,6 +1023,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             python_vs_nerve_p50: both(p50("nerve-python"), p50("nerve")),
             python_vs_nerve_p99: find("nerve-python", size).map(|x| ratio(x.rtt.p99_ns, n.rtt.p99_ns)),
             python_target_met: both(p50("nerve-python"), p50("nerve")).map(|x| x <= PYTHON_TARGET),
+            python_pmqos_vs_nerve_pmqos_p50: both(p50("nerve-python-pmqos"), p50("nerve-pmqos")),
         });
     }
     drop(_router);
@@ -1138,15 +1142,18 @@ pub fn print_tables(r: &HopReport) {
         println!();
         println!("A Python pong (bench/py/pong.py, the nerve package) against a Rust one, same run:");
         println!();
-        println!("| payload | nerve-python/nerve p50 | p99 | target ≤{PYTHON_TARGET} |");
-        println!("|---|---:|---:|---|");
+        println!(
+            "| payload | nerve-python/nerve p50 | p99 | target ≤{PYTHON_TARGET} | nerve-python-pmqos/nerve-pmqos p50 |"
+        );
+        println!("|---|---:|---:|---|---:|");
         for x in &r.ratios {
             println!(
-                "| {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} |",
                 label(x.size),
                 ratio_cell(x.python_vs_nerve_p50),
                 ratio_cell(x.python_vs_nerve_p99),
-                verdict(x.python_target_met)
+                verdict(x.python_target_met),
+                ratio_cell(x.python_pmqos_vs_nerve_pmqos_p50)
             );
         }
     }

@@ -25,6 +25,7 @@ pub(crate) fn colour(t: &str) -> RGBColor {
         "ddsperf" => RGBColor(140, 60, 170),
         "nerve-poll" => RGBColor(240, 120, 160),
         "nerve-python" => RGBColor(230, 190, 0),
+        "nerve-python-pmqos" => RGBColor(250, 225, 110),
         "iox2-poll" => RGBColor(90, 190, 210),
         "dora" | "dora-5ms" => RGBColor(110, 70, 30),
         _ => RGBColor(120, 120, 120),

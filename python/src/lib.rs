@@ -82,6 +82,9 @@ impl Agent for PyAgent {
     }
 
     fn start(&mut self, ctx: &mut SdkContext) -> Result<(), AgentError> {
+        if MAKING.with(|m| m.borrow().is_none()) {
+            keep_thread_state();
+        }
         self.call("_nerve_start", ctx)
     }
 
@@ -93,6 +96,24 @@ impl Agent for PyAgent {
         if let Err(e) = self.call("_nerve_stop", ctx) {
             eprintln!("error: the agent's stop failed: {e}");
         }
+    }
+}
+
+/// Gives the task thread a Python thread state for its whole life, without
+/// holding the interpreter's lock. Without it every step's attach made a
+/// thread state and tore it down again (PyGILState_Ensure on a thread
+/// Python does not know), a large share of a Python agent's hop; with it an
+/// attach only takes the lock. Only for the runtime's task thread: a test
+/// harness steps the agent in the test's own, already attached, thread.
+fn keep_thread_state() {
+    // SAFETY: called once, in the task thread, which holds neither the lock
+    // nor a thread state: PyGILState_Ensure makes the thread state and takes
+    // the lock, and PyEval_SaveThread gives the lock back while the state
+    // stays registered for the thread (its gilstate count stays 1, never
+    // released), so that later PyGILState_Ensure calls reuse it.
+    unsafe {
+        let _state = ffi::PyGILState_Ensure();
+        ffi::PyEval_SaveThread();
     }
 }
 
