@@ -399,6 +399,13 @@ impl<A: Agent> Harness<A> {
 
     /// Like [`Harness::output`], with each sample's sender, sequence number and stamp.
     pub fn output_with_meta<T: Payload>(&mut self, port: &str) -> Result<Vec<(Meta, T)>, HarnessError> {
+        let collected = self.collected::<Collected<T>>(port, T::stable_type_name())?;
+        Ok(collected.take().into_iter().map(|(m, v)| (m, *v)).collect())
+    }
+
+    /// What output `port` collects, as the collector type `C` its binding
+    /// made (`asked` names what the test asked for, in the refusal).
+    fn collected<C: Any + Send + Sync>(&self, port: &str, asked: &'static str) -> Result<Arc<C>, HarnessError> {
         let outputs = self.bus.outputs.lock().unwrap_or_else(|p| p.into_inner());
         let Some(c) = outputs.iter().find(|c| c.port == port) else {
             return Err(HarnessError::NoSuchPort {
@@ -407,12 +414,11 @@ impl<A: Agent> Harness<A> {
                 known: outputs.iter().map(|c| c.port.clone()).collect(),
             });
         };
-        let collected = c.samples.downcast_ref::<Collected<T>>().ok_or_else(|| HarnessError::WrongType {
+        c.samples.clone().downcast::<C>().map_err(|_| HarnessError::WrongType {
             port: port.into(),
             carries: c.type_name.clone(),
-            asked: T::stable_type_name(),
-        })?;
-        Ok(collected.take().into_iter().map(|(m, v)| (m, *v)).collect())
+            asked,
+        })
     }
 
     /// Queues `bytes` on input `input`, declared by layout
@@ -432,20 +438,7 @@ impl<A: Agent> Harness<A> {
     /// Takes what output `port`, declared by layout ([`Setup::output_of`]),
     /// sent since the last call, oldest first, as bytes.
     pub fn output_bytes(&mut self, port: &str) -> Result<Vec<(Meta, Vec<u8>)>, HarnessError> {
-        let outputs = self.bus.outputs.lock().unwrap_or_else(|p| p.into_inner());
-        let Some(c) = outputs.iter().find(|c| c.port == port) else {
-            return Err(HarnessError::NoSuchPort {
-                direction: "output",
-                port: port.into(),
-                known: outputs.iter().map(|c| c.port.clone()).collect(),
-            });
-        };
-        let collected = c.samples.downcast_ref::<CollectedBytes>().ok_or_else(|| HarnessError::WrongType {
-            port: port.into(),
-            carries: c.type_name.clone(),
-            asked: "bytes of a layout",
-        })?;
-        Ok(collected.take())
+        Ok(self.collected::<CollectedBytes>(port, "bytes of a layout")?.take())
     }
 
     /// What each input counts about each source (`nerve ps --json`'s

@@ -43,6 +43,20 @@ fn make(r: &Robot, name: &str, extra: &[&str]) -> PathBuf {
     dir
 }
 
+/// `nerve param set NAME gain 5`, then the agent's output is its input
+/// times 5 (and no longer times the launch file's 2).
+fn gain_5_takes_effect(r: &Robot, name: &str) {
+    r.ok(&["param", "set", name, "gain", "5"]);
+    assert!(
+        nerve_tests::wait_until(std::time::Duration::from_secs(5), || r
+            .echo(&format!("{name}/out"), 1)
+            .first()
+            .and_then(|t| t["data"]["seq"].as_u64())
+            .is_some_and(|s| s % 5 == 0 && s % 2 != 0)),
+        "the new gain takes effect"
+    );
+}
+
 /// The workspace's copy of a project's executable, removed when the test ends.
 struct Built(PathBuf);
 
@@ -72,15 +86,7 @@ fn a_new_event_driven_agent_tests_builds_and_runs_from_its_launch_file() {
     assert!(seqs.windows(2).all(|w| w[1] == w[0] + 2), "every tick, in order: {seqs:?}");
     let list = r.ok(&["param", "list", &name]);
     assert!(list.contains("gain is in [1, 1000]"), "{list}");
-    r.ok(&["param", "set", &name, "gain", "5"]);
-    assert!(
-        nerve_tests::wait_until(std::time::Duration::from_secs(5), || r
-            .echo(&format!("{name}/out"), 1)
-            .first()
-            .and_then(|t| t["data"]["seq"].as_u64())
-            .is_some_and(|s| s % 5 == 0 && s % 2 != 0)),
-        "the new gain takes effect"
-    );
+    gain_5_takes_effect(&r, &name);
     r.down_and_check_clean();
 }
 
@@ -152,15 +158,7 @@ fn a_new_python_agent_tests_and_runs_from_its_launch_file() {
             r.echo(&format!("{name}/out"), 3).iter().filter_map(|t| t["data"]["seq"].as_u64()).collect();
         assert!(seqs.len() == 3 && seqs.iter().all(|s| s % 2 == 0 && *s > 0), "gain 2: {seqs:?}");
         assert!(seqs.windows(2).all(|w| w[1] > w[0]), "in order: {seqs:?}");
-        r.ok(&["param", "set", &name, "gain", "5"]);
-        assert!(
-            nerve_tests::wait_until(std::time::Duration::from_secs(5), || r
-                .echo(&format!("{name}/out"), 1)
-                .first()
-                .and_then(|t| t["data"]["seq"].as_u64())
-                .is_some_and(|s| s % 5 == 0 && s % 2 != 0)),
-            "the new gain takes effect"
-        );
+        gain_5_takes_effect(&r, &name);
         r.down_and_check_clean();
     }
 }
