@@ -4,7 +4,7 @@
 
 use crate::cmd::{
     bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, new, plot, record, replay, start,
-    wire,
+    ui, wire,
 };
 use clap::{Parser, Subcommand};
 
@@ -108,6 +108,8 @@ pub enum Command {
     Calibrate(calibrate::CalibrateCmd),
     /// Run a benchmark scenario (runs `nerve-bench`; see BENCHMARKS.md).
     Bench(bench::BenchArgs),
+    /// Serve the robot's live graph to a browser: watch and rewire it.
+    Ui(ui::UiArgs),
     /// Robots talking to each other: the bridge agents' peers and what crosses.
     #[command(subcommand)]
     Bridge(bridge::BridgeCmd),

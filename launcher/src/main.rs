@@ -58,6 +58,7 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
     match cli.command {
         Command::Router(a) => start::router(&world, a),
         Command::New(a) => cmd::new::new(a),
+        Command::Ui(a) => cmd::ui::ui(&world, a),
         Command::Start(a) => start::start(&world, a),
         Command::Ps(a) => inspect::ps(&world, a),
         Command::Graph(a) => inspect::graph(&world, a),

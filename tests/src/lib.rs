@@ -17,6 +17,7 @@
 //! ([`sweep_dead_test_robots`]): robot names start with `t<pid>-`, so what
 //! belongs to a dead test process is known by its pid.
 
+pub mod browser;
 pub mod device;
 pub mod py;
 

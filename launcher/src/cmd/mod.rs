@@ -24,4 +24,5 @@ pub mod shm_space;
 pub mod snapshot;
 pub mod start;
 pub mod tap;
+pub mod ui;
 pub mod wire;

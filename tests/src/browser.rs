@@ -1,0 +1,280 @@
+//! A real browser for the tests of `nerve ui`: headless Chromium driven
+//! through chromedriver's WebDriver protocol (plain HTTP and JSON, spoken
+//! here over a `TcpStream`), and a small HTTP client for the tests' own
+//! requests to the server. `scripts/setup.sh` installs `chromium` and
+//! `chromium-driver`; a machine without them fails the test with that hint.
+
+use serde_json::{Value, json};
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// One HTTP/1.1 request; returns the status and the body.
+pub fn http(addr: &str, method: &str, path: &str, headers: &[(&str, &str)], body: Option<&str>) -> (u16, String) {
+    let mut s = TcpStream::connect(addr).unwrap_or_else(|e| panic!("cannot connect to {addr}: {e}"));
+    s.set_read_timeout(Some(Duration::from_secs(60))).expect("timeout");
+    let body = body.unwrap_or("");
+    let mut req =
+        format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n", body.len());
+    if !body.is_empty() {
+        req.push_str("Content-Type: application/json\r\n");
+    }
+    for (k, v) in headers {
+        req.push_str(&format!("{k}: {v}\r\n"));
+    }
+    req.push_str("\r\n");
+    req.push_str(body);
+    s.write_all(req.as_bytes()).expect("send the request");
+    // read the head, then as much body as Content-Length says (a server may keep the connection open)
+    let mut raw = Vec::new();
+    let mut buf = [0u8; 65536];
+    let head_end = loop {
+        if let Some(i) = raw.windows(4).position(|w| w == b"\r\n\r\n") {
+            break i + 4;
+        }
+        let n = s.read(&mut buf).expect("read the answer");
+        assert!(n > 0, "{addr} closed the connection before answering {method} {path}");
+        raw.extend_from_slice(&buf[..n]);
+    };
+    let head = String::from_utf8_lossy(&raw[..head_end]).to_ascii_lowercase();
+    let status = head.split_whitespace().nth(1).and_then(|c| c.parse().ok()).unwrap_or(0);
+    let length =
+        head.lines().find_map(|l| l.strip_prefix("content-length:")).and_then(|v| v.trim().parse::<usize>().ok());
+    match length {
+        Some(len) => {
+            while raw.len() < head_end + len {
+                let n = s.read(&mut buf).expect("read the answer");
+                assert!(n > 0, "{addr} closed the connection in the middle of its answer");
+                raw.extend_from_slice(&buf[..n]);
+            }
+        }
+        None => {
+            s.read_to_end(&mut raw).expect("read the answer");
+        }
+    }
+    let body = String::from_utf8_lossy(&raw[head_end..]).into_owned();
+    (status, if head.contains("transfer-encoding: chunked") { dechunk(&body) } else { body })
+}
+
+fn dechunk(mut s: &str) -> String {
+    let mut out = String::new();
+    while let Some((size, rest)) = s.split_once("\r\n") {
+        let n = usize::from_str_radix(size.trim(), 16).unwrap_or(0);
+        if n == 0 || rest.len() < n {
+            break;
+        }
+        out.push_str(&rest[..n]);
+        s = rest[n..].trim_start_matches("\r\n");
+    }
+    out
+}
+
+/// A headless Chromium with its chromedriver; both end when dropped.
+#[derive(Debug)]
+pub struct Browser {
+    driver: Child,
+    addr: String,
+    session: String,
+    profile: PathBuf,
+}
+
+const ELEMENT: &str = "element-6066-11e4-a52e-4f735466cecf";
+
+impl Browser {
+    /// Starts chromedriver and a headless Chromium window of 1400x900.
+    pub fn start() -> Browser {
+        let port = crate::free_port();
+        let driver = Command::new("chromedriver")
+            .arg(format!("--port={port}"))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("cannot run chromedriver ({e}): install chromium and chromium-driver (scripts/setup.sh does)")
+            });
+        let addr = format!("127.0.0.1:{port}");
+        let up = crate::wait_until(Duration::from_secs(20), || TcpStream::connect(&addr).is_ok());
+        let profile = std::env::temp_dir().join(format!("nerve-test-chromium-{}-{port}", std::process::id()));
+        let mut b = Browser { driver, addr, session: String::new(), profile };
+        assert!(up, "chromedriver did not listen on port {port} within 20 s");
+        let caps = json!({ "capabilities": { "alwaysMatch": {
+            "browserName": "chrome",
+            "goog:chromeOptions": {
+                "binary": "/usr/bin/chromium",
+                "args": ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                         "--window-size=1400,900", "--hide-scrollbars",
+                         format!("--user-data-dir={}", b.profile.display())],
+            },
+        }}});
+        let v = b.call("POST", "/session", Some(&caps));
+        b.session = v["sessionId"].as_str().unwrap_or_else(|| panic!("no WebDriver session: {v}")).to_owned();
+        b
+    }
+
+    /// A WebDriver command; returns its `value`, panics on an error.
+    fn call(&self, method: &str, path: &str, body: Option<&Value>) -> Value {
+        let text = body.map(Value::to_string);
+        let (status, answer) = http(&self.addr, method, path, &[], text.as_deref().or(Some("")));
+        let v: Value = serde_json::from_str(&answer).unwrap_or(Value::Null);
+        assert!(status == 200, "WebDriver {method} {path} answered {status}: {answer}");
+        v["value"].clone()
+    }
+
+    fn session_call(&self, method: &str, path: &str, body: Option<&Value>) -> Value {
+        self.call(method, &format!("/session/{}{path}", self.session), body)
+    }
+
+    /// Loads `url`.
+    pub fn open(&self, url: &str) {
+        self.session_call("POST", "/url", Some(&json!({ "url": url })));
+    }
+
+    /// Runs `script` (a function body; `return` gives the result) in the page.
+    pub fn eval(&self, script: &str) -> Value {
+        self.session_call("POST", "/execute/sync", Some(&json!({ "script": script, "args": [] })))
+    }
+
+    /// Evaluates `script` until it gives something truthy, for up to `timeout`.
+    pub fn wait_for(&self, what: &str, timeout: Duration, script: &str) -> Value {
+        let t0 = Instant::now();
+        loop {
+            let v = self.eval(script);
+            let truthy = !matches!(&v, Value::Null | Value::Bool(false))
+                && v.as_array().is_none_or(|a| !a.is_empty())
+                && v.as_str().is_none_or(|s| !s.is_empty());
+            if truthy {
+                return v;
+            }
+            assert!(t0.elapsed() < timeout, "the page did not show {what} within {timeout:?}");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// The element matching `css`.
+    pub fn element(&self, css: &str) -> Value {
+        let v = self.session_call("POST", "/element", Some(&json!({ "using": "css selector", "value": css })));
+        let mut reference = serde_json::Map::new();
+        reference.insert(ELEMENT.to_owned(), v[ELEMENT].clone());
+        Value::Object(reference)
+    }
+
+    /// Presses the mouse on `from`, moves it in steps onto `to` and releases it there.
+    pub fn drag(&self, from: &str, to: &str) {
+        let (a, b) = (self.element(from), self.element(to));
+        let actions = json!({ "actions": [{
+            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
+            "actions": [
+                { "type": "pointerMove", "duration": 0, "origin": a, "x": 0, "y": 0 },
+                { "type": "pointerDown", "button": 0 },
+                { "type": "pointerMove", "duration": 150, "origin": a, "x": 30, "y": 10 },
+                { "type": "pointerMove", "duration": 150, "origin": b, "x": 0, "y": 0 },
+                { "type": "pointerUp", "button": 0 },
+            ],
+        }]});
+        self.session_call("POST", "/actions", Some(&actions));
+        self.session_call("DELETE", "/actions", None);
+    }
+
+    /// Presses the mouse on `css` and moves it a little, holding it (a drag
+    /// begun; [`Browser::release_on`] ends it).
+    pub fn press_on(&self, css: &str) {
+        let a = self.element(css);
+        let actions = json!({ "actions": [{
+            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
+            "actions": [
+                { "type": "pointerMove", "duration": 0, "origin": a, "x": 0, "y": 0 },
+                { "type": "pointerDown", "button": 0 },
+                { "type": "pointerMove", "duration": 100, "origin": a, "x": 40, "y": 15 },
+            ],
+        }]});
+        self.session_call("POST", "/actions", Some(&actions));
+    }
+
+    /// Moves the held mouse onto `css` and releases it there.
+    pub fn release_on(&self, css: &str) {
+        let b = self.element(css);
+        let actions = json!({ "actions": [{
+            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
+            "actions": [
+                { "type": "pointerMove", "duration": 100, "origin": b, "x": 0, "y": 0 },
+                { "type": "pointerUp", "button": 0 },
+            ],
+        }]});
+        self.session_call("POST", "/actions", Some(&actions));
+        self.session_call("DELETE", "/actions", None);
+    }
+
+    /// Clicks the element matching `css` (in its centre).
+    pub fn click(&self, css: &str) {
+        let e = self.element(css);
+        let actions = json!({ "actions": [{
+            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
+            "actions": [
+                { "type": "pointerMove", "duration": 0, "origin": e, "x": 0, "y": 0 },
+                { "type": "pointerDown", "button": 0 },
+                { "type": "pointerUp", "button": 0 },
+            ],
+        }]});
+        self.session_call("POST", "/actions", Some(&actions));
+        self.session_call("DELETE", "/actions", None);
+    }
+
+    /// Presses a key (a WebDriver key code such as `"\u{E017}"`, Delete).
+    pub fn key(&self, key: &str) {
+        let actions = json!({ "actions": [{
+            "type": "key", "id": "keyboard",
+            "actions": [{ "type": "keyDown", "value": key }, { "type": "keyUp", "value": key }],
+        }]});
+        self.session_call("POST", "/actions", Some(&actions));
+    }
+
+    /// The window as PNG.
+    pub fn screenshot(&self) -> Vec<u8> {
+        let v = self.session_call("GET", "/screenshot", None);
+        base64_decode(v.as_str().expect("a base64 screenshot"))
+    }
+}
+
+impl Drop for Browser {
+    fn drop(&mut self) {
+        if !self.session.is_empty() {
+            let _ = http(&self.addr, "DELETE", &format!("/session/{}", self.session), &[], None);
+        }
+        let _ = self.driver.kill();
+        let _ = self.driver.wait();
+        let _ = std::fs::remove_dir_all(&self.profile);
+    }
+}
+
+fn base64_decode(s: &str) -> Vec<u8> {
+    let value = |c: u8| match c {
+        b'A'..=b'Z' => Some(c - b'A'),
+        b'a'..=b'z' => Some(c - b'a' + 26),
+        b'0'..=b'9' => Some(c - b'0' + 52),
+        b'+' => Some(62),
+        b'/' => Some(63),
+        _ => None,
+    };
+    let mut out = Vec::with_capacity(s.len() * 3 / 4);
+    let (mut acc, mut bits) = (0u32, 0);
+    for v in s.bytes().filter_map(value) {
+        acc = (acc << 6) | u32::from(v);
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn base64_and_chunks_are_decoded() {
+        assert_eq!(super::base64_decode("aGVsbG8gd29ybGQ="), b"hello world");
+        assert_eq!(super::dechunk("5\r\nhello\r\n6\r\n world\r\n0\r\n\r\n"), "hello world");
+    }
+}
