@@ -39,6 +39,7 @@ mod idle;
 mod images;
 mod jitter;
 mod machine;
+mod observed;
 mod payloads;
 mod pipeline;
 mod plot;
@@ -51,6 +52,7 @@ mod shared_page;
 mod soak;
 mod stats;
 mod uds;
+mod ui_cost;
 mod zenoh_raw;
 
 use anyhow::{Context as _, Result};
@@ -211,6 +213,17 @@ enum Scenario {
         #[arg(long)]
         seconds: Option<f64>,
     },
+    /// What watching costs: one hop while `nerve ui` serves a browser showing the page vs without.
+    Ui {
+        #[command(flatten)]
+        common: Common,
+        /// Payload sizes of the hop, in bytes.
+        #[arg(long, value_delimiter = ',', default_values_t = [8usize, 230_400])]
+        payloads: Vec<usize>,
+        /// Measured rounds (each condition one batch per round, interleaved).
+        #[arg(long)]
+        rounds: Option<usize>,
+    },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
         #[command(flatten)]
@@ -316,6 +329,25 @@ fn run(cli: Cli) -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
             } else {
                 recording::print_tables(&report);
+            }
+        }
+        Scenario::Ui { common, payloads, rounds } => {
+            let opts = ui_cost::UiOpts {
+                quick: common.quick,
+                sizes: payloads,
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 7 }).max(1),
+                verbose: common.verbose,
+                work: ui_cost::work_dir(&common.out),
+            };
+            let report = ui_cost::run(&opts);
+            let _ = std::fs::remove_dir_all(&opts.work);
+            let report = report?;
+            let json = write_json(&common.out, "ui.json", &report)?;
+            eprintln!("ui: results in {} ({:.0} s)", json.display(), report.seconds);
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
+            } else {
+                ui_cost::print_tables(&report);
             }
         }
         Scenario::Scale { common, agents, period_ms, window } => {

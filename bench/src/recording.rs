@@ -14,19 +14,17 @@
 //!   (`acme::Gripper`, the test crate's `nerve-gripper`), both at 50 Hz,
 //!   interleaved: a custom type should cost no more.
 
-use crate::hop::{NervePing, default_count, size_tag, spawn_bench_agent};
 use crate::machine::{Machine, command_line};
+use crate::observed::hop_with_and_without;
 use crate::payloads::label;
 use crate::procs::{ChildGuard, Robot};
-use crate::stats::{Rounds, Summary, median_f64, ratio, us};
+use crate::stats::{Rounds, Summary, median_f64, us};
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-/// Samples dropped at the start of every batch.
-const DISCARD: usize = 5;
 /// The recorder may make the round trip this much slower.
 pub const TARGET_RATIO: f64 = 1.05;
 
@@ -158,80 +156,29 @@ fn children_cpu() -> f64 {
 
 /// The hop with and without `nerve record --all`.
 fn hop(opts: &RecordOpts, robot: &Robot) -> Result<Vec<HopCost>> {
-    let mut children: Vec<ChildGuard> = Vec::new();
-    let mut pings: Vec<(usize, NervePing)> = Vec::new();
-    let mut names = Vec::new();
-    for &size in &opts.sizes {
-        let t = size_tag(size);
-        let count = default_count(size, opts.quick);
-        let (p, q) = (format!("rp-{t}"), format!("rq-{t}"));
-        for (role, name) in [("ping", &p), ("pong", &q)] {
-            let dir = opts.work.join(name);
-            std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-            children.push(spawn_bench_agent(robot, role, name, size, count, &dir)?);
-            names.push(name.clone());
-        }
-        pings.push((size, NervePing { name: p.clone(), dir: opts.work.join(&p), next: 0 }));
-    }
-    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
-    robot.wait_registered(&refs, Duration::from_secs(20))?;
-    for &size in &opts.sizes {
-        let t = size_tag(size);
-        robot.run(&["connect", "--allow-cycle", &format!("rp-{t}/out"), &format!("rq-{t}/in")])?;
-        robot.run(&["connect", "--allow-cycle", &format!("rq-{t}/out"), &format!("rp-{t}/in")])?;
-    }
-    // system i: ping i / 2 without (even) or with (odd) the recorder
-    let mut rounds = Rounds::new(pings.len() * 2, DISCARD);
     let file = opts.work.join("hop.mcap");
-    for round in usize::from(opts.quick)..=opts.rounds {
-        let t_round = Instant::now();
-        for (k, (size, ping)) in pings.iter_mut().enumerate() {
-            for i in Rounds::order(&[2 * k, 2 * k + 1], round) {
-                let recorder = if i % 2 == 1 {
-                    let mut cmd = robot.nerve();
-                    cmd.arg("record").arg("--all").arg("-o").arg(&file).arg("-q").stdin(Stdio::null());
-                    robot.quiet(&mut cmd);
-                    let g = ChildGuard::spawn("nerve record", cmd)?;
-                    // it has opened every port well before this
-                    std::thread::sleep(Duration::from_millis(1500));
-                    Some(g)
-                } else {
-                    None
-                };
-                let v = ping.run_batch(robot).with_context(|| format!("hop at {size} B, round {round}"))?;
-                if let Some(mut g) = recorder {
-                    g.check_alive().context("the recorder died during the batch")?;
-                    g.stop(Duration::from_secs(5));
-                    let _ = std::fs::remove_file(&file);
-                }
-                rounds.keep(i, round, &v);
-            }
-        }
-        let what = if round == 0 { "warm-up".to_owned() } else { format!("round {round}/{}", opts.rounds) };
-        eprintln!("record: hop {what} done in {:.1} s", t_round.elapsed().as_secs_f64());
-    }
-    for mut c in children.drain(..) {
-        c.stop(Duration::from_secs(2));
-    }
-    Ok(pings
-        .iter()
-        .enumerate()
-        .map(|(k, (size, _))| {
-            let (a, b) = (2 * k, 2 * k + 1);
-            let without = Summary::of(&rounds.samples[a]);
-            let with_recorder = Summary::of(&rounds.samples[b]);
-            let per_round: Vec<f64> =
-                rounds.round_p50[b].iter().zip(&rounds.round_p50[a]).map(|(w, wo)| ratio(*w, *wo)).collect();
-            let r = ratio(with_recorder.p50_ns, without.p50_ns);
-            HopCost {
-                size: *size,
-                label: label(*size).into(),
-                without,
-                with_recorder,
-                ratio_p50: r,
-                ratio_p50_round_median: median_f64(&per_round),
-                target_met: r <= TARGET_RATIO,
-            }
+    let mut record = || -> Result<Vec<ChildGuard>> {
+        let _ = std::fs::remove_file(&file);
+        let mut cmd = robot.nerve();
+        cmd.arg("record").arg("--all").arg("-o").arg(&file).arg("-q").stdin(Stdio::null());
+        robot.quiet(&mut cmd);
+        let g = ChildGuard::spawn("nerve record", cmd)?;
+        // it has opened every port well before this
+        std::thread::sleep(Duration::from_millis(1500));
+        Ok(vec![g])
+    };
+    let measured = hop_with_and_without(robot, &opts.sizes, opts.rounds, opts.quick, &opts.work, "r", &mut record)?;
+    let _ = std::fs::remove_file(&file);
+    Ok(measured
+        .into_iter()
+        .map(|m| HopCost {
+            size: m.size,
+            label: label(m.size).into(),
+            target_met: m.ratio_p50 <= TARGET_RATIO,
+            without: m.without,
+            with_recorder: m.with,
+            ratio_p50: m.ratio_p50,
+            ratio_p50_round_median: m.ratio_p50_round_median,
         })
         .collect())
 }

@@ -35,6 +35,10 @@ pub enum Scenario {
     Bridge,
     /// The exploration robot plus churn for N minutes (`--minutes N`): memory, descriptors, files, latencies.
     Soak,
+    /// What recording costs: one hop with `nerve record --all` vs without, images to MCAP, echo of a custom type.
+    Record,
+    /// What watching costs: one hop while `nerve ui` serves a browser showing the page vs without.
+    Ui,
 }
 
 /// `nerve bench`

@@ -1,0 +1,103 @@
+//! One hop with an observer running and without it, batch by batch
+//! interleaved: what watching the robot costs its data path. The observer
+//! is `nerve record --all` (scenario `record`) or `nerve ui` with a browser
+//! showing the page (scenario `ui`); both targets are ≤ 1.05x.
+
+use crate::hop::{NervePing, default_count, size_tag, spawn_bench_agent};
+use crate::procs::{ChildGuard, Robot};
+use crate::stats::{Rounds, Summary, median_f64, ratio};
+use anyhow::{Context as _, Result};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Samples dropped at the start of every batch.
+const DISCARD: usize = 5;
+
+/// One payload size's round trips without and with the observer.
+#[derive(Debug, Clone)]
+pub struct Observed {
+    /// payload bytes
+    pub size: usize,
+    /// round trips without the observer, ns
+    pub without: Summary,
+    /// round trips while it runs, ns
+    pub with: Summary,
+    /// with / without, pooled medians
+    pub ratio_p50: f64,
+    /// median of the per-round ratios
+    pub ratio_p50_round_median: f64,
+}
+
+/// Measures the SDK ping-pong at every size in `sizes`, `rounds` rounds
+/// (after a warm-up unless `quick`), each round one batch without and one
+/// with the processes `observe` starts (in alternating order), which are
+/// stopped after their batch. Agents are named `PREFIX-p-SIZE`/`PREFIX-q-SIZE`.
+pub fn hop_with_and_without(
+    robot: &Robot,
+    sizes: &[usize],
+    rounds: usize,
+    quick: bool,
+    work: &Path,
+    scenario: &str,
+    observe: &mut dyn FnMut() -> Result<Vec<ChildGuard>>,
+) -> Result<Vec<Observed>> {
+    let mut children: Vec<ChildGuard> = Vec::new();
+    let mut pings: Vec<(usize, NervePing)> = Vec::new();
+    let mut names = Vec::new();
+    for &size in sizes {
+        let t = size_tag(size);
+        let count = default_count(size, quick);
+        let (p, q) = (format!("{scenario}p-{t}"), format!("{scenario}q-{t}"));
+        for (role, name) in [("ping", &p), ("pong", &q)] {
+            let dir = work.join(name);
+            std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+            children.push(spawn_bench_agent(robot, role, name, size, count, &dir)?);
+            names.push(name.clone());
+        }
+        pings.push((size, NervePing { name: p.clone(), dir: work.join(&p), next: 0 }));
+        robot.wait_registered(&[p.as_str(), q.as_str()], Duration::from_secs(20))?;
+        robot.run(&["connect", "--allow-cycle", &format!("{p}/out"), &format!("{q}/in")])?;
+        robot.run(&["connect", "--allow-cycle", &format!("{q}/out"), &format!("{p}/in")])?;
+    }
+    // system i: ping i / 2 without (even) or with (odd) the observer
+    let mut kept = Rounds::new(pings.len() * 2, DISCARD);
+    for round in usize::from(quick)..=rounds {
+        let t_round = Instant::now();
+        for (k, (size, ping)) in pings.iter_mut().enumerate() {
+            for i in Rounds::order(&[2 * k, 2 * k + 1], round) {
+                let mut observer = if i % 2 == 1 { observe()? } else { Vec::new() };
+                let v = ping.run_batch(robot).with_context(|| format!("hop at {size} B, round {round}"))?;
+                for g in &mut observer {
+                    g.check_alive().context("the observer died during the batch")?;
+                }
+                for mut g in observer {
+                    g.stop(Duration::from_secs(5));
+                }
+                kept.keep(i, round, &v);
+            }
+        }
+        let what = if round == 0 { "warm-up".to_owned() } else { format!("round {round}/{rounds}") };
+        eprintln!("{scenario}: hop {what} done in {:.1} s", t_round.elapsed().as_secs_f64());
+    }
+    for mut c in children.drain(..) {
+        c.stop(Duration::from_secs(2));
+    }
+    Ok(pings
+        .iter()
+        .enumerate()
+        .map(|(k, (size, _))| {
+            let (a, b) = (2 * k, 2 * k + 1);
+            let without = Summary::of(&kept.samples[a]);
+            let with = Summary::of(&kept.samples[b]);
+            let per_round: Vec<f64> =
+                kept.round_p50[b].iter().zip(&kept.round_p50[a]).map(|(w, wo)| ratio(*w, *wo)).collect();
+            Observed {
+                size: *size,
+                ratio_p50: ratio(with.p50_ns, without.p50_ns),
+                without,
+                with,
+                ratio_p50_round_median: median_f64(&per_round),
+            }
+        })
+        .collect())
+}

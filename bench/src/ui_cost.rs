@@ -1,0 +1,175 @@
+//! Scenario `ui`: what `nerve ui` costs the robot while a browser shows its
+//! page (issue 16). The one-hop round trip of SDK agents with `nerve ui`
+//! serving a headless Chromium (the page open, its event stream reading the
+//! graph every 0.5 s, as a person watching would) and without them, batch
+//! by batch interleaved; target: the median with them at most 1.05x the
+//! median without.
+
+use crate::machine::{Machine, command_line};
+use crate::observed::hop_with_and_without;
+use crate::payloads::label;
+use crate::procs::{ChildGuard, Robot};
+use crate::stats::{Summary, us};
+use anyhow::{Context as _, Result, bail};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// The page may make the round trip this much slower.
+pub const TARGET_RATIO: f64 = 1.05;
+const TOKEN: &str = "bench-token-0123456789";
+
+/// Options of the ui scenario.
+#[derive(Debug, Clone)]
+pub struct UiOpts {
+    /// smoke run
+    pub quick: bool,
+    /// payload sizes of the hop (bytes)
+    pub sizes: Vec<usize>,
+    /// measured rounds
+    pub rounds: usize,
+    /// show children's output
+    pub verbose: bool,
+    /// where batch files and the browser's profile go
+    pub work: PathBuf,
+}
+
+/// The hop with and without the page, one size.
+#[derive(Debug, Clone, Serialize)]
+pub struct UiHop {
+    /// payload bytes
+    pub size: usize,
+    /// payload label
+    pub label: String,
+    /// round trips without `nerve ui`, ns
+    pub without: Summary,
+    /// round trips while `nerve ui` serves a browser, ns
+    pub with_ui: Summary,
+    /// with / without, pooled medians
+    pub ratio_p50: f64,
+    /// median of the per-round ratios
+    pub ratio_p50_round_median: f64,
+    /// whether the pooled ratio is within the target
+    pub target_met: bool,
+}
+
+/// Results of the ui scenario.
+#[derive(Debug, Clone, Serialize)]
+pub struct UiReport {
+    /// "ui"
+    pub scenario: &'static str,
+    /// how it was run
+    pub command: String,
+    /// the machine
+    pub machine: Machine,
+    /// measured rounds
+    pub rounds: usize,
+    /// the hop with and without the page
+    pub hop: Vec<UiHop>,
+    /// the target
+    pub target_ratio: f64,
+    /// the browser's version
+    pub browser: String,
+    /// wall time
+    pub seconds: f64,
+}
+
+fn free_port() -> Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+}
+
+/// `nerve ui` and a headless Chromium showing its page.
+fn open_page(robot: &Robot, work: &Path) -> Result<Vec<ChildGuard>> {
+    let addr = format!("127.0.0.1:{}", free_port()?);
+    let mut cmd = robot.nerve();
+    cmd.args(["ui", "--bind", &addr, "--token", TOKEN]).stdin(Stdio::null());
+    robot.quiet(&mut cmd);
+    let ui = ChildGuard::spawn("nerve ui", cmd)?;
+    let t0 = Instant::now();
+    while std::net::TcpStream::connect(&addr).is_err() {
+        if t0.elapsed() > Duration::from_secs(10) {
+            bail!("nerve ui did not listen on {addr} within 10 s");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let profile = work.join("chromium");
+    let mut cmd = Command::new("chromium");
+    cmd.args(["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1400,900"])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg(format!("http://{addr}/?token={TOKEN}"))
+        .stdin(Stdio::null());
+    robot.quiet(&mut cmd);
+    let browser = ChildGuard::spawn("chromium", cmd)
+        .context("cannot run chromium: install chromium (scripts/setup.sh --bench does)")?;
+    // the page is loaded and its event stream open well before this
+    std::thread::sleep(Duration::from_millis(2500));
+    Ok(vec![browser, ui])
+}
+
+/// Runs the scenario.
+pub fn run(opts: &UiOpts) -> Result<UiReport> {
+    let started = Instant::now();
+    let machine = Machine::probe();
+    std::fs::create_dir_all(&opts.work).with_context(|| format!("cannot create {}", opts.work.display()))?;
+    let browser = Command::new("chromium")
+        .arg("--version")
+        .output()
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_owned())
+        .context("cannot run chromium: install chromium (scripts/setup.sh --bench does)")?;
+    let robot = Robot::new("u", opts.verbose)?;
+    eprintln!("ui: robot {} (hop sizes {:?}, {} rounds, {browser})", robot.name, opts.sizes, opts.rounds);
+    let router = robot.start_router()?;
+    let mut observe = || open_page(&robot, &opts.work);
+    let measured = hop_with_and_without(&robot, &opts.sizes, opts.rounds, opts.quick, &opts.work, "u", &mut observe)?;
+    drop(router);
+    drop(robot);
+    Ok(UiReport {
+        scenario: "ui",
+        command: command_line(),
+        machine,
+        rounds: opts.rounds,
+        hop: measured
+            .into_iter()
+            .map(|m| UiHop {
+                size: m.size,
+                label: label(m.size).into(),
+                target_met: m.ratio_p50 <= TARGET_RATIO,
+                without: m.without,
+                with_ui: m.with,
+                ratio_p50: m.ratio_p50,
+                ratio_p50_round_median: m.ratio_p50_round_median,
+            })
+            .collect(),
+        target_ratio: TARGET_RATIO,
+        browser,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Prints the table (markdown).
+pub fn print_tables(r: &UiReport) {
+    println!("### One hop while `nerve ui` serves a browser (round trip, µs; {})\n", r.browser);
+    println!(
+        "| payload | without p50 | with p50 | without p99 | with p99 | with / without (p50) | per-round median | ≤ {TARGET_RATIO}x |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for h in &r.hop {
+        println!(
+            "| {} | {} | {} | {} | {} | {:.3} | {:.3} | {} |",
+            h.label,
+            us(h.without.p50_ns),
+            us(h.with_ui.p50_ns),
+            us(h.without.p99_ns),
+            us(h.with_ui.p99_ns),
+            h.ratio_p50,
+            h.ratio_p50_round_median,
+            if h.target_met { "yes" } else { "**no**" }
+        );
+    }
+}
+
+/// Where the scenario's files go.
+pub fn work_dir(out: &Path) -> PathBuf {
+    out.join("ui-work")
+}
