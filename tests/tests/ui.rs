@@ -285,9 +285,29 @@ fn read_only_offers_nothing_and_actions_need_the_token() {
     b.drag(".port[data-port=\"t1/tick\"] circle", ".port[data-port=\"r1/in\"] circle");
     std::thread::sleep(Duration::from_millis(500));
     assert!(!has_edge(&r, "t1/tick", "r1/in"));
+    // a port carrying ring notices shows its image (watching needs no token)
+    r.ok(&["start", "camera", "--name", "cam", "--", "--source", "test-pattern", "--width", "160", "--height", "120"]);
+    b.wait_for("the camera", WAIT, "return !!document.querySelector('.port[data-port=\"cam/frames\"]')");
+    b.click(".port[data-port=\"cam/frames\"] circle");
+    let size = b.wait_for(
+        "the camera's frame",
+        WAIT,
+        "const i = document.getElementById('port-image'); return !i.hidden && i.complete && i.naturalWidth > 0 && i.naturalWidth + 'x' + i.naturalHeight",
+    );
+    assert_eq!(size, Value::String("160x120".into()));
+    assert_eq!(
+        b.eval("return document.getElementById('port-type').textContent"),
+        Value::String("nerve::RingNotice".into())
+    );
+    let (status, png) = http(&ro.addr, "GET", "/api/image?port=cam%2Fframes", &[], None);
+    assert_eq!(status, 200);
+    assert!(png.get(1..4) == Some("PNG") || png.starts_with("\u{FFFD}PNG"), "not a PNG");
+    let (status, body) = http(&ro.addr, "GET", "/api/image?port=t1%2Ftick", &[], None);
+    assert_eq!(status, 409, "{body}");
+    assert!(body.contains("not ring notices"), "{body}");
     // the editing server's page opened without the token watches only
     b.open(&rw.url(false));
-    b.wait_for("the agents", WAIT, &format!("const a = {PAGE_AGENTS}; return a === 'r1,r2,t1' && a"));
+    b.wait_for("the agents", WAIT, &format!("const a = {PAGE_AGENTS}; return a === 'cam,r1,r2,t1' && a"));
     assert_eq!(b.eval("return nerveUi.editable"), Value::Bool(false));
     assert_eq!(
         b.eval("return document.getElementById('mode').textContent"),
