@@ -140,6 +140,16 @@ fn the_page_shows_and_rewires_a_running_robot() {
     );
     b.wait_for("the edge back", WAIT, "return !!document.querySelector('.edge[data-to=\"r1/in\"]')");
 
+    // a node dragged by its name moves, and stays where it was put
+    let at =
+        |b: &Browser| b.eval("return document.querySelector('.node[data-agent=\"r2\"]').getAttribute('transform')");
+    let before = at(&b);
+    b.drag(".node[data-agent=\"r2\"] text.name", ".node[data-agent=\"r1\"] text.state");
+    let moved = at(&b);
+    assert_ne!(moved, before, "r2 did not move");
+    std::thread::sleep(Duration::from_millis(700));
+    assert_eq!(at(&b), moved, "r2 went back to the automatic layout");
+
     // hot add from the page: an agent with an input of another type
     b.eval("document.getElementById('add-kind').value = 'gripper'; document.getElementById('add-name').value = 'g1'; return 1");
     b.click("#add-go");

@@ -68,6 +68,8 @@ const WORKERS: usize = 4;
 const MAX_BODY: u64 = 64 * 1024;
 /// How long a worker waits for the robot's thread to answer.
 const ROBOT_TIMEOUT: Duration = Duration::from_secs(30);
+/// The least time between two reads of the graph, however slow the last was.
+const MIN_PAUSE: Duration = Duration::from_millis(20);
 /// A comment line on an idle event stream at least this often, so that a
 /// closed browser is noticed.
 const KEEP_ALIVE: Duration = Duration::from_secs(10);
@@ -178,10 +180,12 @@ pub fn serve(
     drop(tx);
     let mut next_read = Instant::now();
     while !should_stop() {
-        if Instant::now() >= next_read {
+        let now = Instant::now();
+        if now >= next_read {
             robot.tick();
             shared.hub.publish(snapshot(robot));
-            next_read = Instant::now() + opts.interval;
+            // from when this read began: a slow router does not stretch the interval
+            next_read = (now + opts.interval).max(Instant::now() + MIN_PAUSE);
         }
         let wait = next_read.saturating_duration_since(Instant::now()).min(Duration::from_millis(100));
         match rx.recv_timeout(wait) {
