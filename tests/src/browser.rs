@@ -11,10 +11,22 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// One HTTP/1.1 request; returns the status and the body.
+/// One HTTP/1.1 request; returns the status and the body. Panics when the
+/// server cannot be reached or does not answer within 120 s.
 pub fn http(addr: &str, method: &str, path: &str, headers: &[(&str, &str)], body: Option<&str>) -> (u16, String) {
-    let mut s = TcpStream::connect(addr).unwrap_or_else(|e| panic!("cannot connect to {addr}: {e}"));
-    s.set_read_timeout(Some(Duration::from_secs(60))).expect("timeout");
+    try_http(addr, method, path, headers, body).unwrap_or_else(|e| panic!("{method} {path} to {addr}: {e}"))
+}
+
+/// [`http`], with the failure returned.
+pub fn try_http(
+    addr: &str,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: Option<&str>,
+) -> std::io::Result<(u16, String)> {
+    let mut s = TcpStream::connect(addr)?;
+    s.set_read_timeout(Some(Duration::from_secs(120)))?;
     let body = body.unwrap_or("");
     let mut req =
         format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n", body.len());
@@ -26,7 +38,7 @@ pub fn http(addr: &str, method: &str, path: &str, headers: &[(&str, &str)], body
     }
     req.push_str("\r\n");
     req.push_str(body);
-    s.write_all(req.as_bytes()).expect("send the request");
+    s.write_all(req.as_bytes())?;
     // read the head, then as much body as Content-Length says (a server may keep the connection open)
     let mut raw = Vec::new();
     let mut buf = [0u8; 65536];
@@ -34,8 +46,10 @@ pub fn http(addr: &str, method: &str, path: &str, headers: &[(&str, &str)], body
         if let Some(i) = raw.windows(4).position(|w| w == b"\r\n\r\n") {
             break i + 4;
         }
-        let n = s.read(&mut buf).expect("read the answer");
-        assert!(n > 0, "{addr} closed the connection before answering {method} {path}");
+        let n = s.read(&mut buf)?;
+        if n == 0 {
+            return Err(std::io::Error::other("the connection was closed before the answer"));
+        }
         raw.extend_from_slice(&buf[..n]);
     };
     let head = String::from_utf8_lossy(&raw[..head_end]).to_ascii_lowercase();
@@ -45,17 +59,19 @@ pub fn http(addr: &str, method: &str, path: &str, headers: &[(&str, &str)], body
     match length {
         Some(len) => {
             while raw.len() < head_end + len {
-                let n = s.read(&mut buf).expect("read the answer");
-                assert!(n > 0, "{addr} closed the connection in the middle of its answer");
+                let n = s.read(&mut buf)?;
+                if n == 0 {
+                    return Err(std::io::Error::other("the connection was closed in the middle of the answer"));
+                }
                 raw.extend_from_slice(&buf[..n]);
             }
         }
         None => {
-            s.read_to_end(&mut raw).expect("read the answer");
+            s.read_to_end(&mut raw)?;
         }
     }
     let body = String::from_utf8_lossy(&raw[head_end..]).into_owned();
-    (status, if head.contains("transfer-encoding: chunked") { dechunk(&body) } else { body })
+    Ok((status, if head.contains("transfer-encoding: chunked") { dechunk(&body) } else { body }))
 }
 
 fn dechunk(mut s: &str) -> String {
@@ -101,6 +117,8 @@ impl Browser {
         assert!(up, "chromedriver did not listen on port {port} within 20 s");
         let caps = json!({ "capabilities": { "alwaysMatch": {
             "browserName": "chrome",
+            // navigation returns once the document is parsed; the tests wait for what they need
+            "pageLoadStrategy": "eager",
             "goog:chromeOptions": {
                 "binary": "/usr/bin/chromium",
                 "args": ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
@@ -177,6 +195,22 @@ impl Browser {
         self.session_call("DELETE", "/actions", None);
     }
 
+    /// Presses the mouse on `css`, moves it by (`dx`, `dy`) pixels and releases it.
+    pub fn drag_by(&self, css: &str, dx: i64, dy: i64) {
+        let a = self.element(css);
+        let actions = json!({ "actions": [{
+            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
+            "actions": [
+                { "type": "pointerMove", "duration": 0, "origin": a, "x": 0, "y": 0 },
+                { "type": "pointerDown", "button": 0 },
+                { "type": "pointerMove", "duration": 200, "origin": "pointer", "x": dx, "y": dy },
+                { "type": "pointerUp", "button": 0 },
+            ],
+        }]});
+        self.session_call("POST", "/actions", Some(&actions));
+        self.session_call("DELETE", "/actions", None);
+    }
+
     /// Presses the mouse on `css` and moves it a little, holding it (a drag
     /// begun; [`Browser::release_on`] ends it).
     pub fn press_on(&self, css: &str) {
@@ -240,7 +274,7 @@ impl Browser {
 impl Drop for Browser {
     fn drop(&mut self) {
         if !self.session.is_empty() {
-            let _ = http(&self.addr, "DELETE", &format!("/session/{}", self.session), &[], None);
+            let _ = try_http(&self.addr, "DELETE", &format!("/session/{}", self.session), &[], None);
         }
         let _ = self.driver.kill();
         let _ = self.driver.wait();

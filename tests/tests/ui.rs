@@ -144,7 +144,7 @@ fn the_page_shows_and_rewires_a_running_robot() {
     let at =
         |b: &Browser| b.eval("return document.querySelector('.node[data-agent=\"r2\"]').getAttribute('transform')");
     let before = at(&b);
-    b.drag(".node[data-agent=\"r2\"] text.name", ".node[data-agent=\"r1\"] text.state");
+    b.drag_by(".node[data-agent=\"r2\"] text.name", 0, 160); // down, into empty space
     let moved = at(&b);
     assert_ne!(moved, before, "r2 did not move");
     std::thread::sleep(Duration::from_millis(700));
