@@ -278,7 +278,20 @@ impl Drop for Browser {
         }
         let _ = self.driver.kill();
         let _ = self.driver.wait();
+        // a browser whose session could not be ended (the test failed mid-command) is found by its profile
+        kill_processes_using(&self.profile.display().to_string());
         let _ = std::fs::remove_dir_all(&self.profile);
+    }
+}
+
+/// SIGKILLs every process whose command line contains `needle`.
+fn kill_processes_using(needle: &str) {
+    let Ok(entries) = std::fs::read_dir("/proc") else { return };
+    for pid in entries.filter_map(|e| e.ok()?.file_name().to_str()?.parse::<i32>().ok()) {
+        let Ok(cmdline) = std::fs::read(format!("/proc/{pid}/cmdline")) else { continue };
+        if String::from_utf8_lossy(&cmdline).contains(needle) {
+            let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid), nix::sys::signal::Signal::SIGKILL);
+        }
     }
 }
 
