@@ -283,6 +283,29 @@ fn write_json(out: &std::path::Path, name: &str, value: &impl serde::Serialize) 
     Ok(path)
 }
 
+/// Writes `report` to `OUT/NAME.json`, then its figures (`plot` returns
+/// the files it wrote), says where they are on stderr, and prints the
+/// report on stdout: as JSON with `--json`, else as markdown tables.
+fn publish<R: serde::Serialize>(
+    common: &Common,
+    name: &str,
+    report: &R,
+    seconds: f64,
+    plot: impl FnOnce(&R) -> Result<Vec<PathBuf>>,
+    tables: fn(&R),
+) -> Result<()> {
+    let mut files = vec![write_json(&common.out, &format!("{name}.json"), report)?];
+    files.extend(plot(report)?);
+    let files: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
+    eprintln!("{name}: results in {} ({seconds:.0} s)", files.join(" and "));
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(report).context("cannot encode the results")?);
+    } else {
+        tables(report);
+    }
+    Ok(())
+}
+
 fn run(cli: Cli) -> Result<()> {
     if cfg!(debug_assertions) {
         eprintln!(
@@ -302,13 +325,7 @@ fn run(cli: Cli) -> Result<()> {
             let report = pipeline::run(&opts);
             let _ = std::fs::remove_dir_all(&opts.work);
             let report = report?;
-            let json = write_json(&common.out, "pipeline.json", &report)?;
-            eprintln!("pipeline: results in {} ({:.0} s)", json.display(), report.seconds);
-            if common.json {
-                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
-            } else {
-                pipeline::print_tables(&report);
-            }
+            publish(&common, "pipeline", &report, report.seconds, |_| Ok(vec![]), pipeline::print_tables)?;
         }
         Scenario::Record { common, payloads, rounds, seconds } => {
             let opts = recording::RecordOpts {
@@ -323,13 +340,7 @@ fn run(cli: Cli) -> Result<()> {
             let report = recording::run(&opts);
             let _ = std::fs::remove_dir_all(&opts.work);
             let report = report?;
-            let json = write_json(&common.out, "record.json", &report)?;
-            eprintln!("record: results in {} ({:.0} s)", json.display(), report.seconds);
-            if common.json {
-                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
-            } else {
-                recording::print_tables(&report);
-            }
+            publish(&common, "record", &report, report.seconds, |_| Ok(vec![]), recording::print_tables)?;
         }
         Scenario::Ui { common, payloads, rounds } => {
             let opts = ui_cost::UiOpts {
@@ -342,13 +353,7 @@ fn run(cli: Cli) -> Result<()> {
             let report = ui_cost::run(&opts);
             let _ = std::fs::remove_dir_all(&opts.work);
             let report = report?;
-            let json = write_json(&common.out, "ui.json", &report)?;
-            eprintln!("ui: results in {} ({:.0} s)", json.display(), report.seconds);
-            if common.json {
-                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
-            } else {
-                ui_cost::print_tables(&report);
-            }
+            publish(&common, "ui", &report, report.seconds, |_| Ok(vec![]), ui_cost::print_tables)?;
         }
         Scenario::Scale { common, agents, period_ms, window } => {
             let opts = scale::ScaleOpts {
@@ -359,13 +364,7 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: common.verbose,
             };
             let report = scale::run(&opts)?;
-            let json = write_json(&common.out, "scale.json", &report)?;
-            eprintln!("scale: results in {} ({:.0} s)", json.display(), report.seconds);
-            if common.json {
-                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
-            } else {
-                scale::print_tables(&report);
-            }
+            publish(&common, "scale", &report, report.seconds, |_| Ok(vec![]), scale::print_tables)?;
         }
         Scenario::Soak { common, minutes, every, churn, launch } => {
             let launch =
@@ -378,15 +377,12 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: common.verbose,
             };
             let report = soak::run(&opts)?;
-            let json = write_json(&common.out, "soak.json", &report)?;
-            let png = common.out.join("soak.png");
-            soak::png(&report, &png)?;
-            eprintln!("soak: results in {} and {} ({:.0} s)", json.display(), png.display(), report.seconds);
-            if common.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                soak::print_tables(&report);
-            }
+            let plot = |r: &_| {
+                let png = common.out.join("soak.png");
+                soak::png(r, &png)?;
+                Ok(vec![png])
+            };
+            publish(&common, "soak", &report, report.seconds, plot, soak::print_tables)?;
         }
         Scenario::Hop { common, payloads, rounds, count } => {
             let opts = hop::HopOpts {
@@ -400,17 +396,14 @@ fn run(cli: Cli) -> Result<()> {
             let report = hop::run(&opts);
             let _ = std::fs::remove_dir_all(&opts.work);
             let report = report?;
-            let json = write_json(&common.out, "hop.json", &report)?;
-            let png = common.out.join("hop-latency.png");
-            if let Err(e) = plot::hop_png(&report, &png) {
-                eprintln!("warning: no plot: {e:#}");
-            }
-            eprintln!("hop: results in {} and {} ({:.0} s)", json.display(), png.display(), report.seconds);
-            if common.json {
-                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
-            } else {
-                hop::print_tables(&report);
-            }
+            let plot = |r: &_| {
+                let png = common.out.join("hop-latency.png");
+                if let Err(e) = plot::hop_png(r, &png) {
+                    eprintln!("warning: no plot: {e:#}");
+                }
+                Ok(vec![png])
+            };
+            publish(&common, "hop", &report, report.seconds, plot, hop::print_tables)?;
         }
         Scenario::Control { common, rounds, launch } => {
             let opts = control::ControlOpts {
@@ -420,13 +413,7 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: common.verbose,
             };
             let report = control::run(&opts)?;
-            let json = write_json(&common.out, "control.json", &report)?;
-            eprintln!("control: results in {} ({:.0} s)", json.display(), report.seconds);
-            if common.json {
-                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
-            } else {
-                control::print_tables(&report);
-            }
+            publish(&common, "control", &report, report.seconds, |_| Ok(vec![]), control::print_tables)?;
         }
         Scenario::Images { common, resolutions, readers, rounds, rate, seconds, max_seconds } => {
             let opts = images::ImagesOpts {
@@ -443,17 +430,14 @@ fn run(cli: Cli) -> Result<()> {
             let report = images::run(&opts);
             let _ = std::fs::remove_dir_all(&opts.work);
             let report = report?;
-            let json = write_json(&common.out, "images.json", &report)?;
-            let png = common.out.join("images-latency.png");
-            if let Err(e) = plot_images::images_png(&report, &png) {
-                eprintln!("warning: no plot: {e:#}");
-            }
-            eprintln!("images: results in {} and {} ({:.0} s)", json.display(), png.display(), report.seconds);
-            if common.json {
-                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
-            } else {
-                images::print_tables(&report);
-            }
+            let plot = |r: &_| {
+                let png = common.out.join("images-latency.png");
+                if let Err(e) = plot_images::images_png(r, &png) {
+                    eprintln!("warning: no plot: {e:#}");
+                }
+                Ok(vec![png])
+            };
+            publish(&common, "images", &report, report.seconds, plot, images::print_tables)?;
         }
         Scenario::Bridge { common, payloads, rounds, count, interval_us, tput_ms, hop_count } => {
             let opts = bridge::BridgeOpts {
@@ -470,13 +454,7 @@ fn run(cli: Cli) -> Result<()> {
             let report = bridge::run(&opts);
             let _ = std::fs::remove_dir_all(&opts.work);
             let report = report?;
-            let json = write_json(&common.out, "bridge.json", &report)?;
-            eprintln!("bridge: results in {} ({:.0} s)", json.display(), report.seconds);
-            if common.json {
-                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
-            } else {
-                bridge::print_tables(&report);
-            }
+            publish(&common, "bridge", &report, report.seconds, |_| Ok(vec![]), bridge::print_tables)?;
         }
         Scenario::Jitter { common, rates, seconds, rounds } => {
             let opts = jitter::JitterOpts {
@@ -489,13 +467,7 @@ fn run(cli: Cli) -> Result<()> {
             let report = jitter::run(&opts);
             let _ = std::fs::remove_dir_all(&opts.work);
             let report = report?;
-            let json = write_json(&common.out, "jitter.json", &report)?;
-            eprintln!("jitter: results in {} ({:.0} s)", json.display(), report.seconds);
-            if common.json {
-                println!("{}", serde_json::to_string_pretty(&report).context("cannot encode the results")?);
-            } else {
-                jitter::print_tables(&report);
-            }
+            publish(&common, "jitter", &report, report.seconds, |_| Ok(vec![]), jitter::print_tables)?;
         }
     }
     Ok(())
