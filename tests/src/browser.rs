@@ -178,81 +178,48 @@ impl Browser {
         Value::Object(reference)
     }
 
+    /// Runs a sequence of mouse `steps`; `release` lets go of every input
+    /// state afterwards (a drag that goes on keeps it).
+    fn mouse(&self, steps: Value, release: bool) {
+        let actions = json!({ "actions": [{
+            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" }, "actions": steps,
+        }]});
+        self.session_call("POST", "/actions", Some(&actions));
+        if release {
+            self.session_call("DELETE", "/actions", None);
+        }
+    }
+
     /// Presses the mouse on `from`, moves it in steps onto `to` and releases it there.
     pub fn drag(&self, from: &str, to: &str) {
         let (a, b) = (self.element(from), self.element(to));
-        let actions = json!({ "actions": [{
-            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
-            "actions": [
-                { "type": "pointerMove", "duration": 0, "origin": a, "x": 0, "y": 0 },
-                { "type": "pointerDown", "button": 0 },
-                { "type": "pointerMove", "duration": 150, "origin": a, "x": 30, "y": 10 },
-                { "type": "pointerMove", "duration": 150, "origin": b, "x": 0, "y": 0 },
-                { "type": "pointerUp", "button": 0 },
-            ],
-        }]});
-        self.session_call("POST", "/actions", Some(&actions));
-        self.session_call("DELETE", "/actions", None);
+        self.mouse(json!([move_to(&a, 0, 0, 0), down(), move_to(&a, 30, 10, 150), move_to(&b, 0, 0, 150), up()]), true);
     }
 
     /// Presses the mouse on `css`, moves it by (`dx`, `dy`) pixels and releases it.
     pub fn drag_by(&self, css: &str, dx: i64, dy: i64) {
         let a = self.element(css);
-        let actions = json!({ "actions": [{
-            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
-            "actions": [
-                { "type": "pointerMove", "duration": 0, "origin": a, "x": 0, "y": 0 },
-                { "type": "pointerDown", "button": 0 },
-                { "type": "pointerMove", "duration": 200, "origin": "pointer", "x": dx, "y": dy },
-                { "type": "pointerUp", "button": 0 },
-            ],
-        }]});
-        self.session_call("POST", "/actions", Some(&actions));
-        self.session_call("DELETE", "/actions", None);
+        let by = json!({ "type": "pointerMove", "duration": 200, "origin": "pointer", "x": dx, "y": dy });
+        self.mouse(json!([move_to(&a, 0, 0, 0), down(), by, up()]), true);
     }
 
     /// Presses the mouse on `css` and moves it a little, holding it (a drag
     /// begun; [`Browser::release_on`] ends it).
     pub fn press_on(&self, css: &str) {
         let a = self.element(css);
-        let actions = json!({ "actions": [{
-            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
-            "actions": [
-                { "type": "pointerMove", "duration": 0, "origin": a, "x": 0, "y": 0 },
-                { "type": "pointerDown", "button": 0 },
-                { "type": "pointerMove", "duration": 100, "origin": a, "x": 40, "y": 15 },
-            ],
-        }]});
-        self.session_call("POST", "/actions", Some(&actions));
+        self.mouse(json!([move_to(&a, 0, 0, 0), down(), move_to(&a, 40, 15, 100)]), false);
     }
 
     /// Moves the held mouse onto `css` and releases it there.
     pub fn release_on(&self, css: &str) {
         let b = self.element(css);
-        let actions = json!({ "actions": [{
-            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
-            "actions": [
-                { "type": "pointerMove", "duration": 100, "origin": b, "x": 0, "y": 0 },
-                { "type": "pointerUp", "button": 0 },
-            ],
-        }]});
-        self.session_call("POST", "/actions", Some(&actions));
-        self.session_call("DELETE", "/actions", None);
+        self.mouse(json!([move_to(&b, 0, 0, 100), up()]), true);
     }
 
     /// Clicks the element matching `css` (in its centre).
     pub fn click(&self, css: &str) {
         let e = self.element(css);
-        let actions = json!({ "actions": [{
-            "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
-            "actions": [
-                { "type": "pointerMove", "duration": 0, "origin": e, "x": 0, "y": 0 },
-                { "type": "pointerDown", "button": 0 },
-                { "type": "pointerUp", "button": 0 },
-            ],
-        }]});
-        self.session_call("POST", "/actions", Some(&actions));
-        self.session_call("DELETE", "/actions", None);
+        self.mouse(json!([move_to(&e, 0, 0, 0), down(), up()]), true);
     }
 
     /// Presses a key (a WebDriver key code such as `"\u{E017}"`, Delete).
@@ -282,6 +249,21 @@ impl Drop for Browser {
         kill_processes_using(&self.profile.display().to_string());
         let _ = std::fs::remove_dir_all(&self.profile);
     }
+}
+
+/// A WebDriver step: the mouse moves to (`x`, `y`) from the centre of `element` in `ms`.
+fn move_to(element: &Value, x: i64, y: i64, ms: u64) -> Value {
+    json!({ "type": "pointerMove", "duration": ms, "origin": element, "x": x, "y": y })
+}
+
+/// A WebDriver step: the left button pressed.
+fn down() -> Value {
+    json!({ "type": "pointerDown", "button": 0 })
+}
+
+/// A WebDriver step: the left button released.
+fn up() -> Value {
+    json!({ "type": "pointerUp", "button": 0 })
 }
 
 /// SIGKILLs every process whose command line contains `needle`.
