@@ -5,7 +5,7 @@
 
 use crate::hop::{NervePing, default_count, size_tag, spawn_bench_agent};
 use crate::procs::{ChildGuard, Robot};
-use crate::stats::{Rounds, Summary, median_f64, ratio};
+use crate::stats::{Rounds, Summary, median_f64, ratio, us};
 use anyhow::{Context as _, Result};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -100,4 +100,43 @@ pub fn hop_with_and_without(
             }
         })
         .collect())
+}
+
+/// One payload size in the table [`print_table`] prints.
+#[derive(Debug)]
+pub struct TableRow<'a> {
+    /// payload label
+    pub label: &'a str,
+    /// round trips without the observer
+    pub without: &'a Summary,
+    /// round trips with it
+    pub with: &'a Summary,
+    /// with / without, pooled medians
+    pub ratio_p50: f64,
+    /// median of the per-round ratios
+    pub ratio_p50_round_median: f64,
+    /// whether the pooled ratio is within the target
+    pub target_met: bool,
+}
+
+/// Prints the hop with and without the observer as a markdown table under `title`.
+pub fn print_table<'a>(title: &str, target: f64, rows: impl IntoIterator<Item = TableRow<'a>>) {
+    println!("### {title}\n");
+    println!(
+        "| payload | without p50 | with p50 | without p99 | with p99 | with / without (p50) | per-round median | ≤ {target}x |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for h in rows {
+        println!(
+            "| {} | {} | {} | {} | {} | {:.3} | {:.3} | {} |",
+            h.label,
+            us(h.without.p50_ns),
+            us(h.with.p50_ns),
+            us(h.without.p99_ns),
+            us(h.with.p99_ns),
+            h.ratio_p50,
+            h.ratio_p50_round_median,
+            if h.target_met { "yes" } else { "**no**" }
+        );
+    }
 }

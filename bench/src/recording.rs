@@ -15,10 +15,10 @@
 //!   interleaved: a custom type should cost no more.
 
 use crate::machine::{Machine, command_line};
-use crate::observed::hop_with_and_without;
+use crate::observed::{TableRow, hop_with_and_without, print_table};
 use crate::payloads::label;
 use crate::procs::{ChildGuard, Robot};
-use crate::stats::{Rounds, Summary, median_f64, us};
+use crate::stats::{Rounds, Summary, median_f64};
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -341,24 +341,15 @@ pub fn run(opts: &RecordOpts) -> Result<RecordReport> {
 
 /// Prints the tables (markdown).
 pub fn print_tables(r: &RecordReport) {
-    println!("### One hop with `nerve record --all` running (round trip, µs)\n");
-    println!(
-        "| payload | without p50 | with p50 | without p99 | with p99 | with / without (p50) | per-round median | ≤ {TARGET_RATIO}x |"
-    );
-    println!("|---|---|---|---|---|---|---|---|");
-    for h in &r.hop {
-        println!(
-            "| {} | {} | {} | {} | {} | {:.3} | {:.3} | {} |",
-            h.label,
-            us(h.without.p50_ns),
-            us(h.with_recorder.p50_ns),
-            us(h.without.p99_ns),
-            us(h.with_recorder.p99_ns),
-            h.ratio_p50,
-            h.ratio_p50_round_median,
-            if h.target_met { "yes" } else { "**no**" }
-        );
-    }
+    let rows = r.hop.iter().map(|h| TableRow {
+        label: &h.label,
+        without: &h.without,
+        with: &h.with_recorder,
+        ratio_p50: h.ratio_p50,
+        ratio_p50_round_median: h.ratio_p50_round_median,
+        target_met: h.target_met,
+    });
+    print_table("One hop with `nerve record --all` running (round trip, µs)", TARGET_RATIO, rows);
     println!("\n### Images recorded from a camera's ring\n");
     println!("| resolution | fps asked | camera fps | seconds | frames | dropped | MB/s | recorder CPU | file MB |");
     println!("|---|---|---|---|---|---|---|---|---|");

@@ -6,10 +6,10 @@
 //! median without.
 
 use crate::machine::{Machine, command_line};
-use crate::observed::hop_with_and_without;
+use crate::observed::{TableRow, hop_with_and_without, print_table};
 use crate::payloads::label;
 use crate::procs::{ChildGuard, Robot};
-use crate::stats::{Summary, us};
+use crate::stats::Summary;
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -149,24 +149,16 @@ pub fn run(opts: &UiOpts) -> Result<UiReport> {
 
 /// Prints the table (markdown).
 pub fn print_tables(r: &UiReport) {
-    println!("### One hop while `nerve ui` serves a browser (round trip, µs; {})\n", r.browser);
-    println!(
-        "| payload | without p50 | with p50 | without p99 | with p99 | with / without (p50) | per-round median | ≤ {TARGET_RATIO}x |"
-    );
-    println!("|---|---|---|---|---|---|---|---|");
-    for h in &r.hop {
-        println!(
-            "| {} | {} | {} | {} | {} | {:.3} | {:.3} | {} |",
-            h.label,
-            us(h.without.p50_ns),
-            us(h.with_ui.p50_ns),
-            us(h.without.p99_ns),
-            us(h.with_ui.p99_ns),
-            h.ratio_p50,
-            h.ratio_p50_round_median,
-            if h.target_met { "yes" } else { "**no**" }
-        );
-    }
+    let rows = r.hop.iter().map(|h| TableRow {
+        label: &h.label,
+        without: &h.without,
+        with: &h.with_ui,
+        ratio_p50: h.ratio_p50,
+        ratio_p50_round_median: h.ratio_p50_round_median,
+        target_met: h.target_met,
+    });
+    let title = format!("One hop while `nerve ui` serves a browser (round trip, µs; {})", r.browser);
+    print_table(&title, TARGET_RATIO, rows);
 }
 
 /// Where the scenario's files go.
