@@ -18,7 +18,7 @@ use anyhow::{Context as _, Result};
 use iceoryx2::prelude::Node;
 use nerve_ui::{Action, Options, Robot};
 use serde_json::{Value, json};
-use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
+use shm_schemas::control::cli_to_router::{CliRequest, RouterError, RouterReply};
 use shm_schemas::ring::RingNotice;
 use shm_schemas::{PortRef, Schema};
 use std::collections::{BTreeMap, VecDeque};
@@ -113,15 +113,17 @@ struct UiRobot {
 
 impl UiRobot {
     fn call(&mut self, req: CliRequest) -> Result<RouterReply, String> {
-        if self.session.is_none() {
-            self.session = Some(RouterSession::open(&self.world).map_err(|e| format!("{e:#}"))?);
+        let session = match &self.session {
+            Some(s) => s,
+            None => self.session.insert(RouterSession::open(&self.world).map_err(|e| format!("{e:#}"))?),
+        };
+        let reply = session.call(req);
+        // a refusal is the router's answer; any other failure means no router (or a new
+        // one): the next call opens a fresh session
+        if reply.as_ref().is_err_and(|e| e.downcast_ref::<RouterError>().is_none()) {
+            self.session = None;
         }
-        let Some(s) = &self.session else { return Err("no router session".into()) };
-        let reply = s.call(req).map_err(|e| format!("{e:#}"));
-        if reply.as_ref().is_err_and(|e| e.starts_with("no router runs") || e.contains("did not answer")) {
-            self.session = None; // a restarted router gets a fresh session
-        }
-        reply
+        reply.map_err(|e| format!("{e:#}"))
     }
 
     fn ok(&mut self, req: CliRequest) -> Result<Value, String> {
