@@ -49,6 +49,10 @@ pub fn find_program(file: &str) -> Option<PathBuf> {
     dirs.into_iter().map(|d| d.join(file)).find(|p| is_executable(p))
 }
 
+/// Programs named like agents that are not agents: `nerve-bench` runs the
+/// benchmarks (`nerve bench`).
+const NOT_AGENTS: [&str; 1] = ["bench"];
+
 /// Agent kinds installed next to this program.
 pub fn known_kinds() -> Vec<String> {
     let Some(dir) = std::env::current_exe().ok().and_then(|p| p.parent().map(Path::to_path_buf)) else { return vec![] };
@@ -57,6 +61,7 @@ pub fn known_kinds() -> Vec<String> {
             rd.filter_map(|e| e.ok())
                 .filter_map(|e| e.file_name().to_str().and_then(|n| n.strip_prefix(AGENT_PREFIX)).map(str::to_owned))
                 .filter(|k| k.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-'))
+                .filter(|k| !NOT_AGENTS.contains(&k.as_str()))
                 .collect()
         })
         .unwrap_or_default();

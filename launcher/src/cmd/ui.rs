@@ -288,7 +288,7 @@ impl Robot for UiRobot {
     }
 
     fn kinds(&mut self) -> Vec<String> {
-        crate::kinds::known_kinds().into_iter().filter(|k| k != "bench").collect()
+        crate::kinds::known_kinds()
     }
 
     fn tick(&mut self) {
