@@ -10,7 +10,7 @@ use std::time::Duration;
 /// A command-line session with a robot's router.
 pub struct RouterSession {
     pub world: World,
-    _node: Node<Ipc>,
+    node: Node<Ipc>,
     client: ControlClient<RouterRequest, RouterReply>,
 }
 
@@ -25,7 +25,12 @@ impl RouterSession {
     pub fn open(world: &World) -> Result<Self> {
         let node = cli_node(world)?;
         let client = router_client(world, &node).map_err(|e| no_router(world, e))?;
-        Ok(RouterSession { world: world.clone(), _node: node, client })
+        Ok(RouterSession { world: world.clone(), node, client })
+    }
+
+    /// The session's iceoryx2 node (ports a command makes beside its session).
+    pub fn node(&self) -> &Node<Ipc> {
+        &self.node
     }
 
     /// Sends a request; a refusal becomes an error with the router's message.

@@ -41,6 +41,7 @@ pub mod remembered;
 mod serving;
 pub mod store;
 pub mod supervision;
+pub mod transient;
 pub mod wiring;
 
 use agent_sdk::clock::now_ns;
@@ -159,6 +160,7 @@ impl Router {
                 epoch,
                 registry: registry::Registry::default(),
                 wiring: wiring::Wiring::new(connections),
+                transient: transient::Transient::default(),
                 store,
                 saves: store::ListSaves::default(),
                 writer: store::Writer::start()

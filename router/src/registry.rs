@@ -118,7 +118,15 @@ impl Registry {
     /// be connected: another type, or the same type name built from another
     /// definition (the agent to rebuild is named when the router can tell).
     pub fn check_compatible(&self, from: &PortRef, to: &PortRef) -> Result<String, RouterError> {
-        let (f, t) = (self.port(from, true)?, self.port(to, false)?);
+        let f = self.port(from, true)?;
+        self.check_input(from, f, to)?;
+        Ok(f.type_name.clone())
+    }
+
+    /// Whether input `to` takes what `from` sends (`f`: the spec of `from`,
+    /// an agent's output or a tool's port); why not, if not.
+    pub fn check_input(&self, from: &PortRef, f: &PortSpec, to: &PortRef) -> Result<(), RouterError> {
+        let t = self.port(to, false)?;
         if f.type_name != t.type_name {
             return Err(RouterError::TypeMismatch {
                 from: from.to_string(),
@@ -147,7 +155,7 @@ impl Registry {
                 rebuild,
             });
         }
-        Ok(f.type_name.clone())
+        Ok(())
     }
 }
 

@@ -19,13 +19,14 @@ use crate::registry::Registry;
 use crate::remembered::{self, FORGET_AFTER, Remembered};
 use crate::store::{Connection, ListSaves, Saved, Store, Writer};
 use crate::supervision::{Exit, Supervisor};
-use crate::wiring::Wiring;
+use crate::transient::{Attached, Transient};
+use crate::wiring::{self, Wiring};
 use agent_sdk::control::Responder;
 use agent_sdk::process::{ProcessError, ProcessHandle};
 use agent_sdk::world::{Ipc, World};
 use iceoryx2::prelude::Node;
 use shm_schemas::control::ProtocolError;
-use shm_schemas::control::agent_to_router::{AgentToRouter, Registration, TaskKind};
+use shm_schemas::control::agent_to_router::{AgentToRouter, PortSpec, Registration, TaskKind};
 use shm_schemas::control::cli_to_router::{
     AgentState, AgentView, CliRequest, EventKind, GraphView, RouterError, RouterReply, RouterRequest,
 };
@@ -45,10 +46,16 @@ const KILL_WAIT: Duration = Duration::from_millis(500);
 enum Work {
     /// `ps` or `graph`: statistics of every live agent
     Views { graph: bool, asked: BTreeMap<Ticket, String> },
+    /// `CliRequest::Agent`: statistics of one agent
+    AgentView { name: String },
     /// `connect`: the input agent subscribed
     Connect { conn: Connection },
     /// `disconnect`: the input agent let go
     Disconnect { conn: Connection },
+    /// a tool's edge (`CliRequest::Attach`): the input agent subscribed
+    Attach { attached: Attached },
+    /// a tool's edge removed (`CliRequest::Detach`): the input agent let go
+    Detach { conn: Connection },
     /// `rate`, `suspend`, `resume`, `param get/set`, `stop`
     Command { name: String, what: Asked },
     /// `kill`: the process is gone
@@ -68,6 +75,9 @@ impl Work {
             Work::Views { .. } => "views",
             Work::Connect { .. } => "connect",
             Work::Disconnect { .. } => "disconnect",
+            Work::Attach { .. } => "attach",
+            Work::Detach { .. } => "detach",
+            Work::AgentView { .. } => "agent",
             Work::Command { .. } => "command",
             Work::Kill { .. } => "kill",
             Work::Background { .. } => "background",
@@ -120,6 +130,8 @@ pub struct State {
     pub(crate) epoch: u64,
     pub(crate) registry: Registry,
     pub(crate) wiring: Wiring,
+    /// the edges of tools (`nerve cmd`), never saved
+    pub(crate) transient: Transient,
     pub(crate) store: Store,
     pub(crate) writer: Writer,
     /// the connection list's saves
@@ -260,6 +272,10 @@ impl State {
 
     /// A supervised agent exited (`failure`: died without leaving cleanly).
     fn exited(&mut self, name: &str, failure: bool) {
+        // its subscriptions to tools went with it, and a tool attaches anew
+        for a in self.transient.into_agent(name) {
+            self.events.push(EventKind::Disconnected { from: a.conn.from, to: a.conn.to });
+        }
         let exit = if self.shutdown { Exit::Left } else { self.supervisor.exited(name, failure, Instant::now()) };
         match exit {
             Exit::Left => {}
@@ -286,6 +302,9 @@ impl State {
 
     /// Removes dead agents from the registry and cleans their resources.
     pub fn check_liveness(&mut self) {
+        if !self.transient.is_empty() {
+            self.detach_orphans();
+        }
         let dead = self.registry.dead();
         if dead.is_empty() {
             return;
@@ -297,6 +316,19 @@ impl State {
             self.exited(name, true);
         }
         self.sweep();
+    }
+
+    /// Has agents let go of the ports of tools that are gone (a `nerve cmd`
+    /// killed before it detached).
+    fn detach_orphans(&mut self) {
+        for a in self.transient.orphaned() {
+            let (from, to) = (a.conn.from.clone(), a.conn.to.clone());
+            self.events.push(EventKind::Disconnected { from: from.clone(), to: to.clone() });
+            let (agent, cmd) = Wiring::disconnect_command(&a.conn);
+            let what = format!("{to} let go of {from}, whose tool (pid {}) is gone", a.process.pid());
+            let ticket = self.calls.submit(&agent, cmd, AGENT_TIMEOUT);
+            self.jobs.push(Job::new(vec![ticket], Work::Background { name: agent, what, effect: Asked::Nothing }));
+        }
     }
 
     /// Cleans up after dead processes that were not agents (tools, programs).
@@ -408,6 +440,49 @@ impl State {
                     asked.insert(ticket, name);
                 }
                 Ok(Started::waiting(asked.keys().copied().collect(), Work::Views { graph, asked }))
+            }
+            CliRequest::Agent { name } => {
+                self.registry.live(&name)?;
+                let ticket = self.calls.submit(&name, AgentCommand::Stats, STATS_TIMEOUT);
+                Ok(Started::waiting(vec![ticket], Work::AgentView { name }))
+            }
+            CliRequest::Attach { from, pid, type_name, fingerprint, to } => {
+                if self.registry.contains(from.agent.as_str()) {
+                    return Err(RouterError::NotApplicable(format!(
+                        "{from} is an agent's port: connect it with `nerve connect {from} {to}`"
+                    )));
+                }
+                let process = ProcessHandle::take(pid).map_err(|e| {
+                    RouterError::NotApplicable(format!("cannot attach {from}: its process {pid} is not there ({e})"))
+                })?;
+                let spec = PortSpec { name: from.port.clone(), type_name, fingerprint };
+                self.registry.check_input(&from, &spec, &to)?;
+                let conn = Connection {
+                    from: from.to_string(),
+                    to: to.to_string(),
+                    type_name: spec.type_name,
+                    allow_cycle: false,
+                };
+                let (agent, cmd) = Wiring::connect_command(&conn);
+                let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
+                Ok(Started::waiting(vec![ticket], Work::Attach { attached: Attached { conn, process } }))
+            }
+            CliRequest::Detach { from, to } => {
+                let (f, t) = (from.to_string(), to.to_string());
+                if self.registry.contains(from.agent.as_str()) {
+                    return Err(RouterError::NotConnected { from: f, to: t });
+                }
+                let conn = match self.transient.remove(&f, &t) {
+                    Some(a) => {
+                        self.events.push(EventKind::Disconnected { from: f, to: t });
+                        a.conn
+                    }
+                    // attached under an earlier router: the agent may still hold it
+                    None => Connection { from: f, to: t, type_name: String::new(), allow_cycle: false },
+                };
+                let (agent, cmd) = Wiring::disconnect_command(&conn);
+                let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
+                Ok(Started::waiting(vec![ticket], Work::Detach { conn }))
             }
             CliRequest::Events { after } => Ok(Started::Answer(RouterReply::Events {
                 epoch: self.epoch,
@@ -558,7 +633,8 @@ impl State {
                 }
                 let agents = self.views(&stats);
                 Ok(if graph {
-                    let connections = self.wiring.views(&agents);
+                    let mut connections = self.wiring.views(&agents);
+                    connections.extend(self.transient.connections().map(|c| wiring::view(c, &agents, true)));
                     RouterReply::Graph(GraphView { agents, connections })
                 } else {
                     RouterReply::Agents(agents)
@@ -578,6 +654,33 @@ impl State {
                 }
                 Err(e) => return self.answer_when_written_back(reply, since, e),
             },
+            Work::AgentView { name } => match single() {
+                Ok(AgentReply::Stats(s)) => {
+                    let stats = BTreeMap::from([(name.clone(), s)]);
+                    Ok(RouterReply::Agents(self.views(&stats).into_iter().filter(|v| v.name == name).collect()))
+                }
+                Ok(other) => Err(RouterError::Internal(format!("unexpected reply {other:?}"))),
+                Err(e) => Err(e),
+            },
+            Work::Attach { attached } => single().map(|_| {
+                let (from, to) = (attached.conn.from.clone(), attached.conn.to.clone());
+                let pid = attached.process.pid();
+                tracing::info!(from = %from, to = %to, pid, "attached {from} -> {to} (a tool, pid {pid})");
+                if self.transient.add(attached) {
+                    self.events.push(EventKind::Connected { from, to });
+                }
+                RouterReply::Ok
+            }),
+            Work::Detach { conn } => {
+                // it let go, or it did not have it: either way nothing flows
+                match single() {
+                    Ok(_) | Err(RouterError::AgentRefused { .. }) => {
+                        tracing::info!(from = %conn.from, to = %conn.to, "detached {} -> {}", conn.from, conn.to);
+                        Ok(RouterReply::Ok)
+                    }
+                    Err(e) => Err(e),
+                }
+            }
             Work::Disconnect { conn } => match single() {
                 // it let go, or it did not have it: either way nothing flows
                 Ok(_) | Err(RouterError::AgentRefused { .. }) => {

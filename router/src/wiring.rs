@@ -110,28 +110,32 @@ impl Wiring {
 
     /// Each connection with the figures its input reports in `agents`.
     pub fn views(&self, agents: &[AgentView]) -> Vec<ConnectionView> {
-        self.list
-            .iter()
-            .map(|c| {
-                let (fa, fp) = split_port(&c.from);
-                let (ta, tp) = split_port(&c.to);
-                let input =
-                    agents.iter().find(|a| a.name == ta).and_then(|a| a.stats.as_ref()).and_then(|s| {
-                        s.inputs.iter().find(|i| i.input == tp && i.from_agent == fa && i.from_port == fp)
-                    });
-                let from_live = agents.iter().any(|a| a.name == fa && a.pid != 0);
-                ConnectionView {
-                    from: c.from.clone(),
-                    to: c.to.clone(),
-                    type_name: c.type_name.clone(),
-                    active: from_live && input.is_some(),
-                    rate_hz: input.map(|i| i.rate_hz).unwrap_or(0.0),
-                    last_age_ms: input.and_then(|i| i.last_age_ns).map(|ns| ns as f64 / 1e6),
-                    received: input.map(|i| i.received).unwrap_or(0),
-                    dropped: input.map(|i| i.dropped).unwrap_or(0),
-                }
-            })
-            .collect()
+        self.list.iter().map(|c| view(c, agents, false)).collect()
+    }
+}
+
+/// Connection `c` with the figures its input reports in `agents`
+/// (`transient`: made by a tool, see [`crate::transient`]).
+pub fn view(c: &Connection, agents: &[AgentView], transient: bool) -> ConnectionView {
+    let (fa, fp) = split_port(&c.from);
+    let (ta, tp) = split_port(&c.to);
+    let input = agents
+        .iter()
+        .find(|a| a.name == ta)
+        .and_then(|a| a.stats.as_ref())
+        .and_then(|s| s.inputs.iter().find(|i| i.input == tp && i.from_agent == fa && i.from_port == fp));
+    // a tool is no agent: its edge is live while the input holds it
+    let from_live = transient || agents.iter().any(|a| a.name == fa && a.pid != 0);
+    ConnectionView {
+        from: c.from.clone(),
+        to: c.to.clone(),
+        type_name: c.type_name.clone(),
+        active: from_live && input.is_some(),
+        rate_hz: input.map(|i| i.rate_hz).unwrap_or(0.0),
+        last_age_ms: input.and_then(|i| i.last_age_ns).map(|ns| ns as f64 / 1e6),
+        received: input.map(|i| i.received).unwrap_or(0),
+        dropped: input.map(|i| i.dropped).unwrap_or(0),
+        transient,
     }
 }
 

@@ -6,9 +6,10 @@
 //! Some tests put a pseudo-terminal of their own in place of a board, so
 //! that they can write what a real line may carry (garbage, truncated
 //! frames, bad checksums, 64 KiB of noise), close it (the device vanishes)
-//! and bring it back. Commands reach the actuators the way `nerve cmd` sends
-//! them: a temporary port of the test, subscribed by the agent's message
-//! checker, with the sender named in the sample header.
+//! and bring it back. Commands reach the actuators from a temporary port of
+//! the test, which the agent's message checker is asked directly to
+//! subscribe, with the sender named in the sample header (`nerve cmd` does
+//! the same through the router: `nerve_cmd_goes_through_the_router`).
 //!
 //! No assertion depends on how fast this machine is: rates are checked in
 //! sequence numbers, retries in counts, and waits are bounded polls.
@@ -18,7 +19,7 @@ use agent_sdk::clock::now_ns;
 use agent_sdk::control::{ControlClient, ControlSize};
 use agent_sdk::ports::{port_event, port_service};
 use nerve_tests::device::{FakeDevice, crc16, sonar_frame};
-use nerve_tests::{Robot, wait_until};
+use nerve_tests::{Robot, sigkill, wait_until};
 use serde_json::Value;
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
 use shm_schemas::payloads::{LinguisticCommand, LinguisticTerm, SafetyStop, VelocityCommand};
@@ -611,6 +612,69 @@ fn safety_stop_overrides_every_source() {
         }));
     });
     stop_reader.store(true, Ordering::Relaxed);
+    let _ = h.join();
+    r.down_and_check_clean();
+}
+
+/// `nerve cmd` goes through the router's wiring like any other source: the
+/// router checks the type (a head command to the motor is refused with the
+/// router's message), `nerve graph` shows the tool's edge while it sends,
+/// nothing of it is saved, and a `nerve cmd` killed mid-way leaves no edge
+/// and no subscription behind.
+#[test]
+fn nerve_cmd_goes_through_the_router() {
+    let r = Robot::new("clirt");
+    r.router();
+    let (_bytes, stop, h) = motor_on_fake_board(&r);
+    let tool_edges = |r: &Robot| -> Vec<Value> {
+        r.graph()["connections"]
+            .as_array()
+            .map(|c| c.iter().filter(|c| c["transient"] == true).cloned().collect())
+            .unwrap_or_default()
+    };
+    let err = r.fails(&["cmd", "motor", "--pan", "10", "--input", "cmd"]);
+    assert!(err.contains("nerve::HeadCommand") && err.contains("motor/cmd"), "the router's refusal: {err}");
+
+    // while it holds, the edge is in the graph, marked as a tool's
+    let mut holding = r
+        .command("nerve")
+        .args(["cmd", "motor", "--v", "0.1", "--hold", "30s"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("nerve cmd runs");
+    let from = format!("cli-{}/cmd", holding.id());
+    assert!(
+        wait_until(Duration::from_secs(5), || tool_edges(&r).iter().any(|c| c["from"] == from.as_str()
+            && c["to"] == "motor/cmd"
+            && c["type_name"] == "nerve::VelocityCommand")),
+        "the tool's edge in the graph: {}",
+        r.graph()
+    );
+
+    let saved = std::fs::read_to_string(r.home.join(&r.name).join("connections.json")).unwrap_or_default();
+    assert!(!saved.contains("cli-"), "a tool's edge is never saved: {saved}");
+    // killed mid-way: the router sees the process gone and has the motor let go
+    sigkill(holding.id());
+    let _ = holding.wait();
+    let subscribed = |r: &Robot| {
+        r.agent("motor").is_some_and(|m| {
+            let tool = from.split('/').next().unwrap_or("");
+            m["stats"]["inputs"].as_array().is_some_and(|i| i.iter().any(|i| i["from_agent"] == tool))
+        })
+    };
+    assert!(
+        wait_until(Duration::from_secs(5), || tool_edges(&r).is_empty() && !subscribed(&r)),
+        "the killed tool's edge and subscription are gone: {} / {:?}",
+        r.graph(),
+        r.agent("motor")
+    );
+
+    // a command that ends detaches itself
+    let out = r.ok(&["cmd", "motor", "--v", "0.1"]);
+    assert!(out.contains("motor/cmd"), "{out}");
+    assert!(tool_edges(&r).is_empty(), "detached: {}", r.graph());
+    stop.store(true, Ordering::Relaxed);
     let _ = h.join();
     r.down_and_check_clean();
 }

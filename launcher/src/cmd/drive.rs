@@ -10,35 +10,33 @@
 //! nerve cmd motor --v 0.2 --hold 3s              # repeat every 100 ms for 3 s
 //! ```
 //!
-//! **How it reaches the agent.** The router only connects ports of
-//! registered agents, and the command line is not one. So `nerve cmd` does
-//! what the router would do, for a moment: it creates a temporary output
-//! port `nerve/<robot>/cli-<pid>/<input>` (through the SDK's
-//! `port_service`/`port_event`, so its settings match every agent's), asks
-//! the target agent's message checker directly (its control service
-//! `nerve/<robot>/<agent>/ctl`) to subscribe its input to it, publishes the
-//! command with the sample header's sender set to `--sender` (default
-//! `cli`; actuators keep one command per sender and weight senders by name),
-//! waits until the agent's statistics show it received it, and asks the
-//! agent to drop the subscription again. The connection list is untouched
-//! and nothing stays behind. The agent checks the payload type on connect,
-//! so sending a head command to the motor is refused with its message.
+//! **How it reaches the agent: through the router, like any source.** The
+//! command line is not an agent, so `nerve cmd` publishes on a port of its
+//! own, `nerve/<robot>/cli-<pid>/<input>` (made with the SDK's
+//! `port_service`/`port_event`, so its settings match every agent's), and
+//! asks the router to attach it to the input (`CliRequest::Attach`). The
+//! router checks the input and the type (a head command to the motor is
+//! refused with the router's message, as `nerve connect` would be), has the
+//! agent subscribe, and shows the edge in `nerve graph` as transient. The
+//! sample header's sender is `--sender` (default `cli`; actuators keep one
+//! command per sender and weight senders by name). `nerve cmd` waits until
+//! the agent's statistics (`CliRequest::Agent`) show it received what was
+//! sent, then detaches. The edge is never saved; if `nerve cmd` is killed
+//! first, the router removes it when it sees the process gone.
 //!
 //! Commands are stamped now. Actuators drop commands after their `stale_ms`
 //! (500 ms by default), so a single command moves the robot only briefly;
 //! `--hold DURATION` repeats it every 100 ms for that long. Unknown phrases
 //! are refused with the list of known ones.
 
+use crate::client::RouterSession;
 use agent_sdk::World;
 use agent_sdk::clock::now_ns;
-use agent_sdk::control::{ControlClient, ControlError, ControlSize};
 use agent_sdk::ports::{port_event, port_service};
-use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, anyhow, bail};
-use iceoryx2::prelude::Node;
-use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
+use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::payloads::{HeadCommand, LinguisticCommand, LinguisticTerm, SafetyStop, VelocityCommand};
-use shm_schemas::{AgentName, FixedName, Payload, SampleHeader};
+use shm_schemas::{AgentName, FixedName, Payload, PortRef, SampleHeader};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -191,39 +189,24 @@ fn send<T: Payload>(
     first: T,
     hold: Option<Duration>,
 ) -> Result<ExitCode> {
-    let node: Node<Ipc> =
-        world.node(&format!("cli-cmd-{}", std::process::id())).context("cannot join the robot's shared memory")?;
-    let from_agent = format!("cli-{}", std::process::id());
-    let service = world.robot().port_service(&from_agent, input);
-    let publisher = port_service::<T>(&node, &service)?
+    let session = RouterSession::open(world)?;
+    let from = PortRef::new(&format!("cli-{}", std::process::id()), input).context("the command line's port")?;
+    let to = PortRef::new(agent.as_str(), input).with_context(|| format!("input {input:?}"))?;
+    let service = world.robot().port_service(from.agent.as_str(), input);
+    let publisher = port_service::<T>(session.node(), &service)?
         .publisher_builder()
         .create()
         .map_err(|e| anyhow!("cannot create a publisher on {service}: {e:?}"))?;
-    let notifier = port_event(&node, &service)?
+    let notifier = port_event(session.node(), &service)?
         .notifier_builder()
         .create()
         .map_err(|e| anyhow!("cannot create a notifier on {service}: {e:?}"))?;
-
-    let ctl = world.robot().ctl_service(agent);
-    let client: ControlClient<AgentCommand, AgentReply> = ControlClient::open(&node, &ctl, ControlSize::AGENT)
-        .map_err(|e| match e {
-            ControlError::NoServer { .. } => {
-                anyhow!("no agent {agent} runs on robot {robot}; see `nerve --robot {robot} ps`", robot = world.robot())
-            }
-            e => anyhow!(e),
-        })?;
-    let call = |c: &AgentCommand| -> Result<AgentReply> {
-        match client.call(c, Duration::from_secs(5)) {
-            Ok(AgentReply::Error(e)) => Err(anyhow!("{agent} refused: {e}")),
-            Ok(r) => Ok(r),
-            Err(e) => Err(anyhow!("{agent} did not answer: {e}")),
-        }
-    };
-    call(&AgentCommand::Connect {
-        input: input.to_owned(),
-        from_agent: from_agent.clone(),
-        from_port: input.to_owned(),
+    session.ok(CliRequest::Attach {
+        from: from.clone(),
+        pid: std::process::id(),
         type_name: T::stable_type_name().to_owned(),
+        fingerprint: T::layout_fingerprint(),
+        to: to.clone(),
     })?;
 
     let result = (|| -> Result<u64> {
@@ -241,14 +224,14 @@ fn send<T: Payload>(
             }
             Ok(n)
         };
-        // the subscription is made; wait until the publisher sees it
+        // the agent answered once subscribed; the publisher may see it a moment later
         let mut value = first;
         loop {
             if publish(value, &mut seq)? > 0 {
                 break;
             }
             if t0.elapsed() > DELIVERY_TIMEOUT {
-                bail!("{agent}/{input} did not subscribe within {DELIVERY_TIMEOUT:?}");
+                bail!("{to} did not subscribe within {DELIVERY_TIMEOUT:?}");
             }
             std::thread::sleep(Duration::from_millis(5));
             command.restamp(now_ns());
@@ -266,16 +249,17 @@ fn send<T: Payload>(
         Ok(seq)
     })();
 
-    // wait until the agent has taken what we sent, then unsubscribe it
+    // wait until the agent has taken what we sent, then detach
     let sent = result.as_ref().copied().unwrap_or(0);
     let deadline = Instant::now() + DELIVERY_TIMEOUT;
     let mut received = 0;
     while sent > 0 && Instant::now() < deadline {
-        if let Ok(AgentReply::Stats(s)) = call(&AgentCommand::Stats) {
-            received = s
-                .inputs
+        if let Ok(RouterReply::Agents(views)) = session.call(CliRequest::Agent { name: agent.to_string() }) {
+            received = views
                 .iter()
-                .filter(|i| i.input == input && i.from_agent == from_agent)
+                .filter_map(|v| v.stats.as_ref())
+                .flat_map(|s| &s.inputs)
+                .filter(|i| i.input == input && i.from_agent == from.agent.as_str())
                 .map(|i| i.received)
                 .sum::<u64>();
             if received >= sent {
@@ -284,15 +268,13 @@ fn send<T: Payload>(
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    let _ = call(&AgentCommand::Disconnect {
-        input: input.to_owned(),
-        from_agent: from_agent.clone(),
-        from_port: input.to_owned(),
-    });
+    if let Err(e) = session.ok(CliRequest::Detach { from: from.clone(), to: to.clone() }) {
+        tracing::warn!(from = %from, to = %to, "could not detach: {e:#}; the router removes the edge when this command has exited");
+    }
     let sent = result?;
     if received < sent {
         bail!(
-            "{agent}/{input} took {received} of {sent} command(s) within {DELIVERY_TIMEOUT:?}; is its task running (`nerve ps`)?"
+            "{to} took {received} of {sent} command(s) within {DELIVERY_TIMEOUT:?}; is its task running (`nerve ps`)?"
         );
     }
     let what = match command {

@@ -152,7 +152,11 @@ fn print_graph(g: &GraphView) {
             c.from,
             c.to,
             c.type_name,
-            if c.active { "yes" } else { "no" },
+            match (c.active, c.transient) {
+                (true, true) => "tool",
+                (true, false) => "yes",
+                (false, _) => "no",
+            },
             format!("{:.1}Hz", c.rate_hz),
             c.last_age_ms.map(|a| format!("{a:.1}ms")).unwrap_or_else(|| "-".into()),
             c.received,

@@ -97,6 +97,37 @@ pub enum CliRequest {
     Supervise(Supervision),
     /// Stop the router itself.
     Shutdown,
+    /// Feed input `to` from port `from` of a tool that is not an agent
+    /// (`nerve cmd` publishes on `cli-<pid>/<input>`): the router checks the
+    /// input and the type as for [`CliRequest::Connect`] and has the agent
+    /// subscribe. The edge is not saved and not made again after a restart;
+    /// it goes with `Detach`, when process `pid` is gone, or when the
+    /// input's agent leaves.
+    Attach {
+        /// the tool's output port (its agent part names no running agent)
+        from: PortRef,
+        /// the tool's process
+        pid: u32,
+        /// the payload type the tool sends
+        type_name: String,
+        /// [`crate::Schema::fingerprint`] of that type as the tool was built
+        fingerprint: u64,
+        /// input port
+        to: PortRef,
+    },
+    /// Remove an edge made by [`CliRequest::Attach`].
+    Detach {
+        /// the tool's output port
+        from: PortRef,
+        /// input port
+        to: PortRef,
+    },
+    /// One agent with fresh statistics (answered with [`RouterReply::Agents`]
+    /// of one view): what `Ps` gives for that agent, without asking the others.
+    Agent {
+        /// agent
+        name: String,
+    },
 }
 
 /// When a supervised agent is restarted.
@@ -296,6 +327,9 @@ pub struct ConnectionView {
     pub received: u64,
     /// samples lost (sequence gaps) since the subscription was made
     pub dropped: u64,
+    /// made by a tool with [`CliRequest::Attach`]: not saved, gone with the tool
+    #[serde(default)]
+    pub transient: bool,
 }
 
 /// The whole graph.
