@@ -339,8 +339,8 @@ impl World {
     /// node counter, one file per iceoryx2 version).
     ///
     /// The file iceoryx2 opens is looked at first, by its name: every
-    /// command makes a node, and listing `/dev/shm` to find it cost about
-    /// 1.5 ms beside a 100-agent robot (1900 files). Where it is not there
+    /// command makes a node, and listing `/dev/shm` to find it took about
+    /// 1 ms beside a 100-agent robot (1900 files). Where it is not there
     /// (no node of the robot yet, or an iceoryx2 whose name differs) the
     /// folder is listed as before.
     fn global_mgmt_files(&self) -> Vec<PathBuf> {
