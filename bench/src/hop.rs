@@ -35,6 +35,10 @@
 //!   scenario, here in one robot without a bridge;
 //! * `dora-5ms`: the same with the dora nodes (see [`crate::dora`]).
 //!
+//! dora's two rows and `nerve-5ms` are measured under PM QoS as well
+//! (`dora-pmqos`, `dora-5ms-pmqos`, `nerve-5ms-pmqos`, below), so that dora
+//! and nerve are compared under the same settings both ways.
+//!
 //! `nerve-pinned` and `futex-pinned` are the pairs with both ends kept on
 //! one CPU (`--cpus 0` for the agents; the futex ping thread for its batch):
 //! what placement buys, without PM QoS.
@@ -82,7 +86,7 @@ use std::time::{Duration, Instant};
 /// Samples dropped at the start of every batch.
 const DISCARD: usize = 5;
 /// The transports, in the order of the tables.
-pub const TRANSPORTS: [&str; 18] = [
+pub const TRANSPORTS: [&str; 19] = [
     "nerve",
     "nerve-python",
     "nerve-python-pmqos",
@@ -99,17 +103,19 @@ pub const TRANSPORTS: [&str; 18] = [
     "futex-pinned",
     "ddsperf",
     "dora",
+    "dora-pmqos",
     "nerve-poll",
     "iox2-poll",
 ];
 /// The CPU the `-pinned` rows keep both ends on.
 pub(crate) const PINNED_CPU: usize = 0;
 /// The transports measured again under a PM QoS bound of 0 µs (row `T-pmqos`).
-const UNDER_PM_QOS: [&str; 5] = ["nerve", "nerve-python", "iox2-waitset", "uds", "futex"];
+const UNDER_PM_QOS: [&str; 8] =
+    ["nerve", "nerve-python", "iox2-waitset", "uds", "futex", "dora", "nerve-5ms", "dora-5ms"];
 /// nerve's round trip (with its default PM QoS bound) may be this many times the futex floor's (issue 17).
 pub const FUTEX_TARGET: f64 = 1.5;
 /// The rows in dora's pattern (one way, a sample every 5 ms), in table order.
-pub const PERIODIC: [&str; 2] = ["nerve-5ms", "dora-5ms"];
+pub const PERIODIC: [&str; 4] = ["nerve-5ms", "dora-5ms", "nerve-5ms-pmqos", "dora-5ms-pmqos"];
 /// nerve may be this much slower than raw iceoryx2 (the issue's target).
 pub const TARGET_RATIO: f64 = 1.1;
 /// A Python agent's round trip may be this many times a Rust agent's (issue 15).
@@ -203,6 +209,16 @@ pub struct HopRatio {
     pub dora_5ms_vs_nerve_5ms_p99: Option<f64>,
     /// whether both dora p50 ratios are at least [`DORA_TARGET`] (None without dora)
     pub dora_target_met: Option<bool>,
+    /// dora-pmqos p50 / nerve-pmqos p50: round trips, both under a PM QoS
+    /// bound of 0 µs (nerve's default; dora holds none of its own)
+    pub dora_pmqos_vs_nerve_pmqos_p50: Option<f64>,
+    /// dora-5ms-pmqos p50 / nerve-5ms-pmqos p50: one way every 5 ms, both under the bound
+    pub dora_5ms_pmqos_vs_nerve_5ms_pmqos_p50: Option<f64>,
+    /// whether both ratios under the bound are at least [`DORA_TARGET`]
+    pub dora_target_met_pmqos: Option<bool>,
+    /// dora p50 / nerve-pmqos p50: each as it runs by default (dora holds no
+    /// bound, nerve's agents hold 0 µs); not the same settings
+    pub dora_vs_nerve_pmqos_p50: Option<f64>,
     /// whether nerve p50 is within the target of iox2-waitset p50
     pub target_met: bool,
     /// nerve p50 / futex p50, neither holding PM QoS
@@ -828,7 +844,12 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             let Some(&pmqos) = UNDER_PM_QOS.iter().find(|x| **x == t && pm_qos) else {
                 return vec![(size, t, p)];
             };
-            let pmqos_name = TRANSPORTS.iter().copied().find(|x| x.strip_suffix("-pmqos") == Some(pmqos)).unwrap_or(t);
+            let pmqos_name = TRANSPORTS
+                .iter()
+                .chain(PERIODIC.iter())
+                .copied()
+                .find(|x| x.strip_suffix("-pmqos") == Some(pmqos))
+                .unwrap_or(t);
             let (plain, held) = Row::both(p);
             vec![(size, t, Box::new(plain) as Box<dyn Pinger>), (size, pmqos_name, Box::new(held))]
         })
@@ -933,7 +954,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 continue;
             }
             let Some(i) = keys.iter().position(|k| *k == (size, t)) else {
-                if t == "dora" || t.starts_with("nerve-python") {
+                if t.starts_with("dora") || t.starts_with("nerve-python") {
                     continue;
                 }
                 bail!("internal: no samples for {t} {size}");
@@ -987,6 +1008,9 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         let dora_p50 = dora.map(|d| ratio(d.rtt.p50_ns, n.rtt.p50_ns));
         let p50 = |t: &str| find(t, size).map(|x| x.rtt.p50_ns);
         let both = |a: Option<u64>, b: Option<u64>| a.zip(b).map(|(a, b)| ratio(a, b));
+        let one_way_p50 = |t: &str| find_periodic(t, size).map(|x| x.one_way.p50_ns);
+        let dora_pmqos = both(p50("dora-pmqos"), p50("nerve-pmqos"));
+        let dora_5ms_pmqos = both(one_way_p50("dora-5ms-pmqos"), one_way_p50("nerve-5ms-pmqos"));
         let nerve_pmqos_vs_futex_pmqos = both(p50("nerve-pmqos"), p50("futex-pmqos"));
         ratios.push(HopRatio {
             size,
@@ -1011,6 +1035,10 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 (Some(a), Some((b, _))) => Some(a >= DORA_TARGET && b >= DORA_TARGET),
                 _ => None,
             },
+            dora_pmqos_vs_nerve_pmqos_p50: dora_pmqos,
+            dora_5ms_pmqos_vs_nerve_5ms_pmqos_p50: dora_5ms_pmqos,
+            dora_target_met_pmqos: dora_pmqos.zip(dora_5ms_pmqos).map(|(a, b)| a >= DORA_TARGET && b >= DORA_TARGET),
+            dora_vs_nerve_pmqos_p50: both(p50("dora"), p50("nerve-pmqos")),
             target_met: r <= TARGET_RATIO,
             nerve_vs_futex_p50: both(p50("nerve"), p50("futex")),
             nerve_pmqos_vs_futex_pmqos_p50: nerve_pmqos_vs_futex_pmqos,
@@ -1162,18 +1190,22 @@ pub fn print_tables(r: &HopReport) {
         println!("dora ({v}) against nerve, same run:");
         println!();
         println!(
-            "| payload | dora/nerve p50 (round trip) | p99 | dora-5ms/nerve-5ms p50 (one way, 5 ms) | p99 | target ≥{DORA_TARGET} |"
+            "| payload | dora/nerve p50 (round trip) | p99 | dora-5ms/nerve-5ms p50 (one way, 5 ms) | p99 | target ≥{DORA_TARGET} | both under PM QoS 0: round trip | one way, 5 ms | target ≥{DORA_TARGET} | dora/nerve-pmqos (each by default) |"
         );
-        println!("|---|---:|---:|---:|---:|---|");
+        println!("|---|---:|---:|---:|---:|---|---:|---:|---|---:|");
         for x in &r.ratios {
             println!(
-                "| {} | {} | {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 label(x.size),
                 ratio_cell(x.dora_vs_nerve_p50),
                 ratio_cell(x.dora_vs_nerve_p99),
                 ratio_cell(x.dora_5ms_vs_nerve_5ms_p50),
                 ratio_cell(x.dora_5ms_vs_nerve_5ms_p99),
-                verdict(x.dora_target_met)
+                verdict(x.dora_target_met),
+                ratio_cell(x.dora_pmqos_vs_nerve_pmqos_p50),
+                ratio_cell(x.dora_5ms_pmqos_vs_nerve_5ms_pmqos_p50),
+                verdict(x.dora_target_met_pmqos),
+                ratio_cell(x.dora_vs_nerve_pmqos_p50)
             );
         }
     }

@@ -28,6 +28,7 @@ pub(crate) fn colour(t: &str) -> RGBColor {
         "nerve-python-pmqos" => RGBColor(250, 225, 110),
         "iox2-poll" => RGBColor(90, 190, 210),
         "dora" | "dora-5ms" => RGBColor(110, 70, 30),
+        "dora-pmqos" | "dora-5ms-pmqos" => RGBColor(185, 140, 95),
         _ => RGBColor(120, 120, 120),
     }
 }
