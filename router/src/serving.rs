@@ -15,7 +15,7 @@
 
 use crate::calls::{AGENT_TIMEOUT, Calls, Outcome, STATS_TIMEOUT, Ticket};
 use crate::events::EventLog;
-use crate::registry::Registry;
+use crate::registry::{Entry, Registry};
 use crate::remembered::{self, FORGET_AFTER, Remembered};
 use crate::store::{Connection, ListSaves, Saved, Store, Writer};
 use crate::supervision::{Exit, Supervisor};
@@ -655,10 +655,10 @@ impl State {
                 Err(e) => return self.answer_when_written_back(reply, since, e),
             },
             Work::AgentView { name } => match single() {
-                Ok(AgentReply::Stats(s)) => {
-                    let stats = BTreeMap::from([(name.clone(), s)]);
-                    Ok(RouterReply::Agents(self.views(&stats).into_iter().filter(|v| v.name == name).collect()))
-                }
+                // one view, not every agent's (`nerve cmd` asks every 20 ms); none if it left meanwhile
+                Ok(AgentReply::Stats(s)) => Ok(RouterReply::Agents(
+                    self.registry.get(&name).map(|e| self.live_view(&name, e, Some(s))).into_iter().collect(),
+                )),
                 Ok(other) => Err(RouterError::Internal(format!("unexpected reply {other:?}"))),
                 Err(e) => Err(e),
             },
@@ -790,23 +790,7 @@ impl State {
     fn views(&self, stats: &BTreeMap<String, AgentStats>) -> Vec<AgentView> {
         let mut out = Vec::new();
         for (name, e) in self.registry.iter() {
-            let stats = stats.get(name).cloned();
-            let sup = self.supervisor.get(name);
-            out.push(AgentView {
-                name: name.clone(),
-                pid: e.reg.pid,
-                kind: e.reg.kind.clone(),
-                state: if stats.is_some() { e.state } else { AgentState::Unresponsive },
-                task: e.reg.task,
-                period_ns: if e.reg.task == TaskKind::Periodic { e.reg.period_ns } else { None },
-                inputs: e.reg.inputs.clone(),
-                outputs: e.reg.outputs.clone(),
-                log_file: e.reg.log_file.clone(),
-                stats,
-                restarts: sup.map(|s| s.total).unwrap_or(0),
-                importance: sup.map(|s| s.spec.importance),
-                schemas: e.reg.schemas.clone(),
-            });
+            out.push(self.live_view(name, e, stats.get(name).cloned()));
         }
         for (name, sup) in self.supervisor.iter() {
             if self.registry.contains(name) || !sup.is_pending() {
@@ -830,6 +814,27 @@ impl State {
         }
         out.sort_by(|a, b| a.name.cmp(&b.name));
         out
+    }
+
+    /// Live agent `name` as `ps` shows it, with the statistics it answered
+    /// (`None`: it did not, and shows as unresponsive).
+    fn live_view(&self, name: &str, e: &Entry, stats: Option<AgentStats>) -> AgentView {
+        let sup = self.supervisor.get(name);
+        AgentView {
+            name: name.to_owned(),
+            pid: e.reg.pid,
+            kind: e.reg.kind.clone(),
+            state: if stats.is_some() { e.state } else { AgentState::Unresponsive },
+            task: e.reg.task,
+            period_ns: if e.reg.task == TaskKind::Periodic { e.reg.period_ns } else { None },
+            inputs: e.reg.inputs.clone(),
+            outputs: e.reg.outputs.clone(),
+            log_file: e.reg.log_file.clone(),
+            stats,
+            restarts: sup.map(|s| s.total).unwrap_or(0),
+            importance: sup.map(|s| s.spec.importance),
+            schemas: e.reg.schemas.clone(),
+        }
     }
 }
 
