@@ -306,6 +306,22 @@ fn publish<R: serde::Serialize>(
     Ok(())
 }
 
+/// The plot step of [`publish`] for a figure that may fail without failing
+/// the run: `draw` writes `OUT/FILE`; its error is a warning.
+fn plot_or_warn<R>(
+    out: &std::path::Path,
+    file: &str,
+    draw: fn(&R, &std::path::Path) -> Result<()>,
+) -> impl FnOnce(&R) -> Result<Vec<PathBuf>> {
+    let png = out.join(file);
+    move |r| {
+        if let Err(e) = draw(r, &png) {
+            eprintln!("warning: no plot: {e:#}");
+        }
+        Ok(vec![png])
+    }
+}
+
 fn run(cli: Cli) -> Result<()> {
     if cfg!(debug_assertions) {
         eprintln!(
@@ -396,13 +412,7 @@ fn run(cli: Cli) -> Result<()> {
             let report = hop::run(&opts);
             let _ = std::fs::remove_dir_all(&opts.work);
             let report = report?;
-            let plot = |r: &_| {
-                let png = common.out.join("hop-latency.png");
-                if let Err(e) = plot::hop_png(r, &png) {
-                    eprintln!("warning: no plot: {e:#}");
-                }
-                Ok(vec![png])
-            };
+            let plot = plot_or_warn(&common.out, "hop-latency.png", plot::hop_png);
             publish(&common, "hop", &report, report.seconds, plot, hop::print_tables)?;
         }
         Scenario::Control { common, rounds, launch } => {
@@ -430,13 +440,7 @@ fn run(cli: Cli) -> Result<()> {
             let report = images::run(&opts);
             let _ = std::fs::remove_dir_all(&opts.work);
             let report = report?;
-            let plot = |r: &_| {
-                let png = common.out.join("images-latency.png");
-                if let Err(e) = plot_images::images_png(r, &png) {
-                    eprintln!("warning: no plot: {e:#}");
-                }
-                Ok(vec![png])
-            };
+            let plot = plot_or_warn(&common.out, "images-latency.png", plot_images::images_png);
             publish(&common, "images", &report, report.seconds, plot, images::print_tables)?;
         }
         Scenario::Bridge { common, payloads, rounds, count, interval_us, tput_ms, hop_count } => {
