@@ -4,9 +4,10 @@
 //! [`agent_sdk::run_with_args`].
 //!
 //! * `ping` (event-driven): on `nerve resume` it starts a batch: it sends a
-//!   sample on `out` and, each time the echo comes back on `in`, records the
-//!   round-trip time and sends the next; after `--count` round trips it
-//!   writes them to `<out-dir>/batch-<k>.txt` and waits for the next resume.
+//!   sample on `out` and, each time the echo comes back on `in`, sends the
+//!   next; after 100 ms of settling it records each round-trip time, and
+//!   after `--count` of them it writes them to `<out-dir>/batch-<k>.txt` and
+//!   waits for the next resume.
 //! * `pong` (event-driven): echoes every sample of `in` on `out`
 //!   (`Output::send_uninit`: only the sequence number is written, in place).
 //! * `jitter` (periodic): records, for `--cycles` cycles, how late each
@@ -69,6 +70,14 @@ pub fn read_values(path: &Path) -> anyhow::Result<Vec<u64>> {
         .collect()
 }
 
+/// How long a batch ping-pongs before it records: the `nerve resume` that
+/// started it is still being answered and exiting meanwhile (the router
+/// replies, the command drops its iceoryx2 node and exits: a few ms of CPU
+/// on a 2-core machine). A batch of 250 frames at 20 µs lasts 5 ms and used
+/// to run entirely beside that work: 45 µs measured where the same pair,
+/// settled, takes 20 (BENCHMARKS.md §1, "the 1080p row under PM QoS").
+const SETTLE_NS: u64 = 100_000_000;
+
 /// The round-trip bookkeeping of a ping agent, shared by the event-driven
 /// [`Ping`] and the polling [`PollPing`].
 struct PingSide<P: BenchPayload> {
@@ -77,6 +86,8 @@ struct PingSide<P: BenchPayload> {
     count: usize,
     dir: PathBuf,
     batch: u64,
+    /// echoes of samples sent before this are not recorded ([`SETTLE_NS`])
+    settle_until_ns: u64,
     seq: u64,
     /// (seq, send time) of the sample in flight
     outstanding: Option<(u64, u64)>,
@@ -103,6 +114,7 @@ impl<P: BenchPayload> PingSide<P> {
             count: a.count.max(1),
             dir,
             batch: 0,
+            settle_until_ns: 0,
             seq: 0,
             outstanding: None,
             rtts: Vec::with_capacity(a.count.max(1)),
@@ -124,10 +136,12 @@ impl<P: BenchPayload> PingSide<P> {
         self.outstanding.is_some_and(|(_, t0)| now_ns().saturating_sub(t0) > 500_000_000)
     }
 
-    /// Forgets a batch under way.
+    /// Forgets a batch under way and starts a new one, which records after
+    /// [`SETTLE_NS`].
     fn restart(&mut self) {
         self.outstanding = None;
         self.rtts.clear();
+        self.settle_until_ns = now_ns().saturating_add(SETTLE_NS);
     }
 
     /// Drains the input; records the round trip when the echo of the sample
@@ -143,8 +157,11 @@ impl<P: BenchPayload> PingSide<P> {
         let (Some(t), Some((_, t0))) = (seen_at, self.outstanding) else {
             return Ok(Collected { drained, echo: false, batch_done: false });
         };
-        self.rtts.push(t.saturating_sub(t0));
         self.outstanding = None;
+        if t0 < self.settle_until_ns {
+            return Ok(Collected { drained, echo: true, batch_done: false });
+        }
+        self.rtts.push(t.saturating_sub(t0));
         let batch_done = self.rtts.len() >= self.count;
         if batch_done {
             self.batch += 1;
@@ -189,6 +206,9 @@ impl<P: BenchPayload> Agent for Ping<P> {
         }
         // woken without input: a `nerve resume` starts a batch, or restarts a stalled one
         if c.drained == 0 && (side.outstanding.is_none() || side.stalled()) {
+            if side.outstanding.is_none() && side.rtts.is_empty() {
+                side.restart();
+            }
             return side.send_next();
         }
         Ok(()) // a stale echo, or the echo still on its way

@@ -60,7 +60,11 @@
 //! The benchmark's own ping side runs at the agents' SCHED_FIFO priority (20)
 //! with locked memory, like the SDK's task thread, so that only the code
 //! paths differ. The first samples of every batch are dropped (warm-up), and
-//! so is a whole first round.
+//! so is a whole first round. The SDK ping, started by a `nerve resume`,
+//! ping-pongs 100 ms before it records, while that command is answered and
+//! exits: a raw pair's batch starts from this process and has no such
+//! neighbour, and a short batch (250 frames of 1080p: 5 ms) ran entirely
+//! beside it.
 
 use crate::agents::read_values;
 use crate::bridge_agents::take_sink_batch;
