@@ -420,15 +420,18 @@ pub(crate) fn spawn_bench_agent(
     count: usize,
     dir: &Path,
 ) -> Result<ChildGuard> {
-    // `pin-ping`, `pin-pong`: the same agents kept on CPU 0
-    let (role, pinned) = match role.strip_prefix("pin-") {
-        Some(r) => (r, true),
-        None => (role, false),
+    // `pin-ping`, `pin-pong`: the same agents kept on CPU 0; `cpuN-ROLE` on CPU N
+    let (role, cpu) = match role.strip_prefix("pin-") {
+        Some(r) => (r, Some(PINNED_CPU)),
+        None => match role.strip_prefix("cpu").and_then(|r| r.split_once('-')) {
+            Some((n, r)) => (r, Some(n.parse::<usize>().with_context(|| format!("bad CPU in role {role}"))?)),
+            None => (role, None),
+        },
     };
     let mut cmd = self_command(&format!("__agent-{role}"))?;
     cmd.args(["--robot", &robot.name, "--name", name]);
-    if pinned {
-        cmd.args(["--cpus", &PINNED_CPU.to_string()]);
+    if let Some(cpu) = cpu {
+        cmd.args(["--cpus", &cpu.to_string()]);
     }
     if role == "ping" || role.starts_with("poll-") {
         cmd.arg("--suspended");
