@@ -180,10 +180,13 @@ impl ProcessHandle {
     /// Whether the process is alive: it has not exited (a zombie has), and
     /// its pid has not been reused since the handle was taken.
     pub fn is_alive(&self) -> bool {
-        if let Some(fd) = &self.pidfd
-            && pidfd_exited(fd)
-        {
-            return false;
+        // A pidfd names one process, never a later one with the same pid,
+        // and polls readable once it exited (a zombie included): it answers
+        // alone. The router asks this of every agent before every request,
+        // where reading `/proc/<pid>/stat` instead took about a fifth of its
+        // CPU for a `nerve ps` of 100 agents.
+        if let Some(fd) = &self.pidfd {
+            return !pidfd_exited(fd);
         }
         match read_stat(self.pid) {
             Some(s) => s.start_time == self.start_time && !matches!(s.state, 'Z' | 'X' | 'x'),
@@ -342,6 +345,26 @@ mod tests {
         let _ = sleeper.0.wait();
         assert!(!handle.is_alive(), "killed and reaped");
         assert!(!sleeper.running());
+    }
+
+    /// A process that exited but was not reaped yet (a zombie) is dead: the
+    /// pidfd says so alone, without `/proc` (and so does `/proc` without one).
+    #[test]
+    fn a_zombie_is_dead() {
+        let mut sleeper = Sleeper::start();
+        let pid = sleeper.pid();
+        let handle = ProcessHandle::take(pid).expect("sleep runs");
+        let no_pidfd = ProcessHandle::from_parts(pid, handle.start_time());
+        assert!(handle.is_alive() && no_pidfd.is_alive());
+        // SIGKILL without a wait: the child stays a zombie until the Sleeper drops
+        nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), Signal::SIGKILL).expect("kill");
+        let t0 = std::time::Instant::now();
+        while handle.is_alive() && t0.elapsed() < std::time::Duration::from_secs(5) {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        assert!(!handle.is_alive(), "a zombie by its pidfd");
+        assert!(!no_pidfd.is_alive(), "a zombie by /proc");
+        assert!(sleeper.0.try_wait().is_ok_and(|s| s.is_some()), "it was a zombie, reaped only now");
     }
 
     /// A pid reused by another process: simulated by a handle whose start
