@@ -75,7 +75,7 @@ pub fn read_values(path: &Path) -> anyhow::Result<Vec<u64>> {
 /// replies, the command drops its iceoryx2 node and exits: a few ms of CPU
 /// on a 2-core machine). A batch of 250 frames at 20 µs lasts 5 ms and used
 /// to run entirely beside that work: 45 µs measured where the same pair,
-/// settled, takes 20 (BENCHMARKS.md §1, "the 1080p row under PM QoS").
+/// settled, takes 20 (BENCHMARKS.md §1, "A settled batch").
 const SETTLE_NS: u64 = 100_000_000;
 
 /// The round-trip bookkeeping of a ping agent, shared by the event-driven
