@@ -138,6 +138,47 @@ pub struct PipelineReport {
     pub seconds: f64,
 }
 
+/// One ring of SDK agents, its ping first: each member feeds the next and
+/// the last feeds the ping, so a round is one hop per member.
+struct Ring {
+    path: &'static str,
+    path_pmqos: &'static str,
+    /// (role for [`spawn_bench_agent`], agent name), in ring order
+    members: Vec<(&'static str, String)>,
+}
+
+impl Ring {
+    /// The rings measured at the payload of tag `t`: the one-hop pair, the
+    /// three-hop chain, and the placed chain where `placed`.
+    fn all(t: &str, placed: bool) -> Vec<Ring> {
+        let ring = |path, path_pmqos, members: &[(&'static str, &str)]| Ring {
+            path,
+            path_pmqos,
+            members: members.iter().map(|(role, name)| (*role, format!("{name}-{t}"))).collect(),
+        };
+        let mut rings = vec![
+            ring("one-hop", "one-hop-pmqos", &[("ping", "p1"), ("pong", "q1")]),
+            ring("three-hop", "three-hop-pmqos", &[("ping", "p3"), ("pong", "sonar"), ("pong", "safety")]),
+        ];
+        if placed {
+            let members = [("cpu0-ping", "p3p"), ("cpu1-pong", "sonarp"), ("cpu1-pong", "safetyp")];
+            rings.push(ring("three-hop-placed", "three-hop-placed-pmqos", &members));
+        }
+        rings
+    }
+
+    /// Hops in one round of the ring.
+    fn hops(&self) -> u32 {
+        u32::try_from(self.members.len()).unwrap_or(u32::MAX)
+    }
+
+    /// The connections that close the ring: each member's `out` to the next's `in`.
+    fn edges(&self) -> impl Iterator<Item = (String, String)> + '_ {
+        let next = self.members.iter().cycle().skip(1);
+        self.members.iter().zip(next).map(|((_, a), (_, b))| (format!("{a}/out"), format!("{b}/in")))
+    }
+}
+
 /// Runs the scenario.
 pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
     let started = Instant::now();
@@ -155,40 +196,27 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
     let _router = robot.start_router()?;
     let mut children: Vec<ChildGuard> = Vec::new();
     let mut names = Vec::new();
+    let mut all_rings = Vec::new();
     let pm_qos = pm_qos_permitted("pipeline");
     // the placed ring needs a second CPU
     let placed = std::thread::available_parallelism().is_ok_and(|n| n.get() >= 2);
     // (size, path, hops, ping)
     let mut paths: Vec<(usize, &'static str, u32, Box<dyn Pinger>)> = Vec::new();
     for &(size, count) in &counts {
-        let t = size_tag(size);
-        let (p1, q1, p3, s3, f3) =
-            (format!("p1-{t}"), format!("q1-{t}"), format!("p3-{t}"), format!("sonar-{t}"), format!("safety-{t}"));
-        let mut agents =
-            vec![("ping", p1.clone()), ("pong", q1.clone()), ("ping", p3.clone()), ("pong", s3), ("pong", f3)];
-        if placed {
-            agents.extend([
-                ("cpu0-ping", format!("p3p-{t}")),
-                ("cpu1-pong", format!("sonarp-{t}")),
-                ("cpu1-pong", format!("safetyp-{t}")),
-            ]);
-        }
-        for (role, name) in &agents {
-            let dir = opts.work.join(name);
-            std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-            children.push(spawn_bench_agent(&robot, role, name, size, count, &dir)?);
-            names.push(name.clone());
-        }
-        let mut rings = vec![("one-hop", "one-hop-pmqos", 2, p1), ("three-hop", "three-hop-pmqos", 3, p3)];
-        if placed {
-            rings.push(("three-hop-placed", "three-hop-placed-pmqos", 3, format!("p3p-{t}")));
-        }
-        for (path, path_pmqos, hops, name) in rings {
-            let (plain, held) = Row::both(Box::new(NervePing { dir: opts.work.join(&name), name, next: 0 }));
-            paths.push((size, path, hops, Box::new(plain)));
-            if pm_qos {
-                paths.push((size, path_pmqos, hops, Box::new(held)));
+        for ring in Ring::all(size_tag(size), placed) {
+            for (role, name) in &ring.members {
+                let dir = opts.work.join(name);
+                std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+                children.push(spawn_bench_agent(&robot, role, name, size, count, &dir)?);
+                names.push(name.clone());
             }
+            let ping = ring.members[0].1.clone();
+            let (plain, held) = Row::both(Box::new(NervePing { dir: opts.work.join(&ping), name: ping, next: 0 }));
+            paths.push((size, ring.path, ring.hops(), Box::new(plain)));
+            if pm_qos {
+                paths.push((size, ring.path_pmqos, ring.hops(), Box::new(held)));
+            }
+            all_rings.push(ring);
         }
         let (c, ping) = UdsPing::with_pong(&robot.home, size, opts.verbose)?;
         children.push(c);
@@ -203,26 +231,9 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
     }
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
     robot.wait_registered(&refs, Duration::from_secs(20))?;
-    for &size in &opts.sizes {
-        let t = size_tag(size);
-        let mut edges = vec![
-            (format!("p1-{t}/out"), format!("q1-{t}/in")),
-            (format!("q1-{t}/out"), format!("p1-{t}/in")),
-            (format!("p3-{t}/out"), format!("sonar-{t}/in")),
-            (format!("sonar-{t}/out"), format!("safety-{t}/in")),
-            (format!("safety-{t}/out"), format!("p3-{t}/in")),
-        ];
-        if placed {
-            edges.extend([
-                (format!("p3p-{t}/out"), format!("sonarp-{t}/in")),
-                (format!("sonarp-{t}/out"), format!("safetyp-{t}/in")),
-                (format!("safetyp-{t}/out"), format!("p3p-{t}/in")),
-            ]);
-        }
-        for (from, to) in edges {
-            // the two rings are the benchmark: their pingers answer one sample with one
-            robot.run(&["connect", "--allow-cycle", &from, &to])?;
-        }
+    for (from, to) in all_rings.iter().flat_map(Ring::edges) {
+        // the rings are the benchmark: their pingers answer one sample with one
+        robot.run(&["connect", "--allow-cycle", &from, &to])?;
     }
     eprintln!("pipeline: agents running and connected");
 
@@ -371,5 +382,22 @@ pub fn print_tables(r: &PipelineReport) {
             ratio_cell(x.one_hop_vs_futex_p50),
             ratio_cell(x.one_hop_vs_futex_pmqos_p50)
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rings_close_on_their_ping_and_count_a_hop_per_member() {
+        let rings = Ring::all("8", true);
+        let paths: Vec<_> = rings.iter().map(|r| (r.path, r.hops())).collect();
+        assert_eq!(paths, [("one-hop", 2), ("three-hop", 3), ("three-hop-placed", 3)]);
+        let edges: Vec<_> = rings[1].edges().collect();
+        let want = [("p3-8/out", "sonar-8/in"), ("sonar-8/out", "safety-8/in"), ("safety-8/out", "p3-8/in")];
+        assert_eq!(edges, want.map(|(a, b)| (a.to_owned(), b.to_owned())));
+        assert_eq!(rings[2].members[0], ("cpu0-ping", "p3p-8".to_owned()));
+        assert_eq!(Ring::all("8", false).len(), 2, "no placed ring on one CPU");
     }
 }
