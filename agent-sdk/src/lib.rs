@@ -44,5 +44,5 @@ pub use agent::{Agent, AgentError, Context, Setup, Task};
 pub use cli::CommonArgs;
 pub use params::Param;
 pub use ports::{Input, Meta, Output, PortError};
-pub use runtime::{run, run_with_args};
+pub use runtime::{abort_on_panic, run, run_with_args};
 pub use world::{Ipc, World};

@@ -786,7 +786,7 @@ impl<T: Payload> Input<T> {
 }
 
 pub(crate) fn lock<X>(m: &Mutex<X>) -> MutexGuard<'_, X> {
-    // A panic in another thread aborts the process (panic = "abort"), so a
+    // A panic in another thread aborts the process (`abort_on_panic`), so a
     // poisoned lock cannot be observed; recover the guard regardless.
     m.lock().unwrap_or_else(|p| p.into_inner())
 }

@@ -22,6 +22,8 @@ use cmd::{
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    // the router's threads, and every command's, end the process on a panic
+    agent_sdk::abort_on_panic();
     let matches = Cli::command().get_matches();
     let mut args = match Cli::from_arg_matches(&matches) {
         Ok(a) => a,

@@ -180,6 +180,25 @@ fn crashing_agent_is_restarted_with_backoff_then_marked_failed() {
     r.down_and_check_clean();
 }
 
+/// A panic in the task's thread ends the agent's process, also in the dev
+/// profile, which unwinds (`agent_sdk::abort_on_panic`): its supervisor sees
+/// the death and restarts it. Were only the thread lost, the agent would
+/// answer the router for ever and never step again.
+#[test]
+fn a_panic_in_the_task_ends_the_agent_and_it_is_restarted() {
+    let r = Robot::new("panic");
+    let file = r.launch_file(
+        "panic.toml",
+        "robot = \"x\"\n[[agent]]\nname = \"bad\"\nkind = \"testagent\"\nargs = [\"--mode\", \"panic\"]\nrestart = \"on-failure\"\nmax_restarts = 1\nbackoff = \"100ms\"\nrestart_window = \"60s\"\n",
+    );
+    r.command("nerve").arg("launch").arg(&file).output().expect("launch");
+    let failed = || r.ps().iter().any(|a| a["name"] == "bad" && a["state"] == "failed");
+    assert!(wait_until(Duration::from_secs(30), failed), "the panicking agent never died: {:?}", r.ps());
+    let bad = r.ps().into_iter().find(|a| a["name"] == "bad").expect("bad listed");
+    assert_eq!(bad["restarts"], 1, "restarted once, then failed: {bad}");
+    r.down_and_check_clean();
+}
+
 /// An agent that ignores SIGTERM is killed after the grace time; no zombie remains.
 #[test]
 fn sigterm_ignoring_agent_is_killed_after_grace() {

@@ -30,7 +30,7 @@ mod startup;
 mod task;
 
 pub use router_link::epoch_service;
-pub use startup::{EXIT_STARTUP, StartupError, run, run_status, run_with_args};
+pub use startup::{EXIT_STARTUP, StartupError, abort_on_panic, run, run_status, run_with_args};
 
 use crate::agent::AgentError;
 use crate::meters::{LatenessRecorder, RateMeter};

@@ -116,12 +116,17 @@ pub fn run<A: Agent>() -> ExitCode {
     run_with_args::<A>(args)
 }
 
-/// A panic anywhere in an agent ends its process, in any build. nerve's
-/// own profiles say `panic = "abort"`; a crate built with unwinding (one that
-/// changed its profile) would otherwise lose only the thread that panicked,
-/// and an agent whose task died alone answers the router but never steps
-/// again, which its supervisor cannot see.
-fn abort_on_panic() {
+/// Makes a panic anywhere in this process end the process, in any build:
+/// the panic is reported as usual, then the process aborts. The release
+/// profile says `panic = "abort"`; the dev profile unwinds (tests need
+/// unwinding, and a profile that aborts made cargo build every dependency
+/// twice, once per strategy). Unwinding would lose only the thread that
+/// panicked: an agent whose task died alone answers the router but never
+/// steps again, and a router whose serving thread died supervises no one,
+/// and neither is visible to whoever watches the process. Every nerve
+/// daemon calls this first ([`run`] does for agents; `nerve` for the router
+/// and its other commands).
+pub fn abort_on_panic() {
     let report = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
         report(info);

@@ -6,6 +6,8 @@
 //! `-- --mode MODE`:
 //! * `scalar` (default): sends a counter on `value` each period;
 //! * `crash`: aborts on its first step (a crash at once);
+//! * `panic`: panics in its first step, in the task's thread (the process
+//!   must end all the same, in a build that unwinds too);
 //! * `stubborn`: ignores SIGTERM and never finishes a step (must be SIGKILLed);
 //! * `hang`: its task blocks for ever in the first step (a hung agent; the
 //!   message checker still answers, but the watchdog pings stop);
@@ -20,6 +22,7 @@ use std::time::Duration;
 enum Mode {
     Scalar,
     Crash,
+    Panic,
     Stubborn,
     Hang,
     Burn,
@@ -46,13 +49,14 @@ impl Agent for TestAgent {
             [flag, m] if flag == "--mode" => match m.as_str() {
                 "scalar" => Mode::Scalar,
                 "crash" => Mode::Crash,
+                "panic" => Mode::Panic,
                 "stubborn" => Mode::Stubborn,
                 "hang" => Mode::Hang,
                 "burn" => Mode::Burn,
                 "fail-start" => Mode::FailStart,
                 other => {
                     return Err(AgentError::Config(format!(
-                        "unknown mode {other:?}; use scalar, crash, stubborn, hang, burn or fail-start"
+                        "unknown mode {other:?}; use scalar, crash, panic, stubborn, hang, burn or fail-start"
                     )));
                 }
             },
@@ -72,6 +76,7 @@ impl Agent for TestAgent {
         match self.mode {
             Mode::Scalar | Mode::FailStart => {}
             Mode::Crash => std::process::abort(),
+            Mode::Panic => panic!("testagent: a bug in the step, on purpose"),
             Mode::Stubborn => {
                 // SAFETY: setting a signal disposition to SIG_IGN is always sound.
                 unsafe { libc::signal(libc::SIGTERM, libc::SIG_IGN) };
