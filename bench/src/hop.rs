@@ -420,6 +420,11 @@ pub(crate) fn spawn_bench_agent(
     count: usize,
     dir: &Path,
 ) -> Result<ChildGuard> {
+    // `ROLE@P`: the task at SCHED_FIFO priority P instead of the SDK's 20
+    let (role, priority) = match role.split_once('@') {
+        Some((r, p)) => (r, Some(p.parse::<u8>().with_context(|| format!("bad priority in role {role}"))?)),
+        None => (role, None),
+    };
     // `pin-ping`, `pin-pong`: the same agents kept on CPU 0; `cpuN-ROLE` on CPU N
     let (role, cpu) = match role.strip_prefix("pin-") {
         Some(r) => (r, Some(PINNED_CPU)),
@@ -432,6 +437,9 @@ pub(crate) fn spawn_bench_agent(
     cmd.args(["--robot", &robot.name, "--name", name]);
     if let Some(cpu) = cpu {
         cmd.args(["--cpus", &cpu.to_string()]);
+    }
+    if let Some(p) = priority {
+        cmd.args(["--priority", &p.to_string()]);
     }
     if role == "ping" || role.starts_with("poll-") {
         cmd.arg("--suspended");

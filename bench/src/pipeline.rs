@@ -23,6 +23,11 @@
 //!   of their context switches were migrations, against 0.02% in the
 //!   one-hop pair); placed, none does, and one hop of three is a hand-over
 //!   on one CPU.
+//! * `three-hop-ordered`: placed the same, with `safety` one SCHED_FIFO
+//!   priority above `sonar` (21 against the SDK's 20), as a real-time
+//!   pipeline is often given: the hand-over on CPU 1 then preempts the
+//!   sender at its `sendto` instead of waiting for it to block, and the
+//!   sender's tail runs while `ping-3` works on CPU 0.
 //!
 //! Beside them, the floors of a round trip at the same size: `uds` (a
 //! blocking Unix socket, copying) and `futex` (the wake-up alone), from
@@ -107,6 +112,9 @@ pub struct PipelineRatio {
     pub placed_vs_one_p50: Option<f64>,
     /// three-hop-placed-pmqos p50 / one-hop-pmqos p50 (hops)
     pub placed_vs_one_pmqos_p50: Option<f64>,
+    /// three-hop-ordered-pmqos p50 / one-hop-pmqos p50 (hops): placed, the
+    /// downstream stage one priority above the upstream one
+    pub ordered_vs_one_pmqos_p50: Option<f64>,
     /// whether that is within the target
     pub target_met_placed_pmqos: Option<bool>,
     /// one-hop round trip p50 / futex round trip p50, both without PM QoS
@@ -163,6 +171,8 @@ impl Ring {
         if placed {
             let members = [("cpu0-ping", "p3p"), ("cpu1-pong", "sonarp"), ("cpu1-pong", "safetyp")];
             rings.push(ring("three-hop-placed", "three-hop-placed-pmqos", &members));
+            let members = [("cpu0-ping", "p3o"), ("cpu1-pong@20", "sonaro"), ("cpu1-pong@21", "safetyo")];
+            rings.push(ring("three-hop-ordered", "three-hop-ordered-pmqos", &members));
         }
         rings
     }
@@ -287,6 +297,8 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
         let placed_vs_one = p50("three-hop-placed").map(|a| 2.0 * ratio(a, one.latency.p50_ns));
         let placed_vs_one_pmqos =
             p50("three-hop-placed-pmqos").zip(p50("one-hop-pmqos")).map(|(a, b)| 2.0 * ratio(a, b));
+        let ordered_vs_one_pmqos =
+            p50("three-hop-ordered-pmqos").zip(p50("one-hop-pmqos")).map(|(a, b)| 2.0 * ratio(a, b));
         ratios.push(PipelineRatio {
             size,
             one_hop_p50_ns: one.latency.p50_ns / 2,
@@ -299,6 +311,7 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
             target_met_pmqos: three_vs_one_pmqos.map(|x| x <= TARGET_RATIO),
             placed_vs_one_p50: placed_vs_one,
             placed_vs_one_pmqos_p50: placed_vs_one_pmqos,
+            ordered_vs_one_pmqos_p50: ordered_vs_one_pmqos,
             target_met_placed_pmqos: placed_vs_one_pmqos.map(|x| x <= TARGET_RATIO),
             one_hop_vs_futex_p50: p50("futex").map(|f| ratio(one.latency.p50_ns, f)),
             one_hop_vs_futex_pmqos_p50: p50("one-hop-pmqos").zip(p50("futex-pmqos")).map(|(a, b)| ratio(a, b)),
@@ -334,6 +347,8 @@ pub fn print_tables(r: &PipelineReport) {
                 "three-hop-pmqos" => "three-hop pipeline, PM QoS 0",
                 "three-hop-placed" => "three-hop pipeline, placed",
                 "three-hop-placed-pmqos" => "three-hop pipeline, placed, PM QoS 0",
+                "three-hop-ordered" => "three-hop pipeline, placed, downstream priority +1",
+                "three-hop-ordered-pmqos" => "three-hop pipeline, placed, downstream priority +1, PM QoS 0",
                 "uds" => "Unix socket round trip",
                 "futex" => "futex round trip (wake-up floor)",
                 "futex-pmqos" => "futex round trip, PM QoS 0",
@@ -367,18 +382,19 @@ pub fn print_tables(r: &PipelineReport) {
     println!("Under PM QoS 0 (nerve's default), and against the wake-up floor, same run:");
     println!();
     println!(
-        "| payload | three / one p50, PM QoS 0 | target ≤{TARGET_RATIO} | placed three / one | placed, PM QoS 0 | target ≤{TARGET_RATIO} | one-hop / futex round trip | the same, PM QoS 0 |"
+        "| payload | three / one p50, PM QoS 0 | target ≤{TARGET_RATIO} | placed three / one | placed, PM QoS 0 | target ≤{TARGET_RATIO} | placed and ordered, PM QoS 0 | one-hop / futex round trip | the same, PM QoS 0 |"
     );
-    println!("|---|---:|---|---:|---:|---|---:|---:|");
+    println!("|---|---:|---|---:|---:|---|---:|---:|---:|");
     for x in &r.ratios {
         println!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             label(x.size),
             ratio_cell(x.three_vs_one_pmqos_p50),
             verdict(x.target_met_pmqos),
             ratio_cell(x.placed_vs_one_p50),
             ratio_cell(x.placed_vs_one_pmqos_p50),
             verdict(x.target_met_placed_pmqos),
+            ratio_cell(x.ordered_vs_one_pmqos_p50),
             ratio_cell(x.one_hop_vs_futex_p50),
             ratio_cell(x.one_hop_vs_futex_pmqos_p50)
         );
@@ -393,7 +409,7 @@ mod tests {
     fn rings_close_on_their_ping_and_count_a_hop_per_member() {
         let rings = Ring::all("8", true);
         let paths: Vec<_> = rings.iter().map(|r| (r.path, r.hops())).collect();
-        assert_eq!(paths, [("one-hop", 2), ("three-hop", 3), ("three-hop-placed", 3)]);
+        assert_eq!(paths, [("one-hop", 2), ("three-hop", 3), ("three-hop-placed", 3), ("three-hop-ordered", 3)]);
         let edges: Vec<_> = rings[1].edges().collect();
         let want = [("p3-8/out", "sonar-8/in"), ("sonar-8/out", "safety-8/in"), ("safety-8/out", "p3-8/in")];
         assert_eq!(edges, want.map(|(a, b)| (a.to_owned(), b.to_owned())));
