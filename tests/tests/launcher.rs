@@ -199,6 +199,29 @@ fn a_panic_in_the_task_ends_the_agent_and_it_is_restarted() {
     r.down_and_check_clean();
 }
 
+/// `nerve ps | head`: a reader that leaves before the table is written is no
+/// error (the table was 100 `println!`s, and the first one that met the
+/// closed pipe panicked with a backtrace).
+#[test]
+fn ps_into_a_closed_pipe_ends_quietly() {
+    let r = Robot::new("pspipe");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t"]);
+    for args in [["ps"], ["graph"]] {
+        let mut c = r
+            .command("nerve")
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("nerve runs");
+        drop(c.stdout.take());
+        let out = c.wait_with_output().expect("it ends");
+        assert!(out.status.success(), "{args:?}: {:?}: {}", out.status, String::from_utf8_lossy(&out.stderr));
+    }
+    r.down_and_check_clean();
+}
+
 /// An agent that ignores SIGTERM is killed after the grace time; no zombie remains.
 #[test]
 fn sigterm_ignoring_agent_is_killed_after_grace() {

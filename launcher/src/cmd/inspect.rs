@@ -5,6 +5,8 @@ use agent_sdk::World;
 use agent_sdk::clock::format_duration;
 use anyhow::{Result, bail};
 use shm_schemas::control::cli_to_router::{AgentView, CliRequest, GraphView, RouterReply};
+use std::fmt::Write as _;
+use std::io::Write as _;
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -42,7 +44,20 @@ fn ports(p: &[shm_schemas::control::agent_to_router::PortSpec]) -> String {
     }
 }
 
-pub fn print_agents(agents: &[AgentView]) {
+/// Writes `text` to standard output in one go: a table of 100 agents was
+/// 100 `write`s, one per `println!`. A closed pipe (`nerve ps | head`) is
+/// not an error.
+pub fn emit(text: &str) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
+    }
+}
+
+/// The `nerve ps` table, with the figures agents report below it.
+pub fn agents_table(agents: &[AgentView]) -> String {
+    let mut out = String::new();
     const HEADER: [&str; 13] = [
         "NAME",
         "PID",
@@ -59,7 +74,8 @@ pub fn print_agents(agents: &[AgentView]) {
         "INPUTS",
     ];
     let [n, p, k, st, t, pe, r, j, o, c, w, rs, i] = HEADER;
-    println!(
+    let _ = writeln!(
+        out,
         "{n:<16} {p:>8} {k:<10} {st:<12} {t:<13} {pe:>8} {r:>9} {j:>24} {o:>5} {c:>6} {w:>7} {rs:>4}  {i:<24} OUTPUTS"
     );
     for a in agents {
@@ -78,7 +94,8 @@ pub fn print_agents(agents: &[AgentView]) {
             ),
             None => ("?".into(), "?".into(), "?".into(), "?".into()),
         };
-        println!(
+        let _ = writeln!(
+            out,
             "{:<16} {:>8} {:<10} {:<12} {:<13} {:>8} {:>9} {:>24} {:>5} {:>6} {:>7} {:>4}  {:<24} {}",
             a.name,
             a.pid,
@@ -106,20 +123,23 @@ pub fn print_agents(agents: &[AgentView]) {
             .map(|(k, v)| format!("{k}={v}"))
             .collect();
         if !figures.is_empty() {
-            println!("{}: {}", a.name, figures.join(" "));
+            let _ = writeln!(out, "{}: {}", a.name, figures.join(" "));
         }
     }
+    out
 }
 
 pub fn ps(world: &World, a: PsArgs) -> Result<ExitCode> {
     let s = RouterSession::open(world)?;
     let RouterReply::Agents(agents) = s.call(CliRequest::Ps)? else { bail!("unexpected reply from the router") };
+    // the reply is in: let the router's client go before printing
+    drop(s);
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&agents)?);
+        emit(&format!("{}\n", serde_json::to_string_pretty(&agents)?))?;
     } else if agents.is_empty() {
-        println!("no agents run on robot {} (start one with `nerve start KIND --name NAME`)", world.robot());
+        emit(&format!("no agents run on robot {} (start one with `nerve start KIND --name NAME`)\n", world.robot()))?;
     } else {
-        print_agents(&agents);
+        emit(&agents_table(&agents))?;
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -127,27 +147,31 @@ pub fn ps(world: &World, a: PsArgs) -> Result<ExitCode> {
 pub fn graph(world: &World, a: GraphArgs) -> Result<ExitCode> {
     let s = RouterSession::open(world)?;
     let RouterReply::Graph(g) = s.call(CliRequest::Graph)? else { bail!("unexpected reply from the router") };
+    drop(s);
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&g)?);
+        emit(&format!("{}\n", serde_json::to_string_pretty(&g)?))?;
     } else if a.dot {
-        print!("{}", to_dot(world.robot().as_str(), &g));
+        emit(&to_dot(world.robot().as_str(), &g))?;
     } else {
-        print_graph(&g);
+        emit(&graph_table(&g))?;
     }
     Ok(ExitCode::SUCCESS)
 }
 
-fn print_graph(g: &GraphView) {
+/// The `nerve graph` table.
+fn graph_table(g: &GraphView) -> String {
     if g.connections.is_empty() {
-        println!("no connections (make one with `nerve connect AGENT/PORT AGENT/PORT`)");
-        return;
+        return "no connections (make one with `nerve connect AGENT/PORT AGENT/PORT`)\n".into();
     }
-    println!(
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
         "{:<24} {:<24} {:<18} {:<8} {:>9} {:>10} {:>9} {:>8}",
         "FROM", "TO", "TYPE", "ACTIVE", "RATE", "LAST AGE", "RECEIVED", "DROPPED"
     );
     for c in &g.connections {
-        println!(
+        let _ = writeln!(
+            out,
             "{:<24} {:<24} {:<18} {:<8} {:>9} {:>10} {:>9} {:>8}",
             c.from,
             c.to,
@@ -163,6 +187,7 @@ fn print_graph(g: &GraphView) {
             c.dropped
         );
     }
+    out
 }
 
 fn dot_escape(s: &str) -> String {
@@ -210,4 +235,40 @@ pub fn to_dot(robot: &str, g: &GraphView) -> String {
     }
     out += "}\n";
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn view(name: &str, figures: &[(&str, &str)]) -> AgentView {
+        let mut v: AgentView = serde_json::from_value(serde_json::json!({
+            "name": name, "pid": 42, "kind": "relay", "state": "running", "task": "event-driven",
+            "period_ns": null,
+            "inputs": [{"name": "in", "type_name": "nerve::Tick", "fingerprint": 1}],
+            "outputs": [{"name": "out", "type_name": "nerve::Tick", "fingerprint": 1}],
+            "log_file": null,
+            "stats": {"cycles": 7, "rate_hz": 10.0, "jitter_p50_ns": 0, "jitter_p99_ns": 0, "jitter_max_ns": 0,
+                "overruns": 0, "cpu_percent": 0.5, "rss_bytes": 1, "realtime": true,
+                "cpu_latency": {"held": {"us": 0}}, "inputs": [], "figures": []},
+            "restarts": 1
+        }))
+        .expect("a view");
+        if let Some(s) = v.stats.as_mut() {
+            s.figures = figures.iter().map(|(k, v)| ((*k).to_owned(), (*v).to_owned())).collect();
+        }
+        v
+    }
+
+    #[test]
+    fn the_ps_table_has_a_header_a_line_per_agent_and_their_figures() {
+        let text = agents_table(&[view("r0", &[]), view("b", &[("peers", "2"), ("empty", "")])]);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 4, "{text}");
+        assert!(lines[0].starts_with("NAME") && lines[0].ends_with("OUTPUTS"), "{text}");
+        assert!(lines[1].starts_with("r0 ") && lines[1].contains("10.0Hz") && lines[1].contains("in:Tick"), "{text}");
+        assert!(lines[2].starts_with("b "), "{text}");
+        assert_eq!(lines[3], "b: peers=2", "empty figures are left out");
+        assert!(text.ends_with('\n'));
+    }
 }
