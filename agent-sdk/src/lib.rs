@@ -15,7 +15,10 @@
 //!   `--log-level`), registration with the router and re-registration with a
 //!   restarted one, SCHED_FIFO, locked memory and a PM QoS wake-up bound
 //!   ([`cpu_latency`]) where permitted, sd_notify,
-//!   clean stop on SIGTERM and SIGINT.
+//!   clean stop on SIGTERM and SIGINT; a panic in any of its threads ends
+//!   the process ([`abort_on_panic`], in every build profile), so that its
+//!   supervisor sees a death rather than an agent that answers but never
+//!   steps again.
 //!
 //! Ports are iceoryx2 publish-subscribe services of `#[repr(C)]` payloads
 //! (see `shm-schemas`): a sample is written once in shared memory and read in
