@@ -28,6 +28,10 @@
 //!   pipeline is often given: the hand-over on CPU 1 then preempts the
 //!   sender at its `sendto` instead of waiting for it to block, and the
 //!   sender's tail runs while `ping-3` works on CPU 0.
+//! * `three-hop-onecpu`: the whole ring on CPU 1, and beside it
+//!   `one-hop-onecpu`, the pair on CPU 1. On one CPU no hop wakes another
+//!   CPU: the sender blocks in its next wait and the woken stage runs in its
+//!   place (equal SCHED_FIFO priorities do not preempt).
 //!
 //! Beside them, the floors of a round trip at the same size: `uds` (a
 //! blocking Unix socket, copying) and `futex` (the wake-up alone), from
@@ -117,6 +121,16 @@ pub struct PipelineRatio {
     pub ordered_vs_one_pmqos_p50: Option<f64>,
     /// whether that is within the target
     pub target_met_placed_pmqos: Option<bool>,
+    /// three-hop-onecpu p50 / one-hop p50 (hops), without PM QoS: the ring
+    /// on one CPU against the free pair
+    pub onecpu_vs_one_p50: Option<f64>,
+    /// three-hop-onecpu-pmqos p50 / one-hop-pmqos p50 (hops)
+    pub onecpu_vs_one_pmqos_p50: Option<f64>,
+    /// whether that is within the target
+    pub target_met_onecpu_pmqos: Option<bool>,
+    /// three-hop-onecpu-pmqos p50 / one-hop-onecpu-pmqos p50 (hops): ring
+    /// and pair placed alike, on one CPU
+    pub onecpu_vs_onecpu_pair_pmqos_p50: Option<f64>,
     /// one-hop round trip p50 / futex round trip p50, both without PM QoS
     pub one_hop_vs_futex_p50: Option<f64>,
     /// one-hop-pmqos p50 / futex-pmqos p50
@@ -173,6 +187,14 @@ impl Ring {
             rings.push(ring("three-hop-placed", "three-hop-placed-pmqos", &members));
             let members = [("cpu0-ping", "p3o"), ("cpu1-pong@20", "sonaro"), ("cpu1-pong@21", "safetyo")];
             rings.push(ring("three-hop-ordered", "three-hop-ordered-pmqos", &members));
+            // the whole ring on one CPU (CPU 1, away from the benchmark and
+            // the router's usual place): every hop a switch on that CPU, no
+            // cross-CPU wake; beside it the pair on one CPU, for the same
+            // placement's one hop
+            let members = [("cpu1-ping", "p1c"), ("cpu1-pong", "q1c")];
+            rings.push(ring("one-hop-onecpu", "one-hop-onecpu-pmqos", &members));
+            let members = [("cpu1-ping", "p3c"), ("cpu1-pong", "sonarc"), ("cpu1-pong", "safetyc")];
+            rings.push(ring("three-hop-onecpu", "three-hop-onecpu-pmqos", &members));
         }
         rings
     }
@@ -293,12 +315,16 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
             three.round_p50_ns.iter().zip(&one.round_p50_ns).map(|(a, b)| 2.0 * ratio(*a, *b)).collect();
         let r = 2.0 * ratio(three.latency.p50_ns, one.latency.p50_ns);
         let p50 = |p: &str| find(p).map(|x| x.latency.p50_ns);
-        let three_vs_one_pmqos = p50("three-hop-pmqos").zip(p50("one-hop-pmqos")).map(|(a, b)| 2.0 * ratio(a, b));
+        // a ring under PM QoS against one hop under PM QoS (half its round trip)
+        let vs_one_pmqos = |path: &str| p50(path).zip(p50("one-hop-pmqos")).map(|(a, b)| 2.0 * ratio(a, b));
+        let three_vs_one_pmqos = vs_one_pmqos("three-hop-pmqos");
         let placed_vs_one = p50("three-hop-placed").map(|a| 2.0 * ratio(a, one.latency.p50_ns));
-        let placed_vs_one_pmqos =
-            p50("three-hop-placed-pmqos").zip(p50("one-hop-pmqos")).map(|(a, b)| 2.0 * ratio(a, b));
-        let ordered_vs_one_pmqos =
-            p50("three-hop-ordered-pmqos").zip(p50("one-hop-pmqos")).map(|(a, b)| 2.0 * ratio(a, b));
+        let placed_vs_one_pmqos = vs_one_pmqos("three-hop-placed-pmqos");
+        let ordered_vs_one_pmqos = vs_one_pmqos("three-hop-ordered-pmqos");
+        let onecpu_vs_one = p50("three-hop-onecpu").map(|a| 2.0 * ratio(a, one.latency.p50_ns));
+        let onecpu_vs_one_pmqos = vs_one_pmqos("three-hop-onecpu-pmqos");
+        let onecpu_vs_onecpu_pair_pmqos =
+            p50("three-hop-onecpu-pmqos").zip(p50("one-hop-onecpu-pmqos")).map(|(a, b)| 2.0 * ratio(a, b));
         ratios.push(PipelineRatio {
             size,
             one_hop_p50_ns: one.latency.p50_ns / 2,
@@ -313,6 +339,10 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
             placed_vs_one_pmqos_p50: placed_vs_one_pmqos,
             ordered_vs_one_pmqos_p50: ordered_vs_one_pmqos,
             target_met_placed_pmqos: placed_vs_one_pmqos.map(|x| x <= TARGET_RATIO),
+            onecpu_vs_one_p50: onecpu_vs_one,
+            onecpu_vs_one_pmqos_p50: onecpu_vs_one_pmqos,
+            target_met_onecpu_pmqos: onecpu_vs_one_pmqos.map(|x| x <= TARGET_RATIO),
+            onecpu_vs_onecpu_pair_pmqos_p50: onecpu_vs_onecpu_pair_pmqos,
             one_hop_vs_futex_p50: p50("futex").map(|f| ratio(one.latency.p50_ns, f)),
             one_hop_vs_futex_pmqos_p50: p50("one-hop-pmqos").zip(p50("futex-pmqos")).map(|(a, b)| ratio(a, b)),
         });
@@ -349,6 +379,10 @@ pub fn print_tables(r: &PipelineReport) {
                 "three-hop-placed-pmqos" => "three-hop pipeline, placed, PM QoS 0",
                 "three-hop-ordered" => "three-hop pipeline, placed, downstream priority +1",
                 "three-hop-ordered-pmqos" => "three-hop pipeline, placed, downstream priority +1, PM QoS 0",
+                "one-hop-onecpu" => "one-hop round trip, both on one CPU",
+                "one-hop-onecpu-pmqos" => "one-hop round trip, both on one CPU, PM QoS 0",
+                "three-hop-onecpu" => "three-hop pipeline, all on one CPU",
+                "three-hop-onecpu-pmqos" => "three-hop pipeline, all on one CPU, PM QoS 0",
                 "uds" => "Unix socket round trip",
                 "futex" => "futex round trip (wake-up floor)",
                 "futex-pmqos" => "futex round trip, PM QoS 0",
@@ -399,6 +433,23 @@ pub fn print_tables(r: &PipelineReport) {
             ratio_cell(x.one_hop_vs_futex_pmqos_p50)
         );
     }
+    println!();
+    println!("The ring on one CPU (every hop a switch on that CPU), same run:");
+    println!();
+    println!(
+        "| payload | one-CPU ring / free pair | the same, PM QoS 0 | target ≤{TARGET_RATIO} | one-CPU ring / one-CPU pair, PM QoS 0 |"
+    );
+    println!("|---|---:|---:|---|---:|");
+    for x in &r.ratios {
+        println!(
+            "| {} | {} | {} | {} | {} |",
+            label(x.size),
+            ratio_cell(x.onecpu_vs_one_p50),
+            ratio_cell(x.onecpu_vs_one_pmqos_p50),
+            verdict(x.target_met_onecpu_pmqos),
+            ratio_cell(x.onecpu_vs_onecpu_pair_pmqos_p50)
+        );
+    }
 }
 
 #[cfg(test)]
@@ -409,7 +460,15 @@ mod tests {
     fn rings_close_on_their_ping_and_count_a_hop_per_member() {
         let rings = Ring::all("8", true);
         let paths: Vec<_> = rings.iter().map(|r| (r.path, r.hops())).collect();
-        assert_eq!(paths, [("one-hop", 2), ("three-hop", 3), ("three-hop-placed", 3), ("three-hop-ordered", 3)]);
+        let want = [
+            ("one-hop", 2),
+            ("three-hop", 3),
+            ("three-hop-placed", 3),
+            ("three-hop-ordered", 3),
+            ("one-hop-onecpu", 2),
+            ("three-hop-onecpu", 3),
+        ];
+        assert_eq!(paths, want);
         let edges: Vec<_> = rings[1].edges().collect();
         let want = [("p3-8/out", "sonar-8/in"), ("sonar-8/out", "safety-8/in"), ("safety-8/out", "p3-8/in")];
         assert_eq!(edges, want.map(|(a, b)| (a.to_owned(), b.to_owned())));
