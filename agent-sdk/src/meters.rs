@@ -84,9 +84,14 @@ impl LatenessRecorder {
         if self.len == 0 {
             return (0, 0, 0);
         }
+        // two selections instead of a sort: every `nerve ps` asks for this,
+        // and sorting 2048 values was the largest part of an agent's answer
         let mut v = self.recent[..self.len].to_vec();
-        v.sort_unstable();
-        (percentile(&v, 0.50), percentile(&v, 0.99), self.max)
+        let mut nth = |q: f64| {
+            let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
+            *v.select_nth_unstable(rank - 1).1
+        };
+        (nth(0.50), nth(0.99), self.max)
     }
 
     /// Forgets the recent values and the maximum (after a period change).
@@ -106,26 +111,39 @@ pub fn percentile(sorted: &[u64], q: f64) -> u64 {
     sorted[rank - 1]
 }
 
-/// CPU use of this process, from `/proc/self/stat`.
-#[derive(Debug, Default)]
+/// CPU use and memory of this process, for its statistics.
+///
+/// Both are read often (every `nerve ps` asks every agent), so neither
+/// opens a file per reading: the CPU time comes from
+/// `clock_gettime(CLOCK_PROCESS_CPUTIME_ID)`, and the resident memory from
+/// `/proc/self/statm` opened once and read again at offset 0. Opening it
+/// each time (the path walk through `/proc/self`) was a fifth of an agent's
+/// CPU while it answered `ps` (BENCHMARKS.md §6).
+#[derive(Debug)]
 pub struct CpuMeter {
     last: Option<(u64, u64)>,
     percent: f64,
+    statm: Option<std::fs::File>,
+}
+
+impl Default for CpuMeter {
+    fn default() -> Self {
+        CpuMeter { last: None, percent: 0.0, statm: std::fs::File::open("/proc/self/statm").ok() }
+    }
 }
 
 impl CpuMeter {
     /// Samples the CPU time; returns the percent of one core used since the last sample.
     pub fn sample(&mut self, now_ns: u64) -> f64 {
-        if let Some(ticks) = process_cpu_ticks() {
+        if let Some(cpu_ns) = process_cpu_ns() {
             if let Some((t0, c0)) = self.last {
-                let dt = now_ns.saturating_sub(t0) as f64 / 1e9;
-                if dt > 0.05 {
-                    let hz = clock_ticks_per_sec();
-                    self.percent = (ticks.saturating_sub(c0)) as f64 / hz / dt * 100.0;
-                    self.last = Some((now_ns, ticks));
+                let dt = now_ns.saturating_sub(t0);
+                if dt > 50_000_000 {
+                    self.percent = cpu_ns.saturating_sub(c0) as f64 / dt as f64 * 100.0;
+                    self.last = Some((now_ns, cpu_ns));
                 }
             } else {
-                self.last = Some((now_ns, ticks));
+                self.last = Some((now_ns, cpu_ns));
             }
         }
         self.percent
@@ -135,36 +153,42 @@ impl CpuMeter {
     pub fn percent(&self) -> f64 {
         self.percent
     }
+
+    /// Resident memory of this process now, bytes (0 where `/proc` cannot
+    /// be read).
+    pub fn rss_bytes(&self) -> u64 {
+        use std::os::unix::fs::FileExt;
+        let Some(f) = &self.statm else { return rss_bytes() };
+        let mut buf = [0u8; 128];
+        match f.read_at(&mut buf, 0) {
+            Ok(n) => rss_of_statm(std::str::from_utf8(&buf[..n]).unwrap_or("")),
+            Err(_) => rss_bytes(),
+        }
+    }
 }
 
-fn clock_ticks_per_sec() -> f64 {
-    // SAFETY: sysconf has no preconditions.
-    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
-    if hz > 0 { hz as f64 } else { 100.0 }
+/// CPU time of this whole process, ns.
+fn process_cpu_ns() -> Option<u64> {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes into the timespec we pass.
+    let r = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+    if r != 0 {
+        return None;
+    }
+    u64::try_from(ts.tv_sec).ok()?.checked_mul(1_000_000_000)?.checked_add(u64::try_from(ts.tv_nsec).ok()?)
 }
 
-/// utime + stime of a process in clock ticks.
-pub fn cpu_ticks_of(pid: &str) -> Option<u64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    let rest = stat.rsplit_once(')')?.1;
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    // after the command: state is field 3, utime 14, stime 15 (1-based in proc(5))
-    let utime: u64 = f.get(11)?.parse().ok()?;
-    let stime: u64 = f.get(12)?.parse().ok()?;
-    Some(utime + stime)
-}
-
-fn process_cpu_ticks() -> Option<u64> {
-    cpu_ticks_of("self")
-}
-
-/// Resident memory of this process in bytes.
+/// Resident memory of this process, bytes, from `/proc/self/statm`.
 pub fn rss_bytes() -> u64 {
-    let statm = std::fs::read_to_string("/proc/self/statm").unwrap_or_default();
+    rss_of_statm(&std::fs::read_to_string("/proc/self/statm").unwrap_or_default())
+}
+
+/// Resident bytes from the text of a `statm` file (pages, second field).
+fn rss_of_statm(statm: &str) -> u64 {
     let pages: u64 = statm.split_whitespace().nth(1).and_then(|s| s.parse().ok()).unwrap_or(0);
     // SAFETY: sysconf has no preconditions.
     let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) }.max(4096) as u64;
-    pages * page
+    pages.saturating_mul(page)
 }
 
 #[cfg(test)]
@@ -184,11 +208,43 @@ mod tests {
     }
 
     #[test]
+    fn memory_and_cpu_of_this_process() {
+        let mut m = CpuMeter::default();
+        let rss = m.rss_bytes();
+        assert!(rss > 1 << 20, "a test process has more than 1 MiB resident: {rss}");
+        // read again from the same open file: still there, about the same
+        assert!(m.rss_bytes().abs_diff(rss) < 64 << 20);
+        assert_eq!(rss_of_statm("100 25 3 1 0 20 0\n") % 4096, 0);
+        assert_eq!(rss_of_statm(""), 0);
+        // a busy loop of 200 ms shows as CPU
+        let t0 = crate::clock::now_ns();
+        m.sample(t0);
+        let start = std::time::Instant::now();
+        let mut x = 0u64;
+        while start.elapsed() < std::time::Duration::from_millis(200) {
+            x = x.wrapping_add(std::hint::black_box(1));
+        }
+        let pct = m.sample(crate::clock::now_ns());
+        assert!(pct > 20.0 && pct < 250.0, "{pct}% ({x})");
+    }
+
+    #[test]
     fn percentiles() {
         let mut l = LatenessRecorder::default();
         for i in 1..=100u64 {
             l.record(i);
         }
         assert_eq!(l.summary(), (50, 99, 100));
+        // out of order, and wrapped round the buffer: the same as sorting
+        let mut l = LatenessRecorder::default();
+        let mut x = 12345u64;
+        for _ in 0..5000 {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            l.record(x >> 40);
+        }
+        let mut v = l.recent.clone();
+        v.sort_unstable();
+        let (p50, p99, _) = l.summary();
+        assert_eq!((p50, p99), (percentile(&v, 0.50), percentile(&v, 0.99)));
     }
 }

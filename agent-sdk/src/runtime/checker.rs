@@ -10,7 +10,7 @@ use crate::agent::Task;
 use crate::clock::now_ns;
 use crate::control::ControlServer;
 use crate::daemon::{sd_notify, watchdog_interval};
-use crate::meters::{CpuMeter, rss_bytes};
+use crate::meters::CpuMeter;
 use crate::params::ParamTable;
 use crate::ports::DynInput;
 use crate::world::{Ipc, World};
@@ -342,17 +342,22 @@ impl Checker<'_> {
 
     fn stats(&self, cpu: &CpuMeter) -> AgentStats {
         let now = now_ns();
-        let f = self.shared.figures();
-        let (p50, p99, max) = f.lateness.summary();
+        // copied out, so that the task, which records into them every
+        // cycle, does not wait while the percentiles are worked out
+        let (cycles, rate_hz, overruns, lateness) = {
+            let f = self.shared.figures();
+            (f.cycles, f.rate.rate(now), f.overruns, f.lateness.clone())
+        };
+        let (p50, p99, max) = lateness.summary();
         AgentStats {
-            cycles: f.cycles,
-            rate_hz: f.rate.rate(now),
+            cycles,
+            rate_hz,
             jitter_p50_ns: p50,
             jitter_p99_ns: p99,
             jitter_max_ns: max,
-            overruns: f.overruns,
+            overruns,
             cpu_percent: cpu.percent(),
-            rss_bytes: rss_bytes(),
+            rss_bytes: cpu.rss_bytes(),
             realtime: self.shared.realtime.load(Ordering::Relaxed),
             cpu_latency: self.shared.cpu_latency,
             inputs: self.inputs.iter().flat_map(|i| i.stats(now)).collect(),
