@@ -8,6 +8,13 @@
 //!
 //! Clients poll for the reply with a short back-off: control traffic is rare,
 //! and this keeps every waiting side free of extra listeners.
+//!
+//! Tools (`nerve` commands) reach the router through its [`ToolSocket`]
+//! instead, a Unix stream socket beside the robot's state: a command that
+//! only asks the router needs no iceoryx2 node, client port or shared
+//! memory of its own, which were most of its time (BENCHMARKS.md §6), and
+//! it sleeps in `read` until the reply comes. The router serves both; a
+//! request taken from either is answered through the same [`Responder`].
 
 use crate::world::{Ipc, World};
 use iceoryx2::active_request::ActiveRequest;
@@ -21,6 +28,9 @@ use serde::{Serialize, de::DeserializeOwned};
 use shm_schemas::control::{ProtocolError, decode, encode, unanswered};
 use std::marker::PhantomData;
 use std::time::{Duration, Instant};
+
+mod stream;
+pub use stream::{ToolConnection, ToolSocket};
 
 /// How big a control service is.
 ///
@@ -121,6 +131,17 @@ pub enum ControlError {
     /// The peer speaks another protocol or sent garbage.
     #[error(transparent)]
     Protocol(#[from] ProtocolError),
+    /// The tools' socket failed (see [`ToolSocket`]).
+    #[error("cannot {what} {}: {source}", path.display())]
+    Io {
+        /// what was being done
+        what: &'static str,
+        /// the socket
+        path: std::path::PathBuf,
+        /// what the system said
+        #[source]
+        source: std::io::Error,
+    },
     /// iceoryx2 failed: which operation, and iceoryx2's own error as the
     /// source (downcast it to that operation's iceoryx2 error type).
     #[error("iceoryx2 could not {op} of {service}: {source:?}")]
@@ -265,7 +286,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
         };
         let req = decode::<Req>(active.payload());
         let responder = Responder {
-            active: Some(active),
+            active: Some(Caller::Shm(active)),
             service: self.service.clone(),
             max_message: self.size.max_message,
             _types: PhantomData,
@@ -298,17 +319,35 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
 #[derive(Debug)]
 pub struct Responder<Resp> {
     /// `None` once answered
-    active: Option<ActiveRequest<Ipc, Bytes, (), Bytes, ()>>,
+    active: Option<Caller>,
     service: String,
     max_message: Option<usize>,
     _types: PhantomData<fn(Resp)>,
+}
+
+/// Where a request came from, and so where its answer goes.
+#[derive(Debug)]
+enum Caller {
+    /// an iceoryx2 client: the answer is loaned and sent on its connection
+    Shm(ActiveRequest<Ipc, Bytes, (), Bytes, ()>),
+    /// a tool on a [`ToolSocket`]: the answer is written as one frame
+    Stream(stream::Connection),
+}
+
+impl Caller {
+    fn is_connected(&self) -> bool {
+        match self {
+            Caller::Shm(a) => a.is_connected(),
+            Caller::Stream(c) => c.is_open(),
+        }
+    }
 }
 
 impl<Resp: Serialize> Responder<Resp> {
     /// Whether the caller still waits for the answer (it has not given up
     /// or gone).
     pub fn is_connected(&self) -> bool {
-        self.active.as_ref().is_some_and(|a| a.is_connected())
+        self.active.as_ref().is_some_and(Caller::is_connected)
     }
 
     /// Sends `reply`; a reply larger than the service carries is replaced by
@@ -326,14 +365,21 @@ impl<Resp: Serialize> Responder<Resp> {
 
 impl<Resp> Responder<Resp> {
     fn send(&mut self, bytes: &[u8]) {
-        let Some(active) = self.active.take() else { return };
-        match active.loan_slice_uninit(bytes.len()) {
-            Ok(resp) => {
-                if let Err(e) = resp.write_from_slice(bytes).send() {
-                    tracing::warn!(service = %self.service, "could not send a reply: {e:?}");
+        match self.active.take() {
+            None => {}
+            Some(Caller::Shm(active)) => match active.loan_slice_uninit(bytes.len()) {
+                Ok(resp) => {
+                    if let Err(e) = resp.write_from_slice(bytes).send() {
+                        tracing::warn!(service = %self.service, "could not send a reply: {e:?}");
+                    }
+                }
+                Err(e) => tracing::warn!(service = %self.service, "could not loan a reply: {e:?}"),
+            },
+            Some(Caller::Stream(mut c)) => {
+                if let Err(e) = c.answer(bytes) {
+                    tracing::warn!(service = %self.service, error = %e, "could not answer a tool: {e}");
                 }
             }
-            Err(e) => tracing::warn!(service = %self.service, "could not loan a reply: {e:?}"),
         }
     }
 }

@@ -291,6 +291,12 @@ impl World {
         self.state_dir.join("pids")
     }
 
+    /// The router's socket for tools (`nerve` commands), in the private
+    /// state directory: see [`crate::control::ToolSocket`].
+    pub fn tool_socket(&self) -> PathBuf {
+        self.state_dir.join("router.sock")
+    }
+
     /// The log file of agent `name`.
     pub fn log_file(&self, name: &str) -> PathBuf {
         self.logs_dir().join(format!("{name}.log"))

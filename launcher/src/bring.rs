@@ -354,6 +354,11 @@ pub fn clean(world: &World) -> usize {
     let others_alive = world.live_node_pids().into_iter().any(|p| p != me);
     let mut removed = 0;
     if !others_alive {
+        // the tools' socket of a router that was killed (one that stopped
+        // removed its own): nothing listens on it any more
+        if std::os::unix::net::UnixStream::connect(world.tool_socket()).is_err() {
+            let _ = std::fs::remove_file(world.tool_socket());
+        }
         for f in world.shm_files() {
             if std::fs::remove_file(&f).is_ok() {
                 removed += 1;

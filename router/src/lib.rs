@@ -45,7 +45,7 @@ pub mod transient;
 pub mod wiring;
 
 use agent_sdk::clock::now_ns;
-use agent_sdk::control::{ControlError, ControlServer, ControlSize};
+use agent_sdk::control::{ControlError, ControlServer, ControlSize, ToolSocket};
 use agent_sdk::world::{Ipc, World};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::UpdateConnections;
@@ -92,6 +92,10 @@ pub struct Router {
     server: ControlServer<RouterRequest, RouterReply>,
     /// tools and programs call here (few clients, replies of any size)
     cli_server: ControlServer<RouterRequest, RouterReply>,
+    /// `nerve` commands call here, without iceoryx2 ports of their own
+    /// (`None` where the socket could not be made: they fall back to
+    /// `cli_server`)
+    tool_socket: Option<ToolSocket<RouterRequest, RouterReply>>,
     epoch_pub: Publisher<Ipc, RouterEpoch, ()>,
     state: serving::State,
 }
@@ -117,6 +121,15 @@ impl Router {
         };
         let server = serve(world.robot().router_service(), ControlSize::ROUTER)?;
         let cli_server = serve(world.robot().router_cli_service(), ControlSize::ROUTER_CLI)?;
+        // bound only now that this router is known to be the robot's only
+        // one: it replaces the file a dead router left
+        let tool_socket = match ToolSocket::bind(&world.tool_socket()) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                tracing::warn!(error = %e, "{e}; `nerve` commands use iceoryx2 instead (slower)");
+                None
+            }
+        };
         let store = Store::new(world.state_dir());
         let connections = store.load().map_err(StartError::Other)?;
         let supervisor = supervision::Supervisor::load(world.state_dir(), Instant::now());
@@ -153,6 +166,7 @@ impl Router {
         Ok(Router {
             server,
             cli_server,
+            tool_socket,
             epoch_pub,
             state: serving::State {
                 world,
@@ -189,6 +203,10 @@ impl Router {
             .map_err(|e| format!("cannot create the router's WaitSet: {e:?}"))?;
         let _req = ws.attach_notification(self.server.listener()).map_err(|e| format!("{e:?}"))?;
         let _cli = ws.attach_notification(self.cli_server.listener()).map_err(|e| format!("{e:?}"))?;
+        let _tools = match &self.tool_socket {
+            Some(s) => Some(ws.attach_notification(s).map_err(|e| format!("{e:?}"))?),
+            None => None,
+        };
         let _tick = ws.attach_interval(LIVENESS_PERIOD).map_err(|e| format!("{e:?}"))?;
         let mut last_liveness = Instant::now();
         let mut last_sweep = Instant::now();
@@ -205,7 +223,7 @@ impl Router {
             // next look, at most MAX_POLL_INTERVAL later. A SIGTERM meanwhile
             // is kept by iceoryx2's handler for the next wait (a busy spell
             // ends with its jobs' time-outs).
-            if self.state.busy() {
+            if self.state.busy() || self.tool_socket.as_ref().is_some_and(ToolSocket::busy) {
                 std::thread::sleep(poll);
             } else {
                 let wait = tidy.next().map_or(LIVENESS_PERIOD, |at| at.saturating_duration_since(Instant::now()));
@@ -244,6 +262,12 @@ impl Router {
                             break;
                         }
                     }
+                }
+            }
+            if let Some(tools) = &self.tool_socket {
+                while let Some((req, responder)) = tools.receive() {
+                    progressed = true;
+                    self.state.accept(req, responder);
                 }
             }
             self.state.pump();

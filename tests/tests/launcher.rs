@@ -1,7 +1,7 @@
 //! Launch files, `nerve launch` and `nerve down`, supervision, systemd units
 //! and sd_notify: real processes, real shared memory.
 
-use nerve_tests::{Robot, alive, exists, reap, wait_until};
+use nerve_tests::{Robot, alive, exists, reap, sigkill, wait_until};
 use std::os::unix::net::UnixDatagram;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -163,16 +163,16 @@ fn crashing_agent_is_restarted_with_backoff_then_marked_failed() {
     let t0 = Instant::now();
     // the crash comes after registration, so the launch itself succeeds
     r.command("nerve").arg("launch").arg(&file).output().expect("launch");
-    let failed = || r.ps().iter().any(|a| a["name"] == "bad" && a["state"] == "failed");
+    let failed = || r.agent("bad").is_some_and(|a| a["state"] == "failed");
     assert!(wait_until(Duration::from_secs(30), failed), "never marked failed: {:?}", r.ps());
     let elapsed = t0.elapsed();
-    let bad = r.ps().into_iter().find(|a| a["name"] == "bad").expect("bad listed");
+    let bad = r.agent("bad").expect("bad listed");
     assert_eq!(bad["restarts"], 3, "exactly max_restarts restarts: {bad}");
     // back-off 100 + 200 + 400 ms at least between the crashes
     assert!(elapsed >= Duration::from_millis(700), "restarted too fast: {elapsed:?}");
     // it stays failed: no further restarts
     std::thread::sleep(Duration::from_millis(800));
-    let bad = r.ps().into_iter().find(|a| a["name"] == "bad").expect("bad listed");
+    let bad = r.agent("bad").expect("bad listed");
     assert_eq!(bad["restarts"], 3);
     assert!(r.agent("t1").is_some_and(|a| a["state"] == "running"), "the others run on");
     let table = r.ok(&["ps"]);
@@ -192,9 +192,9 @@ fn a_panic_in_the_task_ends_the_agent_and_it_is_restarted() {
         "robot = \"x\"\n[[agent]]\nname = \"bad\"\nkind = \"testagent\"\nargs = [\"--mode\", \"panic\"]\nrestart = \"on-failure\"\nmax_restarts = 1\nbackoff = \"100ms\"\nrestart_window = \"60s\"\n",
     );
     r.command("nerve").arg("launch").arg(&file).output().expect("launch");
-    let failed = || r.ps().iter().any(|a| a["name"] == "bad" && a["state"] == "failed");
+    let failed = || r.agent("bad").is_some_and(|a| a["state"] == "failed");
     assert!(wait_until(Duration::from_secs(30), failed), "the panicking agent never died: {:?}", r.ps());
-    let bad = r.ps().into_iter().find(|a| a["name"] == "bad").expect("bad listed");
+    let bad = r.agent("bad").expect("bad listed");
     assert_eq!(bad["restarts"], 1, "restarted once, then failed: {bad}");
     r.down_and_check_clean();
 }
@@ -454,4 +454,49 @@ fn down_names_the_clients_it_leaves_running() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!err.contains("note:"), "{err}");
     r.down_and_check_clean();
+}
+
+/// `nerve` commands talk to the router over its socket for tools (private
+/// to the user, removed when the router stops), fall back to iceoryx2 where
+/// nothing listens there (`NERVE_TOOL_SOCKET=off` asks for it), and a
+/// killed router's socket is replaced by the next router and removed by
+/// `nerve down`.
+#[test]
+fn commands_reach_the_router_over_its_socket_or_iceoryx2() {
+    use std::os::unix::fs::{FileTypeExt, PermissionsExt};
+    let r = Robot::new("sock");
+    r.router();
+    let sock = r.home.join(&r.name).join("router.sock");
+    let meta = std::fs::metadata(&sock).expect("the router's socket for tools");
+    assert!(meta.file_type().is_socket());
+    assert_eq!(meta.permissions().mode() & 0o777, 0o600);
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    r.ok(&["start", "relay", "--name", "r1"]);
+    r.ok(&["connect", "t1/tick", "r1/in"]);
+    let over_socket = r.ps();
+    // the same requests over iceoryx2
+    let out = r.command("nerve").args(["ps", "--json"]).env("NERVE_TOOL_SOCKET", "off").output().expect("ps");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let over_iox: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).expect("ps json");
+    let names = |v: &[serde_json::Value]| v.iter().map(|a| a["name"].to_string()).collect::<Vec<_>>();
+    assert_eq!(names(&over_socket), names(&over_iox));
+    let out = r.command("nerve").args(["disconnect", "t1/tick", "r1/in"]).env("NERVE_TOOL_SOCKET", "off").output();
+    assert!(out.expect("disconnect").status.success());
+    assert!(r.graph()["connections"].as_array().is_some_and(|c| c.is_empty()), "{}", r.graph());
+
+    // a router killed: its socket stays, nothing listens, commands say so
+    let router = r.pid_file("router").expect("router pid file");
+    sigkill(router);
+    assert!(wait_until(Duration::from_secs(5), || !alive(router)), "router still alive");
+    assert!(sock.exists(), "a killed router cannot remove its socket");
+    let err = r.fails(&["ps"]);
+    assert!(err.contains("no router runs"), "{err}");
+    // the next router replaces it; the agents come back to it
+    r.router();
+    assert!(wait_until(Duration::from_secs(10), || r.agent("t1").is_some()), "t1 never re-registered: {:?}", r.ps());
+    let router = r.pid_file("router").expect("router pid file");
+    sigkill(router);
+    assert!(wait_until(Duration::from_secs(5), || !alive(router)), "router still alive");
+    r.down_and_check_clean();
+    assert!(!sock.exists(), "`nerve down` removes a dead router's socket");
 }

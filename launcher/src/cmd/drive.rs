@@ -193,11 +193,11 @@ fn send<T: Payload>(
     let from = PortRef::new(&format!("cli-{}", std::process::id()), input).context("the command line's port")?;
     let to = PortRef::new(agent.as_str(), input).with_context(|| format!("input {input:?}"))?;
     let service = world.robot().port_service(from.agent.as_str(), input);
-    let publisher = port_service::<T>(session.node(), &service)?
+    let publisher = port_service::<T>(session.node()?, &service)?
         .publisher_builder()
         .create()
         .map_err(|e| anyhow!("cannot create a publisher on {service}: {e:?}"))?;
-    let notifier = port_event(session.node(), &service)?
+    let notifier = port_event(session.node()?, &service)?
         .notifier_builder()
         .create()
         .map_err(|e| anyhow!("cannot create a notifier on {service}: {e:?}"))?;
