@@ -430,4 +430,20 @@ mod tests {
         assert!(matches!(r, Err(ControlError::Timeout { .. })), "{r:?}");
         assert!(ToolConnection::connect(&socket_path("none")).is_err());
     }
+
+    /// A state directory too deep for a socket address (107 bytes): the
+    /// server says so, and a tool finds nothing there (both then use
+    /// iceoryx2).
+    #[test]
+    fn a_path_too_long_for_a_socket_is_refused_plainly() {
+        let dir = std::env::temp_dir().join(format!("nerve-sock-{}-{}", std::process::id(), "d".repeat(100)));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("router.sock");
+        match ToolSocket::<String, String>::bind(&path) {
+            Err(e @ ControlError::Io { .. }) => assert!(e.to_string().contains("bind the tool socket"), "{e}"),
+            other => panic!("expected an Io error, got {other:?}"),
+        }
+        assert!(ToolConnection::connect(&path).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
