@@ -52,6 +52,9 @@ pub struct ToolSocket<Req, Resp> {
     /// connections whose request is not whole yet (a cell: the WaitSet
     /// holds the socket borrowed while the server reads)
     reading: RefCell<Vec<Reading>>,
+    /// when a failed `accept` was last logged (out of descriptors, say, it
+    /// fails at every pass until one is free)
+    accept_warned: std::cell::Cell<Option<Instant>>,
     _types: PhantomData<fn(Req) -> Resp>,
 }
 
@@ -146,6 +149,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ToolSocket<Req, Resp> {
             fd,
             file: (meta.dev(), meta.ino()),
             reading: RefCell::new(Vec::new()),
+            accept_warned: std::cell::Cell::new(None),
             _types: PhantomData,
         })
     }
@@ -176,8 +180,12 @@ impl<Req: DeserializeOwned, Resp: Serialize> ToolSocket<Req, Resp> {
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
                 Err(e) => {
-                    // out of descriptors, say: the next pass tries again
-                    tracing::warn!(path = %self.path.display(), error = %e, "cannot accept a tool: {e}");
+                    // out of descriptors, say: the next pass tries again,
+                    // and the log hears of it once a second at most
+                    if self.accept_warned.get().is_none_or(|t| t.elapsed() >= Duration::from_secs(1)) {
+                        tracing::warn!(path = %self.path.display(), error = %e, "cannot accept a tool: {e}");
+                        self.accept_warned.set(Some(Instant::now()));
+                    }
                     break;
                 }
             }
