@@ -78,7 +78,9 @@ impl RouterSession {
         match &self.client {
             Some(client) => client.call(&req, ROUTER_TIMEOUT),
             None => {
-                let conn = match self.first.borrow_mut().take() {
+                // the connection `open` made, unless it waited so long that
+                // the router may have let it go
+                let conn = match self.first.borrow_mut().take().filter(ToolConnection::fresh) {
                     Some(c) => c,
                     None => ToolConnection::connect(&self.world.tool_socket()).map_err(|_| ControlError::NoServer {
                         service: self.world.tool_socket().display().to_string(),

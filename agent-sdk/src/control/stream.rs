@@ -269,6 +269,7 @@ impl Connection {
 pub struct ToolConnection {
     stream: UnixStream,
     path: PathBuf,
+    made: Instant,
 }
 
 impl ToolConnection {
@@ -276,7 +277,15 @@ impl ToolConnection {
     /// file, a file left by a server that is gone, a path too long for a
     /// socket address (the caller may then try iceoryx2).
     pub fn connect(path: &Path) -> io::Result<ToolConnection> {
-        Ok(ToolConnection { stream: UnixStream::connect(path)?, path: path.to_path_buf() })
+        Ok(ToolConnection { stream: UnixStream::connect(path)?, path: path.to_path_buf(), made: Instant::now() })
+    }
+
+    /// Whether the connection is young enough to carry a request: the
+    /// server closes one that brings no whole request within
+    /// [`READ_WITHIN`], so a caller that connected early and waited (a
+    /// session opened, then ports made) connects again after half of it.
+    pub fn fresh(&self) -> bool {
+        self.made.elapsed() < READ_WITHIN / 2
     }
 
     /// Sends `req` and waits up to `timeout` for the reply.
@@ -437,6 +446,23 @@ mod tests {
             .call::<String, String>(&"x".into(), Duration::from_millis(50));
         assert!(matches!(r, Err(ControlError::Timeout { .. })), "{r:?}");
         assert!(ToolConnection::connect(&socket_path("none")).is_err());
+    }
+
+    /// A connection left unused is closed by the server after READ_WITHIN;
+    /// it stops being fresh well before.
+    #[test]
+    fn an_unused_connection_goes_stale_before_the_server_drops_it() {
+        let path = socket_path("stale");
+        let server = ToolSocket::<String, String>::bind(&path).expect("bind");
+        let c = ToolConnection::connect(&path).expect("connect");
+        assert!(c.fresh());
+        let t0 = Instant::now();
+        while t0.elapsed() < READ_WITHIN + Duration::from_millis(200) {
+            assert!(server.receive().is_none());
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        assert!(!c.fresh());
+        assert!(!server.busy(), "the server let the silent connection go");
     }
 
     /// A state directory too deep for a socket address (107 bytes): the
