@@ -87,10 +87,8 @@ impl LatenessRecorder {
         // two selections instead of a sort: every `nerve ps` asks for this,
         // and sorting 2048 values was the largest part of an agent's answer
         let mut v = self.recent[..self.len].to_vec();
-        let mut nth = |q: f64| {
-            let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
-            *v.select_nth_unstable(rank - 1).1
-        };
+        let n = v.len();
+        let mut nth = |q: f64| *v.select_nth_unstable(nearest_rank(n, q)).1;
         (nth(0.50), nth(0.99), self.max)
     }
 
@@ -107,8 +105,13 @@ pub fn percentile(sorted: &[u64], q: f64) -> u64 {
     if sorted.is_empty() {
         return 0;
     }
-    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
-    sorted[rank - 1]
+    sorted[nearest_rank(sorted.len(), q)]
+}
+
+/// The index of the `q` quantile (0..=1) among `len` sorted values, by
+/// nearest rank; `len` is at least 1.
+fn nearest_rank(len: usize, q: f64) -> usize {
+    ((q * len as f64).ceil() as usize).clamp(1, len) - 1
 }
 
 /// CPU use and memory of this process, for its statistics.

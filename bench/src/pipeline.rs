@@ -315,16 +315,15 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
             three.round_p50_ns.iter().zip(&one.round_p50_ns).map(|(a, b)| 2.0 * ratio(*a, *b)).collect();
         let r = 2.0 * ratio(three.latency.p50_ns, one.latency.p50_ns);
         let p50 = |p: &str| find(p).map(|x| x.latency.p50_ns);
-        // a ring under PM QoS against one hop under PM QoS (half its round trip)
-        let vs_one_pmqos = |path: &str| p50(path).zip(p50("one-hop-pmqos")).map(|(a, b)| 2.0 * ratio(a, b));
-        let three_vs_one_pmqos = vs_one_pmqos("three-hop-pmqos");
-        let placed_vs_one = p50("three-hop-placed").map(|a| 2.0 * ratio(a, one.latency.p50_ns));
-        let placed_vs_one_pmqos = vs_one_pmqos("three-hop-placed-pmqos");
-        let ordered_vs_one_pmqos = vs_one_pmqos("three-hop-ordered-pmqos");
-        let onecpu_vs_one = p50("three-hop-onecpu").map(|a| 2.0 * ratio(a, one.latency.p50_ns));
-        let onecpu_vs_one_pmqos = vs_one_pmqos("three-hop-onecpu-pmqos");
-        let onecpu_vs_onecpu_pair_pmqos =
-            p50("three-hop-onecpu-pmqos").zip(p50("one-hop-onecpu-pmqos")).map(|(a, b)| 2.0 * ratio(a, b));
+        // a ring's median against one hop of a pair (half its round trip)
+        let ring_vs_hop = |ring: &str, pair: &str| p50(ring).zip(p50(pair)).map(|(a, b)| 2.0 * ratio(a, b));
+        let three_vs_one_pmqos = ring_vs_hop("three-hop-pmqos", "one-hop-pmqos");
+        let placed_vs_one = ring_vs_hop("three-hop-placed", "one-hop");
+        let placed_vs_one_pmqos = ring_vs_hop("three-hop-placed-pmqos", "one-hop-pmqos");
+        let ordered_vs_one_pmqos = ring_vs_hop("three-hop-ordered-pmqos", "one-hop-pmqos");
+        let onecpu_vs_one = ring_vs_hop("three-hop-onecpu", "one-hop");
+        let onecpu_vs_one_pmqos = ring_vs_hop("three-hop-onecpu-pmqos", "one-hop-pmqos");
+        let onecpu_vs_onecpu_pair_pmqos = ring_vs_hop("three-hop-onecpu-pmqos", "one-hop-onecpu-pmqos");
         ratios.push(PipelineRatio {
             size,
             one_hop_p50_ns: one.latency.p50_ns / 2,

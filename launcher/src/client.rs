@@ -58,9 +58,12 @@ impl RouterSession {
         }
         let node = cli_node(world)?;
         let client = router_client(world, &node).map_err(|e| no_router(world, e))?;
-        let cell = OnceCell::new();
-        let _ = cell.set(node);
-        Ok(RouterSession { world: world.clone(), first: RefCell::new(None), node: cell, client: Some(client) })
+        Ok(RouterSession {
+            world: world.clone(),
+            first: RefCell::new(None),
+            node: OnceCell::from(node),
+            client: Some(client),
+        })
     }
 
     /// The session's iceoryx2 node (ports a command makes beside its

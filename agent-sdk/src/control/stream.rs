@@ -154,11 +154,6 @@ impl<Req: DeserializeOwned, Resp: Serialize> ToolSocket<Req, Resp> {
         })
     }
 
-    /// The socket's path.
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
-
     /// Whether requests are partly read: look again soon.
     pub fn busy(&self) -> bool {
         !self.reading.borrow().is_empty()
@@ -295,34 +290,38 @@ impl ToolConnection {
         timeout: Duration,
     ) -> Result<Resp, ControlError> {
         let start = Instant::now();
-        let service = self.path.display().to_string();
-        let timed_out = |e: io::Error, path: &Path| match e.kind() {
+        // what a failed read or write means: no answer in time, a server
+        // gone without answering, or the system's own error
+        let path = &self.path;
+        let fail = |e: io::Error| match e.kind() {
             io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut => {
                 ControlError::Timeout { service: path.display().to_string(), timeout }
             }
-            // the server closed the connection without an answer: it is gone
             io::ErrorKind::UnexpectedEof | io::ErrorKind::BrokenPipe | io::ErrorKind::ConnectionReset => {
                 ControlError::NoServer { service: path.display().to_string() }
             }
-            _ => ControlError::Io { what: "talk to the router", path: path.to_path_buf(), source: e },
+            _ => ControlError::Io { what: "talk to the router", path: path.clone(), source: e },
         };
-        let bytes = frame(&encode(req)).map_err(|e| timed_out(e, &self.path))?;
-        if bytes.len() - 4 > MAX_REQUEST {
-            return Err(ControlError::TooLarge { service, bytes: bytes.len() - 4, max: MAX_REQUEST });
+        let body = encode(req);
+        if body.len() > MAX_REQUEST {
+            let service = path.display().to_string();
+            return Err(ControlError::TooLarge { service, bytes: body.len(), max: MAX_REQUEST });
         }
-        self.stream.set_write_timeout(Some(timeout)).map_err(|e| timed_out(e, &self.path))?;
-        self.stream.write_all(&bytes).map_err(|e| timed_out(e, &self.path))?;
+        let bytes = frame(&body).map_err(fail)?;
+        let left = || timeout.saturating_sub(start.elapsed()).max(Duration::from_millis(1));
+        self.stream.set_write_timeout(Some(timeout)).map_err(fail)?;
+        self.stream.write_all(&bytes).map_err(fail)?;
         let mut head = [0u8; 4];
-        let left = |start: Instant| timeout.saturating_sub(start.elapsed()).max(Duration::from_millis(1));
-        self.stream.set_read_timeout(Some(left(start))).map_err(|e| timed_out(e, &self.path))?;
-        self.stream.read_exact(&mut head).map_err(|e| timed_out(e, &self.path))?;
+        self.stream.set_read_timeout(Some(left())).map_err(fail)?;
+        self.stream.read_exact(&mut head).map_err(fail)?;
         let len = u32::from_le_bytes(head) as usize;
         if len > MAX_REPLY {
+            let service = path.display();
             return Err(ProtocolError::Malformed(format!("a reply of {len} bytes from {service}")).into());
         }
         let mut body = vec![0u8; len];
-        self.stream.set_read_timeout(Some(left(start))).map_err(|e| timed_out(e, &self.path))?;
-        self.stream.read_exact(&mut body).map_err(|e| timed_out(e, &self.path))?;
+        self.stream.set_read_timeout(Some(left())).map_err(fail)?;
+        self.stream.read_exact(&mut body).map_err(fail)?;
         Ok(decode::<Resp>(&body)?)
     }
 }
