@@ -240,15 +240,21 @@ impl Robot {
 impl Robot {
     /// Prints the last lines of every log of the robot (router and agents) on stderr.
     pub fn dump_logs(&self) {
-        let logs = self.home.join(&self.name).join("logs");
-        let Ok(rd) = std::fs::read_dir(&logs) else { return };
-        for e in rd.filter_map(|e| e.ok()) {
-            let text = std::fs::read_to_string(e.path()).unwrap_or_default();
-            let lines: Vec<&str> = text.lines().collect();
-            eprintln!("----- {} (last {} lines)", e.path().display(), lines.len().min(40));
-            for l in &lines[lines.len().saturating_sub(40)..] {
-                eprintln!("{l}");
-            }
+        dump_logs(&self.home.join(&self.name));
+    }
+}
+
+/// Prints the last lines of every log in `STATE_DIR/logs` (a robot's router
+/// and agents) on stderr: a failing test's home is removed when it ends.
+pub fn dump_logs(state_dir: &std::path::Path) {
+    let logs = state_dir.join("logs");
+    let Ok(rd) = std::fs::read_dir(&logs) else { return };
+    for e in rd.filter_map(|e| e.ok()) {
+        let text = std::fs::read_to_string(e.path()).unwrap_or_default();
+        let lines: Vec<&str> = text.lines().collect();
+        eprintln!("----- {} (last {} lines)", e.path().display(), lines.len().min(40));
+        for l in &lines[lines.len().saturating_sub(40)..] {
+            eprintln!("{l}");
         }
     }
 }

@@ -91,6 +91,9 @@ impl OtherUser {
 
 impl Drop for OtherUser {
     fn drop(&mut self) {
+        if std::thread::panicking() {
+            nerve_tests::dump_logs(&self.home.join(&self.robot));
+        }
         let _ = self.nerve(&["down", "--grace", "1"]);
         for p in self.processes() {
             nerve_tests::sigkill(p);
@@ -118,9 +121,14 @@ fn pids(ps: &[Value]) -> Vec<u32> {
     ps.iter().filter_map(|a| a["pid"].as_u64()).map(|p| p as u32).collect()
 }
 
-fn mode_and_owner(p: &Path) -> (u32, u32) {
-    let m = std::fs::symlink_metadata(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
-    (m.mode() & 0o777, m.uid())
+/// Permission bits and owner of `p`, or None if it is gone (an agent's
+/// connection files come and go while the test lists them).
+fn mode_and_owner(p: &Path) -> Option<(u32, u32)> {
+    match std::fs::symlink_metadata(p) {
+        Ok(m) => Some((m.mode() & 0o777, m.uid())),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => panic!("{}: {e}", p.display()),
+    }
 }
 
 /// Two users launch `launch/pipeline.toml` on the same robot name: both
@@ -162,16 +170,15 @@ fn two_users_run_a_robot_of_the_same_name_side_by_side() {
     assert!(!my_files.is_empty() && !their_files.is_empty(), "{my_files:?} {their_files:?}");
     for (files, uid) in [(&my_files, my_uid), (&their_files, other.uid)] {
         for f in files.iter() {
-            let (mode, owner) = mode_and_owner(f);
+            let Some((mode, owner)) = mode_and_owner(f) else { continue };
             assert_eq!(owner, uid, "{} belongs to uid {owner}", f.display());
             // iceoryx2's management segment was 0666 (review F6)
             assert_eq!(mode & 0o002, 0, "{} is world-writable ({mode:o})", f.display());
         }
     }
-    let (mode, owner) = mode_and_owner(&other.iox2_root());
-    assert_eq!((mode, owner), (0o700, other.uid), "their iceoryx2 root");
-    let (mode, owner) = mode_and_owner(Path::new(&agent_sdk::world::default_iox2_root()));
-    assert_eq!((mode, owner), (0o700, my_uid), "my iceoryx2 root");
+    assert_eq!(mode_and_owner(&other.iox2_root()), Some((0o700, other.uid)), "their iceoryx2 root");
+    let mine = agent_sdk::world::default_iox2_root();
+    assert_eq!(mode_and_owner(Path::new(&mine)), Some((0o700, my_uid)), "my iceoryx2 root");
 
     // their `down` stops theirs only
     other.ok(&["down", "--grace", "2"]);
