@@ -224,20 +224,30 @@ mod tests {
     #[test]
     fn the_task_threads_cpu_clock_counts_only_that_thread() {
         use std::os::unix::thread::JoinHandleExt;
+        fn own_cpu_ns() -> u64 {
+            let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+            // SAFETY: clock_gettime writes one timespec through a valid pointer.
+            unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+            ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+        }
         let (tx, rx) = std::sync::mpsc::channel::<()>();
+        let (done_tx, done_rx) = std::sync::mpsc::channel::<()>();
+        // spins until it has had 150 ms of CPU (on a loaded machine that
+        // takes longer than 150 ms), at most 10 s
         let spinner = std::thread::spawn(move || {
             let t0 = std::time::Instant::now();
-            let mut x = 0u64;
-            while t0.elapsed() < Duration::from_millis(200) {
-                x = x.wrapping_add(1);
+            while own_cpu_ns() < 150_000_000 && t0.elapsed() < Duration::from_secs(10) {
+                std::hint::black_box(own_cpu_ns());
             }
-            std::hint::black_box(x);
+            let _ = done_tx.send(());
             let _ = rx.recv();
         });
         let task = TaskThread::new(spinner.as_pthread_t()).expect("its clock");
-        std::thread::sleep(Duration::from_millis(300));
+        done_rx.recv_timeout(Duration::from_secs(15)).expect("the spinner ends");
         let cpu = task.cpu_ns().expect("cpu time");
-        assert!(cpu >= 100_000_000, "the spinner used {cpu} ns");
+        // this thread only slept: the clock is the spinner's
+        assert!(cpu >= 150_000_000, "the spinner used {cpu} ns");
+        assert!(own_cpu_ns() < 100_000_000, "this thread waited, it did not spin");
         let _ = tx.send(());
         let _ = spinner.join();
     }
