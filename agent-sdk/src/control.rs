@@ -7,7 +7,11 @@
 //! (`nerve/<robot>/<agent>/ctl`).
 //!
 //! Clients poll for the reply with a short back-off: control traffic is rare,
-//! and this keeps every waiting side free of extra listeners.
+//! and this keeps every waiting side free of extra listeners. The router,
+//! which asks every agent at once (`nerve ps`), is woken instead: an agent
+//! that answered notifies the router's own event with its
+//! [`reply_event_id`], and the router looks only at the calls of agents
+//! whose id came (see `router::calls`).
 //!
 //! Tools (`nerve` commands) reach the router through its [`ToolSocket`]
 //! instead, a Unix stream socket beside the robot's state: a command that
@@ -224,6 +228,21 @@ const INITIAL_MESSAGE_BYTES: usize = 512;
 /// costs a few thousand wake-ups a second only while a call is pending.
 const MAX_POLL_INTERVAL: Duration = Duration::from_micros(200);
 
+/// Reply wake-ups a control service's event tells apart: event id 0 (a
+/// notifier's default) says that a request came; ids 1 to this say that an
+/// agent whose name hashes to the id answered one (see
+/// [`reply_event_id`]). Also the event's largest id.
+pub const REPLY_EVENT_IDS: usize = 255;
+
+/// The event id with which agent `name` tells the router that it answered:
+/// 1 to [`REPLY_EVENT_IDS`], from a hash of the name (FNV-1a). Agents that
+/// share an id only make the router look at each other's calls as well.
+pub fn reply_event_id(name: &str) -> usize {
+    let hash = name.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
+    // the remainder is below REPLY_EVENT_IDS, which fits a usize
+    1 + (hash % REPLY_EVENT_IDS as u64) as usize
+}
+
 /// The serving side: receives requests and answers them.
 #[derive(Debug)]
 pub struct ControlServer<Req, Resp> {
@@ -274,6 +293,17 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
     /// after this call wakes the server again. Call it before receiving.
     pub fn drain_wakeups(&self) {
         let _ = self.listener.try_wait(|_| {});
+    }
+
+    /// Drains the wake-ups like [`ControlServer::drain_wakeups`], calling
+    /// `replied` with every reply id that came (see [`reply_event_id`]).
+    pub fn take_wakeups(&self, mut replied: impl FnMut(usize)) {
+        let _ = self.listener.try_wait(|a| {
+            let id = a.id.as_value();
+            if id != 0 {
+                replied(id);
+            }
+        });
     }
 
     /// Takes the next pending request, if any, with the [`Responder`] that
@@ -492,6 +522,15 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
         }
     }
 
+    /// Wakes the server's owner with event id `id` (an agent telling the
+    /// router that it answered: [`reply_event_id`]).
+    pub fn notify_replied(&self, id: usize) -> Result<(), ControlError> {
+        self.notifier
+            .notify_with_custom_event_id(EventId::new(id))
+            .map(|_| ())
+            .map_err(ipc_err(&self.service, IpcOp::Notify))
+    }
+
     /// Sends `req` and returns at once: the reply is picked up later with
     /// [`PendingCall::poll`]. [`ControlError::NoServer`] when no server took
     /// the request (none is connected); a caller that sends to a server it
@@ -584,6 +623,7 @@ fn open_event(
     let name: ServiceName = service.try_into().map_err(ipc_err(service, IpcOp::Name))?;
     node.service_builder(&name)
         .event()
+        .event_id_max_value(REPLY_EVENT_IDS)
         .max_notifiers(size.max_clients + 2)
         .max_listeners(2)
         .max_nodes(size.max_nodes)

@@ -12,6 +12,13 @@
 //! When a call to an agent times out, the commands queued behind it fail at
 //! once with the same cause instead of waiting their own time-outs: an
 //! agent that did not answer one command is not expected to answer the next.
+//!
+//! An agent that answered wakes the router with its reply id
+//! ([`agent_sdk::control::reply_event_id`]); a pass given the ids that came
+//! ([`Looks::Replied`]) looks only at the calls of those agents, so that
+//! a `ps` of 100 agents costs a look per reply instead of a look at every
+//! pending call on every pass. A full look ([`Looks::All`]) now and then
+//! catches what no wake-up announces: time-outs, agents gone, a wake-up lost.
 
 use agent_sdk::control::{ControlClient, ControlError, ControlSize, PendingCall};
 use agent_sdk::world::{Ipc, World};
@@ -69,6 +76,42 @@ struct Link {
     gone: bool,
 }
 
+/// Which calls in flight a [`Calls::pump`] looks at (queued commands are
+/// always sent).
+#[derive(Debug, Clone)]
+pub enum Looks {
+    /// every one: for time-outs, agents gone and wake-ups lost
+    All,
+    /// only those of agents whose reply id came
+    Replied(ReplyIds),
+}
+
+/// A set of reply ids (1 to [`agent_sdk::control::REPLY_EVENT_IDS`]).
+#[derive(Debug, Clone, Default)]
+pub struct ReplyIds([u64; 4]);
+
+impl ReplyIds {
+    /// Adds `id`; ids out of range are ignored.
+    pub fn insert(&mut self, id: usize) {
+        if let Some(word) = self.0.get_mut(id / 64) {
+            *word |= 1 << (id % 64);
+        }
+    }
+
+    /// Whether `id` is in the set.
+    pub fn contains(&self, id: usize) -> bool {
+        self.0.get(id / 64).is_some_and(|w| w & (1 << (id % 64)) != 0)
+    }
+
+    /// Whether the set is empty.
+    pub fn is_empty(&self) -> bool {
+        self.0.iter().all(|w| *w == 0)
+    }
+}
+
+// the set holds every id an agent can send
+const _: () = assert!(agent_sdk::control::REPLY_EVENT_IDS < 4 * 64);
+
 /// The router's commands to its agents.
 #[derive(Debug, Default)]
 pub struct Calls {
@@ -125,10 +168,21 @@ impl Calls {
         self.links.values().any(|l| l.in_flight.is_some() || !l.queue.is_empty())
     }
 
-    /// Sends what can be sent, collects replies and time-outs.
-    pub fn pump(&mut self, world: &World, node: &Node<Ipc>, now: Instant) -> Vec<Outcome> {
+    /// Whether a command waits for its reply (and not only in a queue).
+    pub fn in_flight(&self) -> bool {
+        self.links.values().any(|l| l.in_flight.is_some())
+    }
+
+    /// Sends what can be sent, collects replies and time-outs of the calls
+    /// that `looks` names.
+    pub fn pump(&mut self, world: &World, node: &Node<Ipc>, now: Instant, looks: &Looks) -> Vec<Outcome> {
         let mut out = Vec::new();
         for (name, link) in self.links.iter_mut() {
+            if let (Looks::Replied(ids), Some(_)) = (looks, &link.in_flight)
+                && !ids.contains(agent_sdk::control::reply_event_id(name))
+            {
+                continue;
+            }
             // at most a few rounds: a reply, then the next command sent
             for _ in 0..4 {
                 if !link.step(name, world, node, now, &mut out) {
@@ -321,7 +375,7 @@ mod tests {
             let server = ControlServer::create(&agent, &service, ControlSize::AGENT).expect("server");
             let mut calls = Calls::default();
             let ticket = calls.submit(name, AgentCommand::Stop, Duration::from_secs(5));
-            assert!(calls.pump(&world, &node, Instant::now()).is_empty(), "sent, not answered yet");
+            assert!(calls.pump(&world, &node, Instant::now(), &Looks::All).is_empty(), "sent, not answered yet");
             StopSent {
                 world,
                 _files,
@@ -342,7 +396,7 @@ mod tests {
         fn outcome(&mut self) -> Outcome {
             loop {
                 assert!(self.t0.elapsed() < Duration::from_secs(5), "no outcome");
-                let mut out = self.calls.pump(&self.world, &self.node, Instant::now());
+                let mut out = self.calls.pump(&self.world, &self.node, Instant::now(), &Looks::All);
                 if let Some(o) = out.pop() {
                     assert_eq!(o.ticket, self.ticket);
                     return o;
@@ -378,5 +432,55 @@ mod tests {
         s.agent = None;
         let o = s.outcome();
         assert!(matches!(o.result, Ok(AgentReply::Ok)), "{:?}", o.result);
+    }
+
+    #[test]
+    fn a_pass_looks_only_at_the_calls_of_agents_that_said_they_replied() {
+        use shm_schemas::control::cli_to_router::{RouterReply, RouterRequest};
+        let mut s = StopSent::new("callwake", "a3");
+        // the router's own service, which an agent wakes with its reply id
+        let router: ControlServer<RouterRequest, RouterReply> =
+            ControlServer::create(&s.node, &s.world.robot().router_service(), ControlSize::ROUTER)
+                .expect("router service");
+        let agent = s.agent.as_ref().expect("agent node");
+        let to_router = agent_sdk::control::agent_router_client::<RouterRequest, RouterReply>(&s.world, agent)
+            .expect("the agent's client of the router");
+        while s.server().serve(|_| AgentReply::Ok).expect("serve") == 0 {
+            assert!(s.t0.elapsed() < Duration::from_secs(5), "the stop never arrived");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        // answered, but nothing said so: a pass given other ids skips it
+        let mut other = ReplyIds::default();
+        let mine = agent_sdk::control::reply_event_id("a3");
+        other.insert(if mine == 1 { 2 } else { 1 });
+        assert!(s.calls.pump(&s.world, &s.node, Instant::now(), &Looks::Replied(other)).is_empty());
+        assert!(s.calls.in_flight(), "still in flight");
+        // the agent says so; the router's wake-ups carry its id
+        to_router.notify_replied(mine).expect("notify");
+        let mut ids = ReplyIds::default();
+        router.take_wakeups(|id| ids.insert(id));
+        assert!(ids.contains(mine) && !ids.is_empty(), "the reply id came");
+        let out = s.calls.pump(&s.world, &s.node, Instant::now(), &Looks::Replied(ids));
+        assert_eq!(out.len(), 1, "{out:?}");
+        assert!(matches!(out[0].result, Ok(AgentReply::Ok)), "{:?}", out[0].result);
+        assert!(!s.calls.in_flight());
+    }
+
+    #[test]
+    fn reply_ids_are_a_set_of_the_ids_agents_send() {
+        let mut ids = ReplyIds::default();
+        assert!(ids.is_empty());
+        for id in [1, 63, 64, 200, agent_sdk::control::REPLY_EVENT_IDS] {
+            ids.insert(id);
+            assert!(ids.contains(id));
+        }
+        assert!(!ids.contains(2) && !ids.contains(65));
+        ids.insert(10_000); // out of range: ignored, never a panic
+        assert!(!ids.contains(10_000));
+        for name in ["a", "t1", "r1", "sonar", "a-very-long-agent-name-0123456789"] {
+            let id = agent_sdk::control::reply_event_id(name);
+            assert!((1..=agent_sdk::control::REPLY_EVENT_IDS).contains(&id), "{name}: {id}");
+            assert_eq!(id, agent_sdk::control::reply_event_id(name), "the same name, the same id");
+        }
     }
 }

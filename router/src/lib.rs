@@ -59,6 +59,7 @@ use store::Store;
 pub use supervision::{MAX_BACKOFF, MAX_SUPERVISED};
 
 pub use calls::{AGENT_TIMEOUT, STATS_TIMEOUT};
+use calls::{Looks, ReplyIds};
 /// How often liveness is checked.
 pub const LIVENESS_PERIOD: Duration = Duration::from_millis(250);
 /// How often the shared memory of dead processes that are not agents (a
@@ -71,6 +72,11 @@ const SWEEP_PERIOD: Duration = Duration::from_secs(5);
 /// The longest sleep between two looks for agents' replies while commands
 /// are in flight.
 const MAX_POLL_INTERVAL: Duration = Duration::from_micros(200);
+
+/// How often the router looks at every call in flight while it waits for
+/// agents' replies, which otherwise wake it with their ids (see
+/// [`calls`]): time-outs, agents gone and wake-ups lost are found then.
+const FULL_LOOK_EVERY: Duration = Duration::from_millis(2);
 
 /// Why the router could not start.
 #[derive(Debug, thiserror::Error)]
@@ -214,19 +220,35 @@ impl Router {
         let mut last_ping = Instant::now();
         let mut poll = Duration::from_micros(10);
         let mut tidy = Tidy::default();
+        let mut last_full_look = Instant::now();
+        // `NERVE_REPLY_WAKE=off`: the router looks at every call on every
+        // pass and polls while agents owe replies, as it did before agents
+        // woke it (for measuring the two side by side, BENCHMARKS.md §6)
+        let reply_wake = std::env::var_os("NERVE_REPLY_WAKE").is_none_or(|v| v != "off");
         loop {
-            // While agents owe replies (or the disk a write), look again
-            // soon; else sleep until a request or the tick. The WaitSet
-            // counts its time-out in whole milliseconds (epoll), which made
-            // every stage of a rewire wait 1 ms: a busy router sleeps by
-            // itself instead, and a request coming meanwhile is taken at the
-            // next look, at most MAX_POLL_INTERVAL later. A SIGTERM meanwhile
-            // is kept by iceoryx2's handler for the next wait (a busy spell
-            // ends with its jobs' time-outs).
-            if self.state.busy() || self.tool_socket.as_ref().is_some_and(ToolSocket::busy) {
+            // While a job waits for what no event announces (a death, the
+            // disk) or a tool's request is half read, look again soon; else
+            // sleep until a request, an agent's reply or the tick. The
+            // WaitSet counts its time-out in whole milliseconds (epoll),
+            // which made every stage of a rewire wait 1 ms: a polling router
+            // sleeps by itself instead, and a request coming meanwhile is
+            // taken at the next look, at most MAX_POLL_INTERVAL later. A
+            // SIGTERM meanwhile is kept by iceoryx2's handler for the next
+            // wait (a busy spell ends with its jobs' time-outs).
+            let awaiting = self.state.busy();
+            let polling = self.state.needs_polling()
+                || self.tool_socket.as_ref().is_some_and(ToolSocket::busy)
+                || (awaiting && !reply_wake);
+            if polling {
                 std::thread::sleep(poll);
             } else {
-                let wait = tidy.next().map_or(LIVENESS_PERIOD, |at| at.saturating_duration_since(Instant::now()));
+                let wait = if awaiting {
+                    // agents' replies wake the router; the time-out is for a
+                    // full look (time-outs, agents gone, a wake-up lost)
+                    FULL_LOOK_EVERY.saturating_sub(last_full_look.elapsed())
+                } else {
+                    tidy.next().map_or(LIVENESS_PERIOD, |at| at.saturating_duration_since(Instant::now()))
+                };
                 match ws
                     .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, wait.min(LIVENESS_PERIOD))
                 {
@@ -238,9 +260,13 @@ impl Router {
                     }
                 }
             }
+            let mut replied = ReplyIds::default();
+            self.server.take_wakeups(|id| replied.insert(id));
             let mut progressed = false;
             for (server, tool) in [(&self.server, false), (&self.cli_server, true)] {
-                server.drain_wakeups();
+                if tool {
+                    server.drain_wakeups();
+                }
                 loop {
                     let t = Instant::now();
                     let got = server.receive();
@@ -270,7 +296,14 @@ impl Router {
                     self.state.accept(req, responder);
                 }
             }
-            self.state.pump();
+            // a full look while polling anyway, and every FULL_LOOK_EVERY
+            let looks = if polling || last_full_look.elapsed() >= FULL_LOOK_EVERY {
+                last_full_look = Instant::now();
+                Looks::All
+            } else {
+                Looks::Replied(replied)
+            };
+            self.state.pump(&looks);
             poll = if progressed { Duration::from_micros(10) } else { (poll * 2).min(MAX_POLL_INTERVAL) };
             if self.state.shutdown && self.state.jobs.is_empty() {
                 break;

@@ -13,7 +13,7 @@
 //! it (or is not running), a `Suspend` marks the agent suspended when it
 //! obeyed, and a `Stop` cancels the agent's restarts only when it obeyed.
 
-use crate::calls::{AGENT_TIMEOUT, Calls, Outcome, STATS_TIMEOUT, Ticket};
+use crate::calls::{AGENT_TIMEOUT, Calls, Looks, Outcome, STATS_TIMEOUT, Ticket};
 use crate::events::EventLog;
 use crate::registry::{Entry, Registry};
 use crate::remembered::{self, FORGET_AFTER, Remembered};
@@ -418,6 +418,14 @@ impl State {
         self.calls.busy() || !self.jobs.is_empty()
     }
 
+    /// Whether a job waits for something no event announces (a process to
+    /// die, the disk writer), so that the serving loop must look again soon
+    /// by itself; replies of agents wake it (see [`crate::calls`]).
+    pub fn needs_polling(&self) -> bool {
+        self.jobs.iter().any(|j| matches!(j.work, Work::Kill { .. } | Work::Saved { .. }))
+            || (self.calls.busy() && !self.calls.in_flight())
+    }
+
     fn submit(&mut self, name: &str, cmd: AgentCommand, timeout: Duration) -> Result<Ticket, RouterError> {
         self.registry.live(name)?;
         Ok(self.calls.submit(name, cmd, timeout))
@@ -589,8 +597,8 @@ impl State {
 
     /// Hands the outcomes of agent commands to their jobs, and answers the
     /// jobs that are complete.
-    pub fn pump(&mut self) {
-        let outcomes = self.calls.pump(&self.world, &self.node, Instant::now());
+    pub fn pump(&mut self, looks: &Looks) {
+        let outcomes = self.calls.pump(&self.world, &self.node, Instant::now(), looks);
         for o in outcomes {
             if let Some(job) = self.jobs.iter_mut().find(|j| j.waiting.contains(&o.ticket)) {
                 job.waiting.retain(|t| *t != o.ticket);

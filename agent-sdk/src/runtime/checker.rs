@@ -78,10 +78,11 @@ impl Checker<'_> {
             return;
         };
         let mut cpu = CpuMeter::default();
+        let reply_id = crate::control::reply_event_id(&reg.name);
         // The router sends a hot-added agent its connections as soon as it
         // has registered: they are served before the epoch is watched
         // (about 1 ms of iceoryx2 set-up), which is not on that path.
-        if self.serve(server, &cpu) {
+        if self.serve(server, &cpu, link, reply_id) {
             return;
         }
         link.watch_epoch(self.world, self.node);
@@ -134,7 +135,7 @@ impl Checker<'_> {
             if let Some((task, g, priority)) = &mut guard {
                 self.guard_task(task, g, *priority, now_ns);
             }
-            if self.serve(server, &cpu) || self.shared.stopping() {
+            if self.serve(server, &cpu, link, reply_id) || self.shared.stopping() {
                 return;
             }
             // cheap (one receive on the epoch subscriber) unless registering is due
@@ -154,10 +155,17 @@ impl Checker<'_> {
         }
     }
 
-    /// Answers the commands that came; whether one was a stop.
-    fn serve(&self, server: &ControlServer<AgentCommand, AgentReply>, cpu: &CpuMeter) -> bool {
+    /// Answers the commands that came, and wakes the router if any was
+    /// answered (its calls wait for that event); whether one was a stop.
+    fn serve(
+        &self,
+        server: &ControlServer<AgentCommand, AgentReply>,
+        cpu: &CpuMeter,
+        link: &RouterLink,
+        reply_id: usize,
+    ) -> bool {
         let mut stop_now = false;
-        if let Err(e) = server.serve(|req| match req {
+        match server.serve(|req| match req {
             Ok(AgentCommand::Stop) => {
                 stop_now = true;
                 AgentReply::Ok
@@ -165,7 +173,9 @@ impl Checker<'_> {
             Ok(cmd) => self.handle(cmd, cpu),
             Err(e) => AgentReply::Error(e.to_string()),
         }) {
-            tracing::warn!("control service failed: {e}");
+            Ok(0) => {}
+            Ok(_) => link.replied(reply_id),
+            Err(e) => tracing::warn!("control service failed: {e}"),
         }
         if stop_now {
             tracing::info!("stop requested");

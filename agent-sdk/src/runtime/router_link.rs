@@ -215,6 +215,18 @@ impl RouterLink {
         }
     }
 
+    /// Tells the router that this agent (event id `reply_id`, see
+    /// [`crate::control::reply_event_id`]) answered a request, so that it
+    /// picks the reply up at once instead of at its next look. Best effort:
+    /// a router that misses it finds the reply at that look.
+    pub(super) fn replied(&self, reply_id: usize) {
+        if let Some(client) = &self.client
+            && let Err(e) = client.notify_replied(reply_id)
+        {
+            tracing::debug!("cannot wake the router after a reply: {e}");
+        }
+    }
+
     /// Whether a router accepted this agent.
     pub(super) fn is_registered(&self) -> bool {
         self.registrar.registered.is_some()
