@@ -84,6 +84,36 @@ pub fn tails_from_now(paths: impl IntoIterator<Item = PathBuf>) -> Vec<Tail> {
     paths.into_iter().map(Tail::from_end).collect()
 }
 
+/// `lines` without the frames of Rust backtraces (from a `stack backtrace:`
+/// line to the `note:` that ends it, or to the first line that is not a
+/// frame), each replaced by one line that says where it went: shown a few
+/// lines of a log, a person wants the panic's message, which a backtrace
+/// would push out.
+pub fn without_backtraces(lines: &[String]) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut in_trace = false;
+    for l in lines {
+        let t = l.trim_start();
+        if t == "stack backtrace:" {
+            in_trace = true;
+            out.push("(a backtrace, in the log)".to_owned());
+            continue;
+        }
+        if in_trace {
+            let frame = t.starts_with("at ") || t.split_once(':').is_some_and(|(n, _)| n.parse::<u32>().is_ok());
+            if frame {
+                continue;
+            }
+            in_trace = false;
+            if t.starts_with("note: Some details are omitted") {
+                continue;
+            }
+        }
+        out.push(l.clone());
+    }
+    out
+}
+
 /// The last `n` lines of `f` (the bytes from the start of the n-th line from
 /// the end to the end) and the offset of the end. Reads blocks of
 /// [`BACK_BLOCK`] backwards from the end until it has seen `n` line breaks,
@@ -158,6 +188,31 @@ mod tests {
         fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
             self.inner.seek(pos)
         }
+    }
+
+    #[test]
+    fn backtraces_are_left_out_of_a_logs_lines_and_the_message_kept() {
+        let log: Vec<String> = [
+            "thread 'task' (7) panicked at src/a.rs:1:2:",
+            "boom",
+            "stack backtrace:",
+            "   0: __rustc::rust_begin_unwind",
+            "             at /rustc/x/library/std/src/panicking.rs:689:5",
+            "  12: start_thread",
+            "note: Some details are omitted, run with `RUST_BACKTRACE=full` for a verbose backtrace.",
+            "after",
+        ]
+        .map(String::from)
+        .to_vec();
+        assert_eq!(
+            without_backtraces(&log),
+            ["thread 'task' (7) panicked at src/a.rs:1:2:", "boom", "(a backtrace, in the log)", "after"]
+        );
+        // a trace without its note ends at the first line that is no frame
+        let cut: Vec<String> = ["stack backtrace:", "   0: f", "next"].map(String::from).to_vec();
+        assert_eq!(without_backtraces(&cut), ["(a backtrace, in the log)", "next"]);
+        let plain: Vec<String> = ["12:00:01 INFO started", "x: y"].map(String::from).to_vec();
+        assert_eq!(without_backtraces(&plain), plain);
     }
 
     #[test]

@@ -57,6 +57,9 @@ fn policy(p: RestartPolicy) -> proto::RestartPolicy {
     }
 }
 
+/// How many of its last log lines a launch shows of an agent that failed to start.
+const FAILED_LOG_LINES: usize = 12;
+
 /// Starts every agent not already running, in parallel; returns how many failed.
 fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<usize> {
     let n = file.agents.len();
@@ -67,6 +70,8 @@ fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<
             continue;
         }
         let argv = spec.argv(world.robot().as_str());
+        // from the log's end now: a failure shows this start's lines only
+        let log = crate::agent_logs::Tail::from_end(world.log_file(&spec.name));
         let child = Command::new(&argv[0])
             .args(&argv[1..])
             .stdin(Stdio::null())
@@ -74,11 +79,11 @@ fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<
             .stderr(Stdio::piped())
             .spawn()
             .with_context(|| format!("cannot start {}", argv[0]))?;
-        children.push((spec, Some(child)));
+        children.push((spec, Some((child, log))));
     }
     let mut failed = 0;
     for (i, (spec, child)) in children.into_iter().enumerate() {
-        let Some(mut child) = child else {
+        let Some((mut child, mut log)) = child else {
             eprintln!("  [{}/{n}] {} ({}) already running", i + 1, spec.name, spec.kind);
             continue;
         };
@@ -101,14 +106,18 @@ fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<
             );
         } else {
             failed += 1;
-            eprintln!(
-                "  [{}/{n}] {} ({}) FAILED: {} (log: {})",
-                i + 1,
-                spec.name,
-                spec.kind,
-                err.trim().trim_start_matches("error: "),
-                world.log_file(&spec.name).display()
-            );
+            let log_file = world.log_file(&spec.name).display().to_string();
+            let why = err.trim().trim_start_matches("error: ");
+            // the agent's own message may name its log already
+            let log_note = if why.contains(&log_file) { String::new() } else { format!(" (log: {log_file})") };
+            eprintln!("  [{}/{n}] {} ({}) FAILED: {why}{log_note}", i + 1, spec.name, spec.kind);
+            // what the agent wrote before it went: a failure without a
+            // message (a panic, a signal) is otherwise read in another window
+            let lines = crate::agent_logs::without_backtraces(&log.poll());
+            let lines: Vec<&String> = lines.iter().skip_while(|l| l.trim().is_empty()).collect();
+            for l in &lines[lines.len().saturating_sub(FAILED_LOG_LINES)..] {
+                eprintln!("        | {l}");
+            }
         }
     }
     Ok(failed)

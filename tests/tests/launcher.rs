@@ -199,6 +199,30 @@ fn a_panic_in_the_task_ends_the_agent_and_it_is_restarted() {
     r.down_and_check_clean();
 }
 
+/// An agent that dies during its start-up without a word (a panic, a
+/// signal) is reported by the launch with the end of what it logged in
+/// this start, not only a pointer to its log (CI of 2026-11-26 kept only
+/// "exited during start-up" of a failure it could not reproduce).
+#[test]
+fn an_agent_that_dies_starting_is_reported_with_its_last_log_lines() {
+    let r = Robot::new("dies");
+    // an earlier run's line in the same log is not shown
+    let logs = r.home.join(&r.name).join("logs");
+    std::fs::create_dir_all(&logs).expect("logs folder");
+    std::fs::write(logs.join("bad.log"), "an earlier run of bad, not this one\n").expect("old log");
+    let file = r.launch_file(
+        "dies.toml",
+        "robot = \"x\"\n[[agent]]\nname = \"bad\"\nkind = \"testagent\"\nargs = [\"--mode\", \"panic-start\"]\n\
+         [[agent]]\nname = \"t1\"\nkind = \"ticker\"\n",
+    );
+    let err = r.fails(&["launch", file.to_str().expect("utf-8 path")]);
+    assert!(err.contains("bad (testagent) FAILED"), "{err}");
+    assert!(err.contains("| ") && err.contains("testagent: a bug in start-up, on purpose"), "{err}");
+    assert!(!err.contains("an earlier run of bad"), "{err}");
+    assert!(err.contains("t1 (ticker) started"), "the other agent starts all the same: {err}");
+    r.down_and_check_clean();
+}
+
 /// `nerve ps | head`: a reader that leaves before the table is written is no
 /// error (the table was 100 `println!`s, and the first one that met the
 /// closed pipe panicked with a backtrace).

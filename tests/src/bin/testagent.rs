@@ -12,7 +12,9 @@
 //! * `hang`: its task blocks for ever in the first step (a hung agent; the
 //!   message checker still answers, but the watchdog pings stop);
 //! * `burn`: burns CPU in every step (for resource tests);
-//! * `fail-start`: its `start` fails (a device that cannot be opened).
+//! * `fail-start`: its `start` fails (a device that cannot be opened);
+//! * `panic-start`: its `start` panics (the process ends during its
+//!   start-up, before it is ready, with nothing said but its log).
 
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
 use shm_schemas::payloads::Scalar;
@@ -27,6 +29,7 @@ enum Mode {
     Hang,
     Burn,
     FailStart,
+    PanicStart,
 }
 
 struct TestAgent {
@@ -54,9 +57,10 @@ impl Agent for TestAgent {
                 "hang" => Mode::Hang,
                 "burn" => Mode::Burn,
                 "fail-start" => Mode::FailStart,
+                "panic-start" => Mode::PanicStart,
                 other => {
                     return Err(AgentError::Config(format!(
-                        "unknown mode {other:?}; use scalar, crash, panic, stubborn, hang, burn or fail-start"
+                        "unknown mode {other:?}; use scalar, crash, panic, stubborn, hang, burn, fail-start or panic-start"
                     )));
                 }
             },
@@ -66,15 +70,17 @@ impl Agent for TestAgent {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        if self.mode == Mode::FailStart {
-            return Err(AgentError::Device("cannot open /dev/ttyNOPE: no such device".into()));
+        match self.mode {
+            Mode::FailStart => return Err(AgentError::Device("cannot open /dev/ttyNOPE: no such device".into())),
+            Mode::PanicStart => panic!("testagent: a bug in start-up, on purpose"),
+            _ => {}
         }
         Ok(())
     }
 
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
         match self.mode {
-            Mode::Scalar | Mode::FailStart => {}
+            Mode::Scalar | Mode::FailStart | Mode::PanicStart => {}
             Mode::Crash => std::process::abort(),
             Mode::Panic => panic!("testagent: a bug in the step, on purpose"),
             Mode::Stubborn => {
