@@ -81,15 +81,18 @@ impl LatenessRecorder {
 
     /// (p50, p99, max since start) in nanoseconds.
     pub fn summary(&self) -> (u64, u64, u64) {
-        if self.len == 0 {
-            return (0, 0, 0);
-        }
-        // two selections instead of a sort: every `nerve ps` asks for this,
-        // and sorting 2048 values was the largest part of an agent's answer
-        let mut v = self.recent[..self.len].to_vec();
-        let n = v.len();
-        let mut nth = |q: f64| *v.select_nth_unstable(nearest_rank(n, q)).1;
-        (nth(0.50), nth(0.99), self.max)
+        let mut v = Vec::new();
+        let max = self.copy_recent_into(&mut v);
+        summary_of(&mut v, max)
+    }
+
+    /// Copies the recent values into `out` (replacing what it held, reusing
+    /// its memory) and returns the all-time maximum: taken under the lock
+    /// the task records into, so that [`summary_of`] can work outside it.
+    pub fn copy_recent_into(&self, out: &mut Vec<u64>) -> u64 {
+        out.clear();
+        out.extend_from_slice(&self.recent[..self.len]);
+        self.max
     }
 
     /// Forgets the recent values and the maximum (after a period change).
@@ -98,6 +101,19 @@ impl LatenessRecorder {
         self.next = 0;
         self.max = 0;
     }
+}
+
+/// (p50, p99, max) of lateness values (reordered in place), given their
+/// maximum; zeros when there are none.
+pub fn summary_of(values: &mut [u64], max: u64) -> (u64, u64, u64) {
+    if values.is_empty() {
+        return (0, 0, 0);
+    }
+    // two selections instead of a sort: every `nerve ps` asks for this,
+    // and sorting 2048 values was the largest part of an agent's answer
+    let n = values.len();
+    let mut nth = |q: f64| *values.select_nth_unstable(nearest_rank(n, q)).1;
+    (nth(0.50), nth(0.99), max)
 }
 
 /// The `q` quantile (0..=1) of sorted values, nearest rank.

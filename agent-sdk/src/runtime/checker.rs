@@ -49,6 +49,10 @@ pub(super) struct Checker<'a> {
     pub(super) task_kind: Task,
     /// the task thread, its run-away guard and its real-time priority, when it runs real-time
     pub(super) guard: std::cell::RefCell<Option<(TaskThread, Guard, i32)>>,
+    /// the lateness values copied out for a statistics answer, kept between
+    /// answers: a fresh 16 KiB copy per `nerve ps` was a large part of an
+    /// agent's answer (allocation and the allocator's consolidation)
+    pub(super) lateness_scratch: std::cell::RefCell<Vec<u64>>,
 }
 
 impl Checker<'_> {
@@ -354,11 +358,12 @@ impl Checker<'_> {
         let now = now_ns();
         // copied out, so that the task, which records into them every
         // cycle, does not wait while the percentiles are worked out
-        let (cycles, rate_hz, overruns, lateness) = {
+        let mut recent = self.lateness_scratch.borrow_mut();
+        let (cycles, rate_hz, overruns, max) = {
             let f = self.shared.figures();
-            (f.cycles, f.rate.rate(now), f.overruns, f.lateness.clone())
+            (f.cycles, f.rate.rate(now), f.overruns, f.lateness.copy_recent_into(&mut recent))
         };
-        let (p50, p99, max) = lateness.summary();
+        let (p50, p99, max) = crate::meters::summary_of(&mut recent, max);
         AgentStats {
             cycles,
             rate_hz,

@@ -414,6 +414,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
         params: &params,
         task_kind,
         guard: std::cell::RefCell::new(guard),
+        lateness_scratch: std::cell::RefCell::default(),
     };
     checker.run(&server, &checker_wake, &mut link, &registration);
 
