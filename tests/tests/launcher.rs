@@ -220,6 +220,7 @@ fn an_agent_that_dies_starting_is_reported_with_its_last_log_lines() {
     assert!(err.contains("| ") && err.contains("testagent: a bug in start-up, on purpose"), "{err}");
     assert!(!err.contains("an earlier run of bad"), "{err}");
     assert!(err.contains("t1 (ticker) started"), "the other agent starts all the same: {err}");
+    assert!(err.contains("is up in part: 1 of 2 agent(s) running (1 failed to start"), "{err}");
     r.down_and_check_clean();
 }
 

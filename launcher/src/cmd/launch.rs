@@ -51,14 +51,20 @@ pub fn launch(cli_robot: &str, explicit: bool, a: LaunchArgs) -> Result<ExitCode
     });
     let up = bring::up(&world, &file)?;
     let (failed, wiring_failed) = (up.failed, up.wiring_failed);
-    eprintln!(
-        "robot {} is up: {} agent(s) running, {} connection(s), in {:.2} s{}",
-        world.robot(),
-        n - failed,
-        file.connections.len() - wiring_failed,
-        t0.elapsed().as_secs_f64(),
-        if a.foreground { "" } else { " (`nerve ps`, `nerve graph`, `nerve logs NAME`, `nerve down`)" }
-    );
+    let hint = if a.foreground { "" } else { " (`nerve ps`, `nerve graph`, `nerve logs NAME`, `nerve down`)" };
+    let (links, secs) = (file.connections.len(), t0.elapsed().as_secs_f64());
+    if failed > 0 || wiring_failed > 0 {
+        // not "up": the launch exits 1, and says what is missing
+        eprintln!(
+            "robot {} is up in part: {} of {n} agent(s) running ({failed} failed to start, above), {} of {links} \
+             connection(s), in {secs:.2} s{hint}",
+            world.robot(),
+            n - failed,
+            links - wiring_failed,
+        );
+    } else {
+        eprintln!("robot {} is up: {n} agent(s) running, {links} connection(s), in {secs:.2} s{hint}", world.robot());
+    }
     if let Some(tails) = tails {
         follow(&world, tails)?;
         return Ok(ExitCode::SUCCESS);
