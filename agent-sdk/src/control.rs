@@ -292,7 +292,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
     /// Drains the wake-ups of the listener, so that a request arriving
     /// after this call wakes the server again. Call it before receiving.
     pub fn drain_wakeups(&self) {
-        let _ = self.listener.try_wait(|_| {});
+        self.take_wakeups(|_| {});
     }
 
     /// Drains the wake-ups like [`ControlServer::drain_wakeups`], calling

@@ -260,13 +260,12 @@ impl Router {
                     }
                 }
             }
+            // before receiving, so that what comes after wakes the next wait
             let mut replied = ReplyIds::default();
             self.server.take_wakeups(|id| replied.insert(id));
+            self.cli_server.drain_wakeups();
             let mut progressed = false;
             for (server, tool) in [(&self.server, false), (&self.cli_server, true)] {
-                if tool {
-                    server.drain_wakeups();
-                }
                 loop {
                     let t = Instant::now();
                     let got = server.receive();
