@@ -122,9 +122,14 @@ pub fn create_pid_file(path: &Path) -> Result<(), String> {
 /// and exits with 0 or 1. Must be called before any thread is started.
 pub fn daemonize(log: &Path, pid_file: &Path) -> std::io::Result<Readiness> {
     let (rd, wr): (OwnedFd, OwnedFd) = nix::unistd::pipe()?;
+    // the daemon (our grandchild) is re-parented to us, not to init, while
+    // we wait: if it dies before it is ready we can say how (a signal's
+    // name is most of the diagnosis of a crash that logged nothing)
+    // SAFETY: PR_SET_CHILD_SUBREAPER takes a plain integer argument.
+    let _ = unsafe { libc::prctl(libc::PR_SET_CHILD_SUBREAPER, 1 as libc::c_ulong, 0, 0, 0) };
     // SAFETY: no other thread runs yet (documented precondition).
     match unsafe { fork() }? {
-        ForkResult::Parent { .. } => {
+        ForkResult::Parent { child } => {
             drop(wr);
             let mut s = String::new();
             let _ = std::fs::File::from(rd).read_to_string(&mut s);
@@ -136,7 +141,8 @@ pub fn daemonize(log: &Path, pid_file: &Path) -> std::io::Result<Readiness> {
             }
             let msg = s.strip_prefix('E').unwrap_or("");
             if msg.is_empty() {
-                eprintln!("error: the agent exited during start-up; see its log {}", log.display());
+                let how = daemon_end(child).map(|h| format!(" ({h})")).unwrap_or_default();
+                eprintln!("error: the agent exited during start-up{how}; see its log {}", log.display());
             } else {
                 eprintln!("error: {msg}");
             }
@@ -166,6 +172,31 @@ pub fn daemonize(log: &Path, pid_file: &Path) -> std::io::Result<Readiness> {
     nix::unistd::dup2_stderr(&logf)?;
     let _ = logf.as_raw_fd();
     Ok(Readiness { pipe: Some(pipe), pid_file: Some(pid_file.to_path_buf()) })
+}
+
+/// How the daemon that closed the start-up pipe without a word ended, as
+/// its subreaper sees it: "killed by SIGSEGV", "exit status 3". Reaps the
+/// intermediate child `first` too. Waits at most a second for the daemon's
+/// status (its pipe closes a moment before it becomes a zombie); `None`
+/// when it is still running or the status could not be had.
+fn daemon_end(first: nix::unistd::Pid) -> Option<String> {
+    use nix::sys::wait::{WaitPidFlag, WaitStatus, waitpid};
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(1);
+    while std::time::Instant::now() < deadline {
+        match waitpid(None, Some(WaitPidFlag::WNOHANG)) {
+            Ok(WaitStatus::Exited(pid, _)) if pid == first => continue,
+            Ok(WaitStatus::Exited(_, code)) => return Some(format!("exit status {code}")),
+            Ok(WaitStatus::Signaled(pid, _, _)) if pid == first => continue,
+            Ok(WaitStatus::Signaled(_, sig, core)) => {
+                let core = if core { ", core dumped" } else { "" };
+                return Some(format!("killed by {}{core}", sig.as_str()));
+            }
+            Ok(WaitStatus::StillAlive) => std::thread::sleep(std::time::Duration::from_millis(5)),
+            Ok(_) => continue,
+            Err(_) => return None,
+        }
+    }
+    None
 }
 
 /// Size above which a log is rotated (see the module documentation).

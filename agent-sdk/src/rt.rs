@@ -8,6 +8,17 @@
 //! `MCL_FUTURE` only when the limit is infinite or the process holds
 //! `CAP_IPC_LOCK` (which lifts it); under a finite limit it locks the pages
 //! mapped so far and warns, naming the limit and how to raise it.
+//!
+//! Locking the pages mapped now also locks the main thread's stack, and a
+//! locked stack grows only within what is left of the limit: past it the
+//! kernel refuses the growth and the process dies of SIGSEGV, silently.
+//! The kernel lets `mlockall(MCL_CURRENT)` succeed whenever everything
+//! mapped fits the limit, and an agent maps about 8.0 MiB when it locks, so
+//! under the common 8 MiB default a build a few pages smaller locked with
+//! nothing left, and died at its first deeper call (CI saw exactly this).
+//! [`lock_plan`] therefore locks the pages mapped now only when the limit
+//! also holds the main thread's whole stack (`RLIMIT_STACK`), and otherwise
+//! locks nothing and says why.
 
 /// How much of the process [`lock_memory`] locks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -18,32 +29,52 @@ pub enum LockPlan {
     /// finite, and locking future mappings would make them fail to map once
     /// the limit is reached. Carries the limit in bytes, for the warning.
     CurrentOnly { limit: u64 },
+    /// Nothing: the limit is finite and would not hold what is mapped now
+    /// plus the main thread's whole stack, so a locked stack could not grow
+    /// (see the module documentation). Carries the numbers for the message.
+    Nothing { limit: u64, mapped: u64, stack: Option<u64> },
 }
 
 /// Decides how to lock memory from the soft `RLIMIT_MEMLOCK` (`None` for
-/// infinity) and whether the process holds `CAP_IPC_LOCK`.
-pub fn lock_plan(memlock_limit: Option<u64>, cap_ipc_lock: bool) -> LockPlan {
-    match memlock_limit {
-        None => LockPlan::CurrentAndFuture,
-        Some(_) if cap_ipc_lock => LockPlan::CurrentAndFuture,
-        Some(limit) => LockPlan::CurrentOnly { limit },
+/// infinity), whether the process holds `CAP_IPC_LOCK`, the bytes it maps
+/// now (`VmSize`; `None` when unknown) and the soft `RLIMIT_STACK` (`None`
+/// for infinity).
+pub fn lock_plan(memlock_limit: Option<u64>, cap_ipc_lock: bool, mapped: Option<u64>, stack: Option<u64>) -> LockPlan {
+    let Some(limit) = memlock_limit else { return LockPlan::CurrentAndFuture };
+    if cap_ipc_lock {
+        return LockPlan::CurrentAndFuture;
+    }
+    match (mapped, stack) {
+        (Some(m), Some(s)) if m.checked_add(s).is_some_and(|need| need <= limit) => LockPlan::CurrentOnly { limit },
+        _ => LockPlan::Nothing { limit, mapped: mapped.unwrap_or(0), stack },
     }
 }
 
-/// The soft `RLIMIT_MEMLOCK` in bytes, `None` for infinity (or when it
-/// cannot be read, so the old behaviour is kept).
-fn memlock_limit() -> Option<u64> {
+/// A soft resource limit in bytes, `None` for infinity (or when it cannot be
+/// read).
+fn soft_limit(resource: libc::__rlimit_resource_t) -> Option<u64> {
     let mut lim = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
     // SAFETY: getrlimit writes one rlimit through a valid pointer.
-    let rc = unsafe { libc::getrlimit(libc::RLIMIT_MEMLOCK, &mut lim) };
+    let rc = unsafe { libc::getrlimit(resource, &mut lim) };
     if rc != 0 || lim.rlim_cur == libc::RLIM_INFINITY { None } else { Some(lim.rlim_cur) }
 }
 
-/// Whether the effective capability set holds `CAP_IPC_LOCK` (read from
-/// `/proc/self/status`; `false` when it cannot be read).
-fn has_cap_ipc_lock() -> bool {
+/// The process's own `/proc/self/status`, read once per question.
+fn self_status() -> Option<String> {
+    std::fs::read_to_string("/proc/self/status").ok()
+}
+
+/// The bytes the process maps now (`VmSize` of `/proc/self/status`).
+fn mapped_bytes(status: &str) -> Option<u64> {
+    let kib: u64 =
+        status.lines().find_map(|l| l.strip_prefix("VmSize:"))?.trim().strip_suffix("kB")?.trim().parse().ok()?;
+    kib.checked_mul(1024)
+}
+
+/// Whether the effective capability set holds `CAP_IPC_LOCK` (`false` when
+/// the status cannot be read).
+fn has_cap_ipc_lock(status: &str) -> bool {
     const CAP_IPC_LOCK: u32 = 14;
-    let Ok(status) = std::fs::read_to_string("/proc/self/status") else { return false };
     status
         .lines()
         .find_map(|l| l.strip_prefix("CapEff:"))
@@ -51,12 +82,26 @@ fn has_cap_ipc_lock() -> bool {
         .is_some_and(|caps| caps & (1 << CAP_IPC_LOCK) != 0)
 }
 
+/// Bytes as MiB with one decimal, for messages.
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
+}
+
 /// Locks the pages of the process in RAM as they are touched
 /// (`MCL_ONFAULT`, so large sparse shared-memory mappings are not faulted
 /// in): current and future pages where `RLIMIT_MEMLOCK` is infinite, only
-/// current ones (with a warning) where it is finite; see [`lock_plan`].
+/// current ones (with a warning) where it is finite but large, nothing
+/// where it is too small to do so safely; see [`lock_plan`]. The error
+/// says what was not locked and why, for the caller to log.
 pub fn lock_memory() -> Result<(), String> {
-    let flags = match lock_plan(memlock_limit(), has_cap_ipc_lock()) {
+    let status = self_status().unwrap_or_default();
+    let plan = lock_plan(
+        soft_limit(libc::RLIMIT_MEMLOCK),
+        has_cap_ipc_lock(&status),
+        mapped_bytes(&status),
+        soft_limit(libc::RLIMIT_STACK),
+    );
+    let flags = match plan {
         LockPlan::CurrentAndFuture => libc::MCL_CURRENT | libc::MCL_FUTURE | libc::MCL_ONFAULT,
         LockPlan::CurrentOnly { limit } => {
             tracing::warn!(
@@ -68,10 +113,20 @@ pub fn lock_memory() -> Result<(), String> {
             );
             libc::MCL_CURRENT | libc::MCL_ONFAULT
         }
+        LockPlan::Nothing { limit, mapped, stack } => {
+            let stack = stack.map_or_else(|| "unlimited".to_owned(), mib);
+            return Err(format!(
+                "RLIMIT_MEMLOCK ({}) cannot hold the {} mapped now plus the main thread's stack (RLIMIT_STACK {stack}), \
+                 and a locked stack that cannot grow crashes the agent; to lock memory, set LimitMEMLOCK=infinity \
+                 in the systemd unit or run `ulimit -l unlimited` before starting",
+                mib(limit),
+                mib(mapped)
+            ));
+        }
     };
     // SAFETY: mlockall has no memory-safety preconditions.
     let rc = unsafe { libc::mlockall(flags) };
-    if rc == 0 { Ok(()) } else { Err(std::io::Error::last_os_error().to_string()) }
+    if rc == 0 { Ok(()) } else { Err(format!("mlockall refused ({})", std::io::Error::last_os_error())) }
 }
 
 /// Puts the calling thread under SCHED_FIFO at `priority` (1-99).
@@ -239,11 +294,46 @@ mod tests {
 
     #[test]
     fn a_finite_memlock_limit_never_locks_future_mappings() {
-        assert_eq!(lock_plan(None, false), LockPlan::CurrentAndFuture);
-        assert_eq!(lock_plan(None, true), LockPlan::CurrentAndFuture);
-        assert_eq!(lock_plan(Some(64 << 20), false), LockPlan::CurrentOnly { limit: 64 << 20 });
-        assert_eq!(lock_plan(Some(0), false), LockPlan::CurrentOnly { limit: 0 });
+        let (mapped, stack) = (Some(8 << 20), Some(8 << 20));
+        assert_eq!(lock_plan(None, false, mapped, stack), LockPlan::CurrentAndFuture);
+        assert_eq!(lock_plan(None, true, mapped, stack), LockPlan::CurrentAndFuture);
+        assert_eq!(lock_plan(Some(64 << 20), false, mapped, stack), LockPlan::CurrentOnly { limit: 64 << 20 });
         // CAP_IPC_LOCK lifts the limit: future mappings cannot hit it.
-        assert_eq!(lock_plan(Some(64 << 20), true), LockPlan::CurrentAndFuture);
+        assert_eq!(lock_plan(Some(64 << 20), true, mapped, stack), LockPlan::CurrentAndFuture);
+    }
+
+    #[test]
+    fn a_limit_that_would_leave_the_stack_no_room_locks_nothing() {
+        // what CI met: 8 MiB limit, a little under 8 MiB mapped
+        let plan = lock_plan(Some(8 << 20), false, Some((8 << 20) - 4096), Some(8 << 20));
+        assert!(matches!(plan, LockPlan::Nothing { limit, .. } if limit == 8 << 20), "{plan:?}");
+        // the stack must fit whole, not just what it uses now
+        assert!(matches!(
+            lock_plan(Some(16 << 20), false, Some((8 << 20) + 1), Some(8 << 20)),
+            LockPlan::Nothing { .. }
+        ));
+        assert_eq!(
+            lock_plan(Some(16 << 20), false, Some(8 << 20), Some(8 << 20)),
+            LockPlan::CurrentOnly { limit: 16 << 20 }
+        );
+        // an unlimited stack, an unknown size or a limit of 0: nothing
+        assert!(matches!(lock_plan(Some(1 << 40), false, Some(8 << 20), None), LockPlan::Nothing { .. }));
+        assert!(matches!(lock_plan(Some(1 << 40), false, None, Some(8 << 20)), LockPlan::Nothing { .. }));
+        assert!(matches!(lock_plan(Some(0), false, Some(8 << 20), Some(8 << 20)), LockPlan::Nothing { .. }));
+        assert!(matches!(
+            lock_plan(Some(u64::MAX - 1), false, Some(u64::MAX), Some(8 << 20)),
+            LockPlan::Nothing { .. }
+        ));
+    }
+
+    #[test]
+    fn the_status_file_gives_the_mapped_size_and_the_capability() {
+        let status = "Name:\tx\nVmSize:\t    8236 kB\nCapEff:\t0000000000004000\n";
+        assert_eq!(mapped_bytes(status), Some(8236 * 1024));
+        assert!(has_cap_ipc_lock(status));
+        assert!(!has_cap_ipc_lock("CapEff:\t0000000000000000\n"));
+        assert_eq!(mapped_bytes("Name:\tx\n"), None);
+        let own = self_status().expect("/proc/self/status");
+        assert!(mapped_bytes(&own).is_some_and(|b| b > 0), "{own}");
     }
 }

@@ -284,9 +284,10 @@ pub fn wait_file(path: &Path, timeout: Duration, children: &mut [&mut ChildGuard
 /// Puts the calling thread under SCHED_FIFO at `prio`, not inherited by
 /// children it forks, and locks memory as the SDK does; says so when refused.
 pub fn realtime_like_an_agent(prio: i32) -> bool {
+    // as the SDK decides it: never a locked stack that cannot grow
+    let _ = agent_sdk::rt::lock_memory();
     // SAFETY: plain system calls on the calling thread, valid arguments.
     unsafe {
-        let _ = libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE | libc::MCL_ONFAULT);
         let param = libc::sched_param { sched_priority: prio };
         let rc = libc::sched_setscheduler(0, libc::SCHED_FIFO | libc::SCHED_RESET_ON_FORK, &param);
         if rc != 0 {

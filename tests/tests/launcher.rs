@@ -200,9 +200,10 @@ fn a_panic_in_the_task_ends_the_agent_and_it_is_restarted() {
 }
 
 /// An agent that dies during its start-up without a word (a panic, a
-/// signal) is reported by the launch with the end of what it logged in
-/// this start, not only a pointer to its log (CI of 2026-11-26 kept only
-/// "exited during start-up" of a failure it could not reproduce).
+/// signal) is reported by the launch with how it ended and the end of what
+/// it logged in this start, not only a pointer to its log (CI of 2026-11-26
+/// kept only "exited during start-up" of a failure it could not reproduce;
+/// it was a SIGSEGV, see `agent_sdk::rt`).
 #[test]
 fn an_agent_that_dies_starting_is_reported_with_its_last_log_lines() {
     let r = Robot::new("dies");
@@ -213,14 +214,19 @@ fn an_agent_that_dies_starting_is_reported_with_its_last_log_lines() {
     let file = r.launch_file(
         "dies.toml",
         "robot = \"x\"\n[[agent]]\nname = \"bad\"\nkind = \"testagent\"\nargs = [\"--mode\", \"panic-start\"]\n\
+         [[agent]]\nname = \"segv\"\nkind = \"testagent\"\nargs = [\"--mode\", \"segv-start\"]\n\
          [[agent]]\nname = \"t1\"\nkind = \"ticker\"\n",
     );
     let err = r.fails(&["launch", file.to_str().expect("utf-8 path")]);
     assert!(err.contains("bad (testagent) FAILED"), "{err}");
+    // a panic in the task thread aborts the process (the SDK's panic policy)
+    assert!(err.contains("exited during start-up (killed by SIGABRT)"), "{err}");
     assert!(err.contains("| ") && err.contains("testagent: a bug in start-up, on purpose"), "{err}");
     assert!(!err.contains("an earlier run of bad"), "{err}");
+    assert!(err.contains("segv (testagent) FAILED"), "{err}");
+    assert!(err.contains("exited during start-up (killed by SIGSEGV"), "the signal is named: {err}");
     assert!(err.contains("t1 (ticker) started"), "the other agent starts all the same: {err}");
-    assert!(err.contains("is up in part: 1 of 2 agent(s) running (1 failed to start"), "{err}");
+    assert!(err.contains("is up in part: 1 of 3 agent(s) running (2 failed to start"), "{err}");
     r.down_and_check_clean();
 }
 

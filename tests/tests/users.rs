@@ -154,6 +154,16 @@ fn two_users_run_a_robot_of_the_same_name_side_by_side() {
     let (mine, theirs) = (me.ps(), other.ps());
     assert_eq!(mine.len(), 3, "my robot: {mine:?}");
     assert_eq!(theirs.len(), 3, "their robot: {theirs:?}");
+    // Without CAP_IPC_LOCK and under a small finite RLIMIT_MEMLOCK (8 MiB
+    // by default), their agents lock nothing rather than their pages of now:
+    // a locked main stack left no room by the limit killed their ticker
+    // with SIGSEGV in CI, whenever its build mapped a few pages less
+    let small_memlock = nix::sys::resource::getrlimit(nix::sys::resource::Resource::RLIMIT_MEMLOCK)
+        .is_ok_and(|(soft, _)| soft != nix::sys::resource::RLIM_INFINITY && soft < 16 << 20);
+    if small_memlock {
+        let t1 = std::fs::read_to_string(other.home.join(&other.robot).join("logs/t1.log")).unwrap_or_default();
+        assert!(t1.contains("memory not locked: RLIMIT_MEMLOCK") && t1.contains("main thread's stack"), "{t1}");
+    }
     let (my_pids, their_pids) = (pids(&mine), pids(&theirs));
     assert!(my_pids.iter().all(|p| !their_pids.contains(p)), "one router sees the other's agents");
     let my_uid = shm_schemas::names::effective_uid();

@@ -253,7 +253,7 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     if !args.no_realtime {
         match rt::lock_memory() {
             Ok(()) => tracing::debug!("memory locked (mlockall, on fault)"),
-            Err(e) => tracing::info!("memory not locked: mlockall refused ({e}); page faults may add latency"),
+            Err(e) => tracing::info!("memory not locked: {e}; page faults may add latency"),
         }
     }
 

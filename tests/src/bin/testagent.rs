@@ -14,7 +14,9 @@
 //! * `burn`: burns CPU in every step (for resource tests);
 //! * `fail-start`: its `start` fails (a device that cannot be opened);
 //! * `panic-start`: its `start` panics (the process ends during its
-//!   start-up, before it is ready, with nothing said but its log).
+//!   start-up, before it is ready, with nothing said but its log);
+//! * `segv-start`: dies of SIGSEGV in its `start`, without a word (as a
+//!   locked main stack that may not grow did, see `agent_sdk::rt`).
 
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
 use shm_schemas::payloads::Scalar;
@@ -30,6 +32,7 @@ enum Mode {
     Burn,
     FailStart,
     PanicStart,
+    SegvStart,
 }
 
 struct TestAgent {
@@ -58,9 +61,11 @@ impl Agent for TestAgent {
                 "burn" => Mode::Burn,
                 "fail-start" => Mode::FailStart,
                 "panic-start" => Mode::PanicStart,
+                "segv-start" => Mode::SegvStart,
                 other => {
                     return Err(AgentError::Config(format!(
-                        "unknown mode {other:?}; use scalar, crash, panic, stubborn, hang, burn, fail-start or panic-start"
+                        "unknown mode {other:?}; use scalar, crash, panic, stubborn, hang, burn, fail-start, \
+                         panic-start or segv-start"
                     )));
                 }
             },
@@ -73,6 +78,14 @@ impl Agent for TestAgent {
         match self.mode {
             Mode::FailStart => return Err(AgentError::Device("cannot open /dev/ttyNOPE: no such device".into())),
             Mode::PanicStart => panic!("testagent: a bug in start-up, on purpose"),
+            // the default action, not Rust's stack-overflow handler (which
+            // returns from a SIGSEGV it did not cause by a fault)
+            // SAFETY: restoring a default disposition and raising a signal
+            // have no memory-safety preconditions.
+            Mode::SegvStart => unsafe {
+                libc::signal(libc::SIGSEGV, libc::SIG_DFL);
+                libc::raise(libc::SIGSEGV);
+            },
             _ => {}
         }
         Ok(())
@@ -80,7 +93,7 @@ impl Agent for TestAgent {
 
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
         match self.mode {
-            Mode::Scalar | Mode::FailStart | Mode::PanicStart => {}
+            Mode::Scalar | Mode::FailStart | Mode::PanicStart | Mode::SegvStart => {}
             Mode::Crash => std::process::abort(),
             Mode::Panic => panic!("testagent: a bug in the step, on purpose"),
             Mode::Stubborn => {
