@@ -94,6 +94,7 @@ where
 /// Draws `report` into `path` (PNG, 1000x640).
 pub fn hop_png(report: &HopReport, path: &Path) -> Result<()> {
     let e = |x: &dyn std::fmt::Display| anyhow!("plot {}: {x}", path.display());
+    nerve_plot_font::register();
     let root = BitMapBackend::new(path, (1000, 640)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(&x))?;
     let ys: Vec<f64> =

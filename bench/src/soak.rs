@@ -329,6 +329,7 @@ pub fn print_tables(r: &SoakReport) {
 pub fn png(r: &SoakReport, path: &Path) -> Result<()> {
     use plotters::prelude::*;
     let e = |x: &dyn std::fmt::Display| anyhow!("plot {}: {x}", path.display());
+    nerve_plot_font::register();
     let root = BitMapBackend::new(path, (1200, 900)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(&x))?;
     let panels = root.split_evenly((2, 2));

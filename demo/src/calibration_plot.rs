@@ -178,6 +178,7 @@ pub fn write_fit(dir: &Path, points: &[CalibrationPoint], title: &str) -> Result
         move |message: String| DemoError::Plot { path: p.clone(), message }
     };
     let size = (1000, 900);
+    nerve_plot_font::register();
     let png = dir.join("fit.png");
     draw(BitMapBackend::new(&png, size).into_drawing_area(), points, title).map_err(plot_err(&png))?;
     let svg = dir.join("fit.svg");

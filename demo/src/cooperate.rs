@@ -400,6 +400,7 @@ where
 
 /// Writes `trajectories.png` and `trajectories.svg` into `dir`.
 pub fn write_trajectories(dir: &Path, scene: &Scene, rec: &Records, title: &str) -> Result<Figures, DemoError> {
+    nerve_plot_font::register();
     let (w, h, xr, yr) = map_size(scene);
     let mut files = Vec::new();
     let p = dir.join("trajectories.png");

@@ -344,6 +344,7 @@ pub fn write_all(
         s.collisions
     );
     let mut files = Vec::new();
+    nerve_plot_font::register();
     let p = dir.join("trajectory.png");
     draw_trajectory(BitMapBackend::new(&p, (w, h)).into_drawing_area(), scene, rows, analysis, &verdict, (xr, yr))
         .map_err(err(&p))?;

@@ -429,6 +429,7 @@ fn live(world: &World, ports: &[PortRef], fields: &[String], duration: f64, quie
 
 /// Writes the figure to `path`.
 fn draw_to(path: &Path, format: Format, lines: &[Line], title: &str, y_desc: &str) -> Result<()> {
+    nerve_plot_font::register();
     let r = match format {
         Format::Png => draw(BitMapBackend::new(path, SIZE).into_drawing_area(), lines, title, y_desc),
         Format::Svg => draw(SVGBackend::new(path, SIZE).into_drawing_area(), lines, title, y_desc),
