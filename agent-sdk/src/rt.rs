@@ -52,11 +52,11 @@ pub fn lock_plan(memlock_limit: Option<u64>, cap_ipc_lock: bool, mapped: Option<
 
 /// A soft resource limit in bytes, `None` for infinity (or when it cannot be
 /// read).
-fn soft_limit(resource: libc::__rlimit_resource_t) -> Option<u64> {
-    let mut lim = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
-    // SAFETY: getrlimit writes one rlimit through a valid pointer.
-    let rc = unsafe { libc::getrlimit(resource, &mut lim) };
-    if rc != 0 || lim.rlim_cur == libc::RLIM_INFINITY { None } else { Some(lim.rlim_cur) }
+fn soft_limit(resource: nix::sys::resource::Resource) -> Option<u64> {
+    match nix::sys::resource::getrlimit(resource) {
+        Ok((soft, _)) if soft != nix::sys::resource::RLIM_INFINITY => Some(soft),
+        _ => None,
+    }
 }
 
 /// The process's own `/proc/self/status`, read once per question.
@@ -96,10 +96,10 @@ fn mib(bytes: u64) -> String {
 pub fn lock_memory() -> Result<(), String> {
     let status = self_status().unwrap_or_default();
     let plan = lock_plan(
-        soft_limit(libc::RLIMIT_MEMLOCK),
+        soft_limit(nix::sys::resource::Resource::RLIMIT_MEMLOCK),
         has_cap_ipc_lock(&status),
         mapped_bytes(&status),
-        soft_limit(libc::RLIMIT_STACK),
+        soft_limit(nix::sys::resource::Resource::RLIMIT_STACK),
     );
     let flags = match plan {
         LockPlan::CurrentAndFuture => libc::MCL_CURRENT | libc::MCL_FUTURE | libc::MCL_ONFAULT,
