@@ -268,7 +268,11 @@ impl Drop for Robot {
         for f in self.shm_files() {
             let _ = std::fs::remove_file(format!("/dev/shm/{f}"));
         }
-        if self.owns_home {
+        // a failed test's home (its logs, a demo's summary and figures) is
+        // kept for reading; a passed test leaves nothing
+        if std::thread::panicking() {
+            eprintln!("----- kept for reading: {}", self.home.display());
+        } else if self.owns_home {
             let _ = std::fs::remove_dir_all(&self.home);
         }
     }
