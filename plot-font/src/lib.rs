@@ -42,32 +42,30 @@ mod tests {
     use super::*;
     use plotters::prelude::*;
 
+    /// A white `w` x `h` RGB image with `text` drawn at `pos` in `style`.
+    fn drawn(w: u32, h: u32, text: &str, style: &TextStyle, pos: (i32, i32)) -> Vec<u8> {
+        let mut buf = vec![255u8; (w * h * 3) as usize];
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+            root.draw_text(text, style, pos).expect("text drawn");
+            root.present().expect("present");
+        }
+        buf
+    }
+
+    /// The positions (pixel indices) of an image's dark pixels.
+    fn dark(buf: &[u8]) -> impl Iterator<Item = u32> + '_ {
+        buf.chunks(3).enumerate().filter(|(_, p)| p.iter().all(|&c| c < 128)).map(|(i, _)| i as u32)
+    }
+
     /// Text drawn after `register` lands on the image (a figure without
     /// its labels is what a missing font looks like).
     #[test]
     fn registered_text_is_drawn() {
         register();
-        let (w, h) = (200u32, 60u32);
-        let mut buf = vec![255u8; (w * h * 3) as usize];
-        {
-            let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-            root.draw_text("nerve 42", &(FAMILY, 30).into_font().color(&BLACK), (5, 10)).expect("text drawn");
-            root.present().expect("present");
-        }
-        let dark = buf.chunks(3).filter(|p| p.iter().all(|&c| c < 128)).count();
-        assert!(dark > 100, "only {dark} dark pixels: the text was not drawn");
-    }
-
-    /// The bounding box (width, height) of the dark pixels of an image.
-    fn ink(buf: &[u8], w: u32) -> (u32, u32) {
-        let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
-        for (i, p) in buf.chunks(3).enumerate() {
-            if p.iter().all(|&c| c < 128) {
-                let (x, y) = (i as u32 % w, i as u32 / w);
-                (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
-            }
-        }
-        (x1.saturating_sub(x0), y1.saturating_sub(y0))
+        let buf = drawn(200, 60, "nerve 42", &(FAMILY, 30).into_font().color(&BLACK), (5, 10));
+        let n = dark(&buf).count();
+        assert!(n > 100, "only {n} dark pixels: the text was not drawn");
     }
 
     /// A y axis's description is drawn turned a quarter (taller than wide),
@@ -75,15 +73,15 @@ mod tests {
     #[test]
     fn turned_text_is_drawn_turned() {
         register();
-        let (w, h) = (200u32, 200u32);
-        let mut buf = vec![255u8; (w * h * 3) as usize];
-        {
-            let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-            let style = TextStyle::from((FAMILY, 20).into_font()).transform(FontTransform::Rotate270).color(&BLACK);
-            root.draw_text("round trip", &style, (100, 150)).expect("text drawn");
-            root.present().expect("present");
+        let w = 200;
+        let style = TextStyle::from((FAMILY, 20).into_font()).transform(FontTransform::Rotate270).color(&BLACK);
+        let buf = drawn(w, 200, "round trip", &style, (100, 150));
+        let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
+        for i in dark(&buf) {
+            let (x, y) = (i % w, i / w);
+            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
         }
-        let (iw, ih) = ink(&buf, w);
+        let (iw, ih) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
         assert!(ih > 2 * iw && ih > 50, "ink {iw}x{ih}: not turned");
     }
 }

@@ -261,7 +261,8 @@ pub fn dump_logs(state_dir: &std::path::Path) {
 
 impl Drop for Robot {
     fn drop(&mut self) {
-        if std::thread::panicking() {
+        let failed = std::thread::panicking();
+        if failed {
             self.dump_logs();
         }
         let _ = self.command("nerve").args(["down", "--grace", "1"]).output();
@@ -270,7 +271,7 @@ impl Drop for Robot {
         }
         // a failed test's home (its logs, a demo's summary and figures) is
         // kept for reading; a passed test leaves nothing
-        if std::thread::panicking() {
+        if failed {
             eprintln!("----- kept for reading: {}", self.home.display());
         } else if self.owns_home {
             let _ = std::fs::remove_dir_all(&self.home);
