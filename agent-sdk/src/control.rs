@@ -454,6 +454,14 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
             }
             e => ipc_err(service, IpcOp::Service)(e),
         })?;
+        if servers_all_dead(&rr) {
+            // A killed server's port stays in the service until someone
+            // cleans up after it (iceoryx2 no longer does on every open,
+            // `World::new`), and a request sent to it would wait out its
+            // whole time-out: cleaned now, so that a call finds no server.
+            let cleaned = crate::world::cleanup_dead_nodes_of(node.config());
+            tracing::debug!(service, cleaned, "the server of {service} is dead; cleaned up after it");
+        }
         let max = size.max_clients.saturating_sub(leave);
         let taken = rr.dynamic_config().number_of_clients();
         if leave > 0 && taken >= max {
@@ -552,6 +560,23 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
         self.notifier.notify().map_err(ipc_err(&self.service, IpcOp::Notify))?;
         Ok(Some(PendingCall { pending, service: self.service.clone(), _types: PhantomData }))
     }
+}
+
+/// Whether `rr` has servers and every one of them belongs to a process
+/// that is gone (a pid reused meanwhile counts as alive: the caller then
+/// waits out its time-out, as before).
+fn servers_all_dead(
+    rr: &iceoryx2::service::port_factory::request_response::PortFactory<Ipc, Bytes, (), Bytes, ()>,
+) -> bool {
+    let (mut servers, mut dead) = (0usize, 0usize);
+    rr.dynamic_config().list_servers(|d| {
+        servers += 1;
+        if d.node_id.pid::<Ipc>().is_ok_and(|p| u32::try_from(p.value()).is_ok_and(|p| !crate::world::pid_alive(p))) {
+            dead += 1;
+        }
+        CallbackProgression::Continue
+    });
+    servers > 0 && dead == servers
 }
 
 /// A request sent and not answered yet.

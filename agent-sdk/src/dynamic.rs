@@ -314,11 +314,16 @@ impl DynInput for SchemaInputInner {
             }
         }
         let service = robot.port_service(from_agent, from_port);
-        let subscriber = self.open(node, &service)?;
-        let listener = source_event(node, &service)?
-            .listener_builder()
-            .create()
-            .map_err(|source| PortError::Listener { service: service.clone(), source })?;
+        // a killed reader's ports may hold the source's slots until the router's next sweep
+        let (subscriber, listener) =
+            crate::world::retry_after_cleanup(node.config(), "connect", PortError::blockable, || {
+                let subscriber = self.open(node, &service)?;
+                let listener = source_event(node, &service)?
+                    .listener_builder()
+                    .create()
+                    .map_err(|source| PortError::Listener { service: service.clone(), source })?;
+                Ok((subscriber, listener))
+            })?;
         lock(&self.subs).push(Source {
             from_agent: from_agent.into(),
             from_port: from_port.into(),

@@ -195,6 +195,26 @@ pub enum PortError {
     },
 }
 
+impl PortError {
+    /// Whether a dead process's leftover ports could explain this error
+    /// (iceoryx2 refused a port or an open because the service's slots
+    /// for ports or nodes were taken), so that cleaning them up and trying
+    /// again may help; not for a missing port or a type that differs.
+    pub(crate) fn blockable(&self) -> bool {
+        matches!(
+            self,
+            PortError::Service { .. }
+                | PortError::Event { .. }
+                | PortError::OpenService { .. }
+                | PortError::OpenEvent { .. }
+                | PortError::Publisher { .. }
+                | PortError::Subscriber { .. }
+                | PortError::Notifier { .. }
+                | PortError::Listener { .. }
+        )
+    }
+}
+
 pub(crate) fn perr(service: &str, e: impl std::fmt::Debug) -> PortError {
     PortError::Ipc { service: service.into(), detail: format!("{e:?}") }
 }
@@ -883,9 +903,17 @@ impl<T: Payload> DynInput for InputInner<T> {
         }
         let service = robot.port_service(from_agent, from_port);
         let (ps, ev) = source_services::<T>(node, &service)?;
-        let subscriber =
-            ps.subscriber_builder().buffer_size(SUBSCRIBER_BUFFER).create().map_err(port_err!(Subscriber, &service))?;
-        let listener = ev.listener_builder().create().map_err(port_err!(Listener, &service))?;
+        // a killed reader's ports may hold the source's slots until the router's next sweep
+        let (subscriber, listener) =
+            crate::world::retry_after_cleanup(node.config(), "connect", PortError::blockable, || {
+                let subscriber = ps
+                    .subscriber_builder()
+                    .buffer_size(SUBSCRIBER_BUFFER)
+                    .create()
+                    .map_err(port_err!(Subscriber, &service))?;
+                let listener = ev.listener_builder().create().map_err(port_err!(Listener, &service))?;
+                Ok((subscriber, listener))
+            })?;
         lock(&self.subs).push(Subscription {
             from_agent: from_agent.into(),
             from_port: from_port.into(),

@@ -240,10 +240,22 @@ impl World {
         // cost n² looks (a launch of 50 took 0.55 s, 0.46 s without). The
         // router cleans up after dead processes instead, at once for an
         // agent and every few seconds for anything else, as does `nerve
-        // down`; opening a service still cleans up the stale ports that
-        // would block it.
+        // down`.
         config.global.node.cleanup_dead_nodes_on_creation = false;
         config.global.node.cleanup_dead_nodes_on_destruction = false;
+        // The same scan per service: opening a service looked at every node
+        // attached to it (reading each one's record, a TOML file, and
+        // formatting iceoryx2's whole configuration three times for log
+        // origins), so every agent that opened the router's services paid
+        // for every agent before it, and a launch of 50 spent half its time
+        // there (1.23 s against 0.68 s without, BENCHMARKS §3). Where a dead
+        // process's ports would block an opener (a crashed agent's control
+        // server, a source's subscriber slots, a killed router's server),
+        // the opener cleans up once and tries again ([`retry_after_cleanup`],
+        // docs/router.md). `NERVE_IOX2_CLEANUP_ON_OPEN=on` brings iceoryx2's
+        // own scan back (to measure it).
+        config.global.service.cleanup_dead_nodes_on_open =
+            std::env::var_os(CLEANUP_ON_OPEN_ENV).is_some_and(|v| v == "on");
         Ok(World { robot, config, state_dir, iox_root: PathBuf::from(iox_root) })
     }
 
@@ -435,21 +447,7 @@ impl World {
 
     /// Removes the resources of every dead node of this world; returns how many were cleaned.
     pub fn cleanup_dead_nodes(&self) -> usize {
-        quiet_iceoryx2();
-        let mut dead = Vec::new();
-        let _ = Node::<Ipc>::list(&self.config, |state| {
-            if let NodeState::Dead(view) = state {
-                dead.push(view);
-            }
-            CallbackProgression::Continue
-        });
-        let mut n = 0;
-        for view in dead {
-            if view.try_remove_stale_resources().is_ok() {
-                n += 1;
-            }
-        }
-        n
+        cleanup_dead_nodes_of(&self.config)
     }
 
     /// Whether any iceoryx2 node of this world is alive: the listing stops
@@ -507,6 +505,57 @@ fn make_private(files: &[PathBuf]) {
             && m.mode() & 0o077 != 0
         {
             let _ = std::fs::set_permissions(f, std::fs::Permissions::from_mode(0o600));
+        }
+    }
+}
+
+/// The environment variable that turns iceoryx2's scan of a service's
+/// nodes on every open back on (`on`); see [`World::new`].
+pub const CLEANUP_ON_OPEN_ENV: &str = "NERVE_IOX2_CLEANUP_ON_OPEN";
+
+/// Removes the resources of every dead node under iceoryx2 configuration
+/// `config` (a robot's: [`World::config`], or a node's own); returns how
+/// many were cleaned. It reads every node's record: call it when something
+/// failed that a dead process's ports could explain, not on every open.
+pub fn cleanup_dead_nodes_of(config: &iceoryx2::config::Config) -> usize {
+    quiet_iceoryx2();
+    let mut dead = Vec::new();
+    let _ = Node::<Ipc>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    });
+    let mut n = 0;
+    for view in dead {
+        if view.try_remove_stale_resources().is_ok() {
+            n += 1;
+        }
+    }
+    n
+}
+
+/// Runs `attempt`; if it fails in a way `blockable` says a dead process's
+/// leftovers could explain, and such leftovers were found and cleaned under
+/// `config`, runs it once more. For creating a port or server that a
+/// crashed process's ports may block (iceoryx2 no longer scans a service's
+/// nodes on every open, see [`World::new`]); `what` names it in the log line.
+pub fn retry_after_cleanup<T, E>(
+    config: &iceoryx2::config::Config,
+    what: &str,
+    blockable: impl Fn(&E) -> bool,
+    mut attempt: impl FnMut() -> Result<T, E>,
+) -> Result<T, E> {
+    match attempt() {
+        Ok(v) => Ok(v),
+        Err(e) if !blockable(&e) => Err(e),
+        Err(e) => {
+            let cleaned = cleanup_dead_nodes_of(config);
+            if cleaned == 0 {
+                return Err(e);
+            }
+            tracing::info!(cleaned, "{what}: cleaned the shared memory of {cleaned} dead process(es), trying again");
+            attempt()
         }
     }
 }

@@ -222,17 +222,10 @@ fn a_rejected_duplicate_keeps_the_live_agents_pid_file() {
     r.router();
     r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
     let pid = r.pid("t1");
-    let pids = r.home.join(&r.name).join("pids");
-    let read = |f: &str| std::fs::read_to_string(pids.join(f)).ok().and_then(|s| s.trim().parse::<u32>().ok());
-    let router = read("router.pid").expect("router pid file");
-    nerve_tests::sigkill(router);
-    assert!(wait_until(Duration::from_secs(5), || {
-        nerve_tests::reap();
-        !nerve_tests::alive(router)
-    }));
+    kill_and_wait(pid_file(&r, "router").expect("router pid file"));
     let err = r.fails(&["start", "ticker", "--name", "t1"]);
     assert!(err.contains("already running"), "{err}");
-    assert_eq!(read("t1.pid"), Some(pid), "the duplicate removed or replaced the live agent's pid file");
+    assert_eq!(pid_file(&r, "t1"), Some(pid), "the duplicate removed or replaced the live agent's pid file");
     r.down_and_check_clean();
     assert!(
         wait_until(Duration::from_secs(5), || {
@@ -240,6 +233,64 @@ fn a_rejected_duplicate_keeps_the_live_agents_pid_file() {
             !nerve_tests::alive(pid)
         }),
         "nerve down left t1 running"
+    );
+}
+
+/// An agent killed while no router runs (nobody cleans up after it) starts
+/// again under its name: the control server its killed run left in shared
+/// memory is cleaned at start-up, not taken for a live duplicate (iceoryx2
+/// no longer scans a service's nodes on every open, `World::new`).
+#[test]
+fn an_agent_killed_with_no_router_starts_again_under_its_name() {
+    let r = Robot::new("relive");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    let pid = r.pid("t1");
+    for victim in [pid_file(&r, "router").expect("router pid file"), pid] {
+        kill_and_wait(victim);
+    }
+    let out = r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    assert!(out.contains("t1 started"), "{out}");
+    let log = r.ok(&["logs", "t1"]);
+    assert!(log.contains("control service: cleaned the shared memory of"), "{log}");
+    // and it works: a new router finds it, and it publishes
+    r.router();
+    assert!(wait_until(Duration::from_secs(5), || r.agent("t1").is_some()), "the new router does not list t1");
+    assert_eq!(r.echo("t1/tick", 1).len(), 1);
+    r.down_and_check_clean();
+}
+
+/// A command sent to a killed router says that no router runs, instead of
+/// sending its request to the server port the killed router left in shared
+/// memory and waiting out its time-out: a client that finds only dead
+/// servers cleans up after them first (`ControlClient::open`).
+#[test]
+fn a_killed_router_is_reported_as_no_router() {
+    let r = Robot::new("deadrt");
+    r.router();
+    // a live agent keeps the router's services in shared memory
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    kill_and_wait(pid_file(&r, "router").expect("router pid file"));
+    let e = r.fails(&["ps"]);
+    assert!(e.contains("no router runs"), "{e}");
+    r.down_and_check_clean();
+}
+
+/// The pid in `r`'s pid file of `name`.
+fn pid_file(r: &Robot, name: &str) -> Option<u32> {
+    let f = r.home.join(&r.name).join("pids").join(format!("{name}.pid"));
+    std::fs::read_to_string(f).ok().and_then(|s| s.trim().parse().ok())
+}
+
+/// SIGKILL, then waits (5 s at most) until `pid` is gone.
+fn kill_and_wait(pid: u32) {
+    sigkill(pid);
+    assert!(
+        wait_until(Duration::from_secs(5), || {
+            nerve_tests::reap();
+            !alive(pid)
+        }),
+        "process {pid} survived SIGKILL"
     );
 }
 

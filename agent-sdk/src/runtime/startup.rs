@@ -270,8 +270,15 @@ fn start<A: Agent>(args: &CommonArgs, name: &str, world: World, readiness: &mut 
     let node = Arc::new(world.node(name)?);
     stage("node created");
     let ctl_service = world.robot().ctl_service(&agent_name);
+    // A crashed run of this agent leaves its control server behind (and its
+    // other ports) until the router cleans up after it: found here as a
+    // served service, cleaned, and tried once more; a live one stays served.
+    let blockable = |e: &ControlError| matches!(e, ControlError::AlreadyServed { .. } | ControlError::Ipc { .. });
     let server: ControlServer<AgentCommand, AgentReply> =
-        ControlServer::create(&node, &ctl_service, ControlSize::AGENT).map_err(|e| match e {
+        crate::world::retry_after_cleanup(world.config(), "control service", blockable, || {
+            ControlServer::create(&node, &ctl_service, ControlSize::AGENT)
+        })
+        .map_err(|e| match e {
             ControlError::AlreadyServed { .. } => {
                 StartupError::AlreadyRunning { name: name.into(), robot: world.robot().to_string() }
             }
