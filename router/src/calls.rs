@@ -308,24 +308,16 @@ impl Link {
 }
 
 /// Opens the control client of `name`, cleaning up after dead processes
-/// once if every client slot seems taken.
+/// once if every client slot seems taken (some by tools that were killed).
 fn open(name: &str, world: &World, node: &Node<Ipc>) -> Option<ControlClient<AgentCommand, AgentReply>> {
     let agent = AgentName::new(name).ok()?;
     let service = world.robot().ctl_service(&agent);
-    let mut opened = ControlClient::open_reserved(node, &service, ControlSize::AGENT);
-    if matches!(opened, Err(ControlError::Ipc { .. } | ControlError::Full { .. })) {
-        // Every client slot may be taken, some by tools that were
-        // killed: clean the ports of dead processes and try once more.
-        let cleaned = world.cleanup_dead_nodes();
-        if cleaned > 0 {
-            tracing::info!(
-                agent = name,
-                cleaned,
-                "cleaned the shared-memory resources of dead nodes to reach the agent"
-            );
-        }
-        opened = ControlClient::open_reserved(node, &service, ControlSize::AGENT);
-    }
+    let _reach = tracing::info_span!("reach", agent = name).entered();
+    let blockable = |e: &ControlError| matches!(e, ControlError::Ipc { .. } | ControlError::Full { .. });
+    let opened =
+        agent_sdk::world::retry_after_cleanup(world.config(), "the agent's control service", blockable, || {
+            ControlClient::open_reserved(node, &service, ControlSize::AGENT)
+        });
     match opened {
         Ok(c) => Some(c),
         Err(e) => {
