@@ -325,14 +325,6 @@ fn clean_up(r: &Robot) {
 }
 
 #[test]
-fn demo_explore_seed_1() {
-    let r = Robot::new("demoa");
-    let s = run_demo(&r, &["--seed", "1", "--world", world("explore.toml").as_str()], |_| {});
-    assert_success(&s);
-    clean_up(&r);
-}
-
-#[test]
 fn demo_explore_seed_2() {
     let r = Robot::new("demob");
     let s = run_demo(&r, &["--seed", "2", "--world", world("explore.toml").as_str()], |_| {});
@@ -369,7 +361,11 @@ fn demo_explore_island_leaves_the_island() {
 }
 
 /// `nerve kill tracker` while the robot explores: the supervisor restarts
-/// it, and the robot still finishes.
+/// it, and the robot still finishes. This is also the suite's run of seed 1
+/// on `explore.toml`: it asserts the whole success an undisturbed run does,
+/// so a run of its own (about 105 s of the serial group) was dropped; a
+/// failure here that is not about the tracker reproduces with `nerve demo
+/// explore --seed 1`.
 #[test]
 fn demo_survives_killing_the_tracker() {
     let r = Robot::new("demok");

@@ -4,11 +4,14 @@
 //!
 //! One run with the checkpoint corrections, during which each robot's bridge
 //! is killed once (its supervisor restarts it; reliable messages arrive
-//! after the restart), then the same run without corrections: robot 2 must
-//! reach the target within 0.5 m with no collision in the first, and be
-//! farther from where it believes it is at the via points in the second.
-//! Each run takes about two and a half minutes of simulated (= wall) time;
-//! they run in the `demo-runs` group, one at a time (`.config/nextest.toml`).
+//! after the restart), and beside it the same run without corrections, by
+//! two other robots: robot 2 must reach the target within 0.5 m with no
+//! collision in the first, and be farther from where it believes it is at
+//! the via points in the second. Each run takes about two and a half
+//! minutes of simulated (= wall) time. The two run at the same time (their
+//! own robots, simulators and bridge ports; together about a third of one
+//! of the machine's two cores), which halves the test's share of CI's
+//! serial `demo-runs` group (`.config/nextest.toml`).
 
 use nerve_tests::{Robot, free_port, sigkill, wait_until};
 use serde_json::Value;
@@ -30,6 +33,9 @@ impl Drop for Demo {
     }
 }
 
+/// Starts `nerve demo cooperate` for robots `r1` and `r2`; its stdout lines
+/// are printed (tagged with robot 1's name, as two runs print at once) and
+/// sent to the returned receiver.
 fn start(r1: &Robot, r2: &Robot, out: &Path, extra: &[&str]) -> (Demo, std::sync::mpsc::Receiver<String>) {
     let port = free_port().to_string();
     let robots = format!("{},{}", r1.name, r2.name);
@@ -42,9 +48,10 @@ fn start(r1: &Robot, r2: &Robot, out: &Path, extra: &[&str]) -> (Demo, std::sync
     let mut child = cmd.spawn().expect("start nerve demo cooperate");
     let stdout = child.stdout.take().expect("stdout");
     let (tx, rx) = std::sync::mpsc::channel();
+    let tag = r1.name.clone();
     std::thread::spawn(move || {
         for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            println!("{line}");
+            println!("[{tag}] {line}");
             // keep reading after the test stops listening: the pipe must not fill
             let _ = tx.send(line);
         }
@@ -82,6 +89,12 @@ fn demo_cooperate_robot_2_reaches_the_target_through_bridge_restarts_and_misses_
     let r1 = Robot::new("coa");
     let r2 = r1.sibling("cob");
     let out = r1.home.join("run");
+    // the run without corrections, by robots of its own, beside the other
+    let n1 = Robot::new("coc");
+    let n2 = n1.sibling("cod");
+    let out_n = n1.home.join("run-no-checkpoints");
+    let (demo_n, lines_n) = start(&n1, &n2, &out_n, &["--no-checkpoints"]);
+    drop(lines_n);
     // ---- with corrections; each bridge killed once on the way ----
     let (demo, lines) = start(&r1, &r2, &out, &[]);
     let t0 = Instant::now();
@@ -140,16 +153,13 @@ fn demo_cooperate_robot_2_reaches_the_target_through_bridge_restarts_and_misses_
         let len = std::fs::metadata(out.join(f)).map(|m| m.len()).unwrap_or(0);
         assert!(len > 1000, "{f} is missing or empty");
     }
-    // nothing left behind
-    for r in [&r1, &r2] {
+
+    // ---- the same run without corrections, which ran beside it ----
+    let without = finish(demo_n, &out_n, Duration::from_secs(480));
+    // nothing left behind by either run
+    for r in [&r1, &r2, &n1, &n2] {
         assert!(r.shm_files().is_empty(), "left in /dev/shm by robot {}: {:?}", r.name, r.shm_files());
     }
-
-    // ---- the same run without corrections ----
-    let out_n = r1.home.join("run-no-checkpoints");
-    let (demo, lines) = start(&r1, &r2, &out_n, &["--no-checkpoints"]);
-    drop(lines);
-    let without = finish(demo, &out_n, Duration::from_secs(480));
     assert_eq!(without["checkpoints"], false);
     assert_eq!(without["corrections"][&r2.name], 0, "{without:#}");
     // What the corrections remove is robot 2's localisation error; without

@@ -6,20 +6,27 @@
 //! so that the dependencies nerve's build compiled already are not compiled
 //! again (the project pins nerve's Cargo.lock and profiles), and cargo runs
 //! offline. The first build still compiles iceoryx2 and the SDK (about a
-//! minute and a half here: nerve's workspace unifies other features), so
-//! these tests run in the `demo-runs` group, away from the timed end-to-end
-//! runs.
+//! minute and a half here: nerve's workspace unifies other features, e.g.
+//! `syn`'s and `toml`'s, so most proc-macros and what uses them are built
+//! again). These tests run one at a time in their own group, beside the
+//! end-to-end runs of the demos, with cargo at nice 19 and one job: the
+//! robot beside them keeps the CPU it asks for, and its resource manager,
+//! which judges the whole machine's load (85 % of all cores is `high`),
+//! does not see a build of both cores and slow the robot down.
 
 use nerve_tests::{Robot, bin_dir};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// `cargo ARGS` in `dir`, offline; panics with its output unless it succeeds.
+/// `cargo ARGS` in `dir`, offline, at nice 19 with one job; panics with its
+/// output unless it succeeds.
 fn cargo(dir: &Path, args: &[&str]) -> String {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(cargo)
+    let out = Command::new("nice")
+        .args(["-n", "19"])
+        .arg(cargo)
         .args(args)
-        .arg("--offline")
+        .args(["--offline", "--jobs", "1"])
         .current_dir(dir)
         .env_remove("CARGO_TARGET_DIR")
         .env_remove("RUSTFLAGS")
