@@ -161,7 +161,7 @@ fn demo_cooperate_robot_2_reaches_the_target_through_bridge_restarts_and_misses_
         assert!(r.shm_files().is_empty(), "left in /dev/shm by robot {}: {:?}", r.name, r.shm_files());
     }
     assert_eq!(without["checkpoints"], false);
-    assert_eq!(without["corrections"][&r2.name], 0, "{without:#}");
+    assert_eq!(without["corrections"][&n2.name], 0, "{without:#}");
     // What the corrections remove is robot 2's localisation error; without
     // them it is lost on the way. Whether it then also misses the target
     // varies: usually it scrapes the south wall short of the opening and ends
