@@ -426,6 +426,17 @@ impl State {
             || (self.calls.busy() && !self.calls.in_flight())
     }
 
+    /// (from agent, to agent) of every connect still waiting for its agent
+    /// and not allowed to close a loop.
+    fn pending_loop_edges(&self) -> impl Iterator<Item = (&str, &str)> {
+        self.jobs.iter().filter_map(|j| match &j.work {
+            Work::Connect { conn } if !conn.allow_cycle => {
+                Some((wiring::port_agent(&conn.from), wiring::port_agent(&conn.to)))
+            }
+            _ => None,
+        })
+    }
+
     fn submit(&mut self, name: &str, cmd: AgentCommand, timeout: Duration) -> Result<Ticket, RouterError> {
         self.registry.live(name)?;
         Ok(self.calls.submit(name, cmd, timeout))
@@ -502,8 +513,11 @@ impl State {
                 if !allow_cycle {
                     let registry = &self.registry;
                     let event_driven = |n: &str| registry.get(n).is_some_and(|e| e.reg.task == TaskKind::EventDriven);
-                    // a loop through an edge allowed to close one is allowed
-                    let edges = self.wiring.loop_edges();
+                    // a loop through an edge allowed to close one is allowed;
+                    // connects still waiting for their agent count too, so
+                    // that requests sent side by side (`nerve launch`) cannot
+                    // close a loop between them unseen
+                    let edges = self.wiring.loop_edges().chain(self.pending_loop_edges());
                     if let Some(cycle) = event_cycle(edges, from.agent.as_str(), to.agent.as_str(), event_driven) {
                         return Err(RouterError::Cycle { from: from.to_string(), to: to.to_string(), cycle });
                     }

@@ -43,6 +43,36 @@ fn connect_refuses_a_loop_of_event_driven_agents_unless_allowed() {
     r.down_and_check_clean();
 }
 
+/// A connect still waiting for its agent counts: `nerve launch` asks for a
+/// file's connections side by side, and two of them must not close a loop
+/// between them unseen. Here the first waits because its agent is stopped
+/// (SIGSTOP) until the second has been refused.
+#[test]
+fn a_loop_closed_with_a_connect_still_in_flight_is_refused() {
+    let r = Robot::new("loopsfl");
+    r.router();
+    for n in ["r1", "r2"] {
+        r.ok(&["start", "relay", "--name", n]);
+    }
+    let r2 = r.pid("r2");
+    // SAFETY: kill has no memory-safety preconditions.
+    unsafe { libc::kill(r2 as i32, libc::SIGSTOP) };
+    let first = std::thread::scope(|s| {
+        let pending = s.spawn(|| r.command("nerve").args(["connect", "r1/out", "r2/in"]).output());
+        // the first is in flight (its agent cannot answer) for all of this
+        std::thread::sleep(std::time::Duration::from_millis(200));
+        let e = r.fails(&["connect", "r2/out", "r1/in"]);
+        // SAFETY: as above
+        unsafe { libc::kill(r2 as i32, libc::SIGCONT) };
+        assert!(e.contains("closes a loop of event-driven agents (r2 -> r1 -> r2)"), "{e}");
+        pending.join().expect("the first connect")
+    });
+    let first = first.expect("run nerve connect");
+    assert!(first.status.success(), "the first connect: {}", String::from_utf8_lossy(&first.stderr));
+    assert_eq!(r.graph()["connections"].as_array().map(|c| c.len()), Some(1));
+    r.down_and_check_clean();
+}
+
 #[test]
 fn a_launch_file_with_a_loop_is_refused_before_anything_starts_unless_allowed() {
     let r = Robot::new("loopslf");
