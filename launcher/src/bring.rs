@@ -216,7 +216,8 @@ pub fn up(world: &World, file: &LaunchFile) -> Result<BroughtUp> {
 const CONNECTS_AT_ONCE: usize = 8;
 
 /// Asks the router for every connection of `file`, [`CONNECTS_AT_ONCE`] at a
-/// time, each from a session of its own; the outcomes in the file's order.
+/// time (as many lanes, each with a session of its own); the outcomes in the
+/// file's order.
 ///
 /// Each connect waits for its agent to subscribe (a millisecond or two) and
 /// for the connection list to reach the disk, and the router serves many
@@ -226,36 +227,31 @@ const CONNECTS_AT_ONCE: usize = 8;
 /// for together cannot close a loop unseen; a fan-in's connects to one agent
 /// reach it one at a time, in order (the router's per-agent queue).
 fn connect_all(world: &World, file: &LaunchFile) -> Vec<Result<()>> {
-    let n = file.connections.len();
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let done: Vec<std::sync::Mutex<Option<Result<()>>>> = (0..n).map(|_| std::sync::Mutex::new(None)).collect();
-    std::thread::scope(|s| {
-        for _ in 0..CONNECTS_AT_ONCE.min(n) {
-            s.spawn(|| {
-                let session = RouterSession::open(world);
-                loop {
-                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    let Some((from, to)) = file.connections.get(i) else { break };
-                    let allow_cycle = file.allow_cycle.contains(&(from.clone(), to.clone()));
-                    let req = CliRequest::Connect { from: from.clone(), to: to.clone(), allow_cycle };
-                    let result = match &session {
-                        Ok(session) => session.ok(req),
-                        Err(e) => Err(anyhow!("{e:#}")),
-                    };
-                    if let Some(slot) = done.get(i) {
-                        *slot.lock().unwrap_or_else(|p| p.into_inner()) = Some(result);
+    let lanes = CONNECTS_AT_ONCE.min(file.connections.len()).max(1);
+    let mut done: Vec<(usize, Result<()>)> = std::thread::scope(|s| {
+        // lane k asks for connections k, k + lanes, k + 2 lanes...
+        let lanes: Vec<_> = (0..lanes)
+            .map(|lane| {
+                s.spawn(move || {
+                    let session = RouterSession::open(world);
+                    let mut done = Vec::new();
+                    for (i, (from, to)) in file.connections.iter().enumerate().skip(lane).step_by(lanes) {
+                        let allow_cycle = file.allow_cycle.contains(&(from.clone(), to.clone()));
+                        let req = CliRequest::Connect { from: from.clone(), to: to.clone(), allow_cycle };
+                        let result = match &session {
+                            Ok(session) => session.ok(req),
+                            Err(e) => Err(anyhow!("{e:#}")),
+                        };
+                        done.push((i, result));
                     }
-                }
-            });
-        }
+                    done
+                })
+            })
+            .collect();
+        lanes.into_iter().flat_map(|lane| lane.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect()
     });
-    done.into_iter()
-        .map(|slot| {
-            slot.into_inner()
-                .unwrap_or_else(|p| p.into_inner())
-                .unwrap_or_else(|| Err(anyhow!("the connection was not asked for (a launcher thread ended early)")))
-        })
-        .collect()
+    done.sort_by_key(|(i, _)| *i);
+    done.into_iter().map(|(_, result)| result).collect()
 }
 
 /// (name, pid) of every process that has a pid file in the robot's state directory.

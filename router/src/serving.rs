@@ -430,9 +430,7 @@ impl State {
     /// and not allowed to close a loop.
     fn pending_loop_edges(&self) -> impl Iterator<Item = (&str, &str)> {
         self.jobs.iter().filter_map(|j| match &j.work {
-            Work::Connect { conn } if !conn.allow_cycle => {
-                Some((wiring::port_agent(&conn.from), wiring::port_agent(&conn.to)))
-            }
+            Work::Connect { conn } => wiring::loop_edge(conn),
             _ => None,
         })
     }

@@ -22,6 +22,12 @@ pub fn port_agent(p: &str) -> &str {
     split_port(p).0
 }
 
+/// `c` as an edge, agent to agent, that a loop may not run through; `None`
+/// when it is allowed to close one.
+pub fn loop_edge(c: &Connection) -> Option<(&str, &str)> {
+    (!c.allow_cycle).then(|| (port_agent(&c.from), port_agent(&c.to)))
+}
+
 /// The connection list.
 #[derive(Debug, Default)]
 pub struct Wiring {
@@ -58,7 +64,7 @@ impl Wiring {
     /// The edges, agent to agent, that a loop may not run through: those not
     /// allowed to close one.
     pub fn loop_edges(&self) -> impl Iterator<Item = (&str, &str)> {
-        self.list.iter().filter(|c| !c.allow_cycle).map(|c| (port_agent(&c.from), port_agent(&c.to)))
+        self.list.iter().filter_map(loop_edge)
     }
 
     /// The connection `from` → `to`.
