@@ -36,6 +36,7 @@
 
 pub mod calls;
 pub mod events;
+pub mod journal;
 pub mod registry;
 pub mod remembered;
 mod serving;

@@ -2,12 +2,18 @@
 //! atomically (temporary file, fsync, rename, fsync of the directory) so that
 //! a router killed at any moment leaves either the old or the new list.
 //!
-//! The router writes through a [`Writer`] thread: the two fsyncs take tens of
+//! The router writes through a [`Writer`] thread: the fsyncs take tens of
 //! milliseconds on a busy disk, and a router blocked in them made the next
 //! `nerve connect` (or a decision maker's rewiring) wait. The thread writes
 //! the newest body it has been given for each file, skipping bodies
 //! overtaken meanwhile, and is flushed when the router stops. It writes the
 //! supervision list ([`crate::supervision`]) the same way.
+//!
+//! A rewire is answered once its list is on disk, which for the connection
+//! list means in its journal (`connections.json.journal`, [`crate::journal`]):
+//! one synced append instead of the two syncs of an atomic rewrite. The file
+//! itself is rewritten right after, and [`Store::load`] takes the journal's
+//! list when a router stopped before that.
 //!
 //! A file that cannot be read (corrupt, truncated, a hand edit gone wrong, a
 //! version this router does not know) does not keep the router from
@@ -15,6 +21,7 @@
 //! loud message, and the last good copy (`connections.json.bak`, refreshed
 //! at every successful load) is used instead.
 
+use crate::journal;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -86,10 +93,59 @@ impl Store {
         self.path.with_extension("json.bak")
     }
 
-    /// Loads the list; a missing file is an empty list. A file that cannot
-    /// be used is moved aside and the last good copy loaded instead, each
-    /// said loudly; only a file that cannot even be read is an error.
+    /// Loads the list: the file's, or its journal's when a router stopped
+    /// between answering a rewire and rewriting the file (the journal is
+    /// then written into the file and emptied, so that nothing is appended
+    /// after a record a crash may have torn). A missing file is an empty
+    /// list. A file that cannot be used is moved aside and the last good
+    /// copy loaded instead, each said loudly; only a file that cannot even
+    /// be read is an error.
     pub fn load(&self) -> Result<Vec<Connection>, String> {
+        // the journal first: emptied only once the file is written, it is
+        // then never older than the file read after it
+        let journal = journal::path_for(&self.path);
+        let contents = journal::read(&journal);
+        let from_file = self.load_file()?;
+        let contents = match contents {
+            Ok(c) => c,
+            Err(e) => {
+                tracing::warn!(file = %journal.display(), "cannot read the connection list's journal: {e}; using {}", self.path.display());
+                return Ok(from_file);
+            }
+        };
+        let list = match contents.last.as_deref().map(parse) {
+            None => from_file,
+            Some(Ok(list)) => {
+                if list != from_file {
+                    tracing::info!(
+                        file = %journal.display(),
+                        "the router stopped before it rewrote {}: its journal holds the newer list ({} connection(s) against {})",
+                        self.path.display(),
+                        list.len(),
+                        from_file.len()
+                    );
+                    if let Err(e) = write_atomic(&self.path, contents.last.as_deref().unwrap_or_default()) {
+                        tracing::warn!(file = %self.path.display(), "cannot rewrite the connection list: {e}; its journal keeps it");
+                        return Ok(list);
+                    }
+                }
+                list
+            }
+            Some(Err(why)) => {
+                tracing::warn!(file = %journal.display(), "the journal's last record cannot be used ({why}); using {}", self.path.display());
+                from_file
+            }
+        };
+        if contents.bytes > 0
+            && let Err(e) = journal::clear(&journal)
+        {
+            tracing::warn!(file = %journal.display(), "cannot empty the connection list's journal: {e}");
+        }
+        Ok(list)
+    }
+
+    /// The file's list (see [`Store::load`]).
+    fn load_file(&self) -> Result<Vec<Connection>, String> {
         let bytes = match std::fs::read(&self.path) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
@@ -132,9 +188,11 @@ impl Store {
             .unwrap_or_default()
     }
 
-    /// Saves the list atomically.
+    /// Saves the list atomically, here and now (the router saves through
+    /// its [`Writer`]); the journal is emptied, as it is no newer.
     pub fn save(&self, connections: &[Connection]) -> std::io::Result<()> {
-        write_atomic(&self.path, &Self::encode(connections))
+        write_atomic(&self.path, &Self::encode(connections))?;
+        journal::clear(&journal::path_for(&self.path))
     }
 }
 
@@ -194,7 +252,7 @@ impl ListSaves {
         {
             return *saved;
         }
-        let saved = writer.write(store.path(), body.clone());
+        let saved = writer.journaled(store.path(), body.clone());
         self.last = Some((body, saved));
         saved
     }
@@ -205,6 +263,9 @@ impl ListSaves {
 enum Job {
     /// Write this body atomically.
     Write(Vec<u8>),
+    /// Append this body to the file's journal, then write it atomically
+    /// once nothing else waits ([`crate::journal`]).
+    Journaled(Vec<u8>),
     /// Remove the file.
     Remove,
 }
@@ -230,7 +291,7 @@ const MAX_FAILED: usize = 256;
 /// save, and a failed save was only logged).
 #[derive(Debug)]
 pub struct Writer {
-    tx: Option<std::sync::mpsc::Sender<(PathBuf, Job, u64)>>,
+    tx: Option<std::sync::mpsc::Sender<Queued>>,
     thread: Option<std::thread::JoinHandle<()>>,
     queued: std::sync::atomic::AtomicU64,
     progress: std::sync::Arc<Progress>,
@@ -239,58 +300,27 @@ pub struct Writer {
 impl Writer {
     /// Starts the thread.
     pub fn start() -> std::io::Result<Self> {
-        let (tx, rx) = std::sync::mpsc::channel::<(PathBuf, Job, u64)>();
+        let (tx, rx) = std::sync::mpsc::channel::<Queued>();
         let progress = std::sync::Arc::new(Progress::default());
         let shared = progress.clone();
-        let thread = std::thread::Builder::new().name("persist".into()).spawn(move || {
-            while let Ok((path, job, seq)) = rx.recv() {
-                // a newer body of a file makes the older ones pointless (their
-                // callers learn the newer one's outcome); the order of files is kept
-                let mut batch: Vec<(PathBuf, Job, Vec<u64>)> = vec![(path, job, vec![seq])];
-                let mut last = seq;
-                while let Ok((path, job, seq)) = rx.try_recv() {
-                    last = seq;
-                    match batch.iter_mut().find(|(p, _, _)| *p == path) {
-                        Some(slot) => {
-                            slot.1 = job;
-                            slot.2.push(seq);
-                        }
-                        None => batch.push((path, job, vec![seq])),
-                    }
-                }
-                for (path, job, seqs) in batch {
-                    let done = match job {
-                        Job::Write(body) => write_atomic(&path, &body),
-                        Job::Remove => match std::fs::remove_file(&path) {
-                            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
-                            _ => Ok(()),
-                        },
-                    };
-                    if let Err(e) = done {
-                        tracing::error!(file = %path.display(), "cannot save: {e}");
-                        let mut failed = shared.failed.lock().unwrap_or_else(|p| p.into_inner());
-                        for s in seqs {
-                            if failed.len() == MAX_FAILED {
-                                failed.pop_front();
-                            }
-                            failed.push_back((s, format!("cannot save {}: {e}", path.display())));
-                        }
-                    }
-                }
-                shared.done.store(last, std::sync::atomic::Ordering::Release);
-            }
-        })?;
+        let thread = std::thread::Builder::new().name("persist".into()).spawn(move || persist(&rx, &shared))?;
         Ok(Writer { tx: Some(tx), thread: Some(thread), queued: 0.into(), progress })
     }
 
     /// Queues the connection list `list` to be saved into `store`.
     pub fn save(&self, store: &Store, list: &[Connection]) -> Saved {
-        self.write(store.path(), Store::encode(list))
+        self.journaled(store.path(), Store::encode(list))
     }
 
     /// Queues `body` to be written atomically to `path`.
     pub fn write(&self, path: &Path, body: Vec<u8>) -> Saved {
         self.send(path, Job::Write(body))
+    }
+
+    /// Queues `body` for `path` through its journal: the save is done once
+    /// the journal has it, and the file is rewritten right after.
+    pub fn journaled(&self, path: &Path, body: Vec<u8>) -> Saved {
+        self.send(path, Job::Journaled(body))
     }
 
     /// Queues the removal of `path`.
@@ -332,6 +362,114 @@ impl Writer {
     }
 }
 
+type Queued = (PathBuf, Job, u64);
+
+/// The writer thread: saves what comes until the channel closes, then
+/// brings every journaled file up to date.
+fn persist(rx: &std::sync::mpsc::Receiver<Queued>, progress: &Progress) {
+    // files whose journal holds a newer body than they do, oldest first
+    let mut behind: Vec<(PathBuf, Vec<u8>)> = Vec::new();
+    let mut next: Option<Queued> = None;
+    loop {
+        let Some((path, job, seq)) = next.take().or_else(|| rx.recv().ok()) else { break };
+        // a newer body of a file makes the older ones pointless (their
+        // callers learn the newer one's outcome); the order of files is kept
+        let mut batch: Vec<(PathBuf, Job, Vec<u64>)> = vec![(path, job, vec![seq])];
+        let mut last = seq;
+        while let Ok((path, job, seq)) = rx.try_recv() {
+            last = seq;
+            match batch.iter_mut().find(|(p, _, _)| *p == path) {
+                Some(slot) => {
+                    slot.1 = job;
+                    slot.2.push(seq);
+                }
+                None => batch.push((path, job, vec![seq])),
+            }
+        }
+        for (path, job, seqs) in batch {
+            let done = match job {
+                Job::Write(body) => write_atomic(&path, &body),
+                Job::Journaled(body) => match journal::append(&journal::path_for(&path), &body) {
+                    Ok(()) => {
+                        behind.retain(|(p, _)| *p != path);
+                        behind.push((path.clone(), body));
+                        Ok(())
+                    }
+                    Err(e) => write_past_journal(&path, &body, &e).inspect(|()| behind.retain(|(p, _)| *p != path)),
+                },
+                Job::Remove => match std::fs::remove_file(&path) {
+                    Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+                    _ => Ok(()),
+                },
+            };
+            if let Err(e) = done {
+                tracing::error!(file = %path.display(), "cannot save: {e}");
+                let mut failed = progress.failed.lock().unwrap_or_else(|p| p.into_inner());
+                for s in seqs {
+                    if failed.len() == MAX_FAILED {
+                        failed.pop_front();
+                    }
+                    failed.push_back((s, format!("cannot save {}: {e}", path.display())));
+                }
+            }
+        }
+        progress.done.store(last, std::sync::atomic::Ordering::Release);
+        // the files themselves, while no save waits
+        while !behind.is_empty() {
+            match rx.try_recv() {
+                Ok(q) => {
+                    next = Some(q);
+                    break;
+                }
+                // closed: flushing, every file is brought up to date
+                Err(std::sync::mpsc::TryRecvError::Disconnected | std::sync::mpsc::TryRecvError::Empty) => {}
+            }
+            let (path, body) = behind.remove(0);
+            catch_up(&path, &body);
+        }
+    }
+    for (path, body) in behind {
+        catch_up(&path, &body);
+    }
+}
+
+/// Writes a journaled file whose journal has its newest body, then empties
+/// the journal.
+fn catch_up(path: &Path, body: &[u8]) {
+    let journal = journal::path_for(path);
+    match write_atomic(path, body) {
+        Ok(()) => {
+            if let Err(e) = journal::clear(&journal) {
+                tracing::warn!(file = %journal.display(), "cannot empty the journal: {e}");
+            }
+        }
+        Err(e) => tracing::error!(
+            file = %path.display(),
+            "cannot rewrite the file: {e}; its journal {} keeps the newest body, read at the next start",
+            journal.display()
+        ),
+    }
+}
+
+/// The journal of `path` could not take `body` (`why`): the file is
+/// written atomically instead, as it was before journals, once the journal
+/// is gone (an older record left there would win over the file at the next
+/// start).
+fn write_past_journal(path: &Path, body: &[u8], why: &std::io::Error) -> std::io::Result<()> {
+    let journal = journal::path_for(path);
+    tracing::warn!(file = %journal.display(), "cannot append to the journal: {why}; writing {} itself", path.display());
+    match std::fs::remove_file(&journal) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            return Err(std::io::Error::new(
+                e.kind(),
+                format!("its journal {} can be neither written ({why}) nor removed ({e})", journal.display()),
+            ));
+        }
+        _ => {}
+    }
+    write_atomic(path, body)
+}
+
 impl Drop for Writer {
     fn drop(&mut self) {
         self.flush();
@@ -355,6 +493,59 @@ mod tests {
         }];
         store.save(&c).expect("saves");
         assert_eq!(store.load(), Ok(c));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_list_in_the_journal_only_is_loaded_and_written_into_the_file() {
+        let dir = std::env::temp_dir().join(format!("nerve-store-journal-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = Store::new(&dir);
+        let c =
+            |from: &str| Connection { from: from.into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false };
+        store.save(&[c("a/out")]).expect("saves");
+        // a router killed after it answered a rewire, before it rewrote the file
+        let journal = journal::path_for(store.path());
+        journal::append(&journal, &Store::encode(&[c("a/out"), c("x/out")])).expect("append");
+        assert_eq!(store.load(), Ok(vec![c("a/out"), c("x/out")]), "the journal's newer list");
+        assert_eq!(
+            std::fs::read(store.path()).ok(),
+            Some(Store::encode(&[c("a/out"), c("x/out")])),
+            "and it is in the file now"
+        );
+        assert_eq!(journal::read(&journal).expect("read"), journal::Contents::default(), "the journal emptied");
+        // a torn record, nothing whole: the file's list
+        std::fs::write(&journal, b"NRJ1\x05\0\0").expect("torn");
+        assert_eq!(store.load(), Ok(vec![c("a/out"), c("x/out")]));
+        assert_eq!(journal::read(&journal).expect("read").bytes, 0, "a torn journal is emptied too");
+        // a record that is no connection list is not believed
+        journal::append(&journal, b"{ not json").expect("append");
+        assert_eq!(store.load(), Ok(vec![c("a/out"), c("x/out")]));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_journaled_save_is_done_once_in_the_journal_and_the_file_follows() {
+        let dir = std::env::temp_dir().join(format!("nerve-store-follows-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = Store::new(&dir);
+        let mut w = Writer::start().expect("thread");
+        let c = Connection { from: "a/out".into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false };
+        let saved = w.save(&store, std::slice::from_ref(&c));
+        let t0 = std::time::Instant::now();
+        while w.outcome(saved).is_none() {
+            assert!(t0.elapsed() < std::time::Duration::from_secs(10), "never saved");
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        assert_eq!(w.outcome(saved), Some(Ok(())));
+        // on disk: in the journal, in the file, or both by now
+        let journal = journal::path_for(store.path());
+        let in_journal = journal::read(&journal).expect("read").last == Some(Store::encode(std::slice::from_ref(&c)));
+        let in_file = std::fs::read(store.path()).ok() == Some(Store::encode(std::slice::from_ref(&c)));
+        assert!(in_journal || in_file, "reported saved, but on disk nowhere");
+        w.flush();
+        assert_eq!(std::fs::read(store.path()).ok(), Some(Store::encode(std::slice::from_ref(&c))), "the file follows");
+        assert_eq!(journal::read(&journal).expect("read").bytes, 0, "and the journal is emptied");
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -486,9 +677,11 @@ mod tests {
         assert_eq!(wait(ok), Ok(()));
         // once reported, it is on disk
         assert_eq!(Store::new(&dir).load().expect("load"), vec![c.clone()]);
-        // a save that cannot happen (the file is a folder now) is reported, not only logged
-        std::fs::remove_file(store.path()).expect("rm");
-        std::fs::create_dir(store.path()).expect("a folder in its place");
+        // a save that cannot happen (the journal is a folder now, which
+        // cannot be removed either) is reported, not only logged
+        let journal = journal::path_for(store.path());
+        let _ = std::fs::remove_file(&journal);
+        std::fs::create_dir(&journal).expect("a folder in its place");
         let bad = w.save(&store, &[]);
         let err = wait(bad).expect_err("the save failed");
         assert!(err.contains("connections.json"), "{err}");

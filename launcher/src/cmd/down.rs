@@ -33,10 +33,13 @@ pub struct DownArgs {
     pub keep_connections: bool,
 }
 
-/// The number of connections in a persisted connection list (0 when there is none).
+/// The number of connections in a persisted connection list (0 when there
+/// is none): its journal's last record, which a router killed before it
+/// rewrote the file leaves newer than the file, else the file.
 fn count_connections(path: &std::path::Path) -> usize {
-    std::fs::read(path)
-        .ok()
+    let journal = nerve_router::journal::read(&nerve_router::journal::path_for(path)).ok().and_then(|c| c.last);
+    journal
+        .or_else(|| std::fs::read(path).ok())
         .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
         .and_then(|v| v.get("connections").and_then(|c| c.as_array()).map(Vec::len))
         .unwrap_or(0)
@@ -52,7 +55,7 @@ fn connections_after_down(world: &World, keep: bool) -> String {
         return format!("; kept its {n} connection(s) for the next start");
     }
     let mut dropped = false;
-    for f in [list.clone(), list.with_extension("json.bak")] {
+    for f in [list.clone(), list.with_extension("json.bak"), nerve_router::journal::path_for(&list)] {
         dropped |= std::fs::remove_file(&f).is_ok();
     }
     if dropped && n > 0 {
