@@ -6,12 +6,17 @@
 //! (`nerve/<robot>/router`) and each agent's control service
 //! (`nerve/<robot>/<agent>/ctl`).
 //!
-//! Clients poll for the reply with a short back-off: control traffic is rare,
-//! and this keeps every waiting side free of extra listeners. The router,
-//! which asks every agent at once (`nerve ps`), is woken instead: an agent
-//! that answered notifies the router's own event with its
-//! [`reply_event_id`], and the router looks only at the calls of agents
-//! whose id came (see `router::calls`).
+//! Nobody polls for a reply where it matters. The router, which asks every
+//! agent at once (`nerve ps`), is woken by the agent that answered: it
+//! notifies the router's own event with its [`reply_event_id`], and the
+//! router looks only at the calls of agents whose id came (see
+//! `router::calls`). Programs calling the router (the decision maker's
+//! rewiring) sleep on a listener of `<service>/replies`, which the router
+//! notifies after each reply on that service ([`ControlSize::reply_wake`]);
+//! a program that finds every listener slot taken polls. Agents' other
+//! clients (tools, the router's own calls when it waits in place) poll
+//! with a short back-off: a listener per client of every agent would cost
+//! more than the rare waits it saves.
 //!
 //! Tools (`nerve` commands) reach the router through its [`ToolSocket`]
 //! instead, a Unix stream socket beside the robot's state: a command that
@@ -31,6 +36,7 @@ use iceoryx2::prelude::*;
 use serde::{Serialize, de::DeserializeOwned};
 use shm_schemas::control::{ProtocolError, decode, encode, unanswered};
 use std::marker::PhantomData;
+use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 mod stream;
@@ -57,17 +63,28 @@ pub struct ControlSize {
     /// client slots that [`ControlClient::open`] leaves free, for the
     /// service's owner's [`ControlClient::open_reserved`] (the router)
     pub reserved_clients: usize,
+    /// the server wakes its clients after each reply (an event service
+    /// `<service>/replies`), so that a waiting client sleeps instead of
+    /// polling: for a service with few clients, each of which a reply
+    /// wakes (see [`ControlClient::call`])
+    pub reply_wake: bool,
 }
 
 impl ControlSize {
     /// The router's service for agents (registration): every agent of the
     /// robot, small fixed-size messages.
-    pub const ROUTER: ControlSize =
-        ControlSize { max_clients: 512, max_nodes: 640, max_message: Some(8192), reserved_clients: 0 };
+    pub const ROUTER: ControlSize = ControlSize {
+        max_clients: 512,
+        max_nodes: 640,
+        max_message: Some(8192),
+        reserved_clients: 0,
+        reply_wake: false,
+    };
     /// The router's service for tools and programs (`nerve ps` of 500 agents
-    /// is a large reply): a few clients at once.
+    /// is a large reply): a few clients at once, each woken by a reply
+    /// (a program's rewire waits for its answer, issue 18).
     pub const ROUTER_CLI: ControlSize =
-        ControlSize { max_clients: 32, max_nodes: 64, max_message: None, reserved_clients: 0 };
+        ControlSize { max_clients: 32, max_nodes: 64, max_message: None, reserved_clients: 0, reply_wake: true };
     /// An agent's control service: the router, a restarted router, tools.
     /// Fixed 64 KiB messages (statistics of an agent with a few hundred
     /// ports): with growing messages the router's client of each agent
@@ -76,7 +93,7 @@ impl ControlSize {
     /// injectors, clients of killed tools not yet cleaned up) take at most
     /// seven, so that they never leave the agent unreachable for the router.
     pub const AGENT: ControlSize =
-        ControlSize { max_clients: 8, max_nodes: 16, max_message: Some(65536), reserved_clients: 1 };
+        ControlSize { max_clients: 8, max_nodes: 16, max_message: Some(65536), reserved_clients: 1, reply_wake: false };
 
     fn slice_len(&self) -> usize {
         self.max_message.unwrap_or(INITIAL_MESSAGE_BYTES)
@@ -228,6 +245,11 @@ const INITIAL_MESSAGE_BYTES: usize = 512;
 /// costs a few thousand wake-ups a second only while a call is pending.
 const MAX_POLL_INTERVAL: Duration = Duration::from_micros(200);
 
+/// How long a client woken by replies ([`ControlSize::reply_wake`]) sleeps
+/// at most before it looks for its reply anyway: only a wake-up the server
+/// could not send (it logs why) or a server gone are found this way.
+const REPLY_WAIT_BOUND: Duration = Duration::from_millis(50);
+
 /// Reply wake-ups a control service's event tells apart: event id 0 (a
 /// notifier's default) says that a request came; ids 1 to this say that an
 /// agent whose name hashes to the id answered one (see
@@ -250,6 +272,8 @@ pub struct ControlServer<Req, Resp> {
     size: ControlSize,
     server: Server<Ipc, Bytes, (), Bytes, ()>,
     listener: Listener<Ipc>,
+    /// wakes the clients after a reply (`size.reply_wake`)
+    replies: Option<Rc<Notifier<Ipc>>>,
     _types: PhantomData<fn(Req) -> Resp>,
 }
 
@@ -273,7 +297,13 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
             })?;
         let ev = open_event(node, service, size)?;
         let listener = ev.listener_builder().create().map_err(ipc_err(service, IpcOp::Listener))?;
-        Ok(ControlServer { service: service.into(), size, server, listener, _types: PhantomData })
+        let replies = if size.reply_wake {
+            let ev = open_replies(node, service, size)?;
+            Some(Rc::new(ev.notifier_builder().create().map_err(ipc_err(service, IpcOp::Notifier))?))
+        } else {
+            None
+        };
+        Ok(ControlServer { service: service.into(), size, server, listener, replies, _types: PhantomData })
     }
 
     /// The listener that wakes when a request arrives (attach it to a WaitSet).
@@ -319,6 +349,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
             active: Some(Caller::Shm(active)),
             service: self.service.clone(),
             max_message: self.size.max_message,
+            replies: self.replies.clone(),
             _types: PhantomData,
         };
         Ok(Some((req, responder)))
@@ -352,6 +383,8 @@ pub struct Responder<Resp> {
     active: Option<Caller>,
     service: String,
     max_message: Option<usize>,
+    /// the server's notifier that wakes its waiting clients
+    replies: Option<Rc<Notifier<Ipc>>>,
     _types: PhantomData<fn(Resp)>,
 }
 
@@ -397,14 +430,23 @@ impl<Resp> Responder<Resp> {
     fn send(&mut self, bytes: &[u8]) {
         match self.active.take() {
             None => {}
-            Some(Caller::Shm(active)) => match active.loan_slice_uninit(bytes.len()) {
-                Ok(resp) => {
-                    if let Err(e) = resp.write_from_slice(bytes).send() {
-                        tracing::warn!(service = %self.service, "could not send a reply: {e:?}");
+            Some(Caller::Shm(active)) => {
+                match active.loan_slice_uninit(bytes.len()) {
+                    Ok(resp) => {
+                        if let Err(e) = resp.write_from_slice(bytes).send() {
+                            tracing::warn!(service = %self.service, "could not send a reply: {e:?}");
+                        }
                     }
+                    Err(e) => tracing::warn!(service = %self.service, "could not loan a reply: {e:?}"),
                 }
-                Err(e) => tracing::warn!(service = %self.service, "could not loan a reply: {e:?}"),
-            },
+                // a client that misses this wake-up still looks within
+                // REPLY_WAIT_BOUND
+                if let Some(n) = &self.replies
+                    && let Err(e) = n.notify()
+                {
+                    tracing::debug!(service = %self.service, "could not wake the clients: {e:?}");
+                }
+            }
             Some(Caller::Stream(mut c)) => {
                 if let Err(e) = c.answer(bytes) {
                     tracing::warn!(service = %self.service, error = %e, "could not answer a tool: {e}");
@@ -430,6 +472,11 @@ pub struct ControlClient<Req, Resp> {
     size: ControlSize,
     client: Client<Ipc, Bytes, (), Bytes, ()>,
     notifier: Notifier<Ipc>,
+    /// woken by the server after each of its replies (`size.reply_wake`);
+    /// `None`: the client polls
+    replies: Option<Listener<Ipc>>,
+    /// waits for a reply that a wake-up ended (for the tests)
+    reply_wakes: std::cell::Cell<u64>,
     _types: PhantomData<fn(Req) -> Resp>,
 }
 
@@ -475,7 +522,32 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
             .map_err(ipc_err(service, IpcOp::Client))?;
         let ev = open_event(node, service, size)?;
         let notifier = ev.notifier_builder().create().map_err(ipc_err(service, IpcOp::Notifier))?;
-        Ok(ControlClient { service: service.into(), size, client, notifier, _types: PhantomData })
+        // every listener slot taken (more programs than the service has
+        // clients, or killed ones not cleaned up yet): this one polls
+        let replies = if size.reply_wake {
+            match open_replies(node, service, size).map(|ev| ev.listener_builder().create()) {
+                Ok(Ok(l)) => Some(l),
+                Ok(Err(e)) => {
+                    tracing::debug!(service, "no reply wake-ups, polling instead: {e:?}");
+                    None
+                }
+                Err(e) => {
+                    tracing::debug!(service, "no reply wake-ups, polling instead: {e}");
+                    None
+                }
+            }
+        } else {
+            None
+        };
+        Ok(ControlClient {
+            service: service.into(),
+            size,
+            client,
+            notifier,
+            replies,
+            reply_wakes: std::cell::Cell::new(0),
+            _types: PhantomData,
+        })
     }
 
     /// The service this client calls.
@@ -513,6 +585,11 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
     /// Sends the request once and waits for the reply; `None` when no server
     /// took it (none connected, or the request was dropped unanswered).
     fn attempt(&self, bytes: &[u8], start: Instant, timeout: Duration) -> Result<Option<Resp>, ControlError> {
+        // wake-ups of earlier replies (to this client or others) would
+        // only make it look once more: dropped before the request goes
+        if let Some(l) = &self.replies {
+            let _ = l.try_wait(|_| {});
+        }
         let Some(pending) = self.send_bytes(bytes)? else { return Ok(None) };
         let mut backoff = Duration::from_micros(10);
         loop {
@@ -522,10 +599,23 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
                 Err(ControlError::NoServer { .. }) => return Ok(None),
                 Err(e) => return Err(e),
             }
-            if start.elapsed() > timeout {
+            let waited = start.elapsed();
+            if waited > timeout {
                 return Err(ControlError::Timeout { service: self.service.clone(), timeout });
             }
-            std::thread::sleep(backoff);
+            match &self.replies {
+                // sleeps until the server replied to someone, looking
+                // anyway now and then (a server gone, a wake-up lost)
+                Some(l) => {
+                    let bound = REPLY_WAIT_BOUND.min(timeout.saturating_sub(waited)).max(Duration::from_micros(1));
+                    match l.timed_wait(|_| {}, bound) {
+                        Ok(0) => {}
+                        Ok(_) => self.reply_wakes.set(self.reply_wakes.get().saturating_add(1)),
+                        Err(_) => std::thread::sleep(backoff),
+                    }
+                }
+                None => std::thread::sleep(backoff),
+            }
             backoff = (backoff * 2).min(MAX_POLL_INTERVAL);
         }
     }
@@ -640,6 +730,24 @@ fn rr_builder(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<RrBu
         .max_loaned_requests(1))
 }
 
+/// The event with which a server of `service` wakes its clients after a
+/// reply ([`ControlSize::reply_wake`]): a listener per client.
+fn open_replies(
+    node: &Node<Ipc>,
+    service: &str,
+    size: ControlSize,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Ipc>, ControlError> {
+    let replies = format!("{service}/replies");
+    let name: ServiceName = replies.as_str().try_into().map_err(ipc_err(service, IpcOp::Name))?;
+    node.service_builder(&name)
+        .event()
+        .max_notifiers(2)
+        .max_listeners(size.max_clients + 2)
+        .max_nodes(size.max_nodes)
+        .open_or_create()
+        .map_err(ipc_err(service, IpcOp::Event))
+}
+
 fn open_event(
     node: &Node<Ipc>,
     service: &str,
@@ -682,7 +790,7 @@ mod tests {
 
     /// The size of the tests' services.
     const SMALL: ControlSize =
-        ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128), reserved_clients: 0 };
+        ControlSize { max_clients: 2, max_nodes: 4, max_message: Some(128), reserved_clients: 0, reply_wake: false };
 
     /// A robot of the test's own (removed when the guard drops) and the
     /// name of its test service.
@@ -695,7 +803,13 @@ mod tests {
     #[test]
     fn tools_leave_the_reserved_client_slot_for_the_router() {
         let (world, _cleanup, service) = test_robot("slot");
-        let size = ControlSize { max_clients: 3, max_nodes: 8, max_message: Some(128), reserved_clients: 1 };
+        let size = ControlSize {
+            max_clients: 3,
+            max_nodes: 8,
+            max_message: Some(128),
+            reserved_clients: 1,
+            reply_wake: false,
+        };
         let node = world.node("server").expect("node");
         let _server: ControlServer<String, String> = ControlServer::create(&node, &service, size).expect("server");
         let tools = world.node("tools").expect("node");
@@ -825,6 +939,53 @@ mod tests {
             assert_eq!(client.call(&format!("{i}"), timeout).expect("an answer"), "ok");
         }
         assert_eq!(taken.load(Ordering::SeqCst), 1 + CALLS, "a request was carried out twice");
+        server.stop();
+    }
+
+    /// This thread's voluntary context switches (each sleep that ended).
+    fn own_wakeups() -> u64 {
+        std::fs::read_to_string("/proc/thread-self/status")
+            .ok()
+            .and_then(|s| {
+                s.lines().find_map(|l| l.strip_prefix("voluntary_ctxt_switches:").and_then(|v| v.trim().parse().ok()))
+            })
+            .expect("voluntary_ctxt_switches")
+    }
+
+    #[test]
+    fn a_client_of_a_service_with_reply_wakes_sleeps_until_the_reply() {
+        let answer_after = Duration::from_millis(20);
+        let (world, _cleanup, service) = test_robot("wake");
+        let woken = ControlSize { reply_wake: true, ..SMALL };
+        let server = server_thread(&world, &service, woken, move |req, responder| {
+            std::thread::sleep(answer_after);
+            responder.respond_or(&format!("re: {}", req.unwrap_or_default()), |e| e.to_string());
+        });
+        let node = world.node("client").expect("node");
+        let client = client_of(&node, &service, woken);
+        assert!(client.replies.is_some(), "the client listens for replies");
+        let before = own_wakeups();
+        assert_eq!(client.call(&"a".to_owned(), Duration::from_secs(5)).expect("reply"), "re: a");
+        let woke = own_wakeups() - before;
+        // the reply came well within REPLY_WAIT_BOUND: its wake-up ended the wait
+        assert!(client.reply_wakes.get() >= 1, "the reply did not wake the client");
+        // polling every 200 µs at most would have woken some 100 times
+        assert!(woke < 12, "the client woke {woke} times waiting {answer_after:?} for its reply");
+        server.stop();
+        drop(client);
+        // without the wake-ups the same call polls
+        let (world, _cleanup, service) = test_robot("poll");
+        let server = server_thread(&world, &service, SMALL, move |req, responder| {
+            std::thread::sleep(answer_after);
+            responder.respond_or(&format!("re: {}", req.unwrap_or_default()), |e| e.to_string());
+        });
+        let node = world.node("client").expect("node");
+        let client = client_of(&node, &service, SMALL);
+        assert!(client.replies.is_none());
+        let before = own_wakeups();
+        assert_eq!(client.call(&"b".to_owned(), Duration::from_secs(5)).expect("reply"), "re: b");
+        let polled = own_wakeups() - before;
+        assert!(polled > 30, "a polling client woke only {polled} times: the test cannot tell the two apart");
         server.stop();
     }
 }

@@ -203,6 +203,7 @@ impl<Req: DeserializeOwned, Resp: Serialize> ToolSocket<Req, Resp> {
                         active: Some(Caller::Stream(Connection { stream: r.stream })),
                         service: self.path.display().to_string(),
                         max_message: None,
+                        replies: None,
                         _types: PhantomData,
                     };
                     return Some((decode::<Req>(&body), responder));
