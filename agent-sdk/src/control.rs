@@ -281,6 +281,13 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
     /// Serves `service`. Only one server may serve a service at a time: a
     /// second one gets [`ControlError::AlreadyServed`].
     pub fn create(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<Self, ControlError> {
+        // before the server, so that a client that finds the server finds it too
+        let replies = if size.reply_wake {
+            let ev = open_replies(node, service, size, true)?;
+            Some(Rc::new(ev.notifier_builder().create().map_err(ipc_err(service, IpcOp::Notifier))?))
+        } else {
+            None
+        };
         let rr = rr_builder(node, service, size)?.open_or_create().map_err(ipc_err(service, IpcOp::Service))?;
         let server = rr
             .server_builder()
@@ -297,12 +304,6 @@ impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
             })?;
         let ev = open_event(node, service, size)?;
         let listener = ev.listener_builder().create().map_err(ipc_err(service, IpcOp::Listener))?;
-        let replies = if size.reply_wake {
-            let ev = open_replies(node, service, size)?;
-            Some(Rc::new(ev.notifier_builder().create().map_err(ipc_err(service, IpcOp::Notifier))?))
-        } else {
-            None
-        };
         Ok(ControlServer { service: service.into(), size, server, listener, replies, _types: PhantomData })
     }
 
@@ -525,7 +526,7 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
         // every listener slot taken (more programs than the service has
         // clients, or killed ones not cleaned up yet): this one polls
         let replies = if size.reply_wake {
-            match open_replies(node, service, size).map(|ev| ev.listener_builder().create()) {
+            match open_replies(node, service, size, false).map(|ev| ev.listener_builder().create()) {
                 Ok(Ok(l)) => Some(l),
                 Ok(Err(e)) => {
                     tracing::debug!(service, "no reply wake-ups, polling instead: {e:?}");
@@ -731,21 +732,29 @@ fn rr_builder(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<RrBu
 }
 
 /// The event with which a server of `service` wakes its clients after a
-/// reply ([`ControlSize::reply_wake`]): a listener per client.
+/// reply ([`ControlSize::reply_wake`]): a listener per client. The server
+/// creates it (`create`); a client only opens it, so that a client of a
+/// server without it (an older router) polls instead of waiting for
+/// wake-ups that never come.
 fn open_replies(
     node: &Node<Ipc>,
     service: &str,
     size: ControlSize,
+    create: bool,
 ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Ipc>, ControlError> {
     let replies = format!("{service}/replies");
     let name: ServiceName = replies.as_str().try_into().map_err(ipc_err(service, IpcOp::Name))?;
-    node.service_builder(&name)
+    let builder = node
+        .service_builder(&name)
         .event()
         .max_notifiers(2)
         .max_listeners(size.max_clients + 2)
-        .max_nodes(size.max_nodes)
-        .open_or_create()
-        .map_err(ipc_err(service, IpcOp::Event))
+        .max_nodes(size.max_nodes);
+    if create {
+        builder.open_or_create().map_err(ipc_err(service, IpcOp::Event))
+    } else {
+        builder.open().map_err(ipc_err(service, IpcOp::Event))
+    }
 }
 
 fn open_event(
