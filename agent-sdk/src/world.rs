@@ -256,6 +256,19 @@ impl World {
         // own scan back (to measure it).
         config.global.service.cleanup_dead_nodes_on_open =
             std::env::var_os(CLEANUP_ON_OPEN_ENV).is_some_and(|v| v == "on");
+        // Each subscriber, client and server keeps room for the connections
+        // of peers that left with messages still unread: 128 by iceoryx2's
+        // default, each a slot built and touched when the port is made. A
+        // subscriber here reads one source (a publisher, or its restarted
+        // successor), a client one server: a few suffice. The room cost
+        // the router about 0.8 ms per agent it first called (its client of
+        // the agent; 40 ms of a launch of 50) and every subscribe a share
+        // of its millisecond (BENCHMARKS §3). A peer that leaves past this
+        // many expired connections loses its unread messages; it has left.
+        let expired = expired_connection_buffer();
+        config.defaults.publish_subscribe.subscriber_expired_connection_buffer = expired;
+        config.defaults.request_response.client_expired_connection_buffer = expired;
+        config.defaults.request_response.server_expired_connection_buffer = expired;
         Ok(World { robot, config, state_dir, iox_root: PathBuf::from(iox_root) })
     }
 
@@ -512,6 +525,16 @@ fn make_private(files: &[PathBuf]) {
 /// The environment variable that turns iceoryx2's scan of a service's
 /// nodes on every open back on (`on`); see [`World::new`].
 pub const CLEANUP_ON_OPEN_ENV: &str = "NERVE_IOX2_CLEANUP_ON_OPEN";
+
+/// `NERVE_IOX2_EXPIRED_CONNECTIONS=N` sets the room every port keeps for
+/// the connections of peers that left (iceoryx2's default is 128), to
+/// measure it; see [`World::new`].
+pub const EXPIRED_CONNECTIONS_ENV: &str = "NERVE_IOX2_EXPIRED_CONNECTIONS";
+
+/// The room for expired connections: [`EXPIRED_CONNECTIONS_ENV`], else 8.
+fn expired_connection_buffer() -> usize {
+    std::env::var(EXPIRED_CONNECTIONS_ENV).ok().and_then(|v| v.parse().ok()).filter(|n| *n >= 1).unwrap_or(8)
+}
 
 /// Removes the resources of every dead node under iceoryx2 configuration
 /// `config` (a robot's: [`World::config`], or a node's own); returns how
