@@ -370,8 +370,7 @@ fn persist(rx: &std::sync::mpsc::Receiver<Queued>, progress: &Progress) {
     // files whose journal holds a newer body than they do, oldest first
     let mut behind: Vec<(PathBuf, Vec<u8>)> = Vec::new();
     let mut next: Option<Queued> = None;
-    loop {
-        let Some((path, job, seq)) = next.take().or_else(|| rx.recv().ok()) else { break };
+    while let Some((path, job, seq)) = next.take().or_else(|| rx.recv().ok()) {
         // a newer body of a file makes the older ones pointless (their
         // callers learn the newer one's outcome); the order of files is kept
         let mut batch: Vec<(PathBuf, Job, Vec<u64>)> = vec![(path, job, vec![seq])];
