@@ -69,6 +69,8 @@ pub struct Contents {
     pub last: Option<Vec<u8>>,
     /// its length in bytes (0 when it is missing)
     pub bytes: u64,
+    /// the length of its whole records: less than `bytes` after a torn tail
+    pub whole: u64,
 }
 
 /// Reads the journal; a missing one holds nothing.
@@ -81,6 +83,7 @@ pub fn read(journal: &Path) -> std::io::Result<Contents> {
     };
     let mut last = None;
     let mut rest = buf.as_slice();
+    let mut whole = 0u64;
     while let Some((head, tail)) = rest.split_first_chunk::<HEADER>() {
         let word = |i: usize| u32::from_le_bytes([head[i], head[i + 1], head[i + 2], head[i + 3]]);
         if head[..4] != MAGIC {
@@ -93,17 +96,33 @@ pub fn read(journal: &Path) -> std::io::Result<Contents> {
             break;
         }
         last = Some(body.to_vec());
+        whole = whole.saturating_add((HEADER + body.len()) as u64);
         rest = after;
     }
-    Ok(Contents { last, bytes: buf.len() as u64 })
+    Ok(Contents { last, bytes: buf.len() as u64, whole })
 }
 
 /// Empties the journal (its file stays, so that the next append needs no
 /// sync of the folder). Not synced: should the emptying be lost, the
 /// records that come back are no newer than the file.
 pub fn clear(journal: &Path) -> std::io::Result<()> {
+    cut(journal, 0)
+}
+
+/// Cuts the journal to its first `len` bytes (a torn tail off, so that the
+/// next record follows a whole one), and syncs that.
+pub fn cut_to_whole(journal: &Path, len: u64) -> std::io::Result<()> {
+    cut(journal, len)?;
     match std::fs::OpenOptions::new().write(true).custom_flags(libc::O_NOFOLLOW).open(journal) {
-        Ok(f) => f.set_len(0),
+        Ok(f) => f.sync_data(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(e),
+    }
+}
+
+fn cut(journal: &Path, len: u64) -> std::io::Result<()> {
+    match std::fs::OpenOptions::new().write(true).custom_flags(libc::O_NOFOLLOW).open(journal) {
+        Ok(f) => f.set_len(len),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(e) => Err(e),
     }
@@ -130,13 +149,20 @@ mod tests {
         append(&j, b"second, longer").expect("append");
         let whole = read(&j).expect("read");
         assert_eq!(whole.last.as_deref(), Some(&b"second, longer"[..]));
+        assert_eq!(whole.whole, whole.bytes);
         // every cut through the last record leaves the one before it
         let bytes = std::fs::read(&j).expect("bytes");
         let first_len = HEADER + 5;
         for cut in first_len..bytes.len() {
             std::fs::write(&j, &bytes[..cut]).expect("cut");
-            assert_eq!(read(&j).expect("read").last.as_deref(), Some(&b"first"[..]), "cut at {cut}");
+            let c = read(&j).expect("read");
+            assert_eq!(c.last.as_deref(), Some(&b"first"[..]), "cut at {cut}");
+            assert_eq!(c.whole, first_len as u64, "cut at {cut}");
         }
+        // cut to its whole records, the journal takes a record that is read back
+        cut_to_whole(&j, first_len as u64).expect("cut to whole");
+        append(&j, b"third").expect("append");
+        assert_eq!(read(&j).expect("read").last.as_deref(), Some(&b"third"[..]));
         // a flipped bit in the body: that record is not believed
         let mut flipped = bytes.clone();
         if let Some(b) = flipped.last_mut() {
@@ -161,7 +187,7 @@ mod tests {
         clear(&j).expect("clearing a missing journal is nothing");
         append(&j, b"one").expect("append");
         clear(&j).expect("clear");
-        assert_eq!(read(&j).expect("read"), Contents { last: None, bytes: 0 });
+        assert_eq!(read(&j).expect("read"), Contents { last: None, bytes: 0, whole: 0 });
         append(&j, b"two").expect("append");
         assert_eq!(read(&j).expect("read").last.as_deref(), Some(&b"two"[..]));
         let _ = std::fs::remove_dir_all(&d);

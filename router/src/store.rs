@@ -126,6 +126,12 @@ impl Store {
                     );
                     if let Err(e) = write_atomic(&self.path, contents.last.as_deref().unwrap_or_default()) {
                         tracing::warn!(file = %self.path.display(), "cannot rewrite the connection list: {e}; its journal keeps it");
+                        // the next record must follow a whole one to be read
+                        if contents.whole < contents.bytes
+                            && let Err(e) = journal::cut_to_whole(&journal, contents.whole)
+                        {
+                            tracing::warn!(file = %journal.display(), "cannot cut the journal's torn tail: {e}");
+                        }
                         return Ok(list);
                     }
                 }
