@@ -106,23 +106,22 @@ pub fn read(journal: &Path) -> std::io::Result<Contents> {
 /// sync of the folder). Not synced: should the emptying be lost, the
 /// records that come back are no newer than the file.
 pub fn clear(journal: &Path) -> std::io::Result<()> {
-    cut(journal, 0)
+    cut(journal, 0, false)
 }
 
 /// Cuts the journal to its first `len` bytes (a torn tail off, so that the
 /// next record follows a whole one), and syncs that.
 pub fn cut_to_whole(journal: &Path, len: u64) -> std::io::Result<()> {
-    cut(journal, len)?;
-    match std::fs::OpenOptions::new().write(true).custom_flags(libc::O_NOFOLLOW).open(journal) {
-        Ok(f) => f.sync_data(),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(e),
-    }
+    cut(journal, len, true)
 }
 
-fn cut(journal: &Path, len: u64) -> std::io::Result<()> {
+/// Cuts the journal to `len` bytes, synced if `sync`; a missing one is left so.
+fn cut(journal: &Path, len: u64, sync: bool) -> std::io::Result<()> {
     match std::fs::OpenOptions::new().write(true).custom_flags(libc::O_NOFOLLOW).open(journal) {
-        Ok(f) => f.set_len(len),
+        Ok(f) => {
+            f.set_len(len)?;
+            if sync { f.sync_data() } else { Ok(()) }
+        }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(e) => Err(e),
     }
