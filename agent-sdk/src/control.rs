@@ -526,17 +526,10 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
         // every listener slot taken (more programs than the service has
         // clients, or killed ones not cleaned up yet): this one polls
         let replies = if size.reply_wake {
-            match open_replies(node, service, size, false).map(|ev| ev.listener_builder().create()) {
-                Ok(Ok(l)) => Some(l),
-                Ok(Err(e)) => {
-                    tracing::debug!(service, "no reply wake-ups, polling instead: {e:?}");
-                    None
-                }
-                Err(e) => {
-                    tracing::debug!(service, "no reply wake-ups, polling instead: {e}");
-                    None
-                }
-            }
+            open_replies(node, service, size, false)
+                .and_then(|ev| ev.listener_builder().create().map_err(ipc_err(service, IpcOp::Listener)))
+                .inspect_err(|e| tracing::debug!(service, "no reply wake-ups, polling instead: {e}"))
+                .ok()
         } else {
             None
         };
@@ -961,15 +954,20 @@ mod tests {
             .expect("voluntary_ctxt_switches")
     }
 
+    /// A server's handling that answers "re: REQUEST" `after` it took the request.
+    fn answer_after(after: Duration) -> impl FnMut(Result<String, ProtocolError>, Responder<String>) + Send + 'static {
+        move |req, responder| {
+            std::thread::sleep(after);
+            responder.respond_or(&format!("re: {}", req.unwrap_or_default()), |e| e.to_string());
+        }
+    }
+
     #[test]
     fn a_client_of_a_service_with_reply_wakes_sleeps_until_the_reply() {
-        let answer_after = Duration::from_millis(20);
+        let late = Duration::from_millis(20);
         let (world, _cleanup, service) = test_robot("wake");
         let woken = ControlSize { reply_wake: true, ..SMALL };
-        let server = server_thread(&world, &service, woken, move |req, responder| {
-            std::thread::sleep(answer_after);
-            responder.respond_or(&format!("re: {}", req.unwrap_or_default()), |e| e.to_string());
-        });
+        let server = server_thread(&world, &service, woken, answer_after(late));
         let node = world.node("client").expect("node");
         let client = client_of(&node, &service, woken);
         assert!(client.replies.is_some(), "the client listens for replies");
@@ -979,15 +977,12 @@ mod tests {
         // the reply came well within REPLY_WAIT_BOUND: its wake-up ended the wait
         assert!(client.reply_wakes.get() >= 1, "the reply did not wake the client");
         // polling every 200 µs at most would have woken some 100 times
-        assert!(woke < 12, "the client woke {woke} times waiting {answer_after:?} for its reply");
+        assert!(woke < 12, "the client woke {woke} times waiting {late:?} for its reply");
         server.stop();
         drop(client);
         // without the wake-ups the same call polls
         let (world, _cleanup, service) = test_robot("poll");
-        let server = server_thread(&world, &service, SMALL, move |req, responder| {
-            std::thread::sleep(answer_after);
-            responder.respond_or(&format!("re: {}", req.unwrap_or_default()), |e| e.to_string());
-        });
+        let server = server_thread(&world, &service, SMALL, answer_after(late));
         let node = world.node("client").expect("node");
         let client = client_of(&node, &service, SMALL);
         assert!(client.replies.is_none());

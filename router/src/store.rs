@@ -113,9 +113,9 @@ impl Store {
                 return Ok(from_file);
             }
         };
-        let list = match contents.last.as_deref().map(parse) {
+        let list = match contents.last.as_deref().map(|body| (body, parse(body))) {
             None => from_file,
-            Some(Ok(list)) => {
+            Some((body, Ok(list))) => {
                 if list != from_file {
                     tracing::info!(
                         file = %journal.display(),
@@ -124,7 +124,7 @@ impl Store {
                         list.len(),
                         from_file.len()
                     );
-                    if let Err(e) = write_atomic(&self.path, contents.last.as_deref().unwrap_or_default()) {
+                    if let Err(e) = write_atomic(&self.path, body) {
                         tracing::warn!(file = %self.path.display(), "cannot rewrite the connection list: {e}; its journal keeps it");
                         // the next record must follow a whole one to be read
                         if contents.whole < contents.bytes
@@ -137,7 +137,7 @@ impl Store {
                 }
                 list
             }
-            Some(Err(why)) => {
+            Some((_, Err(why))) => {
                 tracing::warn!(file = %journal.display(), "the journal's last record cannot be used ({why}); using {}", self.path.display());
                 from_file
             }
@@ -487,7 +487,7 @@ mod tests {
 
     #[test]
     fn save_and_load() {
-        let dir = std::env::temp_dir().join(format!("nerve-store-test-{}", std::process::id()));
+        let dir = fresh_dir("test");
         let store = Store::new(&dir);
         assert_eq!(store.load(), Ok(vec![]));
         let c = vec![Connection {
@@ -503,46 +503,61 @@ mod tests {
 
     #[test]
     fn a_list_in_the_journal_only_is_loaded_and_written_into_the_file() {
-        let dir = std::env::temp_dir().join(format!("nerve-store-journal-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = fresh_dir("journal");
         let store = Store::new(&dir);
-        let c =
-            |from: &str| Connection { from: from.into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false };
-        store.save(&[c("a/out")]).expect("saves");
+        store.save(&[conn("a/out")]).expect("saves");
         // a router killed after it answered a rewire, before it rewrote the file
         let journal = journal::path_for(store.path());
-        journal::append(&journal, &Store::encode(&[c("a/out"), c("x/out")])).expect("append");
-        assert_eq!(store.load(), Ok(vec![c("a/out"), c("x/out")]), "the journal's newer list");
+        journal::append(&journal, &Store::encode(&[conn("a/out"), conn("x/out")])).expect("append");
+        assert_eq!(store.load(), Ok(vec![conn("a/out"), conn("x/out")]), "the journal's newer list");
         assert_eq!(
             std::fs::read(store.path()).ok(),
-            Some(Store::encode(&[c("a/out"), c("x/out")])),
+            Some(Store::encode(&[conn("a/out"), conn("x/out")])),
             "and it is in the file now"
         );
         assert_eq!(journal::read(&journal).expect("read"), journal::Contents::default(), "the journal emptied");
         // a torn record, nothing whole: the file's list
         std::fs::write(&journal, b"NRJ1\x05\0\0").expect("torn");
-        assert_eq!(store.load(), Ok(vec![c("a/out"), c("x/out")]));
+        assert_eq!(store.load(), Ok(vec![conn("a/out"), conn("x/out")]));
         assert_eq!(journal::read(&journal).expect("read").bytes, 0, "a torn journal is emptied too");
         // a record that is no connection list is not believed
         journal::append(&journal, b"{ not json").expect("append");
-        assert_eq!(store.load(), Ok(vec![c("a/out"), c("x/out")]));
+        assert_eq!(store.load(), Ok(vec![conn("a/out"), conn("x/out")]));
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A test's folder `nerve-store-TAG-PID`, empty.
+    fn fresh_dir(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("nerve-store-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        dir
+    }
+
+    /// `from` → `b/in`, of type `T`.
+    fn conn(from: &str) -> Connection {
+        Connection { from: from.into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false }
+    }
+
+    /// What became of `saved`, once the writer has done it (10 s at most).
+    fn wait_outcome(w: &Writer, saved: Saved) -> Result<(), String> {
+        let t0 = std::time::Instant::now();
+        loop {
+            if let Some(r) = w.outcome(saved) {
+                return r;
+            }
+            assert!(t0.elapsed() < std::time::Duration::from_secs(10), "save {saved:?} never done");
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
     }
 
     #[test]
     fn a_journaled_save_is_done_once_in_the_journal_and_the_file_follows() {
-        let dir = std::env::temp_dir().join(format!("nerve-store-follows-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = fresh_dir("follows");
         let store = Store::new(&dir);
         let mut w = Writer::start().expect("thread");
         let c = Connection { from: "a/out".into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false };
         let saved = w.save(&store, std::slice::from_ref(&c));
-        let t0 = std::time::Instant::now();
-        while w.outcome(saved).is_none() {
-            assert!(t0.elapsed() < std::time::Duration::from_secs(10), "never saved");
-            std::thread::sleep(std::time::Duration::from_millis(1));
-        }
-        assert_eq!(w.outcome(saved), Some(Ok(())));
+        assert_eq!(wait_outcome(&w, saved), Ok(()));
         // on disk: in the journal, in the file, or both by now
         let journal = journal::path_for(store.path());
         let in_journal = journal::read(&journal).expect("read").last == Some(Store::encode(std::slice::from_ref(&c)));
@@ -556,8 +571,7 @@ mod tests {
 
     #[test]
     fn a_corrupt_list_is_moved_aside_and_the_last_good_copy_used() {
-        let dir = std::env::temp_dir().join(format!("nerve-store-corrupt-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = fresh_dir("corrupt");
         let store = Store::new(&dir);
         let c = vec![Connection {
             from: "t1/tick".into(),
@@ -592,8 +606,7 @@ mod tests {
     #[test]
     fn a_planted_symlink_is_never_written_through() {
         use std::os::unix::fs::MetadataExt;
-        let dir = std::env::temp_dir().join(format!("nerve-store-link-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = fresh_dir("link");
         std::fs::create_dir_all(&dir).expect("dir");
         let store = Store::new(&dir);
         let victim = dir.join("victim");
@@ -616,7 +629,7 @@ mod tests {
 
     #[test]
     fn writer_saves_the_newest_list_and_flushes() {
-        let dir = std::env::temp_dir().join(format!("nerve-store-writer-{}", std::process::id()));
+        let dir = fresh_dir("writer");
         let store = Store::new(&dir);
         let mut w = Writer::start().expect("thread");
         for i in 0..20 {
@@ -639,13 +652,10 @@ mod tests {
 
     #[test]
     fn a_list_equal_to_the_newest_queued_is_not_queued_again() {
-        let dir = std::env::temp_dir().join(format!("nerve-store-saves-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = fresh_dir("saves");
         let store = Store::new(&dir);
         let mut w = Writer::start().expect("thread");
-        let c =
-            |from: &str| Connection { from: from.into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false };
-        let (l1, l2) = (vec![c("a/out")], vec![c("a/out"), c("x/out")]);
+        let (l1, l2) = (vec![conn("a/out")], vec![conn("a/out"), conn("x/out")]);
         let mut saves = ListSaves::default();
         // expected while the agent subscribes, then the same once it has
         let expected = saves.save(&w, &store, &l2);
@@ -663,21 +673,11 @@ mod tests {
 
     #[test]
     fn each_save_reports_when_it_is_on_disk_and_whether_it_failed() {
-        let dir = std::env::temp_dir().join(format!("nerve-store-outcome-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = fresh_dir("outcome");
         let store = Store::new(&dir);
         let w = Writer::start().expect("thread");
         let c = Connection { from: "a/out".into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false };
-        let wait = |saved| {
-            let t0 = std::time::Instant::now();
-            loop {
-                if let Some(r) = w.outcome(saved) {
-                    return r;
-                }
-                assert!(t0.elapsed() < std::time::Duration::from_secs(10), "save {saved:?} never done");
-                std::thread::sleep(std::time::Duration::from_millis(1));
-            }
-        };
+        let wait = |saved| wait_outcome(&w, saved);
         let ok = w.save(&store, std::slice::from_ref(&c));
         assert_eq!(wait(ok), Ok(()));
         // once reported, it is on disk
