@@ -216,18 +216,19 @@ impl State {
         self.supervisor.registered(&name);
         self.calls.registered(&name);
         // Sent after this reply, by the next pump: the agent goes on starting
-        // its threads meanwhile.
-        self.reapply(&name);
-        self.rewire(&name);
-        RouterReply::Registered { epoch: self.epoch }
+        // its threads meanwhile. Its own inputs' connections travel in the
+        // reply unless something re-applied must come first (a suspend).
+        let reapplied = self.reapply(&name);
+        let first = self.rewire(&name, !reapplied);
+        RouterReply::Registered { epoch: self.epoch, first }
     }
 
     /// Queues what was set at run time for an earlier agent of this name:
     /// a suspend first (so that it does not run meanwhile), then parameters
-    /// and period, a resume last.
-    fn reapply(&mut self, name: &str) {
-        let Some(mem) = self.remembered.get(name).cloned() else { return };
-        let Some(entry) = self.registry.get(name) else { return };
+    /// and period, a resume last. Whether anything was queued.
+    fn reapply(&mut self, name: &str) -> bool {
+        let Some(mem) = self.remembered.get(name).cloned() else { return false };
+        let Some(entry) = self.registry.get(name) else { return false };
         let registered_suspended = entry.state == AgentState::Suspended;
         let registered_period = entry.reg.period_ns;
         let mut todo = Vec::new();
@@ -248,18 +249,30 @@ impl State {
         if mem.suspended == Some(false) && registered_suspended {
             todo.push((AgentCommand::Resume, "resume".to_owned(), Asked::Resume));
         }
+        let queued = !todo.is_empty();
         for (cmd, what, effect) in todo {
             let ticket = self.calls.submit(name, cmd, AGENT_TIMEOUT);
             let work = Work::Background { name: name.into(), what: format!("re-applied to {name}: {what}"), effect };
             self.jobs.push(Job::new(vec![ticket], work));
         }
+        queued
     }
 
-    /// Queues every stored connection that involves `name` and whose other end is live.
-    fn rewire(&mut self, name: &str) {
+    /// Queues every stored connection that involves `name` and whose other
+    /// end is live. With `in_reply`, those into `name`'s own inputs are
+    /// returned instead, for the registration's reply: the agent makes them
+    /// at once, about a millisecond before the router could have opened a
+    /// client to it and sent them (a hot-add, a restart; issue 18).
+    fn rewire(&mut self, name: &str, in_reply: bool) -> Vec<AgentCommand> {
         let registry = &self.registry;
+        let mut first = Vec::new();
         for c in self.wiring.involving(name, |a| registry.contains(a)) {
             let (agent, cmd) = Wiring::connect_command(&c);
+            if in_reply && agent == name {
+                tracing::info!(agent = name, "rewiring {} -> {}: handed to {name} with its registration", c.from, c.to);
+                first.push(cmd);
+                continue;
+            }
             let ticket = self.calls.submit(&agent, cmd, AGENT_TIMEOUT);
             let work = Work::Background {
                 name: agent,
@@ -268,6 +281,7 @@ impl State {
             };
             self.jobs.push(Job::new(vec![ticket], work));
         }
+        first
     }
 
     /// A supervised agent exited (`failure`: died without leaving cleanly).

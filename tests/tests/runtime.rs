@@ -374,6 +374,20 @@ fn killed_agent_is_noticed_and_rewired_on_restart() {
     assert_eq!(s.len(), 3);
     let g = r.graph();
     assert!(connection(&g, "t1/tick", "r1/in").is_some_and(|c| c["active"] == true));
+    // r1's own input came in the reply to its registration (protocol 7),
+    // r2's as a command the router sent r2
+    let log = r.ok(&["logs", "router"]);
+    assert!(
+        log.contains("rewiring t1/tick -> r1/in: handed to r1 with its registration"),
+        "the router did not hand r1 its input's connection: {log}"
+    );
+    assert!(log.contains("rewired r1/out -> r2/in"), "the router did not send r2 its connection: {log}");
+    let r1_log = r.ok(&["logs", "r1"]);
+    assert_eq!(
+        r1_log.matches("input in now reads t1/tick").count(),
+        2,
+        "r1 (twice started) did not connect its input each time: {r1_log}"
+    );
     r.down_and_check_clean();
 }
 

@@ -59,12 +59,15 @@ impl Checker<'_> {
     /// Serves the control service until a stop (a `Stop` command, a
     /// signal, the task's request). Sleeps until a request, the task's
     /// wake-up, a due registration attempt or the [`HOUSEKEEPING`] tick.
+    /// With `lock_memory`, locks the process's memory once the router's
+    /// first commands are done.
     pub(super) fn run(
         &self,
         server: &ControlServer<AgentCommand, AgentReply>,
         wake: &Listener<Ipc>,
         link: &mut RouterLink,
         reg: &Registration,
+        lock_memory: bool,
     ) {
         let ws = match WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
@@ -83,11 +86,22 @@ impl Checker<'_> {
         };
         let mut cpu = CpuMeter::default();
         let reply_id = crate::control::reply_event_id(&reg.name);
-        // The router sends a hot-added agent its connections as soon as it
-        // has registered: they are served before the epoch is watched
-        // (about 1 ms of iceoryx2 set-up), which is not on that path.
+        // The router hands a hot-added agent its inputs' connections in the
+        // registration's reply, and sends the rest (a suspend re-applied,
+        // then the connections) as soon as it has registered: all of it is
+        // done before the epoch is watched (about 1 ms of iceoryx2 set-up),
+        // which is not on that path.
+        self.carry_out_first(link, &cpu);
         if self.serve(server, &cpu, link, reply_id) {
             return;
+        }
+        // Locking walks every page mapped so far (half a millisecond): done
+        // once the first connections are made, not on their path.
+        if lock_memory {
+            match crate::rt::lock_memory() {
+                Ok(()) => tracing::debug!("memory locked (mlockall, on fault)"),
+                Err(e) => tracing::info!("memory not locked: {e}; page faults may add latency"),
+            }
         }
         link.watch_epoch(self.world, self.node);
         // a restarted router wakes the checker at once (its epoch event)
@@ -146,6 +160,7 @@ impl Checker<'_> {
             if !link.poll(self.node, self.world, reg, self.shared) {
                 return;
             }
+            self.carry_out_first(link, &cpu);
             if Instant::now() >= next_tick {
                 next_tick = Instant::now() + tick;
             }
@@ -161,6 +176,18 @@ impl Checker<'_> {
 
     /// Answers the commands that came, and wakes the router if any was
     /// answered (its calls wait for that event); whether one was a stop.
+    /// Carries out what the router's registration reply asked for first
+    /// (the connections of this agent's inputs), as if each had come as a
+    /// request; a refusal is logged, as the router logs one of a request.
+    fn carry_out_first(&self, link: &mut RouterLink, cpu: &CpuMeter) {
+        for cmd in link.take_first() {
+            let what = format!("{cmd:?}");
+            if let AgentReply::Error(e) = self.handle(cmd, cpu) {
+                tracing::warn!("not done, as the router asked at registration: {what}: {e}");
+            }
+        }
+    }
+
     fn serve(
         &self,
         server: &ControlServer<AgentCommand, AgentReply>,

@@ -17,6 +17,7 @@ use iceoryx2::prelude::*;
 use shm_schemas::ProtocolError;
 use shm_schemas::control::agent_to_router::{AgentToRouter, Registration};
 use shm_schemas::control::cli_to_router::{RouterError, RouterReply, RouterRequest};
+use shm_schemas::control::router_to_agent::AgentCommand;
 use shm_schemas::payloads::RouterEpoch;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -112,6 +113,8 @@ pub(super) struct RouterLink {
     /// the pid of the newest router seen, for the log
     router_pid: Option<u32>,
     registrar: Registrar,
+    /// what the last accepted registration asked to carry out at once
+    first: Vec<AgentCommand>,
 }
 
 // every agent the router serves must be able to watch its epoch
@@ -132,7 +135,26 @@ pub fn epoch_service(
 
 impl RouterLink {
     pub(super) fn new() -> Self {
-        RouterLink { client: None, epoch: None, epoch_wake: None, router_pid: None, registrar: Registrar::new() }
+        RouterLink {
+            client: None,
+            epoch: None,
+            epoch_wake: None,
+            router_pid: None,
+            registrar: Registrar::new(),
+            first: Vec::new(),
+        }
+    }
+
+    /// What the router's last accepted registration asked to carry out at
+    /// once (the connections of this agent's inputs), taken once.
+    pub(super) fn take_first(&mut self) -> Vec<AgentCommand> {
+        std::mem::take(&mut self.first)
+    }
+
+    /// Takes a client of the router's service opened beforehand (the
+    /// start-up opens it beside its other set-up).
+    pub(super) fn adopt_client(&mut self, client: ControlClient<RouterRequest, RouterReply>) {
+        self.client = Some(client);
     }
 
     /// Subscribes to the router's epoch. Done by the message checker once it
@@ -201,8 +223,9 @@ impl RouterLink {
             answer = client.call(&RouterRequest::Agent(AgentToRouter::Register(reg)), REGISTER_TIMEOUT);
         }
         match answer {
-            Ok(RouterReply::Registered { epoch }) => {
+            Ok(RouterReply::Registered { epoch, first }) => {
                 self.registrar.accepted(epoch, Instant::now());
+                self.first = first;
                 Ok(())
             }
             Ok(RouterReply::Error(e)) => Err(RegisterError::Refused(e)),

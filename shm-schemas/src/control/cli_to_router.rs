@@ -2,6 +2,7 @@
 //! ask of the router, its answers, and the errors it reports.
 
 use super::agent_to_router::{AgentToRouter, PortSpec, TaskKind};
+use super::router_to_agent::AgentCommand;
 use crate::names::PortRef;
 use crate::stats::AgentStats;
 use serde::{Deserialize, Serialize};
@@ -350,6 +351,12 @@ pub enum RouterReply {
     Registered {
         /// the router's epoch, to notice a restarted router
         epoch: u64,
+        /// what the agent carries out at once, in this order, before it
+        /// serves any request: the kept connections of its inputs (each a
+        /// [`AgentCommand::Connect`]), so that a restarted or hot-added
+        /// agent reads its sources without waiting for the router to open
+        /// a client to it and send them (protocol 7)
+        first: Vec<AgentCommand>,
     },
     /// The live agents.
     Agents(Vec<AgentView>),
