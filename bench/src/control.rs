@@ -44,6 +44,21 @@ pub struct ControlOpts {
     pub launch_rounds: usize,
     /// show child output
     pub verbose: bool,
+    /// another relay executable hot-added in alternate rounds beside `relay`
+    pub hot_add_beside: Option<std::path::PathBuf>,
+}
+
+/// Hot-adds of another relay executable, alternately with `relay`'s.
+#[derive(Debug, Serialize)]
+pub struct BesideRow {
+    /// the executable
+    pub executable: String,
+    /// `nerve start` to the first sample downstream, ns
+    pub hot_add: Summary,
+    /// `nerve start` to the command's exit, ns
+    pub hot_add_command: Summary,
+    /// its median over `relay`'s, same rounds
+    pub ratio_to_relay: f64,
 }
 
 /// Launch time for one size.
@@ -72,6 +87,8 @@ pub struct ControlReport {
     pub rewire_request: Summary,
     /// a connect request to the router to its reply (the agent has subscribed), ns
     pub rewire_reply: Summary,
+    /// hot-adds of `--hot-add-beside`, alternately with `relay`'s
+    pub hot_add_beside: Option<BesideRow>,
     /// launch times
     pub launch: Vec<LaunchRow>,
     /// hot-add median / 10 ms (issue 18's target; issue 7's was 20 ms)
@@ -142,8 +159,17 @@ fn wait_gone(robot: &Robot, name: &str) -> Result<()> {
     bail!("{name} did not leave")
 }
 
-/// Hot-adds: (`nerve start` → first sample downstream, `nerve start` → the command returned), ns.
-fn hot_add(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>)> {
+/// `nerve start` → first sample downstream and `nerve start` → the command
+/// returned, ns, of each round.
+#[derive(Default)]
+struct HotAdds {
+    first_sample: Vec<u64>,
+    command: Vec<u64>,
+}
+
+/// Hot-adds of `relay` and, in alternate rounds (each round in turn first),
+/// of `opts.hot_add_beside`.
+fn hot_add(opts: &ControlOpts) -> Result<(HotAdds, HotAdds)> {
     let robot = Robot::new("ch", opts.verbose)?;
     let _router = robot.start_router()?;
     robot.run(&["start", "ticker", "--name", "t1", "--period", "1ms"])?;
@@ -152,19 +178,29 @@ fn hot_add(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>)> {
     robot.run(&["stop", "h"])?;
     wait_gone(&robot, "h")?;
     let watch = Watch::new(&robot, "h", "out")?;
-    let (mut v, mut cmd) = (Vec::new(), Vec::new());
+    let beside = opts.hot_add_beside.as_ref().map(|p| p.display().to_string());
+    let (mut relay, mut other) = (HotAdds::default(), HotAdds::default());
     for i in 0..opts.rounds {
         eprintln!("control: hot-add {}/{}", i + 1, opts.rounds);
-        watch.drain();
-        let t0 = now_ns();
-        robot.run(&["start", "relay", "--name", "h"])?;
-        cmd.push(now_ns() - t0);
-        let t1 = watch.wait_for(t0, Duration::from_secs(5), |_| true)?;
-        v.push(t1 - t0);
-        robot.run(&["stop", "h"])?;
-        wait_gone(&robot, "h")?;
+        let mut kinds = vec![("relay", &mut relay)];
+        if let Some(b) = &beside {
+            kinds.push((b.as_str(), &mut other));
+            if i % 2 == 1 {
+                kinds.reverse();
+            }
+        }
+        for (kind, into) in kinds {
+            watch.drain();
+            let t0 = now_ns();
+            robot.run(&["start", kind, "--name", "h"])?;
+            into.command.push(now_ns() - t0);
+            let t1 = watch.wait_for(t0, Duration::from_secs(5), |_| true)?;
+            into.first_sample.push(t1 - t0);
+            robot.run(&["stop", "h"])?;
+            wait_gone(&robot, "h")?;
+        }
     }
-    Ok((v, cmd))
+    Ok((relay, other))
 }
 
 /// Rewires: (`nerve connect` → first sample, request → first sample, request → the router's reply), ns.
@@ -263,13 +299,22 @@ fn launch(opts: &ControlOpts, agents: usize) -> Result<Vec<u64>> {
 pub fn run(opts: &ControlOpts) -> Result<ControlReport> {
     let t0 = Instant::now();
     let machine = Machine::probe();
-    let (hot, hot_cmd) = hot_add(opts)?;
+    let (hot, beside) = hot_add(opts)?;
     let (cli, req, reply) = rewire(opts)?;
     let mut rows = Vec::new();
     for &n in &opts.launch_sizes {
         rows.push(LaunchRow { agents: n, launch: Summary::of(&launch(opts, n)?) });
     }
-    let hot_add = Summary::of(&hot);
+    let hot_add = Summary::of(&hot.first_sample);
+    let hot_add_beside = opts.hot_add_beside.as_ref().map(|p| {
+        let first = Summary::of(&beside.first_sample);
+        BesideRow {
+            executable: p.display().to_string(),
+            ratio_to_relay: first.p50_ns as f64 / hot_add.p50_ns.max(1) as f64,
+            hot_add: first,
+            hot_add_command: Summary::of(&beside.command),
+        }
+    });
     let rewire_request = Summary::of(&req);
     Ok(ControlReport {
         machine,
@@ -278,7 +323,8 @@ pub fn run(opts: &ControlOpts) -> Result<ControlReport> {
         rewire_vs_target: rewire_request.p50_ns as f64 / 5e6,
         rewire_reply_vs_target: Summary::of(&reply).p50_ns as f64 / REWIRE_TARGET_NS,
         hot_add,
-        hot_add_command: Summary::of(&hot_cmd),
+        hot_add_command: Summary::of(&hot.command),
+        hot_add_beside,
         rewire_cli: Summary::of(&cli),
         rewire_request,
         rewire_reply: Summary::of(&reply),
@@ -307,6 +353,16 @@ pub fn print_tables(r: &ControlReport) {
     };
     row("hot-add (`nerve start` → first sample downstream)", &r.hot_add, "≤ 10 ms", Some(r.hot_add_vs_target));
     row("hot-add, `nerve start` → the command returns", &r.hot_add_command, "-", None);
+    if let Some(b) = &r.hot_add_beside {
+        let ratio = b.hot_add.p50_ns as f64 / HOT_ADD_TARGET_NS;
+        row(
+            &format!("hot-add of `{}`, alternately (→ first sample)", b.executable),
+            &b.hot_add,
+            "≤ 10 ms",
+            Some(ratio),
+        );
+        row(&format!("hot-add of `{}`, the command returns", b.executable), &b.hot_add_command, "-", None);
+    }
     row(
         "rewire, request to the router → first sample from the new source",
         &r.rewire_request,
@@ -327,5 +383,9 @@ pub fn print_tables(r: &ControlReport) {
             ("-", None)
         };
         row(&format!("`nerve launch` of {} agents → all registered and connected", l.agents), &l.launch, target, ratio);
+    }
+    if let Some(b) = &r.hot_add_beside {
+        println!();
+        println!("`{}` / `relay`, hot-add medians of the same rounds: {:.2}", b.executable, b.ratio_to_relay);
     }
 }

@@ -110,6 +110,11 @@ enum Scenario {
         /// Launch sizes (agents per launch file).
         #[arg(long, value_delimiter = ',')]
         launch: Option<Vec<usize>>,
+        /// Another relay executable (another build's `nerve-relay`) hot-added
+        /// in alternate rounds beside `relay`, and reported as a row of its
+        /// own: a change in an agent's start-up measured side by side.
+        #[arg(long, value_name = "PATH")]
+        hot_add_beside: Option<std::path::PathBuf>,
     },
     /// Three hops end to end (sonar → safety → motor shape) against one hop, SDK agents.
     Pipeline {
@@ -415,8 +420,9 @@ fn run(cli: Cli) -> Result<()> {
             let plot = plot_or_warn(&common.out, "hop-latency.png", plot::hop_png);
             publish(&common, "hop", &report, report.seconds, plot, hop::print_tables)?;
         }
-        Scenario::Control { common, rounds, launch } => {
+        Scenario::Control { common, rounds, launch, hot_add_beside } => {
             let opts = control::ControlOpts {
+                hot_add_beside,
                 rounds: rounds.unwrap_or(if common.quick { 3 } else { 20 }).max(1),
                 launch_sizes: launch.unwrap_or(if common.quick { vec![10] } else { vec![10, 50] }),
                 launch_rounds: if common.quick { 1 } else { 3 },
