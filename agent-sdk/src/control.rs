@@ -508,7 +508,13 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
             // `World::new`), and a request sent to it would wait out its
             // whole time-out: cleaned now, so that a call finds no server.
             let cleaned = crate::world::cleanup_dead_nodes_of(node.config());
-            tracing::debug!(service, cleaned, "the server of {service} is dead; cleaned up after it");
+            if cleaned > 0 {
+                tracing::info!(
+                    service,
+                    cleaned,
+                    "the server of {service} is dead: cleaned the shared memory of {cleaned} dead process(es)"
+                );
+            }
         }
         let max = size.max_clients.saturating_sub(leave);
         let taken = rr.dynamic_config().number_of_clients();

@@ -542,6 +542,13 @@ fn expired_connection_buffer() -> usize {
 /// failed that a dead process's ports could explain, not on every open.
 pub fn cleanup_dead_nodes_of(config: &iceoryx2::config::Config) -> usize {
     quiet_iceoryx2();
+    // One clean-up at a time in this process: a thread that finds a dead
+    // node another thread is still cleaning skips it, and would try again
+    // what that node blocks before it is gone (an agent's start-up opens
+    // the router's client, which cleans up after a killed router, beside
+    // its control service, which cleans up after a killed run of itself).
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let mut dead = Vec::new();
     let _ = Node::<Ipc>::list(config, |state| {
         if let NodeState::Dead(view) = state {
@@ -559,9 +566,11 @@ pub fn cleanup_dead_nodes_of(config: &iceoryx2::config::Config) -> usize {
 }
 
 /// Runs `attempt`; if it fails in a way `blockable` says a dead process's
-/// leftovers could explain, and such leftovers were found and cleaned under
-/// `config`, runs it once more. For creating a port or server that a
-/// crashed process's ports may block (iceoryx2 no longer scans a service's
+/// leftovers could explain, cleans such leftovers under `config` and runs it
+/// once more (also when this call found nothing left to clean: another
+/// thread or process may have cleaned them between the failure and the
+/// look). For creating a port or server that a crashed process's ports may
+/// block (iceoryx2 no longer scans a service's
 /// nodes on every open, see [`World::new`]); `what` names it in the log line.
 pub fn retry_after_cleanup<T, E>(
     config: &iceoryx2::config::Config,
@@ -572,12 +581,19 @@ pub fn retry_after_cleanup<T, E>(
     match attempt() {
         Ok(v) => Ok(v),
         Err(e) if !blockable(&e) => Err(e),
-        Err(e) => {
+        Err(_) => {
             let cleaned = cleanup_dead_nodes_of(config);
-            if cleaned == 0 {
-                return Err(e);
+            if cleaned > 0 {
+                tracing::info!(
+                    cleaned,
+                    "{what}: cleaned the shared memory of {cleaned} dead process(es), trying again"
+                );
+            } else {
+                // another thread of this process (an agent's start-up opens
+                // the router's client beside its control service) or another
+                // process may have cleaned the same leftovers a moment ago
+                tracing::debug!("{what}: nothing left to clean, trying again once");
             }
-            tracing::info!(cleaned, "{what}: cleaned the shared memory of {cleaned} dead process(es), trying again");
             attempt()
         }
     }
