@@ -299,6 +299,15 @@ fn launch(opts: &ControlOpts, agents: usize) -> Result<Vec<u64>> {
 pub fn run(opts: &ControlOpts) -> Result<ControlReport> {
     let t0 = Instant::now();
     let machine = Machine::probe();
+    // the robots this run makes, named as `Robot::new` names them (a check of
+    // what is left in /dev/shm afterwards reads them from this line)
+    let pid = std::process::id();
+    let launches: Vec<String> = opts
+        .launch_sizes
+        .iter()
+        .flat_map(|n| (0..opts.launch_rounds).map(move |i| format!(", robot b{pid}l{n}x{i}")))
+        .collect();
+    eprintln!("control: robot b{pid}ch (hot-add), robot b{pid}cr (rewire){}", launches.concat());
     let (hot, beside) = hot_add(opts)?;
     let (cli, req, reply) = rewire(opts)?;
     let mut rows = Vec::new();

@@ -44,6 +44,25 @@ fn run(scenario: &str, extra: &[&str]) -> Value {
     report
 }
 
+/// The control plane, with a second relay executable (this build's own, by
+/// its path) hot-added in alternate rounds: every measure has samples, and
+/// the side-by-side row has as many as `relay`'s.
+#[test]
+fn control_quick_measures_hot_add_rewire_and_launch_side_by_side() {
+    let relay = PathBuf::from(env!("CARGO_BIN_EXE_nerve-bench")).with_file_name("nerve-relay");
+    assert!(relay.is_file(), "build the agents first: cargo build --workspace --bins ({})", relay.display());
+    let r = run("control", &["--launch", "10", "--hot-add-beside", &relay.display().to_string()]);
+    for measure in ["hot_add", "hot_add_command", "rewire_cli", "rewire_request", "rewire_reply"] {
+        assert!(r[measure]["n"].as_u64().unwrap_or(0) > 0, "{measure}: no samples in {r}");
+    }
+    let beside = &r["hot_add_beside"];
+    assert_eq!(beside["hot_add"]["n"], r["hot_add"]["n"], "{beside}");
+    assert_eq!(beside["executable"], relay.display().to_string());
+    assert!(beside["ratio_to_relay"].as_f64().is_some_and(|v| v > 0.0), "{beside}");
+    assert_eq!(r["launch"][0]["agents"], 10);
+    assert!(r["hot_add_vs_target"].as_f64().is_some_and(|v| v > 0.0));
+}
+
 /// Whether this process may write the PM QoS device (the `-pmqos` rows need it).
 fn may_hold_pm_qos() -> bool {
     std::fs::OpenOptions::new().write(true).open("/dev/cpu_dma_latency").is_ok()
