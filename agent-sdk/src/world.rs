@@ -570,8 +570,8 @@ pub fn cleanup_dead_nodes_of(config: &iceoryx2::config::Config) -> usize {
 /// once more (also when this call found nothing left to clean: another
 /// thread or process may have cleaned them between the failure and the
 /// look). For creating a port or server that a crashed process's ports may
-/// block (iceoryx2 no longer scans a service's
-/// nodes on every open, see [`World::new`]); `what` names it in the log line.
+/// block (iceoryx2 no longer scans a service's nodes on every open, see
+/// [`World::new`]); `what` names it in the log line.
 pub fn retry_after_cleanup<T, E>(
     config: &iceoryx2::config::Config,
     what: &str,

@@ -33,6 +33,13 @@ const REWIRE_TARGET_NS: f64 = 2e6;
 /// `nerve launch` of 50 agents (issue 18).
 const LAUNCH_50_TARGET_NS: f64 = 500e6;
 
+/// The robots' tags ([`Robot::new`]): hot-add, rewire, and each launch.
+const HOT_ADD_TAG: &str = "ch";
+const REWIRE_TAG: &str = "cr";
+fn launch_tag(agents: usize, round: usize) -> String {
+    format!("l{agents}x{round}")
+}
+
 /// Options of the control scenario.
 #[derive(Debug)]
 pub struct ControlOpts {
@@ -170,7 +177,7 @@ struct HotAdds {
 /// Hot-adds of `relay` and, in alternate rounds (each round in turn first),
 /// of `opts.hot_add_beside`.
 fn hot_add(opts: &ControlOpts) -> Result<(HotAdds, HotAdds)> {
-    let robot = Robot::new("ch", opts.verbose)?;
+    let robot = Robot::new(HOT_ADD_TAG, opts.verbose)?;
     let _router = robot.start_router()?;
     robot.run(&["start", "ticker", "--name", "t1", "--period", "1ms"])?;
     robot.run(&["start", "relay", "--name", "h"])?;
@@ -205,7 +212,7 @@ fn hot_add(opts: &ControlOpts) -> Result<(HotAdds, HotAdds)> {
 
 /// Rewires: (`nerve connect` → first sample, request → first sample, request → the router's reply), ns.
 fn rewire(opts: &ControlOpts) -> Result<(Vec<u64>, Vec<u64>, Vec<u64>)> {
-    let robot = Robot::new("cr", opts.verbose)?;
+    let robot = Robot::new(REWIRE_TAG, opts.verbose)?;
     let _router = robot.start_router()?;
     robot.run(&["start", "ticker", "--name", "t1", "--period", "1ms"])?;
     robot.run(&["start", "ticker", "--name", "t2", "--period", "1ms"])?;
@@ -279,7 +286,7 @@ fn launch(opts: &ControlOpts, agents: usize) -> Result<Vec<u64>> {
     let mut v = Vec::new();
     for i in 0..opts.launch_rounds {
         eprintln!("control: launch of {agents} agents {}/{}", i + 1, opts.launch_rounds);
-        let robot = Robot::new(&format!("l{agents}x{i}"), opts.verbose)?;
+        let robot = Robot::new(&launch_tag(agents, i), opts.verbose)?;
         let file = robot.home.join("launch.toml");
         std::fs::write(&file, launch_file(&robot.name, agents)).context("cannot write the launch file")?;
         let t0 = now_ns();
@@ -299,15 +306,19 @@ fn launch(opts: &ControlOpts, agents: usize) -> Result<Vec<u64>> {
 pub fn run(opts: &ControlOpts) -> Result<ControlReport> {
     let t0 = Instant::now();
     let machine = Machine::probe();
-    // the robots this run makes, named as `Robot::new` names them (a check of
-    // what is left in /dev/shm afterwards reads them from this line)
-    let pid = std::process::id();
+    // the robots this run makes (a check of what is left in /dev/shm
+    // afterwards reads them from this line)
     let launches: Vec<String> = opts
         .launch_sizes
         .iter()
-        .flat_map(|n| (0..opts.launch_rounds).map(move |i| format!(", robot b{pid}l{n}x{i}")))
+        .flat_map(|&n| (0..opts.launch_rounds).map(move |i| format!(", robot {}", Robot::name_of(&launch_tag(n, i)))))
         .collect();
-    eprintln!("control: robot b{pid}ch (hot-add), robot b{pid}cr (rewire){}", launches.concat());
+    eprintln!(
+        "control: robot {} (hot-add), robot {} (rewire){}",
+        Robot::name_of(HOT_ADD_TAG),
+        Robot::name_of(REWIRE_TAG),
+        launches.concat()
+    );
     let (hot, beside) = hot_add(opts)?;
     let (cli, req, reply) = rewire(opts)?;
     let mut rows = Vec::new();

@@ -142,9 +142,14 @@ pub struct Robot {
 }
 
 impl Robot {
-    /// A robot named `b<pid><tag>`, with its state in a private directory.
+    /// The name [`Robot::new`] gives the robot of `tag`: `b<pid><tag>`.
+    pub fn name_of(tag: &str) -> String {
+        format!("b{}{tag}", std::process::id())
+    }
+
+    /// A robot named [`Robot::name_of`] `tag`, with its state in a private directory.
     pub fn new(tag: &str, verbose: bool) -> Result<Self> {
-        let name = format!("b{}{tag}", std::process::id());
+        let name = Robot::name_of(tag);
         let home = std::env::temp_dir().join(format!("nerve-bench-{name}"));
         std::fs::create_dir_all(&home).with_context(|| format!("cannot create {}", home.display()))?;
         Ok(Robot { name, nerve: nerve_bin()?, home, verbose, cpu_latency: None })

@@ -174,8 +174,6 @@ impl Checker<'_> {
         }
     }
 
-    /// Answers the commands that came, and wakes the router if any was
-    /// answered (its calls wait for that event); whether one was a stop.
     /// Carries out what the router's registration reply asked for first
     /// (the connections of this agent's inputs), as if each had come as a
     /// request; a refusal is logged, as the router logs one of a request.
@@ -188,6 +186,8 @@ impl Checker<'_> {
         }
     }
 
+    /// Answers the commands that came, and wakes the router if any was
+    /// answered (its calls wait for that event); whether one was a stop.
     fn serve(
         &self,
         server: &ControlServer<AgentCommand, AgentReply>,

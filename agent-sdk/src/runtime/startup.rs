@@ -1,7 +1,8 @@
 //! Start-up of an agent: the command line, `--describe` (the agent's ports
 //! and parameters as JSON, from a throw-away world), and [`start`]: the node,
-//! the control service, the agent's ports, registration, the task thread,
-//! then the message checker until the agent stops.
+//! the control service (beside the task's wake-up event and the router's
+//! client), the agent's ports, the task thread, registration, then the
+//! message checker until the agent stops.
 
 use super::checker::Checker;
 use super::router_link::{RegisterError, RouterLink};
@@ -329,8 +330,8 @@ fn start<A: Agent>(
 
     // the task thread, before the registration: the agent's own `start`
     // (a device opened, a session up) runs on it while the router answers,
-    // and the router's first command (a connection it keeps for this agent)
-    // finds the message checker at most that `start` later (issue 18)
+    // and the connections that come with the answer are made at most that
+    // `start` later (issue 18)
     let task_shared = shared.clone();
     let task_inputs = inputs.clone();
     let name_owned = name.to_owned();
