@@ -61,8 +61,9 @@ fn policy(p: RestartPolicy) -> proto::RestartPolicy {
 /// How many of its last log lines a launch shows of an agent that failed to start.
 const FAILED_LOG_LINES: usize = 12;
 
-/// Starts every agent not already running, in parallel; returns how many failed.
-fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<usize> {
+/// Starts every agent not already running, in parallel; returns the names of
+/// those that failed.
+fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<Vec<String>> {
     let n = file.agents.len();
     let mut children = Vec::new();
     for spec in &file.agents {
@@ -82,7 +83,7 @@ fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<
             .with_context(|| format!("cannot start {}", argv[0]))?;
         children.push((spec, Some((child, log))));
     }
-    let mut failed = 0;
+    let mut failed = Vec::new();
     for (i, (spec, child)) in children.into_iter().enumerate() {
         let Some((mut child, mut log)) = child else {
             eprintln!("  [{}/{n}] {} ({}) already running", i + 1, spec.name, spec.kind);
@@ -106,7 +107,7 @@ fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<
                 out.trim().trim_start_matches(&format!("{} ", spec.name))
             );
         } else {
-            failed += 1;
+            failed.push(spec.name.clone());
             let log_file = world.log_file(&spec.name).display().to_string();
             let why = err.trim().trim_start_matches("error: ");
             // the agent's own message may name its log already
@@ -131,16 +132,21 @@ const REGISTER_LOOK: Duration = Duration::from_millis(5);
 /// and the router keeps only its newest [`proto::EVENTS_KEPT`] events.
 const REGISTER_PS_EVERY: Duration = Duration::from_millis(250);
 
-/// Waits until every agent of `file` that was not `running` before has
-/// registered (or is in its supervisor's hands). It follows the router's
+/// Waits until every agent of `file` that was neither `running` before nor
+/// reported as `failed` by its start has registered (or is in its
+/// supervisor's hands). A failed agent is not waited for: its `start` runs
+/// beside its registration, so it may have died before the router could
+/// check its pid, and then the router has never heard of it (CI of
+/// 2026-11-27 waited 20 s for a SIGSEGV in `start`). It follows the router's
 /// events, which the router answers from memory, and asks for `ps` only
 /// when the events have not told all by [`REGISTER_PS_EVERY`]: `ps` asks
 /// every agent for its statistics, and polled every 20 ms during a launch
 /// of 50 it woke every agent started so far, on the CPUs the others needed
 /// to start (and its last call, with 50 agents, took 90 ms).
-fn wait_registered(session: &RouterSession, file: &LaunchFile, running: &[String]) -> Result<()> {
+fn wait_registered(session: &RouterSession, file: &LaunchFile, running: &[String], failed: &[String]) -> Result<()> {
     let t0 = Instant::now();
-    let wanted: BTreeSet<&str> = file.agents.iter().map(|a| a.name.as_str()).collect();
+    let wanted: BTreeSet<&str> =
+        file.agents.iter().map(|a| a.name.as_str()).filter(|n| !failed.iter().any(|f| f == n)).collect();
     // not yet seen registering
     let mut unheard: BTreeSet<String> =
         wanted.iter().filter(|n| !running.iter().any(|r| r == *n)).map(|n| (*n).to_owned()).collect();
@@ -247,7 +253,7 @@ pub fn up(world: &World, file: &LaunchFile) -> Result<BroughtUp> {
             .with_context(|| format!("the router refused to supervise {}", spec.name))?;
     }
     let failed = start_agents(world, file, &running)?;
-    wait_registered(&session, file, &running)?;
+    wait_registered(&session, file, &running, &failed)?;
     let mut wiring_failed = 0;
     for ((from, to), done) in file.connections.iter().zip(connect_all(world, file)) {
         match done {
@@ -258,7 +264,7 @@ pub fn up(world: &World, file: &LaunchFile) -> Result<BroughtUp> {
             }
         }
     }
-    Ok(BroughtUp { failed, wiring_failed })
+    Ok(BroughtUp { failed: failed.len(), wiring_failed })
 }
 
 /// How many of a launch file's connections are asked for at once.

@@ -166,7 +166,9 @@ impl Registry {
 /// is refused, saying which check failed.
 pub fn check_process(reg: &Registration, world: &World) -> Result<ProcessHandle, RouterError> {
     let refused = |reason: String| RouterError::RegistrationRefused { name: reg.name.clone(), pid: reg.pid, reason };
-    let process = ProcessHandle::take(reg.pid).map_err(|_| refused("no process has this pid".into()))?;
+    let process = ProcessHandle::take(reg.pid).map_err(|_| {
+        refused("no process has this pid (a wrong pid, or an agent that ended right after it asked)".into())
+    })?;
     let ours = nix::unistd::geteuid().as_raw();
     match process.uid() {
         Some(uid) if uid == ours => {}
@@ -174,6 +176,11 @@ pub fn check_process(reg: &Registration, world: &World) -> Result<ProcessHandle,
         None => return Err(refused("the process exited while it was checked".into())),
     }
     if !process.is_nerve(world) {
+        // an agent that died in its own `start` (which runs beside the
+        // registration) is gone before its executable can be read
+        if !process.is_alive() {
+            return Err(refused("the process ended while its registration was checked".into()));
+        }
         let exe = process.exe().map_or_else(|| "unknown".to_owned(), |e| e.display().to_string());
         return Err(refused(format!(
             "the process is not a nerve agent: its executable {exe} is not `nerve-*` and it has no iceoryx2 node of robot {}",
@@ -222,6 +229,15 @@ mod tests {
         let e = refusal(sleep.id(), &world);
         assert!(e.contains("not a nerve agent") && e.contains("sleep") && e.contains("t1"), "{e}");
         let _ = sleep.kill();
+        // dead and not yet reaped, as an agent that died in its `start`
+        // while its registration was on the way
+        let zombie = (0..200).any(|_| {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+            std::fs::read_to_string(format!("/proc/{}/stat", sleep.id())).is_ok_and(|s| s.contains(") Z "))
+        });
+        assert!(zombie, "sleep did not end");
+        let e = refusal(sleep.id(), &world);
+        assert!(e.contains("no process has this pid") && e.contains("ended right after"), "{e}");
         let _ = sleep.wait();
         // a pid nobody has (any more)
         let e = refusal(sleep.id(), &world);

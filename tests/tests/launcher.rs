@@ -215,9 +215,16 @@ fn an_agent_that_dies_starting_is_reported_with_its_last_log_lines() {
         "dies.toml",
         "robot = \"x\"\n[[agent]]\nname = \"bad\"\nkind = \"testagent\"\nargs = [\"--mode\", \"panic-start\"]\n\
          [[agent]]\nname = \"segv\"\nkind = \"testagent\"\nargs = [\"--mode\", \"segv-start\"]\n\
+         [[agent]]\nname = \"gone\"\nkind = \"testagent\"\nargs = [\"--mode\", \"gone-start\"]\n\
          [[agent]]\nname = \"t1\"\nkind = \"ticker\"\n",
     );
+    let t0 = std::time::Instant::now();
     let err = r.fails(&["launch", file.to_str().expect("utf-8 path")]);
+    // an agent that failed is not waited for: one that never registered
+    // (its device gone after the file's check, or dead in its `start`
+    // before the router could check its pid) kept the launch waiting 20 s
+    assert!(t0.elapsed() < std::time::Duration::from_secs(15), "{:?}: {err}", t0.elapsed());
+    assert!(err.contains("gone (testagent) FAILED") && err.contains("/dev/ttyGONE"), "{err}");
     assert!(err.contains("bad (testagent) FAILED"), "{err}");
     // a panic in the task thread aborts the process (the SDK's panic policy)
     assert!(err.contains("exited during start-up (killed by SIGABRT)"), "{err}");
@@ -226,7 +233,7 @@ fn an_agent_that_dies_starting_is_reported_with_its_last_log_lines() {
     assert!(err.contains("segv (testagent) FAILED"), "{err}");
     assert!(err.contains("exited during start-up (killed by SIGSEGV"), "the signal is named: {err}");
     assert!(err.contains("t1 (ticker) started"), "the other agent starts all the same: {err}");
-    assert!(err.contains("is up in part: 1 of 3 agent(s) running (2 failed to start"), "{err}");
+    assert!(err.contains("is up in part: 1 of 4 agent(s) running (3 failed to start"), "{err}");
     r.down_and_check_clean();
 }
 

@@ -16,7 +16,11 @@
 //! * `panic-start`: its `start` panics (the process ends during its
 //!   start-up, before it is ready, with nothing said but its log);
 //! * `segv-start`: dies of SIGSEGV in its `start`, without a word (as a
-//!   locked main stack that may not grow did, see `agent_sdk::rt`).
+//!   locked main stack that may not grow did, see `agent_sdk::rt`);
+//! * `gone-start`: its `new` fails when the agent really starts, though it
+//!   worked when a launch file's check described the agent (a device there
+//!   when the file was checked and gone a moment later): the agent exits
+//!   before it registers, and the router never hears of it.
 
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
 use shm_schemas::payloads::Scalar;
@@ -33,6 +37,7 @@ enum Mode {
     FailStart,
     PanicStart,
     SegvStart,
+    GoneStart,
 }
 
 struct TestAgent {
@@ -62,10 +67,15 @@ impl Agent for TestAgent {
                 "fail-start" => Mode::FailStart,
                 "panic-start" => Mode::PanicStart,
                 "segv-start" => Mode::SegvStart,
+                // a description's world is a private robot's, `describe-PID`
+                "gone-start" if !setup.world().robot().as_str().starts_with("describe-") => {
+                    return Err(AgentError::Device("/dev/ttyGONE: it was there when the file was checked".into()));
+                }
+                "gone-start" => Mode::GoneStart,
                 other => {
                     return Err(AgentError::Config(format!(
                         "unknown mode {other:?}; use scalar, crash, panic, stubborn, hang, burn, fail-start, \
-                         panic-start or segv-start"
+                         panic-start, segv-start or gone-start"
                     )));
                 }
             },
@@ -93,7 +103,7 @@ impl Agent for TestAgent {
 
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
         match self.mode {
-            Mode::Scalar | Mode::FailStart | Mode::PanicStart | Mode::SegvStart => {}
+            Mode::Scalar | Mode::FailStart | Mode::PanicStart | Mode::SegvStart | Mode::GoneStart => {}
             Mode::Crash => std::process::abort(),
             Mode::Panic => panic!("testagent: a bug in the step, on purpose"),
             Mode::Stubborn => {
