@@ -541,6 +541,19 @@ fn expired_connection_buffer() -> usize {
 /// many were cleaned. It reads every node's record: call it when something
 /// failed that a dead process's ports could explain, not on every open.
 pub fn cleanup_dead_nodes_of(config: &iceoryx2::config::Config) -> usize {
+    cleanup_dead_nodes_counted(config).removed
+}
+
+/// What one look for dead nodes did.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+struct Cleaned {
+    /// dead nodes whose resources this look removed
+    removed: usize,
+    /// dead nodes another process was cleaning up at the time
+    by_another: usize,
+}
+
+fn cleanup_dead_nodes_counted(config: &iceoryx2::config::Config) -> Cleaned {
     quiet_iceoryx2();
     // One clean-up at a time in this process: a thread that finds a dead
     // node another thread is still cleaning skips it, and would try again
@@ -556,45 +569,93 @@ pub fn cleanup_dead_nodes_of(config: &iceoryx2::config::Config) -> usize {
         }
         CallbackProgression::Continue
     });
-    let mut n = 0;
+    let mut c = Cleaned::default();
     for view in dead {
-        if view.try_remove_stale_resources().is_ok() {
-            n += 1;
+        match view.try_remove_stale_resources() {
+            Ok(()) => c.removed += 1,
+            Err(iceoryx2::node::NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode) => c.by_another += 1,
+            Err(_) => {}
         }
     }
-    n
+    c
 }
+
+/// How long [`retry_after_cleanup_while`] waits, in turn, for a process
+/// that is cleaning up a dead node, or for one that is exiting (under a
+/// second in all, and only while either is seen).
+const WAITS_FOR_LEAVERS: [std::time::Duration; 7] = [
+    std::time::Duration::from_millis(5),
+    std::time::Duration::from_millis(10),
+    std::time::Duration::from_millis(20),
+    std::time::Duration::from_millis(50),
+    std::time::Duration::from_millis(100),
+    std::time::Duration::from_millis(200),
+    std::time::Duration::from_millis(400),
+];
 
 /// Runs `attempt`; if it fails in a way `blockable` says a dead process's
 /// leftovers could explain, cleans such leftovers under `config` and runs it
 /// once more (also when this call found nothing left to clean: another
 /// thread or process may have cleaned them between the failure and the
-/// look). For creating a port or server that a crashed process's ports may
-/// block (iceoryx2 no longer scans a service's nodes on every open, see
-/// [`World::new`]); `what` names it in the log line.
+/// look). While another process is still cleaning a dead node up (a killed
+/// router's, which every agent looking for the router cleans up after too),
+/// it waits for it a little and tries again. For creating a port or server
+/// that a crashed process's ports may block (iceoryx2 no longer scans a
+/// service's nodes on every open, see [`World::new`]); `what` names it in
+/// the log line.
 pub fn retry_after_cleanup<T, E>(
     config: &iceoryx2::config::Config,
     what: &str,
     blockable: impl Fn(&E) -> bool,
+    attempt: impl FnMut() -> Result<T, E>,
+) -> Result<T, E> {
+    retry_after_cleanup_while(config, what, blockable, || false, attempt)
+}
+
+/// [`retry_after_cleanup`], waiting also while `holder_exiting` says that
+/// what blocks the attempt belongs to a process that is exiting
+/// ([`crate::control::served_only_by_the_gone`]): killed, but not yet
+/// gone, so that its iceoryx2 node still counts as alive.
+pub fn retry_after_cleanup_while<T, E>(
+    config: &iceoryx2::config::Config,
+    what: &str,
+    blockable: impl Fn(&E) -> bool,
+    holder_exiting: impl Fn() -> bool,
     mut attempt: impl FnMut() -> Result<T, E>,
 ) -> Result<T, E> {
     match attempt() {
-        Ok(v) => Ok(v),
-        Err(e) if !blockable(&e) => Err(e),
-        Err(_) => {
-            let cleaned = cleanup_dead_nodes_of(config);
-            if cleaned > 0 {
-                tracing::info!(
-                    cleaned,
-                    "{what}: cleaned the shared memory of {cleaned} dead process(es), trying again"
-                );
-            } else {
-                // another thread of this process (an agent's start-up opens
-                // the router's client beside its control service) or another
-                // process may have cleaned the same leftovers a moment ago
-                tracing::debug!("{what}: nothing left to clean, trying again once");
+        Err(e) if blockable(&e) => {}
+        done => return done,
+    }
+    let mut waits = WAITS_FOR_LEAVERS.iter();
+    loop {
+        let cleaned = cleanup_dead_nodes_counted(config);
+        if cleaned.removed > 0 {
+            let n = cleaned.removed;
+            tracing::info!(cleaned = n, "{what}: cleaned the shared memory of {n} dead process(es), trying again");
+        } else {
+            // another thread of this process (an agent's start-up opens
+            // the router's client beside its control service) or another
+            // process may have cleaned the same leftovers a moment ago
+            tracing::debug!("{what}: nothing left to clean, trying again");
+        }
+        let done = attempt();
+        let blocked = matches!(&done, Err(e) if blockable(e));
+        let why = if !blocked {
+            None
+        } else if cleaned.by_another > 0 {
+            Some("another process is cleaning up after a dead one")
+        } else if holder_exiting() {
+            Some("what blocks it belongs to a process that is exiting")
+        } else {
+            None
+        };
+        match (why, waits.next()) {
+            (Some(why), Some(wait)) => {
+                tracing::info!("{what}: {why}; waiting {wait:?}");
+                std::thread::sleep(*wait);
             }
-            attempt()
+            _ => return done,
         }
     }
 }

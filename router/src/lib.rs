@@ -88,6 +88,16 @@ pub enum StartError {
         /// robot
         robot: String,
     },
+    /// The router before this one was killed and is still exiting (a
+    /// thread of it still writes to disk, say) after this one waited for
+    /// it for most of a second.
+    #[error(
+        "the router killed before is still exiting and holds robot {robot}'s service; start the router again in a moment"
+    )]
+    PreviousExiting {
+        /// robot
+        robot: String,
+    },
     /// Anything else, with its message.
     #[error("{0}")]
     Other(String),
@@ -120,8 +130,23 @@ impl Router {
         world.ensure_state_dirs().map_err(|e| StartError::Other(e.to_string()))?;
         let node = world.node("router").map_err(|e| StartError::Other(e.to_string()))?;
         world.cleanup_dead_nodes();
+        // a killed router's server stays until someone cleans up after it:
+        // this router did above, and so may every agent looking for a
+        // router at the same moment (waited for)
         let serve = |service: String, size: ControlSize| {
-            ControlServer::create(&node, &service, size).map_err(|e| match e {
+            let blockable = |e: &ControlError| matches!(e, ControlError::AlreadyServed { .. });
+            let exiting = || agent_sdk::control::served_only_by_the_gone(&node, &service, size);
+            agent_sdk::world::retry_after_cleanup_while(
+                world.config(),
+                "the router's service",
+                blockable,
+                exiting,
+                || ControlServer::create(&node, &service, size),
+            )
+            .map_err(|e| match e {
+                ControlError::AlreadyServed { .. } if exiting() => {
+                    StartError::PreviousExiting { robot: world.robot().to_string() }
+                }
                 ControlError::AlreadyServed { .. } => StartError::AlreadyRunning { robot: world.robot().to_string() },
                 e => StartError::Other(e.to_string()),
             })

@@ -419,6 +419,57 @@ fn router_crash_keeps_data_flowing_and_restart_restores() {
     r.down_and_check_clean();
 }
 
+/// A router started again at once after the old one was killed waits for
+/// the old one to be gone instead of taking it for a second router: killed
+/// while a thread finished a write to disk, a process shows as a zombie
+/// while that thread still holds its files, and with them its server (the
+/// chaos test in CI of 2026-11-27: "a router already runs"). Here a
+/// stand-in leaves that way for 400 ms.
+#[test]
+fn a_router_started_while_the_killed_one_is_still_leaving_waits_for_it() {
+    let r = Robot::new("leaver");
+    let (mut leaver, pid) = leaving(&r, 400);
+    // its main thread has ended: dead, as a test or `kill -0` loop sees it
+    assert!(wait_until(Duration::from_secs(2), || !alive(pid)), "the leaver's main thread did not end");
+    let t0 = std::time::Instant::now();
+    r.router();
+    let waited = t0.elapsed();
+    let _ = leaver.wait();
+    let log = r.ok(&["logs", "router"]);
+    assert!(log.contains("belongs to a process that is exiting; waiting"), "{log}");
+    assert!(waited >= Duration::from_millis(100), "the router started after {waited:?}, beside the leaver: {log}");
+    r.ok(&["start", "ticker", "--name", "t1"]);
+    assert!(wait_until(Duration::from_secs(3), || r.ps().len() == 1), "{:?}", r.ps());
+    r.down_and_check_clean();
+
+    // one that takes longer than the router waits is named for what it is
+    let r = Robot::new("leaver");
+    let (mut leaver, pid) = leaving(&r, 3000);
+    assert!(wait_until(Duration::from_secs(2), || !alive(pid)), "the leaver's main thread did not end");
+    let e = r.fails(&["router", "--daemon"]);
+    assert!(e.contains("the router killed before is still exiting") && e.contains("in a moment"), "{e}");
+    let _ = leaver.wait();
+    r.router();
+    r.down_and_check_clean();
+}
+
+/// Starts `test-leaver HOLD_MS` on `r`'s robot; returns it, serving, and its pid.
+fn leaving(r: &Robot, hold_ms: u64) -> (std::process::Child, u32) {
+    use std::io::BufRead as _;
+    let mut leaver = r
+        .command("test-leaver")
+        .arg(hold_ms.to_string())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("start test-leaver");
+    let mut first = String::new();
+    let out = leaver.stdout.take().expect("its stdout");
+    std::io::BufReader::new(out).read_line(&mut first).expect("its first line");
+    assert_eq!(first.trim(), "serving");
+    let pid = leaver.id();
+    (leaver, pid)
+}
+
 /// Duplicate names, unknown agents or ports and mismatched types are refused with clear errors.
 #[test]
 fn bad_requests_are_refused_clearly() {

@@ -462,7 +462,9 @@ fn control_server(
     name: &AgentName,
 ) -> Result<ControlServer<AgentCommand, AgentReply>, StartupError> {
     let blockable = |e: &ControlError| matches!(e, ControlError::AlreadyServed { .. } | ControlError::Ipc { .. });
-    crate::world::retry_after_cleanup(world.config(), "control service", blockable, || {
+    // a run of this agent killed a moment ago may not be gone yet
+    let exiting = || crate::control::served_only_by_the_gone(node, ctl_service, ControlSize::AGENT);
+    crate::world::retry_after_cleanup_while(world.config(), "control service", blockable, exiting, || {
         ControlServer::create(node, ctl_service, ControlSize::AGENT)
     })
     .map_err(|e| match e {
