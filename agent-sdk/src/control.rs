@@ -657,7 +657,7 @@ impl<Req: Serialize, Resp: DeserializeOwned> ControlClient<Req, Resp> {
 /// shows as a zombie before all its threads are gone and its files closed,
 /// and until then its iceoryx2 node is alive and its server blocks
 /// [`ControlServer::create`] (a router or an agent started again at once
-/// after a `kill -9`, the chaos test in CI of 2026-11-27).
+/// after a `kill -9`: the chaos test in a fresh-clone CI run of 2026-11-27).
 pub fn served_only_by_the_gone(node: &Node<Ipc>, service: &str, size: ControlSize) -> bool {
     rr_builder(node, service, size).ok().and_then(|b| b.open().ok()).is_some_and(|rr| servers_all_dead(&rr))
 }

@@ -421,10 +421,11 @@ fn router_crash_keeps_data_flowing_and_restart_restores() {
 
 /// A router started again at once after the old one was killed waits for
 /// the old one to be gone instead of taking it for a second router: killed
-/// while a thread finished a write to disk, a process shows as a zombie
-/// while that thread still holds its files, and with them its server (the
-/// chaos test in CI of 2026-11-27: "a router already runs"). Here a
-/// stand-in leaves that way for 400 ms.
+/// while a thread is still busy (most likely finishing a write to disk), a
+/// process shows as a zombie while that thread still holds its files, and
+/// with them its server (the chaos test in a fresh-clone CI run of
+/// 2026-11-27: "a router already runs"). Here a stand-in leaves that way
+/// for 400 ms, then for longer than the router waits.
 #[test]
 fn a_router_started_while_the_killed_one_is_still_leaving_waits_for_it() {
     let r = Robot::new("leaver");

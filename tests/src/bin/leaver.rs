@@ -1,9 +1,11 @@
 //! `leaver`: a process that serves the router's service of robot
 //! `NERVE_ROBOT` and then leaves slowly, as a router killed while one of its
-//! threads finished a write to disk does: its main thread ends at once (the
-//! process shows as a zombie in `/proc/<pid>/stat`), while another thread
-//! holds the server, and with it a live iceoryx2 node, for `HOLD_MS` more
-//! milliseconds (`test-leaver HOLD_MS`; not named `nerve-*`, which would make it an agent kind). Prints `serving` once it serves.
+//! threads is still busy (finishing a write to disk, say) does: its main
+//! thread ends at once (the process shows as a zombie in
+//! `/proc/<pid>/stat`), while another thread holds the server, and with it
+//! a live iceoryx2 node, for `HOLD_MS` more milliseconds (`test-leaver
+//! HOLD_MS`; not named `nerve-*`, which would make it an agent kind).
+//! Prints `serving` once it serves.
 
 use agent_sdk::World;
 use agent_sdk::control::{ControlServer, ControlSize};
