@@ -278,6 +278,27 @@ pub struct ControlServer<Req, Resp> {
 }
 
 impl<Req: DeserializeOwned, Resp: Serialize> ControlServer<Req, Resp> {
+    /// [`ControlServer::create`] where a dead or exiting process's server
+    /// may be in the way (a killed run of this agent, a killed router):
+    /// when the creation fails in a way `blockable` says such leftovers
+    /// could explain, cleans up after dead processes and tries again,
+    /// waiting a little while the server in the way belongs only to
+    /// processes that are exiting ([`served_only_by_the_gone`]) or another
+    /// process is cleaning up ([`crate::world::retry_after_cleanup_while`]).
+    /// `what` names the service in the log lines.
+    pub fn create_clearing(
+        node: &Node<Ipc>,
+        service: &str,
+        size: ControlSize,
+        what: &str,
+        blockable: impl Fn(&ControlError) -> bool,
+    ) -> Result<Self, ControlError> {
+        let exiting = || served_only_by_the_gone(node, service, size);
+        crate::world::retry_after_cleanup_while(node.config(), what, blockable, exiting, || {
+            Self::create(node, service, size)
+        })
+    }
+
     /// Serves `service`. Only one server may serve a service at a time: a
     /// second one gets [`ControlError::AlreadyServed`].
     pub fn create(node: &Node<Ipc>, service: &str, size: ControlSize) -> Result<Self, ControlError> {

@@ -615,8 +615,9 @@ pub fn retry_after_cleanup<T, E>(
 /// [`retry_after_cleanup`], waiting also while `holder_exiting` says that
 /// what blocks the attempt belongs to a process that is exiting
 /// ([`crate::control::served_only_by_the_gone`]): killed, but not yet
-/// gone, so that its iceoryx2 node still counts as alive.
-pub fn retry_after_cleanup_while<T, E>(
+/// gone, so that its iceoryx2 node still counts as alive. Servers are made
+/// through [`crate::control::ControlServer::create_clearing`].
+pub(crate) fn retry_after_cleanup_while<T, E>(
     config: &iceoryx2::config::Config,
     what: &str,
     blockable: impl Fn(&E) -> bool,

@@ -135,21 +135,19 @@ impl Router {
         // router at the same moment (waited for)
         let serve = |service: String, size: ControlSize| {
             let blockable = |e: &ControlError| matches!(e, ControlError::AlreadyServed { .. });
-            let exiting = || agent_sdk::control::served_only_by_the_gone(&node, &service, size);
-            agent_sdk::world::retry_after_cleanup_while(
-                world.config(),
-                "the router's service",
-                blockable,
-                exiting,
-                || ControlServer::create(&node, &service, size),
+            ControlServer::create_clearing(&node, &service, size, "the router's service", blockable).map_err(
+                |e| match e {
+                    ControlError::AlreadyServed { .. }
+                        if agent_sdk::control::served_only_by_the_gone(&node, &service, size) =>
+                    {
+                        StartError::PreviousExiting { robot: world.robot().to_string() }
+                    }
+                    ControlError::AlreadyServed { .. } => {
+                        StartError::AlreadyRunning { robot: world.robot().to_string() }
+                    }
+                    e => StartError::Other(e.to_string()),
+                },
             )
-            .map_err(|e| match e {
-                ControlError::AlreadyServed { .. } if exiting() => {
-                    StartError::PreviousExiting { robot: world.robot().to_string() }
-                }
-                ControlError::AlreadyServed { .. } => StartError::AlreadyRunning { robot: world.robot().to_string() },
-                e => StartError::Other(e.to_string()),
-            })
         };
         let server = serve(world.robot().router_service(), ControlSize::ROUTER)?;
         let cli_server = serve(world.robot().router_cli_service(), ControlSize::ROUTER_CLI)?;

@@ -453,8 +453,9 @@ fn joined<T>(helper: std::thread::ScopedJoinHandle<'_, T>) -> T {
 
 /// Serves the agent's control service. A crashed run of this agent leaves
 /// its control server behind (and its other ports) until the router cleans
-/// up after it: found here as a served service, cleaned, and tried once
-/// more; a live one stays served, and is the agent of this name running.
+/// up after it: found here as a served service, cleaned, and tried again
+/// (after waiting, while a run killed a moment ago is still exiting); a
+/// live one stays served, and is the agent of this name running.
 fn control_server(
     world: &World,
     node: &Node<Ipc>,
@@ -463,15 +464,13 @@ fn control_server(
 ) -> Result<ControlServer<AgentCommand, AgentReply>, StartupError> {
     let blockable = |e: &ControlError| matches!(e, ControlError::AlreadyServed { .. } | ControlError::Ipc { .. });
     // a run of this agent killed a moment ago may not be gone yet
-    let exiting = || crate::control::served_only_by_the_gone(node, ctl_service, ControlSize::AGENT);
-    crate::world::retry_after_cleanup_while(world.config(), "control service", blockable, exiting, || {
-        ControlServer::create(node, ctl_service, ControlSize::AGENT)
-    })
-    .map_err(|e| match e {
-        ControlError::AlreadyServed { .. } => {
-            StartupError::AlreadyRunning { name: name.to_string(), robot: world.robot().to_string() }
+    ControlServer::create_clearing(node, ctl_service, ControlSize::AGENT, "control service", blockable).map_err(|e| {
+        match e {
+            ControlError::AlreadyServed { .. } => {
+                StartupError::AlreadyRunning { name: name.to_string(), robot: world.robot().to_string() }
+            }
+            e => e.into(),
         }
-        e => e.into(),
     })
 }
 
