@@ -238,6 +238,15 @@ impl Router {
             None => None,
         };
         let _tick = ws.attach_interval(LIVENESS_PERIOD).map_err(|e| format!("{e:?}"))?;
+        // SIGTERM and SIGINT kept and woken through a pipe (iceoryx2's own
+        // record of them can be overwritten, see `agent_sdk::termination`)
+        let term = match agent_sdk::termination::install() {
+            Ok(t) => Some((t, ws.attach_notification(t).map_err(|e| format!("{e:?}"))?)),
+            Err(e) => {
+                tracing::warn!("{e}; a SIGTERM may go unseen when another signal follows it");
+                None
+            }
+        };
         let mut last_liveness = Instant::now();
         let mut last_sweep = Instant::now();
         let watchdog = agent_sdk::daemon::watchdog_interval();
@@ -250,6 +259,9 @@ impl Router {
         // woke it (for measuring the two side by side, BENCHMARKS.md §6)
         let reply_wake = std::env::var_os("NERVE_REPLY_WAKE").is_none_or(|v| v != "off");
         loop {
+            if agent_sdk::termination::requested() {
+                break;
+            }
             // While a job waits for what no event announces (a death, the
             // disk) or a tool's request is half read, look again soon; else
             // sleep until a request, an agent's reply or the tick. The
@@ -257,8 +269,8 @@ impl Router {
             // which made every stage of a rewire wait 1 ms: a polling router
             // sleeps by itself instead, and a request coming meanwhile is
             // taken at the next look, at most MAX_POLL_INTERVAL later. A
-            // SIGTERM meanwhile is kept by iceoryx2's handler for the next
-            // wait (a busy spell ends with its jobs' time-outs).
+            // SIGTERM meanwhile is kept by `termination` for the next look
+            // (a busy spell ends with its jobs' time-outs).
             let awaiting = self.state.busy();
             let polling = self.state.needs_polling()
                 || self.tool_socket.as_ref().is_some_and(ToolSocket::busy)
@@ -273,9 +285,17 @@ impl Router {
                 } else {
                     tidy.next().map_or(LIVENESS_PERIOD, |at| at.saturating_duration_since(Instant::now()))
                 };
-                match ws
-                    .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, wait.min(LIVENESS_PERIOD))
-                {
+                match ws.wait_and_process_once_with_timeout(
+                    |id| {
+                        if let Some((t, g)) = &term
+                            && id.has_event_from(g)
+                        {
+                            t.drain();
+                        }
+                        CallbackProgression::Continue
+                    },
+                    wait.min(LIVENESS_PERIOD),
+                ) {
                     Ok(WaitSetRunResult::TerminationRequest) => break,
                     Ok(_) => {}
                     Err(e) => {

@@ -315,6 +315,67 @@ fn kill_and_wait(pid: u32) {
     );
 }
 
+/// A SIGTERM that other signals follow at once still stops agents and the
+/// router. systemd stops a unit with SIGTERM and then SIGCONT; iceoryx2's
+/// handler kept only the last signal it caught, so the SIGCONT (or a
+/// SIGURG) could hide the SIGTERM and the process ran on until SIGKILL:
+/// the router every time it was stopped as they came, three agents in
+/// eight, seven in eight with a SIGURG between (see
+/// `agent_sdk::termination`). The signals are sent while the process is
+/// stopped (SIGSTOP), so that they all arrive together when SIGCONT
+/// resumes it.
+#[test]
+fn a_sigterm_that_other_signals_follow_still_stops_agents_and_the_router() {
+    let r = Robot::new("sigterm");
+    r.router();
+    let names = ["s1", "s2", "s3", "s4", "s5", "s6"];
+    for n in names {
+        r.ok(&["start", "relay", "--name", n]);
+    }
+    for (i, n) in names.iter().enumerate() {
+        let pid = r.pid(n);
+        let between: &[i32] = if i % 2 == 0 { &[libc::SIGURG] } else { &[] };
+        signal_while_stopped(pid, libc::SIGTERM, between);
+        let stopped = wait_until(Duration::from_secs(3), || {
+            nerve_tests::reap();
+            !alive(pid)
+        });
+        let log = r.ok(&["logs", n]);
+        assert!(stopped, "{n} ran on after SIGTERM: {log}");
+        assert!(log.contains("termination requested by signal"), "{n} did not stop cleanly: {log}");
+    }
+    let router = pid_file(&r, "router").expect("router pid file");
+    signal_while_stopped(router, libc::SIGTERM, &[]);
+    let stopped = wait_until(Duration::from_secs(3), || {
+        nerve_tests::reap();
+        !alive(router)
+    });
+    if !stopped {
+        sigkill(router);
+    }
+    assert!(stopped, "the router ran on after SIGTERM");
+    r.down_and_check_clean();
+}
+
+/// Stops `pid`, sends it `first` and then `between`, and resumes it with
+/// SIGCONT: the process finds them all pending at once.
+fn signal_while_stopped(pid: u32, first: i32, between: &[i32]) {
+    let pid = pid as i32;
+    // SAFETY: kill has no memory-safety preconditions.
+    unsafe { libc::kill(pid, libc::SIGSTOP) };
+    assert!(
+        wait_until(Duration::from_secs(2), || {
+            std::fs::read_to_string(format!("/proc/{pid}/stat"))
+                .is_ok_and(|s| s.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().next()) == Some("T"))
+        }),
+        "process {pid} did not stop"
+    );
+    for sig in std::iter::once(&first).chain(between).chain(std::iter::once(&libc::SIGCONT)) {
+        // SAFETY: as above.
+        unsafe { libc::kill(pid, *sig) };
+    }
+}
+
 /// An agent whose own `start` fails makes `nerve start` fail with its
 /// reason, instead of saying "started" and vanishing (review R19).
 #[test]

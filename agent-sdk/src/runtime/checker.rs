@@ -84,6 +84,11 @@ impl Checker<'_> {
             tracing::error!("cannot attach the control service to the WaitSet");
             return;
         };
+        // SIGTERM and SIGINT wake the checker through a pipe and stay
+        // recorded (iceoryx2's own record of them can be overwritten, see
+        // `termination`); its check of the WaitSet stays as a fallback
+        let term = crate::termination::installed();
+        let term_guard = term.and_then(|t| ws.attach_notification(t).ok());
         let mut cpu = CpuMeter::default();
         let reply_id = crate::control::reply_event_id(&reg.name);
         // The router hands a hot-added agent its inputs' connections in the
@@ -114,12 +119,21 @@ impl Checker<'_> {
         let mut last_ping = Instant::now();
         let mut next_tick = Instant::now() + tick;
         loop {
+            if crate::termination::requested() {
+                tracing::info!("termination requested by signal");
+                return;
+            }
             let now = Instant::now();
             let until = link.next_attempt().map_or(next_tick, |at| at.min(next_tick));
             let result = ws.wait_and_process_once_with_timeout(
                 |id| {
                     if id.has_event_from(&wake_guard) {
                         let _ = wake.try_wait(|_| {});
+                    }
+                    if let (Some(g), Some(t)) = (&term_guard, term)
+                        && id.has_event_from(g)
+                    {
+                        t.drain();
                     }
                     if let (Some(g), Some(l)) = (&epoch_guard, &epoch_wake)
                         && id.has_event_from(g)

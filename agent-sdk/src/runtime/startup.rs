@@ -179,6 +179,10 @@ pub fn run_status<A: Agent>(args: CommonArgs) -> u8 {
         }
     }
     init_logging(&name, args.log_level.as_deref());
+    // in the daemon, not the parent waiting for its readiness
+    if let Err(e) = crate::termination::install() {
+        tracing::warn!("{e}; a SIGTERM may go unseen when another signal follows it");
+    }
     match start::<A>(&args, &name, world, &mut readiness, began) {
         Ok(()) => 0,
         Err(e) => startup_error(&mut readiness, &e),

@@ -152,6 +152,7 @@ fn watch(
 ) -> Result<bool> {
     let raw = RawPort::open(node, service)?;
     let listener = port_event(node, service)?.listener_builder().create().map_err(|e| anyhow!("{e:?}"))?;
+    crate::interrupt::catch();
     let ws = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<Ipc>()
@@ -162,6 +163,7 @@ fn watch(
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
             Ok(WaitSetRunResult::TerminationRequest) => return Ok(true),
+            Ok(_) if crate::interrupt::requested() => return Ok(true),
             Ok(_) => {}
             Err(e) => bail!("wait failed: {e:?}"),
         }

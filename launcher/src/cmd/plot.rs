@@ -368,6 +368,7 @@ fn live(world: &World, ports: &[PortRef], fields: &[String], duration: f64, quie
         watched.push(Watched { raw, listener, fields });
     }
     let mut samples: Vec<Samples> = ports.iter().map(|p| Samples::new(p, fields.len())).collect();
+    crate::interrupt::catch();
     let ws = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<Ipc>()
@@ -385,6 +386,7 @@ fn live(world: &World, ports: &[PortRef], fields: &[String], duration: f64, quie
     loop {
         match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
             Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => interrupted = true,
+            Ok(_) if crate::interrupt::requested() => interrupted = true,
             Ok(_) => {}
             Err(e) => bail!("wait failed: {e:?}"),
         }

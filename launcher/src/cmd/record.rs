@@ -244,6 +244,7 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
     let mut events = EventFollower::new(world, events_node);
     let _ = events.look();
     let mut interrupted = false;
+    crate::interrupt::catch();
     loop {
         // a fresh wait set each round: --all adds ports as agents appear
         let ws = WaitSetBuilder::new()
@@ -260,6 +261,10 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
         while !round_done {
             match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
                 Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                    interrupted = true;
+                    break;
+                }
+                Ok(_) if crate::interrupt::requested() => {
                     interrupted = true;
                     break;
                 }

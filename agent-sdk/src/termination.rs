@@ -1,0 +1,117 @@
+//! SIGTERM and SIGINT, kept until they are acted on.
+//!
+//! iceoryx2's signal handler records the last signal it caught in a single
+//! slot: any later signal it catches overwrites it (SIGCONT, SIGURG,
+//! SIGUSR1, ...), and its set-up of zeroed shared memory clears it. systemd
+//! stops a unit with SIGTERM followed at once by SIGCONT, so a process that
+//! waited on a WaitSet with `HandleTerminationRequests` could find SIGCONT in
+//! the slot, never see the SIGTERM and run on until SIGKILL: here one agent
+//! in 20 (`kill -TERM; kill -CONT`), and the router every time when it was
+//! stopped (SIGSTOP) as the two came.
+//!
+//! [`install`] lets iceoryx2 put its handlers in first (they are installed
+//! once, on its first use of signals, and would otherwise replace ours),
+//! then takes SIGTERM and SIGINT itself: a flag that nothing clears
+//! ([`requested`]) and a byte written to a pipe. The read end
+//! ([`Termination`]) is attached to the waiting thread's WaitSet, so the
+//! request wakes it whichever thread the kernel delivered the signal to.
+
+use iceoryx2::prelude::{FileDescriptor, FileDescriptorBased, SynchronousMultiplexing};
+use std::os::fd::{AsRawFd, IntoRawFd, OwnedFd};
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+
+/// Set by SIGTERM or SIGINT once [`install`] ran; never cleared.
+static REQUESTED: AtomicBool = AtomicBool::new(false);
+/// The pipe's write end, for the handler (-1 before [`install`]).
+static WAKE_FD: AtomicI32 = AtomicI32::new(-1);
+/// The one installation of the process.
+static INSTALLED: OnceLock<Result<Termination, String>> = OnceLock::new();
+
+/// The read end of the pipe a termination signal writes to: attach it to a
+/// WaitSet, and [`Termination::drain`] it after a wake-up.
+#[derive(Debug)]
+pub struct Termination {
+    read: FileDescriptor,
+}
+
+impl FileDescriptorBased for Termination {
+    fn file_descriptor(&self) -> &FileDescriptor {
+        &self.read
+    }
+}
+
+impl SynchronousMultiplexing for Termination {}
+
+impl Termination {
+    /// Empties the pipe, so that a level-triggered wait does not wake again.
+    pub fn drain(&self) {
+        let mut buf = [0u8; 64];
+        // SAFETY: the descriptor is the pipe's read end, open for the
+        // process's lifetime; buf is a valid buffer of its length.
+        while unsafe { libc::read(self.read.native_handle(), buf.as_mut_ptr().cast(), buf.len()) } > 0 {}
+    }
+}
+
+extern "C" fn on_signal(_: libc::c_int) {
+    REQUESTED.store(true, Ordering::SeqCst);
+    let fd = WAKE_FD.load(Ordering::SeqCst);
+    if fd >= 0 {
+        // SAFETY: errno is thread-local; saved and restored around write,
+        // which is async-signal-safe. A full pipe already wakes its reader.
+        unsafe {
+            let errno = *libc::__errno_location();
+            let byte = 1u8;
+            let _ = libc::write(fd, (&byte as *const u8).cast(), 1);
+            *libc::__errno_location() = errno;
+        }
+    }
+}
+
+/// Takes SIGTERM and SIGINT for this process (once; later calls return the
+/// same). Call it after any fork that should not inherit it (a daemon's)
+/// and before the process waits for work.
+pub fn install() -> Result<&'static Termination, &'static str> {
+    INSTALLED.get_or_init(make).as_ref().map_err(String::as_str)
+}
+
+/// The installation, where [`install`] succeeded.
+pub fn installed() -> Option<&'static Termination> {
+    INSTALLED.get().and_then(|r| r.as_ref().ok())
+}
+
+/// Whether SIGTERM or SIGINT came since [`install`].
+pub fn requested() -> bool {
+    REQUESTED.load(Ordering::SeqCst)
+}
+
+fn make() -> Result<Termination, String> {
+    use iceoryx2_bb_posix::signal::{NonFatalFetchableSignal, SignalHandler};
+    use nix::fcntl::OFlag;
+    use nix::sys::signal::{SaFlags, SigAction, SigHandler, SigSet, Signal, sigaction};
+    // iceoryx2 installs its handlers on its first use of signals, over
+    // whatever was there: have it done now, so that ours stay. A request
+    // its handler caught before is taken over (the call empties its record).
+    if matches!(
+        SignalHandler::last_signal(),
+        Some(NonFatalFetchableSignal::Terminate | NonFatalFetchableSignal::Interrupt)
+    ) {
+        REQUESTED.store(true, Ordering::SeqCst);
+    }
+    let (read, write): (OwnedFd, OwnedFd) = nix::unistd::pipe2(OFlag::O_NONBLOCK | OFlag::O_CLOEXEC)
+        .map_err(|e| format!("cannot make the pipe for termination signals: {e}"))?;
+    let read = FileDescriptor::new(read.into_raw_fd())
+        .ok_or_else(|| "the pipe for termination signals has no valid descriptor".to_owned())?;
+    WAKE_FD.store(write.as_raw_fd(), Ordering::SeqCst);
+    // the write end lives as long as the process
+    let _ = write.into_raw_fd();
+    // SA_RESTART: a read or write the signal interrupts in other code goes
+    // on; waits (epoll) still return, and the pipe wakes the one that matters
+    let act = SigAction::new(SigHandler::Handler(on_signal), SaFlags::SA_RESTART, SigSet::empty());
+    for sig in [Signal::SIGTERM, Signal::SIGINT] {
+        // SAFETY: the handler only stores to an atomic and writes to a pipe,
+        // both async-signal-safe.
+        unsafe { sigaction(sig, &act) }.map_err(|e| format!("cannot take {sig}: {e}"))?;
+    }
+    Ok(Termination { read })
+}
