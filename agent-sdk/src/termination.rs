@@ -15,6 +15,9 @@
 //! ([`requested`]) and a byte written to a pipe. The read end
 //! ([`Termination`]) is attached to the waiting thread's WaitSet, so the
 //! request wakes it whichever thread the kernel delivered the signal to.
+//! The other signals iceoryx2 catches (job control, SIGQUIT, SIGUSR1, ...)
+//! get back the actions they had before it, which it would otherwise
+//! swallow: Ctrl-Z still suspends a command, SIGQUIT still quits.
 
 use iceoryx2::prelude::{FileDescriptor, FileDescriptorBased, SynchronousMultiplexing};
 use std::os::fd::{AsRawFd, IntoRawFd, OwnedFd};
@@ -85,6 +88,22 @@ pub fn requested() -> bool {
     REQUESTED.load(Ordering::SeqCst)
 }
 
+/// The signals iceoryx2's handler catches besides SIGTERM and SIGINT
+/// (`iceoryx2_bb_posix::signal::NonFatalFetchableSignal`).
+const ALSO_CAUGHT_BY_ICEORYX2: [libc::c_int; 11] = [
+    libc::SIGCONT,
+    libc::SIGABRT,
+    libc::SIGQUIT,
+    libc::SIGTSTP,
+    libc::SIGTTIN,
+    libc::SIGTTOU,
+    libc::SIGUSR1,
+    libc::SIGUSR2,
+    libc::SIGPROF,
+    libc::SIGURG,
+    libc::SIGVTALRM,
+];
+
 fn make() -> Result<Termination, String> {
     use iceoryx2_bb_posix::signal::{NonFatalFetchableSignal, SignalHandler};
     use nix::fcntl::OFlag;
@@ -92,11 +111,26 @@ fn make() -> Result<Termination, String> {
     // iceoryx2 installs its handlers on its first use of signals, over
     // whatever was there: have it done now, so that ours stay. A request
     // its handler caught before is taken over (the call empties its record).
+    // It also catches job control and others (SIGTSTP, SIGQUIT, SIGUSR1,
+    // ...), which it would then swallow: Ctrl-Z would no longer suspend
+    // `nerve logs --follow`. Those get back what they had before.
+    let before: Vec<(libc::c_int, libc::sigaction)> = ALSO_CAUGHT_BY_ICEORYX2
+        .iter()
+        .filter_map(|&sig| {
+            // SAFETY: a null new action only reads the current one into `old`.
+            let mut old: libc::sigaction = unsafe { std::mem::zeroed() };
+            (unsafe { libc::sigaction(sig, std::ptr::null(), &mut old) } == 0).then_some((sig, old))
+        })
+        .collect();
     if matches!(
         SignalHandler::last_signal(),
         Some(NonFatalFetchableSignal::Terminate | NonFatalFetchableSignal::Interrupt)
     ) {
         REQUESTED.store(true, Ordering::SeqCst);
+    }
+    for (sig, old) in &before {
+        // SAFETY: puts back an action read above, unchanged.
+        unsafe { libc::sigaction(*sig, old, std::ptr::null_mut()) };
     }
     let (read, write): (OwnedFd, OwnedFd) = nix::unistd::pipe2(OFlag::O_NONBLOCK | OFlag::O_CLOEXEC)
         .map_err(|e| format!("cannot make the pipe for termination signals: {e}"))?;

@@ -355,6 +355,41 @@ fn a_sigterm_that_other_signals_follow_still_stops_agents_and_the_router() {
     }
     assert!(stopped, "the router ran on after SIGTERM");
     r.down_and_check_clean();
+
+    // the same flag ends a command on Ctrl-C, and job control is left to
+    // the shell: iceoryx2's handler, installed first, would swallow Ctrl-Z
+    let r = Robot::new("sigtstp");
+    r.router();
+    let mut follow = r
+        .command("nerve")
+        .args(["logs", "router", "--follow"])
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("start nerve logs --follow");
+    let pid = follow.id() as i32;
+    let state = || {
+        std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .ok()
+            .and_then(|s| s.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().next().map(str::to_owned)))
+    };
+    // it has caught Ctrl-C once its first lines are out; give it a moment
+    std::thread::sleep(Duration::from_millis(300));
+    // SAFETY: kill has no memory-safety preconditions.
+    unsafe { libc::kill(pid, libc::SIGTSTP) };
+    let suspended = wait_until(Duration::from_secs(2), || state().as_deref() == Some("T"));
+    // SAFETY: as above.
+    unsafe {
+        libc::kill(pid, libc::SIGCONT);
+        libc::kill(pid, libc::SIGINT);
+    }
+    let ended = wait_until(Duration::from_secs(3), || follow.try_wait().ok().flatten().is_some());
+    if !ended {
+        let _ = follow.kill();
+        let _ = follow.wait();
+    }
+    assert!(suspended, "Ctrl-Z (SIGTSTP) did not suspend `nerve logs --follow`: state {:?}", state());
+    assert!(ended, "Ctrl-C (SIGINT) did not end `nerve logs --follow`");
+    r.down_and_check_clean();
 }
 
 /// Stops `pid`, sends it `first` and then `between`, and resumes it with
