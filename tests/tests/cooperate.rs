@@ -332,6 +332,13 @@ fn the_shipped_launch_files_come_up_and_their_bridges_meet() {
     );
     assert_eq!(r1.figure("mission", "role"), "explorer");
     assert_eq!(r2.figure("mission", "role"), "executor");
+    // the phase is set by the agent's first step, up to a period (100 ms)
+    // after its start; the bridges can meet before that
+    assert!(
+        wait_until(Duration::from_secs(5), || !r2.figure("mission", "phase").is_empty()),
+        "robot 2's mission agent reported no phase: {:?}",
+        r2.figures("mission")
+    );
     assert_eq!(r2.figure("mission", "phase"), "waiting");
     // robot 2's decision maker holds the foot while nothing is to be done
     let mode = r2.echo("decision/mode", 1);
