@@ -32,7 +32,8 @@ static WAKE_FD: AtomicI32 = AtomicI32::new(-1);
 static INSTALLED: OnceLock<Result<Termination, String>> = OnceLock::new();
 
 /// The read end of the pipe a termination signal writes to: attach it to a
-/// WaitSet, and [`Termination::drain`] it after a wake-up.
+/// WaitSet. It is never emptied: once woken, the waiting loop sees
+/// [`requested`] before it would wait again, and ends.
 #[derive(Debug)]
 pub struct Termination {
     read: FileDescriptor,
@@ -45,16 +46,6 @@ impl FileDescriptorBased for Termination {
 }
 
 impl SynchronousMultiplexing for Termination {}
-
-impl Termination {
-    /// Empties the pipe, so that a level-triggered wait does not wake again.
-    pub fn drain(&self) {
-        let mut buf = [0u8; 64];
-        // SAFETY: the descriptor is the pipe's read end, open for the
-        // process's lifetime; buf is a valid buffer of its length.
-        while unsafe { libc::read(self.read.native_handle(), buf.as_mut_ptr().cast(), buf.len()) } > 0 {}
-    }
-}
 
 extern "C" fn on_signal(_: libc::c_int) {
     REQUESTED.store(true, Ordering::SeqCst);

@@ -240,8 +240,8 @@ impl Router {
         let _tick = ws.attach_interval(LIVENESS_PERIOD).map_err(|e| format!("{e:?}"))?;
         // SIGTERM and SIGINT kept and woken through a pipe (iceoryx2's own
         // record of them can be overwritten, see `agent_sdk::termination`)
-        let term = match agent_sdk::termination::install() {
-            Ok(t) => Some((t, ws.attach_notification(t).map_err(|e| format!("{e:?}"))?)),
+        let _term = match agent_sdk::termination::install() {
+            Ok(t) => Some(ws.attach_notification(t).map_err(|e| format!("{e:?}"))?),
             Err(e) => {
                 tracing::warn!("{e}; a SIGTERM may go unseen when another signal follows it");
                 None
@@ -285,17 +285,9 @@ impl Router {
                 } else {
                     tidy.next().map_or(LIVENESS_PERIOD, |at| at.saturating_duration_since(Instant::now()))
                 };
-                match ws.wait_and_process_once_with_timeout(
-                    |id| {
-                        if let Some((t, g)) = &term
-                            && id.has_event_from(g)
-                        {
-                            t.drain();
-                        }
-                        CallbackProgression::Continue
-                    },
-                    wait.min(LIVENESS_PERIOD),
-                ) {
+                match ws
+                    .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, wait.min(LIVENESS_PERIOD))
+                {
                     Ok(WaitSetRunResult::TerminationRequest) => break,
                     Ok(_) => {}
                     Err(e) => {

@@ -87,8 +87,7 @@ impl Checker<'_> {
         // SIGTERM and SIGINT wake the checker through a pipe and stay
         // recorded (iceoryx2's own record of them can be overwritten, see
         // `termination`); its check of the WaitSet stays as a fallback
-        let term = crate::termination::installed();
-        let term_guard = term.and_then(|t| ws.attach_notification(t).ok());
+        let _term = crate::termination::installed().and_then(|t| ws.attach_notification(t).ok());
         let mut cpu = CpuMeter::default();
         let reply_id = crate::control::reply_event_id(&reg.name);
         // The router hands a hot-added agent its inputs' connections in the
@@ -129,11 +128,6 @@ impl Checker<'_> {
                 |id| {
                     if id.has_event_from(&wake_guard) {
                         let _ = wake.try_wait(|_| {});
-                    }
-                    if let (Some(g), Some(t)) = (&term_guard, term)
-                        && id.has_event_from(g)
-                    {
-                        t.drain();
                     }
                     if let (Some(g), Some(l)) = (&epoch_guard, &epoch_wake)
                         && id.has_event_from(g)
