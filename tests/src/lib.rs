@@ -493,10 +493,14 @@ pub fn exists(pid: u32) -> bool {
 
 /// Whether process `pid` is alive and not a zombie.
 pub fn alive(pid: u32) -> bool {
-    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
-        Ok(s) => !matches!(s.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().next()), Some("Z") | None),
-        Err(_) => false,
-    }
+    !matches!(process_state(pid).as_deref(), Some("Z") | None)
+}
+
+/// The state letter of `pid` in `/proc/PID/stat` (`R`, `S`, `T` stopped,
+/// `Z`...), `None` when there is no such process.
+pub fn process_state(pid: u32) -> Option<String> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    stat.rsplit_once(')')?.1.split_whitespace().next().map(str::to_owned)
 }
 
 /// Sends SIGKILL to `pid`.

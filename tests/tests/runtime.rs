@@ -2,7 +2,7 @@
 //! Data flows, rewiring, rates, suspend/resume, hot add, crashes of agents and
 //! of the router, refusals with clear errors, and nothing left behind.
 
-use nerve_tests::{Robot, alive, sigkill, wait_until};
+use nerve_tests::{Robot, alive, process_state, sigkill, wait_until};
 use serde_json::Value;
 use std::time::Duration;
 
@@ -366,21 +366,17 @@ fn a_sigterm_that_other_signals_follow_still_stops_agents_and_the_router() {
         .stdout(std::process::Stdio::null())
         .spawn()
         .expect("start nerve logs --follow");
-    let pid = follow.id() as i32;
-    let state = || {
-        std::fs::read_to_string(format!("/proc/{pid}/stat"))
-            .ok()
-            .and_then(|s| s.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().next().map(str::to_owned)))
-    };
+    let pid = follow.id();
+    let state = || process_state(pid);
     // it has caught Ctrl-C once its first lines are out; give it a moment
     std::thread::sleep(Duration::from_millis(300));
     // SAFETY: kill has no memory-safety preconditions.
-    unsafe { libc::kill(pid, libc::SIGTSTP) };
+    unsafe { libc::kill(pid as i32, libc::SIGTSTP) };
     let suspended = wait_until(Duration::from_secs(2), || state().as_deref() == Some("T"));
     // SAFETY: as above.
     unsafe {
-        libc::kill(pid, libc::SIGCONT);
-        libc::kill(pid, libc::SIGINT);
+        libc::kill(pid as i32, libc::SIGCONT);
+        libc::kill(pid as i32, libc::SIGINT);
     }
     let ended = wait_until(Duration::from_secs(3), || follow.try_wait().ok().flatten().is_some());
     if !ended {
@@ -395,19 +391,15 @@ fn a_sigterm_that_other_signals_follow_still_stops_agents_and_the_router() {
 /// Stops `pid`, sends it `first` and then `between`, and resumes it with
 /// SIGCONT: the process finds them all pending at once.
 fn signal_while_stopped(pid: u32, first: i32, between: &[i32]) {
-    let pid = pid as i32;
     // SAFETY: kill has no memory-safety preconditions.
-    unsafe { libc::kill(pid, libc::SIGSTOP) };
+    unsafe { libc::kill(pid as i32, libc::SIGSTOP) };
     assert!(
-        wait_until(Duration::from_secs(2), || {
-            std::fs::read_to_string(format!("/proc/{pid}/stat"))
-                .is_ok_and(|s| s.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().next()) == Some("T"))
-        }),
+        wait_until(Duration::from_secs(2), || process_state(pid).as_deref() == Some("T")),
         "process {pid} did not stop"
     );
     for sig in std::iter::once(&first).chain(between).chain(std::iter::once(&libc::SIGCONT)) {
         // SAFETY: as above.
-        unsafe { libc::kill(pid, *sig) };
+        unsafe { libc::kill(pid as i32, *sig) };
     }
 }
 
