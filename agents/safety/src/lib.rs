@@ -25,8 +25,19 @@
 //! * **Stop rule** ([`stop_rule`]): stop moving (turning still allowed) when
 //!   the front clearance is under `stop_dist` or the front risk reaches
 //!   `risk_stop`; release only once the clearance exceeds `stop_dist +
-//!   release_margin` and the risk is under `0.8 × risk_stop` (hysteresis).
-//!   While stopped the robot turns on the spot toward the chosen side.
+//!   release_margin` and the risk is under `0.8 × risk_stop` (hysteresis),
+//!   in `release_scans` scans in a row. While stopped the robot turns on
+//!   the spot toward the chosen side.
+//! * **Why release waits for several clear scans**: the twelve beams (±12.5°
+//!   every 30°) leave gaps, and a transducer sits on the rim, so near the
+//!   rim the gaps are wide: a pole (a tube's stand) at ±15° or ±45° and
+//!   within 0.15 m of the rim echoes in no beam (the simulator's geometry,
+//!   and a real ring's). A robot stopped by such a pole turns on the spot;
+//!   a few degrees in, the pole slips into a gap and the front reads clear.
+//!   Released at once it drove on into the pole (CI, 2026-11-28: robot 1
+//!   of the cooperation run touched the target's stand at 44° to its left
+//!   0.2 s after a release). Turning on for a few more scans carries the
+//!   pole into the next beam (the stop holds) or out of the way.
 //! * **Danger level**: `stop` while stopped; `high` when the front is closer
 //!   than halfway between `stop_dist` and `slow_dist` or its risk reaches
 //!   `risk_high`; `low` when something is within `slow_dist`, the front risk
@@ -69,6 +80,8 @@ pub struct Settings {
     pub max_range: f32,
     /// The other side must score this much better (fraction) to switch sides.
     pub side_margin: f32,
+    /// A stop is released after this many clear scans in a row (at least 1).
+    pub release_scans: u32,
 }
 
 impl Default for Settings {
@@ -84,6 +97,7 @@ impl Default for Settings {
             narrow_dist: 0.6,
             max_range: 3.0,
             side_margin: 0.15,
+            release_scans: 4,
         }
     }
 }
@@ -124,6 +138,8 @@ pub struct Judgement {
     pub danger: f32,
     /// Front clearance (the front sector and the flanks, see the module documentation), m.
     pub front: f32,
+    /// While stopped: the clear scans in a row so far (released at `release_scans`).
+    pub clear_scans: u32,
 }
 
 /// Ranges with every silent or invalid direction counted as `max_range`.
@@ -179,6 +195,21 @@ pub fn stop_rule(front: f32, front_risk: f32, stopped: bool, s: &Settings) -> bo
     stopped && !(front > s.stop_dist + s.release_margin && front_risk < 0.8 * s.risk_stop)
 }
 
+/// The stop after this scan and the clear scans in a row counted toward its
+/// release: [`stop_rule`], and a stopped robot stays stopped until the rule
+/// has let go in `release_scans` scans in a row.
+pub fn stop_with_release(front: f32, front_risk: f32, previous: Option<&Judgement>, s: &Settings) -> (bool, u32) {
+    let stopped = previous.is_some_and(|p| p.stop);
+    if stop_rule(front, front_risk, stopped, s) {
+        return (true, 0);
+    }
+    if !stopped {
+        return (false, 0);
+    }
+    let clear = previous.map_or(0, |p| p.clear_scans).saturating_add(1);
+    if clear >= s.release_scans.max(1) { (false, 0) } else { (true, clear) }
+}
+
 /// Judges one scan; `previous` is the last judgement (for the hysteresis).
 pub fn judge(scan: &SonarScan, s: &Settings, previous: Option<&Judgement>) -> Judgement {
     let ranges = effective_ranges(scan, s.max_range);
@@ -187,7 +218,7 @@ pub fn judge(scan: &SonarScan, s: &Settings, previous: Option<&Judgement>) -> Ju
     let span = (s.slow_dist - s.stop_dist).max(1e-3);
     let c = ((s.slow_dist - front) / span).clamp(0.0, 1.0);
     let side = choose_side(&ranges, scan, previous.map(|p| p.side), s.side_margin);
-    let stop = stop_rule(front, front_risk, previous.is_some_and(|p| p.stop), s);
+    let (stop, clear_scans) = stop_with_release(front, front_risk, previous, s);
     let (v, omega) = if stop {
         (0.0, side.sign() * s.omega_max * 0.6)
     } else {
@@ -204,7 +235,7 @@ pub fn judge(scan: &SonarScan, s: &Settings, previous: Option<&Judgement>) -> Ju
         DangerLevel::None
     };
     let danger = if stop { 1.0 } else { c.max(front_risk) };
-    Judgement { v, omega, stop, side, level, danger, front }
+    Judgement { v, omega, stop, side, level, danger, front, clear_scans }
 }
 
 /// Limits a change of command to `rate × dt` (the motor refuses jumps).
@@ -281,7 +312,8 @@ mod tests {
         assert!(j2.stop, "{j2:?}");
         assert!(!judge(&sc, &s, None).stop, "a fresh monitor would not stop at 0.4 m");
         sc.ranges_m[11] = 0.5;
-        assert!(!judge(&sc, &s, Some(&j2)).stop);
+        let once = Settings { release_scans: 1, ..s };
+        assert!(!judge(&sc, &once, Some(&j2)).stop);
         // a fast approach stops too, even far away
         let mut sc = scan(3.0);
         sc.risk[0] = 0.85;
@@ -307,6 +339,44 @@ mod tests {
         sc.ranges_m[9] = 0.2;
         let j = judge(&sc, &s, None);
         assert!(!j.stop && (j.v - s.cruise).abs() < 1e-6, "{j:?}");
+    }
+
+    #[test]
+    fn a_stop_is_released_only_after_release_scans_clear_scans_in_a_row() {
+        let s = Settings::default();
+        assert_eq!(s.release_scans, 4);
+        let mut close = scan(3.0);
+        close.ranges_m[1] = 0.2; // a pole at 30° to the left
+        let clear = scan(3.0); // ... slipped into the gap between two beams
+        let mut j = judge(&close, &s, None);
+        assert!(j.stop);
+        // three clear scans: still stopped, turning on the spot
+        for n in 1..=3 {
+            j = judge(&clear, &s, Some(&j));
+            assert!(j.stop && j.v == 0.0 && j.omega != 0.0 && j.clear_scans == n, "scan {n}: {j:?}");
+            assert_eq!(j.level, DangerLevel::Stop);
+        }
+        // the pole comes back into a beam: the count starts again
+        j = judge(&close, &s, Some(&j));
+        assert!(j.stop && j.clear_scans == 0, "{j:?}");
+        for _ in 1..=3 {
+            j = judge(&clear, &s, Some(&j));
+        }
+        assert!(j.stop);
+        // the fourth clear scan in a row releases
+        j = judge(&clear, &s, Some(&j));
+        assert!(!j.stop && j.clear_scans == 0 && j.v > 0.0, "{j:?}");
+        // a release margin not yet passed does not count as clear
+        let mut near = scan(3.0);
+        near.ranges_m[0] = 0.4;
+        let mut j = judge(&close, &s, None);
+        for _ in 0..10 {
+            j = judge(&near, &s, Some(&j));
+        }
+        assert!(j.stop && j.clear_scans == 0, "{j:?}");
+        // 0 means 1: never a stop that cannot be released
+        let zero = Settings { release_scans: 0, ..s };
+        assert!(!judge(&clear, &zero, Some(&judge(&close, &zero, None))).stop);
     }
 
     #[test]

@@ -6,7 +6,8 @@
 //!   toward the safer, wider side;
 //! * output `stop` (`nerve::SafetyStop`): stop moving — not turning — when
 //!   something is too close or approaching fast; repeated every cycle while
-//!   it holds (each holds `hold_ms`), released once clear;
+//!   it holds (each holds `hold_ms`), released once clear in
+//!   `release_scans` scans in a row (default 4; see the library for why);
 //! * output `situation` (`nerve::Situation`): the danger level for the
 //!   decision maker.
 //!
@@ -29,6 +30,9 @@ const OMEGA_MAX: f32 = 2.0;
 /// Scan timeout bounds, ms: under 100 ms a scan period would count as
 /// silence; over 10 s a dead sonar would count as alive for too long.
 const TIMEOUT_MS: std::ops::RangeInclusive<u64> = 100..=10_000;
+/// Clear scans in a row that release a stop: at least one; over 50 (5 s at
+/// 100 ms) a stopped robot would turn on the spot for too long.
+const RELEASE_SCANS: std::ops::RangeInclusive<u64> = 1..=50;
 
 /// The monitor's parameters, each bounded above and below.
 struct Params {
@@ -38,6 +42,7 @@ struct Params {
     omega_max: Param<f32>,
     risk_stop: Param<f32>,
     timeout_ms: Param<u64>,
+    release_scans: Param<u64>,
 }
 
 impl Params {
@@ -51,6 +56,9 @@ impl Params {
                 .checked("omega_max", s.omega_max, |v| in_range_above_zero("omega_max", *v, OMEGA_MAX, "rad/s")),
             risk_stop: d.checked("risk_stop", s.risk_stop, |v| in_range_above_zero("risk_stop", *v, 1.0, "")),
             timeout_ms: d.checked("scan_timeout_ms", 1000u64, |v| in_range("scan_timeout_ms", *v, &TIMEOUT_MS, "ms")),
+            release_scans: d.checked("release_scans", u64::from(s.release_scans), |v| {
+                in_range("release_scans", *v, &RELEASE_SCANS, "scans")
+            }),
         }
     }
 }
@@ -71,6 +79,7 @@ struct Safety {
     omega_max: Param<f32>,
     risk_stop: Param<f32>,
     timeout_ms: Param<u64>,
+    release_scans: Param<u64>,
     last: Option<Judgement>,
     last_scan_ns: Option<u64>,
     sent: Option<(f32, f32, u64)>,
@@ -86,6 +95,7 @@ impl Safety {
             cruise: self.cruise.get(),
             omega_max: self.omega_max.get(),
             risk_stop: self.risk_stop.get(),
+            release_scans: u32::try_from(self.release_scans.get()).unwrap_or(u32::MAX),
             ..Settings::default()
         }
     }
@@ -125,7 +135,8 @@ impl Agent for Safety {
         let cmd = setup.output("cmd")?;
         let stop = setup.output("stop")?;
         let situation = setup.output("situation")?;
-        let Params { slow_dist, stop_dist, cruise, omega_max, risk_stop, timeout_ms } = Params::declare(setup);
+        let Params { slow_dist, stop_dist, cruise, omega_max, risk_stop, timeout_ms, release_scans } =
+            Params::declare(setup);
         Ok(Safety {
             scan,
             cmd,
@@ -137,6 +148,7 @@ impl Agent for Safety {
             omega_max,
             risk_stop,
             timeout_ms,
+            release_scans,
             last: None,
             last_scan_ns: None,
             sent: None,
@@ -312,7 +324,7 @@ mod tests {
         let mut t = ParamTable::default();
         let _p = Params::declare(&mut t);
         let keys: Vec<String> = t.snapshot().into_iter().map(|(k, _)| k).collect();
-        assert_eq!(keys.len(), 6, "{keys:?}");
+        assert_eq!(keys.len(), 7, "{keys:?}");
         for key in &keys {
             // values of the parameter's type, refused by its range
             for absurd in ["18446744073709551615", "0"] {
@@ -327,9 +339,14 @@ mod tests {
         // the defaults and the edges are accepted
         let d = Settings::default();
         assert_eq!(t.get("slow_dist").as_deref(), Ok(d.slow_dist.to_string().as_str()));
-        for (key, ok) in
-            [("scan_timeout_ms", "100"), ("scan_timeout_ms", "10000"), ("cruise", "0.8"), ("risk_stop", "1")]
-        {
+        for (key, ok) in [
+            ("scan_timeout_ms", "100"),
+            ("scan_timeout_ms", "10000"),
+            ("cruise", "0.8"),
+            ("risk_stop", "1"),
+            ("release_scans", "1"),
+            ("release_scans", "50"),
+        ] {
             t.set(key, ok).unwrap_or_else(|e| panic!("{key} = {ok}: {e}"));
         }
     }
