@@ -36,6 +36,13 @@ static SWEEP: Once = Once::new();
 /// Prefix of a test robot's `NERVE_HOME` under the temporary directory.
 const HOME_PREFIX: &str = "nerve-test-t";
 
+/// A failed test's home holds this file: the sweep then leaves the home (its
+/// logs, a demo's summary and figures) for reading, for [`KEEP_FOR`].
+pub const KEPT_MARKER: &str = "KEPT-FOR-READING";
+
+/// How long a failed test's home is kept; the first sweep after that removes it.
+pub const KEEP_FOR: Duration = Duration::from_secs(24 * 3600);
+
 /// Prefix of this user's test robots' files in /dev/shm (and under the
 /// iceoryx2 root): `nerve_<uid>_t`.
 fn shm_test_prefix() -> String {
@@ -270,9 +277,11 @@ impl Drop for Robot {
             let _ = std::fs::remove_file(format!("/dev/shm/{f}"));
         }
         // a failed test's home (its logs, a demo's summary and figures) is
-        // kept for reading; a passed test leaves nothing
+        // kept for reading, marked so that later sweeps leave it for a day;
+        // a passed test leaves nothing
         if failed {
-            eprintln!("----- kept for reading: {}", self.home.display());
+            let _ = std::fs::write(self.home.join(KEPT_MARKER), b"");
+            eprintln!("----- kept for reading ({} h): {}", KEEP_FOR.as_secs() / 3600, self.home.display());
         } else if self.owns_home {
             let _ = std::fs::remove_dir_all(&self.home);
         }
@@ -360,6 +369,13 @@ fn proc_stat(pid: u32) -> Option<(String, u32, u32)> {
     Some((state, ppid, session))
 }
 
+/// Whether `home` holds a [`KEPT_MARKER`] younger than [`KEEP_FOR`] (a
+/// marker of unknown age counts as young).
+fn kept_for_reading(home: &std::path::Path) -> bool {
+    std::fs::metadata(home.join(KEPT_MARKER))
+        .is_ok_and(|m| m.modified().ok().and_then(|t| t.elapsed().ok()).is_none_or(|age| age < KEEP_FOR))
+}
+
 /// What [`sweep_dead_test_robots`] did.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
 pub struct Swept {
@@ -403,6 +419,10 @@ fn nerve_process_of(pid: u32, home: &std::path::Path) -> bool {
 /// `NERVE_HOME` is that folder, are killed first), and files
 /// `/dev/shm/nerve_<uid>_t<pid>-...` and under the iceoryx2 root
 /// `/dev/shm/nerve-iox2-<uid>/`. Robots of live test processes are left alone.
+/// A home a failed test kept for reading ([`KEPT_MARKER`]) stays, its
+/// processes killed, until its marker is [`KEEP_FOR`] old: the next test run
+/// must not erase the evidence of the last failure (it did: a CI failure's
+/// kept home was gone by the time it was read).
 /// Called once per test process by the first [`Robot::new`]; safe to call
 /// again.
 pub fn sweep_dead_test_robots() -> Swept {
@@ -455,7 +475,7 @@ pub fn sweep_dead_test_robots() -> Swept {
             reap();
             victims.iter().all(|&p| !alive(p))
         });
-        for home in &homes {
+        for home in homes.iter().filter(|h| !kept_for_reading(h)) {
             if std::fs::remove_dir_all(home).is_ok() {
                 swept.files += 1;
             }
@@ -568,6 +588,19 @@ mod tests {
         std::fs::write(&mine, b"").expect("own shm file");
         let bystander = Command::new(&fake).arg("30").spawn().expect("bystander");
         let seen = (nerve_process_of(daemon.id(), &home), proc_stat(daemon.id()));
+        // two homes the dead test process kept for reading: one failed
+        // today (stays), one two days ago (goes)
+        let kept = std::env::temp_dir().join(format!("nerve-test-t{dead}-1-kept"));
+        let old = std::env::temp_dir().join(format!("nerve-test-t{dead}-2-old"));
+        for h in [&kept, &old] {
+            std::fs::create_dir_all(h.join("logs")).expect("kept home");
+            std::fs::write(h.join(KEPT_MARKER), b"").expect("marker");
+        }
+        std::fs::File::options()
+            .write(true)
+            .open(old.join(KEPT_MARKER))
+            .and_then(|f| f.set_modified(std::time::SystemTime::now() - 2 * KEEP_FOR))
+            .expect("an old marker");
 
         let swept = sweep_dead_test_robots();
         let _ = std::fs::remove_file(&fake);
@@ -583,6 +616,9 @@ mod tests {
         // (the end state above is the same either way)
         assert!(swept.processes >= 1 && swept.files >= 2 || swept.processes == 0, "{swept:?}");
         assert!(mine.exists(), "a live test process's file was removed");
+        assert!(kept.join("logs").is_dir(), "a home kept for reading today was removed");
+        assert!(!old.exists(), "a home kept for reading past KEEP_FOR was left");
+        let _ = std::fs::remove_dir_all(&kept);
         assert!(alive(bystander.id()), "a process of no test home was killed");
         let _ = std::fs::remove_file(&mine);
         sigkill(bystander.id());
