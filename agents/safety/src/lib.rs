@@ -21,7 +21,15 @@
 //!   -30°, -60°, -90°) scores the mean of `range × (1 - risk)` — open *and*
 //!   safe; the robot turns toward the better side, and keeps its previous
 //!   side unless the other is better by `side_margin` (no dithering in
-//!   front of a wall). The turn rate is `omega_max × c`.
+//!   front of a wall). The turn rate is `omega_max × c`. **While stopped
+//!   the side is kept** until the stop is released: a robot stopped against
+//!   a pole turned toward whichever side scored better, the pole moved
+//!   from one right-hand beam to the next (or into a gap between them) as it
+//!   turned, the scores swapped, and it turned back: it rocked between two
+//!   headings against the pole for as long as the run lasted (the
+//!   cooperation run's robot 1, at the target's stand). Turning one way
+//!   on the spot clears the front within a full turn, unless the robot is
+//!   walled in all round.
 //! * **Stop rule** ([`stop_rule`]): stop moving (turning still allowed) when
 //!   the front clearance is under `stop_dist` or the front risk reaches
 //!   `risk_stop`; release only once the clearance exceeds `stop_dist +
@@ -217,7 +225,10 @@ pub fn judge(scan: &SonarScan, s: &Settings, previous: Option<&Judgement>) -> Ju
     let front_risk = FRONT.iter().map(|&i| risk_of(scan, i)).fold(0.0, f32::max);
     let span = (s.slow_dist - s.stop_dist).max(1e-3);
     let c = ((s.slow_dist - front) / span).clamp(0.0, 1.0);
-    let side = choose_side(&ranges, scan, previous.map(|p| p.side), s.side_margin);
+    let side = match previous {
+        Some(p) if p.stop => p.side,
+        _ => choose_side(&ranges, scan, previous.map(|p| p.side), s.side_margin),
+    };
     let (stop, clear_scans) = stop_with_release(front, front_risk, previous, s);
     let (v, omega) = if stop {
         (0.0, side.sign() * s.omega_max * 0.6)
@@ -377,6 +388,37 @@ mod tests {
         // 0 means 1: never a stop that cannot be released
         let zero = Settings { release_scans: 0, ..s };
         assert!(!judge(&clear, &zero, Some(&judge(&close, &zero, None))).stop);
+    }
+
+    #[test]
+    fn a_stopped_robot_keeps_turning_to_the_side_it_chose_until_released() {
+        let s = Settings::default();
+        // a pole against the right front: stop, turn left (the wider side)
+        let mut pole_front = scan(3.0);
+        pole_front.ranges_m[11] = 0.15;
+        pole_front.ranges_m[3] = 1.0; // the left side is narrower than the right's open space
+        let j = judge(&pole_front, &s, None);
+        assert!(j.stop && j.side == Side::Left && j.omega > 0.0, "{j:?}");
+        // a little turn on: the pole sits in a gap, the right side looks far wider; a
+        // fresh choice would turn right, back into the pole
+        let mut pole_gap = scan(3.0);
+        pole_gap.ranges_m[2] = 0.3; // still too close at 60°, in the front clearance
+        pole_gap.ranges_m[1] = 0.6;
+        pole_gap.ranges_m[3] = 0.8;
+        assert_eq!(choose_side(&effective_ranges(&pole_gap, 3.0), &pole_gap, Some(Side::Left), 0.15), Side::Right);
+        let j = judge(&pole_gap, &s, Some(&j));
+        assert!(j.stop && j.side == Side::Left && j.omega > 0.0, "kept its side while stopped: {j:?}");
+        // released, the side is chosen afresh
+        let mut j = j;
+        for _ in 0..s.release_scans {
+            j = judge(&scan(3.0), &s, Some(&j));
+        }
+        assert!(!j.stop, "{j:?}");
+        let mut right_open = scan(3.0);
+        right_open.ranges_m[1] = 0.9;
+        right_open.ranges_m[2] = 0.9;
+        right_open.ranges_m[3] = 0.9;
+        assert_eq!(judge(&right_open, &s, Some(&j)).side, Side::Right);
     }
 
     #[test]
