@@ -151,3 +151,35 @@ fn a_thin_pole_between_two_rays_of_a_beam_echoes() {
     let sim = h1(room(6.0, x, y, 0.0, &pole), 1, NoiseModel::none());
     assert!(sim.sonar_true_ranges()[0].expect("the wall") > 4.0);
 }
+
+/// The ring's blind spots, which the safety monitor must live with
+/// (agents/safety, "release after clear scans in a row"): twelve beams of
+/// ±12.5° every 30° leave gaps, and near the rim, where the transducers sit
+/// 13 cm apart, the gaps are wide. A tube (radius 5 cm) whose centre is
+/// 0.31-0.40 m from the robot's centre (within 0.15 m of the rim) at ±15° or
+/// ±45° echoes in no front beam; at 0°, ±30° and ±60° it does, and at 0.5 m
+/// only the gaps' middle (±15°, ±45°) stays blind. Should the beams change,
+/// this says what the safety monitor was tuned against.
+#[test]
+fn a_tube_close_to_the_rim_between_two_beams_echoes_in_none() {
+    let (x, y) = (3.0, 3.0);
+    let seen = |d: f64, bearing_deg: f64| {
+        let b = bearing_deg.to_radians();
+        let tube = format!("[[checkpoint]]\nid = 1\nposition = [{}, {}]\n", x + d * b.cos(), y + d * b.sin());
+        let sim = h1(room(6.0, x, y, 0.0, &tube), 1, NoiseModel::none());
+        let r = sim.sonar_true_ranges();
+        // the front sector and the flanks (the safety monitor's front clearance)
+        [10usize, 11, 0, 1, 2].iter().any(|&i| r[i].is_some_and(|m| m < d))
+    };
+    for d in [0.31, 0.35, 0.40] {
+        for b in [-45.0, -15.0, 15.0, 45.0] {
+            assert!(!seen(d, b), "a tube {d} m away at {b}° was seen: the ring has no blind spot there any more");
+        }
+        for b in [-60.0, -30.0, 0.0, 30.0, 60.0] {
+            assert!(seen(d, b), "a tube {d} m away at {b}° was not seen");
+        }
+    }
+    for b in [-48.0, -42.0, -18.0, -12.0, 12.0, 18.0, 42.0, 48.0] {
+        assert!(seen(0.5, b), "a tube 0.5 m away at {b}° was not seen");
+    }
+}
