@@ -7,7 +7,8 @@
 //! * output `stop` (`nerve::SafetyStop`): stop moving — not turning — when
 //!   something is too close or approaching fast; repeated every cycle while
 //!   it holds (each holds `hold_ms`), released once clear in
-//!   `release_scans` scans in a row (default 4; see the library for why);
+//!   `release_scans` scans in a row (default 1; see the library for when
+//!   more);
 //! * output `situation` (`nerve::Situation`): the danger level for the
 //!   decision maker.
 //!
