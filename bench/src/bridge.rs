@@ -38,7 +38,7 @@ use crate::bridge_agents::{SETTLE, read_rows, take_sink_batch};
 use crate::hop::{NervePing, size_tag, spawn_bench_agent};
 use crate::machine::{Machine, command_line};
 use crate::payloads::label;
-use crate::procs::{ChildGuard, Robot, self_command, wait_file};
+use crate::procs::{ChildGuard, Robot, self_command, wait_file_after};
 use crate::stats::{Rounds, Summary, median_f64, ratio, us};
 use crate::with_payload;
 use anyhow::{Context as _, Result, anyhow, bail};
@@ -328,7 +328,7 @@ impl SdkPath {
         a.run(&["suspend", &self.src])?;
         a.run(&["resume", &self.src])?;
         let sent_path = self.src_dir.join(format!("sent-{}.txt", self.src_next));
-        if !wait_file(&sent_path, expected + Duration::from_secs(20), &mut [])? {
+        if !wait_file_after(&sent_path, expected, expected + Duration::from_secs(20), &mut [])? {
             bail!("the sender {} wrote no batch {} ({})", self.src, self.src_next, sent_path.display());
         }
         let v = read_values(&sent_path)?;
@@ -578,7 +578,7 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
             children.push(spawn_bench_agent(ra, "pong", &pong, size, opts.hop_count, &dir)?);
             names_a.push(ping.clone());
             names_a.push(pong);
-            trio.push(NervePing { name: ping, dir, next: 0 });
+            trio.push(NervePing::new(ping, dir));
         }
         let trio: [NervePing; 3] = trio.try_into().map_err(|_| anyhow!("internal: three pairs per size"))?;
         pings.push((size, trio));

@@ -209,17 +209,12 @@ impl DoraRun {
 
     /// Waits up to `timeout` for the exit; `None` when it did not come.
     fn wait(&mut self, timeout: Duration) -> Result<Option<std::process::ExitStatus>> {
-        let t0 = Instant::now();
-        loop {
-            if let Some(s) = self.child.try_wait().context("cannot wait for `dora run`")? {
-                self.reaped = true;
-                return Ok(Some(s));
-            }
-            if t0.elapsed() > timeout {
-                return Ok(None);
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        // asleep until it ends: a poll every few ms would run beside the
+        // batch, at this process's real-time priority
+        crate::procs::sleep_until_exit(&mut self.child, timeout)?;
+        let status = self.child.try_wait().context("cannot wait for `dora run`")?;
+        self.reaped = status.is_some();
+        Ok(status)
     }
 }
 

@@ -74,7 +74,7 @@ use crate::futex::FutexPing;
 use crate::idle::IdleShare;
 use crate::machine::{Machine, command_line};
 use crate::payloads::{BenchPayload, SIZES, label};
-use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file};
+use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file_after};
 use crate::raw::{Mode, Side};
 use crate::stats::{Rounds, Summary, median_f64, ratio, ratio_cell, verdict};
 use crate::uds::UdsPing;
@@ -519,9 +519,17 @@ pub(crate) struct NervePing {
     pub(crate) name: String,
     pub(crate) dir: PathBuf,
     pub(crate) next: u64,
+    /// how long this process sleeps before it looks for the batch's file:
+    /// three quarters of the last batch's time, so that its polling runs
+    /// beside the batch's end only
+    quiet: Duration,
 }
 
 impl NervePing {
+    pub(crate) fn new(name: String, dir: PathBuf) -> Self {
+        NervePing { name, dir, next: 0, quiet: Duration::ZERO }
+    }
+
     /// Runs one batch; returns its round-trip times, ns.
     pub(crate) fn run_batch(&mut self, robot: &Robot) -> Result<Vec<u64>> {
         Pinger::batch(self, robot, 0)
@@ -534,8 +542,10 @@ impl Pinger for NervePing {
         let path = self.dir.join(format!("batch-{}.txt", self.next));
         for attempt in 0..3 {
             robot.run(&["suspend", &self.name])?;
+            let t0 = Instant::now();
             robot.run(&["resume", &self.name])?;
-            if wait_file(&path, Duration::from_secs(30), &mut [])? {
+            if wait_file_after(&path, self.quiet, Duration::from_secs(30), &mut [])? {
+                self.quiet = t0.elapsed() * 3 / 4;
                 let v = read_values(&path)?;
                 let _ = std::fs::remove_file(&path);
                 return Ok(v);
@@ -567,7 +577,7 @@ impl Pinger for NervePeriodic {
         robot.run(&["resume", &self.src])?;
         let sent = self.src_dir.join(format!("sent-{k}.txt"));
         let expected = Duration::from_micros(dora::PERIOD_US * self.count as u64);
-        if !wait_file(&sent, expected + Duration::from_secs(20), &mut [])? {
+        if !wait_file_after(&sent, expected, expected + Duration::from_secs(20), &mut [])? {
             bail!("the sender {} wrote no batch {k} ({})", self.src, sent.display());
         }
         let _ = std::fs::remove_file(&sent);
@@ -793,41 +803,25 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         pingers.push((
             size,
             "nerve-pinned",
-            Box::new(NervePing {
-                name: agent_name("pin-ping", size),
-                dir: opts.work.join(agent_name("nerve-pinned", size)),
-                next: 0,
-            }),
+            Box::new(NervePing::new(agent_name("pin-ping", size), opts.work.join(agent_name("nerve-pinned", size)))),
         ));
         pingers.push((
             size,
             "nerve",
-            Box::new(NervePing {
-                name: agent_name("ping", size),
-                dir: opts.work.join(agent_name("nerve", size)),
-                next: 0,
-            }),
+            Box::new(NervePing::new(agent_name("ping", size), opts.work.join(agent_name("nerve", size)))),
         ));
         if python.is_some() {
             pingers.push((
                 size,
                 "nerve-python",
-                Box::new(NervePing {
-                    name: agent_name("pyping", size),
-                    dir: opts.work.join(agent_name("nerve-python", size)),
-                    next: 0,
-                }),
+                Box::new(NervePing::new(agent_name("pyping", size), opts.work.join(agent_name("nerve-python", size)))),
             ));
         }
         pingers.push((
             size,
             "nerve-poll",
             Box::new(NervePollPing {
-                ping: NervePing {
-                    name: agent_name("poll-ping", size),
-                    dir: opts.work.join(agent_name("nerve-poll", size)),
-                    next: 0,
-                },
+                ping: NervePing::new(agent_name("poll-ping", size), opts.work.join(agent_name("nerve-poll", size))),
                 pong: agent_name("poll-pong", size),
             }),
         ));

@@ -54,7 +54,7 @@ pub fn hop_with_and_without(
             children.push(spawn_bench_agent(robot, role, name, size, count, &dir)?);
             names.push(name.clone());
         }
-        pings.push((size, NervePing { name: p.clone(), dir: work.join(&p), next: 0 }));
+        pings.push((size, NervePing::new(p.clone(), work.join(&p))));
         robot.wait_registered(&[p.as_str(), q.as_str()], Duration::from_secs(20))?;
         robot.run(&["connect", "--allow-cycle", &format!("{p}/out"), &format!("{q}/in")])?;
         robot.run(&["connect", "--allow-cycle", &format!("{q}/out"), &format!("{p}/in")])?;

@@ -243,7 +243,7 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
                 names.push(name.clone());
             }
             let ping = ring.members[0].1.clone();
-            let (plain, held) = Row::both(Box::new(NervePing { dir: opts.work.join(&ping), name: ping, next: 0 }));
+            let (plain, held) = Row::both(Box::new(NervePing::new(ping.clone(), opts.work.join(&ping))));
             paths.push((size, ring.path, ring.hops(), Box::new(plain)));
             if pm_qos {
                 paths.push((size, ring.path_pmqos, ring.hops(), Box::new(held)));
