@@ -24,6 +24,7 @@ use nix::sys::signal::Signal;
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 /// The start of the file name of every nerve executable: the `nerve`
 /// program (CLI and router) and the agents `nerve-<kind>`.
@@ -135,9 +136,16 @@ fn pidfd_open(pid: u32) -> Result<Option<OwnedFd>, ProcessError> {
 
 /// Whether the process of `pidfd` has exited (the pidfd reads as readable then).
 fn pidfd_exited(pidfd: &OwnedFd) -> bool {
+    pidfd_exited_within(pidfd, 0)
+}
+
+/// Whether the process of `pidfd` exits within `ms` milliseconds: asleep in
+/// `poll` until then, no wake-up in between (an interrupted poll counts as
+/// not yet).
+fn pidfd_exited_within(pidfd: &OwnedFd, ms: libc::c_int) -> bool {
     let mut p = libc::pollfd { fd: pidfd.as_raw_fd(), events: libc::POLLIN, revents: 0 };
-    // SAFETY: one valid pollfd, no wait.
-    let rc = unsafe { libc::poll(&mut p, 1, 0) };
+    // SAFETY: one valid pollfd.
+    let rc = unsafe { libc::poll(&mut p, 1, ms) };
     rc > 0 && p.revents & (libc::POLLIN | libc::POLLHUP | libc::POLLERR | libc::POLLNVAL) != 0
 }
 
@@ -191,6 +199,33 @@ impl ProcessHandle {
         match read_stat(self.pid) {
             Some(s) => s.start_time == self.start_time && !matches!(s.state, 'Z' | 'X' | 'x'),
             None => false,
+        }
+    }
+
+    /// Waits up to `timeout` for the process to exit (a zombie has); true
+    /// when it has. With a pidfd the caller sleeps until the exit, without
+    /// waking in between (a benchmark's harness waits this way beside what
+    /// it measures); without one, it looks every 5 ms.
+    pub fn wait_exit(&self, timeout: Duration) -> bool {
+        let t0 = Instant::now();
+        loop {
+            let left = timeout.saturating_sub(t0.elapsed());
+            let exited = match &self.pidfd {
+                Some(fd) => {
+                    let ms = libc::c_int::try_from(left.as_millis().saturating_add(1)).unwrap_or(libc::c_int::MAX);
+                    pidfd_exited_within(fd, ms)
+                }
+                None => !self.is_alive(),
+            };
+            if exited {
+                return true;
+            }
+            if left.is_zero() {
+                return false;
+            }
+            if self.pidfd.is_none() {
+                std::thread::sleep(left.min(Duration::from_millis(5)));
+            }
         }
     }
 
@@ -300,6 +335,7 @@ mod tests {
     use nix::sys::signal::Signal;
     use std::path::Path;
     use std::process::{Child, Command};
+    use std::time::{Duration, Instant};
 
     /// A `sleep` child, killed and reaped when dropped.
     struct Sleeper(Child);
@@ -321,6 +357,30 @@ mod tests {
             let _ = self.0.kill();
             let _ = self.0.wait();
         }
+    }
+
+    /// `wait_exit` returns at the exit (the child is left to reap), with a
+    /// pidfd and without one, and gives up at its timeout.
+    #[test]
+    fn wait_exit_returns_at_the_exit_or_at_the_timeout() {
+        let mut short = Command::new("sleep").arg("0.2").spawn().expect("start sleep");
+        let handle = ProcessHandle::take(short.id()).expect("sleep runs");
+        let no_pidfd = ProcessHandle::from_parts(short.id(), handle.start_time());
+        let t0 = Instant::now();
+        assert!(handle.wait_exit(Duration::from_secs(20)), "it exited");
+        assert!(t0.elapsed() < Duration::from_secs(15), "at the exit, not at the timeout: {:?}", t0.elapsed());
+        assert!(no_pidfd.wait_exit(Duration::from_secs(20)), "a zombie by /proc");
+        assert!(short.try_wait().is_ok_and(|s| s.is_some()), "left for the caller to reap");
+
+        let mut sleeper = Sleeper::start();
+        let handle = ProcessHandle::take(sleeper.pid()).expect("sleep runs");
+        let no_pidfd = ProcessHandle::from_parts(sleeper.pid(), handle.start_time());
+        for h in [&handle, &no_pidfd] {
+            let t0 = Instant::now();
+            assert!(!h.wait_exit(Duration::from_millis(150)), "still running");
+            assert!(t0.elapsed() >= Duration::from_millis(150));
+        }
+        assert!(sleeper.running());
     }
 
     #[test]

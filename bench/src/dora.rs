@@ -37,6 +37,7 @@
 
 use crate::agents::read_values;
 use crate::procs::spawn_dying_with_us;
+use agent_sdk::process::ProcessHandle;
 use anyhow::{Context as _, Result, bail};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
@@ -210,8 +211,11 @@ impl DoraRun {
     /// Waits up to `timeout` for the exit; `None` when it did not come.
     fn wait(&mut self, timeout: Duration) -> Result<Option<std::process::ExitStatus>> {
         // asleep until it ends: a poll every few ms would run beside the
-        // batch, at this process's real-time priority
-        crate::procs::sleep_until_exit(&mut self.child, timeout)?;
+        // batch, at this process's real-time priority (not taken: it has
+        // exited already)
+        if let Ok(run) = ProcessHandle::take(self.child.id()) {
+            run.wait_exit(timeout);
+        }
         let status = self.child.try_wait().context("cannot wait for `dora run`")?;
         self.reaped = status.is_some();
         Ok(status)

@@ -243,7 +243,8 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
                 names.push(name.clone());
             }
             let ping = ring.members[0].1.clone();
-            let (plain, held) = Row::both(Box::new(NervePing::new(ping.clone(), opts.work.join(&ping))));
+            let dir = opts.work.join(&ping);
+            let (plain, held) = Row::both(Box::new(NervePing::new(ping, dir)));
             paths.push((size, ring.path, ring.hops(), Box::new(plain)));
             if pm_qos {
                 paths.push((size, ring.path_pmqos, ring.hops(), Box::new(held)));

@@ -9,7 +9,6 @@
 use anyhow::{Context as _, Result, bail};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
-use std::os::fd::{AsRawFd as _, FromRawFd as _};
 use std::os::unix::process::CommandExt as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};
@@ -288,43 +287,6 @@ pub fn wait_file_after(
     wait_file(path, timeout.saturating_sub(quiet), children)
 }
 
-/// Sleeps until `child` has exited or `timeout` has passed, without waking
-/// in between (a pidfd); does not reap it. Where the kernel has no pidfd
-/// (before Linux 5.3), polls every 5 ms instead.
-pub fn sleep_until_exit(child: &mut Child, timeout: Duration) -> Result<()> {
-    let Ok(pid) = libc::pid_t::try_from(child.id()) else { bail!("internal: pid {} out of range", child.id()) };
-    // SAFETY: a plain system call with valid arguments; the descriptor it
-    // returns is owned below.
-    let fd = unsafe { libc::syscall(libc::SYS_pidfd_open, pid, 0) };
-    let Ok(fd) = i32::try_from(fd) else { bail!("internal: pidfd {fd} out of range") };
-    if fd < 0 {
-        let t0 = Instant::now();
-        while t0.elapsed() < timeout && child.try_wait().context("cannot wait for a child")?.is_none() {
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        return Ok(());
-    }
-    // SAFETY: `fd` was just opened and is owned by nothing else.
-    let fd = unsafe { std::os::fd::OwnedFd::from_raw_fd(fd) };
-    let t0 = Instant::now();
-    loop {
-        let left = timeout.saturating_sub(t0.elapsed());
-        if left.is_zero() {
-            return Ok(());
-        }
-        let mut p = libc::pollfd { fd: fd.as_raw_fd(), events: libc::POLLIN, revents: 0 };
-        let ms = i32::try_from(left.as_millis().saturating_add(1)).unwrap_or(i32::MAX);
-        // SAFETY: one valid pollfd.
-        let rc = unsafe { libc::poll(&mut p, 1, ms) };
-        if rc > 0 {
-            return Ok(());
-        }
-        if rc < 0 && std::io::Error::last_os_error().kind() != std::io::ErrorKind::Interrupted {
-            return Err(std::io::Error::last_os_error()).context("cannot poll a child's pidfd");
-        }
-    }
-}
-
 /// Waits for a file to appear, watching `children` for early exits.
 pub fn wait_file(path: &Path, timeout: Duration, children: &mut [&mut ChildGuard]) -> Result<bool> {
     let t0 = Instant::now();
@@ -392,27 +354,6 @@ pub fn exit_status(what: &str, r: Result<()>) -> ExitCode {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn sleep_until_exit_returns_at_the_exit_and_leaves_it_to_reap() {
-        let mut child = Command::new("sleep").arg("0.2").spawn().unwrap();
-        let t0 = Instant::now();
-        sleep_until_exit(&mut child, Duration::from_secs(20)).unwrap();
-        // it returned at the exit, not at the timeout
-        assert!(t0.elapsed() < Duration::from_secs(15), "{:?}", t0.elapsed());
-        assert!(child.try_wait().unwrap().is_some(), "the child has exited and is reaped here");
-    }
-
-    #[test]
-    fn sleep_until_exit_gives_up_at_the_timeout() {
-        let mut child = Command::new("sleep").arg("30").spawn().unwrap();
-        let t0 = Instant::now();
-        sleep_until_exit(&mut child, Duration::from_millis(150)).unwrap();
-        assert!(t0.elapsed() >= Duration::from_millis(150));
-        assert!(child.try_wait().unwrap().is_none(), "still running");
-        child.kill().unwrap();
-        child.wait().unwrap();
-    }
 
     #[test]
     fn wait_file_after_sleeps_through_the_quiet_time_then_finds_the_file() {
