@@ -338,15 +338,19 @@ pub(crate) fn belongs_to(pid: u32, world: &World) -> Option<ProcessHandle> {
     ours.then_some(handle)
 }
 
+/// Waits up to `grace` for `procs` to exit; returns those still running.
+/// It sleeps on each process's exit in turn ([`ProcessHandle::wait_exit`],
+/// on its pidfd) rather than looking at all of them every few milliseconds:
+/// the whole wait is bounded by `grace`, and a robot that stops at once is
+/// seen to have stopped at once.
 fn wait_gone(procs: &[ProcessHandle], grace: Duration) -> Vec<ProcessHandle> {
-    let t0 = Instant::now();
-    loop {
-        let alive: Vec<ProcessHandle> = procs.iter().filter(|p| p.is_alive()).cloned().collect();
-        if alive.is_empty() || t0.elapsed() >= grace {
-            return alive;
+    let deadline = Instant::now() + grace;
+    for p in procs {
+        if !p.wait_exit(deadline.saturating_duration_since(Instant::now())) {
+            break;
         }
-        std::thread::sleep(Duration::from_millis(20));
     }
+    procs.iter().filter(|p| p.is_alive()).cloned().collect()
 }
 
 fn signal_all(procs: &[ProcessHandle], sig: Signal) {
@@ -537,6 +541,28 @@ mod tests {
             assert!(t0.elapsed() < Duration::from_secs(10), "pid {pid} never showed {needle:?}");
             std::thread::sleep(Duration::from_millis(10));
         }
+    }
+
+    /// `wait_gone` returns as soon as every process has exited, and when
+    /// one runs on, it gives up at the grace and names that one only.
+    #[test]
+    fn wait_gone_returns_at_the_last_exit_or_names_who_runs_on() {
+        use agent_sdk::process::ProcessHandle;
+        let spawn = |secs: &str| Reaped(Command::new("sleep").arg(secs).spawn().expect("sleep"));
+        let handle = |c: &Reaped| ProcessHandle::take(c.0.id()).expect("a handle");
+
+        let quick = [spawn("0.1"), spawn("0.3")];
+        let procs: Vec<ProcessHandle> = quick.iter().map(handle).collect();
+        let t0 = Instant::now();
+        assert!(super::wait_gone(&procs, Duration::from_secs(30)).is_empty(), "both exited");
+        assert!(t0.elapsed() < Duration::from_secs(20), "it returned at the exits, not at the grace");
+
+        let (goes, stays) = (spawn("0.1"), spawn("30"));
+        let mixed = [handle(&goes), handle(&stays)];
+        let t0 = Instant::now();
+        let left = super::wait_gone(&mixed, Duration::from_millis(300));
+        assert!(t0.elapsed() >= Duration::from_millis(300), "it waited the whole grace");
+        assert_eq!(left.iter().map(ProcessHandle::pid).collect::<Vec<_>>(), vec![stays.0.id()]);
     }
 
     /// A stale pid file whose pid now names a process of the same user
