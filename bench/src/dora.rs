@@ -23,6 +23,11 @@
 //!   reaches its event loop and sends it back in a 16-byte reply; ping writes
 //!   the one-way latencies.
 //!
+//! A batch may keep both nodes on one CPU (`taskset -c CPU` starts each
+//! node, so that `dora run` and its daemon stay free, as nerve's router does
+//! beside its pinned agents): the rows `dora-5ms-pinned`, beside nerve's
+//! `nerve-5ms-pinned`.
+//!
 //! The ping drops its first samples (a fresh dataflow: dora's shared-memory
 //! pool, the Arrow schema, the first wake-ups) before the hop scenario drops
 //! its own first few of every batch. Both nodes run under SCHED_FIFO priority
@@ -103,6 +108,8 @@ pub struct DoraPeer {
     pub version: String,
     /// the cache it came from
     pub cache: PathBuf,
+    /// `taskset` (util-linux), which keeps a node on one CPU; None: not found
+    taskset: Option<PathBuf>,
     work: PathBuf,
     verbose: bool,
     next: Cell<u64>,
@@ -132,30 +139,41 @@ impl DoraPeer {
         // relative `--out` (the default, bench-results) named files it could not find
         let work = std::path::absolute(work.join("dora")).context("cannot make the work folder's path absolute")?;
         std::fs::create_dir_all(&work).with_context(|| format!("cannot create {}", work.display()))?;
-        Ok(DoraPeer { dora, ping, pong, version, cache: dir, work, verbose, next: Cell::new(0) })
+        let taskset = on_path("taskset");
+        Ok(DoraPeer { dora, ping, pong, version, cache: dir, taskset, work, verbose, next: Cell::new(0) })
     }
 
-    /// One `dora run` of `count` kept samples of `size` bytes in `pattern`;
-    /// returns them, ns (round trips or one-way latencies, see [`Pattern`]).
-    pub fn batch(&self, size: usize, pattern: Pattern, count: usize) -> Result<Vec<u64>> {
+    /// Whether batches can keep both nodes on one CPU (`taskset` was found).
+    pub fn can_pin(&self) -> bool {
+        self.taskset.is_some()
+    }
+
+    /// One `dora run` of `count` kept samples of `size` bytes in `pattern`,
+    /// both nodes kept on CPU `cpu` if given; returns them, ns (round trips
+    /// or one-way latencies, see [`Pattern`]).
+    pub fn batch(&self, size: usize, pattern: Pattern, count: usize, cpu: Option<usize>) -> Result<Vec<u64>> {
         self.next.set(self.next.get() + 1);
         let dir = self.work.join(format!("run-{}", self.next.get()));
         std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let r = self.run_in(&dir, size, pattern, count);
+        let r = self.run_in(&dir, size, pattern, count, cpu);
         if r.is_ok() || !self.verbose {
             let _ = std::fs::remove_dir_all(&dir);
         }
         r
     }
 
-    fn run_in(&self, dir: &Path, size: usize, pattern: Pattern, count: usize) -> Result<Vec<u64>> {
+    fn run_in(&self, dir: &Path, size: usize, pattern: Pattern, count: usize, cpu: Option<usize>) -> Result<Vec<u64>> {
         let warmup = match pattern {
             Pattern::PingPong => WARMUP_PINGPONG,
             Pattern::Periodic => WARMUP_PERIODIC,
         };
         let out = dir.join("samples.txt");
         let yml = dir.join("dataflow.yml");
-        let text = dataflow(&self.ping, &self.pong, dir, &out, size, pattern, count, warmup)?;
+        let pin = match cpu {
+            Some(c) => Some((self.taskset.as_deref().context("no `taskset` to keep the dora nodes on one CPU")?, c)),
+            None => None,
+        };
+        let text = dataflow(&self.ping, &self.pong, pin, dir, &out, size, pattern, count, warmup)?;
         std::fs::write(&yml, text).with_context(|| format!("cannot write {}", yml.display()))?;
 
         // generous bounds: dora's slowest round trip here is milliseconds
@@ -326,11 +344,19 @@ fn quoted(s: &str) -> String {
     serde_json::Value::String(s.to_owned()).to_string()
 }
 
-/// The dataflow of one batch.
+/// `name` in a folder of `PATH`, if there.
+fn on_path(name: &str) -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path).map(|d| d.join(name)).find(|p| p.is_file())
+}
+
+/// The dataflow of one batch; with `pin` (`taskset`, CPU), each node is
+/// started by `taskset -c CPU`, which keeps it on that CPU and execs it.
 #[allow(clippy::too_many_arguments)]
 fn dataflow(
     ping: &Path,
     pong: &Path,
+    pin: Option<(&Path, usize)>,
     pid_dir: &Path,
     out: &Path,
     size: usize,
@@ -340,6 +366,15 @@ fn dataflow(
 ) -> Result<String> {
     let s = |p: &Path| -> Result<String> {
         p.to_str().map(quoted).with_context(|| format!("{} is not UTF-8", p.display()))
+    };
+    // `path:` and, when pinned, `args:` (dora splits them at white space)
+    let start = |exe: &Path| -> Result<String> {
+        let Some((taskset, cpu)) = pin else { return s(exe) };
+        let e = exe.to_str().with_context(|| format!("{} is not UTF-8", exe.display()))?;
+        if e.contains(char::is_whitespace) {
+            bail!("cannot pin the dora node {e}: dora splits a node's arguments at white space");
+        }
+        Ok(format!("{}\n    args: {}", s(taskset)?, quoted(&format!("-c {cpu} {e}"))))
     };
     let common = format!(
         "      NERVE_DORA_MODE: {}\n      NERVE_DORA_FIFO: \"{FIFO_PRIORITY}\"\n      NERVE_DORA_PID_DIR: {}\n",
@@ -368,8 +403,8 @@ fn dataflow(
              outputs:\n      \
                - out\n    \
              env:\n{common}",
-        ping = s(ping)?,
-        pong = s(pong)?,
+        ping = start(ping)?,
+        pong = start(pong)?,
         out = s(out)?,
     ))
 }
@@ -383,6 +418,7 @@ mod tests {
         let d = dataflow(
             Path::new("/c/ping"),
             Path::new("/c/pong"),
+            None,
             Path::new("/w/run-1"),
             Path::new("/w/run-1/samples.txt"),
             230_400,
@@ -396,7 +432,20 @@ mod tests {
         assert!(d.contains("echo: pong/out") && d.contains("in: ping/out"), "{d}");
         assert!(d.contains("NERVE_DORA_SIZE: \"230400\"") && d.contains("NERVE_DORA_COUNT: \"200\""), "{d}");
         assert_eq!(d.matches("NERVE_DORA_MODE: \"periodic\"").count(), 2, "{d}");
-        assert!(!d.contains("build:"), "{d}");
+        assert!(!d.contains("build:") && !d.contains("args:"), "{d}");
+    }
+
+    #[test]
+    fn a_pinned_dataflow_starts_each_node_through_taskset_on_the_cpu() {
+        let taskset = Path::new("/usr/bin/taskset");
+        let (ping, pong) = (Path::new("/c/ping"), Path::new("/c/pong"));
+        let (dir, out) = (Path::new("/w/run-1"), Path::new("/w/run-1/samples.txt"));
+        let d = dataflow(ping, pong, Some((taskset, 1)), dir, out, 8, Pattern::Periodic, 200, 10).expect("a dataflow");
+        assert_eq!(d.matches("path: \"/usr/bin/taskset\"").count(), 2, "{d}");
+        assert!(d.contains("args: \"-c 1 /c/ping\"") && d.contains("args: \"-c 1 /c/pong\""), "{d}");
+        let spaced = Path::new("/c/my ping");
+        let e = dataflow(spaced, pong, Some((taskset, 1)), dir, out, 8, Pattern::Periodic, 200, 10);
+        assert!(e.is_err_and(|e| e.to_string().contains("white space")));
     }
 
     #[test]

@@ -39,6 +39,14 @@
 //! (`dora-pmqos`, `dora-5ms-pmqos`, `nerve-5ms-pmqos`, below), so that dora
 //! and nerve are compared under the same settings both ways.
 //!
+//! `nerve-5ms-pinned` and `dora-5ms-pinned` (and their `-pmqos` rows) are
+//! dora's pattern with both ends kept on one CPU ([`PINNED_CPU`]): nerve's
+//! sender and sink with `--cpus`, dora's two nodes started by `taskset`;
+//! the router and dora's daemon stay free. A sample every 5 ms wakes a sink
+//! whose CPU has been idle for 5 ms; on one CPU the sink is woken by the
+//! sender's own, still warm, CPU instead. What that buys each system is the
+//! placement question of a sparse stream.
+//!
 //! `nerve-pinned` and `futex-pinned` are the pairs with both ends kept on
 //! one CPU (`--cpus 0` for the agents; the futex ping thread for its batch):
 //! what placement buys, without PM QoS.
@@ -114,12 +122,31 @@ pub const TRANSPORTS: [&str; 19] = [
 /// The CPU the `-pinned` rows keep both ends on.
 pub(crate) const PINNED_CPU: usize = 0;
 /// The transports measured again under a PM QoS bound of 0 µs (row `T-pmqos`).
-const UNDER_PM_QOS: [&str; 8] =
-    ["nerve", "nerve-python", "iox2-waitset", "uds", "futex", "dora", "nerve-5ms", "dora-5ms"];
+const UNDER_PM_QOS: [&str; 10] = [
+    "nerve",
+    "nerve-python",
+    "iox2-waitset",
+    "uds",
+    "futex",
+    "dora",
+    "nerve-5ms",
+    "dora-5ms",
+    "nerve-5ms-pinned",
+    "dora-5ms-pinned",
+];
 /// nerve's round trip (with its default PM QoS bound) may be this many times the futex floor's (issue 17).
 pub const FUTEX_TARGET: f64 = 1.5;
 /// The rows in dora's pattern (one way, a sample every 5 ms), in table order.
-pub const PERIODIC: [&str; 4] = ["nerve-5ms", "dora-5ms", "nerve-5ms-pmqos", "dora-5ms-pmqos"];
+pub const PERIODIC: [&str; 8] = [
+    "nerve-5ms",
+    "dora-5ms",
+    "nerve-5ms-pmqos",
+    "dora-5ms-pmqos",
+    "nerve-5ms-pinned",
+    "dora-5ms-pinned",
+    "nerve-5ms-pinned-pmqos",
+    "dora-5ms-pinned-pmqos",
+];
 /// nerve may be this much slower than raw iceoryx2 (the issue's target).
 pub const TARGET_RATIO: f64 = 1.1;
 /// A Python agent's round trip may be this many times a Rust agent's (issue 15).
@@ -220,6 +247,13 @@ pub struct HopRatio {
     pub dora_5ms_pmqos_vs_nerve_5ms_pmqos_p50: Option<f64>,
     /// whether both ratios under the bound are at least [`DORA_TARGET`]
     pub dora_target_met_pmqos: Option<bool>,
+    /// dora-5ms-pinned p50 / nerve-5ms-pinned p50: one way every 5 ms, each
+    /// system's two ends on one CPU, no bound (None without the rows)
+    pub dora_5ms_pinned_vs_nerve_5ms_pinned_p50: Option<f64>,
+    /// dora-5ms-pinned-pmqos p50 / nerve-5ms-pinned-pmqos p50: the same under the bound
+    pub dora_5ms_pinned_pmqos_vs_nerve_5ms_pinned_pmqos_p50: Option<f64>,
+    /// nerve-5ms-pmqos p50 / nerve-5ms-pinned-pmqos p50: what one CPU for both ends buys nerve in dora's pattern
+    pub pinned_gain_nerve_5ms_pmqos: Option<f64>,
     /// dora p50 / nerve-pmqos p50: each as it runs by default (dora holds no
     /// bound, nerve's agents hold 0 µs); not the same settings
     pub dora_vs_nerve_pmqos_p50: Option<f64>,
@@ -593,16 +627,19 @@ struct DoraPinger {
     size: usize,
     pattern: Pattern,
     count: Option<usize>,
+    /// both nodes kept on this CPU
+    cpu: Option<usize>,
 }
 
 impl Pinger for DoraPinger {
     fn batch(&mut self, _robot: &Robot, count: usize) -> Result<Vec<u64>> {
-        self.peer.batch(self.size, self.pattern, self.count.unwrap_or(count))
+        self.peer.batch(self.size, self.pattern, self.count.unwrap_or(count), self.cpu)
     }
 }
 
 /// Starts a sender or sink of the `bridge` scenario (`sub`: `__agent-bsend`
-/// or `__agent-bsink`) in `robot`, writing its batch files into `dir`.
+/// or `__agent-bsink`) in `robot`, writing its batch files into `dir`, kept
+/// on CPU `cpu` if given.
 fn spawn_periodic_agent(
     robot: &Robot,
     sub: &str,
@@ -610,9 +647,14 @@ fn spawn_periodic_agent(
     size: usize,
     count: usize,
     dir: &Path,
+    cpu: Option<usize>,
 ) -> Result<ChildGuard> {
     let mut cmd = self_command(sub)?;
-    cmd.args(["--robot", &robot.name, "--name", name, "--"]);
+    cmd.args(["--robot", &robot.name, "--name", name]);
+    if let Some(cpu) = cpu {
+        cmd.args(["--cpus", &cpu.to_string()]);
+    }
+    cmd.arg("--");
     cmd.args(["--size", &size.to_string(), "--count", &count.to_string()]);
     cmd.args(["--interval-us", &dora::PERIOD_US.to_string()]);
     cmd.arg("--out").arg(dir);
@@ -733,11 +775,16 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             names.extend([ping, pong]);
         }
         if dora_peer.is_some() {
-            for (sub, role) in [("__agent-bsend", "psend"), ("__agent-bsink", "psink")] {
+            for (sub, role, cpu) in [
+                ("__agent-bsend", "psend", None),
+                ("__agent-bsink", "psink", None),
+                ("__agent-bsend", "pin-psend", Some(PINNED_CPU)),
+                ("__agent-bsink", "pin-psink", Some(PINNED_CPU)),
+            ] {
                 let name = agent_name(role, size);
                 let dir = opts.work.join(&name);
                 std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-                children.push(spawn_periodic_agent(&robot, sub, &name, size, periodic_count, &dir)?);
+                children.push(spawn_periodic_agent(&robot, sub, &name, size, periodic_count, &dir, cpu)?);
                 names.push(name);
             }
         }
@@ -761,8 +808,10 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
         robot.run(&["connect", &format!("{pong}/out"), &format!("{ping}/in")])?;
         if dora_peer.is_some() {
-            let (src, sink) = (agent_name("psend", size), agent_name("psink", size));
-            robot.run(&["connect", &format!("{src}/out"), &format!("{sink}/in")])?;
+            for (src, sink) in [("psend", "psink"), ("pin-psend", "pin-psink")] {
+                let (src, sink) = (agent_name(src, size), agent_name(sink, size));
+                robot.run(&["connect", &format!("{src}/out"), &format!("{sink}/in")])?;
+            }
         }
     }
     eprintln!("hop: nerve agents running and connected");
@@ -835,13 +884,28 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             pingers.push((size, t, p));
         }
         if let Some(peer) = &dora_peer {
-            let (src, sink) = (agent_name("psend", size), agent_name("psink", size));
-            let (src_dir, sink_dir) = (opts.work.join(&src), opts.work.join(&sink));
-            let p = NervePeriodic { src, sink, src_dir, sink_dir, count: periodic_count, next: 0 };
-            pingers.push((size, "nerve-5ms", Box::new(p)));
+            for (src, sink, row) in [("psend", "psink", "nerve-5ms"), ("pin-psend", "pin-psink", "nerve-5ms-pinned")] {
+                let (src, sink) = (agent_name(src, size), agent_name(sink, size));
+                let (src_dir, sink_dir) = (opts.work.join(&src), opts.work.join(&sink));
+                let p = NervePeriodic { src, sink, src_dir, sink_dir, count: periodic_count, next: 0 };
+                pingers.push((size, row, Box::new(p)));
+            }
             for (pattern, count) in [(Pattern::PingPong, None), (Pattern::Periodic, Some(periodic_count))] {
-                let p = DoraPinger { peer: Rc::clone(peer), size, pattern, count };
+                let p = DoraPinger { peer: Rc::clone(peer), size, pattern, count, cpu: None };
                 pingers.push((size, pattern.transport(), Box::new(p)));
+            }
+            if peer.can_pin() {
+                let cpu = Some(PINNED_CPU);
+                let p = DoraPinger {
+                    peer: Rc::clone(peer),
+                    size,
+                    pattern: Pattern::Periodic,
+                    count: Some(periodic_count),
+                    cpu,
+                };
+                pingers.push((size, "dora-5ms-pinned", Box::new(p)));
+            } else if size == opts.sizes[0] {
+                eprintln!("hop: warning: no dora-5ms-pinned rows: `taskset` (util-linux) is not on PATH");
             }
         }
     }
@@ -1047,6 +1111,15 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             dora_pmqos_vs_nerve_pmqos_p50: dora_pmqos,
             dora_5ms_pmqos_vs_nerve_5ms_pmqos_p50: dora_5ms_pmqos,
             dora_target_met_pmqos: dora_pmqos.zip(dora_5ms_pmqos).map(|(a, b)| a >= DORA_TARGET && b >= DORA_TARGET),
+            dora_5ms_pinned_vs_nerve_5ms_pinned_p50: both(
+                one_way_p50("dora-5ms-pinned"),
+                one_way_p50("nerve-5ms-pinned"),
+            ),
+            dora_5ms_pinned_pmqos_vs_nerve_5ms_pinned_pmqos_p50: both(
+                one_way_p50("dora-5ms-pinned-pmqos"),
+                one_way_p50("nerve-5ms-pinned-pmqos"),
+            ),
+            pinned_gain_nerve_5ms_pmqos: both(one_way_p50("nerve-5ms-pmqos"), one_way_p50("nerve-5ms-pinned-pmqos")),
             dora_vs_nerve_pmqos_p50: both(p50("dora"), p50("nerve-pmqos")),
             target_met: r <= TARGET_RATIO,
             nerve_vs_futex_p50: both(p50("nerve"), p50("futex")),
@@ -1216,6 +1289,28 @@ pub fn print_tables(r: &HopReport) {
                 verdict(x.dora_target_met_pmqos),
                 ratio_cell(x.dora_vs_nerve_pmqos_p50)
             );
+        }
+        if r.ratios.iter().any(|x| x.dora_5ms_pinned_vs_nerve_5ms_pinned_p50.is_some()) {
+            println!();
+            println!(
+                "dora's pattern with each system's two ends on CPU {PINNED_CPU} (router and dora's daemon free), same run:"
+            );
+            println!();
+            println!(
+                "| payload | dora-5ms-pinned/nerve-5ms-pinned p50 | both under PM QoS 0 | target ≥{DORA_TARGET} | nerve-5ms-pmqos/nerve-5ms-pinned-pmqos (what one CPU buys nerve) |"
+            );
+            println!("|---|---:|---:|---|---:|");
+            for x in &r.ratios {
+                let met = x.dora_5ms_pinned_pmqos_vs_nerve_5ms_pinned_pmqos_p50.map(|v| v >= DORA_TARGET);
+                println!(
+                    "| {} | {} | {} | {} | {} |",
+                    label(x.size),
+                    ratio_cell(x.dora_5ms_pinned_vs_nerve_5ms_pinned_p50),
+                    ratio_cell(x.dora_5ms_pinned_pmqos_vs_nerve_5ms_pinned_pmqos_p50),
+                    verdict(met),
+                    ratio_cell(x.pinned_gain_nerve_5ms_pmqos)
+                );
+            }
         }
     }
     println!();
