@@ -13,7 +13,9 @@ at 0 for the batch (as `nerve bench hop` does for its `-pmqos` rows), drops
 the first 5 samples of each batch, and prints the median one-way latency
 (the sink's arrival minus the sender's stamp, both CLOCK_MONOTONIC). A
 sample the sink was too slow for is overwritten in its buffer, not
-counted (a batch is then shorter than N).
+counted (a batch is then shorter than N). On stderr, each batch's median
+and the time the hypervisor took from the guest meanwhile (`steal` of
+/proc/stat).
 
     cargo build --release -p nerve -p nerve-bench
     python3 bench/py/oneway_interval.py 200 1000 5000 20000   # intervals in µs
@@ -36,6 +38,14 @@ REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 BIN = os.path.join(REPO, "target", "release")
 ROBOT = f"ow{os.getpid()}"
 DISCARD = 5
+
+
+def steal_ms() -> float:
+    """CPU time the hypervisor gave to others while this guest's vCPUs
+    wanted to run, all CPUs, ms (`steal` of /proc/stat, in USER_HZ ticks)."""
+    with open("/proc/stat") as f:
+        fields = f.readline().split()
+    return int(fields[8]) * 1000 / os.sysconf("SC_CLK_TCK")
 
 
 def main() -> int:
@@ -95,6 +105,7 @@ def main() -> int:
                         os.write(fd, struct.pack("i", 0))
                     try:
                         time.sleep(0.2)
+                        steal0 = steal_ms()
                         nerve("suspend", f"s{iv}")
                         nerve("resume", f"s{iv}")
                         new: list[str] = []
@@ -121,7 +132,13 @@ def main() -> int:
                     time.sleep(0.05)  # written by rename: whole once it is there
                     with open(os.path.join(sink, new[0])) as f:
                         rows = [[int(x) for x in line.split()] for line in f if line.strip()]
-                    results.setdefault((iv, held), []).extend((row[2] - row[0]) / 1e3 for row in rows[DISCARD:])
+                    batch = [(row[2] - row[0]) / 1e3 for row in rows[DISCARD:]]
+                    results.setdefault((iv, held), []).extend(batch)
+                    steal = steal_ms() - steal0
+                    print(f"  interval {iv} µs, PM QoS {'held' if held else 'no'}: batch median "
+                          f"{statistics.median(batch) if batch else float('nan'):.1f} µs, "
+                          f"time stolen by the host {steal:.0f} ms (in steps of {1000 / os.sysconf('SC_CLK_TCK'):.0f} ms)",
+                          file=sys.stderr)
             print(f"round {r + 1}/{rounds} done", file=sys.stderr)
         print("| interval µs | PM QoS 0 | n | one way p50 µs | p99 µs |")
         print("|---:|---|---:|---:|---:|")

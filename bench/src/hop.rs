@@ -80,7 +80,7 @@ use crate::dds::{self, DdsPeer};
 use crate::dora::{self, DoraPeer, Pattern};
 use crate::futex::FutexPing;
 use crate::idle::IdleShare;
-use crate::machine::{Machine, command_line};
+use crate::machine::{Machine, command_line, steal_ms};
 use crate::payloads::{BenchPayload, SIZES, label};
 use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file_after};
 use crate::raw::{Mode, Side};
@@ -330,6 +330,11 @@ pub struct HopReport {
     pub idle: Vec<IdleShare>,
     /// nerve-pmqos / futex-pmqos p50 target
     pub futex_target_ratio: f64,
+    /// per measured round: the time the hypervisor ran something else while
+    /// this guest's CPUs had work, ms, all CPUs (`steal` of /proc/stat, in
+    /// steps of USER_HZ ticks, 10 ms here: too coarse for one batch, whose
+    /// slow rounds add about 10 ms in all; empty where the kernel does not say)
+    pub round_steal_ms: Vec<f64>,
     /// wall time of the run, s
     pub seconds: f64,
 }
@@ -944,10 +949,12 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     let mut rounds = Rounds::new(pingers.len(), DISCARD);
     // (round trips on one CPU, round trips) per pinger, measured rounds
     let mut placement = vec![(0usize, 0usize); pingers.len()];
+    let mut round_steal_ms = Vec::new();
     let result = (|| -> Result<()> {
         // a quick run has no warm-up round (the first samples of each batch are still dropped)
         for round in usize::from(opts.quick)..=opts.rounds {
             let t_round = Instant::now();
+            let steal0 = steal_ms();
             for &size in &opts.sizes {
                 let idx: Vec<usize> = (0..pingers.len()).filter(|&i| pingers[i].0 == size).collect();
                 for i in Rounds::order(&idx, round) {
@@ -981,7 +988,12 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
                 }
             }
             let what = if round == 0 { "warm-up".to_owned() } else { format!("round {round}/{}", opts.rounds) };
-            eprintln!("hop: {what} done in {:.1} s", t_round.elapsed().as_secs_f64());
+            let stolen = steal0.zip(steal_ms()).map(|(a, b)| b - a);
+            let stolen_note = stolen.map(|s| format!(" (time stolen by the host: {s:.0} ms)")).unwrap_or_default();
+            eprintln!("hop: {what} done in {:.1} s{stolen_note}", t_round.elapsed().as_secs_f64());
+            if let (Some(s), true) = (stolen, round > 0) {
+                round_steal_ms.push(s);
+            }
             for &size in &opts.sizes {
                 if round == 0 {
                     break;
@@ -1154,6 +1166,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         fill_cost: opts.sizes.iter().map(|&s| measure_fill(s)).collect(),
         idle,
         futex_target_ratio: FUTEX_TARGET,
+        round_steal_ms,
         seconds: started.elapsed().as_secs_f64(),
     })
 }

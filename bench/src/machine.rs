@@ -80,9 +80,37 @@ impl Machine {
     }
 }
 
+/// Ticks per second of the CPU times in /proc (USER_HZ).
+pub(crate) fn clock_ticks() -> f64 {
+    // SAFETY: sysconf has no preconditions and no memory effects.
+    let t = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    if t > 0 { t as f64 } else { 100.0 }
+}
+
+/// Time the hypervisor ran something else while this guest's CPUs had
+/// work, all CPUs together, ms since boot (`steal` in /proc/stat); None
+/// where the kernel does not say. The difference over a round tells
+/// whether the host took the CPUs away during it.
+pub(crate) fn steal_ms() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/stat").ok()?;
+    // "cpu user nice system idle iowait irq softirq steal ..."
+    let ticks: u64 = s.lines().next()?.split_whitespace().nth(8)?.parse().ok()?;
+    Some(ticks as f64 * 1000.0 / clock_ticks())
+}
+
 /// The command line this process was started with, for the report.
 pub fn command_line() -> String {
     let mut args = std::env::args();
     let _ = args.next();
     std::iter::once("nerve-bench".to_owned()).chain(args).collect::<Vec<_>>().join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_stolen_time_is_read_and_never_goes_back() {
+        let a = super::steal_ms().expect("/proc/stat has a steal column");
+        let b = super::steal_ms().expect("and still has it");
+        assert!(a >= 0.0 && b >= a, "{a} then {b}");
+    }
 }

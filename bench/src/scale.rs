@@ -18,7 +18,7 @@
 //! process and its ports stay) and the router's CPU is measured again: the
 //! issue's "100 idle agents: router under 1% of a core".
 
-use crate::machine::{Machine, command_line};
+use crate::machine::{Machine, clock_ticks, command_line};
 use crate::procs::Robot;
 use crate::stats::Summary;
 use anyhow::{Context as _, Result, anyhow, bail};
@@ -106,12 +106,6 @@ pub struct ScaleReport {
     pub target_met: bool,
     /// wall time of the scenario, s
     pub seconds: f64,
-}
-
-fn clock_ticks() -> f64 {
-    // SAFETY: sysconf has no memory effects.
-    let t = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
-    if t > 0 { t as f64 } else { 100.0 }
 }
 
 /// utime + stime of a process, in clock ticks; None when it is gone.
