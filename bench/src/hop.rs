@@ -136,6 +136,10 @@ const UNDER_PM_QOS: [&str; 10] = [
 ];
 /// nerve's round trip (with its default PM QoS bound) may be this many times the futex floor's (issue 17).
 pub const FUTEX_TARGET: f64 = 1.5;
+/// nerve's pairs in dora's pattern: (sender's role, sink's role, row, the
+/// CPU both are kept on); the agents are `ROLE-SIZE`.
+const PERIODIC_PAIRS: [(&str, &str, &str, Option<usize>); 2] =
+    [("psend", "psink", "nerve-5ms", None), ("pin-psend", "pin-psink", "nerve-5ms-pinned", Some(PINNED_CPU))];
 /// The rows in dora's pattern (one way, a sample every 5 ms), in table order.
 pub const PERIODIC: [&str; 8] = [
     "nerve-5ms",
@@ -780,12 +784,10 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             names.extend([ping, pong]);
         }
         if dora_peer.is_some() {
-            for (sub, role, cpu) in [
-                ("__agent-bsend", "psend", None),
-                ("__agent-bsink", "psink", None),
-                ("__agent-bsend", "pin-psend", Some(PINNED_CPU)),
-                ("__agent-bsink", "pin-psink", Some(PINNED_CPU)),
-            ] {
+            let agents = PERIODIC_PAIRS
+                .iter()
+                .flat_map(|&(src, sink, _, cpu)| [("__agent-bsend", src, cpu), ("__agent-bsink", sink, cpu)]);
+            for (sub, role, cpu) in agents {
                 let name = agent_name(role, size);
                 let dir = opts.work.join(&name);
                 std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -813,7 +815,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
         robot.run(&["connect", &format!("{pong}/out"), &format!("{ping}/in")])?;
         if dora_peer.is_some() {
-            for (src, sink) in [("psend", "psink"), ("pin-psend", "pin-psink")] {
+            for (src, sink, _, _) in PERIODIC_PAIRS {
                 let (src, sink) = (agent_name(src, size), agent_name(sink, size));
                 robot.run(&["connect", &format!("{src}/out"), &format!("{sink}/in")])?;
             }
@@ -889,7 +891,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             pingers.push((size, t, p));
         }
         if let Some(peer) = &dora_peer {
-            for (src, sink, row) in [("psend", "psink", "nerve-5ms"), ("pin-psend", "pin-psink", "nerve-5ms-pinned")] {
+            for (src, sink, row, _) in PERIODIC_PAIRS {
                 let (src, sink) = (agent_name(src, size), agent_name(sink, size));
                 let (src_dir, sink_dir) = (opts.work.join(&src), opts.work.join(&sink));
                 let p = NervePeriodic { src, sink, src_dir, sink_dir, count: periodic_count, next: 0 };
