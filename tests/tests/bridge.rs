@@ -318,7 +318,8 @@ fn a_cut_link_loses_nothing_reliable_and_streams_resume() {
         &a.home,
         "bridge.toml",
         &format!(
-            "listen = [\"{listen}\"]\nlease = \"1s\"\n[[export]]\nport = \"t1/tick\"\ntype = \"nerve::Tick\"\n\
+            // plain TCP across the veth pair: the test's own namespaces (tests/tests/bridge_security.rs runs TLS)
+            "listen = [\"{listen}\"]\ninsecure = true\nlease = \"1s\"\n[[export]]\nport = \"t1/tick\"\ntype = \"nerve::Tick\"\n\
              [[import]]\nport = \"{b}/cmd/tick\"\ntype = \"nerve::Tick\"\nas = \"cmd\"\n\
              [[import]]\nport = \"{b}/small/tick\"\ntype = \"nerve::Tick\"\nas = \"small\"\n",
             b = b.name
@@ -328,7 +329,7 @@ fn a_cut_link_loses_nothing_reliable_and_streams_resume() {
         &b.home,
         "bridge.toml",
         &format!(
-            "connect = [\"{connect}\"]\nlease = \"1s\"\n\
+            "connect = [\"{connect}\"]\ninsecure = true\nlease = \"1s\"\n\
              [[export]]\nport = \"cmd/tick\"\ntype = \"nerve::Tick\"\nreliable = true\nqueue = 1000\n\
              [[export]]\nport = \"small/tick\"\ntype = \"nerve::Tick\"\nreliable = true\nqueue = 5\n\
              [[import]]\nport = \"{a}/t1/tick\"\ntype = \"nerve::Tick\"\nas = \"t1\"\n",
@@ -517,7 +518,7 @@ fn a_bad_bridge_config_is_refused_by_the_launch_check() {
         .cloned()
         .collect();
     assert!(left.is_empty(), "a failed --describe left {left:?} in /dev/shm");
-    assert!(err.contains("bridge.toml:1: ") && err.contains("TCP only"), "{err}");
+    assert!(err.contains("bridge.toml:1: ") && err.contains("TCP and TLS only"), "{err}");
     assert!(err.contains("bridge.toml:4: ") && err.contains("nerve::Tock"), "{err}");
     assert!(err.contains("nothing was started"), "{err}");
     let ps = r.nerve(&["ps", "--json"]);

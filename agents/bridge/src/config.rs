@@ -2,11 +2,19 @@
 //! files): the Zenoh endpoints and the two lists of what crosses.
 //!
 //! ```toml
-//! listen = ["tcp/127.0.0.1:7447"]      # endpoints this bridge accepts peers on
-//! connect = ["tcp/127.0.0.1:7448"]     # peers it dials (and re-dials after a cut)
+//! listen = ["tls/10.0.0.1:7447"]       # endpoints this bridge accepts peers on
+//! connect = ["tls/10.0.0.2:7447"]      # peers it dials (and re-dials after a cut)
 //! multicast_scouting = false           # find peers on the LAN by multicast (off by default)
 //! queue = 256                          # default queue of a reliable export, messages
 //! lease = "2s"                         # a silent link is declared lost after this
+//! peers = ["r3"]                       # robots that may import our exports (besides those we import from)
+//! importer_ttl = "10min"               # an importer gone this long is forgotten
+//! insecure = false                     # allow tcp/ on a non-loopback address (no authentication)
+//!
+//! [tls]                                # mutual TLS with the fleet's certificates
+//! keys = "/path/to/bridge-keys"        # `nerve bridge keys` directory (default: $NERVE_HOME/bridge-keys)
+//! # ca = "...", cert = "...", key = "..." name the files one by one instead
+//! #   (default KEYS/ca.crt, KEYS/<robot>.crt, KEYS/<robot>.key)
 //!
 //! [[export]]                           # a local output port sent to the peers
 //! port = "t1/tick"                     # AGENT/PORT on this robot
@@ -27,11 +35,16 @@
 //!
 //! Every problem is reported as `FILE:LINE: what, and what to do`, all of
 //! them at once, before anything starts.
+//!
+//! Security (issue 40): an endpoint on a non-loopback address must be
+//! `tls/` (mutual TLS, each robot known by its certificate's common name)
+//! unless `insecure = true` says otherwise. With `[tls]`, every endpoint is
+//! `tls/`. Relative paths are relative to the configuration file.
 
 use serde::Deserialize;
 use shm_schemas::names::validate_port_name;
 use shm_schemas::{AgentName, RobotName};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 use toml::Spanned;
 
@@ -43,6 +56,21 @@ pub const DEFAULT_QUEUE: usize = 256;
 pub const MAX_HZ: f64 = 100_000.0;
 /// Default lease: a link silent for this long is declared lost.
 pub const DEFAULT_LEASE: Duration = Duration::from_secs(2);
+/// Default time after which an importer that left is forgotten.
+pub const DEFAULT_IMPORTER_TTL: Duration = Duration::from_secs(600);
+/// The directory of the fleet's keys under the nerve home (`nerve bridge keys`
+/// uses the same).
+pub const KEYS_DIR_NAME: &str = "bridge-keys";
+
+/// Where `nerve bridge keys` keeps the fleet's keys by default:
+/// `$NERVE_HOME/bridge-keys`, else under [`agent_sdk::world::default_home`].
+pub fn default_keys_dir() -> PathBuf {
+    std::env::var_os(agent_sdk::world::HOME_ENV)
+        .filter(|h| !h.is_empty())
+        .map(PathBuf::from)
+        .unwrap_or_else(agent_sdk::world::default_home)
+        .join(KEYS_DIR_NAME)
+}
 
 /// A configuration that could not be used; the message lists every problem.
 #[derive(Debug, thiserror::Error)]
@@ -83,6 +111,82 @@ struct RawConfig {
     export: Vec<RawExport>,
     #[serde(default)]
     import: Vec<RawImport>,
+    #[serde(default)]
+    peers: Vec<Spanned<String>>,
+    #[serde(default)]
+    importer_ttl: Option<Spanned<String>>,
+    #[serde(default)]
+    insecure: bool,
+    #[serde(default)]
+    tls: Option<RawTls>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTls {
+    #[serde(default)]
+    keys: Option<String>,
+    #[serde(default)]
+    ca: Option<String>,
+    #[serde(default)]
+    cert: Option<String>,
+    #[serde(default)]
+    key: Option<String>,
+}
+
+/// Where the TLS files are (`[tls]`), before the robot's name is known.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tls {
+    /// the keys directory (`keys`, else [`default_keys_dir`])
+    pub keys: PathBuf,
+    /// the fleet CA's certificate, if named one by one
+    pub ca: Option<PathBuf>,
+    /// this robot's certificate, if named one by one
+    pub cert: Option<PathBuf>,
+    /// this robot's private key, if named one by one
+    pub key: Option<PathBuf>,
+}
+
+/// The three files of mutual TLS for one robot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TlsFiles {
+    /// the fleet CA's certificate (PEM)
+    pub ca: PathBuf,
+    /// the robot's certificate, signed by the CA, common name = robot (PEM)
+    pub cert: PathBuf,
+    /// the robot's private key (PEM)
+    pub key: PathBuf,
+}
+
+impl Tls {
+    /// The files of `robot`: named ones, else `KEYS/ca.crt`, `KEYS/<robot>.crt`, `KEYS/<robot>.key`.
+    pub fn files(&self, robot: &str) -> TlsFiles {
+        TlsFiles {
+            ca: self.ca.clone().unwrap_or_else(|| self.keys.join("ca.crt")),
+            cert: self.cert.clone().unwrap_or_else(|| self.keys.join(format!("{robot}.crt"))),
+            key: self.key.clone().unwrap_or_else(|| self.keys.join(format!("{robot}.key"))),
+        }
+    }
+}
+
+impl TlsFiles {
+    /// Says which file is missing or unreadable, and how to make it.
+    pub fn check(&self, robot: &str) -> Result<(), String> {
+        for (what, path, make) in [
+            ("the fleet CA certificate", &self.ca, "nerve bridge keys init".to_string()),
+            ("this robot's certificate", &self.cert, format!("nerve bridge keys add {robot}")),
+            ("this robot's private key", &self.key, format!("nerve bridge keys add {robot}")),
+        ] {
+            if let Err(e) = std::fs::File::open(path) {
+                return Err(format!(
+                    "[tls]: cannot read {what} {}: {e}; make it with `{make}` (with --dir {}), or name the file in [tls]",
+                    path.display(),
+                    path.parent().map_or_else(String::new, |p| p.display().to_string())
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -175,6 +279,22 @@ pub struct Config {
     pub exports: Vec<Export>,
     /// what arrives
     pub imports: Vec<Import>,
+    /// robots allowed to talk to this one: those named in `peers` and those imported from
+    pub peers: Vec<String>,
+    /// an importer gone this long is forgotten
+    pub importer_ttl: Duration,
+    /// plain TCP on a non-loopback address was allowed (`insecure = true`)
+    pub insecure: bool,
+    /// mutual TLS (`[tls]`)
+    pub tls: Option<Tls>,
+}
+
+impl Config {
+    /// Whether the link is open to unauthenticated peers beyond this host:
+    /// `insecure = true` and a plain TCP endpoint on a non-loopback address.
+    pub fn runs_insecure(&self) -> bool {
+        self.tls.is_none() && self.listen.iter().chain(&self.connect).any(|e| !is_loopback_endpoint(e))
+    }
 }
 
 fn line_of(src: &str, offset: usize) -> usize {
@@ -186,7 +306,16 @@ fn line_of(src: &str, offset: usize) -> usize {
 pub fn load(path: &Path, known_type: &dyn Fn(&str) -> bool) -> Result<Config, ConfigError> {
     let src = std::fs::read_to_string(path)
         .map_err(|source| ConfigError::Read { path: path.display().to_string(), source })?;
-    parse(&src, &path.display().to_string(), known_type)
+    let mut cfg = parse(&src, &path.display().to_string(), known_type)?;
+    // relative paths of [tls] are relative to the configuration file
+    if let (Some(tls), Some(dir)) = (cfg.tls.as_mut(), path.parent()) {
+        for p in [Some(&mut tls.keys), tls.ca.as_mut(), tls.cert.as_mut(), tls.key.as_mut()].into_iter().flatten() {
+            if p.is_relative() {
+                *p = dir.join(&*p);
+            }
+        }
+    }
+    Ok(cfg)
 }
 
 /// Checks a configuration given as text; `file` names it in messages.
@@ -204,8 +333,61 @@ pub fn parse(src: &str, file: &str, known_type: &dyn Fn(&str) -> bool) -> Result
     for ep in raw.listen.iter().chain(&raw.connect) {
         if let Err(e) = check_endpoint(ep.get_ref()) {
             at(ep.span(), e);
+        } else if raw.tls.is_some() && !ep.get_ref().starts_with("tls/") {
+            at(
+                ep.span(),
+                format!(
+                    "endpoint {:?}: with [tls] every endpoint is tls/ (write tls/{})",
+                    ep.get_ref(),
+                    ep.get_ref().split_once('/').map_or("", |(_, a)| a)
+                ),
+            );
+        } else if ep.get_ref().starts_with("tls/") && raw.tls.is_none() {
+            at(
+                ep.span(),
+                format!(
+                    "endpoint {:?} is tls/ but the config has no [tls] section; add [tls] (keys made by `nerve bridge keys init`)",
+                    ep.get_ref()
+                ),
+            );
+        } else if !raw.insecure && ep.get_ref().starts_with("tcp/") && !is_loopback_endpoint(ep.get_ref()) {
+            at(
+                ep.span(),
+                format!(
+                    "endpoint {:?} is plain TCP on a non-loopback address: any host that reaches it could read and forge this robot's topics; use tls/ with a [tls] section (see `nerve bridge keys`), or write `insecure = true` if the network itself is protected (WireGuard, a VLAN)",
+                    ep.get_ref()
+                ),
+            );
         }
     }
+    let mut peers: Vec<String> = Vec::new();
+    for p in &raw.peers {
+        match RobotName::new(p.get_ref()) {
+            Ok(_) if !peers.contains(p.get_ref()) => peers.push(p.get_ref().clone()),
+            Ok(_) => {}
+            Err(e) => at(p.span(), format!("peers: {e}")),
+        }
+    }
+    let importer_ttl = match &raw.importer_ttl {
+        Some(l) => match agent_sdk::clock::parse_duration(l.get_ref()) {
+            Ok(d) if (Duration::from_secs(1)..=Duration::from_secs(7 * 24 * 3600)).contains(&d) => d,
+            Ok(_) => {
+                at(l.span(), "importer_ttl must be between 1s and 7 days (e.g. \"10min\")".into());
+                DEFAULT_IMPORTER_TTL
+            }
+            Err(e) => {
+                at(l.span(), format!("importer_ttl: {e}"));
+                DEFAULT_IMPORTER_TTL
+            }
+        },
+        None => DEFAULT_IMPORTER_TTL,
+    };
+    let tls = raw.tls.as_ref().map(|t| Tls {
+        keys: t.keys.as_ref().map_or_else(default_keys_dir, PathBuf::from),
+        ca: t.ca.as_ref().map(PathBuf::from),
+        cert: t.cert.as_ref().map(PathBuf::from),
+        key: t.key.as_ref().map(PathBuf::from),
+    });
     let default_queue = match &raw.queue {
         Some(q) => match check_queue(*q.get_ref()) {
             Ok(n) => n,
@@ -369,7 +551,16 @@ pub fn parse(src: &str, file: &str, known_type: &dyn Fn(&str) -> bool) -> Result
     if !problems.is_empty() {
         return Err(invalid(problems));
     }
+    for i in &imports {
+        if !peers.contains(&i.robot) {
+            peers.push(i.robot.clone());
+        }
+    }
     Ok(Config {
+        peers,
+        importer_ttl,
+        insecure: raw.insecure,
+        tls,
         listen: raw.listen.into_iter().map(Spanned::into_inner).collect(),
         connect: raw.connect.into_iter().map(Spanned::into_inner).collect(),
         multicast_scouting: raw.multicast_scouting,
@@ -386,19 +577,28 @@ fn check_queue(q: i64) -> Result<usize, String> {
         .ok_or_else(|| format!("queue must be between 1 and {MAX_QUEUE} messages"))
 }
 
-/// An endpoint this build can use: `tcp/HOST:PORT`.
+/// Whether an endpoint's host is a loopback address (`127.0.0.0/8`, `::1`, `localhost`).
+pub fn is_loopback_endpoint(ep: &str) -> bool {
+    let addr = ep.split_once('/').map_or(ep, |(_, a)| a);
+    let addr = addr.split(['?', '#']).next().unwrap_or(addr);
+    let host = addr.rsplit_once(':').map_or(addr, |(h, _)| h);
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    host == "localhost" || host.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
+}
+
+/// An endpoint this build can use: `tcp/HOST:PORT` or `tls/HOST:PORT`.
 fn check_endpoint(ep: &str) -> Result<(), String> {
-    let Some(addr) = ep.strip_prefix("tcp/") else {
+    let Some(addr) = ep.strip_prefix("tcp/").or_else(|| ep.strip_prefix("tls/")) else {
         return Err(format!(
-            "endpoint {ep:?}: this bridge speaks TCP only; write tcp/HOST:PORT (e.g. tcp/127.0.0.1:7447)"
+            "endpoint {ep:?}: this bridge speaks TCP and TLS only; write tls/HOST:PORT (e.g. tls/10.0.0.2:7447) or tcp/127.0.0.1:PORT"
         ));
     };
     let addr = addr.split(['?', '#']).next().unwrap_or(addr);
     let Some((host, port)) = addr.rsplit_once(':') else {
-        return Err(format!("endpoint {ep:?} has no port; write tcp/HOST:PORT"));
+        return Err(format!("endpoint {ep:?} has no port; write tls/HOST:PORT or tcp/HOST:PORT"));
     };
     if host.is_empty() || port.parse::<u16>().is_err() {
-        return Err(format!("endpoint {ep:?}: write tcp/HOST:PORT with a port from 0 to 65535"));
+        return Err(format!("endpoint {ep:?}: write tls/HOST:PORT or tcp/HOST:PORT with a port from 0 to 65535"));
     }
     Ok(())
 }
@@ -482,7 +682,7 @@ type = "nerve::Tick"
 as = "r1.t1.tick"
 "#,
         );
-        assert!(p[0].starts_with("b.toml:1: ") && p[0].contains("TCP only"), "{p:?}");
+        assert!(p[0].starts_with("b.toml:1: ") && p[0].contains("TCP and TLS only"), "{p:?}");
         assert!(p.iter().any(|l| l.starts_with("b.toml:3: ") && l.contains("AGENT/PORT")), "{p:?}");
         assert!(p.iter().any(|l| l.starts_with("b.toml:7: ") && l.contains("nerve::Tock")), "{p:?}");
         assert!(p.iter().any(|l| l.starts_with("b.toml:8: ") && l.contains("max_hz")), "{p:?}");
@@ -510,5 +710,55 @@ as = "r1.t1.tick"
         assert!(check_endpoint("tcp/127.0.0.1").is_err());
         assert!(check_endpoint("tcp/host:99999").is_err());
         assert!(check_endpoint("quic/127.0.0.1:7447").is_err());
+        assert!(check_endpoint("tls/10.0.0.2:7447").is_ok());
+        assert!(is_loopback_endpoint("tcp/127.0.0.1:7447") && is_loopback_endpoint("tcp/[::1]:1"));
+        assert!(is_loopback_endpoint("tcp/localhost:1") && is_loopback_endpoint("tcp/127.3.0.1:1#iface=lo"));
+        assert!(!is_loopback_endpoint("tcp/10.0.0.2:7447") && !is_loopback_endpoint("tcp/0.0.0.0:7447"));
+        assert!(!is_loopback_endpoint("tcp/[::]:7447") && !is_loopback_endpoint("tcp/robot2.lan:7447"));
+    }
+
+    const ONE: &str = "[[export]]\nport = \"t1/tick\"\ntype = \"nerve::Tick\"\n";
+
+    #[test]
+    fn plain_tcp_beyond_the_host_needs_insecure() {
+        let p = problems(&format!("listen = [\"tcp/10.0.0.1:7447\"]\n{ONE}"));
+        assert!(
+            p[0].starts_with("b.toml:1: ") && p[0].contains("tcp/10.0.0.1:7447") && p[0].contains("insecure = true"),
+            "{p:?}"
+        );
+        let p = problems(&format!("connect = [\"tcp/0.0.0.0:7447\"]\n{ONE}"));
+        assert!(p[0].contains("use tls/"), "{p:?}");
+        let c = parse(&format!("insecure = true\nlisten = [\"tcp/10.0.0.1:7447\"]\n{ONE}"), "b.toml", &known)
+            .expect("insecure is allowed when written");
+        assert!(c.insecure && c.runs_insecure());
+        let c = parse(&format!("listen = [\"tcp/127.0.0.1:7447\"]\n{ONE}"), "b.toml", &known).expect("loopback");
+        assert!(!c.runs_insecure() && c.tls.is_none());
+    }
+
+    #[test]
+    fn tls_names_its_files_and_every_endpoint_is_tls() {
+        let c = parse(
+            &format!(
+                "listen = [\"tls/10.0.0.1:7447\"]\npeers = [\"r3\"]\nimporter_ttl = \"1min\"\n{ONE}\
+                 [[import]]\nport = \"r2/t1/tick\"\ntype = \"nerve::Tick\"\n[tls]\nkeys = \"/k\"\ncert = \"/c/me.crt\"\n"
+            ),
+            "b.toml",
+            &known,
+        )
+        .expect("valid");
+        assert_eq!(c.peers, vec!["r3", "r2"], "named peers, then the robots imported from");
+        assert_eq!(c.importer_ttl, Duration::from_secs(60));
+        let f = c.tls.expect("tls").files("r1");
+        assert_eq!(f.ca, PathBuf::from("/k/ca.crt"));
+        assert_eq!(f.cert, PathBuf::from("/c/me.crt"));
+        assert_eq!(f.key, PathBuf::from("/k/r1.key"));
+        let e = f.check("r1").expect_err("no such files");
+        assert!(e.contains("/k/ca.crt") && e.contains("nerve bridge keys init"), "{e}");
+        let p = problems(&format!("listen = [\"tcp/127.0.0.1:7447\"]\n{ONE}[tls]\n"));
+        assert!(p[0].starts_with("b.toml:1: ") && p[0].contains("every endpoint is tls/"), "{p:?}");
+        let p = problems(&format!("listen = [\"tls/127.0.0.1:7447\"]\n{ONE}"));
+        assert!(p[0].contains("no [tls] section"), "{p:?}");
+        let p = problems(&format!("importer_ttl = \"0s\"\npeers = [\"a/b\"]\n{ONE}"));
+        assert_eq!(p.len(), 2, "{p:?}");
     }
 }

@@ -122,13 +122,18 @@ impl Agent for Bridge {
         let cfg = config::load(&path, &|t| types.knows(t)).map_err(|e| AgentError::Config(e.to_string()))?;
         let robot = setup.world().robot().to_string();
         let me = Me { robot: robot.clone(), name: setup.name().to_owned() };
+        if let Some(tls) = &cfg.tls {
+            tls.files(&robot).check(&robot).map_err(|e| AgentError::Config(format!("{}: {e}", path.display())))?;
+        }
         let instance = instance_id();
         let mut exports = Vec::new();
         for e in &cfg.exports {
             let c =
                 types.get(&e.type_name).ok_or_else(|| AgentError::Config(format!("unknown type {}", e.type_name)))?;
             let tap = (c.export)(setup, &e.input_name())?;
-            exports.push(Arc::new(ExportTopic::new(e.clone(), c.info, &robot, instance, tap)));
+            exports.push(Arc::new(
+                ExportTopic::new(e.clone(), c.info, &robot, instance, tap).with_importer_ttl(cfg.importer_ttl),
+            ));
         }
         let mut imports = Vec::new();
         for i in &cfg.imports {
@@ -144,13 +149,23 @@ impl Agent for Bridge {
             imports.push(Arc::new(ImportTopic::new(i.clone(), c.info, sink)));
         }
         let peers = Arc::new(Peers::default());
+        let security = if cfg.tls.is_some() {
+            "tls"
+        } else if cfg.runs_insecure() {
+            "insecure"
+        } else {
+            "loopback"
+        };
         {
             let (exports, imports, peers) = (exports.clone(), imports.clone(), peers.clone());
             setup.figures(move || {
                 let now = agent_sdk::clock::now_ns();
                 let names = peers.names();
-                let mut v =
-                    vec![("peers".to_string(), names.len().to_string()), ("peer_names".to_string(), names.join(","))];
+                let mut v = vec![
+                    ("peers".to_string(), names.len().to_string()),
+                    ("peer_names".to_string(), names.join(",")),
+                    ("security".to_string(), security.to_string()),
+                ];
                 for t in &exports {
                     t.figures(&mut v);
                 }
@@ -173,6 +188,16 @@ impl Agent for Bridge {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        if self.cfg.runs_insecure() {
+            tracing::warn!(
+                listen = ?self.cfg.listen,
+                connect = ?self.cfg.connect,
+                "insecure = true: plain TCP beyond this host; any host that reaches these endpoints can read and forge this robot's topics (use [tls], see `nerve bridge keys`)"
+            );
+        }
+        if self.cfg.tls.is_some() && self.cfg.peers.is_empty() {
+            tracing::warn!("[tls] with no peers: no robot may import from this bridge; list them in `peers = [...]`");
+        }
         // The session is opened by the link thread, which is not real-time;
         // wait for it here so that a bad endpoint fails the start loudly.
         let (tx, rx) = std::sync::mpsc::channel::<Result<(), String>>();

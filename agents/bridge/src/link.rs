@@ -7,15 +7,24 @@
 //! | key | what |
 //! |---|---|
 //! | `nerve/<robot>/<agent>/<port>` | the data frames of an exported port |
-//! | `nerve-ack/<robot>/<agent>/<port>` | acknowledgements of a reliable topic, to its sender |
-//! | `nerve-importer/<robot>/<agent>/<port>/<me>` | liveliness: bridge `<me>` imports that port |
+//! | `nerve-ack/<robot>/<agent>/<port>/<me-robot>/<me-name>` | acknowledgements of a reliable topic, to its sender |
+//! | `nerve-importer/<robot>/<agent>/<port>/<me-robot>/<me-name>` | liveliness: bridge `<me>` imports that port |
 //! | `nerve-bridge/<robot>/<name>` | liveliness: a bridge is up (the peers figure) |
+//!
+//! Every key a robot writes carries its own name, so that access control
+//! can tie it to the robot's certificate. With `[tls]` the session speaks
+//! mutual TLS only, and Zenoh's access control lets each peer robot (known
+//! by its certificate's common name) put only its own data frames that this
+//! robot imports, and its own acknowledgements and importer tokens of this
+//! robot's exports; anything else, and any other peer, is denied (see
+//! [`acl_json`]). Frames larger than the largest carried type are refused at
+//! the link (`transport/link/rx/max_message_size`).
 //!
 //! Zenoh runs its own threads. They are started from the link thread, which
 //! first drops real-time scheduling, so that Zenoh's runtime never competes
 //! with the robot's real-time tasks.
 
-use crate::config::Config;
+use crate::config::{Config, TlsFiles};
 use crate::topics::{ExportTopic, ImportTopic, Reply, Transmit};
 use crate::wire;
 use std::collections::BTreeSet;
@@ -60,13 +69,109 @@ fn json_list(v: &[String]) -> String {
     format!("[{}]", items.join(","))
 }
 
+/// The largest frame header (`wire::encode_frame`: magic, version, flags,
+/// name length, a type name of at most 256 bytes, the payload length, six
+/// u64 fields, the sender's name of at most 255 bytes).
+pub const MAX_FRAME_HEADER: usize = 4 + 1 + 1 + 2 + crate::wire::MAX_TYPE_NAME + 4 + 6 * 8 + 1 + 255;
+/// Room for Zenoh's own message header on top of a frame.
+const ZENOH_SLACK: usize = 4096;
+
+/// The largest message the link accepts for payloads of at most
+/// `max_payload` bytes: one frame, plus Zenoh's header.
+pub fn max_message_size(max_payload: usize) -> usize {
+    max_payload.saturating_add(MAX_FRAME_HEADER).saturating_add(ZENOH_SLACK)
+}
+
+/// Zenoh's access control for `robot` (a JSON5 value for `access_control`):
+/// default deny; for each peer robot `P` (its certificate's common name),
+/// allowed in: puts of `nerve/P/..` for each port imported from `P`, and of
+/// `nerve-ack/<robot>/<export>/P/*`; subscriptions to this robot's exports
+/// and to `P`'s own acknowledgements; `P`'s importer tokens of this robot's
+/// exports and its presence token; liveliness subscriptions and queries of
+/// its own importers and of presences. Out to a peer: anything.
+pub fn acl_json(cfg: &Config, robot: &str) -> String {
+    let list = |v: Vec<String>| json_list(&v);
+    let mut rules = vec![format!(
+        "{{id: \"out\", messages: [\"put\", \"delete\", \"declare_subscriber\", \"query\", \"reply\", \"declare_queryable\", \"liveliness_token\", \"declare_liveliness_subscriber\", \"liveliness_query\"], flows: [\"egress\"], permission: \"allow\", key_exprs: [\"**\"]}}"
+    )];
+    let mut subjects = Vec::new();
+    let mut policies = Vec::new();
+    let exports: Vec<String> = cfg.exports.iter().map(|e| format!("{}/{}", e.agent, e.port)).collect();
+    for (n, p) in cfg.peers.iter().enumerate() {
+        let mut ids = Vec::new();
+        let mut rule = |what: &str, messages: &[&str], keys: Vec<String>| {
+            if keys.is_empty() {
+                return;
+            }
+            let id = format!("p{n}-{what}");
+            let messages: Vec<String> = messages.iter().map(|m| (*m).to_string()).collect();
+            rules.push(format!(
+                "{{id: {id:?}, messages: {}, flows: [\"ingress\"], permission: \"allow\", key_exprs: {}}}",
+                json_list(&messages),
+                list(keys)
+            ));
+            ids.push(id);
+        };
+        let mut puts: Vec<String> = cfg
+            .imports
+            .iter()
+            .filter(|i| &i.robot == p)
+            .map(|i| format!("nerve/{}/{}/{}", i.robot, i.agent, i.port))
+            .collect();
+        puts.extend(exports.iter().map(|e| format!("nerve-ack/{robot}/{e}/{p}/*")));
+        rule("put", &["put"], puts);
+        let mut subs: Vec<String> = exports.iter().map(|e| format!("nerve/{robot}/{e}")).collect();
+        subs.push(format!("nerve-ack/{p}/**"));
+        rule("sub", &["declare_subscriber"], subs);
+        let mut tokens: Vec<String> = exports.iter().map(|e| format!("nerve-importer/{robot}/{e}/{p}/*")).collect();
+        tokens.push(format!("nerve-bridge/{p}/*"));
+        rule("token", &["liveliness_token", "reply"], tokens);
+        rule(
+            "live",
+            &["declare_liveliness_subscriber", "liveliness_query"],
+            vec![format!("nerve-importer/{p}/**"), "nerve-bridge/**".into()],
+        );
+        ids.push("out".into());
+        subjects.push(format!("{{id: \"robot-{n}\", cert_common_names: [{p:?}]}}"));
+        policies.push(format!("{{rules: {}, subjects: [\"robot-{n}\"]}}", json_list(&ids)));
+    }
+    format!(
+        "{{enabled: true, default_permission: \"deny\", rules: [{}], subjects: [{}], policies: [{}]}}",
+        rules.join(", "),
+        subjects.join(", "),
+        policies.join(", ")
+    )
+}
+
+/// The bridge's Zenoh configuration without TLS, access control or a
+/// message limit (for a plain Zenoh peer beside a bridge: the raw Zenoh
+/// benchmark); a bridge itself uses [`session_config`].
+pub fn zenoh_config(cfg: &Config) -> Result<zenoh::Config, LinkError> {
+    let mut z = session_config(cfg, "", None, 0)?;
+    z.insert_json5("transport/link/rx/max_message_size", "1073741824")
+        .map_err(|e| LinkError::Config { key: "transport/link/rx/max_message_size", detail: e.to_string() })?;
+    Ok(z)
+}
+
+fn path_json(p: &std::path::Path) -> String {
+    format!("{:?}", p.display().to_string())
+}
+
 /// The Zenoh configuration of a bridge: peer mode, the given endpoints,
 /// multicast scouting only when asked, a short lease so that a cut is
-/// noticed quickly, and quick re-dialling of `connect` endpoints.
-pub fn zenoh_config(cfg: &Config) -> Result<zenoh::Config, LinkError> {
+/// noticed quickly, and quick re-dialling of `connect` endpoints. With
+/// `tls` (the files of this robot): TLS links only, mutual authentication
+/// against the fleet CA, and [`acl_json`]. Messages above
+/// [`max_message_size`]`(max_payload)` are refused at the link.
+pub fn session_config(
+    cfg: &Config,
+    robot: &str,
+    tls: Option<&TlsFiles>,
+    max_payload: usize,
+) -> Result<zenoh::Config, LinkError> {
     let mut z = zenoh::Config::default();
     let lease_ms = cfg.lease.as_millis().max(100);
-    let settings: Vec<(&'static str, String)> = vec![
+    let mut settings: Vec<(&'static str, String)> = vec![
         ("mode", "\"peer\"".into()),
         ("listen/endpoints", json_list(&cfg.listen)),
         ("connect/endpoints", json_list(&cfg.connect)),
@@ -80,7 +185,24 @@ pub fn zenoh_config(cfg: &Config) -> Result<zenoh::Config, LinkError> {
         ("listen/exit_on_failure", "true".into()),
         ("transport/link/tx/lease", lease_ms.to_string()),
         ("transport/link/tx/keep_alive", "4".into()),
+        ("transport/link/rx/max_message_size", max_message_size(max_payload).to_string()),
     ];
+    if let Some(t) = tls {
+        settings.extend([
+            ("transport/link/protocols", "[\"tls\"]".to_string()),
+            ("transport/link/tls/root_ca_certificate", path_json(&t.ca)),
+            ("transport/link/tls/listen_certificate", path_json(&t.cert)),
+            ("transport/link/tls/listen_private_key", path_json(&t.key)),
+            ("transport/link/tls/connect_certificate", path_json(&t.cert)),
+            ("transport/link/tls/connect_private_key", path_json(&t.key)),
+            ("transport/link/tls/enable_mtls", "true".into()),
+            // a robot is known by its certificate's common name (checked by
+            // the access control), not by the address it is reached at
+            ("transport/link/tls/verify_name_on_connect", "false".into()),
+            ("transport/link/tls/close_link_on_expiration", "true".into()),
+            ("access_control", acl_json(cfg, robot)),
+        ]);
+    }
     for (key, value) in settings {
         z.insert_json5(key, &value).map_err(|e| LinkError::Config { key, detail: e.to_string() })?;
     }
@@ -162,7 +284,10 @@ impl Link {
         peers: &Arc<Peers>,
         now_mono: fn() -> u64,
     ) -> Result<Link, LinkError> {
-        let session = zenoh::open(zenoh_config(cfg)?)
+        let tls = cfg.tls.as_ref().map(|t| t.files(&me.robot));
+        let max_payload =
+            exports.iter().map(|t| t.info.size).chain(imports.iter().map(|t| t.info.size)).max().unwrap_or(0);
+        let session = zenoh::open(session_config(cfg, &me.robot, tls.as_ref(), max_payload)?)
             .wait()
             .map_err(|e| LinkError::Open { listen: cfg.listen.clone(), detail: e.to_string() })?;
         let mut subscribers = Vec::new();
@@ -182,14 +307,22 @@ impl Link {
             let by_key = exports.to_vec();
             let ack_key = format!("nerve-ack/{}/**", me.robot);
             let acks = by_key.clone();
+            let ack_prefix = format!("nerve-ack/{}/", me.robot);
             let sub = session
                 .declare_subscriber(ack_key.clone())
                 .callback(move |s| {
+                    // nerve-ack/<robot>/<agent>/<port>/<importer robot>/<importer name>
                     let key = s.key_expr().as_str();
-                    let Some(t) = acks.iter().find(|t| ack_key_of(&t.key) == key) else { return };
+                    let Some(rest) = key.strip_prefix(&ack_prefix) else { return };
+                    let parts: Vec<&str> = rest.split('/').collect();
+                    let [agent, port, robot, name] = parts[..] else { return };
+                    let Some(t) = acks.iter().find(|t| t.spec.agent == agent && t.spec.port == port) else { return };
                     let bytes = s.payload().to_bytes();
                     match wire::decode_ack(&bytes) {
-                        Ok(a) => t.ack(&a, now_mono()),
+                        // the key (which the access control ties to the
+                        // importer's certificate) must name the importer the frame names
+                        Ok(a) if a.importer.split_once('.') == Some((robot, name)) => t.ack(&a, now_mono()),
+                        Ok(a) => t.refuse_ack(key, a.importer),
                         Err(e) => tracing::warn!(key, "an acknowledgement was refused: {e}"),
                     }
                 })
@@ -203,12 +336,12 @@ impl Link {
                 .declare_subscriber(imp_key.clone())
                 .history(true)
                 .callback(move |s| {
-                    // nerve-importer/<robot>/<agent>/<port>/<who>
+                    // nerve-importer/<robot>/<agent>/<port>/<importer robot>/<importer name>
                     let Some(rest) = s.key_expr().as_str().strip_prefix(&prefix) else { return };
                     let parts: Vec<&str> = rest.split('/').collect();
-                    let [agent, port, who] = parts[..] else { return };
+                    let [agent, port, robot, name] = parts[..] else { return };
                     if let Some(t) = by_key.iter().find(|t| t.spec.agent == agent && t.spec.port == port) {
-                        t.set_importer(who, s.kind() == SampleKind::Put);
+                        t.set_importer(&format!("{robot}.{name}"), s.kind() == SampleKind::Put, now_mono());
                     }
                 })
                 .wait()
@@ -218,12 +351,13 @@ impl Link {
 
         // imports: a subscriber and an importer token each; acknowledgements go back on nerve-ack
         for t in imports {
+            let ack_key = ack_key_of(&t.key, me);
             let ack_pub = session
-                .declare_publisher(ack_key_of(&t.key))
+                .declare_publisher(ack_key.clone())
                 .congestion_control(CongestionControl::Drop)
                 .express(true)
                 .wait()
-                .map_err(|e| declare_err("publisher", &ack_key_of(&t.key), e))?;
+                .map_err(|e| declare_err("publisher", &ack_key, e))?;
             let topic = t.clone();
             let who = me.importer_id();
             let sub = session
@@ -241,7 +375,7 @@ impl Link {
                 .map_err(|e| declare_err("subscriber", &t.key, e))?;
             subscribers.push(sub);
             let token_key =
-                format!("nerve-importer/{}/{}/{}/{}", t.spec.robot, t.spec.agent, t.spec.port, me.importer_id());
+                format!("nerve-importer/{}/{}/{}/{}/{}", t.spec.robot, t.spec.agent, t.spec.port, me.robot, me.name);
             let token = session
                 .liveliness()
                 .declare_token(token_key.clone())
@@ -283,9 +417,10 @@ impl Link {
     }
 }
 
-/// The acknowledgement key of a data key: `nerve/R/A/P` → `nerve-ack/R/A/P`.
-fn ack_key_of(data_key: &str) -> String {
-    format!("nerve-ack/{}", data_key.strip_prefix("nerve/").unwrap_or(data_key))
+/// The key on which importer `me` acknowledges a data key:
+/// `nerve/R/A/P` → `nerve-ack/R/A/P/<me robot>/<me name>`.
+fn ack_key_of(data_key: &str, me: &Me) -> String {
+    format!("nerve-ack/{}/{}/{}", data_key.strip_prefix("nerve/").unwrap_or(data_key), me.robot, me.name)
 }
 
 #[cfg(test)]
@@ -294,15 +429,39 @@ mod tests {
 
     #[test]
     fn keys_and_config() {
-        assert_eq!(ack_key_of("nerve/r1/t1/tick"), "nerve-ack/r1/t1/tick");
+        let me = Me { robot: "r2".into(), name: "bridge".into() };
+        assert_eq!(ack_key_of("nerve/r1/t1/tick", &me), "nerve-ack/r1/t1/tick/r2/bridge");
         let cfg = crate::config::parse(
             "listen = [\"tcp/127.0.0.1:7447\"]\n[[export]]\nport = \"t1/tick\"\ntype = \"nerve::Tick\"\n",
             "b.toml",
             &|_| true,
         )
         .expect("valid");
-        let z = zenoh_config(&cfg).expect("zenoh accepts it");
+        let z = session_config(&cfg, "r1", None, 8).expect("zenoh accepts it");
         let json = format!("{z}");
         assert!(json.contains("127.0.0.1:7447"), "{json}");
+        assert!(json.contains(&format!("\"max_message_size\":{}", max_message_size(8))), "{json}");
+    }
+
+    #[test]
+    fn tls_and_access_control_are_accepted_by_zenoh() {
+        let cfg = crate::config::parse(
+            "listen = [\"tls/10.0.0.1:7447\"]\npeers = [\"r3\"]\n[[export]]\nport = \"t1/tick\"\ntype = \"nerve::Tick\"\n\
+             [[import]]\nport = \"r2/m/report\"\ntype = \"nerve::Tick\"\n[tls]\nkeys = \"/k\"\n",
+            "b.toml",
+            &|_| true,
+        )
+        .expect("valid");
+        let files = cfg.tls.as_ref().expect("tls").files("r1");
+        let z = session_config(&cfg, "r1", Some(&files), 1 << 20).expect("zenoh accepts TLS and the ACL");
+        let json = format!("{z}");
+        assert!(json.contains("\"enable_mtls\":true") && json.contains("/k/r1.key"), "{json}");
+        let acl = acl_json(&cfg, "r1");
+        for k in
+            ["nerve/r2/m/report", "nerve-ack/r1/t1/tick/r2/*", "nerve-importer/r1/t1/tick/r3/*", "nerve-bridge/r3/*"]
+        {
+            assert!(acl.contains(k), "{k} missing from {acl}");
+        }
+        assert!(!acl.contains("nerve/r3/"), "r3 is imported from by nobody: it may put no data: {acl}");
     }
 }

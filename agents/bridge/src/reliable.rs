@@ -15,6 +15,12 @@
 //! holds is held back (it will be retransmitted), a frame before the next
 //! expected one is a duplicate. A sender that restarts starts a new
 //! `instance`; the receiver then starts again from that run's oldest frame.
+//!
+//! An importer is known once it has been seen alive (its liveliness token):
+//! acknowledgements from an importer never seen are ignored, at most
+//! [`MAX_IMPORTERS`] are known at once, and one gone for longer than the
+//! bridge's `importer_ttl` is forgotten ([`Outbox::forget_gone`]), so that a
+//! robot decommissioned or renamed does not pin the queue for ever.
 
 use std::collections::{BTreeMap, VecDeque};
 
@@ -33,6 +39,10 @@ pub struct Queued {
     pub payload: Vec<u8>,
 }
 
+/// Most importers one reliable topic keeps track of; more are refused
+/// (until some are forgotten).
+pub const MAX_IMPORTERS: usize = 64;
+
 #[derive(Debug, Clone)]
 struct Importer {
     acked: u64,
@@ -40,12 +50,25 @@ struct Importer {
     /// when it last made progress or was last sent what it lacks (ns);
     /// `None`: it is owed everything after `acked` at once
     last_tx_ns: Option<u64>,
+    /// when it was last seen going away (ns), while it is gone
+    gone_since_ns: Option<u64>,
 }
 
 impl Importer {
-    fn new(alive: bool) -> Self {
-        Importer { acked: 0, alive, last_tx_ns: None }
+    fn new() -> Self {
+        Importer { acked: 0, alive: true, last_tx_ns: None, gone_since_ns: None }
     }
+}
+
+/// What [`Outbox::set_importer`] and [`Outbox::ack`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Seen {
+    /// Taken into account.
+    Taken,
+    /// An importer never seen alive: ignored.
+    Unknown,
+    /// A new importer while [`MAX_IMPORTERS`] are known: refused.
+    Full,
 }
 
 /// The sender side of one reliable topic.
@@ -134,25 +157,41 @@ impl Outbox {
         (self.importers.len(), self.importers.values().filter(|i| i.alive).count())
     }
 
-    /// An importer appeared (`alive`) or went away; one that comes back is
-    /// owed what it has not acknowledged at the next [`Outbox::due`].
-    pub fn set_importer(&mut self, who: &str, alive: bool) {
-        let imp = self.importers.entry(who.into()).or_insert_with(|| Importer::new(alive));
+    /// An importer appeared (`alive`) or went away (at `now_ns`); one that
+    /// comes back is owed what it has not acknowledged at the next
+    /// [`Outbox::due`]. One never seen alive that goes away is ignored; a
+    /// new one beyond [`MAX_IMPORTERS`] is refused.
+    pub fn set_importer(&mut self, who: &str, alive: bool, now_ns: u64) -> Seen {
+        let known = self.importers.len();
+        let Some(imp) = self.importers.get_mut(who) else {
+            if !alive {
+                return Seen::Unknown;
+            }
+            if known >= MAX_IMPORTERS {
+                return Seen::Full;
+            }
+            self.importers.insert(who.into(), Importer::new());
+            return Seen::Taken;
+        };
         if alive && !imp.alive {
             imp.last_tx_ns = None;
         }
         imp.alive = alive;
+        imp.gone_since_ns = if alive { None } else { imp.gone_since_ns.or(Some(now_ns)) };
+        Seen::Taken
     }
 
-    /// `who` has delivered everything up to `acked` (at `now_ns`). An
-    /// acknowledgement also proves that `who` is reachable: one that was
-    /// taken for gone (its liveliness token lost, or its return not yet
-    /// seen) is alive again and owed what it lacks.
-    pub fn ack(&mut self, who: &str, acked: u64, now_ns: u64) {
+    /// `who` has delivered everything up to `acked` (at `now_ns`). Only an
+    /// importer seen alive (and not forgotten) is heard. An acknowledgement
+    /// also proves that `who` is reachable: one that was taken for gone (its
+    /// liveliness token lost, or its return not yet seen) is alive again
+    /// and owed what it lacks.
+    pub fn ack(&mut self, who: &str, acked: u64, now_ns: u64) -> Seen {
         let acked = acked.min(self.sent_upto);
-        let imp = self.importers.entry(who.into()).or_insert_with(|| Importer::new(true));
+        let Some(imp) = self.importers.get_mut(who) else { return Seen::Unknown };
         if !imp.alive {
             imp.alive = true;
+            imp.gone_since_ns = None;
             imp.last_tx_ns = None;
         }
         if acked > imp.acked {
@@ -160,6 +199,25 @@ impl Outbox {
             imp.last_tx_ns = Some(now_ns);
         }
         self.trim();
+        Seen::Taken
+    }
+
+    /// Forgets the importers gone for at least `ttl_ns` at `now_ns`, and
+    /// returns their names (each is returned once).
+    pub fn forget_gone(&mut self, now_ns: u64, ttl_ns: u64) -> Vec<String> {
+        let gone: Vec<String> = self
+            .importers
+            .iter()
+            .filter(|(_, i)| i.gone_since_ns.is_some_and(|t| now_ns.saturating_sub(t) >= ttl_ns))
+            .map(|(k, _)| k.clone())
+            .collect();
+        for k in &gone {
+            self.importers.remove(k);
+        }
+        if !gone.is_empty() {
+            self.trim();
+        }
+        gone
     }
 
     /// Drops what every known importer has acknowledged. With no importer
@@ -297,8 +355,8 @@ mod tests {
         let mut o = Outbox::new(10);
         push(&mut o, 3);
         assert_eq!(seqs(o.due(0, RTO, usize::MAX)), vec![1, 2, 3], "sent while nobody listens");
-        o.set_importer("r2.bridge", true);
-        o.set_importer("r3.bridge", true);
+        o.set_importer("r2.bridge", true, 0);
+        o.set_importer("r3.bridge", true, 0);
         assert_eq!(seqs(o.due(1, RTO, usize::MAX)), vec![1, 2, 3], "a new importer gets what it missed");
         o.ack("r2.bridge", 3, 2);
         assert_eq!(o.depth(), 3, "r3 has not acknowledged");
@@ -311,15 +369,15 @@ mod tests {
     #[test]
     fn a_cut_keeps_messages_and_the_return_delivers_them_in_order() {
         let mut o = Outbox::new(10);
-        o.set_importer("r2.bridge", true);
+        o.set_importer("r2.bridge", true, 0);
         push(&mut o, 2);
         assert_eq!(seqs(o.due(0, RTO, usize::MAX)), vec![1, 2]);
         o.ack("r2.bridge", 2, 1);
-        o.set_importer("r2.bridge", false); // the link is cut
+        o.set_importer("r2.bridge", false, 0); // the link is cut
         push(&mut o, 3);
         assert_eq!(seqs(o.due(10, RTO, usize::MAX)), vec![3, 4, 5], "first try, into the void");
         assert!(o.due(500, RTO, usize::MAX).is_empty(), "no retransmission to a dead importer");
-        o.set_importer("r2.bridge", true); // back
+        o.set_importer("r2.bridge", true, 0); // back
         assert_eq!(seqs(o.due(600, RTO, usize::MAX)), vec![3, 4, 5]);
         assert_eq!(o.retransmitted(), 3);
         assert!(o.due(650, RTO, usize::MAX).is_empty(), "not again before the timeout");
@@ -339,7 +397,7 @@ mod tests {
     #[test]
     fn an_overflow_is_counted_on_both_sides() {
         let mut o = Outbox::new(3);
-        o.set_importer("r2.bridge", false);
+        o.set_importer("r2.bridge", false, 0);
         let mut dropped = Vec::new();
         for _ in 0..5 {
             if let (_, Some(ov)) = o.push(0, "t1", 0, vec![]) {
@@ -385,10 +443,10 @@ mod tests {
     #[test]
     fn an_acknowledgement_revives_an_importer_taken_for_gone() {
         let mut o = Outbox::new(5);
-        o.set_importer("r2.bridge", true);
+        o.set_importer("r2.bridge", true, 0);
         o.push(0, "t1", 0, vec![]);
         assert_eq!(seqs(o.due(0, RTO, usize::MAX)), vec![1]);
-        o.set_importer("r2.bridge", false); // its token went with the cut...
+        o.set_importer("r2.bridge", false, 0); // its token went with the cut...
         o.push(0, "t1", 0, vec![]);
         assert_eq!(seqs(o.due(10, RTO, usize::MAX)), vec![2]);
         // ...and its return was never seen, but it acknowledges what it got
@@ -398,9 +456,59 @@ mod tests {
     }
 
     #[test]
+    fn an_importer_gone_past_its_ttl_is_forgotten_and_frees_the_queue() {
+        let mut o = Outbox::new(10);
+        o.set_importer("r2.bridge", true, 0);
+        o.set_importer("r3.bridge", true, 0);
+        push(&mut o, 3);
+        assert_eq!(seqs(o.due(0, RTO, usize::MAX)), vec![1, 2, 3]);
+        o.ack("r2.bridge", 3, 1);
+        o.set_importer("r3.bridge", false, 1_000); // decommissioned
+        assert_eq!(o.depth(), 3, "r3 may come back: its messages stay");
+        assert!(o.forget_gone(1_000 + 499, 500).is_empty(), "not before the ttl");
+        assert_eq!(o.forget_gone(1_000 + 500, 500), vec!["r3.bridge".to_string()]);
+        assert_eq!((o.depth(), o.importers()), (0, (1, 1)), "nothing is held for it any more");
+        assert!(o.forget_gone(10_000, 500).is_empty(), "forgotten once");
+        assert_eq!(o.ack("r3.bridge", 3, 10_001), Seen::Unknown, "a forgotten importer's acknowledgement is ignored");
+        // it comes back later: a new importer again, owed what is still held
+        assert_eq!(o.set_importer("r3.bridge", true, 20_000), Seen::Taken);
+        assert_eq!(o.importers(), (2, 2));
+    }
+
+    #[test]
+    fn a_return_before_the_ttl_keeps_the_importer() {
+        let mut o = Outbox::new(10);
+        o.set_importer("r2.bridge", true, 0);
+        o.set_importer("r2.bridge", false, 100);
+        o.set_importer("r2.bridge", true, 200);
+        assert!(o.forget_gone(10_000, 500).is_empty(), "alive again: never forgotten");
+        o.set_importer("r2.bridge", false, 20_000);
+        assert!(o.forget_gone(20_400, 500).is_empty(), "gone counts from the last departure");
+    }
+
+    #[test]
+    fn acks_count_only_from_importers_seen_alive_and_the_map_is_capped() {
+        let mut o = Outbox::new(10);
+        push(&mut o, 2);
+        assert_eq!(seqs(o.due(0, RTO, usize::MAX)), vec![1, 2]);
+        assert_eq!(o.ack("forged.bridge", 2, 1), Seen::Unknown);
+        assert_eq!((o.depth(), o.importers()), (2, (0, 0)), "an unknown importer trims nothing and is not kept");
+        assert_eq!(o.set_importer("never.seen", false, 1), Seen::Unknown, "a departure of nobody is ignored");
+        for n in 0..MAX_IMPORTERS {
+            assert_eq!(o.set_importer(&format!("r{n}.bridge"), true, 2), Seen::Taken);
+        }
+        assert_eq!(o.set_importer("one.more", true, 3), Seen::Full);
+        assert_eq!(o.importers().0, MAX_IMPORTERS);
+        assert_eq!(o.set_importer("r0.bridge", true, 4), Seen::Taken, "a known one is still heard");
+        o.set_importer("r0.bridge", false, 5);
+        assert_eq!(o.forget_gone(1_000, 10), vec!["r0.bridge".to_string()]);
+        assert_eq!(o.set_importer("one.more", true, 1_001), Seen::Taken, "room again once one is forgotten");
+    }
+
+    #[test]
     fn the_budget_paces_new_messages_but_not_retransmissions() {
         let mut o = Outbox::new(100);
-        o.set_importer("a", true);
+        o.set_importer("a", true, 0);
         push(&mut o, 5);
         assert_eq!(seqs(o.due(0, RTO, 2)), vec![1, 2]);
         assert_eq!(seqs(o.due(200, RTO, 1)), vec![1, 2, 3], "1 and 2 unacknowledged: again, plus one new");

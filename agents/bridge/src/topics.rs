@@ -8,7 +8,7 @@
 //! topic, and publishes it on the bridge's output port.
 
 use crate::config::{Export, Import};
-use crate::reliable::{Inbox, Outbox, Verdict};
+use crate::reliable::{Inbox, MAX_IMPORTERS, Outbox, Seen, Verdict};
 use crate::types::{ExportTap, ImportSink, TypeInfo};
 use crate::wire::{self, Frame};
 use std::collections::{BTreeSet, VecDeque};
@@ -19,6 +19,29 @@ use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 pub const RETRANSMIT_AFTER_NS: u64 = 300_000_000;
 /// One-way latencies kept for the median figure.
 const LATENCY_WINDOW: usize = 256;
+/// At most one line per this interval for a repeated warning (with a count).
+pub const WARN_EVERY_NS: u64 = 10_000_000_000;
+
+/// A warning that repeats: the first is written at once, later ones at
+/// most once per [`WARN_EVERY_NS`], with how many happened meanwhile.
+#[derive(Debug, Default)]
+pub struct RateLimited {
+    last_ns: Option<u64>,
+    pending: u64,
+}
+
+impl RateLimited {
+    /// Counts one event at `now_ns`; returns how many events the line to
+    /// write now stands for (0: write nothing now).
+    pub fn hit(&mut self, now_ns: u64) -> u64 {
+        self.pending = self.pending.saturating_add(1);
+        if self.last_ns.is_some_and(|t| now_ns.saturating_sub(t) < WARN_EVERY_NS) {
+            return 0;
+        }
+        self.last_ns = Some(now_ns);
+        std::mem::take(&mut self.pending)
+    }
+}
 
 /// CLOCK_REALTIME in ns: the stamp that crosses machines (one-way latency
 /// across hosts is only as good as their clock synchronisation).
@@ -55,6 +78,8 @@ struct Pending {
 
 struct ExportState {
     outbox: Option<Outbox>,
+    overflow_warn: RateLimited,
+    refused_warn: RateLimited,
     pending: Option<Pending>,
     last_sent_ns: u64,
     seq: u64,
@@ -79,6 +104,7 @@ pub struct ExportTopic {
     dropped: Counter,
     failed: Counter,
     wired: std::sync::atomic::AtomicBool,
+    importer_ttl_ns: u64,
 }
 
 impl std::fmt::Debug for ExportTopic {
@@ -99,7 +125,16 @@ impl ExportTopic {
             instance,
             tap,
             link: OnceLock::new(),
-            state: Mutex::new(ExportState { outbox, pending: None, last_sent_ns: 0, seq: 0, buf: Vec::new() }),
+            state: Mutex::new(ExportState {
+                outbox,
+                overflow_warn: RateLimited::default(),
+                refused_warn: RateLimited::default(),
+                pending: None,
+                last_sent_ns: 0,
+                seq: 0,
+                buf: Vec::new(),
+            }),
+            importer_ttl_ns: u64::try_from(crate::config::DEFAULT_IMPORTER_TTL.as_nanos()).unwrap_or(u64::MAX),
             importers: Mutex::new(BTreeSet::new()),
             msgs: Counter::default(),
             bytes: Counter::default(),
@@ -107,6 +142,13 @@ impl ExportTopic {
             failed: Counter::default(),
             wired: std::sync::atomic::AtomicBool::new(false),
         }
+    }
+
+    /// Forgets an importer gone for this long (default
+    /// [`crate::config::DEFAULT_IMPORTER_TTL`]).
+    pub fn with_importer_ttl(mut self, ttl: std::time::Duration) -> Self {
+        self.importer_ttl_ns = u64::try_from(ttl.as_nanos()).unwrap_or(u64::MAX);
+        self
     }
 
     /// Attaches the link once it is up; until then samples are queued
@@ -128,18 +170,23 @@ impl ExportTopic {
     /// Reads every waiting local sample and sends what is due (the task's step).
     pub fn pump(&self, now_mono_ns: u64) -> usize {
         let mut st = lock(&self.state);
+        let st = &mut *st;
         let n = self.tap.drain(&mut |sender, origin_seq, payload| {
             let stamp = unix_now_ns();
             match st.outbox.as_mut() {
                 Some(outbox) => {
                     let (_, overflow) = outbox.push(stamp, sender, origin_seq, payload.to_vec());
                     if let Some(o) = overflow {
-                        tracing::warn!(
-                            topic = %self.spec.origin(),
-                            seq = o.seq,
-                            queue = self.spec.queue,
-                            "reliable queue full: the oldest message is lost (no peer acknowledged it); raise `queue` or check the link"
-                        );
+                        let lost = st.overflow_warn.hit(now_mono_ns);
+                        if lost > 0 {
+                            tracing::warn!(
+                                topic = %self.spec.origin(),
+                                seq = o.seq,
+                                lost,
+                                queue = self.spec.queue,
+                                "reliable queue full: {lost} oldest message(s) lost since the last such line (no peer acknowledged them); raise `queue` or check the link"
+                            );
+                        }
                     }
                 }
                 None => {
@@ -150,7 +197,7 @@ impl ExportTopic {
                 }
             }
         });
-        self.flush_locked(&mut st, now_mono_ns);
+        self.flush_locked(st, now_mono_ns);
         n
     }
 
@@ -176,6 +223,16 @@ impl ExportTopic {
     }
 
     fn flush_locked(&self, st: &mut ExportState, now: u64) {
+        if let Some(outbox) = st.outbox.as_mut() {
+            for who in outbox.forget_gone(now, self.importer_ttl_ns) {
+                tracing::info!(
+                    topic = %self.spec.origin(),
+                    importer = %who,
+                    ttl_s = self.importer_ttl_ns / 1_000_000_000,
+                    "importer forgotten: gone for longer than importer_ttl; nothing is kept for it any more"
+                );
+            }
+        }
         let Some(link) = self.link.get() else { return };
         let budget = self.budget(st, now);
         let st = &mut *st;
@@ -237,29 +294,83 @@ impl ExportTopic {
         st.last_sent_ns = now;
     }
 
-    /// An importer appeared or went away (from its liveliness token).
-    pub fn set_importer(&self, who: &str, alive: bool) {
-        {
+    /// An importer appeared or went away (from its liveliness token), at `now_mono_ns`.
+    pub fn set_importer(&self, who: &str, alive: bool, now_mono_ns: u64) {
+        let mut st = lock(&self.state);
+        let seen = {
             let mut set = lock(&self.importers);
-            if alive {
-                set.insert(who.into());
-            } else {
-                set.remove(who);
+            let seen = match st.outbox.as_mut() {
+                Some(outbox) => outbox.set_importer(who, alive, now_mono_ns),
+                None if alive && !set.contains(who) && set.len() >= MAX_IMPORTERS => Seen::Full,
+                None => Seen::Taken,
+            };
+            if seen == Seen::Taken {
+                if alive {
+                    set.insert(who.into());
+                } else {
+                    set.remove(who);
+                }
+            }
+            seen
+        };
+        match seen {
+            Seen::Taken => tracing::info!(
+                topic = %self.spec.origin(),
+                importer = who,
+                alive,
+                "importer {}",
+                if alive { "joined" } else { "left" }
+            ),
+            Seen::Unknown => {}
+            Seen::Full => {
+                let n = st.refused_warn.hit(now_mono_ns);
+                if n > 0 {
+                    tracing::warn!(
+                        topic = %self.spec.origin(),
+                        importer = who,
+                        refused = n,
+                        "{n} new importer(s) refused: {MAX_IMPORTERS} are known already; those gone are forgotten after importer_ttl"
+                    );
+                }
             }
         }
-        if let Some(outbox) = lock(&self.state).outbox.as_mut() {
-            outbox.set_importer(who, alive);
-        }
-        tracing::info!(topic = %self.spec.origin(), importer = who, alive, "importer {}", if alive { "joined" } else { "left" });
     }
 
-    /// An acknowledgement arrived.
+    /// An acknowledgement arrived; one from an importer never seen alive is ignored.
     pub fn ack(&self, ack: &wire::Ack<'_>, now_mono_ns: u64) {
         if ack.instance != self.instance {
             return; // for an earlier run of this bridge
         }
-        if let Some(outbox) = lock(&self.state).outbox.as_mut() {
-            outbox.ack(ack.importer, ack.acked, now_mono_ns);
+        let mut st = lock(&self.state);
+        let st = &mut *st;
+        if let Some(outbox) = st.outbox.as_mut()
+            && outbox.ack(ack.importer, ack.acked, now_mono_ns) == Seen::Unknown
+        {
+            let n = st.refused_warn.hit(now_mono_ns);
+            if n > 0 {
+                tracing::warn!(
+                    topic = %self.spec.origin(),
+                    importer = ack.importer,
+                    refused = n,
+                    "{n} acknowledgement(s) from importers never seen alive ignored"
+                );
+            }
+        }
+    }
+
+    /// An acknowledgement whose key names another importer than its frame:
+    /// refused (the key is what access control ties to a certificate).
+    pub fn refuse_ack(&self, key: &str, importer: &str) {
+        let mut st = lock(&self.state);
+        let n = st.refused_warn.hit(agent_sdk::clock::now_ns());
+        if n > 0 {
+            tracing::warn!(
+                topic = %self.spec.origin(),
+                key,
+                importer,
+                refused = n,
+                "{n} acknowledgement(s) refused: the key does not name the importer the frame names"
+            );
         }
     }
 
@@ -566,7 +677,7 @@ mod tests {
         feed(&samples, 4);
         t.pump(0); // nobody listens: sent into the void
         lock(&sent).clear();
-        t.set_importer("r2.bridge", true);
+        t.set_importer("r2.bridge", true, 0);
         t.flush(1);
         let frames: Vec<Vec<u8>> = lock(&sent).drain(..).collect();
         assert_eq!(frames.len(), 4, "the importer that appeared is sent what it missed");
