@@ -55,6 +55,9 @@
 
 use serde::{Deserialize, Serialize};
 
+mod validate;
+pub use validate::{MAX_ALIGN, MAX_DEPTH, MAX_FIELDS, MAX_NAME_LEN, MAX_SIZE, SchemaInvalid};
+
 /// The layout of a type that can be part of a payload.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Schema {
