@@ -14,9 +14,16 @@
 //! `AGENT/PORT/image` beside the port that carried the ring notices, as
 //! `foxglove.RawImage` in protobuf ([`foxglove`]), which Foxglove and
 //! Lichtblick show as images.
+//!
+//! The file is written in chunks of at most [`CHUNK_SIZE`] bytes (a larger
+//! message makes a chunk of its own); [`RecordingWriter::flush`] closes the
+//! open chunk. A file whose writer was stopped before [`RecordingWriter::finish`]
+//! (killed, out of memory or disk) is read by [`read`] up to its last whole
+//! message, and by other MCAP readers up to its last closed chunk.
 
 pub mod foxglove;
 pub mod json;
+pub mod read;
 
 use shm_schemas::Schema;
 use shm_schemas::services::port_attributes::fingerprint_text;
@@ -30,6 +37,11 @@ pub const MESSAGE_ENCODING: &str = "nerve.raw";
 pub const SCHEMA_ENCODING: &str = "nerve.schema+json";
 /// Topic suffix of a ring's images, after the notice port's `AGENT/PORT`.
 pub const IMAGE_TOPIC_SUFFIX: &str = "/image";
+
+/// The size at which a chunk is closed and the next begun (uncompressed
+/// bytes). Smaller than mcap's default (1 MiB), so that readers that take
+/// only closed chunks lose less of a file cut short.
+pub const CHUNK_SIZE: u64 = 256 * 1024;
 
 /// Why a recording could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -90,10 +102,22 @@ impl<W: Write + Seek> std::fmt::Debug for RecordingWriter<W> {
 }
 
 impl<W: Write + Seek> RecordingWriter<W> {
-    /// Starts a file (uncompressed: recording must cost the robot next to nothing).
+    /// Starts a file (uncompressed: recording must cost the robot next to
+    /// nothing), in chunks of [`CHUNK_SIZE`].
     pub fn new(out: W) -> Result<Self, RecordingError> {
-        let mcap = mcap::WriteOptions::new().compression(None).profile("").create(out)?;
+        Self::with_chunk_size(out, CHUNK_SIZE)
+    }
+
+    /// Starts a file in chunks of `chunk_size` bytes.
+    pub fn with_chunk_size(out: W, chunk_size: u64) -> Result<Self, RecordingError> {
+        let mcap = mcap::WriteOptions::new().compression(None).profile("").chunk_size(Some(chunk_size)).create(out)?;
         Ok(RecordingWriter { mcap, image_schema: None })
+    }
+
+    /// Closes the open chunk and flushes the output: what was written so
+    /// far is then readable by any MCAP reader, should the writer die.
+    pub fn flush(&mut self) -> Result<(), RecordingError> {
+        Ok(self.mcap.flush()?)
     }
 
     /// Adds a port's channel; returns its id.
