@@ -35,8 +35,13 @@ use std::sync::{Arc, Mutex};
 
 pub use crate::raw_port::Loan;
 
-/// The iceoryx2 type details of a payload laid out as `schema`.
+/// The iceoryx2 type details of a payload laid out as `schema`, once the
+/// schema is [valid](Schema::validate): every port made from a schema
+/// (Python's, `nerve replay`'s) passes here before its size and alignment
+/// reach iceoryx2's `unsafe` set-up, which divides by the alignment and
+/// builds a `Layout` from it unchecked.
 pub(crate) fn payload_details(service: &str, schema: &Schema) -> Result<TypeDetail, PortError> {
+    schema.validate().map_err(|source| PortError::InvalidSchema { service: service.into(), source })?;
     TypeDetail::__internal_new_from_parts(TypeVariant::FixedSize, &schema.type_name, schema.size, schema.align).map_err(
         |e| PortError::Ipc {
             service: service.into(),
@@ -555,5 +560,38 @@ mod tests {
             other => panic!("another layout read: {other:?}"),
         }
         assert!(SchemaOutput::create(&node, &service, other, "py").is_err(), "another layout published");
+    }
+
+    /// A schema from outside (Python, a recording) with an alignment
+    /// iceoryx2 would divide by, or build a `Layout` from unchecked, never
+    /// reaches it: both directions refuse it with the schema's own message.
+    #[test]
+    fn an_invalid_schema_never_reaches_iceoryx2() {
+        let world = World::new(&format!("dynbad{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+        let _typed = Output::<Scalar>::create(&node, &robot.port_service("rust", "value"), "rust").expect("output");
+        for align in [0, 3, 1 << 20] {
+            let mut bad = Scalar::schema();
+            bad.align = align;
+            let service = robot.port_service("py", &format!("bad{align}"));
+            match SchemaOutput::create(&node, &service, bad.clone(), "py") {
+                Err(e @ PortError::InvalidSchema { .. }) => {
+                    let text = e.to_string();
+                    assert!(text.contains(&format!("align {align} is not a power of two")), "{text}");
+                }
+                other => panic!("align {align} published: {other:?}"),
+            }
+            let (_, input) = SchemaInput::new("in", bad.clone());
+            match input.connect(&node, &robot, "rust", "value") {
+                Err(PortError::InvalidSchema { .. }) => {}
+                other => panic!("align {align} read: {other:?}"),
+            }
+            match crate::raw_port::RawOutput::create(&node, &service, &bad, bad.fingerprint(), "rec") {
+                Err(PortError::InvalidSchema { .. }) => {}
+                other => panic!("align {align} replayed: {other:?}"),
+            }
+        }
     }
 }

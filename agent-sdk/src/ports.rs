@@ -185,6 +185,16 @@ pub enum PortError {
         /// [`MAX_SOURCES`]
         max: usize,
     },
+    /// The payload's schema describes no layout a type could have (a
+    /// damaged recording, a hand-written layout): refused before iceoryx2 sees it.
+    #[error("port {service}: {source}")]
+    InvalidSchema {
+        /// service name
+        service: String,
+        /// what is wrong with the schema
+        #[source]
+        source: shm_schemas::schema::SchemaInvalid,
+    },
     /// Anything else: an invalid service name, a sample of the wrong size.
     #[error("port {service}: {detail}")]
     Ipc {

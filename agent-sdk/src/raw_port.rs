@@ -66,9 +66,24 @@ impl RawPort {
             )));
         }
         let payload = types.payload;
+        // the details are whatever the process that made the service wrote:
+        // the same bounds as a schema's before they reach iceoryx2 again
+        let align = payload.alignment();
+        if !align.is_power_of_two()
+            || align > shm_schemas::schema::MAX_ALIGN
+            || payload.size() > shm_schemas::schema::MAX_SIZE
+        {
+            return Err(ipc(format!(
+                "its payload is {} bytes aligned to {align}: not a layout nerve makes (align a power of two up to {}, \
+                 at most {} bytes); the process that created the service is not a nerve agent",
+                payload.size(),
+                shm_schemas::schema::MAX_ALIGN,
+                shm_schemas::schema::MAX_SIZE
+            )));
+        }
         // SAFETY: the payload's type details are the service's own, read
-        // just above; the samples are handed out as bytes only (`receive`),
-        // never as a typed value.
+        // just above and bounded; the samples are handed out as bytes only
+        // (`receive`), never as a typed value.
         let builder = unsafe {
             node.service_builder(&name)
                 .publish_subscribe::<[CustomPayloadMarker]>()
