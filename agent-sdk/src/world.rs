@@ -212,6 +212,18 @@ impl World {
     pub fn new(robot: &str) -> Result<Self, WorldError> {
         let robot = RobotName::new(robot)?;
         let base = std::env::var_os(HOME_ENV).filter(|h| !h.is_empty()).map(PathBuf::from).unwrap_or_else(default_home);
+        // A relative home would name a different directory in every process
+        // that resolves it from its own working directory (daemons and the
+        // router's restarts among them): one robot, several state folders.
+        if base.is_relative() {
+            return Err(WorldError::Path {
+                path: base.display().to_string(),
+                detail: format!(
+                    "{HOME_ENV} is a relative path, which each process would resolve from its own working directory; give an absolute one (e.g. {HOME_ENV}=$PWD/{})",
+                    base.display()
+                ),
+            });
+        }
         let state_dir = base.join(robot.as_str());
         let mut iox_root =
             std::env::var(IOX2_ROOT_ENV).ok().filter(|r| !r.is_empty()).unwrap_or_else(default_iox2_root);

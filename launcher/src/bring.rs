@@ -13,7 +13,7 @@
 //!   runs, its shared-memory files.
 
 use crate::client::RouterSession;
-use crate::launch_file::{self, LaunchFile, RestartPolicy};
+use crate::launch_file::{self, LaunchFile};
 use agent_sdk::World;
 use agent_sdk::process::{ProcessError, ProcessHandle};
 use agent_sdk::world::pid_alive;
@@ -21,7 +21,6 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use nix::sys::signal::Signal;
 use shm_schemas::control::cli_to_router::{self as proto, CliRequest, EventKind, RouterReply};
 use std::collections::BTreeSet;
-use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -48,14 +47,6 @@ pub fn ensure_router(world: &World) -> Result<()> {
     }
     eprintln!("{}", String::from_utf8_lossy(&out.stdout).trim());
     Ok(())
-}
-
-fn policy(p: RestartPolicy) -> proto::RestartPolicy {
-    match p {
-        RestartPolicy::Never => proto::RestartPolicy::Never,
-        RestartPolicy::OnFailure => proto::RestartPolicy::OnFailure,
-        RestartPolicy::Always => proto::RestartPolicy::Always,
-    }
 }
 
 /// How many of its last log lines a launch shows of an agent that failed to start.
@@ -85,20 +76,18 @@ fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<
     }
     let mut failed = Vec::new();
     for (i, (spec, child)) in children.into_iter().enumerate() {
-        let Some((mut child, mut log)) = child else {
+        let Some((child, mut log)) = child else {
             eprintln!("  [{}/{n}] {} ({}) already running", i + 1, spec.name, spec.kind);
             continue;
         };
-        let status = child.wait()?;
-        let mut out = String::new();
-        let mut err = String::new();
-        if let Some(mut o) = child.stdout.take() {
-            let _ = o.read_to_string(&mut out);
-        }
-        if let Some(mut e) = child.stderr.take() {
-            let _ = e.read_to_string(&mut err);
-        }
-        if status.success() {
+        // Both pipes are read while waiting (wait_with_output drains them
+        // together): an agent that wrote more than a pipe holds (64 KiB)
+        // before it daemonized would otherwise block on its write while the
+        // launch blocked on its exit.
+        let output = child.wait_with_output()?;
+        let out = String::from_utf8_lossy(&output.stdout);
+        let err = String::from_utf8_lossy(&output.stderr);
+        if output.status.success() {
             eprintln!(
                 "  [{}/{n}] {} ({}) {}",
                 i + 1,
@@ -243,7 +232,7 @@ pub fn up(world: &World, file: &LaunchFile) -> Result<BroughtUp> {
             .ok(CliRequest::Supervise(proto::Supervision {
                 name: spec.name.clone(),
                 argv: spec.argv(world.robot().as_str()),
-                policy: policy(spec.restart),
+                policy: spec.restart,
                 max_restarts: spec.max_restarts,
                 window_ns: agent_sdk::clock::nanos(spec.restart_window),
                 backoff_ns: agent_sdk::clock::nanos(spec.backoff),

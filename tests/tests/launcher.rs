@@ -84,6 +84,68 @@ fn a_relative_exe_is_found_from_the_launch_files_folder() {
     r.down_and_check_clean();
 }
 
+/// An agent that writes more than a pipe holds before it fails does not
+/// hang the launch: its output is read while the launch waits for it (the
+/// open Low of security-2, `start_agents`), and the failure is reported.
+#[test]
+fn an_agent_that_floods_its_output_and_fails_does_not_hang_the_launch() {
+    use std::os::unix::fs::PermissionsExt;
+    let r = Robot::new("flood");
+    let script = r.home.join("flooder");
+    let ticker = nerve_tests::bin_dir().join("nerve-ticker");
+    std::fs::write(
+        &script,
+        format!(
+            "#!/bin/sh\nfor a in \"$@\"; do [ \"$a\" = --describe ] && exec {} \"$@\"; done\n\
+             head -c 300000 /dev/zero | tr '\\000' x\nhead -c 300000 /dev/zero | tr '\\000' y >&2\nexit 1\n",
+            ticker.display()
+        ),
+    )
+    .expect("script");
+    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+    let file = r.launch_file(
+        "flood.toml",
+        &format!("robot = \"{}\"\n[[agent]]\nname = \"f1\"\nexe = \"{}\"\n", r.name, script.display()),
+    );
+    let mut child = r
+        .command("nerve")
+        .arg("launch")
+        .arg(&file)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("launch");
+    let mut stderr = child.stderr.take().expect("stderr");
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = std::io::Read::read_to_string(&mut stderr, &mut s);
+        s
+    });
+    let ended = wait_until(Duration::from_secs(60), || matches!(child.try_wait(), Ok(Some(_))));
+    if !ended {
+        let _ = child.kill();
+    }
+    let status = child.wait().expect("wait");
+    let err = reader.join().unwrap_or_default();
+    assert!(ended, "nerve launch hung on an agent that filled its pipes");
+    assert!(!status.success(), "the agent failed, so must the launch: {err}");
+    assert!(err.contains("f1") && err.contains("FAILED"), "the failure is named: {}", &err[..err.len().min(2000)]);
+    let _ = r.nerve(&["down"]);
+}
+
+/// A relative NERVE_HOME is refused with what to do: each process would
+/// resolve it from its own working directory (the open Low of security-2).
+#[test]
+fn a_relative_nerve_home_is_refused_with_what_to_do() {
+    let r = Robot::new("relhome");
+    let out =
+        r.command("nerve").arg("ps").env("NERVE_HOME", "some/relative/home").current_dir(&r.home).output().expect("ps");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("relative") && err.contains("absolute"), "{err}");
+    assert!(!r.home.join("some").exists(), "nothing was made under the relative path");
+}
+
 /// Every kind of bad launch file is refused with file and line, and nothing starts.
 #[test]
 fn bad_launch_files_are_refused_with_file_and_line() {
@@ -113,6 +175,11 @@ fn bad_launch_files_are_refused_with_file_and_line() {
         ),
         ("bad name", format!("{head}[[agent]]\nname = \"T 1\"\nkind = \"ticker\"\n"), ":3: agent name"),
         ("bad period", format!("{head}[[agent]]\nname = \"t1\"\nkind = \"ticker\"\nperiod = \"soon\"\n"), ":5: period"),
+        (
+            "bad log level",
+            format!("{head}[[agent]]\nname = \"t1\"\nkind = \"ticker\"\nlog_level = \"debgu\"\n"),
+            ":5: log_level: unknown log level \"debgu\"",
+        ),
         (
             "unknown agent",
             format!(
