@@ -19,7 +19,7 @@ pub struct CommonArgs {
     #[arg(long)]
     pub daemon: bool,
     /// Log filter (error, warn, info, debug, trace or a tracing filter); RUST_LOG is used when absent.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::daemon::parse_log_level)]
     pub log_level: Option<String>,
     /// Do not ask for SCHED_FIFO and locked memory.
     #[arg(long)]

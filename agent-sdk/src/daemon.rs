@@ -344,6 +344,22 @@ impl Drop for LogWriter {
     }
 }
 
+/// Checks a `--log-level` value (`error`, `warn`, `info`, `debug`, `trace`
+/// or a `tracing` filter such as `info,nerve_router=debug`) for clap's
+/// `value_parser`: a typo is refused with what is accepted instead of
+/// falling back to `info` without a word.
+pub fn parse_log_level(s: &str) -> Result<String, String> {
+    const LEVELS: [&str; 6] = ["error", "warn", "info", "debug", "trace", "off"];
+    const WHAT: &str = "give error, warn, info, debug, trace, off or a tracing filter such as info,nerve_router=debug";
+    // A lone word is a target name to `tracing` ("debgu" would enable a
+    // target of that name and hide everything else): only a level is taken.
+    let lone_word = !s.contains([',', '=', '[', ':']);
+    if lone_word && !LEVELS.contains(&s.to_ascii_lowercase().as_str()) {
+        return Err(format!("unknown log level {s:?}; {WHAT}"));
+    }
+    tracing_subscriber::EnvFilter::try_new(s).map(|_| s.to_owned()).map_err(|e| format!("{e}; {WHAT}"))
+}
+
 /// Sets up `tracing` for a nerve process: `--log-level` when given, else
 /// `RUST_LOG`, else `info`; every line carries `who` (the agent's name).
 pub fn init_logging(who: &str, level: Option<&str>) {
@@ -438,6 +454,14 @@ pub fn watchdog_interval() -> Option<std::time::Duration> {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_bad_log_level_is_refused_with_what_is_accepted() {
+        assert_eq!(parse_log_level("debug").as_deref(), Ok("debug"));
+        assert!(parse_log_level("info,nerve_router=trace").is_ok());
+        let e = parse_log_level("debgu").expect_err("a typo of a level");
+        assert!(e.contains("unknown log level \"debgu\"") && e.contains("give error, warn, info"), "{e}");
+    }
 
     #[test]
     fn logs_are_rotated_by_size_keeping_three_generations() {

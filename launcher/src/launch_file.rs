@@ -37,17 +37,9 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 use toml::Spanned;
 
-/// When a supervised agent is restarted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum RestartPolicy {
-    /// never
-    Never,
-    /// when it dies without leaving cleanly
-    OnFailure,
-    /// whenever it exits, unless stopped by `nerve stop` or `nerve down`
-    Always,
-}
+/// When a supervised agent is restarted (`restart = "on-failure"`): the
+/// router's own type, so that the file and the request cannot drift apart.
+pub use shm_schemas::control::cli_to_router::RestartPolicy;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -79,7 +71,7 @@ struct RawAgent {
     importance: Option<Spanned<u8>>,
     #[serde(default)]
     suspended: bool,
-    log_level: Option<String>,
+    log_level: Option<Spanned<String>>,
     cpu_latency: Option<Spanned<toml::Value>>,
     cpus: Option<Spanned<toml::Value>>,
 }
@@ -440,6 +432,11 @@ pub fn load(
         {
             cx.err(p, format!("period: {e}"));
         }
+        if let Some(l) = &a.log_level
+            && let Err(e) = agent_sdk::daemon::parse_log_level(l.get_ref())
+        {
+            cx.err(l, format!("log_level: {e}"));
+        }
         let restart_window = dur(&mut cx, &a.restart_window, Duration::from_secs(60));
         let backoff = dur(&mut cx, &a.backoff, Duration::from_millis(250));
         let importance = match &a.importance {
@@ -478,7 +475,7 @@ pub fn load(
             backoff,
             importance,
             suspended: a.suspended,
-            log_level: a.log_level.clone(),
+            log_level: a.log_level.as_ref().map(|l| l.get_ref().clone()),
             cpu_latency: a.cpu_latency.as_ref().and_then(|v| cpu_latency_of(&mut cx, v)).or(robot_cpu_latency),
             cpus: a.cpus.as_ref().and_then(|v| cpus_of(&mut cx, v)),
             description,

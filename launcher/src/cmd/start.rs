@@ -16,7 +16,7 @@ pub struct RouterArgs {
     #[arg(long)]
     pub daemon: bool,
     /// Log filter; RUST_LOG is used when absent.
-    #[arg(long)]
+    #[arg(long, value_parser = agent_sdk::daemon::parse_log_level)]
     pub log_level: Option<String>,
 }
 
@@ -32,7 +32,7 @@ pub struct StartArgs {
     #[arg(long)]
     pub period: Option<String>,
     /// Log filter of the agent.
-    #[arg(long)]
+    #[arg(long, value_parser = agent_sdk::daemon::parse_log_level)]
     pub log_level: Option<String>,
     /// Start with the task suspended.
     #[arg(long)]
