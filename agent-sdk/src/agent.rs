@@ -63,7 +63,8 @@ pub enum AgentError {
     Other(String),
 }
 
-/// The agent's algorithm. Only [`Agent::new`] and [`Agent::step`] are required.
+/// The agent's algorithm. [`Agent::KIND`], [`Agent::task`], [`Agent::new`] and
+/// [`Agent::step`] are required; every other hook has a default.
 pub trait Agent: Sized + Send + 'static {
     /// The kind of agent, as shown by `nerve ps`.
     const KIND: &'static str;

@@ -33,6 +33,12 @@ impl<T: Clone> Param<T> {
         self.value.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
+    /// Looks at the current value without copying it (a string parameter
+    /// read every cycle, say, to see whether it changed).
+    pub fn with<R>(&self, f: impl FnOnce(&T) -> R) -> R {
+        f(&self.value.lock().unwrap_or_else(|p| p.into_inner()))
+    }
+
     /// Changes the value from inside the agent.
     pub fn set(&self, v: T) {
         *self.value.lock().unwrap_or_else(|p| p.into_inner()) = v;

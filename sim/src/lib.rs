@@ -15,11 +15,11 @@
 //!   rendering into a caller's buffer;
 //! * [`pty`] and [`hub`]: each device on its own pseudo-terminal, published
 //!   as a symlink, speaking the `nerve-devices` protocols; one hub per robot;
-//! * [`run`]: the real-time loop of the `nerve-sim` binary; [`truth`]: the
-//!   ground-truth CSV.
+//! * [`truth`]: the ground-truth CSV.
 //!
-//! Tests and other crates drive a [`Simulation`] step by step; the binary is a
-//! thin main around [`run::run`].
+//! Tests and other crates drive a [`Simulation`] step by step; the
+//! `nerve-sim` binary (`src/main.rs`) is an SDK agent whose periodic step
+//! advances the simulation and serves the devices.
 #![warn(missing_docs)]
 
 pub mod camera;
@@ -27,7 +27,6 @@ pub mod geom;
 pub mod hub;
 pub mod pty;
 pub mod robot;
-pub mod run;
 pub mod sensors;
 pub mod sim;
 pub mod truth;
@@ -38,7 +37,6 @@ pub use geom::{Segment, Vec2};
 pub use hub::DeviceHub;
 pub use pty::{DeviceKind, PtyDevice, PtyError, PtyStats};
 pub use robot::{NoiseModel, RobotKind, RobotModel};
-pub use run::{RunError, RunOptions, RunSummary, install_stop_handler, run};
 pub use sim::{Graspable, RobotId, RobotMut, RobotRef, SimConfig, SimError, Simulation, Truth};
 pub use truth::{TRUTH_HEADER, TruthError, TruthLog, gripper_word};
 pub use world::{RobotStart, World, WorldError};

@@ -76,6 +76,9 @@ struct Motor {
     odom_out: Output<Odometry>,
     applied_out: Output<VelocityCommand>,
     weights: Param<String>,
+    /// the `weights` text last parsed, and what it parsed to: the string
+    /// is parsed again only when `nerve param set` changed it
+    weights_seen: (String, Weights),
     default_weight: Param<f64>,
     v_max: Param<f64>,
     omega_max: Param<f64>,
@@ -187,6 +190,7 @@ impl Agent for Motor {
             last_report: None,
             refusals_by_sender: Refusals::default(),
             last_stopped_by: None,
+            weights_seen: (String::new(), Weights::default()),
             was_idle: true,
             last_step_ns: 0,
         })
@@ -246,14 +250,19 @@ impl Agent for Motor {
 
         // fusion, control, wheels
         self.fusion.cruise = self.cruise.get();
-        let weights = Weights::parse(&self.weights.get()).unwrap_or_default();
+        if self.weights.with(|w| *w != self.weights_seen.0) {
+            let text = self.weights.get();
+            // the parameter's check refuses what does not parse
+            self.weights_seen = (text.clone(), Weights::parse(&text).unwrap_or_default());
+        }
+        let weights = &self.weights_seen.1;
         let dt = if self.last_step_ns == 0 {
             ctx.period().map_or(0.05, |p| p.as_secs_f64())
         } else {
             (now.saturating_sub(self.last_step_ns)) as f64 / 1e9
         };
         self.last_step_ns = now;
-        let d = self.fusion.decide(now, dt, &limits, &weights, self.default_weight.get());
+        let d = self.fusion.decide(now, dt, &limits, weights, self.default_weight.get());
         if d.stopped_by != self.last_stopped_by {
             match &d.stopped_by {
                 Some(s) => tracing::warn!("safety stop from {s}: the base stops"),
