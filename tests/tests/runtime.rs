@@ -704,3 +704,23 @@ fn connect_to_a_source_that_does_not_exist_is_refused_and_creates_nothing() {
     drop(node);
     r.down_and_check_clean();
 }
+
+/// `nerve hz --duration` ends by itself after the time given, its last
+/// report covering what was left of its window (as `record` and `plot`
+/// take `--duration`).
+#[test]
+fn hz_stops_after_its_duration() {
+    let r = Robot::new("hzdur");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    let out = r.ok(&["hz", "t1/tick", "--json", "--window", "10", "--duration", "0.6"]);
+    let reports: Vec<serde_json::Value> =
+        out.lines().map(|l| serde_json::from_str(l).expect("one JSON report a line")).collect();
+    assert_eq!(reports.len(), 1, "one report, cut short by the duration: {out}");
+    let window = reports[0]["window_s"].as_f64().unwrap_or(0.0);
+    assert!(window > 0.5 && window < 5.0, "the report covers the duration, not the 10 s window: {out}");
+    assert!(reports[0]["rate_hz"].as_f64().unwrap_or(0.0) > 10.0, "{out}");
+    let e = r.fails(&["hz", "t1/tick", "--duration", "soon"]);
+    assert!(e.contains("--duration"), "{e}");
+    r.down_and_check_clean();
+}

@@ -54,6 +54,10 @@ pub struct HzArgs {
     /// Exit after this many reports.
     #[arg(long)]
     pub count: Option<u64>,
+    /// Exit after this many seconds (the last report covers what is left of
+    /// its window), as `record` and `plot` take it.
+    #[arg(long, value_parser = agent_sdk::clock::parse_seconds)]
+    pub duration: Option<f64>,
     /// One JSON object per report.
     #[arg(long)]
     pub json: bool,
@@ -283,6 +287,7 @@ fn hz_of(world: &World, node: &Node<Ipc>, port: &PortRef, a: &HzArgs) -> Result<
     let service = world.robot().port_service(port.agent.as_str(), &port.port);
     let window_ns = (a.window * 1e9) as u64;
     let mut start = now_ns();
+    let end = a.duration.map(|d| start.saturating_add((d * 1e9) as u64));
     let mut arrivals: Vec<u64> = Vec::new();
     let mut reports = 0u64;
     watch(node, &service, Duration::from_millis(50), None, |ev| {
@@ -290,11 +295,12 @@ fn hz_of(world: &World, node: &Node<Ipc>, port: &PortRef, a: &HzArgs) -> Result<
             arrivals.push(now_ns());
         }
         let now = now_ns();
-        if now.saturating_sub(start) < window_ns {
+        let over = end.is_some_and(|e| now >= e);
+        if now.saturating_sub(start) < window_ns && !over {
             return true;
         }
-        let elapsed = (now - start) as f64 / 1e9;
-        let rate = arrivals.len() as f64 / elapsed;
+        let elapsed = (now.saturating_sub(start)) as f64 / 1e9;
+        let rate = if elapsed > 0.0 { arrivals.len() as f64 / elapsed } else { 0.0 };
         let mut gaps: Vec<u64> = arrivals.windows(2).map(|w| w[1] - w[0]).collect();
         gaps.sort_unstable();
         let mean = if gaps.is_empty() { 0.0 } else { gaps.iter().sum::<u64>() as f64 / gaps.len() as f64 };
@@ -325,7 +331,7 @@ fn hz_of(world: &World, node: &Node<Ipc>, port: &PortRef, a: &HzArgs) -> Result<
         arrivals.clear();
         start = now;
         reports += 1;
-        a.count.is_none_or(|c| reports < c)
+        !over && a.count.is_none_or(|c| reports < c)
     })?;
     Ok(ExitCode::SUCCESS)
 }
