@@ -462,9 +462,20 @@ fn the_example_pair_of_launch_files_runs() {
     let port = free_port().to_string();
     let dir = a.home.join("example");
     std::fs::create_dir_all(&dir).expect("example dir");
+    // the examples speak mutual TLS: the fleet's keys, as the README makes them
+    let keys = dir.join("keys");
+    for args in [vec!["init"], vec!["add", a.name.as_str()], vec!["add", b.name.as_str()]] {
+        let mut full = vec!["bridge", "keys"];
+        full.extend(args);
+        let keys = keys.display().to_string();
+        full.extend(["--dir", keys.as_str()]);
+        let out = a.nerve(&full);
+        assert!(out.status.success(), "nerve {}: {}", full.join(" "), String::from_utf8_lossy(&out.stderr));
+    }
     for f in ["bridge-a.toml", "bridge-b.toml", "bridge-a.zenoh.toml", "bridge-b.zenoh.toml"] {
         let text = std::fs::read_to_string(repo.join(f)).expect("example file");
         let text = text.replace("bridge-a", &a.name).replace("bridge-b", &b.name).replace("7447", &port);
+        let text = text.replace("\n[tls]\n", &format!("\n[tls]\nkeys = {:?}\n", keys.display().to_string()));
         // the launch files name their configs through {dir}: rename them alike
         let name = f.replace("bridge-a", &a.name).replace("bridge-b", &b.name);
         std::fs::write(dir.join(name), text).expect("write example");
@@ -473,6 +484,7 @@ fn the_example_pair_of_launch_files_runs() {
     launch(&b, &dir.join(format!("{}.toml", b.name)), None);
     assert_eq!(b.echo("r1/out", 3).len(), 3, "robot A's ticks reach robot B");
     assert_eq!(a.echo("r1/out", 1).len(), 1, "robot B's commands reach robot A");
+    assert_eq!(a.figure("bridge", "security"), "tls", "the example runs mutual TLS");
     a.down_and_check_clean();
     b.down_and_check_clean();
 }

@@ -307,6 +307,13 @@ fn the_shipped_launch_files_come_up_and_their_bridges_meet() {
     let dir = r1.home.join("shipped");
     std::fs::create_dir_all(&dir).expect("launch dir");
     let r2_dev = r2.home.join(&r2.name).join("dev");
+    // the bridges speak mutual TLS: the fleet's keys, as docs/cooperate.md makes them
+    let keys = dir.join("keys").display().to_string();
+    for args in [vec!["init"], vec!["add", r1.name.as_str()], vec!["add", r2.name.as_str()]] {
+        let full: Vec<&str> = ["bridge", "keys"].into_iter().chain(args).chain(["--dir", keys.as_str()]).collect();
+        let out = r1.nerve(&full);
+        assert!(out.status.success(), "nerve {}: {}", full.join(" "), String::from_utf8_lossy(&out.stderr));
+    }
     for f in ["cooperate-r1.toml", "cooperate-r2.toml", "cooperate-r1.zenoh.toml", "cooperate-r2.zenoh.toml"] {
         let text = std::fs::read_to_string(repo().join("launch").join(f)).expect("shipped launch file");
         // robot 2's boards go to robot 2's state directory (another NERVE_HOME here)
@@ -314,7 +321,8 @@ fn the_shipped_launch_files_come_up_and_their_bridges_meet() {
             .replace("\"coop-r2:h2\"", &format!("\"coop-r2:h2:{}\"", r2_dev.display()))
             .replace("coop-r1", &r1.name)
             .replace("coop-r2", &r2.name)
-            .replace("7451", &port);
+            .replace("7451", &port)
+            .replace("\n[tls]\n", &format!("\n[tls]\nkeys = {keys:?}\n"));
         std::fs::write(dir.join(f), text).expect("write launch file");
     }
     // the launch files name the world and the knowledge bases from the source tree

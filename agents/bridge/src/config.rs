@@ -170,13 +170,18 @@ impl Tls {
 }
 
 impl TlsFiles {
-    /// Says which file is missing or unreadable, and how to make it.
-    pub fn check(&self, robot: &str) -> Result<(), String> {
-        for (what, path, make) in [
-            ("the fleet CA certificate", &self.ca, "nerve bridge keys init".to_string()),
-            ("this robot's certificate", &self.cert, format!("nerve bridge keys add {robot}")),
-            ("this robot's private key", &self.key, format!("nerve bridge keys add {robot}")),
-        ] {
+    /// Says which file is missing or unreadable, and how to make it. With
+    /// `robot` `None` (the robot is not known yet: `nerve launch`'s check),
+    /// only the files that do not depend on the robot's name.
+    pub fn check(&self, robot: Option<&str>, tls: &Tls) -> Result<(), String> {
+        let who = robot.unwrap_or("ROBOT");
+        let mine = |named: &Option<PathBuf>| robot.is_some() || named.is_some();
+        let files = [
+            ("the fleet CA certificate", &self.ca, "nerve bridge keys init".to_string(), true),
+            ("this robot's certificate", &self.cert, format!("nerve bridge keys add {who}"), mine(&tls.cert)),
+            ("this robot's private key", &self.key, format!("nerve bridge keys add {who}"), mine(&tls.key)),
+        ];
+        for (what, path, make, _) in files.iter().filter(|f| f.3) {
             if let Err(e) = std::fs::File::open(path) {
                 return Err(format!(
                     "[tls]: cannot read {what} {}: {e}; make it with `{make}` (with --dir {}), or name the file in [tls]",
@@ -748,11 +753,11 @@ as = "r1.t1.tick"
         .expect("valid");
         assert_eq!(c.peers, vec!["r3", "r2"], "named peers, then the robots imported from");
         assert_eq!(c.importer_ttl, Duration::from_secs(60));
-        let f = c.tls.expect("tls").files("r1");
+        let f = c.tls.as_ref().expect("tls").files("r1");
         assert_eq!(f.ca, PathBuf::from("/k/ca.crt"));
         assert_eq!(f.cert, PathBuf::from("/c/me.crt"));
         assert_eq!(f.key, PathBuf::from("/k/r1.key"));
-        let e = f.check("r1").expect_err("no such files");
+        let e = f.check(None, c.tls.as_ref().expect("tls")).expect_err("no such files");
         assert!(e.contains("/k/ca.crt") && e.contains("nerve bridge keys init"), "{e}");
         let p = problems(&format!("listen = [\"tcp/127.0.0.1:7447\"]\n{ONE}[tls]\n"));
         assert!(p[0].starts_with("b.toml:1: ") && p[0].contains("every endpoint is tls/"), "{p:?}");

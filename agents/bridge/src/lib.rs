@@ -122,8 +122,10 @@ impl Agent for Bridge {
         let cfg = config::load(&path, &|t| types.knows(t)).map_err(|e| AgentError::Config(e.to_string()))?;
         let robot = setup.world().robot().to_string();
         let me = Me { robot: robot.clone(), name: setup.name().to_owned() };
+        // the files named by the robot's name are checked at the start (a
+        // description for `nerve launch`'s check runs under another name)
         if let Some(tls) = &cfg.tls {
-            tls.files(&robot).check(&robot).map_err(|e| AgentError::Config(format!("{}: {e}", path.display())))?;
+            tls.files(&robot).check(None, tls).map_err(|e| AgentError::Config(format!("{}: {e}", path.display())))?;
         }
         let instance = instance_id();
         let mut exports = Vec::new();
@@ -188,6 +190,9 @@ impl Agent for Bridge {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        if let Some(tls) = &self.cfg.tls {
+            tls.files(&self.me.robot).check(Some(&self.me.robot), tls).map_err(AgentError::Config)?;
+        }
         if self.cfg.runs_insecure() {
             tracing::warn!(
                 listen = ?self.cfg.listen,

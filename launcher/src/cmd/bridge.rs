@@ -1,6 +1,11 @@
 //! `nerve bridge status`: for one robot, which peer robots its bridge agents
 //! see and what crosses, per topic. Read from the bridges' own figures
-//! (`nerve param get BRIDGE KEY` reads any one of them).
+//! (`nerve param get BRIDGE KEY` reads any one of them). Each bridge's
+//! security is shown: `tls`, `loopback` or `insecure` (plain TCP beyond
+//! this host, allowed by `insecure = true`).
+//!
+//! `nerve bridge keys init|add ROBOT`: the fleet's certificates (see
+//! [`crate::cmd::bridge_keys`]).
 
 use crate::client::RouterSession;
 use agent_sdk::World;
@@ -20,6 +25,9 @@ pub enum BridgeCmd {
         #[arg(long)]
         json: bool,
     },
+    /// The fleet's keys for the bridge's mutual TLS: `init` makes the CA, `add ROBOT` a robot's certificate.
+    #[command(subcommand)]
+    Keys(crate::cmd::bridge_keys::KeysCmd),
 }
 
 /// One topic's figures, by field (`msgs_out`, `lost`, ...).
@@ -40,6 +48,8 @@ pub struct BridgeStatus {
     pub pid: u32,
     /// peer bridges seen now, `ROBOT/NAME`
     pub peers: Vec<String>,
+    /// `tls`, `loopback` or `insecure`
+    pub security: String,
     /// local ports sent to the peers
     pub exports: Vec<TopicStatus>,
     /// remote ports received
@@ -54,6 +64,10 @@ pub fn status_of(a: &AgentView) -> BridgeStatus {
     for (k, v) in a.stats.iter().flat_map(|s| &s.figures) {
         if k == "peer_names" {
             st.peers = v.split(',').filter(|s| !s.is_empty()).map(str::to_owned).collect();
+            continue;
+        }
+        if k == "security" {
+            st.security.clone_from(v);
             continue;
         }
         let (map, rest) = if let Some(r) = k.strip_prefix("export.") {
@@ -76,7 +90,10 @@ pub fn status_of(a: &AgentView) -> BridgeStatus {
 }
 
 pub fn bridge(world: &World, cmd: BridgeCmd) -> Result<ExitCode> {
-    let BridgeCmd::Status { json } = cmd;
+    let json = match cmd {
+        BridgeCmd::Status { json } => json,
+        BridgeCmd::Keys(k) => return crate::cmd::bridge_keys::keys(k),
+    };
     let s = RouterSession::open(world)?;
     let RouterReply::Agents(agents) = s.call(CliRequest::Ps)? else { bail!("unexpected reply from the router") };
     let bridges: Vec<BridgeStatus> = agents.iter().filter(|a| a.kind == "bridge").map(status_of).collect();
@@ -103,7 +120,12 @@ fn field<'a>(t: &'a TopicStatus, k: &str) -> &'a str {
 
 fn print_status(b: &BridgeStatus) {
     let peers = if b.peers.is_empty() { "none".to_string() } else { b.peers.join(", ") };
-    println!("bridge {} (pid {}): {} peer(s): {peers}", b.name, b.pid, b.peers.len());
+    let security = match b.security.as_str() {
+        "insecure" => "INSECURE (plain TCP beyond this host: insecure = true)",
+        "" => "-",
+        s => s,
+    };
+    println!("bridge {} (pid {}): {} peer(s): {peers}; security {security}", b.name, b.pid, b.peers.len());
     if !b.exports.is_empty() {
         println!(
             "  {:<28} {:<16} {:<8} {:<5} {:>4} {:>9} {:>12} {:>7} {:>5} {:>5} {:>5}",
@@ -165,6 +187,7 @@ mod tests {
         let figures = [
             ("peers", "1"),
             ("peer_names", "r2/bridge"),
+            ("security", "insecure"),
             ("export.t1/tick.msgs_out", "5"),
             ("export.t1/tick.lost", "0"),
             ("import.r2/a/p.v2.msgs_in", "3"),
@@ -189,6 +212,7 @@ mod tests {
         };
         let s = status_of(&a);
         assert_eq!(s.peers, vec!["r2/bridge"]);
+        assert_eq!(s.security, "insecure");
         assert_eq!(s.exports[0].topic, "t1/tick");
         assert_eq!(s.exports[0].figures["msgs_out"], "5");
         assert_eq!(s.imports[0].topic, "r2/a/p.v2", "a dotted port name keeps its dots");

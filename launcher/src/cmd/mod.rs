@@ -5,6 +5,7 @@
 
 pub mod bench;
 pub mod bridge;
+pub mod bridge_keys;
 pub mod calibrate;
 pub mod demo;
 pub mod down;

@@ -244,6 +244,10 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         names: &names,
         no_checkpoints: a.no_checkpoints,
     };
+    // the bridges talk mutual TLS: the run's fleet keys, made once in `out/keys`
+    let keys = out.join("keys");
+    crate::cmd::bridge_keys::ensure(&keys, &[names[0].as_str(), names[1].as_str()])
+        .with_context(|| format!("cannot make the bridges' keys in {}", keys.display()))?;
     let mut launch_paths = Vec::new();
     for (i, t) in templates.iter().enumerate() {
         let name = format!("launch-r{}.toml", i + 1);
@@ -254,6 +258,7 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         let src = t.with_file_name(&zenoh);
         let text = std::fs::read_to_string(&src).with_context(|| format!("cannot read {}", src.display()))?;
         let text = rename(&text, &template_names, &names).replace(SHIPPED_PORT, &a.port.to_string());
+        let text = text.replace("\n[tls]\n", &format!("\n[tls]\nkeys = {:?}\n", keys.display().to_string()));
         std::fs::write(out.join(&zenoh), text).with_context(|| format!("cannot write {zenoh}"))?;
     }
     for f in ["truth-r1.csv", "truth-r2.csv"] {
