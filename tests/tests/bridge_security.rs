@@ -63,7 +63,7 @@ if a.get("tls"):
         c.insert_json5("transport/link/tls/" + k, json.dumps(v))
 s = zenoh.open(c)
 got = [0]
-sub = s.declare_subscriber("**", lambda sample: got.__setitem__(0, got[0] + 1))
+sub = s.declare_subscriber("**", lambda sample: got.__setitem__(0, got[0] + 1), allowed_origin=zenoh.Locality.REMOTE)
 end = time.monotonic() + a.get("wait_peer", 0)
 while time.monotonic() < end and not list(s.info.peers_zid()):
     time.sleep(0.05)
