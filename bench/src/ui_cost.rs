@@ -83,7 +83,7 @@ fn free_port() -> Result<u16> {
 fn open_page(robot: &Robot, work: &Path) -> Result<Vec<ChildGuard>> {
     let addr = format!("127.0.0.1:{}", free_port()?);
     let mut cmd = robot.nerve();
-    cmd.args(["ui", "--bind", &addr, "--token", TOKEN]).stdin(Stdio::null());
+    cmd.args(["ui", "--bind", &addr]).env("NERVE_UI_TOKEN", TOKEN).stdin(Stdio::null());
     robot.quiet(&mut cmd);
     let ui = ChildGuard::spawn("nerve ui", cmd)?;
     let t0 = Instant::now();

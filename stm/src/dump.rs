@@ -1,4 +1,6 @@
-//! Writing a stored image frame as a PNG file, for `nerve mem dump`.
+//! Writing a stored image frame as a PNG file, for `nerve mem dump`, or
+//! into memory ([`encode_png`], for `nerve ui`: no file that another user
+//! could pre-create or read).
 //!
 //! * `RGB8` is written as an RGB PNG;
 //! * `GRAY8` (and masks) as an 8-bit greyscale PNG;
@@ -68,6 +70,15 @@ pub enum DumpError {
         #[source]
         source: std::io::Error,
     },
+    /// The PNG encoder failed (writing into memory).
+    #[error("cannot encode frame {seq} as PNG: {source}")]
+    EncodeInMemory {
+        /// the frame
+        seq: u64,
+        /// the error
+        #[source]
+        source: png::EncodingError,
+    },
     /// The PNG encoder failed.
     #[error("cannot encode {path} as PNG: {source}")]
     Encode {
@@ -82,6 +93,40 @@ pub enum DumpError {
 /// Writes the selected image frame of `reader` to `path` as a PNG and returns
 /// the frame's description.
 pub fn dump_png(reader: &RingReader, which: FrameSelector, path: &Path) -> Result<FrameMeta, DumpError> {
+    let (meta, color, bytes) = select_image(reader, which)?;
+    let io_err = |source| DumpError::Io { path: path.to_owned(), source };
+    let enc_err = |source| DumpError::Encode { path: path.to_owned(), source };
+    let file = std::fs::File::create(path).map_err(io_err)?;
+    write_png(std::io::BufWriter::new(file), &meta, color, &bytes).map_err(enc_err)?;
+    tracing::debug!(ring = %reader.name(), seq = meta.seq, path = %path.display(), "frame dumped as PNG");
+    Ok(meta)
+}
+
+/// Encodes the selected image frame of `reader` as a PNG in memory; returns
+/// the frame's description and the PNG's bytes.
+pub fn encode_png(reader: &RingReader, which: FrameSelector) -> Result<(FrameMeta, Vec<u8>), DumpError> {
+    let (meta, color, bytes) = select_image(reader, which)?;
+    let mut png = Vec::new();
+    write_png(&mut png, &meta, color, &bytes).map_err(|source| DumpError::EncodeInMemory { seq: meta.seq, source })?;
+    Ok((meta, png))
+}
+
+fn write_png<W: std::io::Write>(
+    out: W,
+    meta: &FrameMeta,
+    color: png::ColorType,
+    bytes: &[u8],
+) -> Result<(), png::EncodingError> {
+    let mut enc = png::Encoder::new(out, meta.width, meta.height);
+    enc.set_color(color);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut w = enc.write_header()?;
+    w.write_image_data(bytes)?;
+    w.finish()
+}
+
+/// The selected frame, checked to be an image, as PNG colour type and pixels.
+fn select_image(reader: &RingReader, which: FrameSelector) -> Result<(FrameMeta, png::ColorType, Vec<u8>), DumpError> {
     let mut data = Vec::new();
     let meta = match which {
         FrameSelector::Latest => reader.latest_into(&mut data)?,
@@ -106,24 +151,14 @@ pub fn dump_png(reader: &RingReader, which: FrameSelector, path: &Path) -> Resul
             len: data.len(),
         });
     }
-    let image = &data[..needed as usize];
-    let (color, bytes): (png::ColorType, std::borrow::Cow<'_, [u8]>) = match format {
-        PixelFormat::Rgb8 => (png::ColorType::Rgb, image.into()),
-        PixelFormat::Gray8 => (png::ColorType::Grayscale, image.into()),
-        PixelFormat::Hsi8 => (png::ColorType::Rgb, hsi8_to_rgb8(image).into()),
+    data.truncate(needed as usize);
+    let (color, bytes) = match format {
+        PixelFormat::Rgb8 => (png::ColorType::Rgb, data),
+        PixelFormat::Gray8 => (png::ColorType::Grayscale, data),
+        PixelFormat::Hsi8 => (png::ColorType::Rgb, hsi8_to_rgb8(&data)),
         PixelFormat::Raw => unreachable!("refused above"),
     };
-    let io_err = |source| DumpError::Io { path: path.to_owned(), source };
-    let enc_err = |source| DumpError::Encode { path: path.to_owned(), source };
-    let file = std::fs::File::create(path).map_err(io_err)?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), meta.width, meta.height);
-    enc.set_color(color);
-    enc.set_depth(png::BitDepth::Eight);
-    let mut w = enc.write_header().map_err(enc_err)?;
-    w.write_image_data(&bytes).map_err(enc_err)?;
-    w.finish().map_err(enc_err)?;
-    tracing::debug!(ring = %reader.name(), seq = meta.seq, path = %path.display(), "frame dumped as PNG");
-    Ok(meta)
+    Ok((meta, color, bytes))
 }
 
 /// Converts packed HSI8 pixels (see the module doc) to packed RGB8.

@@ -47,7 +47,7 @@ mod reader;
 mod sys;
 mod writer;
 
-pub use dump::{DumpError, FrameSelector, dump_png, hsi8_to_rgb8};
+pub use dump::{DumpError, FrameSelector, dump_png, encode_png, hsi8_to_rgb8};
 pub use error::{CreateError, OpenError, ReadError, WriteError};
 pub use list::{ListedRing, RingInfo, list_rings, list_rings_with};
 pub use name::{RING_ID_PREFIX, RING_NAME_MAX_LEN, RingName, RingNameError};

@@ -6,6 +6,13 @@
 //! agent being killed and restarted, and reads a port's samples. A
 //! read-only server offers no action, and an action without the token is
 //! refused.
+//!
+//! And the page closed to everyone else (issue 40, review findings B3, B4,
+//! B10, B11), over real HTTP on loopback: every `/api/*` route needs a
+//! token (the read token watches, the edit token acts), a wrong `Host` or
+//! a foreign `Origin` is refused, hot add takes only known kinds, another
+//! uid gets nothing, no token is on any command line, and oversized,
+//! idle and surplus connections are refused while the server stays up.
 
 use nerve_tests::browser::{Browser, http};
 use nerve_tests::{Robot, wait_until};
@@ -16,6 +23,7 @@ use std::process::{Child, Stdio};
 use std::time::Duration;
 
 const TOKEN: &str = "test-token-0123456789abcdef";
+const READ: &str = "test-read-token-0123456789";
 const WAIT: Duration = Duration::from_secs(20);
 
 /// A running `nerve ui`; stopped with Ctrl-C (SIGINT) when dropped.
@@ -25,10 +33,16 @@ struct Ui {
 }
 
 impl Ui {
+    /// Started with the tokens [`TOKEN`] and [`READ`] in its environment.
     fn start(r: &Robot, extra: &[&str]) -> Ui {
-        let mut child = r
-            .command("nerve")
-            .args(["ui", "--bind", "127.0.0.1:0", "--token", TOKEN, "--interval", "0.25"])
+        let mut cmd = r.command("nerve");
+        cmd.env("NERVE_UI_TOKEN", TOKEN).env("NERVE_UI_READ_TOKEN", READ);
+        Ui::start_with(cmd, extra)
+    }
+
+    fn start_with(mut cmd: std::process::Command, extra: &[&str]) -> Ui {
+        let mut child = cmd
+            .args(["ui", "--bind", "127.0.0.1:0", "--interval", "0.25"])
             .args(extra)
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
@@ -48,8 +62,15 @@ impl Ui {
         Ui { child, addr }
     }
 
-    fn url(&self, token: bool) -> String {
-        if token { format!("http://{}/?token={TOKEN}", self.addr) } else { format!("http://{}/", self.addr) }
+    fn url(&self, token: Option<&str>) -> String {
+        match token {
+            Some(t) => format!("http://{}/?token={t}", self.addr),
+            None => format!("http://{}/", self.addr),
+        }
+    }
+
+    fn pid(&self) -> u32 {
+        self.child.id()
     }
 
     /// Stops it with SIGINT and checks that it ended cleanly.
@@ -111,7 +132,7 @@ fn the_page_shows_and_rewires_a_running_robot() {
     r.ok(&["launch", pipeline().to_str().expect("path")]);
     let ui = Ui::start(&r, &[]);
     let b = Browser::start();
-    b.open(&ui.url(true));
+    b.open(&ui.url(Some(TOKEN)));
 
     // the agents and edges of launch/pipeline.toml
     b.wait_for("the three agents", WAIT, &format!("const a = {PAGE_AGENTS}; return a === 'r1,r2,t1' && a"));
@@ -284,7 +305,7 @@ fn read_only_offers_nothing_and_actions_need_the_token() {
 
     // the read-only page shows the graph and offers no action
     let b = Browser::start();
-    b.open(&ro.url(true));
+    b.open(&ro.url(Some(READ)));
     b.wait_for("the agents", WAIT, &format!("const a = {PAGE_AGENTS}; return a === 'r1,r2,t1' && a"));
     assert_eq!(b.eval("return nerveUi.editable"), Value::Bool(false));
     let visible = "return [...document.querySelectorAll('button, input, select')].filter(e => e.offsetParent !== null && e.id !== 'params-load' && e.id !== 'plot-field').map(e => e.textContent || e.id)";
@@ -309,23 +330,295 @@ fn read_only_offers_nothing_and_actions_need_the_token() {
         b.eval("return document.getElementById('port-type').textContent"),
         Value::String("nerve::RingNotice".into())
     );
-    let (status, png) = http(&ro.addr, "GET", "/api/image?port=cam%2Fframes", &[], None);
+    let (status, _) = http(&ro.addr, "GET", "/api/image?port=cam%2Fframes", &[], None);
+    assert_eq!(status, 401, "an image without the token");
+    let (status, png) = http(&ro.addr, "GET", "/api/image?port=cam%2Fframes", &[("X-Nerve-Token", READ)], None);
     assert_eq!(status, 200);
     assert!(png.get(1..4) == Some("PNG") || png.starts_with("\u{FFFD}PNG"), "not a PNG");
-    let (status, body) = http(&ro.addr, "GET", "/api/image?port=t1%2Ftick", &[], None);
+    let (status, body) = http(&ro.addr, "GET", "/api/image?port=t1%2Ftick", &[("X-Nerve-Token", READ)], None);
     assert_eq!(status, 409, "{body}");
     assert!(body.contains("not ring notices"), "{body}");
-    // the editing server's page opened without the token watches only
-    b.open(&rw.url(false));
+    // the editing server's page opened with the read token watches only; the token left the address bar
+    b.open(&rw.url(Some(READ)));
     b.wait_for("the agents", WAIT, &format!("const a = {PAGE_AGENTS}; return a === 'cam,r1,r2,t1' && a"));
     assert_eq!(b.eval("return nerveUi.editable"), Value::Bool(false));
-    assert_eq!(
-        b.eval("return document.getElementById('mode').textContent"),
-        Value::String("watching (no token)".into())
+    assert_eq!(b.eval("return document.getElementById('mode').textContent"), Value::String("watching".into()));
+    assert_eq!(b.eval("return location.search"), Value::String(String::new()));
+    // opened without a token, the page gets nothing and says why
+    b.eval("sessionStorage.clear(); return 1");
+    let other = Ui::start(&r, &[]);
+    b.open(&other.url(None));
+    let said = b.wait_for(
+        "the refusal",
+        WAIT,
+        "const s = document.getElementById('status').textContent; return /token/.test(s) && s",
     );
+    assert!(said.as_str().is_some_and(|s| s.contains("?token=")), "{said}");
+    assert_eq!(b.eval("return document.querySelectorAll('.node').length"), Value::from(0));
+    other.stop();
 
     drop(b);
     ro.stop();
     rw.stop();
+    r.down_and_check_clean();
+}
+
+/// Every route of the API, as (method, target, body).
+const API: [(&str, &str, Option<&str>); 7] = [
+    ("GET", "/api/info", None),
+    ("GET", "/api/graph", None),
+    ("GET", "/api/events", None),
+    ("GET", "/api/kinds", None),
+    ("GET", "/api/samples?port=t1%2Ftick", None),
+    ("GET", "/api/image?port=t1%2Ftick", None),
+    ("POST", "/api/action", Some(r#"{"op":"suspend","name":"t1"}"#)),
+];
+
+/// Sends `raw` and returns the status of the answer and whether the
+/// connection was then closed (read until EOF, at most 20 s).
+fn raw_request(addr: &str, raw: &[u8]) -> (u16, String) {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).expect("connect");
+    s.set_read_timeout(Some(Duration::from_secs(20))).expect("timeout");
+    let _ = s.write_all(raw);
+    let mut got = Vec::new();
+    let _ = s.read_to_end(&mut got);
+    let text = String::from_utf8_lossy(&got).into_owned();
+    let status = text.split_whitespace().nth(1).and_then(|c| c.parse().ok()).unwrap_or(0);
+    (status, text)
+}
+
+/// The status of a request whose answer may never end (an event stream):
+/// only the head is read.
+fn status_of(addr: &str, method: &str, target: &str, headers: &[(&str, &str)], body: Option<&str>) -> u16 {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).expect("connect");
+    s.set_read_timeout(Some(Duration::from_secs(20))).expect("timeout");
+    let body = body.unwrap_or("");
+    let mut req = format!("{method} {target} HTTP/1.1\r\nContent-Length: {}\r\n", body.len());
+    if !headers.iter().any(|(k, _)| k.eq_ignore_ascii_case("host")) {
+        req.push_str(&format!("Host: {addr}\r\n"));
+    }
+    for (k, v) in headers {
+        req.push_str(&format!("{k}: {v}\r\n"));
+    }
+    req.push_str("\r\n");
+    req.push_str(body);
+    s.write_all(req.as_bytes()).expect("send");
+    let mut head = [0u8; 12];
+    s.read_exact(&mut head).expect("the status line");
+    String::from_utf8_lossy(&head[9..12]).parse().unwrap_or(0)
+}
+
+/// Every `/api/*` route needs a token; the read token watches and cannot
+/// act; the edit token acts; hot add takes known kinds only; a wrong
+/// `Host` or a foreign `Origin` is refused even with the token; no token
+/// is on any command line; another uid cannot read the token file and
+/// gets nothing; `--token` and a token file others can read are refused.
+#[test]
+fn the_api_needs_a_token_and_answers_only_this_host() {
+    let r = Robot::new("uitok");
+    r.ok(&["launch", pipeline().to_str().expect("path")]);
+    // the tokens in a file only we can read
+    let file = r.home.join("ui-tokens");
+    std::fs::write(&file, format!("{TOKEN}\n{READ}\n")).expect("token file");
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600)).expect("chmod");
+    let mut cmd = r.command("nerve");
+    cmd.env_remove("NERVE_UI_TOKEN").env_remove("NERVE_UI_READ_TOKEN");
+    let ui = Ui::start_with(cmd, &["--token-file", file.to_str().expect("path")]);
+    let addr = ui.addr.clone();
+
+    for (method, target, body) in API {
+        assert_eq!(status_of(&addr, method, target, &[], body), 401, "{method} {target} without a token");
+        let wrong = [("X-Nerve-Token", "wrong-token-000000000000")];
+        assert_eq!(status_of(&addr, method, target, &wrong, body), 401, "{method} {target} with a wrong token");
+        let cookie = format!("nerve_ui_{}={TOKEN}", addr.rsplit(':').next().expect("port"));
+        let edit_cookie = [("Cookie", cookie.as_str())];
+        assert_eq!(
+            status_of(&addr, method, target, &edit_cookie, body),
+            401,
+            "{method} {target}: the edit token in a cookie"
+        );
+        let host = [("Host", "evil.example:80"), ("X-Nerve-Token", TOKEN)];
+        assert_eq!(status_of(&addr, method, target, &host, body), 403, "{method} {target} with a foreign Host");
+        let origin = [("Origin", "http://evil.example"), ("X-Nerve-Token", TOKEN)];
+        assert_eq!(status_of(&addr, method, target, &origin, body), 403, "{method} {target} from a foreign Origin");
+    }
+    assert!(r.agent("t1").expect("t1")["state"] == "running", "t1 was suspended without the token");
+    // watching with the read token, in the header or in the page's cookie
+    let read = [("X-Nerve-Token", READ)];
+    for (method, target, _) in API.iter().filter(|(m, ..)| *m == "GET") {
+        let status = status_of(&addr, method, target, &read, None);
+        assert!(
+            status == 200 || (status == 409 && target.starts_with("/api/image")),
+            "{target} with the read token: {status}"
+        );
+    }
+    let cookie = format!("nerve_ui_{}={READ}", addr.rsplit(':').next().expect("port"));
+    assert_eq!(status_of(&addr, "GET", "/api/events", &[("Cookie", cookie.as_str())], None), 200);
+    let (status, graph) = http(&addr, "GET", "/api/graph", &read, None);
+    assert_eq!(status, 200);
+    assert!(graph.contains("\"t1\""), "{graph}");
+    let (status, info) = http(&addr, "GET", "/api/info", &read, None);
+    assert_eq!((status, info.contains("\"editable\":false")), (200, true), "{info}");
+    // ...but not acting
+    let suspend = r#"{"op":"suspend","name":"t1"}"#;
+    let (status, body) = http(&addr, "POST", "/api/action", &read, Some(suspend));
+    assert_eq!(status, 403, "{body}");
+    assert_eq!(r.agent("t1").expect("t1")["state"], "running");
+    // acting with the edit token, from this page's own origin
+    let edit = [("X-Nerve-Token", TOKEN), ("Origin", &format!("http://{addr}"))];
+    let (status, body) = http(&addr, "POST", "/api/action", &edit, Some(suspend));
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(r.agent("t1").expect("t1")["state"], "suspended");
+    let (status, _) = http(&addr, "POST", "/api/action", &edit, Some(r#"{"op":"resume","name":"t1"}"#));
+    assert_eq!(status, 200);
+    // hot add: only kinds the robot knows, never a path
+    for (kind, says) in
+        [("/bin/true", "not paths"), ("../nerve-ticker", "not paths"), ("no-such-kind", "unknown agent kind")]
+    {
+        let start = format!(r#"{{"op":"start","kind":"{kind}","name":"x1"}}"#);
+        let (status, body) = http(&addr, "POST", "/api/action", &edit, Some(&start));
+        assert_eq!(status, 400, "{kind}: {body}");
+        assert!(body.contains(says), "{kind}: {body}");
+    }
+    assert!(r.agent("x1").is_none());
+    let (status, body) =
+        http(&addr, "POST", "/api/action", &edit, Some(r#"{"op":"start","kind":"ticker","name":"x2"}"#));
+    assert_eq!(status, 200, "{body}");
+    assert!(r.agent("x2").is_some());
+
+    // no token on any command line (nerve ui's, the agents' it started, anyone's)
+    for entry in std::fs::read_dir("/proc").expect("/proc").filter_map(Result::ok) {
+        if let Ok(cmdline) = std::fs::read(entry.path().join("cmdline")) {
+            let cmdline = String::from_utf8_lossy(&cmdline);
+            assert!(!cmdline.contains(TOKEN) && !cmdline.contains(READ), "a token in {:?}: {cmdline}", entry.path());
+        }
+    }
+    // nor in the environment of the agent the page started
+    let environ = std::fs::read(format!("/proc/{}/environ", r.pid("x2"))).expect("environ of x2");
+    assert!(!String::from_utf8_lossy(&environ).contains(TOKEN), "the agent inherited the token");
+
+    // another uid on the host: cannot read the token file, and without it gets nothing
+    other_uid_gets_nothing(&file, &addr, ui.pid());
+
+    // a token on the command line, or in a file others can read, is refused
+    let out = r.nerve(&["ui", "--bind", "127.0.0.1:0", "--token", "abcdefghijklmnopqrstuvwxyz"]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && said.contains("NERVE_UI_TOKEN") && said.contains("--token-file"), "{said}");
+    std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o644)).expect("chmod");
+    let out = r.nerve(&["ui", "--bind", "127.0.0.1:0", "--token-file", file.to_str().expect("path")]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && said.contains("chmod 600"), "{said}");
+
+    ui.stop();
+    r.down_and_check_clean();
+}
+
+/// A throw-away uid (`setpriv`, as tests/tests/users.rs does; needs root,
+/// else it says so and returns): it cannot read the token file, nor `nerve
+/// ui`'s environment, and every route of the API answers it 401.
+fn other_uid_gets_nothing(token_file: &std::path::Path, addr: &str, ui_pid: u32) {
+    let setpriv = std::process::Command::new("setpriv").arg("--version").output().is_ok();
+    if !nix::unistd::geteuid().is_root() || !setpriv {
+        eprintln!("not run: switching to a throw-away uid needs root and setpriv");
+        return;
+    }
+    let uid = (61_000 + std::process::id() % 4_000).to_string();
+    // the system's Python: another uid cannot run one under root's home (pyenv)
+    const PYTHON: &str = "/usr/bin/python3";
+    if !std::path::Path::new(PYTHON).exists() {
+        eprintln!("not run: the second uid's client needs {PYTHON}");
+        return;
+    }
+    let routes: Vec<String> = API.iter().map(|(m, t, b)| format!("{m} {t} {}", b.unwrap_or(""))).collect();
+    let script = r#"
+import http.client, sys
+token_file, environ, addr = sys.argv[1], sys.argv[2], sys.argv[3]
+for path in (token_file, environ):
+    try:
+        open(path).read()
+        print("READ", path)
+    except OSError as e:
+        print("DENIED", path)
+host, port = addr.rsplit(":", 1)
+for line in sys.argv[4:]:
+    method, target, body = (line.split(" ", 2) + [""])[:3]
+    c = http.client.HTTPConnection(host, int(port), timeout=20)
+    c.request(method, target, body=body or None)
+    print("STATUS", c.getresponse().status, method, target)
+    c.close()
+"#;
+    let out = std::process::Command::new("setpriv")
+        .args(["--reuid", &uid, "--regid", &uid, "--clear-groups", "--", PYTHON, "-c", script])
+        .arg(token_file)
+        .arg(format!("/proc/{ui_pid}/environ"))
+        .arg(addr)
+        .args(&routes)
+        .env("HOME", "/")
+        .output()
+        .expect("run python3 as another uid");
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{said}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(!said.contains("READ "), "uid {uid} read a secret: {said}");
+    assert_eq!(said.matches("DENIED").count(), 2, "{said}");
+    assert_eq!(said.matches("STATUS 401").count(), API.len(), "uid {uid} got more than 401: {said}");
+}
+
+/// The server's limits: a header too large is refused (431) and the server
+/// stays up; a connection that sends nothing is closed after the idle
+/// timeout; connections beyond 32 at once are answered 503; and Ctrl-C
+/// ends the server while an event stream's reader has stopped reading.
+#[test]
+fn oversized_idle_and_surplus_connections_are_refused() {
+    use std::io::{Read, Write};
+    let r = Robot::new("uilim");
+    r.router();
+    let ui = Ui::start(&r, &["--idle-timeout", "1"]);
+    let addr = ui.addr.clone();
+    let read = [("X-Nerve-Token", READ)];
+
+    // a 20 KiB header, and 100 small ones
+    let big = format!("GET /api/graph HTTP/1.1\r\nHost: {addr}\r\nX-Big: {}\r\n\r\n", "a".repeat(20 * 1024));
+    let (status, _) = raw_request(&addr, big.as_bytes());
+    assert_eq!(status, 431);
+    let many = format!("GET /api/graph HTTP/1.1\r\nHost: {addr}\r\n{}\r\n", "X-A: b\r\n".repeat(100));
+    assert_eq!(raw_request(&addr, many.as_bytes()).0, 431);
+    // a header that never ends (no CRLF): cut off at the limit, not grown
+    let endless = format!("GET / HTTP/1.1\r\nHost: {addr}\r\nX: {}", "a".repeat(64 * 1024));
+    assert_eq!(raw_request(&addr, endless.as_bytes()).0, 431);
+    // the server is still up
+    assert_eq!(http(&addr, "GET", "/api/info", &read, None).0, 200);
+
+    // a connection that sends nothing, and one that sends half a request, are closed
+    let (status, _) = raw_request(&addr, b"");
+    assert!(status == 0 || status == 408, "{status}");
+    let (status, _) = raw_request(&addr, format!("GET /api/info HTTP/1.1\r\nHost: {addr}\r\n").as_bytes());
+    assert_eq!(status, 408);
+
+    // a stream whose reader never reads, held open across Ctrl-C
+    let mut stalled = std::net::TcpStream::connect(&addr).expect("connect");
+    let head = format!("GET /api/events HTTP/1.1\r\nHost: {addr}\r\nX-Nerve-Token: {READ}\r\n\r\n");
+    stalled.write_all(head.as_bytes()).expect("send");
+    let mut first = [0u8; 12];
+    stalled.set_read_timeout(Some(Duration::from_secs(20))).expect("timeout");
+    stalled.read_exact(&mut first).expect("the stream's head");
+    assert_eq!(&first[9..12], b"200");
+    ui.stop();
+    drop(stalled);
+
+    // 32 connections at once (an idle timeout long enough to hold them), the 33rd refused
+    let ui = Ui::start(&r, &["--idle-timeout", "60"]);
+    let held: Vec<std::net::TcpStream> =
+        (0..32).map(|_| std::net::TcpStream::connect(&ui.addr).expect("connect")).collect();
+    let (status, body) = raw_request(&ui.addr, b"");
+    assert_eq!(status, 503, "{body}");
+    drop(held);
+    let up = wait_until(WAIT, || {
+        nerve_tests::browser::try_http(&ui.addr, "GET", "/api/info", &read, None).is_ok_and(|(s, _)| s == 200)
+    });
+    assert!(up, "nerve ui did not serve again once the connections were closed");
+    ui.stop();
     r.down_and_check_clean();
 }

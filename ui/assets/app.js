@@ -11,8 +11,18 @@
 'use strict';
 
 const SVG = 'http://www.w3.org/2000/svg';
+// The token comes in the address nerve ui printed (/?token=...). It is kept
+// in sessionStorage (this tab only) and taken out of the address bar and
+// the history; the page sends it in the X-Nerve-Token header. Opening the
+// page with it also set an HttpOnly cookie, which the event stream and the
+// images carry (they cannot send headers); actions need the header.
 const params = new URLSearchParams(location.search);
-const token = params.get('token') || '';
+const token = params.get('token') || sessionStorage.getItem('nerve-token') || '';
+if (params.has('token')) {
+  sessionStorage.setItem('nerve-token', token);
+  history.replaceState(null, '', location.pathname);
+}
+const api = (path, opts = {}) => fetch(path, { ...opts, headers: { ...(opts.headers || {}), 'X-Nerve-Token': token } });
 const NODE_W = 210, PORT_GAP = 18, HEAD_H = 58, COL_W = 360, ROW_GAP = 26;
 
 const ui = window.nerveUi = { updates: 0, lastSeq: 0, drawMs: [], lastDrawMs: 0, editable: false, graph: null, errors: [], source: null };
@@ -45,9 +55,9 @@ function say(text, error = false) {
 
 // ---- the server --------------------------------------------------------
 async function act(action) {
-  const r = await fetch('/api/action', {
+  const r = await api('/api/action', {
     method: 'POST',
-    headers: { 'Content-Type': 'application/json', 'X-Nerve-Token': token },
+    headers: { 'Content-Type': 'application/json' },
     body: JSON.stringify(action),
   });
   const body = await r.json().catch(() => ({ error: `HTTP ${r.status}` }));
@@ -56,15 +66,24 @@ async function act(action) {
 }
 
 async function start() {
-  const info = await (await fetch('/api/info', { headers: { 'X-Nerve-Token': token } })).json();
+  const r = await api('/api/info');
+  if (!r.ok) {
+    const body = await r.json().catch(() => ({ error: `HTTP ${r.status}` }));
+    $('mode').textContent = 'no access';
+    $('mode').className = 'badge read-only';
+    $('status').textContent = body.error || `HTTP ${r.status}`;
+    $('status').className = 'badge down';
+    return;
+  }
+  const info = await r.json();
   ui.editable = info.editable;
   document.body.classList.toggle('editable', info.editable);
   $('robot').textContent = info.robot;
   document.title = `nerve ui · ${info.robot}`;
-  $('mode').textContent = info.read_only ? 'read-only' : (info.editable ? 'editing' : 'watching (no token)');
+  $('mode').textContent = info.read_only ? 'read-only' : (info.editable ? 'editing' : 'watching');
   $('mode').className = 'badge' + (info.editable ? '' : ' read-only');
   if (info.editable) {
-    const kinds = await (await fetch('/api/kinds')).json();
+    const kinds = await (await api('/api/kinds')).json();
     for (const k of kinds) { const o = document.createElement('option'); o.textContent = k; $('add-kind').appendChild(o); }
   }
   const es = ui.source = new EventSource('/api/events');
@@ -419,7 +438,7 @@ function flatten(v, path = '', out = []) {
 
 async function poll() {
   const ref = inspected;
-  const r = await fetch(`/api/samples?port=${encodeURIComponent(ref)}&after=${inspectAfter}`);
+  const r = await api(`/api/samples?port=${encodeURIComponent(ref)}&after=${inspectAfter}`);
   const body = await r.json().catch(() => ({ error: 'bad answer' }));
   if (ref !== inspected) return;
   if (!r.ok) { $('port-type').textContent = body.error; clearInterval(inspectTimer); return; }

@@ -10,17 +10,21 @@
 //! it answers on the thread that called [`serve`], so a router session (not
 //! `Send`) never leaves that thread.
 //!
-//! Editing needs the token [`new_token`] makes and `nerve ui` prints (as
-//! Jupyter does); watching does not. `--read-only` refuses every action.
+//! Every `/api/*` route needs a token (as Jupyter's, `nerve ui` prints the
+//! address with it): the read token to watch, the edit token to act (it
+//! also lets its holder watch). `--read-only` refuses every action. The
+//! server checks `Host` and `Origin` and bounds every request (see
+//! `server.rs` and `http.rs`, and `docs/ui.md`).
 
 mod action;
 mod assets;
+mod http;
 mod server;
 mod token;
 
 pub use action::Action;
 pub use server::{Options, UiError, serve};
-pub use token::new_token;
+pub use token::{new_token, token_problem};
 
 /// What the page asks of the robot. `nerve ui` implements it with a router
 /// session; every call is made on the thread that called [`serve`].

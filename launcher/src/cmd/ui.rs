@@ -7,6 +7,13 @@
 //! page's port inspector subscribes to the port like `nerve echo` does
 //! (zero copy, the publisher undisturbed) and lets go of the subscription
 //! when nobody has asked for it for [`TAP_IDLE`].
+//!
+//! The tokens (review findings B3, B4) never come from the command line,
+//! which every local user can read in `/proc/PID/cmdline`: they come from
+//! `NERVE_UI_TOKEN` / `NERVE_UI_READ_TOKEN`, or from a file only its owner
+//! can read (`--token-file`), or are made at random and printed once, on a
+//! terminal only (never into a file or a log). Hot add starts only kinds
+//! installed next to `nerve`, never a path.
 
 use super::echo::port_info;
 use crate::client::{RouterSession, cli_node};
@@ -22,8 +29,9 @@ use shm_schemas::control::cli_to_router::{CliRequest, RouterError, RouterReply};
 use shm_schemas::ring::RingNotice;
 use shm_schemas::{PortRef, Schema};
 use std::collections::{BTreeMap, VecDeque};
-use std::io::Write as _;
+use std::io::{IsTerminal as _, Write as _};
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::process::{Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
 
@@ -39,9 +47,122 @@ pub struct UiArgs {
     /// Seconds between two updates of the page.
     #[arg(long, default_value_t = 0.5, value_parser = agent_sdk::clock::parse_seconds)]
     pub interval: f64,
-    /// The editing token (default: a fresh random one, printed at start).
-    #[arg(long, env = "NERVE_UI_TOKEN", hide_env_values = true)]
+    /// A file (mode 0600) holding the edit token on its first line and, optionally, the read token on
+    /// its second (default: NERVE_UI_TOKEN and NERVE_UI_READ_TOKEN, else random ones printed at start).
+    #[arg(long, value_name = "PATH")]
+    pub token_file: Option<PathBuf>,
+    /// Another name the page may be opened by (its `Host`), besides the bound address and localhost.
+    #[arg(long, value_name = "NAME")]
+    pub allow_host: Vec<String>,
+    /// Seconds a connection may take to send its request (slow or idle clients are cut off).
+    #[arg(long, default_value_t = 10.0, value_parser = agent_sdk::clock::parse_seconds)]
+    pub idle_timeout: f64,
+    /// Refused: a token on the command line is readable by every local user.
+    #[arg(long, hide = true)]
     pub token: Option<String>,
+}
+
+/// The environment variable of the edit token.
+const TOKEN_ENV: &str = "NERVE_UI_TOKEN";
+/// The environment variable of the read token.
+const READ_TOKEN_ENV: &str = "NERVE_UI_READ_TOKEN";
+
+/// The two tokens, and whether none was given (so that they must be shown).
+struct Tokens {
+    edit: String,
+    read: String,
+    made: bool,
+}
+
+/// A given token, checked.
+fn checked(token: String, from: &str) -> Result<String> {
+    match nerve_ui::token_problem(&token) {
+        None => Ok(token),
+        Some(why) => anyhow::bail!(
+            "the token from {from} is not usable: {why}; give 16 to 256 characters of A-Z, a-z, 0-9, '-', '.', '_', \
+             '~' (or leave it out for a random one)"
+        ),
+    }
+}
+
+/// The tokens from `--token-file`, else the environment, else random.
+fn tokens(a: &UiArgs) -> Result<Tokens> {
+    if a.token.is_some() {
+        anyhow::bail!(
+            "--token is no longer accepted: a token on the command line is readable by every local user \
+             (ps, /proc/PID/cmdline), so consider this one known to others. Give the token in {TOKEN_ENV} \
+             (and the read token in {READ_TOKEN_ENV}), or in a file only you can read with --token-file PATH, \
+             or leave it out for a random one"
+        );
+    }
+    let (mut edit, mut read) = (None, None);
+    if let Some(path) = &a.token_file {
+        let (e, r) = token_file(path)?;
+        let from = format!("--token-file {}", path.display());
+        edit = Some(checked(e, &from)?);
+        read = r.map(|r| checked(r, &from)).transpose()?;
+    } else {
+        if let Ok(t) = std::env::var(TOKEN_ENV) {
+            edit = Some(checked(t, TOKEN_ENV)?);
+        }
+        if let Ok(t) = std::env::var(READ_TOKEN_ENV) {
+            read = Some(checked(t, READ_TOKEN_ENV)?);
+        }
+    }
+    // a token made here is of use only if it can be shown; with none given, one must be
+    let made = edit.is_none() && read.is_none();
+    let new = || nerve_ui::new_token().context("cannot make a token from /dev/urandom");
+    let edit = match edit {
+        Some(t) => t,
+        None => new()?,
+    };
+    let read = match read {
+        Some(t) => t,
+        None => new()?,
+    };
+    if edit == read {
+        anyhow::bail!("the edit token and the read token are the same: give two different tokens");
+    }
+    Ok(Tokens { edit, read, made })
+}
+
+/// Reads `--token-file`: refused unless only its owner (this user) can read it.
+fn token_file(path: &std::path::Path) -> Result<(String, Option<String>)> {
+    use std::io::Read as _;
+    use std::os::unix::fs::MetadataExt as _;
+    let file = std::fs::File::open(path).with_context(|| format!("cannot open the token file {}", path.display()))?;
+    let meta = file.metadata().with_context(|| format!("cannot read the token file {}", path.display()))?;
+    if meta.mode() & 0o077 != 0 {
+        anyhow::bail!(
+            "the token file {} can be read by other users (mode {:o}): make it yours alone with `chmod 600 {}`, \
+             and consider the tokens in it known",
+            path.display(),
+            meta.mode() & 0o777,
+            path.display()
+        );
+    }
+    let me = nix::unistd::geteuid().as_raw();
+    if meta.uid() != me {
+        anyhow::bail!(
+            "the token file {} belongs to uid {}, not to this user (uid {me}): use a file of your own",
+            path.display(),
+            meta.uid()
+        );
+    }
+    let mut text = String::new();
+    file.take(4096)
+        .read_to_string(&mut text)
+        .with_context(|| format!("cannot read the token file {} (is it text?)", path.display()))?;
+    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+    let edit = lines.next().map(str::to_owned).with_context(|| {
+        format!("the token file {} is empty: write the edit token on its first line", path.display())
+    })?;
+    Ok((edit, lines.next().map(str::to_owned)))
+}
+
+/// Whether the address keeps the page to this machine.
+fn is_loopback(addr: &SocketAddr) -> bool {
+    addr.ip().is_loopback()
 }
 
 /// A port subscription unused this long is dropped.
@@ -53,20 +174,39 @@ pub fn ui(world: &World, a: UiArgs) -> Result<ExitCode> {
     if !(0.05..=10.0).contains(&a.interval) {
         anyhow::bail!("--interval {} is out of range: give 0.05 to 10 seconds", a.interval);
     }
-    let token = match a.token {
-        Some(t) if t.len() >= 16 => t,
-        Some(_) => {
-            anyhow::bail!("--token is too short: give at least 16 characters (or leave it out for a random one)")
-        }
-        None => nerve_ui::new_token().context("cannot make a token from /dev/urandom")?,
-    };
+    if !(0.1..=600.0).contains(&a.idle_timeout) {
+        anyhow::bail!("--idle-timeout {} is out of range: give 0.1 to 600 seconds", a.idle_timeout);
+    }
+    let tokens = tokens(&a)?;
+    let terminal = std::io::stdout().is_terminal();
+    if tokens.made && !terminal {
+        anyhow::bail!(
+            "nerve ui's output is not a terminal, so a token made here would be written into a file or a log: \
+             give the tokens in {TOKEN_ENV} and {READ_TOKEN_ENV}, or in a file with --token-file PATH (mode 0600)"
+        );
+    }
+    if !is_loopback(&a.bind) {
+        let warning = format!(
+            "WARNING: --bind {} serves the robot over plain HTTP (no TLS): the tokens, the camera and every action \
+             cross the network unencrypted, readable and replayable by anyone on the way. Prefer the default \
+             127.0.0.1 and an SSH tunnel (ssh -L 8080:127.0.0.1:8080 ROBOT); remote browsers also need \
+             --allow-host with the name or address they use",
+            a.bind
+        );
+        tracing::warn!(bind = %a.bind, "nerve ui serves a non-loopback address over plain HTTP");
+        eprintln!("{warning}");
+    }
     let opts = Options {
         bind: a.bind,
         read_only: a.read_only,
         interval: Duration::from_secs_f64(a.interval),
-        token: token.clone(),
+        token: tokens.edit.clone(),
+        read_token: tokens.read.clone(),
         robot: world.robot().as_str().to_owned(),
         max_clients: 16,
+        max_connections: 32,
+        idle_timeout: Duration::from_secs_f64(a.idle_timeout),
+        allowed_hosts: a.allow_host.clone(),
     };
     let node = cli_node(world)?;
     let mut robot = UiRobot { world: world.clone(), node, session: None, taps: BTreeMap::new() };
@@ -78,17 +218,44 @@ pub fn ui(world: &World, a: UiArgs) -> Result<ExitCode> {
         let _ = writeln!(out, "{text}").and_then(|()| out.flush());
     };
     let mut listening = |addr: SocketAddr| {
-        if a.read_only {
-            say(format!("nerve ui of robot {robot_name} (read-only): http://{addr}/"));
+        let mode = if a.read_only { " (read-only)" } else { "" };
+        if terminal {
+            // the tokens go to the terminal only, once
+            let (first, what) = if a.read_only {
+                (&tokens.read, "(the address carries the read token: it lets the page watch)")
+            } else {
+                (&tokens.edit, "(the address carries the edit token: it lets the page change the robot)")
+            };
+            say(format!("nerve ui of robot {robot_name}{mode}: http://{addr}/?token={first}"));
+            say(what.into());
+            if !a.read_only {
+                say(format!("to watch only: http://{addr}/?token={}", tokens.read));
+            }
         } else {
-            say(format!("nerve ui of robot {robot_name}: http://{addr}/?token={token}"));
-            say("(the token lets the page change the robot; open the address without it to watch only)".into());
+            say(format!("nerve ui of robot {robot_name}{mode}: http://{addr}/"));
+            say(format!("(open it with ?token= and the token given in {TOKEN_ENV}, {READ_TOKEN_ENV} or --token-file)"));
         }
         say("press Ctrl-C to stop".into());
     };
     nerve_ui::serve(&opts, &mut robot, &mut listening, &interrupt::requested)?;
     say("nerve ui stopped".into());
     Ok(ExitCode::SUCCESS)
+}
+
+/// Why the page may not start `kind`, if it may not: only kinds installed
+/// next to `nerve`, never a path (the server checks the same first).
+fn kind_refused(kind: &str) -> Option<String> {
+    if kind.contains('/') {
+        return Some(format!(
+            "the page starts only agent kinds installed next to nerve, not paths ({kind:?}); start a program \
+             by its path with `nerve start PATH` on the robot"
+        ));
+    }
+    let known = crate::kinds::known_kinds();
+    if !known.iter().any(|k| k == kind) {
+        return Some(format!("unknown agent kind {kind:?}: the kinds this robot knows are {}", known.join(", ")));
+    }
+    None
 }
 
 /// An inspected output port.
@@ -135,9 +302,15 @@ impl UiRobot {
 
     /// `nerve start KIND --name NAME`, run as a command so that it is the same start-up.
     fn start(&self, kind: &str, name: &str) -> Result<Value, String> {
+        if let Some(why) = kind_refused(kind) {
+            return Err(why);
+        }
         let exe = std::env::current_exe().map_err(|e| format!("cannot find the nerve program: {e}"))?;
         let out = Command::new(exe)
             .args(["--robot", self.world.robot().as_str(), "start", kind, "--name", name])
+            // the agent has no use for the page's tokens
+            .env_remove(TOKEN_ENV)
+            .env_remove(READ_TOKEN_ENV)
             .stdin(Stdio::null())
             .output()
             .map_err(|e| format!("cannot run nerve start: {e}"))?;
@@ -163,6 +336,9 @@ impl UiRobot {
             return self.ok(CliRequest::Kill { name: name.into() });
         }
         let kind = agent.kind.clone();
+        if let Some(why) = kind_refused(&kind) {
+            return Err(format!("{name} cannot be restarted from the page: {why}"));
+        }
         self.ok(CliRequest::Stop { name: name.into() })?;
         let t0 = Instant::now();
         loop {
@@ -280,11 +456,9 @@ impl Robot for UiRobot {
             .ok_or_else(|| format!("{port} carries {}, not ring notices, or sent none yet", tap.type_name))?;
         let name = nerve_stm::RingName::from_notice(&notice).map_err(|e| e.to_string())?;
         let reader = nerve_stm::RingReader::open(self.world.robot(), &name).map_err(|e| e.to_string())?;
-        let path = std::env::temp_dir().join(format!("nerve-ui-{}.png", std::process::id()));
-        let dumped = nerve_stm::dump_png(&reader, nerve_stm::FrameSelector::Latest, &path).map_err(|e| e.to_string());
-        let png = dumped.and_then(|_| std::fs::read(&path).map_err(|e| e.to_string()));
-        let _ = std::fs::remove_file(&path);
-        png
+        // in memory: no file another user could pre-create or read (B11)
+        let (_, png) = nerve_stm::encode_png(&reader, nerve_stm::FrameSelector::Latest).map_err(|e| e.to_string())?;
+        Ok(png)
     }
 
     fn kinds(&mut self) -> Vec<String> {
