@@ -59,6 +59,17 @@ pub enum RecordingError {
     },
 }
 
+impl RecordingError {
+    /// The I/O error under it, when the output failed (a full disk, a
+    /// file over its size limit).
+    pub fn io(&self) -> Option<&std::io::Error> {
+        match self {
+            RecordingError::Mcap(mcap::McapError::Io(e)) => Some(e),
+            _ => None,
+        }
+    }
+}
+
 /// What identifies a recorded port.
 #[derive(Debug, Clone)]
 pub struct PortChannel<'a> {

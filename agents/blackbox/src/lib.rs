@@ -10,8 +10,16 @@
 //! what followed are in the file too.
 //!
 //! This library holds what needs no robot: the configuration file
-//! ([`Config`]), the memory ([`Memory`]) and the writing of a snapshot
-//! ([`write_snapshot`]); `main.rs` is the agent.
+//! ([`Config`]), the memory ([`Memory`]), the writing of a snapshot
+//! ([`write_snapshot`]) and the keeping of its folder ([`Folder`]);
+//! `main.rs` is the agent.
+//!
+//! The black box must never fill the disk it shares with the robot's
+//! state: the snapshots it fires are capped by count ([`Config::max_files`])
+//! and total size ([`Config::max_total_mb`]), the oldest deleted first; it
+//! writes none while the disk's free space is below
+//! [`Config::min_free_mb`] (said once, counted); a snapshot that fails is
+//! removed, and `.part` files left by a crash are swept at start.
 
 use nerve_recording::{PortChannel, RecordingError, RecordingWriter, Sample};
 use serde::Deserialize;
@@ -57,6 +65,9 @@ pub enum ConfigError {
 /// dir = "snapshots"                 # fired snapshots go here (relative to this file)
 /// max_mb = 512                      # memory budget: the oldest samples go first
 /// after = 1.0                       # seconds kept after an event before writing
+/// max_files = 20                    # fired snapshots kept in dir: the oldest go first
+/// max_total_mb = 4096               # and their total size
+/// min_free_mb = 1024                # no snapshot while the disk has less free
 ///
 /// [fire]
 /// on_death = true                   # an agent died (not a clean stop)
@@ -82,6 +93,17 @@ pub struct Config {
     /// Seconds after an event included in its snapshot.
     #[serde(default = "default_after")]
     pub after: f64,
+    /// The most fired snapshots kept in `dir` (the oldest are deleted).
+    #[serde(default = "default_max_files")]
+    pub max_files: usize,
+    /// The most MB the fired snapshots in `dir` take together (the oldest
+    /// are deleted); at least `max_mb`, the size of one.
+    #[serde(default = "default_max_total_mb")]
+    pub max_total_mb: u64,
+    /// MB that must stay free on the disk of `dir` (and of a path `nerve
+    /// snapshot` names) after a snapshot; below it none is written.
+    #[serde(default = "default_min_free_mb")]
+    pub min_free_mb: u64,
     /// What fires a snapshot by itself.
     #[serde(default)]
     pub fire: Fire,
@@ -129,6 +151,18 @@ fn default_after() -> f64 {
 fn default_min_gap() -> f64 {
     5.0
 }
+fn default_max_files() -> usize {
+    20
+}
+fn default_max_total_mb() -> u64 {
+    4096
+}
+fn default_min_free_mb() -> u64 {
+    1024
+}
+
+/// The most fired snapshots a black box may keep.
+pub const MAX_FILES: usize = 10_000;
 
 /// The most history a black box keeps (an hour).
 pub const MAX_SECONDS: f64 = 3600.0;
@@ -167,6 +201,15 @@ impl Config {
         }
         if !(1..=MAX_MB).contains(&c.max_mb) {
             return Err(invalid(format!("max_mb = {}: give a budget in [1, {MAX_MB}] MB", c.max_mb)));
+        }
+        if !(1..=MAX_FILES).contains(&c.max_files) {
+            return Err(invalid(format!("max_files = {}: give a count in [1, {MAX_FILES}]", c.max_files)));
+        }
+        if c.max_total_mb < c.max_mb {
+            return Err(invalid(format!(
+                "max_total_mb = {}: give at least max_mb ({}), the size one snapshot can reach",
+                c.max_total_mb, c.max_mb
+            )));
         }
         if c.ports.is_empty() && c.fire.on_change.is_empty() {
             return Err(invalid("ports = []: name the ports to keep (AGENT/PORT), or \"*\" for every one".into()));
@@ -367,10 +410,27 @@ pub struct Written {
 
 /// Writes `ports` to `path` in nerve's recording format: first to
 /// `path.part`, renamed into place when complete, so that whoever waits
-/// for `path` never reads half a file.
+/// for `path` never reads half a file. On an error the `.part` is removed:
+/// a full disk is not left fuller.
 pub fn write_snapshot(path: &Path, robot: &str, ports: &[PortHistory]) -> Result<Written, RecordingError> {
-    let part = path.with_extension("mcap.part");
-    let file = std::fs::File::create(&part).map_err(mcap::McapError::Io)?;
+    let part = part_of(path);
+    let written = write_part(&part, robot, ports).and_then(|w| {
+        std::fs::rename(&part, path).map_err(mcap::McapError::Io)?;
+        Ok(w)
+    });
+    if written.is_err() {
+        let _ = std::fs::remove_file(&part);
+    }
+    written
+}
+
+/// Where a snapshot to `path` is written before it is whole.
+pub fn part_of(path: &Path) -> PathBuf {
+    path.with_extension("mcap.part")
+}
+
+fn write_part(part: &Path, robot: &str, ports: &[PortHistory]) -> Result<Written, RecordingError> {
+    let file = std::fs::File::create(part).map_err(mcap::McapError::Io)?;
     let mut out = RecordingWriter::new(std::io::BufWriter::new(file))?;
     let mut w = Written::default();
     // messages in time order across ports, as a recording has them
@@ -409,8 +469,159 @@ pub fn write_snapshot(path: &Path, robot: &str, ports: &[PortHistory]) -> Result
         }
     }
     out.finish()?;
-    std::fs::rename(&part, path).map_err(mcap::McapError::Io)?;
     Ok(w)
+}
+
+/// The bytes a snapshot of `ports` will take, about (its messages' bytes).
+pub fn snapshot_bytes(ports: &[PortHistory]) -> u64 {
+    ports
+        .iter()
+        .flat_map(|h| h.samples.iter().map(|k| k.bytes.len()).chain(h.images.iter().map(|i| i.encoded.len())))
+        .map(|n| n as u64 + 64)
+        .sum()
+}
+
+/// Why a snapshot was not written.
+#[derive(Debug, thiserror::Error)]
+pub enum RoomError {
+    /// The disk is nearer full than the configuration allows.
+    #[error(
+        "not writing a snapshot of {need_mb:.1} MB to {dir}: its disk has {free_mb:.1} MB free and min_free_mb = {min_free_mb} must stay free; free space on it, or lower min_free_mb"
+    )]
+    LowSpace {
+        /// the folder
+        dir: PathBuf,
+        /// MB the snapshot needs
+        need_mb: f64,
+        /// MB free on the disk
+        free_mb: f64,
+        /// MB that must stay free
+        min_free_mb: u64,
+    },
+    /// The free space could not be learnt.
+    #[error("cannot learn the free space of {dir}: {source}")]
+    Statvfs {
+        /// the folder
+        dir: PathBuf,
+        /// why
+        #[source]
+        source: nix::errno::Errno,
+    },
+}
+
+/// Bytes free on the disk of `dir` for this user.
+pub fn free_bytes(dir: &Path) -> Result<u64, RoomError> {
+    let st = nix::sys::statvfs::statvfs(dir).map_err(|source| RoomError::Statvfs { dir: dir.into(), source })?;
+    // fsblkcnt_t is u64 on 64-bit Linux, u32 on some targets
+    #[allow(clippy::useless_conversion)]
+    let blocks = u64::from(st.blocks_available());
+    Ok(blocks.saturating_mul(st.fragment_size()))
+}
+
+/// Whether a snapshot of `need` bytes may be written to `dir`, leaving
+/// `min_free_mb` free.
+pub fn check_room(dir: &Path, need: u64, min_free_mb: u64) -> Result<(), RoomError> {
+    let free = free_bytes(dir)?;
+    if free.checked_sub(need).is_none_or(|left| left < min_free_mb.saturating_mul(1 << 20)) {
+        return Err(RoomError::LowSpace {
+            dir: dir.into(),
+            need_mb: need as f64 / 1e6,
+            free_mb: free as f64 / 1e6,
+            min_free_mb,
+        });
+    }
+    Ok(())
+}
+
+/// The folder of fired snapshots, kept within its caps.
+#[derive(Debug, Clone)]
+pub struct Folder {
+    /// the folder
+    pub dir: PathBuf,
+    /// the most snapshots kept
+    pub max_files: usize,
+    /// the most bytes they take together
+    pub max_bytes: u64,
+}
+
+/// What [`Folder::make_room`] or [`Folder::sweep`] deleted.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Deleted {
+    /// the files
+    pub files: Vec<PathBuf>,
+    /// their bytes
+    pub bytes: u64,
+}
+
+impl Folder {
+    /// The folder of `config`.
+    pub fn of(config: &Config) -> Folder {
+        Folder {
+            dir: config.dir.clone(),
+            max_files: config.max_files,
+            max_bytes: config.max_total_mb.saturating_mul(1 << 20),
+        }
+    }
+
+    /// Whether `name` is a snapshot the black box fired (only those are
+    /// counted and deleted: nothing else in the folder is touched).
+    pub fn is_fired(name: &str) -> bool {
+        name.starts_with("blackbox-") && name.ends_with(".mcap")
+    }
+
+    /// The fired snapshots in the folder, oldest first, with their sizes.
+    pub fn snapshots(&self) -> std::io::Result<Vec<(PathBuf, u64)>> {
+        let mut out: Vec<(std::time::SystemTime, PathBuf, u64)> = Vec::new();
+        for e in std::fs::read_dir(&self.dir)? {
+            let e = e?;
+            let name = e.file_name();
+            if !name.to_str().is_some_and(Folder::is_fired) {
+                continue;
+            }
+            let Ok(meta) = e.metadata() else { continue };
+            if meta.is_file() {
+                out.push((meta.modified().unwrap_or(std::time::UNIX_EPOCH), e.path(), meta.len()));
+            }
+        }
+        // by time, then by name (whose stamp sorts): the oldest first
+        out.sort();
+        Ok(out.into_iter().map(|(_, p, n)| (p, n)).collect())
+    }
+
+    /// Deletes the oldest fired snapshots until one more of `need` bytes
+    /// fits within the caps.
+    pub fn make_room(&self, need: u64) -> std::io::Result<Deleted> {
+        let files = self.snapshots()?;
+        let mut total: u64 = files.iter().map(|(_, n)| n).sum();
+        let mut count = files.len();
+        let mut deleted = Deleted::default();
+        for (path, len) in files {
+            if count < self.max_files && total.saturating_add(need) <= self.max_bytes {
+                break;
+            }
+            std::fs::remove_file(&path)?;
+            count -= 1;
+            total = total.saturating_sub(len);
+            deleted.bytes += len;
+            deleted.files.push(path);
+        }
+        Ok(deleted)
+    }
+
+    /// Removes the `.part` files a black box that died while writing left.
+    pub fn sweep(&self) -> std::io::Result<Deleted> {
+        let mut deleted = Deleted::default();
+        for e in std::fs::read_dir(&self.dir)? {
+            let e = e?;
+            if e.file_name().to_str().is_some_and(|n| n.ends_with(".mcap.part")) && e.file_type()?.is_file() {
+                let len = e.metadata().map_or(0, |m| m.len());
+                std::fs::remove_file(e.path())?;
+                deleted.bytes += len;
+                deleted.files.push(e.path());
+            }
+        }
+        Ok(deleted)
+    }
 }
 
 #[cfg(test)]
@@ -418,6 +629,7 @@ mod tests {
     use super::*;
     use shm_schemas::Described;
     use shm_schemas::payloads::Tick;
+    use std::time::Duration;
 
     fn history(port: &str) -> PortHistory {
         PortHistory::new(port.parse().expect("port"), "nerve::Tick".into(), 1, Tick::schema())
@@ -431,13 +643,14 @@ mod tests {
     fn a_configuration_reads_with_its_defaults_and_refusals_name_the_line() {
         let c = Config::parse("ports = [\"t1/tick\"]\n[fire]\non_death = true\n").expect("config");
         assert_eq!((c.seconds, c.max_mb, c.after, c.fire.min_gap), (10.0, 512, 1.0, 5.0));
+        assert_eq!((c.max_files, c.max_total_mb, c.min_free_mb), (20, 4096, 1024));
         assert!(c.fire.on_death && c.keeps(&"t1/tick".parse().expect("port")));
         assert!(!c.keeps(&"t2/tick".parse().expect("port")));
         let e = Config::parse("ports = [\"t1/tick\"]\nsecnds = 3\n").expect_err("a typo");
         assert!(e.to_string().contains("secnds") && e.to_string().contains("line 2"), "{e}");
         let e = Config::parse("ports = [\"t1\"]\n").expect_err("no port name");
         assert!(e.to_string().contains("AGENT/PORT"), "{e}");
-        for bad in ["seconds = 0", "seconds = 1e9", "max_mb = 0", "after = -1"] {
+        for bad in ["seconds = 0", "seconds = 1e9", "max_mb = 0", "after = -1", "max_files = 0", "max_total_mb = 100"] {
             assert!(Config::parse(&format!("ports = [\"*\"]\n{bad}\n")).is_err(), "{bad} must be refused");
         }
         let c = Config::parse("ports = [\"*\"]\n[[fire.on_change]]\nport = \"s/stop\"\nfield = \"active\"\n")
@@ -500,5 +713,81 @@ mod tests {
             .collect();
         assert_eq!(order, [("a/x".into(), 10), ("b/y".into(), 20), ("a/x".into(), 30)]);
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A fresh folder under the temp folder, removed by the guard.
+    struct TempDir(PathBuf);
+    impl TempDir {
+        fn new(what: &str) -> TempDir {
+            let d = std::env::temp_dir().join(format!("nerve-blackbox-{what}-{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&d);
+            std::fs::create_dir_all(&d).expect("dir");
+            TempDir(d)
+        }
+    }
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn names(files: &[(PathBuf, u64)]) -> Vec<String> {
+        files.iter().map(|(p, _)| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()).collect()
+    }
+
+    #[test]
+    fn the_folder_keeps_its_caps_by_deleting_the_oldest() {
+        let d = TempDir::new("caps");
+        let folder = Folder { dir: d.0.clone(), max_files: 3, max_bytes: 10_000 };
+        for i in 0..5u8 {
+            // names whose stamps sort, and times that follow them
+            let p = d.0.join(format!("blackbox-2026112{i}-000000.000-died-g.mcap"));
+            std::fs::write(&p, vec![i; 1000]).expect("file");
+            let t = std::time::UNIX_EPOCH + Duration::from_secs(1_000_000 + u64::from(i));
+            std::fs::File::options().write(true).open(&p).and_then(|f| f.set_modified(t)).expect("mtime");
+        }
+        std::fs::write(d.0.join("notes.txt"), "not a snapshot").expect("file");
+        std::fs::write(d.0.join("mine.mcap"), "not fired").expect("file");
+        // by count: room for one more leaves 2 of the 5, the newest
+        let gone = folder.make_room(1000).expect("room");
+        assert_eq!(gone.files.len(), 3);
+        assert_eq!(gone.bytes, 3000);
+        let left = folder.snapshots().expect("list");
+        assert_eq!(
+            names(&left),
+            ["blackbox-20261123-000000.000-died-g.mcap", "blackbox-20261124-000000.000-died-g.mcap"]
+        );
+        // by size: 9,500 more bytes leave none
+        let gone = folder.make_room(9_500).expect("room");
+        assert_eq!(gone.files.len(), 2);
+        assert!(folder.snapshots().expect("list").is_empty());
+        assert!(d.0.join("notes.txt").exists() && d.0.join("mine.mcap").exists(), "only fired snapshots go");
+    }
+
+    #[test]
+    fn stale_parts_are_swept_and_a_failed_snapshot_leaves_none() {
+        let d = TempDir::new("parts");
+        std::fs::write(d.0.join("blackbox-x.mcap.part"), vec![0u8; 500]).expect("part");
+        let folder = Folder { dir: d.0.clone(), max_files: 3, max_bytes: 10_000 };
+        let swept = folder.sweep().expect("sweep");
+        assert_eq!((swept.files.len(), swept.bytes), (1, 500));
+        // the rename into place fails (a folder holds the name): no .part stays
+        let path = d.0.join("blackbox-y.mcap");
+        std::fs::create_dir_all(path.join("in-the-way")).expect("dir");
+        let mut h = history("a/x");
+        h.samples.push_back(kept(1, 10, std::mem::size_of::<Tick>()));
+        let e = write_snapshot(&path, "r", &[h]).expect_err("the name is a folder");
+        assert!(!part_of(&path).exists(), "the .part of a failed snapshot stays: {e}");
+    }
+
+    #[test]
+    fn a_snapshot_is_refused_below_the_free_space_margin() {
+        let d = TempDir::new("room");
+        let free = free_bytes(&d.0).expect("statvfs");
+        assert!(check_room(&d.0, 1000, 0).is_ok());
+        let e = check_room(&d.0, 1000, free / (1 << 20) + 1024).expect_err("more free space than the disk has");
+        assert!(e.to_string().contains("min_free_mb") && e.to_string().contains(&d.0.display().to_string()), "{e}");
+        let e = check_room(&d.0, free.saturating_add(1 << 30), 0).expect_err("a snapshot larger than the free space");
+        assert!(matches!(e, RoomError::LowSpace { .. }), "{e}");
     }
 }

@@ -17,7 +17,10 @@
 //!
 //! Parameter `snapshot`: an absolute path ending in `.mcap`; setting it
 //! writes the kept seconds there (`nerve snapshot` sets it). Figures:
-//! `snapshots` (written so far), `last_snapshot`, `kept_mb`, `ports`.
+//! `snapshots` (written so far), `last_snapshot`, `kept_mb`, `ports`,
+//! `refused` (snapshots not written: the disk was below `min_free_mb`, or
+//! the write failed), `deleted` (old fired snapshots deleted to keep
+//! `max_files` and `max_total_mb`).
 
 use agent_sdk::control::{ControlClient, router_client};
 use agent_sdk::raw_port::RawPort;
@@ -26,7 +29,9 @@ use agent_sdk::world::Ipc;
 use agent_sdk::{Agent, AgentError, Context, Param, Setup, Task, World};
 use clap::Parser;
 use iceoryx2::prelude::Node;
-use nerve_blackbox::{Config, Kept, KeptImage, Memory, PortHistory, write_snapshot};
+use nerve_blackbox::{
+    Config, Folder, Kept, KeptImage, Memory, PortHistory, check_room, snapshot_bytes, write_snapshot,
+};
 use nerve_recording::{FrameOutcome, RingFrames};
 use shm_schemas::control::cli_to_router::{CliRequest, EventKind, RouterReply, RouterRequest};
 use shm_schemas::ring::RingNotice;
@@ -74,6 +79,8 @@ struct Pending {
     to_ns: u64,
     path: PathBuf,
     why: String,
+    /// fired (into the folder, within its caps), not asked
+    fired: bool,
 }
 
 /// Figures the message checker reads.
@@ -82,6 +89,8 @@ struct Figures {
     snapshots: AtomicU64,
     kept_bytes: AtomicU64,
     ports: AtomicU64,
+    refused: AtomicU64,
+    deleted: AtomicU64,
     last: Mutex<String>,
 }
 
@@ -108,6 +117,11 @@ struct Blackbox {
     last_events: Option<Instant>,
     last_fired: Option<Instant>,
     buf: Vec<u8>,
+    /// the folder of fired snapshots
+    folder: Folder,
+    /// a refusal for lack of space was logged (again only after a snapshot
+    /// was written)
+    low_space_said: bool,
 }
 
 /// The check of `snapshot`: empty, or an absolute `.mcap` path in an existing folder.
@@ -287,6 +301,7 @@ impl Blackbox {
             to_ns: unix.saturating_add(after.as_nanos() as u64),
             path,
             why: why.to_string(),
+            fired: true,
         });
     }
 
@@ -296,6 +311,38 @@ impl Blackbox {
         self.pending = later;
         for p in due {
             let ports = self.memory.window(p.from_ns, p.to_ns);
+            let need = snapshot_bytes(&ports);
+            if p.fired {
+                // the oldest fired snapshots make room for this one
+                match self.folder.make_room(need) {
+                    Ok(gone) if !gone.files.is_empty() => {
+                        self.figures.deleted.fetch_add(gone.files.len() as u64, Ordering::Relaxed);
+                        tracing::info!(
+                            dir = %self.folder.dir.display(),
+                            files = gone.files.len(),
+                            bytes = gone.bytes,
+                            "deleted the {} oldest snapshots ({:.1} MB) to keep max_files = {} and max_total_mb",
+                            gone.files.len(),
+                            gone.bytes as f64 / 1e6,
+                            self.folder.max_files
+                        );
+                    }
+                    Ok(_) => {}
+                    Err(e) => {
+                        tracing::warn!(dir = %self.folder.dir.display(), "cannot keep the snapshot folder within its caps: {e}")
+                    }
+                }
+            }
+            let dir = p.path.parent().unwrap_or(Path::new(".")).to_path_buf();
+            if let Err(e) = check_room(&dir, need, self.config.min_free_mb) {
+                self.figures.refused.fetch_add(1, Ordering::Relaxed);
+                if !self.low_space_said {
+                    self.low_space_said = true;
+                    tracing::error!(file = %p.path.display(), need, "{e} (said once; the figure `refused` counts them)");
+                }
+                continue;
+            }
+            self.low_space_said = false;
             let robot = self.world.robot().to_string();
             let figures = self.figures.clone();
             self.writing.push(std::thread::spawn(move || match write_snapshot(&p.path, &robot, &ports) {
@@ -315,7 +362,12 @@ impl Blackbox {
                     *figures.last.lock().unwrap_or_else(|e| e.into_inner()) = p.path.display().to_string();
                 }
                 Err(e) => {
-                    tracing::error!(file = %p.path.display(), "cannot write the black box to {}: {e}", p.path.display())
+                    figures.refused.fetch_add(1, Ordering::Relaxed);
+                    tracing::error!(
+                        file = %p.path.display(),
+                        "cannot write the black box to {} (its .part is removed): {e}",
+                        p.path.display()
+                    )
                 }
             }));
         }
@@ -369,9 +421,26 @@ impl Agent for Blackbox {
                 ("last_snapshot".into(), f.last.lock().map(|s| s.clone()).unwrap_or_default()),
                 ("kept_mb".into(), format!("{:.1}", f.kept_bytes.load(Ordering::Relaxed) as f64 / 1e6)),
                 ("ports".into(), f.ports.load(Ordering::Relaxed).to_string()),
+                ("refused".into(), f.refused.load(Ordering::Relaxed).to_string()),
+                ("deleted".into(), f.deleted.load(Ordering::Relaxed).to_string()),
             ]
         });
         let memory = Memory::new(config.seconds, config.max_mb);
+        let folder = Folder::of(&config);
+        // what a black box that died while writing left
+        match folder.sweep() {
+            Ok(gone) if !gone.files.is_empty() => tracing::info!(
+                dir = %folder.dir.display(),
+                files = gone.files.len(),
+                bytes = gone.bytes,
+                "removed {} unfinished snapshots (.part) of an earlier run",
+                gone.files.len()
+            ),
+            Ok(_) => {}
+            Err(e) => {
+                tracing::warn!(dir = %folder.dir.display(), "cannot sweep the .part files of {}: {e}", folder.dir.display())
+            }
+        }
         Ok(Blackbox {
             name: setup.name().to_string(),
             config,
@@ -391,6 +460,8 @@ impl Agent for Blackbox {
             last_events: None,
             last_fired: None,
             buf: Vec::new(),
+            folder,
+            low_space_said: false,
         })
     }
 
@@ -425,6 +496,7 @@ impl Agent for Blackbox {
                 to_ns: unix,
                 path: PathBuf::from(&asked),
                 why: "asked".into(),
+                fired: false,
             });
         }
         self.memory.trim(agent_sdk::clock::unix_now_ns());

@@ -12,6 +12,17 @@
 //! second channel, `AGENT/PORT/image`, with each noticed frame read from the
 //! short-term-memory ring as a `foxglove.RawImage`; a frame the writer
 //! overwrote before the recorder read it is counted as a dropped image.
+//!
+//! What a crash loses is bounded. The open chunk is closed every
+//! [`FLUSH_PERIOD`] (and at [`nerve_recording::CHUNK_SIZE`]), so that a
+//! `kill -9` or an OOM kill leaves every message older than that in closed
+//! chunks that any MCAP reader takes; nerve's own reader
+//! ([`nerve_recording::read`]) also reads the unclosed chunk, so it loses
+//! only what was still in the recorder's buffer ([`WRITE_BUFFER`] bytes at
+//! most). The file's data is synced to the disk every [`SYNC_PERIOD`], so
+//! a power loss costs at most that much. A write that fails (a full disk,
+//! a file over its size limit) stops the recorder with an error that names
+//! the file, what is on disk and what to do; what was written stays readable.
 
 use crate::client::{RouterSession, cli_node};
 use agent_sdk::World;
@@ -23,18 +34,53 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
-use nerve_recording::{FrameOutcome, PortChannel, RecordingWriter, RingFrames, Sample, foxglove};
+use nerve_recording::{FrameOutcome, PortChannel, RecordingError, RecordingWriter, RingFrames, Sample, foxglove};
 use shm_schemas::control::cli_to_router::{CliRequest, EventKind, RouterReply};
 use shm_schemas::ring::RingNotice;
 use shm_schemas::{Payload, PortRef, RobotName, Schema};
 use std::io::{BufWriter, IsTerminal as _, Write as _};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 /// The file being written.
 type Out = RecordingWriter<BufWriter<std::fs::File>>;
+
+/// How often the open chunk is closed (and the buffer written out).
+pub const FLUSH_PERIOD: Duration = Duration::from_secs(1);
+/// How often the file's data is synced to the disk (`fdatasync`).
+pub const SYNC_PERIOD: Duration = Duration::from_secs(5);
+/// The recorder's write buffer, bytes.
+pub const WRITE_BUFFER: usize = 64 * 1024;
+
+/// The error of a failed write to `path`: what failed, how much is on disk,
+/// that it stays readable, and what to do.
+fn write_failed(path: &Path, e: RecordingError) -> anyhow::Error {
+    let on_disk = std::fs::metadata(path).map_or(0, |m| m.len());
+    let what = match e.io().map(std::io::Error::kind) {
+        Some(std::io::ErrorKind::StorageFull) => "the disk is full",
+        Some(std::io::ErrorKind::FileTooLarge) => {
+            "the file reached the size limit of its file system or of the process (ulimit -f)"
+        }
+        Some(std::io::ErrorKind::QuotaExceeded) => "the disk quota is used up",
+        _ => "the write failed",
+    };
+    let advice = match e.io().map(std::io::Error::kind) {
+        Some(std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded) => {
+            "free space, or record to another disk (-o)"
+        }
+        Some(std::io::ErrorKind::FileTooLarge) => "record shorter files (--duration) or raise the limit",
+        _ => "check the disk (dmesg) and record again",
+    };
+    anyhow::Error::new(e).context(format!(
+        "cannot write {}: {what}; recording stopped with {:.1} MB on disk. What was written is readable: \
+         nerve replay and nerve export read it up to its last whole message (other MCAP readers up to its \
+         last closed chunk). To record on: {advice}",
+        path.display(),
+        on_disk as f64 / 1e6
+    ))
+}
 
 /// `nerve record`
 #[derive(Debug, clap::Args)]
@@ -117,14 +163,14 @@ pub struct Images {
 
 impl Images {
     /// Adds the image channel of `AGENT/PORT`'s ring to `out`.
-    fn add(out: &mut Out, robot: &RobotName, port: &PortRef) -> Result<Images> {
+    fn add(out: &mut Out, robot: &RobotName, port: &PortRef) -> Result<Images, RecordingError> {
         let channel = out.add_images(robot.as_str(), port.agent.as_str(), &port.port)?;
         let frames_of = RingFrames::new(robot, port.agent.as_str());
         Ok(Images { channel, frames_of, buf: Vec::new(), frames: 0, dropped: 0, bytes: 0 })
     }
 
     /// Writes the frame `notice_bytes` announces (log time `log_ns`).
-    fn write(&mut self, out: &mut Out, notice_bytes: &[u8], log_ns: u64) -> Result<()> {
+    fn write(&mut self, out: &mut Out, notice_bytes: &[u8], log_ns: u64) -> Result<(), RecordingError> {
         match self.frames_of.encode(notice_bytes, log_ns, &mut self.buf) {
             FrameOutcome::Encoded(seq) => {
                 out.write_image(self.channel, seq, log_ns, &self.buf)?;
@@ -176,8 +222,9 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
     }
     let path = a.output.clone().unwrap_or_else(|| dated_file("nerve", world));
     let file = std::fs::File::create(&path).with_context(|| format!("cannot create {}", path.display()))?;
-    let mut writer = RecordingWriter::new(BufWriter::new(file))
-        .with_context(|| format!("cannot start the MCAP file {}", path.display()))?;
+    let data = file.try_clone().with_context(|| format!("cannot open {} twice (to sync it)", path.display()))?;
+    let mut writer =
+        RecordingWriter::new(BufWriter::with_capacity(WRITE_BUFFER, file)).map_err(|e| write_failed(&path, e))?;
 
     let mut recordings: Vec<Recording> = Vec::new();
     let add = |k: &Known, writer: &mut Out| -> Result<Option<Recording>> {
@@ -197,16 +244,18 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
             }
         };
         let listener = Rc::new(port_event(&node, &service)?.listener_builder().create().map_err(|e| anyhow!("{e:?}"))?);
-        let channel = writer.add_port(&PortChannel {
-            robot: world.robot().as_str(),
-            agent: k.port.agent.as_str(),
-            port: &k.port.port,
-            type_name: &k.type_name,
-            fingerprint: k.fingerprint,
-            schema,
-        })?;
+        let channel = writer
+            .add_port(&PortChannel {
+                robot: world.robot().as_str(),
+                agent: k.port.agent.as_str(),
+                port: &k.port.port,
+                type_name: &k.type_name,
+                fingerprint: k.fingerprint,
+                schema,
+            })
+            .map_err(|e| write_failed(&path, e))?;
         let images = if k.type_name == <RingNotice as Payload>::stable_type_name() {
-            Some(Images::add(writer, world.robot(), &k.port)?)
+            Some(Images::add(writer, world.robot(), &k.port).map_err(|e| write_failed(&path, e))?)
         } else {
             None
         };
@@ -239,6 +288,7 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
     let tty = std::io::stderr().is_terminal();
     let mut next_progress = start + Duration::from_secs(1);
     let mut next_look = start + Duration::from_millis(500);
+    let (mut next_flush, mut next_sync) = (start + FLUSH_PERIOD, start + SYNC_PERIOD);
     let events_node =
         world.node(&format!("cli-{}-events", std::process::id())).context("cannot join the robot's shared memory")?;
     let mut events = EventFollower::new(world, events_node);
@@ -273,9 +323,17 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
             }
             for r in &mut recordings {
                 let _ = r.listener.try_wait(|_| {});
-                drain(r, &mut writer)?;
+                drain(r, &mut writer, &path)?;
             }
             let now = Instant::now();
+            if now >= next_flush {
+                next_flush = now + FLUSH_PERIOD;
+                writer.flush().map_err(|e| write_failed(&path, e))?;
+                if now >= next_sync {
+                    next_sync = now + SYNC_PERIOD;
+                    data.sync_data().map_err(|e| write_failed(&path, mcap::McapError::Io(e).into()))?;
+                }
+            }
             if until.is_some_and(|u| now >= u) {
                 break;
             }
@@ -314,9 +372,10 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
     }
     // what arrived until the end
     for r in &mut recordings {
-        drain(r, &mut writer)?;
+        drain(r, &mut writer, &path)?;
     }
-    writer.finish().with_context(|| format!("cannot finish the MCAP file {}", path.display()))?;
+    writer.finish().map_err(|e| write_failed(&path, e))?;
+    data.sync_data().map_err(|e| write_failed(&path, mcap::McapError::Io(e).into()))?;
     let totals = sum(&recordings);
     if !a.quiet && tty {
         eprintln!();
@@ -356,8 +415,9 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Writes every waiting sample of `r` (and the frames its notices name).
-fn drain(r: &mut Recording, writer: &mut Out) -> Result<()> {
+/// Writes every waiting sample of `r` (and the frames its notices name) to
+/// `path`.
+fn drain(r: &mut Recording, writer: &mut Out, path: &Path) -> Result<()> {
     let mut failed = None;
     r.raw.receive(|h, bytes| {
         if let Some(last) = r.last_seq {
@@ -367,7 +427,7 @@ fn drain(r: &mut Recording, writer: &mut Out) -> Result<()> {
         let log_ns = agent_sdk::clock::unix_now_ns();
         let sample = Sample { seq: h.seq, log_time_ns: log_ns, stamp_ns: h.stamp_ns, bytes };
         if let Err(e) = writer.write_sample(r.channel, &sample) {
-            failed = Some(anyhow!(e));
+            failed = Some(e);
             return false;
         }
         r.messages += 1;
@@ -381,7 +441,7 @@ fn drain(r: &mut Recording, writer: &mut Out) -> Result<()> {
         true
     })?;
     match failed {
-        Some(e) => Err(e.context("cannot write to the MCAP file")),
+        Some(e) => Err(write_failed(path, e)),
         None => Ok(()),
     }
 }

@@ -10,13 +10,22 @@
 //! recorded spacing of their log times, scaled by `--speed`, or as fast as
 //! they can (`--fast`); each carries a fresh sequence number and stamp,
 //! and the recorded bytes unchanged.
+//!
+//! The file is streamed ([`nerve_recording::read`]), never loaded: a first
+//! read learns its ports (keeping no message), then each round reads it
+//! again a message at a time, in the order it was recorded, and reads past
+//! the images without keeping them. Memory stays that of one message,
+//! however long the recording. A file cut short (the recorder was killed,
+//! or the disk filled) is replayed up to its last whole message, with a
+//! warning that says what was lost.
 
 use crate::client::cli_node;
 use agent_sdk::World;
 use agent_sdk::control::{ControlServer, ControlSize, agent_router_client};
 use agent_sdk::raw_port::RawOutput;
 use anyhow::{Context as _, Result, anyhow, bail};
-use nerve_recording::{MESSAGE_ENCODING, SCHEMA_ENCODING, foxglove};
+use nerve_recording::foxglove;
+use nerve_recording::read::{Event, RecordingReader, nerve_schema};
 use shm_schemas::control::agent_to_router::{AgentToRouter, PortSpec, Registration, TaskKind};
 use shm_schemas::control::cli_to_router::{RouterReply, RouterRequest};
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
@@ -25,7 +34,7 @@ use shm_schemas::stats::AgentStats;
 use shm_schemas::{AgentName, Schema};
 use std::collections::BTreeMap;
 use std::io::IsTerminal as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -66,25 +75,45 @@ struct Track {
     fingerprint: u64,
 }
 
-/// The recorded port of channel `ch`, or what makes it not one of nerve's.
-fn track_of(ch: &mcap::Channel<'_>) -> Result<Track, String> {
-    if ch.message_encoding != MESSAGE_ENCODING {
-        return Err(format!("channel {} is encoded {:?}, not {MESSAGE_ENCODING:?}", ch.topic, ch.message_encoding));
-    }
-    let Some(s) = ch.schema.as_ref().filter(|s| s.encoding == SCHEMA_ENCODING) else {
-        return Err(format!("channel {} has no {SCHEMA_ENCODING} schema", ch.topic));
-    };
-    let schema: Schema = serde_json::from_slice(&s.data)
-        .map_err(|e| format!("the schema of channel {} does not read ({e})", ch.topic))?;
+/// The recorded port of channel `ch` of `file`, or what makes it not one
+/// of nerve's (its schema is checked before it reaches shared memory).
+fn track_of(file: &str, ch: &mcap::Channel<'_>) -> Result<Track> {
+    let schema = nerve_schema(file, ch)?;
     let meta = |k: &str| ch.metadata.get(k).cloned();
     let (Some(agent), Some(port)) = (meta("agent"), meta("port")) else {
-        return Err(format!("channel {} does not say its agent and port", ch.topic));
+        bail!("{file}: channel {} does not say its agent and port; is it a file `nerve record` wrote?", ch.topic);
     };
     let fingerprint = meta("fingerprint").and_then(|f| parse_fingerprint(&f)).unwrap_or(schema.fingerprint());
     if fingerprint != schema.fingerprint() {
-        return Err(format!("channel {}'s schema does not match its fingerprint", ch.topic));
+        bail!("{file}: channel {}'s schema does not match its fingerprint; the file is damaged", ch.topic);
     }
     Ok(Track { agent, port, schema, fingerprint })
+}
+
+/// Whether `ch` holds a ring's images (for people and viewers; their
+/// notices replay).
+fn is_images(ch: &mcap::Channel<'_>) -> bool {
+    ch.message_encoding == foxglove::MESSAGE_ENCODING && ch.topic.ends_with(nerve_recording::IMAGE_TOPIC_SUFFIX)
+}
+
+/// The recorded ports of `path`, by channel id, from a first read that
+/// keeps no message; says once what a file cut short lost.
+fn tracks_of(path: &Path) -> Result<BTreeMap<u16, Track>> {
+    let file = path.display().to_string();
+    let mut reader = RecordingReader::open(path)?;
+    reader.skip_messages();
+    let mut tracks = BTreeMap::new();
+    while let Some(event) = reader.next_event()? {
+        if let Event::Channel(ch) = event
+            && !is_images(&ch)
+        {
+            tracks.insert(ch.id, track_of(&file, &ch)?);
+        }
+    }
+    if let Some(cut) = reader.cut() {
+        eprintln!("warning: {cut}");
+    }
+    Ok(tracks)
 }
 
 /// A replayed agent: its ports and its place in the robot.
@@ -113,28 +142,7 @@ pub fn replay(world: &World, a: ReplayArgs) -> Result<ExitCode> {
         bail!("--speed must be a positive number (or give --fast)");
     }
     let chosen = selection(&a.agents)?;
-    let bytes = std::fs::read(&a.file).with_context(|| format!("cannot read {}", a.file.display()))?;
-    let file = a.file.display().to_string();
-    let not_ours = |what: String| anyhow!("{file}: {what}; is it a file `nerve record` wrote?");
-
-    // the channels: one per recorded port
-    let mut tracks: BTreeMap<u16, Track> = BTreeMap::new();
-    let mut messages: Vec<(u16, u64, std::borrow::Cow<'_, [u8]>)> = Vec::new();
-    let stream = mcap::MessageStream::new(&bytes).map_err(|e| not_ours(format!("not a readable MCAP file ({e})")))?;
-    for m in stream {
-        let m = m.map_err(|e| not_ours(format!("not a readable MCAP file, or a damaged one ({e})")))?;
-        let ch = &m.channel;
-        if ch.message_encoding == foxglove::MESSAGE_ENCODING && ch.topic.ends_with(nerve_recording::IMAGE_TOPIC_SUFFIX)
-        {
-            // a ring's images: for people and viewers; their notices replay
-            continue;
-        }
-        if let std::collections::btree_map::Entry::Vacant(slot) = tracks.entry(ch.id) {
-            slot.insert(track_of(ch).map_err(not_ours)?);
-        }
-        messages.push((ch.id, m.log_time, m.data));
-    }
-    messages.sort_by_key(|(_, t, _)| *t);
+    let tracks = tracks_of(&a.file)?;
     let recorded: Vec<String> =
         tracks.values().map(|t| t.agent.clone()).collect::<std::collections::BTreeSet<_>>().into_iter().collect();
     for c in chosen.keys() {
@@ -219,24 +227,38 @@ pub fn replay(world: &World, a: ReplayArgs) -> Result<ExitCode> {
     let mut rounds = 0u64;
     'replay: loop {
         rounds += 1;
-        let round_start = Instant::now();
-        let first = messages.first().map_or(0, |m| m.1);
-        for (id, log_time, data) in &messages {
-            let Some((name, out)) = outputs.get_mut(id) else { continue };
+        // the file is read again each round, a message at a time, in the
+        // order it was recorded; image channels and agents not replayed are
+        // read past without being kept
+        let mut reader = RecordingReader::open(&a.file)?;
+        let mut round: Option<(Instant, u64)> = None;
+        while let Some(event) = reader.next_event()? {
+            let m = match event {
+                Event::Channel(ch) => {
+                    if !outputs.contains_key(&ch.id) {
+                        reader.skip(ch.id);
+                    }
+                    continue;
+                }
+                Event::Message(m) => m,
+            };
+            let Some((name, out)) = outputs.get_mut(&m.channel.id) else { continue };
             if agents.get(name.as_str()).is_some_and(|r| r.stopped) {
                 continue;
             }
+            let (round_start, first) = *round.get_or_insert((Instant::now(), m.log_time));
             if !a.fast {
-                let due = round_start + Duration::from_secs_f64(log_time.saturating_sub(first) as f64 / 1e9 / a.speed);
+                let due =
+                    round_start + Duration::from_secs_f64(m.log_time.saturating_sub(first) as f64 / 1e9 / a.speed);
                 while Instant::now() < due {
                     serve(&mut agents, router.as_ref());
                     if crate::interrupt::requested() || agents.values().all(|r| r.stopped) {
                         break 'replay;
                     }
-                    std::thread::sleep((due - Instant::now()).min(Duration::from_millis(20)));
+                    std::thread::sleep(due.saturating_duration_since(Instant::now()).min(Duration::from_millis(20)));
                 }
             }
-            out.send(data).with_context(|| format!("cannot publish on {name}"))?;
+            out.send(m.data).with_context(|| format!("cannot publish on {name}"))?;
             if let Some(r) = agents.get_mut(name.as_str()) {
                 r.sent += 1;
             }
@@ -246,14 +268,14 @@ pub fn replay(world: &World, a: ReplayArgs) -> Result<ExitCode> {
             }
             if Instant::now() >= next_progress && !a.quiet {
                 next_progress = Instant::now() + Duration::from_secs(1);
-                let line = format!("replaying: {total} of {} messages sent (round {rounds})", messages.len());
+                let line = format!("replaying: {total} messages sent (round {rounds})");
                 if tty { eprint!("\r{line}   ") } else { eprintln!("{line}") }
             }
             if crate::interrupt::requested() || agents.values().all(|r| r.stopped) {
                 break 'replay;
             }
         }
-        if !a.repeat {
+        if !a.repeat || round.is_none() {
             break;
         }
     }

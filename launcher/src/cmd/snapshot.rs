@@ -12,6 +12,7 @@ use crate::client::RouterSession;
 use crate::cmd::record::dated_file;
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
+use nerve_recording::read::{Event, RecordingReader};
 use shm_schemas::control::cli_to_router::{CliRequest, RouterError};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -79,16 +80,22 @@ fn absolute(path: &Path) -> Result<PathBuf> {
     }
 }
 
-/// Messages per topic, and the seconds between the first and the last.
+/// Messages per topic, and the seconds between the first and the last
+/// (the file streamed, a message at a time; one cut short is read up to its
+/// last whole message, with a warning).
 fn contents(path: &Path) -> Result<(BTreeMap<String, u64>, f64)> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut reader = RecordingReader::open(path)?;
     let mut per_topic = BTreeMap::new();
     let (mut first, mut last) = (u64::MAX, 0u64);
-    for m in mcap::MessageStream::new(&bytes).with_context(|| format!("{} is not MCAP", path.display()))? {
-        let m = m.with_context(|| format!("{} is damaged", path.display()))?;
-        *per_topic.entry(m.channel.topic.clone()).or_insert(0) += 1;
-        first = first.min(m.log_time);
-        last = last.max(m.log_time);
+    while let Some(event) = reader.next_event()? {
+        if let Event::Message(m) = event {
+            *per_topic.entry(m.channel.topic.clone()).or_insert(0) += 1;
+            first = first.min(m.log_time);
+            last = last.max(m.log_time);
+        }
+    }
+    if let Some(cut) = reader.cut() {
+        eprintln!("warning: {cut}");
     }
     Ok((per_topic, last.saturating_sub(first) as f64 / 1e9))
 }
