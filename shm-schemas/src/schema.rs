@@ -25,6 +25,9 @@
 //!     pub width_m: f32,
 //!     pub force_n: f32,
 //!     pub closed: u8,
+//!     // explicit padding, left out of the schema (see below)
+//!     #[serde(skip)]
+//!     pub _pad: [u8; 3],
 //! }
 //!
 //! assert_eq!(Gripper::stable_type_name(), "lab::Gripper");
@@ -52,10 +55,90 @@
 //!     pub a: u8,
 //! }
 //! ```
+//!
+//! A sample's bytes may come from a recording, a bridge peer or Python, not
+//! only from Rust, so every field must be valid for any bytes
+//! ([`AnyBitPattern`]). A `bool` is refused (store a `u8`, or a [`Bool`]):
+//!
+//! ```compile_fail
+//! #[derive(Debug, Clone, Copy, serde::Serialize, shm_schemas::Payload)]
+//! #[repr(C)]
+//! #[payload(name = "lab::Flag")]
+//! pub struct Flag {
+//!     pub closed: bool,
+//! }
+//! ```
+//!
+//! so is a `char`, in an array too:
+//!
+//! ```compile_fail
+//! #[derive(Debug, Clone, Copy, serde::Serialize, shm_schemas::Payload)]
+//! #[repr(C)]
+//! #[payload(name = "lab::Letters")]
+//! pub struct Letters {
+//!     pub letters: [char; 4],
+//! }
+//! ```
+//!
+//! and an enum, even one that claims to be sendable and describes itself:
+//!
+//! ```compile_fail
+//! #[derive(Debug, Clone, Copy, serde::Serialize)]
+//! #[repr(u8)]
+//! pub enum Phase { Open = 0, Closed = 1 }
+//! // SAFETY: (not enough: a byte 2 is no Phase)
+//! unsafe impl shm_schemas::__private::ZeroCopySend for Phase {}
+//! impl shm_schemas::Described for Phase {
+//!     fn schema() -> shm_schemas::Schema { <u8 as shm_schemas::Described>::schema() }
+//! }
+//! #[derive(Debug, Clone, Copy, serde::Serialize, shm_schemas::Payload)]
+//! #[repr(C)]
+//! #[payload(name = "lab::Phased")]
+//! pub struct Phased {
+//!     pub phase: Phase,
+//! }
+//! ```
+//!
+//! Implicit padding is refused too: Rust never writes padding bytes, so a
+//! copy of a sample's bytes would read uninitialised memory. Here the
+//! compiler pads 3 bytes after `closed`:
+//!
+//! ```compile_fail
+//! #[derive(Debug, Clone, Copy, serde::Serialize, shm_schemas::Payload)]
+//! #[repr(C)]
+//! #[payload(name = "lab::Padded")]
+//! pub struct Padded {
+//!     pub closed: u8,
+//!     pub force_n: f32,
+//! }
+//! ```
+//!
+//! Written out as a `_pad` field, the padding is a field like the others,
+//! left out of the schema (the layout fingerprint stays what it was):
+//!
+//! ```
+//! use shm_schemas::{Described, Payload, schema::Bool};
+//!
+//! #[derive(Debug, Clone, Copy, Default, serde::Serialize, Payload)]
+//! #[repr(C)]
+//! #[payload(name = "lab::Padded")]
+//! pub struct Padded {
+//!     pub closed: Bool,
+//!     #[serde(skip)]
+//!     pub _pad: [u8; 3],
+//!     pub force_n: f32,
+//! }
+//!
+//! let schema = Padded::schema();
+//! assert_eq!((schema.size, schema.field("force_n").map(|(o, _)| o)), (8, Some(4)));
+//! assert!(schema.field("_pad").is_none());
+//! ```
 
 use serde::{Deserialize, Serialize};
 
+mod plain;
 mod validate;
+pub use plain::{AnyBitPattern, Bool};
 pub use validate::{MAX_ALIGN, MAX_DEPTH, MAX_FIELDS, MAX_NAME_LEN, MAX_SIZE, SchemaInvalid};
 
 /// The layout of a type that can be part of a payload.

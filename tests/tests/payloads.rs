@@ -38,6 +38,13 @@ fn a_type_nerve_was_not_built_with_is_echoed_by_its_schema() {
         .filter_map(|f| f["name"].as_str())
         .collect();
     assert_eq!(fields, ["count", "opening_m", "fingers", "tool", "temp_cdeg"]);
+    // a registered schema is a valid one (the router checks), and the
+    // explicit padding and the `Bool` a payload needs since B7 left it as
+    // it was: no `_pad` fields, a flag whose schema is a bool's
+    let parsed: shm_schemas::Schema = serde_json::from_value(schema.clone()).expect("a schema");
+    parsed.validate().expect("valid");
+    assert!(parsed.field("fingers.0._pad").is_none() && parsed.field("_pad").is_none());
+    assert_eq!(parsed.field("fingers.0.contact").map(|(_, s)| s.type_name.as_str()), Some("bool"));
     let graph = r.graph();
     let in_graph = graph["agents"].as_array().expect("agents").iter().find(|a| a["name"] == "g").expect("g");
     assert_eq!(gripper_schema(in_graph), schema, "graph --json shows the same schema");

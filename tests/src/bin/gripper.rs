@@ -11,6 +11,7 @@
 //! a type too large to register with its schema.
 
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
+use shm_schemas::schema::Bool;
 use shm_schemas::{FixedName, Payload};
 use std::time::Duration;
 
@@ -21,8 +22,11 @@ use std::time::Duration;
 pub struct Finger {
     /// contact force, N
     pub force_n: f32,
-    /// whether it touches something
-    pub contact: bool,
+    /// whether it touches something (a `Bool`: a payload holds no `bool`)
+    pub contact: Bool,
+    /// explicit padding (a payload has no implicit padding)
+    #[serde(skip)]
+    pub _pad: [u8; 3],
 }
 
 /// The gripper's state as this build defines it.
@@ -40,6 +44,9 @@ pub struct Gripper {
     pub tool: FixedName,
     /// a signed reading (temperature, centi-degrees)
     pub temp_cdeg: i16,
+    /// explicit padding
+    #[serde(skip)]
+    pub _pad: [u8; 2],
 }
 
 /// `acme::Gripper` as an older build defined it: `count` and `opening_m`
@@ -63,6 +70,9 @@ pub mod old {
         pub tool: FixedName,
         /// temperature, centi-degrees
         pub temp_cdeg: i16,
+        /// explicit padding
+        #[serde(skip)]
+        pub _pad: [u8; 2],
     }
 }
 
@@ -213,7 +223,11 @@ trait Sample: Payload + Default {
 }
 
 fn fingers(n: u64) -> [Finger; 3] {
-    [0.5f32, 1.0, 1.5].map(|f| Finger { force_n: f * (n % 10) as f32, contact: n.is_multiple_of(2) })
+    [0.5f32, 1.0, 1.5].map(|f| Finger {
+        force_n: f * (n % 10) as f32,
+        contact: n.is_multiple_of(2).into(),
+        _pad: [0; 3],
+    })
 }
 
 impl Sample for Gripper {
@@ -224,6 +238,7 @@ impl Sample for Gripper {
             fingers: fingers(n),
             tool: FixedName::new(tool),
             temp_cdeg: -250,
+            _pad: [0; 2],
         }
     }
 }
@@ -236,6 +251,7 @@ impl Sample for old::Gripper {
             fingers: fingers(n),
             tool: FixedName::new(tool),
             temp_cdeg: -250,
+            _pad: [0; 2],
         }
     }
 }
