@@ -32,6 +32,13 @@ one written here with ``nerve.payload`` (the layout a ``#[repr(C)]`` Rust
 struct of those fields has, so a Rust agent built with that struct reads it
 in place). Messages are numpy views of the samples in shared memory: a
 received message is read in place, a loaned one written in place.
+
+A loaned message is the sender's until ``out.send(msg)``; after it, its
+memory is the readers' (or, in a test, freed), and ``msg.field`` raises
+instead of touching it. A view taken from it (``msg.array``, an array
+field, a nested struct) must not outlive it: ``send`` raises
+``BufferError`` while one lives, as a ``bytearray`` refuses to resize;
+``del`` the view or keep a ``.copy()``.
 """
 
 from __future__ import annotations
@@ -78,12 +85,14 @@ class Payload:
     """A payload type: its name, its layout (``schema``) and numpy ``dtype``."""
 
     def __init__(self, schema_json: str):
+        # checked first (ValueError saying what is wrong): a layout from
+        # outside never reaches numpy or a port unchecked
+        self.fingerprint = _native.fingerprint(schema_json)
         self.schema_json = schema_json
         self.schema = json.loads(schema_json)
         self.type_name = self.schema["type_name"]
         self.size = self.schema["size"]
         self.dtype = _dtype(self.schema)
-        self.fingerprint = _native.fingerprint(schema_json)
 
     def __repr__(self) -> str:
         return f"Payload({self.type_name!r}, {self.size} B, fingerprint {self.fingerprint:#018x})"
@@ -146,27 +155,42 @@ class Message:
     (a loaned message only). ``msg.meta`` says who sent it (``sender``,
     ``seq``, ``stamp_ns``) for a received one. A received message keeps its
     sample in shared memory while it lives: an input lends two per source
-    at once, so keep ``msg.copy()`` to hold more."""
+    at once, so keep ``msg.copy()`` to hold more.
 
-    __slots__ = ("_a", "meta", "_loan")
+    A loaned message is spent by ``send``: its fields then raise
+    ``RuntimeError`` (the memory is the readers'). A view of it
+    (``msg.array``, an array field, a nested struct) keeps it from being
+    sent (``BufferError``) while it lives."""
+
+    __slots__ = ("_a", "meta", "_loan", "_dtype")
 
     def __init__(self, array, meta=None, loan=None):
         object.__setattr__(self, "_a", array)
         object.__setattr__(self, "meta", meta)
         object.__setattr__(self, "_loan", loan)
+        object.__setattr__(self, "_dtype", array.dtype)
+
+    def _array(self):
+        a = self._a
+        if a is None:
+            raise RuntimeError(f"this {self.type_name} message was sent: its memory is the readers' now; "
+                               "loan a new one (out.loan()), or keep msg.copy() before sending")
+        return a
 
     def __getattr__(self, name):
+        a = self._array()
         try:
-            return self._a[name][0]
+            return a[name][0]
         except (ValueError, KeyError, IndexError):
             raise AttributeError(f"{self.type_name} has no field {name!r} "
-                                 f"(fields: {', '.join(self._a.dtype.names or ())})") from None
+                                 f"(fields: {', '.join(a.dtype.names or ())})") from None
 
     def __setattr__(self, name, value):
+        a = self._array()
         try:
-            self._a[name] = value
+            a[name] = value
         except (ValueError, KeyError) as e:
-            if name not in (self._a.dtype.names or ()):
+            if name not in (a.dtype.names or ()):
                 raise AttributeError(f"{self.type_name} has no field {name!r}") from None
             raise ValueError(f"{self.type_name}.{name}: {e} (a received message is read-only; "
                              "loan one from an output to write)") from None
@@ -178,24 +202,33 @@ class Message:
 
     @property
     def array(self) -> np.ndarray:
-        """The sample as a one-element numpy structured array (a view)."""
-        return self._a
+        """The sample as a one-element numpy structured array (a view: a
+        loaned message is not sent while it lives)."""
+        return self._array()
 
     @property
     def type_name(self) -> str:
-        return (self._a.dtype.metadata or {}).get("nerve", "payload")
+        return (self._dtype.metadata or {}).get("nerve", "payload")
+
+    @property
+    def sent(self) -> bool:
+        """Whether this loaned message was sent (its fields are gone)."""
+        return self._a is None
 
     def copy(self) -> "Message":
         """A copy that holds no shared memory (nor the sample: its slot is
         the sender's again once the original is dropped)."""
         m = self.meta
-        return Message(self._a.copy(), None if m is None else Meta(m.sender, m.seq, m.stamp_ns))
+        return Message(self._array().copy(), None if m is None else Meta(m.sender, m.seq, m.stamp_ns))
 
     def to_dict(self) -> dict:
         """The fields as Python values (arrays as lists)."""
-        return {n: self._a[n][0].tolist() for n in self._a.dtype.names}
+        a = self._array()
+        return {n: a[n][0].tolist() for n in a.dtype.names}
 
     def __repr__(self) -> str:
+        if self._a is None:
+            return f"Message({self.type_name}, sent)"
         return f"Message({self.to_dict()})"
 
 
@@ -255,14 +288,14 @@ class Output:
         (``out.send(value=1.5, stamp_ns=...)``, the rest zero); or a copy of
         ``message`` when it is another message, a dict or bytes."""
         if message is not None and isinstance(message, Message) and message._loan is not None and not fields:
-            self._n.send(message._loan)
+            self._send_loaned(message)
             return
         if isinstance(message, (bytes, bytearray, memoryview)) and not fields:
             self._n.send_bytes(message)
             return
         m = self.loan()
         if isinstance(message, Message):
-            m._a[...] = message._a
+            m._a[...] = message._array()
         elif isinstance(message, dict):
             for k, v in message.items():
                 setattr(m, k, v)
@@ -270,7 +303,20 @@ class Output:
             raise TypeError(f"send takes a Message, a dict, bytes or fields, not {type(message).__name__}")
         for k, v in fields.items():
             setattr(m, k, v)
-        self._n.send(m._loan)
+        self._send_loaned(m)
+
+    def _send_loaned(self, m: Message) -> None:
+        """Sends a loaned message: drops its own view first (the loan is not
+        sent while a view lives), and gives the view back if the send fails."""
+        a = m._array()
+        object.__setattr__(m, "_a", None)
+        del a
+        try:
+            self._n.send(m._loan)
+        except BaseException:
+            if not m._loan.sent:
+                object.__setattr__(m, "_a", np.frombuffer(m._loan, dtype=m._dtype, count=1))
+            raise
 
     @property
     def service(self) -> str:

@@ -13,6 +13,7 @@
 //! loaned one ([`Loan`]) export their shared-memory bytes through the
 //! buffer protocol, and the package views them as numpy records.
 
+use agent_sdk::clock::MAX_DURATION;
 use agent_sdk::dynamic::{SchemaInput, SchemaOutput};
 use agent_sdk::{Agent, AgentError, CommonArgs, Context as SdkContext, Param, Setup as SdkSetup, Task};
 use pyo3::exceptions::{PyBufferError, PyRuntimeError, PyValueError};
@@ -20,6 +21,7 @@ use pyo3::ffi;
 use pyo3::prelude::*;
 use shm_schemas::{Described, Schema};
 use std::os::raw::c_int;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, OnceLock};
 use std::time::Duration;
 
@@ -32,6 +34,32 @@ struct Spec {
 }
 
 static SPEC: OnceLock<Spec> = OnceLock::new();
+
+/// How many threads the interpreter ran when `run` was asked to make the
+/// agent a daemon (0: not a daemon, or one thread). The SDK's daemonize
+/// forks, which is safe in a single-threaded process only; an interpreter
+/// that imported numpy runs its BLAS pool already (review B13). The
+/// daemon says so in its log ([`warn_threads_at_fork`]).
+static THREADS_AT_FORK: AtomicUsize = AtomicUsize::new(0);
+
+/// The threads of this process now (`/proc/self/task`), if readable.
+fn thread_count() -> Option<usize> {
+    std::fs::read_dir("/proc/self/task").ok().map(|d| d.count())
+}
+
+/// Tells the daemon's log that it was forked from a multi-threaded
+/// interpreter, once, with what to do if that ever hangs it.
+fn warn_threads_at_fork() {
+    let n = THREADS_AT_FORK.swap(0, Ordering::Relaxed);
+    if n > 1 {
+        eprintln!(
+            "warning: this Python agent became a daemon (--daemon) by a fork while its interpreter ran {n} threads \
+             (numpy's BLAS pool, threads an import started); only the forking thread goes on, so a lock another held \
+             at that instant would stay taken. numpy's pool is fork-safe; if an agent ever hangs at start, start no \
+             thread before nerve.run (OPENBLAS_NUM_THREADS=1 for numpy's), or run it without --daemon under systemd"
+        );
+    }
+}
 
 thread_local! {
     /// The agent a test harness is making in this thread ([`Harness`]):
@@ -84,6 +112,7 @@ impl Agent for PyAgent {
     fn start(&mut self, ctx: &mut SdkContext) -> Result<(), AgentError> {
         if MAKING.with(|m| m.borrow().is_none()) {
             keep_thread_state();
+            warn_threads_at_fork();
         }
         self.call("_nerve_start", ctx)
     }
@@ -135,8 +164,18 @@ fn dead(what: &str) -> PyErr {
     ))
 }
 
+/// A layout (JSON) from Python, parsed and [validated](Schema::validate):
+/// ValueError with what is wrong, before it reaches a port.
 fn schema_from(json: &str) -> PyResult<Schema> {
-    serde_json::from_str(json).map_err(|e| PyValueError::new_err(format!("not a payload layout: {e}")))
+    let schema: Schema =
+        serde_json::from_str(json).map_err(|e| PyValueError::new_err(format!("not a payload layout: {e}")))?;
+    valid(schema)
+}
+
+/// `schema` if it is valid, else a ValueError saying why.
+fn valid(schema: Schema) -> PyResult<Schema> {
+    schema.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(schema)
 }
 
 fn to_py_err(e: impl std::fmt::Display) -> PyErr {
@@ -328,7 +367,11 @@ struct Input {
 impl Input {
     /// The next waiting sample, read in place; None when none waits.
     fn take(&self) -> PyResult<Option<Received>> {
-        Ok(self.input.take().map_err(to_py_err)?.map(|sample| Received { sample: Mutex::new(sample) }))
+        Ok(self
+            .input
+            .take()
+            .map_err(to_py_err)?
+            .map(|sample| Received { sample: Mutex::new(sample), exports: Mutex::new(0) }))
     }
 
     /// How many output ports feed it now.
@@ -344,6 +387,9 @@ struct Received {
     // iceoryx2's samples may move between threads but not be shared: the
     // lock makes the object shareable, as Python objects are
     sample: Mutex<agent_sdk::dynamic::Received>,
+    /// how many buffer views of it live (numpy arrays): each keeps this
+    /// object, so the sample and its mapping, alive
+    exports: Mutex<usize>,
 }
 
 impl Received {
@@ -380,6 +426,12 @@ impl Received {
         lock(&self.sample).bytes().len()
     }
 
+    /// How many buffer views (numpy arrays) of the sample live now.
+    #[getter]
+    fn exports(&self) -> usize {
+        *lock(&self.exports)
+    }
+
     unsafe fn __getbuffer__(slf: Bound<'_, Self>, view: *mut ffi::Py_buffer, flags: c_int) -> PyResult<()> {
         if flags & ffi::PyBUF_WRITABLE != 0 {
             return Err(PyBufferError::new_err("a received sample is read-only"));
@@ -390,12 +442,20 @@ impl Received {
             let bytes = sample.bytes();
             (bytes.as_ptr(), bytes.len())
         };
-        // SAFETY: the bytes live as long as the sample, which `view` keeps
-        // alive (PyBuffer_FillInfo takes a reference to `slf`)
-        unsafe { fill_buffer(&slf, view, ptr.cast_mut(), len, true, flags) }
+        // SAFETY: the bytes live as long as the sample, which this object
+        // owns and never gives up; `view` keeps the object alive
+        // (PyBuffer_FillInfo takes a reference to `slf`). In shared memory
+        // the sample holds iceoryx2's reference to the subscriber's
+        // mapping, so the bytes outlive the Input too.
+        unsafe { fill_buffer(&slf, view, ptr.cast_mut(), len, true, flags) }?;
+        *lock(&slf.borrow().exports) += 1;
+        Ok(())
     }
 
-    unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {}
+    unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {
+        let mut n = lock(&self.exports);
+        *n = n.saturating_sub(1);
+    }
 }
 
 /// Fills `view` with `len` bytes at `ptr`, owned by `owner`.
@@ -429,13 +489,28 @@ impl Output {
     /// its slot last held.
     #[pyo3(signature = (zeroed = true))]
     fn loan(&self, zeroed: bool) -> PyResult<Loan> {
-        Ok(Loan { loan: Mutex::new(Some(self.output.loan(zeroed).map_err(to_py_err)?)) })
+        let loan = self.output.loan(zeroed).map_err(to_py_err)?;
+        Ok(Loan { state: Mutex::new(LoanState { loan: Some(loan), exports: 0 }) })
     }
 
     /// Sends a loaned sample and wakes the readers; the loan is spent.
+    /// BufferError while a view of it lives (a numpy array of its bytes),
+    /// as a `bytearray` refuses to resize: once sent, the bytes are the
+    /// readers' (or, in a test, freed), and a view would write into them.
     fn send(&mut self, loan: &Bound<'_, Loan>) -> PyResult<()> {
-        let taken =
-            lock(&loan.borrow().loan).take().ok_or_else(|| PyRuntimeError::new_err("this loan was sent already"))?;
+        let taken = {
+            let me = loan.borrow();
+            let mut state = lock(&me.state);
+            if state.exports > 0 {
+                return Err(PyBufferError::new_err(format!(
+                    "this message cannot be sent while {} view(s) of its memory live (numpy arrays from \
+                     msg.array, an array field or a nested struct): delete them (del) or keep copies (.copy()) \
+                     before sending",
+                    state.exports
+                )));
+            }
+            state.loan.take().ok_or_else(|| PyRuntimeError::new_err("this loan was sent already"))?
+        };
         self.output.send(taken).map_err(to_py_err)
     }
 
@@ -455,27 +530,54 @@ impl Output {
 /// it is sent.
 #[pyclass(module = "nerve._native")]
 struct Loan {
-    /// as for [`Received`]; None once sent
-    loan: Mutex<Option<agent_sdk::dynamic::Loan>>,
+    /// as for [`Received`]
+    state: Mutex<LoanState>,
+}
+
+struct LoanState {
+    /// None once sent
+    loan: Option<agent_sdk::dynamic::Loan>,
+    /// how many buffer views of it live: while any does, it is not sent
+    exports: usize,
 }
 
 #[pymethods]
 impl Loan {
-    unsafe fn __getbuffer__(slf: Bound<'_, Self>, view: *mut ffi::Py_buffer, flags: c_int) -> PyResult<()> {
-        let (ptr, len) = {
-            let me = slf.borrow();
-            let mut held = lock(&me.loan);
-            let loan = held.as_mut().ok_or_else(|| PyBufferError::new_err("this loan was sent already"))?;
-            let bytes = loan.bytes_mut();
-            (bytes.as_mut_ptr(), bytes.len())
-        };
-        // SAFETY: the slot stays mapped while the port lives; the loan's
-        // bytes are written only before it is sent (the package's views
-        // of a sent loan are documented as dead)
-        unsafe { fill_buffer(&slf, view, ptr, len, false, flags) }
+    /// How many buffer views (numpy arrays) of the sample live now.
+    #[getter]
+    fn exports(&self) -> usize {
+        lock(&self.state).exports
     }
 
-    unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {}
+    /// Whether it was sent.
+    #[getter]
+    fn sent(&self) -> bool {
+        lock(&self.state).loan.is_none()
+    }
+
+    unsafe fn __getbuffer__(slf: Bound<'_, Self>, view: *mut ffi::Py_buffer, flags: c_int) -> PyResult<()> {
+        let me = slf.borrow();
+        let mut state = lock(&me.state);
+        let loan = state.loan.as_mut().ok_or_else(|| PyBufferError::new_err("this message was sent already"))?;
+        let bytes = loan.bytes_mut();
+        let (ptr, len) = (bytes.as_mut_ptr(), bytes.len());
+        // SAFETY: the bytes are the loan's, which this object owns until
+        // `Output.send` takes it, and `send` refuses while `exports` is
+        // not zero: every view is released before the loan is sent or
+        // dropped (`view` keeps this object alive: PyBuffer_FillInfo takes
+        // a reference to `slf`). A shared-memory loan holds iceoryx2's
+        // reference to the publisher's mapping, so the bytes outlive the
+        // Output; a test's loan is a heap box owned here. The lock is held
+        // while the view is filled, so no send runs between.
+        unsafe { fill_buffer(&slf, view, ptr, len, false, flags) }?;
+        state.exports += 1;
+        Ok(())
+    }
+
+    unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {
+        let mut state = lock(&self.state);
+        state.exports = state.exports.saturating_sub(1);
+    }
 }
 
 /// The layout (JSON) of the built-in payload type `type_name`, or None.
@@ -530,7 +632,7 @@ fn array_schema(element: &str, len: usize) -> PyResult<String> {
         align: element.align,
         kind: shm_schemas::schema::Kind::Array { len, element: Box::new(element) },
     };
-    serde_json::to_string(&s).map_err(to_py_err)
+    serde_json::to_string(&valid(s)?).map_err(to_py_err)
 }
 
 /// The layout (JSON) of the `#[repr(C)]` struct `type_name` with `fields`
@@ -560,7 +662,7 @@ fn struct_schema(type_name: &str, fields: Vec<(String, String)>) -> PyResult<Str
     let size = round(at, align).ok_or_else(too_large)?;
     let s =
         Schema { type_name: type_name.into(), size, align, kind: shm_schemas::schema::Kind::Struct { fields: laid } };
-    serde_json::to_string(&s).map_err(to_py_err)
+    serde_json::to_string(&valid(s)?).map_err(to_py_err)
 }
 
 /// The layout fingerprint of a layout (JSON): what the router compares.
@@ -573,15 +675,34 @@ fn fingerprint(schema: &str) -> PyResult<u64> {
 fn kind_and_task(kind: String, period_s: Option<f64>) -> PyResult<(&'static str, Task)> {
     let task = match period_s {
         None => Task::EventDriven,
-        Some(p) if p.is_finite() && p > 0.0 => Task::Periodic(Duration::from_secs_f64(p)),
-        Some(p) => return Err(PyValueError::new_err(format!("a period of {p} s (give a positive number of seconds)"))),
+        Some(p) => Task::Periodic(period(p)?),
     };
     shm_schemas::AgentName::new(&kind).map_err(|e| PyValueError::new_err(format!("kind {kind:?}: {e}")))?;
     Ok((Box::leak(kind.into_boxed_str()), task))
 }
 
+/// Seconds from Python as a duration: finite, not negative, at most
+/// [`MAX_DURATION`] (a day); ValueError otherwise, never a panic (which
+/// would abort the interpreter).
 fn seconds(s: f64) -> PyResult<Duration> {
-    Duration::try_from_secs_f64(s).map_err(|e| PyValueError::new_err(format!("{s} s: {e}")))
+    Duration::try_from_secs_f64(s).ok().filter(|d| *d <= MAX_DURATION).ok_or_else(|| {
+        PyValueError::new_err(format!("{s} s: give a number of seconds from 0 to {} (one day)", MAX_DURATION.as_secs()))
+    })
+}
+
+/// The shortest period nerve runs (as `--period` and `nerve rate` accept).
+const MIN_PERIOD: Duration = Duration::from_micros(10);
+
+/// A period from Python (an agent class's `period`, `set_period`): as
+/// [`seconds`], and at least [`MIN_PERIOD`].
+fn period(s: f64) -> PyResult<Duration> {
+    seconds(s).ok().filter(|d| *d >= MIN_PERIOD).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "a period of {s} s: give a number of seconds from {} to {} (one day)",
+            MIN_PERIOD.as_secs_f64(),
+            MAX_DURATION.as_secs()
+        ))
+    })
 }
 
 fn harness_err(e: impl std::fmt::Display) -> PyErr {
@@ -631,7 +752,7 @@ impl Harness {
             b = b.param(k, v);
         }
         if let Some(p) = period_override_s {
-            b = b.period(seconds(p)?);
+            b = b.period(period(p)?);
         }
         if suspended {
             b = b.suspended();
@@ -690,7 +811,7 @@ impl Harness {
 
     /// Changes the period, as `nerve rate` does.
     fn set_period(&mut self, s: f64) -> PyResult<()> {
-        let d = seconds(s)?;
+        let d = period(s)?;
         self.get()?.set_period(d);
         Ok(())
     }
@@ -769,6 +890,9 @@ fn run(py: Python<'_>, class: Py<PyAny>, kind: String, period_s: Option<f64>, ar
             return Ok(if e.use_stderr() { 2 } else { 0 });
         }
     };
+    if args.daemon && !args.describe {
+        THREADS_AT_FORK.store(thread_count().unwrap_or(0), Ordering::Relaxed);
+    }
     Ok(py.detach(|| agent_sdk::runtime::run_status::<PyAgent>(args)))
 }
 

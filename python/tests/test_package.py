@@ -1,6 +1,8 @@
 """Tests of the nerve Python package in the test's own process: layouts
 and the harness. Run by tests/tests/python.rs (`python -m unittest` here)."""
 
+import json
+import math
 import os
 import sys
 import time
@@ -13,6 +15,7 @@ from nerve.testing import Harness
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "examples"))
 from scale import Scale  # noqa: E402
+from loaner import Loaner  # noqa: E402 (python/tests, the directory unittest runs in)
 
 
 class Layouts(unittest.TestCase):
@@ -22,6 +25,21 @@ class Layouts(unittest.TestCase):
         self.assertEqual([p.dtype.fields[n][1] for n in ("a", "b", "c", "d")], [0, 8, 16, 22])
         nested = nerve.payload("test::Nested", [("head", "u8"), ("m", p)])
         self.assertEqual(nested.dtype.fields["m"][1], 8)
+
+    def test_a_layout_from_outside_is_checked_before_it_is_used(self):
+        tick = json.loads(nerve.builtin("nerve::Tick").schema_json)
+        for align in (0, 3, 1 << 20):
+            bad = dict(tick, align=align)
+            with self.assertRaisesRegex(ValueError, f"nerve::Tick: align {align} is not a power of two"):
+                nerve.Payload(json.dumps(bad))
+        outside = json.loads(json.dumps(tick))
+        outside["kind"]["struct"]["fields"][1]["offset"] = 2**63
+        with self.assertRaisesRegex(ValueError, "stamp_ns.*past the end|stamp_ns.*beyond"):
+            nerve.Payload(json.dumps(outside))
+        with self.assertRaisesRegex(ValueError, "cap"):
+            nerve.payload("x::Huge", [("a", ("u8", 1 << 30))])
+        with self.assertRaisesRegex(ValueError, "not a payload layout"):
+            nerve.Payload('{"type_name": "x"}')
 
     def test_unknown_types_are_refused_with_what_to_do(self):
         with self.assertRaisesRegex(ValueError, "nerve.payload"):
@@ -108,6 +126,99 @@ class Harnessed(unittest.TestCase):
         self.assertEqual(v.to_dict()["value"], 6.0)
         c = v.copy()
         self.assertEqual(c.meta, v.meta)
+        h.stop()
+
+
+class Loans(unittest.TestCase):
+    """A loaned message's memory is never touched after it is sent, nor
+    sent while a view of it lives (python/tests/loaner.py misuses them)."""
+
+    def test_a_view_kept_across_send_is_refused_and_a_sent_message_is_gone(self):
+        h = Harness(Loaner)
+        h.step()
+        h.step()
+        reports = h.output("report")
+        self.assertEqual([int(r.seq) for r in reports], [1, 2])
+        for r in reports:
+            self.assertEqual(int(r.kept_view_refused), 1, h.agent.messages)
+            self.assertEqual(int(r.array_view_refused), 1, h.agent.messages)
+        # what the view wrote while the loan was the agent's arrived
+        self.assertEqual(reports[1].values.tolist(), [1.5, 2.5, 3.5, 1.0])
+        # the first step's use after send is reported by the second
+        self.assertEqual(int(reports[1].use_after_send_refused), 1, h.agent.messages)
+        text = "\n".join(h.agent.messages)
+        self.assertIn("view(s) of its memory live", text)
+        self.assertIn("was sent: its memory is the readers'", text)
+        self.assertNotIn("was sent\n", text)
+        h.stop()
+
+    def test_ordinary_use_keeps_working_and_native_views_count(self):
+        class Plain(nerve.Agent):
+            kind = "plain"
+
+            def new(self, setup):
+                self.out = setup.output("out", "nerve::Tick")
+
+            def step(self, ctx):
+                m = self.out.loan()
+                m.seq = 5
+                self.out.send(m)
+                self.sent = m
+                self.out.send(seq=6)
+                # the native loan underneath: a memoryview is an export
+                raw = self.out._n.loan(True)
+                view = memoryview(raw)
+                self.exports = raw.exports
+                try:
+                    self.out._n.send(raw)
+                    self.refused = False
+                except BufferError:
+                    self.refused = True
+                view.release()
+                self.out._n.send(raw)
+                try:
+                    memoryview(raw)
+                    self.after = "a view of a sent loan"
+                except BufferError as e:
+                    self.after = str(e)
+
+        h = Harness(Plain)
+        h.step()
+        self.assertEqual([int(m.seq) for m in h.output("out")], [5, 6, 0])
+        a = h.agent
+        self.assertTrue(a.sent.sent)
+        self.assertIn("sent", repr(a.sent))
+        with self.assertRaisesRegex(RuntimeError, "was sent"):
+            a.sent.seq
+        with self.assertRaisesRegex(RuntimeError, "was sent"):
+            a.sent.array
+        self.assertEqual((a.exports, a.refused), (1, True))
+        self.assertIn("sent already", a.after)
+        h.stop()
+
+
+class Periods(unittest.TestCase):
+    def test_a_period_out_of_range_is_a_value_error_not_an_abort(self):
+        for bad in (1e20, math.nan, math.inf, -math.inf, 0.0, -1.0, 1e-9, 86401.0):
+            class Bad(nerve.Agent):
+                kind = "bad"
+                period = bad
+
+                def step(self, ctx):
+                    pass
+
+            with self.assertRaisesRegex(ValueError, "period", msg=str(bad)):
+                Harness(Bad)
+            with self.assertRaisesRegex(ValueError, "period", msg=str(bad)):
+                nerve.run(Bad, ["--describe"])
+        h = Harness(Scale)
+        for bad in (1e20, math.nan, -1.0):
+            with self.assertRaises(ValueError):
+                h.set_period(bad)
+            with self.assertRaises(ValueError):
+                h.advance(bad)
+        h.set_period(0.5)
+        self.assertAlmostEqual(h.period, 0.5)
         h.stop()
 
 

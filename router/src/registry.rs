@@ -10,6 +10,11 @@
 //! R10). Each entry keeps a [`ProcessHandle`] taken at registration, so its
 //! liveness and `nerve kill` follow that process, not whatever has its pid
 //! later (R6).
+//!
+//! The schemas a registration carries (one per payload type of its ports)
+//! must be valid ([`shm_schemas::Schema::validate`]): tools decode samples
+//! and open ports through them, so a damaged or hostile one is refused
+//! with the registration, saying what is wrong.
 
 use agent_sdk::World;
 use agent_sdk::process::ProcessHandle;
@@ -41,6 +46,13 @@ impl Registry {
     /// a bad name or a name a live process holds.
     pub fn register(&mut self, reg: Registration, process: ProcessHandle) -> Result<(), RouterError> {
         AgentName::new(&reg.name).map_err(|e| RouterError::InvalidName(e.to_string()))?;
+        for schema in &reg.schemas {
+            schema.validate().map_err(|e| RouterError::RegistrationRefused {
+                name: reg.name.clone(),
+                pid: reg.pid,
+                reason: format!("its {e}"),
+            })?;
+        }
         if let Some(existing) = self.agents.get(&reg.name)
             && existing.reg.pid != reg.pid
             && existing.process.is_alive()
@@ -192,8 +204,10 @@ pub fn check_process(reg: &Registration, world: &World) -> Result<ProcessHandle,
 
 #[cfg(test)]
 mod tests {
-    use super::check_process;
+    use super::{Registry, check_process};
     use agent_sdk::World;
+    use agent_sdk::process::ProcessHandle;
+    use shm_schemas::Described as _;
     use shm_schemas::control::agent_to_router::{Registration, TaskKind};
     use shm_schemas::control::cli_to_router::RouterError;
     use std::process::Command;
@@ -212,6 +226,27 @@ mod tests {
             suspended: false,
             schemas: vec![],
         }
+    }
+
+    #[test]
+    fn a_registration_with_an_invalid_schema_is_refused_saying_what_is_wrong() {
+        let mut registry = Registry::default();
+        let me = || ProcessHandle::take(std::process::id()).expect("this process");
+        let mut reg = registration(std::process::id());
+        let mut bad = shm_schemas::payloads::Tick::schema();
+        bad.align = 0;
+        reg.schemas = vec![shm_schemas::payloads::Scalar::schema(), bad];
+        match registry.register(reg.clone(), me()) {
+            Err(e @ RouterError::RegistrationRefused { .. }) => {
+                let text = e.to_string();
+                assert!(text.contains("schema nerve::Tick: align 0 is not a power of two"), "{text}");
+            }
+            other => panic!("registered with align 0: {other:?}"),
+        }
+        assert!(!registry.contains("t1"));
+        reg.schemas.pop();
+        registry.register(reg, me()).expect("valid schemas register");
+        assert!(registry.contains("t1"));
     }
 
     fn refusal(pid: u32, world: &World) -> String {

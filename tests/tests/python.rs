@@ -10,6 +10,10 @@ use std::path::PathBuf;
 use std::process::{Command, Output};
 use std::time::Duration;
 
+fn loaner_py() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("python").join("tests").join("loaner.py")
+}
+
 fn scale_py() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("python").join("examples").join("scale.py")
 }
@@ -198,6 +202,47 @@ fn the_packages_tests_pass_in_the_tests_own_process() {
     let out = Command::new(python).args(["-m", "unittest", "-v"]).current_dir(&dir).output().expect("unittest");
     let text = String::from_utf8_lossy(&out.stderr);
     eprintln!("{text}");
-    assert!(out.status.success() && text.contains("Ran 6 tests") && text.contains("OK"), "{text}");
+    assert!(out.status.success() && text.contains("Ran 10 tests") && text.contains("OK"), "{text}");
     assert!(text.contains("1000 cycles of a Python agent in"), "{text}");
+}
+
+/// B5 on a robot: a Python agent (`python/tests/loaner.py`) keeps numpy
+/// views of a loan in shared memory across `send` and touches the message
+/// after it: every send with a live view raises BufferError and every use
+/// after send raises RuntimeError (the agent reports both in what it
+/// sends); the samples a reader gets hold what was written while the loan
+/// was the agent's, and the agent keeps running.
+#[test]
+fn a_python_loan_in_shared_memory_is_never_touched_after_send() {
+    let (_python, bin) = python_with_nerve();
+    let r = Robot::new("pyloan");
+    let file = r.launch_file(
+        "loan.toml",
+        &format!(
+            r#"robot = "x"
+[[agent]]
+name = "loaner"
+exe = "{}"
+period = "20ms"
+"#,
+            loaner_py().display()
+        ),
+    );
+    ok(&r, &bin, &["launch", file.to_str().expect("utf-8 path")]);
+    let reports = values(&r, "loaner/report", 4);
+    assert_eq!(reports.len(), 4);
+    for v in &reports {
+        let d = &v["data"];
+        assert_eq!(d["kept_view_refused"], 1, "a loan was sent with a live view: {v}");
+        assert_eq!(d["array_view_refused"], 1, "a loan was sent with a live array: {v}");
+        // the first report cannot say yet: it tells of the send before it
+        if d["seq"].as_u64().is_some_and(|s| s >= 2) {
+            assert_eq!(d["use_after_send_refused"], 1, "a sent message was touched: {v}");
+        }
+        let vals: Vec<f64> = d["values"].as_array().expect("values").iter().filter_map(Value::as_f64).collect();
+        assert_eq!(vals[..3], [1.5, 2.5, 3.5], "{v}");
+        assert_eq!(vals[3], d["seq"].as_f64().expect("seq") - 1.0, "{v}");
+    }
+    assert_eq!(r.agent("loaner").map(|a| a["state"].clone()), Some("running".into()));
+    r.down_and_check_clean();
 }
