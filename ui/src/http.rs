@@ -22,8 +22,9 @@
 //!   however slowly it trickles in: a slowloris client is cut off (408).
 //!
 //! [`parse_head`] is a pure function over bytes; its tests feed it
-//! generated input (random bytes and mutated valid requests) and check that
-//! it never panics and that whatever it accepts respects the limits.
+//! generated input (random bytes and mutated valid requests, 40,000 heads
+//! by default, `PROPTEST_CASES=N` rounds of two for a longer run) and check
+//! that it never panics and that whatever it accepts respects the limits.
 
 use std::io::Read;
 use std::net::TcpStream;
@@ -343,7 +344,9 @@ mod tests {
         let small = Limits { max_line: 64, max_head: 256, max_headers: 4, max_body: 100 };
         let alphabet: &[u8] = b"GET POST/ HTTP/1.1\r\n:Content-Length0123456789 \t\x00\xff%?=Host";
         let mut g = Gen(0x9E37_79B9_7F4A_7C15);
-        for _ in 0..20_000 {
+        // 20,000 rounds (40,000 heads) by default; `PROPTEST_CASES=N` for a longer run
+        let rounds = std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse::<u64>().ok()).unwrap_or(20_000);
+        for _ in 0..rounds {
             // random bytes, mostly from the alphabet of requests
             let len = g.below(300);
             let bytes: Vec<u8> = (0..len)
