@@ -281,6 +281,12 @@ impl RawOutput {
 
     /// Sends a sample loaned by [`RawOutput::loan`], stamped now, and wakes the readers.
     pub fn send_loan(&mut self, loan: Loan) -> Result<(), PortError> {
+        self.send_loan_counted(loan).map(|_| ())
+    }
+
+    /// [`RawOutput::send_loan`], returning how many readers the sample
+    /// reached (0 before a new subscriber is seen: `nerve pub` sends again).
+    pub fn send_loan_counted(&mut self, loan: Loan) -> Result<usize, PortError> {
         let LoanInner::Shm(mut sample) = loan.0 else {
             return Err(PortError::Ipc {
                 service: self.service.clone(),
@@ -292,9 +298,9 @@ impl RawOutput {
         // SAFETY: the service's user header is a SampleHeader (set in
         // `create`); the marker is a zero-sized stand-in at its address
         unsafe { (sample.user_header_mut() as *mut CustomHeaderMarker).cast::<SampleHeader>().write(header) };
-        sample.send().map_err(|source| PortError::Send { service: self.service.clone(), source })?;
+        let reached = sample.send().map_err(|source| PortError::Send { service: self.service.clone(), source })?;
         self.notifier.notify().map_err(|source| PortError::Notify { service: self.service.clone(), source })?;
-        Ok(())
+        Ok(reached)
     }
 }
 

@@ -74,6 +74,11 @@ pub enum Command {
     Echo(echo::EchoArgs),
     /// Measure the rate of an output port.
     Hz(echo::HzArgs),
+    /// Publish a sample of any type into an input port, from JSON (as `ros2 topic pub`).
+    #[command(name = "pub")]
+    Pub(crate::cmd::publish::PubArgs),
+    /// List the payload types of this build and of the robot's agents, or show one's fields.
+    Types(crate::cmd::types::TypesArgs),
     /// Print this robot's iceoryx2 configuration, for iceoryx2's own tools (`iox2`).
     #[command(name = "iox2-config")]
     Iox2Config,

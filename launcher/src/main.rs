@@ -10,6 +10,8 @@ mod cmd;
 mod interrupt;
 mod kinds;
 mod launch_file;
+#[cfg(test)]
+mod proptests;
 
 use agent_sdk::World;
 use anyhow::Result;
@@ -83,6 +85,11 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
         Command::Hz(a) => {
             shm_space::ensure_shm_space("hz")?;
             echo::hz(&world, a)
+        }
+        Command::Types(a) => crate::cmd::types::types(&world, a),
+        Command::Pub(a) => {
+            shm_space::ensure_shm_space("pub")?;
+            crate::cmd::publish::publish(&world, a)
         }
         Command::Iox2Config => iox2::iox2_config(&world),
         Command::Record(a) => {

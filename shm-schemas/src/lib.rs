@@ -19,6 +19,7 @@ extern crate self as shm_schemas;
 
 pub mod control;
 pub mod cycles;
+pub mod encode;
 pub mod fixed;
 pub mod header;
 pub mod names;

@@ -724,3 +724,75 @@ fn hz_stops_after_its_duration() {
     assert!(e.contains("--duration"), "{e}");
     r.down_and_check_clean();
 }
+
+/// `nerve types` lists the built-in payloads and the types the robot's
+/// agents registered (a team's own `acme::Gripper`), and shows one type's
+/// fields with offsets, units and fingerprint; an unknown name is refused
+/// with the close ones (issue 46).
+#[test]
+fn types_lists_built_in_and_registered_types_and_shows_one() {
+    let r = Robot::new("types");
+    // without a router: the built-in types, and a note saying so
+    let out = r.command("nerve").args(["types"]).output().expect("types");
+    let (list, note) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{note}");
+    assert!(list.contains("nerve::Odometry") && list.contains("built-in"), "{list}");
+    assert!(note.contains("no router runs"), "{note}");
+    r.router();
+    r.ok(&["start", "gripper", "--name", "g"]);
+    let list = r.ok(&["types"]);
+    assert!(list.contains("acme::Gripper") && list.contains("g/state"), "a registered type and where: {list}");
+    let one = r.ok(&["types", "Odometry"]);
+    assert!(one.contains("theta: f64  [rad]") && one.contains("stamp_ns: u64  [ns]"), "{one}");
+    let json: Value = serde_json::from_str(&r.ok(&["types", "acme::Gripper", "--json"])).expect("json");
+    let fields: Vec<&str> =
+        json[0]["fields"].as_array().expect("fields").iter().filter_map(|f| f["name"].as_str()).collect();
+    assert_eq!(fields, ["count", "opening_m", "fingers", "tool", "temp_cdeg"], "{json}");
+    assert!(json[0]["fingerprint"].as_str().is_some_and(|f| f.starts_with("0x")), "{json}");
+    let e = r.fails(&["types", "odometr"]);
+    assert!(e.contains("did you mean nerve::Odometry"), "{e}");
+    r.down_and_check_clean();
+}
+
+/// `nerve pub` sends any type into an input port, laid out by the input's
+/// schema from the router: a relay forwards what was published; a missing or
+/// unknown field, an input that does not exist and text that is not JSON are
+/// refused before anything is attached, and nothing stays attached after
+/// (issue 46).
+#[test]
+fn pub_sends_json_into_an_input_and_refuses_what_does_not_fit() {
+    let r = Robot::new("pub");
+    r.router();
+    r.ok(&["start", "relay", "--name", "r1"]);
+    // a steady stream, so that an echo started beside it sees a sample
+    let mut publisher = r
+        .command("nerve")
+        .args(["pub", "r1/in", r#"{"seq": 4242}"#, "--rate", "20", "--count", "60"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("pub");
+    let seen = r.echo("r1/out", 1);
+    let published = publisher.wait_with_output().expect("pub ends");
+    assert!(
+        published.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&published.stdout),
+        String::from_utf8_lossy(&published.stderr)
+    );
+    assert!(String::from_utf8_lossy(&published.stdout).contains("r1/in <- nerve::Tick x60"), "{published:?}");
+    assert_eq!(seen[0]["data"]["seq"], 4242, "the relay forwarded what was published: {seen:?}");
+    assert!(seen[0]["data"]["stamp_ns"].as_u64().unwrap_or(0) > 0, "a missing stamp is the send time: {seen:?}");
+
+    let e = r.fails(&["pub", "r1/in", "{}"]);
+    assert!(e.contains("field `seq` is missing"), "{e}");
+    let e = r.fails(&["pub", "r1/in", r#"{"seq": 1, "speed": 2}"#]);
+    assert!(e.contains("has no field `speed`; its fields: seq, stamp_ns"), "{e}");
+    let e = r.fails(&["pub", "r1/nope", r#"{"seq": 1}"#]);
+    assert!(e.contains("has no input \"nope\"; its inputs: in"), "{e}");
+    let e = r.fails(&["pub", "r1/in", "seq=1"]);
+    assert!(e.contains("not JSON"), "{e}");
+    let g = r.graph();
+    assert_eq!(g["connections"].as_array().map(|c| c.len()), Some(0), "nothing stays attached: {g}");
+    r.down_and_check_clean();
+}

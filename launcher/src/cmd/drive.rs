@@ -34,14 +34,14 @@ use agent_sdk::World;
 use agent_sdk::clock::now_ns;
 use agent_sdk::ports::{port_event, port_service};
 use anyhow::{Context as _, Result, anyhow, bail};
-use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
+use shm_schemas::control::cli_to_router::CliRequest;
 use shm_schemas::payloads::{HeadCommand, LinguisticCommand, LinguisticTerm, SafetyStop, VelocityCommand};
 use shm_schemas::{AgentName, FixedName, Payload, PortRef, SampleHeader};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-/// How long to wait for the agent to take the command.
-const DELIVERY_TIMEOUT: Duration = Duration::from_secs(3);
+use crate::cmd::publish::DELIVERY_TIMEOUT;
+
 /// Interval of `--hold` repetitions.
 const REPEAT: Duration = Duration::from_millis(100);
 
@@ -251,26 +251,7 @@ fn send<T: Payload>(
 
     // wait until the agent has taken what we sent, then detach
     let sent = result.as_ref().copied().unwrap_or(0);
-    let deadline = Instant::now() + DELIVERY_TIMEOUT;
-    let mut received = 0;
-    while sent > 0 && Instant::now() < deadline {
-        if let Ok(RouterReply::Agents(views)) = session.call(CliRequest::Agent { name: agent.to_string() }) {
-            received = views
-                .iter()
-                .filter_map(|v| v.stats.as_ref())
-                .flat_map(|s| &s.inputs)
-                .filter(|i| i.input == input && i.from_agent == from.agent.as_str())
-                .map(|i| i.received)
-                .sum::<u64>();
-            if received >= sent {
-                break;
-            }
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    if let Err(e) = session.ok(CliRequest::Detach { from: from.clone(), to: to.clone() }) {
-        tracing::warn!(from = %from, to = %to, "could not detach: {e:#}; the router removes the edge when this command has exited");
-    }
+    let received = crate::cmd::publish::wait_taken_and_detach(&session, &from, &to, sent);
     let sent = result?;
     if received < sent {
         bail!(
