@@ -47,6 +47,9 @@ use std::sync::mpsc::{self, RecvTimeoutError};
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
+#[cfg(test)]
+mod proptests;
+
 /// How `nerve ui` serves.
 #[derive(Debug, Clone)]
 pub struct Options {
