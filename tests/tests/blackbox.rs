@@ -4,7 +4,9 @@
 //! PyPI, holds the last seconds and no more, every sample in order. When
 //! the gripper is killed the black box writes a file by itself that holds
 //! the seconds before the death and the moment after; a clean stop fires
-//! nothing. A configuration with a typo is refused at its line.
+//! nothing. A configuration with a typo is refused at its line. Fired
+//! snapshots are capped by count (the oldest deleted), a stale `.part` is
+//! swept at start, and a disk below the free-space margin gets none.
 
 use nerve_tests::py::{messages, read_mcap};
 use nerve_tests::{Robot, wait_until, write_file};
@@ -140,5 +142,69 @@ fn a_bad_configuration_is_refused_at_its_line() {
     assert!(e.contains("secnds") && e.contains("line 3"), "{e}");
     let e = r.fails(&["snapshot", "--agent", "nobb"]);
     assert!(e.contains("no black box named \"nobb\""), "{e}");
+    r.down_and_check_clean();
+}
+
+/// The black box's folder keeps `max_files` fired snapshots, the newest;
+/// a `.part` left by an earlier run is swept at start; a black box whose
+/// free-space margin the disk cannot give writes nothing, and counts it.
+#[test]
+fn fired_snapshots_are_capped_and_a_disk_below_the_margin_gets_none() {
+    let r = Robot::new("bbcap");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t1", "--period", "10ms"]);
+    let dir = r.home.join("snaps");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let stale = write_file(&dir, "blackbox-20260101-000000.000-died-x.mcap.part", "half a file");
+    let body = "seconds = 1\nports = [\"t1/tick\"]\nafter = 0\nmax_mb = 16\nmax_files = 2\nmax_total_mb = 64\n";
+    let config =
+        write_file(&r.home, "bb.toml", &format!("{body}dir = \"snaps\"\n[fire]\non_death = true\nmin_gap = 0\n"));
+    r.ok(&["start", "blackbox", "--name", "bb", "--", "--config", &config.display().to_string()]);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.agent("bb").is_some() && r.figure_u64("bb", "ports") == 1),
+        "the black box does not keep t1/tick: {:?}",
+        r.ps()
+    );
+    assert!(!stale.exists(), "the stale .part was not swept");
+    for i in 0..4u64 {
+        let name = format!("v{i}");
+        r.ok(&["start", "ticker", "--name", &name, "--period", "50ms"]);
+        assert!(wait_until(Duration::from_secs(10), || r.agent(&name).is_some()), "{name} did not start");
+        r.ok(&["kill", &name]);
+        assert!(
+            wait_until(Duration::from_secs(10), || r.figure_u64("bb", "snapshots") == i + 1),
+            "no snapshot after {name}'s death: {:?}",
+            r.figures("bb")
+        );
+    }
+    let mut kept: Vec<String> = snapshots(&dir, "died-")
+        .iter()
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
+    kept.sort();
+    assert_eq!(kept.len(), 2, "max_files = 2: {kept:?}");
+    assert!(kept[0].ends_with("died-v2.mcap") && kept[1].ends_with("died-v3.mcap"), "the newest stay: {kept:?}");
+    assert_eq!(r.figure_u64("bb", "deleted"), 2, "{:?}", r.figures("bb"));
+    assert!(snapshots(&dir, ".part").is_empty());
+
+    // a margin no disk has: nothing is written, and it is counted
+    let dir2 = r.home.join("snaps2");
+    let config2 = write_file(
+        &r.home,
+        "bb2.toml",
+        &format!("{body}dir = \"snaps2\"\nmin_free_mb = 1000000000\n[fire]\non_death = true\nmin_gap = 0\n"),
+    );
+    r.ok(&["start", "blackbox", "--name", "bb2", "--", "--config", &config2.display().to_string()]);
+    assert!(wait_until(Duration::from_secs(10), || r.agent("bb2").is_some() && r.figure_u64("bb2", "ports") == 1));
+    r.ok(&["start", "ticker", "--name", "v9", "--period", "50ms"]);
+    assert!(wait_until(Duration::from_secs(10), || r.agent("v9").is_some()), "v9 did not start");
+    r.ok(&["kill", "v9"]);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("bb2", "refused") == 1),
+        "the low disk was not counted: {:?}",
+        r.figures("bb2")
+    );
+    assert!(snapshots(&dir2, "").is_empty(), "a snapshot below the margin");
+    assert_eq!(r.figure_u64("bb2", "snapshots"), 0);
     r.down_and_check_clean();
 }
