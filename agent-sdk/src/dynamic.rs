@@ -41,7 +41,7 @@ pub use crate::raw_port::Loan;
 /// reach iceoryx2's `unsafe` set-up, which divides by the alignment and
 /// builds a `Layout` from it unchecked.
 pub(crate) fn payload_details(service: &str, schema: &Schema) -> Result<TypeDetail, PortError> {
-    schema.validate().map_err(|source| PortError::InvalidSchema { service: service.into(), source })?;
+    schema.validate().map_err(|e| PortError::InvalidSchema { service: service.into(), source: Box::new(e) })?;
     TypeDetail::__internal_new_from_parts(TypeVariant::FixedSize, &schema.type_name, schema.size, schema.align).map_err(
         |e| PortError::Ipc {
             service: service.into(),

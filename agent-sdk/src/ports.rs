@@ -191,9 +191,10 @@ pub enum PortError {
     InvalidSchema {
         /// service name
         service: String,
-        /// what is wrong with the schema
+        /// what is wrong with the schema (boxed: it names the type and
+        /// the field, and every `Result` of a port would carry its size)
         #[source]
-        source: shm_schemas::schema::SchemaInvalid,
+        source: Box<shm_schemas::schema::SchemaInvalid>,
     },
     /// Anything else: an invalid service name, a sample of the wrong size.
     #[error("port {service}: {detail}")]
