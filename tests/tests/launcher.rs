@@ -511,8 +511,11 @@ fn down_drops_the_connection_list_unless_kept_and_says_so() {
     r.ok(&["launch", &file.display().to_string()]);
     assert_eq!(edges(&r), 2, "{}", r.graph());
     // kept: a new router restores both edges
+    let stopped = r.ok(&["stop", "r1"]);
+    assert!(stopped.contains("a start under the name r1 gets back its connections"), "{stopped}");
     let out = r.ok(&["down", "--grace", "1", "--keep-connections"]);
     assert!(out.contains("kept its 2 connection(s)"), "{out}");
+    assert!(out.contains("its logs stay in") && out.contains("nerve logs NAME"), "what down leaves, said: {out}");
     r.router();
     assert_eq!(edges(&r), 2, "the kept list is restored: {}", r.graph());
     // dropped (the default): a new router starts unwired

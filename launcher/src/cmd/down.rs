@@ -81,6 +81,12 @@ pub fn down(world: &World, a: DownArgs) -> Result<ExitCode> {
             String::new()
         }
     );
+    let logs = world.logs_dir();
+    if std::fs::read_dir(&logs).is_ok_and(|mut d| d.next().is_some()) {
+        // "leave nothing behind" is about processes and shared memory: the
+        // logs stay for `nerve logs` after the fact, and say so
+        println!("  its logs stay in {} (`nerve logs NAME`); remove the folder to drop them", logs.display());
+    }
     if let Some(note) = clients_note(world, &processes) {
         eprintln!("{note}");
     }

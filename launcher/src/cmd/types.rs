@@ -30,6 +30,9 @@ pub struct TypesArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Print the built-in types as the Markdown tables of docs/payloads.md.
+    #[arg(long, conflicts_with_all = ["json", "name"])]
+    pub markdown: bool,
 }
 
 /// A type and where it was seen.
@@ -156,6 +159,10 @@ fn to_json(k: &Known) -> Value {
 }
 
 pub fn types(world: &World, a: TypesArgs) -> Result<ExitCode> {
+    if a.markdown {
+        emit(&builtin_markdown())?;
+        return Ok(ExitCode::SUCCESS);
+    }
     let (known, note) = gather(world);
     if let Some(n) = &note {
         eprintln!("note: {n}");

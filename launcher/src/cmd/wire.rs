@@ -151,6 +151,14 @@ pub fn simple(world: &World, what: Simple, name: &str) -> Result<ExitCode> {
     };
     s.ok(req)?;
     println!("{name}: {done}");
+    if matches!(what, Simple::Stop | Simple::Kill) {
+        // what a restart by hand brings back, said where it happens
+        // rather than only in docs/reliability.md
+        println!(
+            "  a start under the name {name} gets back its connections, and the parameters, rate and suspension \
+             set at run time (the router remembers them until it stops)"
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }
 
