@@ -319,14 +319,15 @@ impl Serialize for Value {
 }
 
 impl std::fmt::Display for Value {
-    /// `{ seq: 7, pose: { x: 1.5, y: -2 }, name: "motor", ranges_m: [1, 2] }`
+    /// `{ seq: 7, pose: { x: 1.5, y: -2.0 }, name: "motor", ranges_m: [1.0, 2.0] }`
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Value::Bool(b) => write!(f, "{b}"),
             Value::Unsigned(u) => write!(f, "{u}"),
             Value::Signed(i) => write!(f, "{i}"),
-            Value::F32(x) => write!(f, "{x}"),
-            Value::Float(x) => write!(f, "{x}"),
+            // `{:?}` keeps a float a float: 20.0, not 20 (which reads as an integer)
+            Value::F32(x) => write!(f, "{x:?}"),
+            Value::Float(x) => write!(f, "{x:?}"),
             Value::String(t) => write!(f, "{t:?}"),
             Value::Array(a) => {
                 f.write_str("[")?;
@@ -649,6 +650,18 @@ mod tests {
         assert_eq!(short_field.decode(&[1u8; 4]).expect("decodes"), Value::Struct(vec![]));
         let string = Schema { type_name: "s".into(), size: 6, align: 4, kind: Kind::String { capacity: 1 << 40 } };
         assert_eq!(string.decode(&[200, 0, 0, 0, b'h', b'i']).expect("decodes"), Value::String("hi".into()));
+    }
+
+    /// The human form keeps a float a float (issue 46: `20.0` printed as `20`).
+    #[test]
+    fn floats_print_as_floats() {
+        let v = Value::Struct(vec![
+            ("a".into(), Value::F32(20.0)),
+            ("b".into(), Value::Float(-2.0)),
+            ("c".into(), Value::F32(0.25)),
+            ("n".into(), Value::Unsigned(20)),
+        ]);
+        assert_eq!(v.to_string(), "{ a: 20.0, b: -2.0, c: 0.25, n: 20 }");
     }
 
     /// A compact JSON-ish rendering for assertions (shm-schemas has no serde_json).
