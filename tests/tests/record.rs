@@ -503,3 +503,29 @@ fn replay_of_a_2_gb_file_stays_under_200_mb() {
     eprintln!("replay of a 2 GB file: peak RSS {rss:.0} MB");
     assert!(rss < 200.0, "replay of a 2 GB file peaked at {rss:.0} MB");
 }
+
+/// A schema from a file is outside input: one that iceoryx2 must not be
+/// handed (an alignment of 3) is refused by replay and export, with the
+/// file and the channel named, before any port is made.
+#[test]
+fn a_bad_schema_in_a_recording_is_refused_with_the_file_and_channel() {
+    let r = Robot::new("recsch");
+    let mut schema = serde_json::to_value(blob_schema(1024)).expect("json");
+    schema["align"] = serde_json::json!(3);
+    let schema_file = r.home.join("bad.json");
+    std::fs::write(&schema_file, serde_json::to_vec(&schema).expect("json")).expect("schema");
+    let file = r.home.join("bad.mcap");
+    let out = std::process::Command::new(python_with_mcap())
+        .arg(std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("py").join("write_big.py"))
+        .args([&file, &schema_file])
+        .arg("1")
+        .output()
+        .expect("python");
+    assert!(out.status.success(), "write_big.py: {}", String::from_utf8_lossy(&out.stderr));
+    let file_s = file.display().to_string();
+    for args in [vec!["replay", &file_s, "--fast"], vec!["export", &file_s]] {
+        let e = r.fails(&args);
+        assert!(e.contains(&file_s) && e.contains("big/blob") && e.contains("align 3"), "{args:?}: {e}");
+    }
+    assert!(r.shm_files().is_empty(), "replay made shared memory for a refused schema: {:?}", r.shm_files());
+}
