@@ -463,6 +463,8 @@ fn replay_peak_rss_mb(tag: &str, mb: u32) -> f64 {
         .expect("python");
     assert!(out.status.success(), "write_big.py: {}", String::from_utf8_lossy(&out.stderr));
     let count: u64 = String::from_utf8_lossy(&out.stdout).trim().parse().expect("count");
+    // waited for below with wait4, which gives the process's own peak RSS
+    #[allow(clippy::zombie_processes)]
     let child = r
         .command("nerve")
         .args(["replay", &big.0.display().to_string(), "--fast", "-q"])
