@@ -8,12 +8,53 @@
 //! bridge in one line: `nerve_bridge::main_with(Types::builtin().with::<MyType>())`.
 //!
 //! Bytes cross as the payload's in-memory representation. That is sound
-//! because every nerve payload is `#[repr(C)]` plain data for which any bit
-//! pattern is a valid value (enums travel as integer codes, names as
-//! length-clamped byte arrays), and the receiver checks the type name, size
-//! and layout fingerprint before it writes a byte.
+//! because a carried type must be [`AnyBitPattern`] (every carrier here is
+//! bound by it, so a type that is not cannot be carried): any bytes of its
+//! size are a valid value, and it has no padding, so all its bytes are
+//! initialised. `#[derive(Payload)]` implements it after checking both for
+//! every field (no `bool`, `char` or enum; enums travel as integer codes,
+//! names as length-clamped byte arrays). A `Payload` implemented by hand
+//! without it is refused at compile time:
+//!
+//! ```compile_fail,E0277
+//! use nerve_bridge::types::Types;
+//! // a payload whose bytes are not all valid values: `bool`
+//! #[repr(C)]
+//! #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+//! struct Grip { closed: bool }
+//! // SAFETY: repr(C), a bool is ZeroCopySend (the point: not AnyBitPattern)
+//! unsafe impl iceoryx2::prelude::ZeroCopySend for Grip {}
+//! impl shm_schemas::schema::Described for Grip {
+//!     fn schema() -> shm_schemas::schema::Schema { unimplemented!() }
+//! }
+//! impl shm_schemas::Payload for Grip {}
+//! let _ = Types::default().with::<Grip>(); // error: Grip is not AnyBitPattern
+//! ```
+//!
+//! The same type with a `u8` flag, whose bytes are all values, is carried
+//! (this one compiles; it is not run, its schema is left out):
+//!
+//! ```no_run
+//! use nerve_bridge::types::Types;
+//! #[repr(C)]
+//! #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+//! struct Grip { closed: u8 }
+//! // SAFETY: repr(C), one u8
+//! unsafe impl iceoryx2::prelude::ZeroCopySend for Grip {}
+//! // SAFETY: one u8: any byte is a value, no padding
+//! unsafe impl shm_schemas::schema::AnyBitPattern for Grip {}
+//! impl shm_schemas::schema::Described for Grip {
+//!     fn schema() -> shm_schemas::schema::Schema { unimplemented!() }
+//! }
+//! impl shm_schemas::Payload for Grip {}
+//! let _ = Types::default().with::<Grip>();
+//! ```
+//!
+//! The receiver also checks the type name, size and layout fingerprint
+//! before it writes a byte.
 
 use agent_sdk::{AgentError, Input, Output, PortError, Setup};
+use shm_schemas::schema::AnyBitPattern;
 use shm_schemas::{Payload, for_each_payload};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -86,8 +127,10 @@ impl Types {
         t
     }
 
-    /// Adds a payload type of the caller's.
-    pub fn with<T: Payload>(mut self) -> Self {
+    /// Adds a payload type of the caller's. It must be [`AnyBitPattern`]
+    /// (which `#[derive(Payload)]` gives): the bridge fills it with a peer's
+    /// bytes and sends its bytes as they are in memory.
+    pub fn with<T: Payload + AnyBitPattern>(mut self) -> Self {
         self.by_name.insert(T::stable_type_name(), carrier::<T>());
         self
     }
@@ -103,7 +146,7 @@ impl Types {
     }
 }
 
-fn carrier<T: Payload>() -> Carrier {
+fn carrier<T: Payload + AnyBitPattern>() -> Carrier {
     Carrier {
         info: TypeInfo {
             name: T::stable_type_name(),
@@ -115,13 +158,14 @@ fn carrier<T: Payload>() -> Carrier {
     }
 }
 
-struct Tap<T: Payload>(Input<T>);
+struct Tap<T: Payload + AnyBitPattern>(Input<T>);
 
-impl<T: Payload> ExportTap for Tap<T> {
+impl<T: Payload + AnyBitPattern> ExportTap for Tap<T> {
     fn drain(&self, f: &mut dyn FnMut(&str, u64, &[u8])) -> usize {
         self.0.drain_up_to(DRAIN_BATCH, |meta, value| {
-            // SAFETY: `value` is a valid `T` for the duration of the call, and
-            // every byte of a nerve payload is plain data (module docs).
+            // SAFETY: `value` is a valid `T` for the duration of the call, so
+            // its size_of::<T>() bytes are readable; `T: AnyBitPattern` has no
+            // padding, so every one of them is initialised.
             let bytes =
                 unsafe { std::slice::from_raw_parts((value as *const T).cast::<u8>(), std::mem::size_of::<T>()) };
             f(meta.sender.as_str(), meta.seq, bytes)
@@ -129,9 +173,9 @@ impl<T: Payload> ExportTap for Tap<T> {
     }
 }
 
-struct Sink<T: Payload>(Output<T>);
+struct Sink<T: Payload + AnyBitPattern>(Output<T>);
 
-impl<T: Payload> ImportSink for Sink<T> {
+impl<T: Payload + AnyBitPattern> ImportSink for Sink<T> {
     fn publish(&self, bytes: &[u8]) -> Result<(), PortError> {
         if bytes.len() != std::mem::size_of::<T>() {
             return Err(PortError::Ipc {
@@ -144,8 +188,9 @@ impl<T: Payload> ImportSink for Sink<T> {
                 ),
             });
         }
-        // SAFETY: exactly size_of::<T>() bytes are copied into the loaned
-        // sample, and any bit pattern is a valid nerve payload (module docs).
+        // SAFETY: `bytes` is exactly size_of::<T>() long (checked above) and
+        // is copied over the whole loaned sample, so every byte is written;
+        // `T: AnyBitPattern` makes whatever bytes the peer sent a valid `T`.
         unsafe {
             self.0.send_uninit(|slot| {
                 std::ptr::copy_nonoverlapping(bytes.as_ptr(), slot.as_mut_ptr().cast::<u8>(), bytes.len());
