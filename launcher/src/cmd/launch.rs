@@ -1,4 +1,5 @@
-//! `nerve launch FILE`: a robot from a launch file. Validates the whole file
+//! `nerve launch FILE [NAME=VALUE ...]`: a robot from a launch file and its
+//! arguments (docs/launch.md). Validates the whole file
 //! first (nothing starts on any error), starts the router if none runs,
 //! batch-starts every agent as a daemon in parallel with a progress line per
 //! agent, waits until each has registered, hands them to the router's
@@ -20,6 +21,9 @@ use std::time::{Duration, Instant};
 pub struct LaunchArgs {
     /// The launch file (TOML).
     pub file: std::path::PathBuf,
+    /// The file's arguments, `NAME=VALUE` (each one declared in its `[args]`).
+    #[arg(value_name = "NAME=VALUE")]
+    pub args: Vec<String>,
     /// Stay attached: stream the agents' logs, stop everything on Ctrl-C.
     #[arg(long)]
     pub foreground: bool,
@@ -27,7 +31,14 @@ pub struct LaunchArgs {
 
 pub fn launch(cli_robot: &str, explicit: bool, a: LaunchArgs) -> Result<ExitCode> {
     let t0 = Instant::now();
-    let (file, world) = match launch_file::load(&a.file, cli_robot, explicit) {
+    let cli_args = match launch_file::parse_cli_args(&a.args) {
+        Ok(v) => v,
+        Err(e) => {
+            eprintln!("error: {e}; nothing was started");
+            return Ok(ExitCode::from(2));
+        }
+    };
+    let (file, world) = match launch_file::load_with_args(&a.file, cli_robot, explicit, &cli_args) {
         Ok(x) => x,
         Err(e) => {
             eprintln!("{e}");

@@ -37,6 +37,10 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 use toml::Spanned;
 
+mod compose;
+use compose::Source;
+pub use compose::parse_cli_args;
+
 /// When a supervised agent is restarted (`restart = "on-failure"`): the
 /// router's own type, so that the file and the request cannot drift apart.
 pub use shm_schemas::control::cli_to_router::RestartPolicy;
@@ -46,10 +50,26 @@ pub use shm_schemas::control::cli_to_router::RestartPolicy;
 struct RawFile {
     robot: Option<Spanned<String>>,
     cpu_latency: Option<Spanned<toml::Value>>,
+    /// the file's arguments: NAME = default, or NAME = { default = .., doc = .. }
+    args: Option<Spanned<BTreeMap<String, Spanned<toml::Value>>>>,
+    #[serde(default)]
+    include: Vec<RawInclude>,
     #[serde(default)]
     agent: Vec<RawAgent>,
     #[serde(default)]
     connect: Vec<RawConnect>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInclude {
+    file: Spanned<String>,
+    #[serde(default)]
+    args: BTreeMap<String, Spanned<String>>,
+    prefix: Option<Spanned<String>>,
+    #[serde(rename = "if")]
+    cond: Option<Spanned<String>>,
+    unless: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -61,9 +81,9 @@ struct RawAgent {
     period: Option<Spanned<String>>,
     device: Option<Spanned<String>>,
     #[serde(default)]
-    args: Vec<String>,
+    args: Vec<Spanned<String>>,
     #[serde(default)]
-    params: BTreeMap<String, toml::Value>,
+    params: BTreeMap<String, Spanned<toml::Value>>,
     restart: Option<Spanned<RestartPolicy>>,
     max_restarts: Option<u32>,
     restart_window: Option<Spanned<String>>,
@@ -74,6 +94,9 @@ struct RawAgent {
     log_level: Option<Spanned<String>>,
     cpu_latency: Option<Spanned<toml::Value>>,
     cpus: Option<Spanned<toml::Value>>,
+    #[serde(rename = "if")]
+    cond: Option<Spanned<String>>,
+    unless: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -83,6 +106,9 @@ struct RawConnect {
     to: Spanned<String>,
     #[serde(default)]
     allow_cycle: bool,
+    #[serde(rename = "if")]
+    cond: Option<Spanned<String>>,
+    unless: Option<Spanned<String>>,
 }
 
 /// One agent of a validated launch file.
@@ -173,13 +199,15 @@ pub struct LaunchFile {
     pub allow_cycle: Vec<(PortRef, PortRef)>,
 }
 
-/// Every problem found in a launch file, each with its line.
+/// Every problem found in a launch file (and the files it includes), each with its line.
 #[derive(Debug)]
 pub struct LaunchErrors {
     /// the file
     pub path: PathBuf,
-    /// (line, message)
+    /// (line, message) in `path`
     pub errors: Vec<(usize, String)>,
+    /// (file, line, message) in the files `path` includes
+    pub included: Vec<(PathBuf, usize, String)>,
 }
 
 impl std::fmt::Display for LaunchErrors {
@@ -187,25 +215,55 @@ impl std::fmt::Display for LaunchErrors {
         for (line, msg) in &self.errors {
             writeln!(f, "{}:{line}: {msg}", self.path.display())?;
         }
-        write!(f, "{} problem(s) in {}; nothing was started", self.errors.len(), self.path.display())
+        for (path, line, msg) in &self.included {
+            writeln!(f, "{}:{line}: {msg}", path.display())?;
+        }
+        let n = self.errors.len() + self.included.len();
+        write!(f, "{n} problem(s) in {}; nothing was started", self.path.display())
     }
 }
 
 impl std::error::Error for LaunchErrors {}
 
+impl LaunchErrors {
+    /// From (file index, line, message) over `sources`, sorted by file then line.
+    fn of(sources: &[Source], mut all: Vec<(usize, usize, String)>) -> Self {
+        all.sort_by_key(|(f, l, _)| (*f, *l));
+        let path = sources.first().map(|s| s.path.clone()).unwrap_or_default();
+        let mut errors = Vec::new();
+        let mut included = Vec::new();
+        for (f, line, msg) in all {
+            match sources.get(f) {
+                Some(s) if f > 0 => included.push((s.path.clone(), line, msg)),
+                _ => errors.push((line, msg)),
+            }
+        }
+        LaunchErrors { path, errors, included }
+    }
+}
+
 fn line_of(src: &str, offset: usize) -> usize {
     src[..offset.min(src.len())].bytes().filter(|b| *b == b'\n').count() + 1
 }
 
+/// The checks' errors, each in the file ([`Source`]) of the entry being checked.
 struct Ctx<'a> {
-    src: &'a str,
-    errors: Vec<(usize, String)>,
+    sources: &'a [Source],
+    /// the file of the entry being checked
+    cur: usize,
+    errors: Vec<(usize, usize, String)>,
 }
 
 impl Ctx<'_> {
     fn err<T>(&mut self, at: &Spanned<T>, msg: impl Into<String>) {
-        let line = line_of(self.src, at.span().start);
-        self.errors.push((line, msg.into()));
+        let line = self.sources.get(self.cur).map(|s| line_of(&s.src, at.span().start)).unwrap_or(1);
+        self.errors.push((self.cur, line, msg.into()));
+    }
+
+    /// `FILE:LINE` of `at` in the current file, for messages that point elsewhere.
+    fn place<T>(&self, at: &Spanned<T>) -> (usize, usize) {
+        let line = self.sources.get(self.cur).map(|s| line_of(&s.src, at.span().start)).unwrap_or(1);
+        (self.cur, line)
     }
 }
 
@@ -308,26 +366,34 @@ fn cpus_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<CpuList> {
 
 /// Reads and checks a launch file for `world` (the robot the file runs on):
 /// `cli_robot` when it was named explicitly (`--robot`, `NERVE_ROBOT`), else
-/// the file's `robot`, else `cli_robot` (the default).
+/// the file's `robot`, else `cli_robot` (the default). The file's arguments
+/// take their defaults.
 pub fn load(
     path: &Path,
     cli_robot: &str,
     explicit: bool,
 ) -> Result<(LaunchFile, World), Box<dyn std::error::Error + Send + Sync>> {
+    load_with_args(path, cli_robot, explicit, &[])
+}
+
+/// [`load`] with the command line's launch arguments (`NAME=VALUE`, see
+/// [`parse_cli_args`]): the file's includes read, its arguments replaced and
+/// its conditions applied, then every agent and connection checked.
+pub fn load_with_args(
+    path: &Path,
+    cli_robot: &str,
+    explicit: bool,
+    cli_args: &[(String, String)],
+) -> Result<(LaunchFile, World), Box<dyn std::error::Error + Send + Sync>> {
     let default_robot = cli_robot;
-    let src = std::fs::read_to_string(path).map_err(|e| format!("cannot read launch file {}: {e}", path.display()))?;
-    let fail = |errors| Box::new(LaunchErrors { path: path.to_path_buf(), errors });
-    let raw: RawFile = match toml::from_str(&src) {
-        Ok(r) => r,
-        Err(e) => {
-            let line = e.span().map(|s| line_of(&src, s.start)).unwrap_or(1);
-            let msg = e.message().to_owned();
-            let hint = if msg.contains("unknown field") { "; see the launch-file keys in README.md" } else { "" };
-            return Err(fail(vec![(line, format!("{msg}{hint}"))]));
-        }
-    };
-    let mut cx = Ctx { src: &src, errors: Vec::new() };
-    let robot = match &raw.robot {
+    let composed = compose::compose(path, cli_args)?;
+    if !composed.errors.is_empty() {
+        return Err(Box::new(LaunchErrors::of(&composed.sources, composed.errors)));
+    }
+    let compose::Composed { sources, robot: file_robot, agents: flat_agents, connections: flat_connections, .. } =
+        composed;
+    let mut cx = Ctx { sources: &sources, cur: 0, errors: Vec::new() };
+    let robot = match &file_robot {
         Some(r) if explicit => {
             if r.get_ref() != cli_robot {
                 eprintln!(
@@ -348,32 +414,48 @@ pub fn load(
         None => default_robot.to_owned(),
     };
     let world = World::new(&robot)?;
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let dir = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
 
-    let robot_cpu_latency = raw.cpu_latency.as_ref().and_then(|v| cpu_latency_of(&mut cx, v));
+    // each file's `cpu_latency`, else its includer's
+    let mut file_cpu_latency: Vec<Option<CpuLatencySetting>> = Vec::with_capacity(sources.len());
+    for (i, s) in sources.iter().enumerate() {
+        cx.cur = i;
+        let own = s.cpu_latency.as_ref().and_then(|v| cpu_latency_of(&mut cx, v));
+        let inherited = s.parent.and_then(|p| file_cpu_latency.get(p).cloned().flatten());
+        file_cpu_latency.push(own.or(inherited));
+    }
     let mut agents = Vec::new();
-    let mut seen: HashMap<String, usize> = HashMap::new();
+    // name -> (file, line) where it is first defined
+    let mut seen: HashMap<String, (usize, usize)> = HashMap::new();
     // one `--describe` per distinct (executable, parameters, arguments)
     type DescribeKey = (PathBuf, Vec<String>, Vec<String>);
     let mut descriptions: HashMap<DescribeKey, Result<Description, String>> = HashMap::new();
-    if raw.agent.is_empty() {
-        cx.errors.push((1, "no [[agent]] in the file; add at least one agent".into()));
+    if flat_agents.is_empty() {
+        cx.errors.push((
+            0,
+            1,
+            "no [[agent]] in the file (or every one's condition is false); add at least one agent".into(),
+        ));
     }
-    for a in &raw.agent {
+    for flat in &flat_agents {
+        let a = &flat.raw;
+        cx.cur = flat.file;
+        let dir = sources.get(flat.file).map(|s| s.dir.clone()).unwrap_or_else(|| PathBuf::from("."));
         let name = a.name.get_ref().clone();
         if let Err(e) = AgentName::new(&name) {
             cx.err(&a.name, e.to_string());
             continue;
         }
-        let line = line_of(&src, a.name.span().start);
-        if let Some(first) = seen.insert(name.clone(), line) {
-            cx.err(
-                &a.name,
-                format!("duplicate agent name {name:?} (first defined on line {first}); names must be unique"),
-            );
+        let here = cx.place(&a.name);
+        if let Some((file, line)) = seen.get(&name).copied() {
+            let first = if file == here.0 {
+                format!("line {line}")
+            } else {
+                format!("{}:{line}", sources.get(file).map(|s| s.path.display().to_string()).unwrap_or_default())
+            };
+            cx.err(&a.name, format!("duplicate agent name {name:?} (first defined on {first}); names must be unique (an include's `prefix` keeps its agents apart)"));
             continue;
         }
+        seen.insert(name.clone(), here);
         let (kind, exe) = match (&a.kind, &a.exe) {
             (Some(k), None) => match resolve_kind(k.get_ref()) {
                 Ok(exe) => (k.get_ref().clone(), exe),
@@ -408,16 +490,16 @@ pub fn load(
                 continue;
             }
         };
-        let mut args: Vec<String> = a.args.iter().map(|s| expand_in(s, &world, &dir)).collect();
+        let mut args: Vec<String> = a.args.iter().map(|s| expand_in(s.get_ref(), &world, &dir)).collect();
         if let Some(d) = &a.device {
             args.push("--device".into());
             args.push(expand_in(d.get_ref(), &world, &dir));
         }
         let mut params = Vec::new();
         for (k, v) in &a.params {
-            match param_text(v) {
+            match param_text(v.get_ref()) {
                 Some(t) => params.push(format!("{k}={t}")),
-                None => cx.err(&a.name, format!("parameter {k:?} of {name:?} must be a string, number or boolean")),
+                None => cx.err(v, format!("parameter {k:?} of {name:?} must be a string, number or boolean")),
             }
         }
         let dur = |cx: &mut Ctx, s: &Option<Spanned<String>>, default: Duration| match s {
@@ -476,7 +558,11 @@ pub fn load(
             importance,
             suspended: a.suspended,
             log_level: a.log_level.as_ref().map(|l| l.get_ref().clone()),
-            cpu_latency: a.cpu_latency.as_ref().and_then(|v| cpu_latency_of(&mut cx, v)).or(robot_cpu_latency),
+            cpu_latency: a
+                .cpu_latency
+                .as_ref()
+                .and_then(|v| cpu_latency_of(&mut cx, v))
+                .or(file_cpu_latency.get(flat.file).cloned().flatten()),
             cpus: a.cpus.as_ref().and_then(|v| cpus_of(&mut cx, v)),
             description,
         });
@@ -484,7 +570,9 @@ pub fn load(
 
     let mut connections = Vec::new();
     let mut allow_cycle = Vec::new();
-    for c in &raw.connect {
+    for flat in &flat_connections {
+        let c = &flat.raw;
+        cx.cur = flat.file;
         let from: PortRef = match c.from.get_ref().parse() {
             Ok(p) => p,
             Err(e) => {
@@ -503,7 +591,7 @@ pub fn load(
         let from_type = match find(&from) {
             None => {
                 if !seen.contains_key(from.agent.as_str()) {
-                    cx.err(&c.from, format!("no agent named {:?} in this file", from.agent.as_str()));
+                    cx.err(&c.from, format!("no agent named {:?} in this file or its includes", from.agent.as_str()));
                 }
                 None
             }
@@ -528,7 +616,7 @@ pub fn load(
         let to_type = match find(&to) {
             None => {
                 if !seen.contains_key(to.agent.as_str()) {
-                    cx.err(&c.to, format!("no agent named {:?} in this file", to.agent.as_str()));
+                    cx.err(&c.to, format!("no agent named {:?} in this file or its includes", to.agent.as_str()));
                 }
                 None
             }
@@ -587,8 +675,8 @@ pub fn load(
         }
     }
     if !cx.errors.is_empty() {
-        cx.errors.sort_by_key(|(l, _)| *l);
-        return Err(fail(cx.errors));
+        let errors = std::mem::take(&mut cx.errors);
+        return Err(Box::new(LaunchErrors::of(&sources, errors)));
     }
     Ok((LaunchFile { path: path.to_path_buf(), agents, connections, allow_cycle }, world))
 }
