@@ -380,16 +380,26 @@ impl<R: Read> RecordingReader<R> {
         &self.channels
     }
 
-    /// Reads exactly `n` bytes into `self.buf`.
+    /// Reads exactly `n` bytes into `self.buf`, a MiB at a time (a length
+    /// that a damaged file inflates costs memory only as far as the file goes).
     fn fill(&mut self, n: u64) -> Result<Got, ReadError> {
+        const STEP: u64 = 1 << 20;
         self.buf.clear();
-        let got = (&mut self.src).take(n).read_to_end(&mut self.buf).map_err(|source| ReadError::Io {
-            file: self.file.clone(),
-            at: self.pos,
-            source,
-        })?;
-        self.pos = self.pos.saturating_add(got as u64);
-        Ok(if got as u64 == n { Got::All } else { Got::Eof })
+        let mut left = n;
+        while left > 0 {
+            let step = left.min(STEP);
+            let got = (&mut self.src).take(step).read_to_end(&mut self.buf).map_err(|source| ReadError::Io {
+                file: self.file.clone(),
+                at: self.pos,
+                source,
+            })?;
+            self.pos = self.pos.saturating_add(got as u64);
+            if (got as u64) < step {
+                return Ok(Got::Eof);
+            }
+            left -= step;
+        }
+        Ok(Got::All)
     }
 
     /// Reads past `n` bytes without keeping them.
