@@ -141,8 +141,11 @@ impl Composed {
             Err(e) => {
                 let line = e.span().map(|s| line_of(&self.sources[me].src, s.start)).unwrap_or(1);
                 let msg = e.message().to_owned();
-                let hint =
-                    if msg.contains("unknown field") { "; see the launch-file keys in docs/launch.md" } else { "" };
+                let hint = if msg.contains("unknown field") {
+                    "; see the launch-file keys in README.md and docs/launch.md"
+                } else {
+                    ""
+                };
                 self.errors.push((me, line, format!("{msg}{hint}")));
                 return;
             }

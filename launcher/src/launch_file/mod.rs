@@ -18,6 +18,10 @@
 //! to = "r1/in"
 //! ```
 //!
+//! A file may also take arguments (`[args]`, `{arg.NAME}`), include other
+//! files (`[[include]]`) and leave entries out with `if`/`unless`: those are
+//! resolved first, in [`compose`] (docs/launch.md).
+//!
 //! Parsing is strict (unknown keys are refused) and the whole file is
 //! checked before anything starts: syntax, names, unknown kinds, missing
 //! executables, duplicate names, periods, connections to unknown agents or
