@@ -765,7 +765,7 @@ fn pub_sends_json_into_an_input_and_refuses_what_does_not_fit() {
     r.router();
     r.ok(&["start", "relay", "--name", "r1"]);
     // a steady stream, so that an echo started beside it sees a sample
-    let mut publisher = r
+    let publisher = r
         .command("nerve")
         .args(["pub", "r1/in", r#"{"seq": 4242}"#, "--rate", "20", "--count", "60"])
         .stdout(std::process::Stdio::piped())
