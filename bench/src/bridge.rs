@@ -10,6 +10,13 @@
 //!      host, one clock: one way is valid). The sink also reads the header
 //!      stamp of the last hop (when bridge B published the sample), which
 //!      splits the path into "A to bridge B" and "bridge B to the sink";
+//!    * `bridge-tls`: the same across a second pair of bridges (`tbridge` in
+//!      both robots, its own sender `ksrc-<size>` and sink `ksink-<size>`)
+//!      linked by mutual TLS (`tls/127.0.0.1`, a fleet CA and one
+//!      certificate per robot made with `nerve bridge keys init/add` in the
+//!      run's work dir, `[tls]` in both configs): what TLS costs against the
+//!      plain pair, measured in the same rounds (latency only, not
+//!      throughput);
 //!    * `zenoh`: raw Zenoh publish-subscribe between two plain processes
 //!      ([`crate::zenoh_raw`]) with the bridge's settings (peer mode,
 //!      explicit tcp/127.0.0.1 endpoints, no multicast scouting, express,
@@ -56,10 +63,14 @@ pub const SIZES: [usize; 3] = [8, 4096, 230_400];
 pub const ONEWAY_TARGET: f64 = 1.2;
 /// A bridge on the port may slow the local round trip by this much (median).
 pub const LOCAL_TARGET: f64 = 1.05;
+/// Across the bridge, one way, the TLS pair may be this much slower than the plain pair (median).
+pub const TLS_TARGET: f64 = 1.15;
 /// Samples dropped at the start of every batch.
 const DISCARD: usize = 5;
 /// The one-way systems, in the order of the tables.
-pub const ONEWAY: [&str; 2] = ["bridge", "zenoh"];
+pub const ONEWAY: [&str; 3] = ["bridge", "zenoh", "bridge-tls"];
+/// The throughput systems (the first two one-way systems).
+pub const TPUT: [&str; 2] = ["bridge", "zenoh"];
 /// The local round-trip systems, in the order of the tables.
 pub const LOCAL: [&str; 3] = ["alone", "bridged", "bridged-100hz"];
 /// Samples per throughput batch at most: a cap no sender reaches in
@@ -93,7 +104,7 @@ pub struct BridgeOpts {
 /// One-way latency of one system at one size.
 #[derive(Debug, Clone, Serialize)]
 pub struct OneWayResult {
-    /// `bridge` or `zenoh`
+    /// `bridge`, `zenoh` or `bridge-tls`
     pub system: String,
     /// payload bytes
     pub size: usize,
@@ -107,11 +118,11 @@ pub struct OneWayResult {
     pub sent: u64,
     /// samples that never arrived
     pub lost: u64,
-    /// bridge: sender's stamp to bridge B's publication (robot A's hop, bridge A, Zenoh, bridge B)
+    /// bridges: sender's stamp to bridge B's publication (robot A's hop, bridge A, Zenoh, bridge B)
     pub to_bridge_b: Option<Summary>,
-    /// bridge: bridge B's publication to the sink (robot B's hop)
+    /// bridges: bridge B's publication to the sink (robot B's hop)
     pub bridge_b_to_sink: Option<Summary>,
-    /// bridge: from bridge A taking the sample off its input to bridge B
+    /// bridges: from bridge A taking the sample off its input to bridge B
     /// receiving it, µs: the bridge's own `latency_us` figure at the end of
     /// the run (median of the topic's last 256 samples, so of the last batch
     /// only, CLOCK_REALTIME stamps); not comparable with the pooled medians
@@ -160,6 +171,16 @@ pub struct OneWayRatio {
     pub local_hop_p50_ns: u64,
     /// whether bridge p50 ≤ target × zenoh p50
     pub target_met: bool,
+    /// bridge-tls p50 / bridge p50 (pooled); 0 when not measured
+    pub tls_vs_plain_p50: f64,
+    /// bridge-tls p99 / bridge p99
+    pub tls_vs_plain_p99: f64,
+    /// median over rounds of the per-round p50 ratio bridge-tls / bridge
+    pub tls_vs_plain_p50_round_median: f64,
+    /// what TLS adds to the plain bridge at the median, ns
+    pub tls_extra_p50_ns: i64,
+    /// whether bridge-tls p50 ≤ TLS target × bridge p50
+    pub tls_target_met: bool,
 }
 
 /// A local round trip at one size.
@@ -229,16 +250,32 @@ pub struct BridgeReport {
     pub oneway_target: f64,
     /// local target (bridged / alone, p50)
     pub local_target: f64,
+    /// TLS target (bridge-tls / bridge, p50)
+    pub tls_target: f64,
+    /// bridge-tls p50 / bridge p50 per size, pooled, as top-level fields
+    /// `tls_vs_plain_p50_8B`, `tls_vs_plain_p50_4KB`, `tls_vs_plain_p50_230KB`
+    #[serde(flatten)]
+    pub tls_vs_plain: std::collections::BTreeMap<String, f64>,
     /// `nerve bridge status --json` of robots A and B at the end (figures: messages, drops...)
     pub bridge_status: Vec<serde_json::Value>,
     /// wall time of the run, s
     pub seconds: f64,
 }
 
+/// `s` as a TOML basic string (quotes and backslashes escaped).
+fn toml_str(s: &str) -> String {
+    format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""))
+}
+
 /// A free TCP port on 127.0.0.1 (bound to port 0, then released).
 fn free_port() -> Result<u16> {
     let l = std::net::TcpListener::bind("127.0.0.1:0").context("cannot bind 127.0.0.1:0 to find a free port")?;
     Ok(l.local_addr().context("local address")?.port())
+}
+
+/// `8B`, `4KB`, `230KB`: a size in a JSON field name (its label without spaces).
+fn size_key(size: usize) -> String {
+    label(size).replace(' ', "")
 }
 
 fn type_name(size: usize) -> Result<&'static str> {
@@ -404,14 +441,15 @@ fn bridge_status(robot: &Robot) -> Result<serde_json::Value> {
     serde_json::from_str(&out).context("cannot parse `nerve bridge status --json`")
 }
 
-/// Waits until bridge A has wired every export and sees an importer for each.
-fn wait_bridge_ready(a: &Robot, exports: usize, timeout: Duration) -> Result<()> {
+/// Waits until the bridge `name` of robot A has wired every export and sees
+/// an importer for each.
+fn wait_bridge_ready(a: &Robot, name: &str, exports: usize, timeout: Duration) -> Result<()> {
     let t0 = Instant::now();
     loop {
         let st = bridge_status(a)?;
         let ready = st
             .as_array()
-            .and_then(|b| b.first())
+            .and_then(|b| b.iter().find(|b| b["name"] == name))
             .and_then(|b| b["exports"].as_array())
             .map(|ex| {
                 ex.len() == exports
@@ -426,7 +464,7 @@ fn wait_bridge_ready(a: &Robot, exports: usize, timeout: Duration) -> Result<()>
         }
         if t0.elapsed() > timeout {
             bail!(
-                "bridge A of robot {} did not wire its exports and see their importer within {timeout:?}: {st}",
+                "bridge {name} of robot {} did not wire its exports and see their importer within {timeout:?}: {st}",
                 a.name
             );
         }
@@ -487,12 +525,12 @@ struct Tput {
 
 /// The raw measurements of a run.
 struct Measured {
-    /// per size: [bridge, zenoh] one-way
+    /// per size: [bridge, zenoh, bridge-tls] one-way
     oneway: Rounds,
-    /// per size: [a-side, b-hop] of the bridge
+    /// per size: [a-side, b-hop] of the bridge, then of the TLS bridge
     parts: Rounds,
-    /// per size: [bridge, zenoh] (sent, lost) of latency batches
-    loss: Vec<[(u64, u64); 2]>,
+    /// per size: [bridge, zenoh, bridge-tls] (sent, lost) of latency batches
+    loss: Vec<[(u64, u64); 3]>,
     /// per size: [bridge, zenoh] throughput
     tput: Vec<[Tput; 2]>,
     /// per size: [alone, bridged, bridged-100hz] round trips
@@ -503,9 +541,24 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
     // the configs of the bridges
     let port_a = free_port()?;
     let port_raw = free_port()?;
+    let port_tls = free_port()?;
     let ep_a = format!("tcp/127.0.0.1:{port_a}");
     let mut cfg_a = format!("listen = [\"{ep_a}\"]\nconnect = []\n");
     let mut cfg_b = format!("listen = []\nconnect = [\"{ep_a}\"]\n");
+    // the TLS pair: the fleet's keys in the work dir, robot B a peer of A
+    // (A imports nothing from B, and access control lets only peers subscribe)
+    let keys = opts.work.join("keys");
+    let keys_s = keys.to_str().ok_or_else(|| anyhow!("the work dir {} is not UTF-8", opts.work.display()))?;
+    for args in [vec!["init"], vec!["add", ra.name.as_str()], vec!["add", rb.name.as_str()]] {
+        let mut full = vec!["bridge", "keys"];
+        full.extend(args);
+        full.extend(["--dir", keys_s]);
+        ra.run(&full)?;
+    }
+    let ep_tls = format!("tls/127.0.0.1:{port_tls}");
+    let tls_section = format!("\n[tls]\nkeys = {}\n", toml_str(keys_s));
+    let mut cfg_ta = format!("listen = [\"{ep_tls}\"]\nconnect = []\npeers = [\"{}\"]\n", rb.name);
+    let mut cfg_tb = format!("listen = []\nconnect = [\"{ep_tls}\"]\n");
     let mut exports = 0;
     for &size in &opts.sizes {
         let t = size_tag(size);
@@ -526,23 +579,35 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
             ));
             exports += 1;
         }
+        let agent = format!("ksrc-{t}");
+        cfg_ta.push_str(&format!("\n[[export]]\nport = \"{agent}/out\"\ntype = \"{tn}\"\n"));
+        cfg_tb.push_str(&format!(
+            "\n[[import]]\nport = \"{}/{agent}/out\"\ntype = \"{tn}\"\nas = \"{agent}\"\n",
+            ra.name
+        ));
     }
+    cfg_ta.push_str(&tls_section);
+    cfg_tb.push_str(&tls_section);
     let (path_a, path_b) = (opts.work.join("bridge-a.zenoh.toml"), opts.work.join("bridge-b.zenoh.toml"));
-    std::fs::write(&path_a, cfg_a).with_context(|| format!("cannot write {}", path_a.display()))?;
-    std::fs::write(&path_b, cfg_b).with_context(|| format!("cannot write {}", path_b.display()))?;
+    let (path_ta, path_tb) = (opts.work.join("tbridge-a.zenoh.toml"), opts.work.join("tbridge-b.zenoh.toml"));
+    for (path, cfg) in [(&path_a, cfg_a), (&path_b, cfg_b), (&path_ta, cfg_ta), (&path_tb, cfg_tb)] {
+        std::fs::write(path, cfg).with_context(|| format!("cannot write {}", path.display()))?;
+    }
 
     // the agents of both robots
-    let mut names_a = vec!["bridge".to_owned()];
-    let mut names_b = vec!["bridge".to_owned()];
-    let mut sdk_paths: Vec<(usize, SdkPath, SdkPath)> = Vec::new();
+    let mut names_a = vec!["bridge".to_owned(), "tbridge".to_owned()];
+    let mut names_b = vec!["bridge".to_owned(), "tbridge".to_owned()];
+    let mut sdk_paths: Vec<(usize, SdkPath, SdkPath, SdkPath)> = Vec::new();
     let mut pings: Vec<(usize, [NervePing; 3])> = Vec::new();
     for &size in &opts.sizes {
         let t = size_tag(size);
         let s = size.to_string();
         let mut paths = Vec::new();
-        for (kind, count, interval, max_ms, rt) in
-            [("l", opts.count, opts.interval_us, 0, true), ("t", TPUT_CAP, 0, opts.tput_ms, false)]
-        {
+        for (kind, count, interval, max_ms, rt) in [
+            ("l", opts.count, opts.interval_us, 0, true),
+            ("t", TPUT_CAP, 0, opts.tput_ms, false),
+            ("k", opts.count, opts.interval_us, 0, true),
+        ] {
             let (src, sink) = (format!("{kind}src-{t}"), format!("{kind}sink-{t}"));
             let (src_dir, sink_dir) = (opts.work.join(&src), opts.work.join(&sink));
             for d in [&src_dir, &sink_dir] {
@@ -567,8 +632,10 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
             paths.push(SdkPath { src, sink, src_dir, sink_dir, src_next: 0, sink_next: 0 });
         }
         let mut it = paths.into_iter();
-        let (Some(lat), Some(tp)) = (it.next(), it.next()) else { bail!("internal: two paths per size") };
-        sdk_paths.push((size, lat, tp));
+        let (Some(lat), Some(tp), Some(tls)) = (it.next(), it.next(), it.next()) else {
+            bail!("internal: three paths per size")
+        };
+        sdk_paths.push((size, lat, tp, tls));
         let mut trio = Vec::new();
         for prefix in ["", "b", "c"] {
             let (ping, pong) = (format!("{prefix}ping-{t}"), format!("{prefix}pong-{t}"));
@@ -583,12 +650,14 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
         let trio: [NervePing; 3] = trio.try_into().map_err(|_| anyhow!("internal: three pairs per size"))?;
         pings.push((size, trio));
     }
-    for (robot, path) in [(ra, &path_a), (rb, &path_b)] {
+    for (robot, name, path) in
+        [(ra, "bridge", &path_a), (rb, "bridge", &path_b), (ra, "tbridge", &path_ta), (rb, "tbridge", &path_tb)]
+    {
         let mut cmd = self_command("__bridge")?;
-        cmd.args(["--robot", &robot.name, "--name", "bridge", "--", "--config"]).arg(path);
+        cmd.args(["--robot", &robot.name, "--name", name, "--", "--config"]).arg(path);
         cmd.env("NERVE_HOME", &robot.home);
         robot.quiet(&mut cmd);
-        children.push(ChildGuard::spawn(&format!("bridge of {}", robot.name), cmd)?);
+        children.push(ChildGuard::spawn(&format!("{name} of {}", robot.name), cmd)?);
     }
     let refs: Vec<&str> = names_a.iter().map(String::as_str).collect();
     ra.wait_registered(&refs, Duration::from_secs(30))?;
@@ -604,9 +673,11 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
         for kind in ["l", "t"] {
             rb.run(&["connect", &format!("bridge/{kind}src-{t}"), &format!("{kind}sink-{t}/in")])?;
         }
+        rb.run(&["connect", &format!("tbridge/ksrc-{t}"), &format!("ksink-{t}/in")])?;
     }
-    wait_bridge_ready(ra, exports, Duration::from_secs(30))?;
-    eprintln!("bridge: agents running, bridges linked ({exports} topics)");
+    wait_bridge_ready(ra, "bridge", exports, Duration::from_secs(30))?;
+    wait_bridge_ready(ra, "tbridge", opts.sizes.len(), Duration::from_secs(30))?;
+    eprintln!("bridge: agents running, bridges linked ({exports} topics, {} over TLS)", opts.sizes.len());
 
     // raw zenoh: the publisher listens, the subscriber dials (as bridge A and B)
     let ep_raw = format!("tcp/127.0.0.1:{port_raw}");
@@ -630,9 +701,9 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
 
     let n = opts.sizes.len();
     let mut m = Measured {
-        oneway: Rounds::new(2 * n, DISCARD),
-        parts: Rounds::new(2 * n, DISCARD),
-        loss: vec![[(0, 0); 2]; n],
+        oneway: Rounds::new(3 * n, DISCARD),
+        parts: Rounds::new(4 * n, DISCARD),
+        loss: vec![[(0, 0); 3]; n],
         tput: (0..n).map(|_| [Tput::default(), Tput::default()]).collect(),
         local: Rounds::new(3 * n, DISCARD),
     };
@@ -641,21 +712,22 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
     for round in usize::from(opts.quick)..=opts.rounds {
         let t_round = Instant::now();
         for (k, &size) in opts.sizes.iter().enumerate() {
-            let (_, lat, tp) = &mut sdk_paths[k];
+            let (_, lat, tp, tls) = &mut sdk_paths[k];
             // one way, paced
-            for sys in Rounds::order(&[0, 1], round) {
-                let b = if sys == 0 {
-                    lat.batch(ra, rb, lat_expected)
-                } else {
-                    raw.batch(size, opts.count, opts.interval_us, 0, lat_expected)
+            for sys in Rounds::order(&[0, 1, 2], round) {
+                let b = match sys {
+                    0 => lat.batch(ra, rb, lat_expected),
+                    2 => tls.batch(ra, rb, lat_expected),
+                    _ => raw.batch(size, opts.count, opts.interval_us, 0, lat_expected),
                 }
                 .with_context(|| format!("{} one way at {size} B, round {round}", ONEWAY[sys]))?;
-                m.oneway.keep(2 * k + sys, round, &one_way(&b.rows));
-                if sys == 0 {
+                m.oneway.keep(3 * k + sys, round, &one_way(&b.rows));
+                if sys != 1 {
                     let a_side: Vec<u64> = b.rows.iter().map(|r| r[1].saturating_sub(r[0])).collect();
                     let b_hop: Vec<u64> = b.rows.iter().map(|r| r[2].saturating_sub(r[1])).collect();
-                    m.parts.keep(2 * k, round, &a_side);
-                    m.parts.keep(2 * k + 1, round, &b_hop);
+                    let at = 4 * k + if sys == 0 { 0 } else { 2 };
+                    m.parts.keep(at, round, &a_side);
+                    m.parts.keep(at + 1, round, &b_hop);
                 }
                 if round > 0 {
                     let l = &mut m.loss[k][sys];
@@ -670,7 +742,7 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
                 } else {
                     raw.batch(size, TPUT_CAP, 0, opts.tput_ms, tput_expected)
                 }
-                .with_context(|| format!("{} throughput at {size} B, round {round}", ONEWAY[sys]))?;
+                .with_context(|| format!("{} throughput at {size} B, round {round}", TPUT[sys]))?;
                 if round > 0 {
                     let t = &mut m.tput[k][sys];
                     t.per_round.push(rates(&b));
@@ -697,10 +769,11 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
             let last = |r: &Rounds, i: usize| us(r.round_p50[i].last().copied().unwrap_or(0));
             let tput = |sys: usize| m.tput[k][sys].per_round.last().map_or(0.0, |x| x.0);
             eprintln!(
-                "  {:>7}: one way bridge {}us zenoh {}us; delivered/s bridge {:.0} zenoh {:.0}; round trip alone {}us bridged {}us bridged-100hz {}us",
+                "  {:>7}: one way bridge {}us zenoh {}us bridge-tls {}us; delivered/s bridge {:.0} zenoh {:.0}; round trip alone {}us bridged {}us bridged-100hz {}us",
                 label(size),
-                last(&m.oneway, 2 * k),
-                last(&m.oneway, 2 * k + 1),
+                last(&m.oneway, 3 * k),
+                last(&m.oneway, 3 * k + 1),
+                last(&m.oneway, 3 * k + 2),
                 tput(0),
                 tput(1),
                 last(&m.local, 3 * k),
@@ -713,9 +786,9 @@ fn measure(opts: &BridgeOpts, ra: &Robot, rb: &Robot, children: &mut Vec<ChildGu
     Ok(m)
 }
 
-/// The `latency_us` figure of the import of `lsrc-<size>` in the bridges' status.
-fn link_latency_us(status: &[serde_json::Value], size: usize) -> Option<u64> {
-    let suffix = format!("/lsrc-{}/out", size_tag(size));
+/// The `latency_us` figure of the import of `<kind>src-<size>` in the bridges' status.
+fn link_latency_us(status: &[serde_json::Value], kind: &str, size: usize) -> Option<u64> {
+    let suffix = format!("/{kind}src-{}/out", size_tag(size));
     status
         .iter()
         .filter_map(|s| s.as_array())
@@ -739,10 +812,16 @@ fn report(
     let mut local = Vec::new();
     let mut oneway_ratios = Vec::new();
     let mut local_ratios = Vec::new();
+    let mut tls_vs_plain = std::collections::BTreeMap::new();
     for (k, &size) in opts.sizes.iter().enumerate() {
         for (sys, name) in ONEWAY.iter().enumerate() {
-            let i = 2 * k + sys;
+            let i = 3 * k + sys;
             let (sent, lost) = m.loss[k][sys];
+            let parts = match sys {
+                0 => Some(4 * k),
+                2 => Some(4 * k + 2),
+                _ => None,
+            };
             oneway.push(OneWayResult {
                 system: (*name).into(),
                 size,
@@ -751,10 +830,16 @@ fn report(
                 round_p50_ns: m.oneway.round_p50[i].clone(),
                 sent,
                 lost,
-                to_bridge_b: (sys == 0).then(|| Summary::of(&m.parts.samples[2 * k])),
-                bridge_b_to_sink: (sys == 0).then(|| Summary::of(&m.parts.samples[2 * k + 1])),
-                bridge_a_to_b_us: if sys == 0 { link_latency_us(&bridge_status, size) } else { None },
+                to_bridge_b: parts.map(|p| Summary::of(&m.parts.samples[p])),
+                bridge_b_to_sink: parts.map(|p| Summary::of(&m.parts.samples[p + 1])),
+                bridge_a_to_b_us: match sys {
+                    0 => link_latency_us(&bridge_status, "l", size),
+                    2 => link_latency_us(&bridge_status, "k", size),
+                    _ => None,
+                },
             });
+        }
+        for (sys, name) in TPUT.iter().enumerate() {
             let t = &m.tput[k][sys];
             let delivered: Vec<f64> = t.per_round.iter().map(|x| x.0).collect();
             let offered: Vec<f64> = t.per_round.iter().map(|x| x.1).collect();
@@ -789,6 +874,12 @@ fn report(
         {
             let per_round: Vec<f64> = b.round_p50_ns.iter().zip(&z.round_p50_ns).map(|(x, y)| ratio(*x, *y)).collect();
             let r = ratio(b.latency.p50_ns, z.latency.p50_ns);
+            let tls = ow("bridge-tls").filter(|t| t.latency.n > 0);
+            let tls_p50 = tls.map_or(0.0, |t| ratio(t.latency.p50_ns, b.latency.p50_ns));
+            let tls_rounds: Vec<f64> = tls.map_or_else(Vec::new, |t| {
+                t.round_p50_ns.iter().zip(&b.round_p50_ns).map(|(x, y)| ratio(*x, *y)).collect()
+            });
+            tls_vs_plain.insert(format!("tls_vs_plain_p50_{}", size_key(size)), tls_p50);
             oneway_ratios.push(OneWayRatio {
                 size,
                 bridge_vs_zenoh_p50: r,
@@ -802,6 +893,11 @@ fn report(
                 extra_p50_ns: b.latency.p50_ns as i64 - z.latency.p50_ns as i64,
                 local_hop_p50_ns: alone.rtt.p50_ns / 2,
                 target_met: r <= ONEWAY_TARGET,
+                tls_vs_plain_p50: tls_p50,
+                tls_vs_plain_p99: tls.map_or(0.0, |t| ratio(t.latency.p99_ns, b.latency.p99_ns)),
+                tls_vs_plain_p50_round_median: if tls_rounds.is_empty() { 0.0 } else { median_f64(&tls_rounds) },
+                tls_extra_p50_ns: tls.map_or(0, |t| t.latency.p50_ns as i64 - b.latency.p50_ns as i64),
+                tls_target_met: tls.is_some() && tls_p50 <= TLS_TARGET,
             });
         }
         if let (Some(alone), Some(bridged), Some(limited)) = (lo("alone"), lo("bridged"), lo("bridged-100hz")) {
@@ -835,6 +931,8 @@ fn report(
         local_ratios,
         oneway_target: ONEWAY_TARGET,
         local_target: LOCAL_TARGET,
+        tls_target: TLS_TARGET,
+        tls_vs_plain,
         bridge_status,
         seconds: started.elapsed().as_secs_f64(),
     }
@@ -899,6 +997,22 @@ pub fn print_tables(r: &BridgeReport) {
             us(x.local_hop_p50_ns),
             x.throughput_bridge_vs_zenoh,
             if x.target_met { "met" } else { "missed" }
+        );
+    }
+    println!();
+    println!("The bridge with mutual TLS against without (bridge-tls / bridge, one way):");
+    println!();
+    println!("| payload | tls/plain p50 | (median of rounds) | p99 | TLS adds, µs | target ≤{TLS_TARGET} |");
+    println!("|---|---:|---:|---:|---:|---|");
+    for x in &r.oneway_ratios {
+        println!(
+            "| {} | {:.2} | {:.2} | {:.2} | {:.1} | {} |",
+            label(x.size),
+            x.tls_vs_plain_p50,
+            x.tls_vs_plain_p50_round_median,
+            x.tls_vs_plain_p99,
+            x.tls_extra_p50_ns as f64 / 1e3,
+            if x.tls_target_met { "met" } else { "missed" }
         );
     }
     println!();
