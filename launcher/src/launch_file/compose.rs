@@ -198,8 +198,14 @@ impl Composed {
             }
             let file = s.string(&inc.file);
             let inner = inc.prefix.as_ref().map(|p| s.string(p));
+            if let Some(p) = &inner
+                && let Err(e) = shm_schemas::AgentName::new(&format!("{prefix}{}x", p.get_ref()))
+            {
+                s.c.err(me, p, format!("prefix {:?} would not make agent names: {e}", p.get_ref()));
+                continue;
+            }
             let args: BTreeMap<String, Spanned<String>> =
-                inc.args.iter().map(|(k, v)| (k.clone(), s.string(v))).collect();
+                inc.args.iter().filter_map(|(k, v)| Some((k.clone(), s.include_arg(k, v)?))).collect();
             let target = dir.join(file.get_ref());
             let target_canon = target.canonicalize().unwrap_or_else(|_| target.clone());
             if let Some(i) = stack.iter().position(|p| *p == target_canon) {
@@ -364,6 +370,20 @@ struct Subst<'c, 'v> {
 }
 
 impl Subst<'_, '_> {
+    /// An include's argument value: a string (replaced), number or boolean.
+    fn include_arg(&mut self, name: &str, v: &Spanned<toml::Value>) -> Option<Spanned<String>> {
+        match v.get_ref() {
+            toml::Value::String(t) => Some(self.string(&Spanned::new(v.span(), t.clone()))),
+            other => match scalar(other) {
+                Some(t) => Some(Spanned::new(v.span(), t)),
+                None => {
+                    self.c.err(self.file, v, format!("argument {name}: give a string, number or boolean"));
+                    None
+                }
+            },
+        }
+    }
+
     fn opt(&mut self, v: &Option<Spanned<String>>) -> Option<Spanned<String>> {
         v.as_ref().map(|v| self.string(v))
     }
@@ -415,6 +435,8 @@ impl Subst<'_, '_> {
                 continue;
             }
             match v.get_ref().trim() {
+                // an argument never given: already reported where it is declared
+                "" if c.get_ref().contains("{arg.") => {}
                 "true" => keep &= want,
                 "false" => keep &= !want,
                 other => self.c.err(
@@ -627,6 +649,12 @@ mod tests {
         assert!(has(&c, "top2.toml", 2, "argument rate (declared on its line 2) has no default"), "{:?}", errors(&c));
         assert!(has(&c, "top2.toml", 3, "declares no argument \"speed\""), "{:?}", errors(&c));
         assert!(has(&c, "bad.toml", 6, "unknown argument \"rte\""), "{:?}", errors(&c));
+
+        // a number as an include's argument, and a prefix that makes no names
+        let p = d.write("num.toml", "[[include]]\nfile = \"part.toml\"\nargs = { rate = 5 }\nprefix = \"L\"\n");
+        let c = compose(&p, &[]).expect("read");
+        assert!(has(&c, "num.toml", 4, "prefix \"L\" would not make agent names"), "{:?}", errors(&c));
+        assert_eq!(c.errors.len(), 1, "{:?}", errors(&c));
 
         // a loop, and a missing file
         d.write("a.toml", "[[include]]\nfile = \"b.toml\"\n");

@@ -69,7 +69,7 @@ struct RawFile {
 struct RawInclude {
     file: Spanned<String>,
     #[serde(default)]
-    args: BTreeMap<String, Spanned<String>>,
+    args: BTreeMap<String, Spanned<toml::Value>>,
     prefix: Option<Spanned<String>>,
     #[serde(rename = "if")]
     cond: Option<Spanned<String>>,
