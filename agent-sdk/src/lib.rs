@@ -24,6 +24,8 @@
 //! (see `shm-schemas`): a sample is written once in shared memory and read in
 //! place by every subscriber.
 
+#![warn(missing_docs)]
+
 pub mod agent;
 pub mod cli;
 pub mod clock;

@@ -28,11 +28,21 @@ pub enum LockPlan {
     /// Only the pages mapped now (`MCL_CURRENT | MCL_ONFAULT`): the limit is
     /// finite, and locking future mappings would make them fail to map once
     /// the limit is reached. Carries the limit in bytes, for the warning.
-    CurrentOnly { limit: u64 },
+    CurrentOnly {
+        /// `RLIMIT_MEMLOCK`, bytes
+        limit: u64,
+    },
     /// Nothing: the limit is finite and would not hold what is mapped now
     /// plus the main thread's whole stack, so a locked stack could not grow
     /// (see the module documentation). Carries the numbers for the message.
-    Nothing { limit: u64, mapped: u64, stack: Option<u64> },
+    Nothing {
+        /// `RLIMIT_MEMLOCK`, bytes
+        limit: u64,
+        /// what is mapped now, bytes
+        mapped: u64,
+        /// the main thread's stack limit, bytes (None: unlimited)
+        stack: Option<u64>,
+    },
 }
 
 /// Decides how to lock memory from the soft `RLIMIT_MEMLOCK` (`None` for

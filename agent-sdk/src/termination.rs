@@ -108,8 +108,9 @@ fn make() -> Result<Termination, String> {
     let before: Vec<(libc::c_int, libc::sigaction)> = ALSO_CAUGHT_BY_ICEORYX2
         .iter()
         .filter_map(|&sig| {
-            // SAFETY: a null new action only reads the current one into `old`.
+            // SAFETY: an all-zero sigaction is a valid value (no handler, empty mask)
             let mut old: libc::sigaction = unsafe { std::mem::zeroed() };
+            // SAFETY: a null new action only reads the current one into `old`.
             (unsafe { libc::sigaction(sig, std::ptr::null(), &mut old) } == 0).then_some((sig, old))
         })
         .collect();

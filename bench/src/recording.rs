@@ -143,8 +143,9 @@ fn cpu_seconds(pid: u32) -> Option<f64> {
 
 /// CPU seconds of the children reaped so far (user + system).
 fn children_cpu() -> f64 {
-    // SAFETY: getrusage writes into the zeroed struct we own
+    // SAFETY: an all-zero rusage is a valid value (plain integers)
     let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: getrusage writes into the struct we own
     if unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut ru) } != 0 {
         return 0.0;
     }

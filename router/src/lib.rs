@@ -487,8 +487,8 @@ mod tests {
             }
             reset_realtime_on_fork();
             let child = std::process::Command::new("sleep").arg("5").spawn();
-            // SAFETY: as above; back to normal before the thread ends
             let normal = libc::sched_param { sched_priority: 0 };
+            // SAFETY: as above; back to normal before the thread ends
             unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &normal) };
             let _ = tx.send(Some(child));
         });

@@ -30,6 +30,7 @@ mod tests {
     fn layout_is_stable() {
         assert_eq!(std::mem::size_of::<SampleHeader>(), 56);
         assert_eq!(std::mem::align_of::<SampleHeader>(), 8);
+        // SAFETY: reading the type's name has no precondition
         assert_eq!(unsafe { <SampleHeader as ZeroCopySend>::type_name() }, "nerve::SampleHeader");
     }
 }

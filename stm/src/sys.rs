@@ -137,8 +137,8 @@ pub(crate) unsafe fn copy_volatile(src: *const u8, dst: *mut u8, len: usize) {
     type Word = u64;
     const W: usize = std::mem::size_of::<Word>();
     let mut i = 0;
-    // SAFETY (whole body): every offset read or written is below `len`, as
-    // the caller guarantees to be valid; word loads are aligned (the head
+    // SAFETY: (the whole body) every offset read or written is below `len`,
+    // as the caller guarantees to be valid; word loads are aligned (the head
     // loop stops at an aligned source address) and stores are unaligned.
     unsafe {
         let head = src.align_offset(W).min(len);
