@@ -142,7 +142,14 @@ pub use plain::{AnyBitPattern, Bool};
 pub use validate::{MAX_ALIGN, MAX_DEPTH, MAX_FIELDS, MAX_NAME_LEN, MAX_SIZE, SchemaInvalid};
 
 /// The layout of a type that can be part of a payload.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+///
+/// Deserialising one is bounded in depth ([`MAX_DECODE_DEPTH`]): schemas
+/// arrive from other processes (registrations, the tool socket) and files,
+/// and a schema nested tens of thousands deep in a few hundred kilobytes of
+/// postcard would otherwise recurse until the decoding thread's stack
+/// overflowed, aborting the router before [`Schema::validate`] could refuse
+/// it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct Schema {
     /// The stable type name (`nerve::Tick`; `u64` for a primitive, `[f32; 3]` for an array).
     pub type_name: String,
@@ -152,6 +159,52 @@ pub struct Schema {
     pub align: usize,
     /// What it is made of.
     pub kind: Kind,
+}
+
+/// How deep a schema may be nested when it is deserialised: twice what
+/// [`Schema::validate`] accepts ([`MAX_DEPTH`]), so that a deep schema is
+/// still refused by `validate` with its own message, and a few kilobytes of
+/// stack at most.
+pub const MAX_DECODE_DEPTH: usize = 2 * MAX_DEPTH;
+
+thread_local! {
+    /// Schemas being deserialised on this thread, one inside the other.
+    static DECODE_DEPTH: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+/// The fields of [`Schema`] as serde derives them (same names and order,
+/// so every format reads what it read before).
+#[derive(Deserialize)]
+#[serde(rename = "Schema")]
+struct SchemaFields {
+    type_name: String,
+    size: usize,
+    align: usize,
+    kind: Kind,
+}
+
+impl<'de> Deserialize<'de> for Schema {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        /// Leaves the level on every way out, errors included.
+        struct Level;
+        impl Drop for Level {
+            fn drop(&mut self) {
+                DECODE_DEPTH.with(|n| n.set(n.get().saturating_sub(1)));
+            }
+        }
+        let depth = DECODE_DEPTH.with(|n| {
+            n.set(n.get().saturating_add(1));
+            n.get()
+        });
+        let _level = Level;
+        if depth > MAX_DECODE_DEPTH {
+            return Err(serde::de::Error::custom(format!(
+                "a schema nested more than {MAX_DECODE_DEPTH} deep (nerve accepts {MAX_DEPTH}): refused before it is read further"
+            )));
+        }
+        let SchemaFields { type_name, size, align, kind } = SchemaFields::deserialize(d)?;
+        Ok(Schema { type_name, size, align, kind })
+    }
 }
 
 /// What a [`Schema`] describes. Externally tagged (`{"struct": {...}}` in
@@ -650,6 +703,32 @@ mod tests {
         assert_eq!(short_field.decode(&[1u8; 4]).expect("decodes"), Value::Struct(vec![]));
         let string = Schema { type_name: "s".into(), size: 6, align: 4, kind: Kind::String { capacity: 1 << 40 } };
         assert_eq!(string.decode(&[200, 0, 0, 0, b'h', b'i']).expect("decodes"), Value::String("hi".into()));
+    }
+
+    /// A schema from another process is read only so deep: nested past
+    /// [`MAX_DECODE_DEPTH`] it is refused with an error, not by recursing
+    /// until the stack overflows; within it, it round-trips.
+    #[test]
+    fn deserialising_is_bounded_in_depth() {
+        let nest = |levels: usize| {
+            let mut s = u8::schema();
+            for _ in 0..levels {
+                s = Schema {
+                    type_name: format!("[{}; 1]", s.type_name),
+                    size: 1,
+                    align: 1,
+                    kind: Kind::Array { len: 1, element: Box::new(s) },
+                };
+            }
+            s
+        };
+        let ok = nest(MAX_DECODE_DEPTH - 1);
+        let bytes = postcard::to_allocvec(&ok).expect("encodes");
+        assert_eq!(postcard::from_bytes::<Schema>(&bytes).expect("within the bound"), ok);
+        let deep = postcard::to_allocvec(&nest(MAX_DECODE_DEPTH + 5)).expect("encodes");
+        assert!(postcard::from_bytes::<Schema>(&deep).is_err(), "refused past the bound");
+        // the depth count is left as it was, errors and all
+        assert_eq!(postcard::from_bytes::<Schema>(&bytes).expect("reads again"), ok);
     }
 
     /// The human form keeps a float a float (issue 46: `20.0` printed as `20`).
