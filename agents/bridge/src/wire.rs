@@ -67,11 +67,22 @@ pub enum WireError {
     Malformed(&'static str),
 }
 
+/// The longest prefix of `s` of at most `max` bytes that ends on a
+/// character: a name cut in the middle of one would not decode as UTF-8 at
+/// the other end, and the frame would be refused whole.
+fn char_floor(s: &str, max: usize) -> usize {
+    let mut n = s.len().min(max);
+    while !s.is_char_boundary(n) {
+        n -= 1;
+    }
+    n
+}
+
 /// Appends a data frame to `out` (cleared first).
 pub fn encode_frame(out: &mut Vec<u8>, f: &Frame<'_>) {
     out.clear();
-    let name = &f.type_name.as_bytes()[..f.type_name.len().min(MAX_TYPE_NAME)];
-    let sender = &f.sender.as_bytes()[..f.sender.len().min(u8::MAX as usize)];
+    let name = &f.type_name.as_bytes()[..char_floor(f.type_name, MAX_TYPE_NAME)];
+    let sender = &f.sender.as_bytes()[..char_floor(f.sender, u8::MAX as usize)];
     out.reserve(64 + name.len() + sender.len() + f.payload.len());
     out.extend_from_slice(DATA_MAGIC);
     out.push(WIRE_VERSION);
@@ -137,6 +148,10 @@ pub fn decode_frame(buf: &[u8]) -> Result<Frame<'_>, WireError> {
     let mut r = Reader { buf };
     r.header(DATA_MAGIC)?;
     let flags = r.u8()?;
+    if flags & !FLAG_RELIABLE != 0 {
+        // a later version's flag this one would silently misread
+        return Err(WireError::Malformed("unknown flag bits"));
+    }
     let name_len = r.u16()? as usize;
     if name_len > MAX_TYPE_NAME {
         return Err(WireError::Malformed("type name too long"));
@@ -214,6 +229,25 @@ pub fn decode_ack(buf: &[u8]) -> Result<Ack<'_>, WireError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Found by the property tests' review: a long name was cut inside a
+    /// character (the frame then failed to decode at the other end), and
+    /// flag bits this version does not know were ignored.
+    #[test]
+    fn long_names_are_cut_on_a_character_and_unknown_flags_refused() {
+        let long = format!("lab::{}", "é".repeat(200));
+        let mut f = sample(&[1, 2, 3]);
+        f.type_name = &long;
+        f.sender = &long;
+        let mut buf = Vec::new();
+        encode_frame(&mut buf, &f);
+        let back = decode_frame(&buf).expect("a cut name still decodes");
+        assert!(long.starts_with(back.type_name) && back.type_name.len() <= MAX_TYPE_NAME);
+        assert!(long.starts_with(back.sender) && back.sender.len() <= u8::MAX as usize);
+        encode_frame(&mut buf, &sample(&[1]));
+        buf[5] |= 0x80; // the flags byte follows "NRVB" and the version
+        assert!(matches!(decode_frame(&buf), Err(WireError::Malformed("unknown flag bits"))));
+    }
 
     fn sample<'a>(payload: &'a [u8]) -> Frame<'a> {
         Frame {
