@@ -40,7 +40,18 @@ fn cargo(dir: &Path, args: &[&str]) -> String {
 /// Makes project `name` under the robot's home with `nerve new NAME EXTRA`,
 /// its `target` the workspace's; returns its folder.
 fn make(r: &Robot, name: &str, extra: &[&str]) -> PathBuf {
-    let out = r.ok(&[&["new", name, "--dir"], &[r.home.to_str().expect("utf-8 path")][..], extra].concat());
+    // the build goes to the project's `target` (cargo() removes
+    // CARGO_TARGET_DIR too), so the launch file must say `target/debug`
+    let made = r
+        .command("nerve")
+        .args(["new", name, "--dir"])
+        .arg(&r.home)
+        .args(extra)
+        .env_remove("CARGO_TARGET_DIR")
+        .output();
+    let made = made.expect("nerve new");
+    let out = String::from_utf8_lossy(&made.stdout).into_owned();
+    assert!(made.status.success(), "nerve new failed: {}", String::from_utf8_lossy(&made.stderr));
     let dir = r.home.join(name);
     for f in ["Cargo.toml", "Cargo.lock", "src/main.rs", "launch.toml", "README.md", ".gitignore"] {
         assert!(dir.join(f).is_file(), "{f} was not made: {out}");
@@ -130,6 +141,37 @@ fn bad_requests_are_refused_with_what_to_do() {
     assert!(err.contains("already exists"), "{err}");
     let err = r.fails(&["new", "lost", "--dir", dir, "--nerve-src", "/nonexistent"]);
     assert!(err.contains("--nerve-src"), "{err}");
+}
+
+/// The launch file's `exe` is where the user's cargo builds: the project's
+/// own `target` (relative), CARGO_TARGET_DIR, or a `build.target-dir` in a
+/// cargo config above the project (`nerve new` asks `cargo metadata`, no
+/// build needed).
+#[test]
+fn the_launch_file_finds_the_build_wherever_cargo_puts_it() {
+    let r = Robot::new("newtgt");
+    let exe_of = |dir: &Path, name: &str, target_dir: Option<&Path>| -> String {
+        let mut c = r.command("nerve");
+        c.args(["new", name, "--dir"]).arg(dir).env_remove("CARGO_TARGET_DIR");
+        if let Some(t) = target_dir {
+            c.env("CARGO_TARGET_DIR", t);
+        }
+        let out = c.output().expect("nerve new");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let launch = std::fs::read_to_string(dir.join(name).join("launch.toml")).expect("launch.toml");
+        let exe = launch.lines().find_map(|l| l.strip_prefix("exe = ")).unwrap_or_else(|| panic!("no exe in {launch}"));
+        exe.trim_matches('"').to_owned()
+    };
+    assert_eq!(exe_of(&r.home, "plain", None), "target/debug/plain");
+    let elsewhere = r.home.join("builds");
+    assert_eq!(exe_of(&r.home, "moved", Some(&elsewhere)), format!("{}/debug/moved", elsewhere.display()));
+    // a cargo config above the project
+    let nested = r.home.join("ws");
+    std::fs::create_dir_all(nested.join(".cargo")).expect("mkdir");
+    let configured = r.home.join("cfg-target");
+    std::fs::write(nested.join(".cargo/config.toml"), format!("[build]\ntarget-dir = {:?}\n", configured))
+        .expect("cargo config");
+    assert_eq!(exe_of(&nested, "configured", None), format!("{}/debug/configured", configured.display()));
 }
 
 /// `nerve new --lang python`: the generated tests pass with the package's

@@ -86,12 +86,25 @@ pub fn new(a: NewArgs) -> Result<ExitCode> {
         return new_python(&a.name, &drive, &root);
     }
     let nerve = nerve_source(a.nerve_src.as_deref())?;
-    let files = render(&a.name, &drive, &nerve);
+    let files = render(&a.name, &drive, &nerve, "target/debug");
     std::fs::create_dir_all(root.join("src")).with_context(|| format!("cannot create {}", root.display()))?;
     for (path, text) in &files {
         let p = root.join(path);
         std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
     }
+    // the launch file's `exe` where this user's cargo will put the build:
+    // CARGO_TARGET_DIR or a `build.target-dir` moves it out of ./target
+    let debug = target_dir(&root).join("debug");
+    let files = if debug == Path::new("target/debug") {
+        files
+    } else {
+        let files = render(&a.name, &drive, &nerve, &debug.display().to_string());
+        let launch = root.join("launch.toml");
+        let text = files.iter().find(|(p, _)| p == "launch.toml").map(|(_, t)| t.as_str()).unwrap_or_default();
+        std::fs::write(&launch, text).with_context(|| format!("cannot write {}", launch.display()))?;
+        println!("cargo builds into {}: launch.toml's exe is there", debug.display());
+        files
+    };
     // the versions nerve is built and tested with, so that the first build
     // resolves nothing anew (and works offline when nerve has been built)
     let lock = nerve.join("Cargo.lock");
@@ -217,6 +230,44 @@ fn nerve_source(given: Option<&Path>) -> Result<PathBuf> {
     dir.canonicalize().with_context(|| format!("cannot resolve {}", dir.display()))
 }
 
+/// Where cargo builds the project at `root`, as `cargo metadata` says
+/// (it honours CARGO_TARGET_DIR and a `build.target-dir` in any cargo
+/// config): `target` when that is the project's own `target` folder (the
+/// launch file then stays relative and the project can move), else the
+/// absolute folder. Without a working cargo: CARGO_TARGET_DIR, or `target`.
+fn target_dir(root: &Path) -> PathBuf {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let meta = std::process::Command::new(cargo)
+        .args(["metadata", "--format-version", "1", "--no-deps", "--offline"])
+        .current_dir(root)
+        .stderr(std::process::Stdio::null())
+        .output();
+    let from_cargo = meta
+        .ok()
+        .filter(|o| o.status.success())
+        .and_then(|o| serde_json::from_slice::<serde_json::Value>(&o.stdout).ok())
+        .and_then(|v| v["target_directory"].as_str().map(PathBuf::from));
+    let found = match from_cargo {
+        Some(d) => d,
+        None => {
+            tracing::debug!(project = %root.display(), "cargo metadata failed; using CARGO_TARGET_DIR or ./target");
+            match std::env::var_os("CARGO_TARGET_DIR") {
+                Some(d) => PathBuf::from(d),
+                None => return PathBuf::from("target"),
+            }
+        }
+    };
+    let own = root.canonicalize().map(|r| r.join("target")).ok();
+    if own.as_deref() == Some(found.as_path()) {
+        PathBuf::from("target")
+    } else if found.is_relative() {
+        // CARGO_TARGET_DIR=relative is the folder cargo was started in's
+        std::env::current_dir().map(|d| d.join(&found)).unwrap_or(found)
+    } else {
+        found
+    }
+}
+
 /// `gripper-driver` → `GripperDriver`, with `Agent` appended to a name the
 /// generated code already uses.
 fn type_name(name: &str) -> String {
@@ -232,7 +283,9 @@ fn type_name(name: &str) -> String {
 }
 
 /// The project's files, by path in it.
-fn render(name: &str, drive: &Drive, nerve: &Path) -> Vec<(String, String)> {
+/// `debug` is the folder cargo's debug build lands in: `target/debug`, or
+/// an absolute folder when the user's cargo builds elsewhere.
+fn render(name: &str, drive: &Drive, nerve: &Path, debug: &str) -> Vec<(String, String)> {
     let (what, task, step, imports, period_line, task_words) = match drive {
         Drive::Event => (
             "an event-driven agent that sends every tick arriving on `in` on `out`, its sequence number multiplied by the parameter `gain`.".to_owned(),
@@ -265,6 +318,7 @@ fn render(name: &str, drive: &Drive, nerve: &Path) -> Vec<(String, String)> {
             .replace("{{task_words}}", &task_words)
             .replace("{{type}}", &type_name(name))
             .replace("{{nerve}}", &nerve.display().to_string())
+            .replace("{{debug}}", debug)
             .replace("{{name}}", name)
     };
     vec![
@@ -300,7 +354,7 @@ mod tests {
     #[test]
     fn every_placeholder_is_filled() {
         for drive in [Drive::Event, Drive::Periodic("50ms".into(), std::time::Duration::from_millis(50))] {
-            for (path, text) in render("my-agent", &drive, Path::new("/src/nerve")) {
+            for (path, text) in render("my-agent", &drive, Path::new("/src/nerve"), "target/debug") {
                 assert!(!text.contains("{{"), "{path} keeps a placeholder:\n{text}");
             }
             for (path, text) in render_python("my-agent", &drive) {
