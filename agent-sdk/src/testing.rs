@@ -63,6 +63,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+mod wiring;
+pub use wiring::Wiring;
+
 /// Why a harness could not do what the test asked. A failed step is not
 /// one of these: steps return the agent's own [`AgentError`].
 #[derive(Debug, thiserror::Error)]
@@ -123,6 +126,62 @@ pub enum HarnessError {
     /// A sample could not be queued.
     #[error(transparent)]
     Port(#[from] PortError),
+    /// A [`Wiring`] refused a connection, with the message the router
+    /// gives for it (no such agent or port, another type, not connected).
+    #[error(transparent)]
+    Connect(#[from] shm_schemas::control::cli_to_router::RouterError),
+    /// A port was not named `AGENT/PORT`.
+    #[error("{given:?} is not a port: name it AGENT/PORT, e.g. \"t1/tick\"")]
+    PortRef {
+        /// what was given
+        given: String,
+    },
+    /// A [`Wiring`] already has an agent of this name.
+    #[error("the wiring already has an agent named {name:?}: give each agent its own name")]
+    Duplicate {
+        /// the name
+        name: String,
+    },
+    /// The agent of this name is of another type than the test asked for.
+    #[error("agent {name:?} is a {kind}, not a {asked}")]
+    WrongAgent {
+        /// the name
+        name: String,
+        /// its kind
+        kind: &'static str,
+        /// the kind asked for
+        asked: &'static str,
+    },
+    /// A step of an agent of a [`Wiring`] failed.
+    #[error("agent {agent:?}: step failed: {source}")]
+    Step {
+        /// the agent's name
+        agent: String,
+        /// the agent's error
+        #[source]
+        source: AgentError,
+    },
+    /// A sample could not be carried from an output to an input.
+    #[error("carrying {from} to {to:?}: {reason}")]
+    Forward {
+        /// the output, `AGENT/PORT`
+        from: String,
+        /// the inputs it goes to
+        to: Vec<String>,
+        /// why an input refused it
+        reason: String,
+    },
+    /// Event-driven agents kept waking each other at one instant.
+    #[error(
+        "the agents stepped {steps} times at {at_ns} ns without settling: a loop of connections \
+         in which every step sends again; disconnect one of them or make one periodic"
+    )]
+    Unsettled {
+        /// steps run at that instant
+        steps: u64,
+        /// the instant
+        at_ns: u64,
+    },
 }
 
 /// The in-memory side of a test's ports: the clock that stamps samples and
@@ -137,8 +196,17 @@ pub(crate) struct Bus {
 struct Collector {
     port: String,
     type_name: String,
+    /// the layout fingerprint of a typed port (`None`: declared by layout)
+    fingerprint: Option<u64>,
     samples: Arc<dyn Any + Send + Sync>,
+    /// takes the samples and queues each on every input given ([`Wiring`])
+    forward: Forward,
 }
+
+/// Takes an output's samples and queues each on every input given, from
+/// the sample's sender and the output's port, with the sample's stamp;
+/// returns how many samples it took, or why an input refused one.
+type Forward = Arc<dyn Fn(&[Arc<dyn DynInput>]) -> Result<usize, String> + Send + Sync>;
 
 impl Bus {
     pub(crate) fn clock(&self) -> Arc<AtomicU64> {
@@ -146,12 +214,56 @@ impl Bus {
     }
 
     pub(crate) fn add_output<T: Payload>(&self, port: &str, collected: Arc<Collected<T>>) {
-        let c = Collector { port: port.into(), type_name: T::stable_type_name().into(), samples: collected };
+        let (from, port_name) = (collected.clone(), port.to_owned());
+        let forward: Forward = Arc::new(move |targets: &[Arc<dyn DynInput>]| {
+            let taken = from.take();
+            for (meta, value) in &taken {
+                for target in targets {
+                    let Some(input) = target.as_any().downcast_ref::<InputInner<T>>() else {
+                        return Err(format!(
+                            "input {:?} is declared by layout; the wiring carries only typed samples to it",
+                            target.name()
+                        ));
+                    };
+                    input.queue(meta.sender.as_str(), &port_name, **value, meta.stamp_ns).map_err(|e| e.to_string())?;
+                }
+            }
+            Ok(taken.len())
+        });
+        let c = Collector {
+            port: port.into(),
+            type_name: T::stable_type_name().into(),
+            fingerprint: Some(T::layout_fingerprint()),
+            samples: collected,
+            forward,
+        };
         self.outputs.lock().unwrap_or_else(|p| p.into_inner()).push(c);
     }
 
     pub(crate) fn add_bytes_output(&self, port: &str, type_name: &str, collected: Arc<CollectedBytes>) {
-        let c = Collector { port: port.into(), type_name: type_name.into(), samples: collected };
+        let (from, port_name) = (collected.clone(), port.to_owned());
+        let forward: Forward = Arc::new(move |targets: &[Arc<dyn DynInput>]| {
+            let taken = from.take();
+            for (meta, bytes) in &taken {
+                for target in targets {
+                    let Some(input) = target.as_any().downcast_ref::<SchemaInputInner>() else {
+                        return Err(format!(
+                            "input {:?} is typed; the wiring carries only bytes of a layout to it",
+                            target.name()
+                        ));
+                    };
+                    input.queue(meta.sender.as_str(), &port_name, bytes, meta.stamp_ns).map_err(|e| e.to_string())?;
+                }
+            }
+            Ok(taken.len())
+        });
+        let c = Collector {
+            port: port.into(),
+            type_name: type_name.into(),
+            fingerprint: None,
+            samples: collected,
+            forward,
+        };
         self.outputs.lock().unwrap_or_else(|p| p.into_inner()).push(c);
     }
 }
