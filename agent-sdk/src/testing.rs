@@ -49,6 +49,12 @@
 //! An agent that opens iceoryx2 services of its own (besides its ports)
 //! finds them in a private robot (`test-PID-N`, [`Harness::world`]), whose
 //! files the harness removes when dropped.
+//!
+//! Several agents wired together run in a [`Wiring`]: a harness per agent
+//! on one fake clock, outputs connected to inputs as the router connects
+//! them (and refused with the router's messages), periodic agents stepping
+//! at their deadlines and event-driven ones when a sample arrives, in a
+//! fixed order; see [`wiring`] for the order and an example.
 
 use crate::agent::{Agent, AgentError, Binding, Context, Setup, Task};
 use crate::dynamic::{CollectedBytes, SchemaInputInner};
@@ -63,7 +69,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-mod wiring;
+pub mod wiring;
 pub use wiring::Wiring;
 
 /// Why a harness could not do what the test asked. A failed step is not
