@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """A periodic Python agent between two Rust agents: each period it takes the
 newest tick on its input `tick` (nerve::Tick) and sends its number times
-the parameter `gain` on its output `value` (nerve::Scalar), and a tick of
-its own on `count` (how many periods it has run).
+the parameter `gain` (bounded: in [0, 10]) on its output `value`
+(nerve::Scalar), and a tick of its own on `count` (how many periods it has
+run).
 
     nerve start python/examples/scale.py --name scale --period 50ms
     nerve connect ticker/tick scale/tick
@@ -20,7 +21,7 @@ class Scale(nerve.Agent):
         self.ticks = setup.input("tick", "nerve::Tick")
         self.value = setup.output("value", "nerve::Scalar")
         self.out = setup.output("count", "nerve::Tick")
-        self.gain = setup.param("gain", 2.0)
+        self.gain = setup.param("gain", 2.0, min=0.0, max=10.0)
         self.seen = 0
 
     def step(self, ctx):

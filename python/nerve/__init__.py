@@ -359,10 +359,16 @@ class Setup:
         self.outputs[port] = p
         return made
 
-    def param(self, key: str, default):
+    def param(self, key: str, default, *, min=None, max=None):
         """Declares parameter ``key`` (float, int, bool or str, as ``default``);
-        ``.get()`` reads the value ``nerve param set`` last set."""
-        return self._n.param(key, default)
+        ``.get()`` reads the value ``nerve param set`` last set.
+
+        A float or int parameter may have inclusive bounds ``min`` and ``max``
+        (either or both): a value outside them is refused at start
+        (``--param``), by ``nerve param set`` and by the Harness, with a
+        message naming the range (``gain is in [0, 10]``) that ``nerve param
+        list`` shows. A default outside its own bounds is a ValueError."""
+        return self._n.param(key, default, min, max)
 
 
 class Agent:

@@ -234,17 +234,48 @@ impl Setup {
     }
 
     /// Declares parameter `key` with `default` (a float, int, bool or str:
-    /// the parameter keeps that type).
-    fn param(&mut self, key: &str, default: &Bound<'_, PyAny>) -> PyResult<ParamHandle> {
+    /// the parameter keeps that type). A float or int parameter may have
+    /// bounds, `min` and `max` (inclusive, either or both): a value outside
+    /// them is refused at start (`--param`), by `nerve param set` and by the
+    /// Harness, with a message naming the range, which `nerve param list`
+    /// shows.
+    #[pyo3(signature = (key, default, min=None, max=None))]
+    fn param(
+        &mut self,
+        key: &str,
+        default: &Bound<'_, PyAny>,
+        min: Option<&Bound<'_, PyAny>>,
+        max: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<ParamHandle> {
         let setup = self.get()?;
+        let bounded = min.is_some() || max.is_some();
         // bool first: a Python bool is also an int
         let param = if let Ok(b) = default.cast::<pyo3::types::PyBool>() {
+            no_bounds(key, "bool", bounded)?;
             AnyParam::Bool(setup.param(key, b.is_true()))
         } else if let Ok(i) = default.cast::<pyo3::types::PyInt>() {
-            AnyParam::Int(setup.param(key, i.extract::<i64>()?))
+            let default = i.extract::<i64>()?;
+            let range = Range::of(key, min, max, |b| b.extract::<i64>().ok(), "an int")?;
+            match range {
+                Some(r) => {
+                    r.check(&default).map_err(|e| default_out_of_range(key, e))?;
+                    AnyParam::Int(setup.param_checked(key, default, move |v| r.check(v)))
+                }
+                None => AnyParam::Int(setup.param(key, default)),
+            }
         } else if let Ok(f) = default.cast::<pyo3::types::PyFloat>() {
-            AnyParam::Float(setup.param(key, f.value()))
+            let default = f.value();
+            // an int bound of a float parameter is the float it equals
+            let range = Range::of(key, min, max, |b| b.extract::<f64>().ok().filter(|x| !x.is_nan()), "a number")?;
+            match range {
+                Some(r) => {
+                    r.check(&default).map_err(|e| default_out_of_range(key, e))?;
+                    AnyParam::Float(setup.param_checked(key, default, move |v| r.check(v)))
+                }
+                None => AnyParam::Float(setup.param(key, default)),
+            }
         } else if let Ok(s) = default.extract::<String>() {
+            no_bounds(key, "str", bounded)?;
             AnyParam::Text(setup.param(key, s))
         } else {
             return Err(PyValueError::new_err(format!(
@@ -253,6 +284,74 @@ impl Setup {
             )));
         };
         Ok(ParamHandle { param })
+    }
+}
+
+fn no_bounds(key: &str, type_name: &str, bounded: bool) -> PyResult<()> {
+    if bounded {
+        Err(PyValueError::new_err(format!(
+            "parameter {key:?} is a {type_name}: only float and int parameters take min and max (remove them)"
+        )))
+    } else {
+        Ok(())
+    }
+}
+
+fn default_out_of_range(key: &str, refusal: String) -> PyErr {
+    PyValueError::new_err(format!("parameter {key:?}: its default is out of its own bounds ({refusal})"))
+}
+
+/// The inclusive bounds of a Python number parameter; its refusal names the
+/// parameter and the range, as the SDK's `in_range` does ("gain is in [0, 10]").
+#[derive(Clone)]
+struct Range<T> {
+    key: String,
+    min: Option<T>,
+    max: Option<T>,
+}
+
+impl<T: PartialOrd + std::fmt::Display + Copy> Range<T> {
+    /// `None` without bounds; a ValueError for a bound of the wrong type or
+    /// `min > max`.
+    fn of(
+        key: &str,
+        min: Option<&Bound<'_, PyAny>>,
+        max: Option<&Bound<'_, PyAny>>,
+        extract: impl Fn(&Bound<'_, PyAny>) -> Option<T>,
+        what: &str,
+    ) -> PyResult<Option<Self>> {
+        let bound = |b: Option<&Bound<'_, PyAny>>, name: &str| -> PyResult<Option<T>> {
+            match b {
+                None => Ok(None),
+                Some(b) if b.is_none() => Ok(None),
+                Some(b) => extract(b).map(Some).ok_or_else(|| {
+                    PyValueError::new_err(format!("parameter {key:?}: {name} must be {what}, like its default"))
+                }),
+            }
+        };
+        let (min, max) = (bound(min, "min")?, bound(max, "max")?);
+        if let (Some(lo), Some(hi)) = (min, max)
+            && lo > hi
+        {
+            return Err(PyValueError::new_err(format!("parameter {key:?}: min {lo} is above max {hi}")));
+        }
+        Ok((min.is_some() || max.is_some()).then(|| Range { key: key.to_owned(), min, max }))
+    }
+
+    /// Refuses a value outside the bounds (and NaN, which is outside every range).
+    fn check(&self, v: &T) -> Result<(), String> {
+        let above = self.min.is_none_or(|lo| *v >= lo);
+        let below = self.max.is_none_or(|hi| *v <= hi);
+        if above && below {
+            return Ok(());
+        }
+        let key = &self.key;
+        Err(match (self.min, self.max) {
+            (Some(lo), Some(hi)) => format!("{key} is in [{lo}, {hi}]"),
+            (Some(lo), None) => format!("{key} must be >= {lo}"),
+            (None, Some(hi)) => format!("{key} must be <= {hi}"),
+            (None, None) => format!("{key} is unbounded"),
+        })
     }
 }
 

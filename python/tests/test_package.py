@@ -222,5 +222,70 @@ class Periods(unittest.TestCase):
         h.stop()
 
 
+class Bounds(unittest.TestCase):
+    def test_a_bounded_parameter_refuses_values_outside_its_range_everywhere(self):
+        # Scale's gain is in [0, 10]: set in the range, refused outside it
+        # (and NaN) with the range named, as `nerve param set` would be
+        h = Harness(Scale)
+        for good in ("0", "10", "7.5"):
+            h.set_param("gain", good)
+            self.assertEqual(float(h.param("gain")), float(good))
+        for bad in ("10.5", "-0.1", "NaN", "inf"):
+            with self.assertRaisesRegex(ValueError, r"gain is in \[0, 10\]", msg=bad):
+                h.set_param("gain", bad)
+        self.assertEqual(h.param("gain"), "7.5", "a refused value changed the parameter")
+        h.stop()
+        # at start, as `--param gain=11` is
+        with self.assertRaisesRegex(RuntimeError, r"gain is in \[0, 10\]"):
+            Harness(Scale, params={"gain": "11"})
+
+    def test_int_one_sided_and_wrong_bounds(self):
+        class Counted(nerve.Agent):
+            kind = "counted"
+            period = 0.1
+
+            def new(self, setup):
+                self.n = setup.param("n", 3, min=1)
+                self.top = setup.param("top", 5, max=8)
+
+            def step(self, ctx):
+                pass
+
+        h = Harness(Counted)
+        h.set_param("n", "1000")
+        with self.assertRaisesRegex(ValueError, "n must be >= 1"):
+            h.set_param("n", "0")
+        with self.assertRaisesRegex(ValueError, "top must be <= 8"):
+            h.set_param("top", "9")
+        with self.assertRaisesRegex(ValueError, "not a valid i64"):
+            h.set_param("n", "2.5")
+        h.stop()
+
+        def declaring(**bounds):
+            class Bad(nerve.Agent):
+                kind = "bad"
+                period = 0.1
+
+                def new(self, setup):
+                    setup.param(bounds.pop("key"), bounds.pop("default"), **bounds)
+
+                def step(self, ctx):
+                    pass
+
+            return Bad
+
+        cases = [
+            (dict(key="g", default=20.0, min=0.0, max=10.0), "default is out of its own bounds"),
+            (dict(key="g", default=1.0, min=5.0, max=2.0), "min 5 is above max 2"),
+            (dict(key="n", default=1, min=0.5), "min must be an int"),
+            (dict(key="b", default=True, max=1), "only float and int parameters"),
+            (dict(key="s", default="a", min=0), "only float and int parameters"),
+            (dict(key="g", default=1.0, max="x"), "max must be a number"),
+        ]
+        for decl, message in cases:
+            with self.assertRaisesRegex(Exception, message, msg=str(decl)):
+                Harness(declaring(**decl))
+
+
 if __name__ == "__main__":
     unittest.main()

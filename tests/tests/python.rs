@@ -1,7 +1,8 @@
 //! Python agents (`python/`, issue 15): a Python agent between two Rust
 //! agents in a real robot, launched from a launch file, rewired, its rate
-//! and a parameter changed and suspended while it runs, its output read by
-//! `nerve echo`; and a payload layout written in Python is the Rust type's.
+//! and a parameter changed (and refused outside its bounds) and suspended
+//! while it runs, its output read by `nerve echo`; and a payload layout
+//! written in Python is the Rust type's.
 
 use nerve_tests::py::python_with_nerve;
 use nerve_tests::{Robot, wait_until};
@@ -129,6 +130,15 @@ to = "r/in"
     // 5 from one 100 ms step to the next)
     ok(&r, &bin, &["param", "set", "scale", "gain", "3"]);
     assert!(ok(&r, &bin, &["param", "get", "scale", "gain"]).contains('3'));
+    // its bounds (`min=0.0, max=10.0` in scale.py): listed, and a value
+    // outside them refused with the range, the value kept
+    let list = ok(&r, &bin, &["param", "list", "scale"]);
+    assert!(list.contains("gain is in [0, 10]"), "{list}");
+    let refused = nerve(&r, &bin, &["param", "set", "scale", "gain", "11"]);
+    let why = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && why.contains("gain is in [0, 10]"), "gain 11 accepted: {why}");
+    let kept = ok(&r, &bin, &["param", "get", "scale", "gain"]);
+    assert!(kept.contains('3') && !kept.contains("11"), "{kept}");
     assert!(
         wait_until(Duration::from_secs(5), || values(&r, "scale/value", 3)
             .iter()
@@ -202,7 +212,7 @@ fn the_packages_tests_pass_in_the_tests_own_process() {
     let out = Command::new(python).args(["-m", "unittest", "-v"]).current_dir(&dir).output().expect("unittest");
     let text = String::from_utf8_lossy(&out.stderr);
     eprintln!("{text}");
-    assert!(out.status.success() && text.contains("Ran 10 tests") && text.contains("OK"), "{text}");
+    assert!(out.status.success() && text.contains("Ran 12 tests") && text.contains("OK"), "{text}");
     assert!(text.contains("1000 cycles of a Python agent in"), "{text}");
 }
 
