@@ -351,4 +351,84 @@ mod tests {
             t.set(key, ok).unwrap_or_else(|e| panic!("{key} = {ok}: {e}"));
         }
     }
+
+    /// A sonar that reports every direction at `far` metres, every 100 ms.
+    struct FakeSonar {
+        out: agent_sdk::Output<SonarScan>,
+        far: f32,
+    }
+
+    impl Agent for FakeSonar {
+        const KIND: &'static str = "fake-sonar";
+        fn task() -> Task {
+            Task::Periodic(Duration::from_millis(100))
+        }
+        fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+            Ok(FakeSonar { out: setup.output("scan")?, far: 3.0 })
+        }
+        fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+            self.out.send(scan(self.far))?;
+            Ok(())
+        }
+    }
+
+    /// Records the stops it is sent, when it is sent them.
+    struct Brake {
+        stop: agent_sdk::Input<SafetyStop>,
+        got: Vec<(u8, u64)>,
+    }
+
+    impl Agent for Brake {
+        const KIND: &'static str = "brake";
+        fn task() -> Task {
+            Task::EventDriven
+        }
+        fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+            Ok(Brake { stop: setup.input("stop")?, got: Vec::new() })
+        }
+        fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+            let (got, now) = (&mut self.got, ctx.now_ns());
+            self.stop.try_drain(|_, s| {
+                got.push((s.active, now));
+                Ok::<(), AgentError>(())
+            })?;
+            Ok(())
+        }
+    }
+
+    /// The real monitor wired between a sonar and a brake in one process
+    /// (`agent_sdk::testing::Wiring`): stopped while the sonar is silent,
+    /// released once by open space, stopped again in the same cycle as the
+    /// scan that shows an obstacle (the sonar, added first, steps first at
+    /// a shared deadline).
+    #[test]
+    fn wired_between_a_sonar_and_a_brake_the_monitor_stops_at_the_scan_that_shows_an_obstacle() {
+        use agent_sdk::testing::Wiring;
+        const MS: u64 = 1_000_000;
+        let mut w = Wiring::new();
+        w.add_built(Harness::<FakeSonar>::builder().name("sonar").suspended()).expect("sonar");
+        w.add::<Safety>("safety").expect("safety");
+        w.add::<Brake>("brake").expect("brake");
+        w.connect("sonar/scan", "safety/scan").expect("scan");
+        w.connect("safety/stop", "brake/stop").expect("stop");
+        let e = w.connect("safety/cmd", "brake/stop").expect_err("a command is not a stop").to_string();
+        assert!(e.starts_with("cannot connect safety/cmd to brake/stop: safety/cmd sends"), "{e}");
+        let start = w.now_ns();
+
+        w.advance(Duration::from_millis(100)).expect("no scan yet");
+        assert_eq!(w.agent::<Brake>("brake").expect("brake").got, [(1, start + 100 * MS)], "blind: stopped");
+
+        w.resume("sonar").expect("the sonar speaks");
+        w.advance(Duration::from_secs(1)).expect("open space");
+        let got = &w.agent::<Brake>("brake").expect("brake").got;
+        let released: Vec<_> = got.iter().filter(|(active, _)| *active == 0).collect();
+        assert_eq!(released.len(), 1, "released once: {got:?}");
+        assert_eq!(got.last().map(|(active, _)| *active), Some(0), "and stays released: {got:?}");
+        assert!(!w.output::<VelocityCommand>("safety/cmd").expect("cmd").is_empty(), "moving");
+
+        w.harness_mut::<FakeSonar>("sonar").expect("sonar").agent_mut().far = 0.2;
+        w.advance(Duration::from_millis(100)).expect("an obstacle");
+        let got = &w.agent::<Brake>("brake").expect("brake").got;
+        assert_eq!(got.last(), Some(&(1, start + 1200 * MS)), "stopped in the cycle of that scan: {got:?}");
+    }
 }
