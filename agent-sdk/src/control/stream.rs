@@ -320,9 +320,14 @@ impl ToolConnection {
             let service = path.display();
             return Err(ProtocolError::Malformed(format!("a reply of {len} bytes from {service}")).into());
         }
-        let mut body = vec![0u8; len];
+        // grown as the bytes arrive, not allocated at the length the peer
+        // claims: a reply that says 256 MiB and sends 4 bytes costs 4 bytes
+        let mut body = Vec::with_capacity(len.min(64 * 1024));
         self.stream.set_read_timeout(Some(left())).map_err(fail)?;
-        self.stream.read_exact(&mut body).map_err(fail)?;
+        (&mut self.stream).take(len as u64).read_to_end(&mut body).map_err(fail)?;
+        if body.len() < len {
+            return Err(fail(io::Error::from(io::ErrorKind::UnexpectedEof)));
+        }
         Ok(decode::<Resp>(&body)?)
     }
 }
@@ -398,6 +403,32 @@ mod tests {
         drop(server);
         assert!(!path.exists(), "the socket file goes with the server");
         assert!(ToolConnection::connect(&path).is_err(), "nothing listens");
+    }
+
+    /// A reply that claims more bytes than it sends ends the call with an
+    /// error once the peer is gone, without taking the memory it claimed
+    /// first (found in the property tests' review).
+    #[test]
+    fn a_reply_that_claims_more_than_it_sends_is_an_error() {
+        use std::os::unix::net::UnixListener;
+        let path = socket_path("claims");
+        let _ = std::fs::remove_file(&path);
+        let listener = UnixListener::bind(&path).expect("bind");
+        let liar = std::thread::spawn(move || {
+            let (mut s, _) = listener.accept().expect("accept");
+            let mut head = [0u8; 4];
+            s.read_exact(&mut head).expect("request head");
+            let mut req = vec![0u8; u32::from_le_bytes(head) as usize];
+            s.read_exact(&mut req).expect("request");
+            // 200 MiB announced, four bytes sent, then gone
+            s.write_all(&(200u32 << 20).to_le_bytes()).expect("head");
+            s.write_all(b"abcd").expect("some bytes");
+        });
+        let c = ToolConnection::connect(&path).expect("connect");
+        let r = c.call::<String, String>(&"x".into(), Duration::from_secs(5));
+        liar.join().expect("the liar ran");
+        assert!(r.is_err(), "{r:?}");
+        let _ = std::fs::remove_file(&path);
     }
 
     /// A responder dropped unanswered tells the tool so (as on iceoryx2),
