@@ -133,6 +133,21 @@ impl Robot {
         c
     }
 
+    /// The robot's connections as `FROM -> TO` lines, sorted (`nerve graph --json`).
+    pub fn edges(&self) -> Vec<String> {
+        let g = self.graph();
+        let mut v: Vec<String> = g["connections"]
+            .as_array()
+            .map(|c| {
+                c.iter()
+                    .map(|e| format!("{} -> {}", e["from"].as_str().unwrap_or("?"), e["to"].as_str().unwrap_or("?")))
+                    .collect()
+            })
+            .unwrap_or_default();
+        v.sort();
+        v
+    }
+
     /// Runs `nerve ARGS`.
     pub fn nerve(&self, args: &[&str]) -> Output {
         self.command("nerve").args(args).output().expect("run nerve")

@@ -12,7 +12,6 @@
 //! 2's "arrived" crosses back, robot 1's mission agent answers "resume".
 
 use nerve_tests::{Robot, free_port, wait_until, write_file};
-use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -212,15 +211,7 @@ fn a_path_crosses_to_robot_2_and_its_arrival_comes_back() {
     );
     assert_eq!(r2.figure_u64("mission", "path_id"), 7);
     assert!(r2.figure_u64("bridge", &format!("import.{}/mission/path.msgs_in", r1.name)) >= 1);
-    let g: Value = serde_json::from_str(&r2.ok(&["graph", "--json"])).expect("graph json");
-    let edges: Vec<String> = g["connections"]
-        .as_array()
-        .map(|c| {
-            c.iter()
-                .map(|e| format!("{} -> {}", e["from"].as_str().unwrap_or("?"), e["to"].as_str().unwrap_or("?")))
-                .collect()
-        })
-        .unwrap_or_default();
+    let edges = r2.edges();
     assert!(edges.contains(&"mission/path -> target/path".to_owned()), "{edges:?}");
 
     // robot 2 drives to the end of the path, the arm tries, robot 2 reports

@@ -42,20 +42,6 @@ fn names(r: &Robot) -> Vec<String> {
     v
 }
 
-fn connections(r: &Robot) -> Vec<String> {
-    let g = r.graph();
-    let mut v: Vec<String> = g["connections"]
-        .as_array()
-        .map(|c| {
-            c.iter()
-                .map(|e| format!("{} -> {}", e["from"].as_str().unwrap_or("?"), e["to"].as_str().unwrap_or("?")))
-                .collect()
-        })
-        .unwrap_or_default();
-    v.sort();
-    v
-}
-
 fn period_ns(r: &Robot, name: &str) -> u64 {
     r.agent(name).and_then(|a| a["period_ns"].as_u64()).unwrap_or_else(|| panic!("{name} has no period in ps"))
 }
@@ -73,7 +59,7 @@ fn arguments_take_their_defaults_or_the_command_line() {
     assert_eq!(names(&r), ["r1", "r2", "t1"]);
     assert_eq!(period_ns(&r, "t1"), 10_000_000);
     assert_eq!(r.ok(&["param", "get", "t1", "step"]).trim(), "1");
-    assert_eq!(connections(&r), ["t1/tick -> r1/in", "t1/tick -> r2/in"]);
+    assert_eq!(r.edges(), ["t1/tick -> r1/in", "t1/tick -> r2/in"]);
     assert_eq!(r.echo("r2/out", 2).len(), 2);
     r.down_and_check_clean();
 
@@ -81,7 +67,7 @@ fn arguments_take_their_defaults_or_the_command_line() {
     assert_eq!(names(&r), ["r1", "t1"], "the condition leaves r2 out");
     assert_eq!(period_ns(&r, "t1"), 20_000_000);
     assert_eq!(r.ok(&["param", "get", "t1", "step"]).trim(), "4");
-    assert_eq!(connections(&r), ["t1/tick -> r1/in"], "and its connection");
+    assert_eq!(r.edges(), ["t1/tick -> r1/in"], "and its connection");
     assert_eq!(r.echo("r1/out", 2).len(), 2);
     r.down_and_check_clean();
 }
@@ -107,7 +93,7 @@ fn an_include_takes_arguments_and_prefixes_its_agents() {
     assert_eq!(names(&r), ["a_r", "a_t", "b_r", "b_t", "sink"]);
     assert_eq!(period_ns(&r, "a_t"), 10_000_000);
     assert_eq!(period_ns(&r, "b_t"), 30_000_000);
-    assert_eq!(connections(&r), ["a_t/tick -> a_r/in", "b_t/tick -> b_r/in", "b_t/tick -> sink/in"]);
+    assert_eq!(r.edges(), ["a_t/tick -> a_r/in", "b_t/tick -> b_r/in", "b_t/tick -> sink/in"]);
     assert_eq!(r.echo("a_r/out", 2).len(), 2);
     assert_eq!(r.echo("sink/out", 2).len(), 2);
     r.down_and_check_clean();
