@@ -303,6 +303,17 @@ impl Drop for Robot {
     }
 }
 
+/// Runs `ip ARGS` (iproute2: network namespaces, veth pairs), or says
+/// what it answered.
+pub fn ip(args: &[&str]) -> Result<(), String> {
+    let out = Command::new("ip").args(args).output().map_err(|e| format!("ip: {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!("ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr).trim()))
+    }
+}
+
 /// A TCP port free on 127.0.0.1 now (for a test's own Zenoh endpoints).
 pub fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("a free port")

@@ -244,14 +244,7 @@ impl Netns {
         let id = std::process::id() % 10_000;
         let n = Netns { a: format!("nvb{id}a{tag}"), b: format!("nvb{id}b{tag}"), veth_a: format!("nv{id}a{tag}") };
         let veth_b = format!("nv{id}b{tag}");
-        let run = |args: &[&str]| -> Result<(), String> {
-            let out = Command::new("ip").args(args).output().map_err(|e| format!("ip: {e}"))?;
-            if out.status.success() {
-                Ok(())
-            } else {
-                Err(format!("ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr).trim()))
-            }
-        };
+        let run = nerve_tests::ip;
         run(&["netns", "add", &n.a])?;
         run(&["netns", "add", &n.b])?;
         run(&["link", "add", &n.veth_a, "type", "veth", "peer", "name", &veth_b])?;

@@ -106,14 +106,7 @@ impl Net {
     fn create() -> Result<Net, String> {
         let id = std::process::id() % 10_000;
         let net = Net { names: ["a", "b", "x"].iter().map(|s| format!("nbs{id}{s}")).collect() };
-        let run = |args: &[&str]| -> Result<(), String> {
-            let out = Command::new("ip").args(args).output().map_err(|e| format!("ip: {e}"))?;
-            if out.status.success() {
-                Ok(())
-            } else {
-                Err(format!("ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr).trim()))
-            }
-        };
+        let run = nerve_tests::ip;
         for n in &net.names {
             run(&["netns", "add", n])?;
             run(&["-n", n, "link", "set", "lo", "up"])?;
@@ -270,18 +263,25 @@ fn an_outsider_can_neither_read_nor_inject_and_a_huge_frame_is_refused() {
         "cert": keys.join(format!("{c_name}.crt")),
         "key": keys.join(format!("{c_name}.key")),
     });
-    let got = outsider(
-        &python,
-        ns_x,
-        &serde_json::json!({
-            "connect": [format!("tls/10.233.2.1:{port}")],
-            "tls": tls_c,
-            "wait_peer": 10,
-            "listen": 1,
-            "puts": [forged(format!("nerve/{b_on_a}")), forged(format!("nerve/{quiet_on_b}")),
-                     forged(format!("nerve/{c_on_a}"))],
-        }),
-    );
+    // robot C's peer dials A over TLS and puts `puts`
+    let as_c = |puts: serde_json::Value| {
+        outsider(
+            &python,
+            ns_x,
+            &serde_json::json!({
+                "connect": [format!("tls/10.233.2.1:{port}")],
+                "tls": tls_c,
+                "wait_peer": 10,
+                "listen": 1,
+                "puts": puts,
+            }),
+        )
+    };
+    let got = as_c(serde_json::json!([
+        forged(format!("nerve/{b_on_a}")),
+        forged(format!("nerve/{quiet_on_b}")),
+        forged(format!("nerve/{c_on_a}"))
+    ]));
     assert_eq!(got["peers"], 1, "robot C's certificate did not open a session with A: {got}");
     assert!(
         wait_until(Duration::from_secs(10), || counts(&a, &c_on_a).1 >= 1),
@@ -293,17 +293,10 @@ fn an_outsider_can_neither_read_nor_inject_and_a_huge_frame_is_refused() {
 
     // 3. a frame of 100 MB under C's own key, then a small one: only the small one arrives
     let refused_before = counts(&a, &c_on_a).1;
-    let got = outsider(
-        &python,
-        ns_x,
-        &serde_json::json!({
-            "connect": [format!("tls/10.233.2.1:{port}")],
-            "tls": tls_c,
-            "wait_peer": 10,
-            "listen": 1,
-            "puts": [[format!("nerve/{c_on_a}"), 100 * 1024 * 1024, 1], [format!("nerve/{c_on_a}"), 64, 1]],
-        }),
-    );
+    let got = as_c(serde_json::json!([
+        [format!("nerve/{c_on_a}"), 100 * 1024 * 1024, 1],
+        [format!("nerve/{c_on_a}"), 64, 1]
+    ]));
     assert_eq!(got["peers"], 1, "{got}");
     assert!(
         wait_until(Duration::from_secs(10), || counts(&a, &c_on_a).1 > refused_before),
