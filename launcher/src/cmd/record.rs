@@ -293,97 +293,105 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
         world.node(&format!("cli-{}-events", std::process::id())).context("cannot join the robot's shared memory")?;
     let mut events = EventFollower::new(world, events_node);
     let _ = events.look();
-    let mut interrupted = false;
-    crate::interrupt::catch();
-    loop {
-        // a fresh wait set each round: --all adds ports as agents appear
-        let ws = WaitSetBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<Ipc>()
-            .map_err(|e| anyhow!("{e:?}"))?;
-        let listeners: Vec<Rc<Listener<Ipc>>> = recordings.iter().map(|r| r.listener.clone()).collect();
-        let mut guards = Vec::new();
-        for l in &listeners {
-            guards.push(ws.attach_notification(l.as_ref()).map_err(|e| anyhow!("{e:?}"))?);
-        }
-        let _tick = ws.attach_interval(Duration::from_millis(100)).map_err(|e| anyhow!("{e:?}"))?;
-        let mut round_done = false;
-        while !round_done {
-            match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
-                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
-                    interrupted = true;
+    // the loop and the file's end; what was recorded is told whether it
+    // ended well or on a failed write (a full disk)
+    let outcome = (|| -> Result<()> {
+        let mut interrupted = false;
+        crate::interrupt::catch();
+        loop {
+            // a fresh wait set each round: --all adds ports as agents appear
+            let ws = WaitSetBuilder::new()
+                .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+                .create::<Ipc>()
+                .map_err(|e| anyhow!("{e:?}"))?;
+            let listeners: Vec<Rc<Listener<Ipc>>> = recordings.iter().map(|r| r.listener.clone()).collect();
+            let mut guards = Vec::new();
+            for l in &listeners {
+                guards.push(ws.attach_notification(l.as_ref()).map_err(|e| anyhow!("{e:?}"))?);
+            }
+            let _tick = ws.attach_interval(Duration::from_millis(100)).map_err(|e| anyhow!("{e:?}"))?;
+            let mut round_done = false;
+            while !round_done {
+                match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+                    Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                        interrupted = true;
+                        break;
+                    }
+                    Ok(_) if crate::interrupt::requested() => {
+                        interrupted = true;
+                        break;
+                    }
+                    Ok(_) => {}
+                    Err(e) => bail!("wait failed: {e:?}"),
+                }
+                for r in &mut recordings {
+                    let _ = r.listener.try_wait(|_| {});
+                    drain(r, &mut writer, &path)?;
+                }
+                let now = Instant::now();
+                if now >= next_flush {
+                    next_flush = now + FLUSH_PERIOD;
+                    writer.flush().map_err(|e| write_failed(&path, e))?;
+                    if now >= next_sync {
+                        next_sync = now + SYNC_PERIOD;
+                        data.sync_data().map_err(|e| write_failed(&path, mcap::McapError::Io(e).into()))?;
+                    }
+                }
+                if until.is_some_and(|u| now >= u) {
                     break;
                 }
-                Ok(_) if crate::interrupt::requested() => {
-                    interrupted = true;
-                    break;
+                if now >= next_progress && !a.quiet {
+                    next_progress = now + Duration::from_secs(1);
+                    progress(&recordings, start.elapsed(), tty);
                 }
-                Ok(_) => {}
-                Err(e) => bail!("wait failed: {e:?}"),
-            }
-            for r in &mut recordings {
-                let _ = r.listener.try_wait(|_| {});
-                drain(r, &mut writer, &path)?;
-            }
-            let now = Instant::now();
-            if now >= next_flush {
-                next_flush = now + FLUSH_PERIOD;
-                writer.flush().map_err(|e| write_failed(&path, e))?;
-                if now >= next_sync {
-                    next_sync = now + SYNC_PERIOD;
-                    data.sync_data().map_err(|e| write_failed(&path, mcap::McapError::Io(e).into()))?;
-                }
-            }
-            if until.is_some_and(|u| now >= u) {
-                break;
-            }
-            if now >= next_progress && !a.quiet {
-                next_progress = now + Duration::from_secs(1);
-                progress(&recordings, start.elapsed(), tty);
-            }
-            if a.all && now >= next_look {
-                next_look = now + Duration::from_millis(500);
-                // agents started meanwhile (the router's events say when one
-                // registered): their ports join the recording
-                let registered = match events.look() {
-                    Look::Events(ev) => ev.iter().any(|e| matches!(e.what, EventKind::Registered { .. })),
-                    Look::Fresh | Look::NoRouter => true,
-                };
-                if let Some(known) = registered.then(|| known_ports(world).ok()).flatten() {
-                    let new: Vec<&Known> = known
-                        .iter()
-                        .filter(|k| !skipped.contains(&k.port) && !recordings.iter().any(|r| r.known.port == k.port))
-                        .collect();
-                    for k in new {
-                        skipped.push(k.port.clone());
-                        if let Some(r) = add(k, &mut writer)? {
-                            skipped.pop();
-                            eprintln!("{}recording {} too", if tty { "\n" } else { "" }, k.port);
-                            recordings.push(r);
-                            round_done = true;
+                if a.all && now >= next_look {
+                    next_look = now + Duration::from_millis(500);
+                    // agents started meanwhile (the router's events say when one
+                    // registered): their ports join the recording
+                    let registered = match events.look() {
+                        Look::Events(ev) => ev.iter().any(|e| matches!(e.what, EventKind::Registered { .. })),
+                        Look::Fresh | Look::NoRouter => true,
+                    };
+                    if let Some(known) = registered.then(|| known_ports(world).ok()).flatten() {
+                        let new: Vec<&Known> = known
+                            .iter()
+                            .filter(|k| {
+                                !skipped.contains(&k.port) && !recordings.iter().any(|r| r.known.port == k.port)
+                            })
+                            .collect();
+                        for k in new {
+                            skipped.push(k.port.clone());
+                            if let Some(r) = add(k, &mut writer)? {
+                                skipped.pop();
+                                eprintln!("{}recording {} too", if tty { "\n" } else { "" }, k.port);
+                                recordings.push(r);
+                                round_done = true;
+                            }
                         }
                     }
                 }
             }
+            if interrupted || until.is_some_and(|u| Instant::now() >= u) {
+                break;
+            }
         }
-        if interrupted || until.is_some_and(|u| Instant::now() >= u) {
-            break;
+        // what arrived until the end
+        for r in &mut recordings {
+            drain(r, &mut writer, &path)?;
         }
-    }
-    // what arrived until the end
-    for r in &mut recordings {
-        drain(r, &mut writer, &path)?;
-    }
-    writer.finish().map_err(|e| write_failed(&path, e))?;
-    data.sync_data().map_err(|e| write_failed(&path, mcap::McapError::Io(e).into()))?;
+        writer.finish().map_err(|e| write_failed(&path, e))?;
+        data.sync_data().map_err(|e| write_failed(&path, mcap::McapError::Io(e).into()))?;
+        Ok(())
+    })();
     let totals = sum(&recordings);
     if !a.quiet && tty {
         eprintln!();
     }
     println!(
-        "recorded {} ports to {}: {} messages, {:.1} MB in {:.1} s, {} dropped",
+        "recorded {} ports to {}{}: {} messages, {:.1} MB in {:.1} s, {} dropped",
         recordings.len(),
         path.display(),
+        if outcome.is_err() { " until the failure below" } else { "" },
         totals.messages,
         totals.bytes as f64 / 1e6,
         start.elapsed().as_secs_f64(),
@@ -412,6 +420,7 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
             );
         }
     }
+    outcome?;
     Ok(ExitCode::SUCCESS)
 }
 
