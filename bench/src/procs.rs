@@ -14,6 +14,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
 
+/// How long a child may take to say it is ready.
+pub const READY_WITHIN: Duration = Duration::from_secs(60);
+
 /// A child process that is stopped when dropped.
 #[derive(Debug)]
 pub struct ChildGuard {
@@ -53,13 +56,27 @@ impl ChildGuard {
         self.child.stdout.take()
     }
 
-    /// Reads the child's `ready` line (its stdout must be piped); its exit
-    /// or any other line is an error.
+    /// Reads the child's `ready` line (its stdout must be piped); its exit,
+    /// any other line, or no line within [`READY_WITHIN`] is an error (a
+    /// child stuck in its start would otherwise hold the benchmark forever).
     pub fn await_ready(&mut self, what: &str) -> Result<()> {
         use std::io::BufRead as _;
         let out = self.stdout().with_context(|| format!("{what}: no stdout"))?;
-        let mut line = String::new();
-        std::io::BufReader::new(out).read_line(&mut line).with_context(|| format!("{what}: reading readiness"))?;
+        let (tx, rx) = std::sync::mpsc::channel();
+        // the reader ends with the child's stdout: at its line, its exit, or
+        // when the guard stops the child after a timeout
+        std::thread::spawn(move || {
+            let mut line = String::new();
+            let r = std::io::BufReader::new(out).read_line(&mut line).map(|_| line);
+            let _ = tx.send(r);
+        });
+        let line = match rx.recv_timeout(READY_WITHIN) {
+            Ok(r) => r.with_context(|| format!("{what}: reading readiness"))?,
+            Err(_) => {
+                self.check_alive()?;
+                bail!("{what} did not say it was ready within {READY_WITHIN:?}; run with --verbose to see its log")
+            }
+        };
         if line.trim() != "ready" {
             self.check_alive()?;
             bail!("{what} did not become ready (said {line:?})");

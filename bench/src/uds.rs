@@ -24,6 +24,8 @@ impl UdsPing {
     /// Connects to the pong listening at `path`.
     pub fn connect(path: &Path, size: usize) -> Result<Self> {
         let stream = UnixStream::connect(path).with_context(|| format!("cannot connect to {}", path.display()))?;
+        // a pong that stopped answering is an error, not a benchmark that never ends
+        stream.set_read_timeout(Some(std::time::Duration::from_secs(10))).context("socket read timeout")?;
         Ok(UdsPing { stream, buf: vec![0u8; size.max(8)], seq: 0 })
     }
 
