@@ -23,7 +23,7 @@ mod server;
 mod token;
 
 pub use action::Action;
-pub use server::{Options, UiError, serve};
+pub use server::{Options, UiError, WRITE_TIMEOUT, serve};
 pub use token::{new_token, token_problem};
 
 /// What the page asks of the robot. `nerve ui` implements it with a router

@@ -71,6 +71,9 @@ pub struct Options {
     pub max_connections: usize,
     /// how long a request may take to arrive, from the connection on
     pub idle_timeout: Duration,
+    /// how long a write to a page may be stuck (a reader that stopped
+    /// reading) before its connection is dropped ([`WRITE_TIMEOUT`] by default)
+    pub write_timeout: Duration,
     /// host names (besides the bound address and loopback) the page may be
     /// reached by: `robot.local` or `robot.local:8080`
     pub allowed_hosts: Vec<String>,
@@ -103,8 +106,8 @@ const MIN_PAUSE: Duration = Duration::from_millis(20);
 /// closed browser is noticed.
 const KEEP_ALIVE: Duration = Duration::from_secs(10);
 /// A write that cannot go on this long (a reader that stopped reading)
-/// drops the connection.
-const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
+/// drops the connection: the default of [`Options::write_timeout`].
+pub const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// A request for the robot's thread.
 enum Call {
@@ -304,7 +307,7 @@ fn accept(listener: &TcpListener, shared: &Arc<Shared>, calls: &Calls) {
                 continue;
             }
         };
-        let _ = stream.set_write_timeout(Some(WRITE_TIMEOUT));
+        let _ = stream.set_write_timeout(Some(shared.opts.write_timeout));
         let _ = stream.set_nodelay(true);
         if shared.connections.fetch_add(1, Ordering::SeqCst) >= shared.opts.max_connections {
             shared.connections.fetch_sub(1, Ordering::SeqCst);
@@ -659,7 +662,7 @@ fn act(stream: TcpStream, req: &Request, shared: &Shared, calls: &Calls) {
 
 /// `GET /api/events`: the graph as server-sent events, on this connection's
 /// thread, until the page goes, the server stops, or a write stalls for
-/// [`WRITE_TIMEOUT`].
+/// [`Options::write_timeout`].
 fn event_stream(mut stream: TcpStream, shared: &Shared) {
     {
         let mut s = shared.hub.lock();
@@ -691,7 +694,7 @@ fn event_stream(mut stream: TcpStream, shared: &Shared) {
             write!(stream, "id: {seq}\ndata: {json}\n\n")
         };
         if let Err(e) = written.and_then(|()| stream.flush()) {
-            // the page was closed, or stopped reading for WRITE_TIMEOUT
+            // the page was closed, or stopped reading for the write timeout
             tracing::debug!(error = %e, "an event stream ended");
             break;
         }

@@ -206,6 +206,7 @@ pub fn ui(world: &World, a: UiArgs) -> Result<ExitCode> {
         max_clients: 16,
         max_connections: 32,
         idle_timeout: Duration::from_secs_f64(a.idle_timeout),
+        write_timeout: nerve_ui::WRITE_TIMEOUT,
         allowed_hosts: a.allow_host.clone(),
     };
     let node = cli_node(world)?;
