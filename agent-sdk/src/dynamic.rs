@@ -562,6 +562,32 @@ mod tests {
         assert!(SchemaOutput::create(&node, &service, other, "py").is_err(), "another layout published");
     }
 
+    /// What the Python binding's views rely on (issue 40): a loan and a
+    /// received sample keep their shared memory mapped after their port is
+    /// dropped, so a numpy view of either never outlives its memory. The
+    /// port is dropped first, then every byte is written and read back (a
+    /// write to memory that was unmapped would kill this test with SIGSEGV).
+    #[test]
+    fn a_loan_and_a_received_sample_outlive_their_ports() {
+        let world = World::new(&format!("dynlive{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+        let service = robot.port_service("py", "value");
+        let mut out = SchemaOutput::create(&node, &service, Scalar::schema(), "py").expect("output");
+        let (input, inner) = SchemaInput::new("in", Scalar::schema());
+        assert!(inner.connect(&node, &robot, "py", "value").expect("a reader"));
+        out.send_bytes(bytes_of(&Scalar { value: 4.5, stamp_ns: 3 })).expect("send");
+        let mut loan = out.loan(false).expect("loan");
+        let received = input.take().expect("take").expect("a sample");
+        drop(out);
+        drop((input, inner));
+        loan.bytes_mut().fill(0xab);
+        assert!(loan.bytes().iter().all(|b| *b == 0xab), "the loan's bytes after its port went");
+        assert_eq!(received.bytes(), bytes_of(&Scalar { value: 4.5, stamp_ns: 3 }), "the sample after its port went");
+        drop((loan, received));
+    }
+
     /// A schema from outside (Python, a recording) with an alignment
     /// iceoryx2 would divide by, or build a `Layout` from unchecked, never
     /// reaches it: both directions refuse it with the schema's own message.
