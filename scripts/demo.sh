@@ -2,13 +2,28 @@
 # The main job: on a fresh machine, install what is missing, build nerve, and
 # run the exploration experiment of the thesis (section 4.2) in simulation.
 # Plots, CSV logs and summary.json land in out/explore-<seed>/ (or $1).
+# It installs only what building and running nerve needs (`scripts/setup.sh`
+# without `--test`: no Chromium) and builds, in release, only the programs
+# the demo starts: `nerve` (router and demo) and the agents of
+# launch/explore.toml, not the benchmarks, the Python package or the test
+# agents (`cargo build --release --workspace --bins` builds everything).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-echo "== building nerve and its agents (release)"
-cargo build --release --workspace --bins
+# kind `K` in the launch file is the program `nerve-K` of package `nerve-K`
+kinds=$(sed -n 's/^kind = "\([a-z0-9-]*\)"$/\1/p' launch/explore.toml | sort -u)
+if [ -z "$kinds" ]; then
+    echo "demo.sh: found no agent kinds in launch/explore.toml" >&2
+    exit 1
+fi
+build=(-p nerve --bin nerve)
+for kind in $kinds; do
+    build+=(-p "nerve-$kind" --bin "nerve-$kind")
+done
+echo "== building nerve and the demo's agents (release): $(echo $kinds)"
+cargo build --release --locked "${build[@]}"
 out="${1:-out/explore-1}"
 echo "== running the exploration demo (about 2 minutes)"
-target/release/nerve --robot explore demo explore --seed 1 --out "$out"
+"${CARGO_TARGET_DIR:-target}/release/nerve" --robot explore demo explore --seed 1 --out "$out"
 echo
 echo "plots: $out/trajectory.png and $out/motion.png (SVG beside them); summary: $out/summary.json"

@@ -1,9 +1,14 @@
 #!/usr/bin/env bash
 # Installs the system packages nerve needs on a fresh Debian machine (which
 # has the Rust toolchain, cargo-nextest, gcc and Python). Idempotent: installs
-# only what is missing. Used by `.ci/run` and `scripts/demo.sh`.
+# only what is missing. Used by `scripts/demo.sh` (no flag: only what
+# building and running nerve needs) and `.ci/run` (`--test`).
+# `scripts/setup.sh --test` also installs what the tests alone need: socat,
+# systemd (`systemd-analyze`), iproute2 (network namespaces), python3-venv
+# and headless Chromium with its WebDriver (`nerve ui`'s page tests); the
+# flags combine (`--test --bench`).
 # `scripts/setup.sh --bench` also installs the peers of the benchmarks:
-# cyclictest (rt-tests) and ddsperf (cyclonedds-tools), and builds dora-rs
+# cyclictest (rt-tests), ddsperf (cyclonedds-tools) and Chromium, and builds dora-rs
 # (its CLI `dora` and the two nodes of bench/dora, both 1.1.0 from crates.io)
 # once into a cache outside the repository:
 # ${NERVE_BENCH_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/nerve-bench}/dora
@@ -12,15 +17,27 @@ set -euo pipefail
 if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
 export DEBIAN_FRONTEND=noninteractive
 bench=0
-if [ "${1:-}" = "--bench" ]; then bench=1; fi
+test=0
+for flag in "$@"; do
+    case "$flag" in
+        --bench) bench=1 ;;
+        --test) test=1 ;;
+        *) echo "setup.sh: unknown flag $flag (known: --test, --bench)" >&2; exit 2 ;;
+    esac
+done
 need=()
-command -v socat >/dev/null || need+=(socat)                       # linked pty pairs for serial work by hand
-command -v systemd-analyze >/dev/null || need+=(systemd)           # `systemd-analyze verify` of the unit files
-ls /usr/lib/llvm-*/lib/libclang*.so >/dev/null 2>&1 || need+=(libclang-dev)  # bindgen for the v4l camera backend
-command -v ip >/dev/null || need+=(iproute2)                       # network namespaces and veth pairs of the bridge tests
-command -v chromium >/dev/null || need+=(chromium)                 # `nerve ui`'s tests load the page in headless Chromium
-command -v chromedriver >/dev/null || need+=(chromium-driver)      # ... driven through WebDriver (tests/src/browser.rs)
-python3 -c 'import ensurepip' 2>/dev/null || need+=(python3-venv)  # the virtual environment of the MCAP reader (tests/tests/record.rs)
+# building nerve (the demo's only need): bindgen for iceoryx2's and the v4l camera backend's bindings
+ls /usr/lib/llvm-*/lib/libclang*.so >/dev/null 2>&1 || need+=(libclang-dev)
+if [ $test = 1 ]; then
+    command -v socat >/dev/null || need+=(socat)                       # linked pty pairs for serial work by hand
+    command -v systemd-analyze >/dev/null || need+=(systemd)           # `systemd-analyze verify` of the unit files
+    command -v ip >/dev/null || need+=(iproute2)                       # network namespaces and veth pairs of the bridge tests
+    command -v chromedriver >/dev/null || need+=(chromium-driver)      # `nerve ui`'s tests drive Chromium through WebDriver (tests/src/browser.rs)
+    python3 -c 'import ensurepip' 2>/dev/null || need+=(python3-venv)  # the virtual environment of the MCAP reader (tests/tests/record.rs)
+fi
+if [ $test = 1 ] || [ $bench = 1 ]; then
+    command -v chromium >/dev/null || need+=(chromium)                 # headless: `nerve ui`'s tests, and `nerve bench ui`'s page load
+fi
 if [ $bench = 1 ]; then
     command -v cyclictest >/dev/null || need+=(rt-tests)           # `nerve bench jitter`
     command -v ddsperf >/dev/null || need+=(cyclonedds-tools)      # `nerve bench hop`: Cyclone DDS
