@@ -5,7 +5,7 @@
 # the agents' start-up is measured with its own agents (BENCHMARKS.md
 # section 3, 2026-11-27 evening).
 #
-#   bash bench/results/control-ab-dirs.sh BEFORE_DIR AFTER_DIR [OUT_DIR] [ROUNDS]
+#   bash bench/scripts/control-ab-dirs.sh BEFORE_DIR AFTER_DIR [OUT_DIR] [ROUNDS]
 #
 # Each run's JSON and tables go to OUT_DIR/<before|after>-<round>/ (default
 # /tmp/control-ab-dirs); ROUNDS is the benchmark's --rounds (default 40).

@@ -4,7 +4,7 @@
 # before with iceoryx2's default room for expired connections (128, in its
 # agents and the benchmark's own client too), the other as it runs.
 #
-#   bash bench/results/control-ab.sh BEFORE_NERVE AFTER_NERVE [OUT_DIR]
+#   bash bench/scripts/control-ab.sh BEFORE_NERVE AFTER_NERVE [OUT_DIR]
 #
 # Agents and nerve-bench are taken from target/release; each run's JSON and
 # tables go to OUT_DIR/<before|after>-<round>/ (default /tmp/control-ab).

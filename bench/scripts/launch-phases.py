@@ -2,7 +2,7 @@
 (the file `nerve bench control` launches) from its stderr lines, three
 launches, each brought down after. BENCHMARKS.md section 3, 2026-11-27.
 
-    python3 bench/results/launch-phases.py [NERVE_BIN_DIR]   # default target/release
+    python3 bench/scripts/launch-phases.py [NERVE_BIN_DIR]   # default target/release
 """
 import os, shutil, subprocess, sys, tempfile, time
 
