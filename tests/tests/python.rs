@@ -254,5 +254,13 @@ period = "20ms"
         assert_eq!(vals[3], d["seq"].as_f64().expect("seq") - 1.0, "{v}");
     }
     assert_eq!(r.agent("loaner").map(|a| a["state"].clone()), Some("running".into()));
+    // review B13: numpy's pool runs before the agent forks into a daemon;
+    // the daemon's log says so, and what to do should it ever hang
+    let log = std::fs::read_to_string(r.home.join(&r.name).join("logs").join("loaner.log")).unwrap_or_default();
+    assert!(
+        log.contains("became a daemon (--daemon) by a fork while its interpreter ran")
+            && log.contains("OPENBLAS_NUM_THREADS=1"),
+        "no word of the threads at the fork in the agent's log:\n{log}"
+    );
     r.down_and_check_clean();
 }
