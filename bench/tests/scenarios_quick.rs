@@ -188,9 +188,19 @@ fn bridge_quick_measures_both_paths_and_the_local_cost() {
             assert!(x["rtt"]["n"].as_u64().unwrap_or(0) > 0, "{system} {size}: no round trips");
         }
     }
+    // the pair of bridges over mutual TLS, in the same rounds (issue 40)
+    for size in [8, 4096] {
+        let x = oneway
+            .iter()
+            .find(|x| x["system"] == "bridge-tls" && x["size"] == size)
+            .unwrap_or_else(|| panic!("no one-way result over TLS at {size} B"));
+        assert!(x["latency"]["n"].as_u64().unwrap_or(0) > 0, "TLS {size}: nothing crossed");
+    }
     let ow = &r["oneway_ratios"][0];
     assert!(ow["bridge_vs_zenoh_p50"].as_f64().is_some_and(|v| v > 0.0));
     assert!(ow["target_met"].is_boolean());
+    assert!(ow["tls_vs_plain_p50"].as_f64().is_some_and(|v| v > 0.0), "no TLS against plain ratio: {ow}");
+    assert!(r["tls_vs_plain_p50_8B"].as_f64().is_some_and(|v| v > 0.0) && r["tls_target"] == 1.15);
     let lo = &r["local_ratios"][0];
     assert!(lo["bridged_vs_alone_p50"].as_f64().is_some_and(|v| v > 0.0));
     assert!(lo["target_met"].is_boolean());
