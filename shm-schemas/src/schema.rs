@@ -136,6 +136,7 @@
 
 use serde::{Deserialize, Serialize};
 
+pub mod compat;
 mod plain;
 mod validate;
 pub use plain::{AnyBitPattern, Bool};
