@@ -1,27 +1,78 @@
 //! The monotonic clock of the thesis' Fig. 2-1: one time base for every
 //! agent (CLOCK_MONOTONIC, shared by all processes on the host) and sleeping
-//! to absolute deadlines, so that periodic tasks do not drift.
+//! to absolute deadlines, so that periodic tasks do not drift. On simulated
+//! time the same functions read the simulator's clock ([`crate::simclock`]).
 
 use std::time::Duration;
 
-/// Nanoseconds of CLOCK_MONOTONIC. Comparable across processes on one host.
+/// Nanoseconds of the robot's clock: CLOCK_MONOTONIC (comparable across
+/// processes on one host), or the simulated clock when the robot runs on
+/// simulated time ([`crate::simclock`], decided once per process). Every
+/// agent's `ctx.now_ns()`, deadline and sample stamp is read from here.
+#[inline]
 pub fn now_ns() -> u64 {
+    match crate::simclock::active() {
+        None => wall_now_ns(),
+        Some(c) => c.now_ns(),
+    }
+}
+
+/// Nanoseconds of CLOCK_MONOTONIC, whatever clock the robot runs on: for
+/// what is measured against the machine (CPU use, the simulated clock itself).
+#[inline]
+pub fn wall_now_ns() -> u64 {
     let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: `ts` is a valid, writable timespec.
     unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// Robot-clock nanoseconds since `at` (an [`std::time::Instant`] taken
+/// earlier, e.g. when a device's frame arrived): the wall time scaled when
+/// the robot runs on simulated time.
+pub fn elapsed_ns(at: std::time::Instant) -> u64 {
+    let wall = nanos(at.elapsed());
+    match crate::simclock::active() {
+        None => wall,
+        Some(c) => c.scaled(wall),
+    }
+}
+
 /// CLOCK_REALTIME in ns since 1970: the stamp that means something on
 /// another machine or in a file (the bridge's one-way latency, a
-/// recording's log time), as good as the clock's synchronisation.
+/// recording's log time), as good as the clock's synchronisation. Real
+/// time also on simulated time (see `docs/time.md`).
 pub fn unix_now_ns() -> u64 {
     std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
 }
 
-/// Sleeps until CLOCK_MONOTONIC reaches `deadline_ns` (absolute), restarting
-/// after signals. Returns at once if the deadline has passed.
+/// Sleeps until the robot's clock ([`now_ns`]) reaches `deadline_ns`
+/// (absolute), restarting after signals. Returns at once if the deadline
+/// has passed. On simulated time it sleeps the scaled wall time and looks
+/// again, until the simulator has got there.
 pub fn sleep_until_ns(deadline_ns: u64) {
+    match crate::simclock::active() {
+        None => sleep_until_wall_ns(deadline_ns),
+        Some(c) => c.sleep_until(deadline_ns),
+    }
+}
+
+/// Sleeps toward `deadline_ns` on the robot's clock for at most about
+/// `max_wall_ns` of wall time: returns at the deadline, or earlier when a
+/// simulator holds the clock short of it (the caller looks at what it
+/// watches, and sleeps again). `now_ns` is the caller's last [`now_ns`]: on
+/// the wall clock this sleeps to the nearer of the deadline and `now_ns +
+/// max_wall_ns`, reading no clock.
+pub fn sleep_toward_ns(deadline_ns: u64, now_ns: u64, max_wall_ns: u64) {
+    match crate::simclock::active() {
+        None => sleep_until_wall_ns(deadline_ns.min(now_ns.saturating_add(max_wall_ns))),
+        Some(c) => c.sleep_until_within(deadline_ns, max_wall_ns),
+    }
+}
+
+/// Sleeps until CLOCK_MONOTONIC reaches `deadline_ns` (absolute),
+/// restarting after signals.
+pub fn sleep_until_wall_ns(deadline_ns: u64) {
     let ts = libc::timespec {
         tv_sec: (deadline_ns / 1_000_000_000) as libc::time_t,
         tv_nsec: (deadline_ns % 1_000_000_000) as libc::c_long,

@@ -42,6 +42,7 @@ pub mod raw_port;
 pub mod router_events;
 pub mod rt;
 pub mod runtime;
+pub mod simclock;
 pub mod termination;
 pub mod testing;
 pub mod world;

@@ -1,5 +1,6 @@
 //! `nerve-sim`: the simulator as a nerve agent (kind `sim`). It runs a
-//! simulated robot in real time, publishes its devices as pseudo-terminals,
+//! simulated robot in real time (or, on simulated time, at the robot
+//! clock's scale, owning that clock: `docs/time.md`), publishes its devices as pseudo-terminals,
 //! its ground truth on a port and its camera frames in a short-term-memory
 //! ring.
 //!
@@ -419,6 +420,8 @@ impl Agent for SimAgent {
             dev_dir = %dev_dir.display(), step_s = dt, "simulator running"
         );
         self.sim = Some(sim);
+        // on simulated time the robot's clock is this simulator's: no agent runs past its step
+        agent_sdk::simclock::own();
         Ok(())
     }
 

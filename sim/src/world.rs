@@ -117,6 +117,9 @@ fn default_tube_z() -> [f64; 2] {
 struct WorldFile {
     #[serde(default)]
     name: Option<String>,
+    /// How many times as fast as real time the world runs on simulated time.
+    #[serde(default)]
+    time_scale: Option<f64>,
     robot: RobotStartsFile,
     #[serde(default)]
     wall: Vec<WallFile>,
@@ -418,6 +421,10 @@ pub struct World {
     /// Every robot's start, in file order; never empty. The first is the
     /// simulator's own robot.
     pub robots: Vec<RobotStart>,
+    /// `time_scale = 4.0`: the scale of simulated time this world runs at
+    /// when the robot runs on simulated time and no `--time-scale` is
+    /// given (`docs/time.md`); 1 when absent.
+    pub time_scale: Option<f64>,
 }
 
 fn v(p: [f64; 2]) -> Vec2 {
@@ -447,6 +454,14 @@ impl World {
             }
         };
 
+        if let Some(k) = file.time_scale {
+            let (lo, hi) = agent_sdk::simclock::SCALE_RANGE;
+            if !(k.is_finite() && (lo..=hi).contains(&k)) {
+                return Err(bad(format!(
+                    "time_scale = {k}: give how many times as fast as real time the world runs, from {lo} to {hi}"
+                )));
+            }
+        }
         if file.robot.0.is_empty() {
             return Err(bad("no robot: add a [robot] table (or [[robot]] tables) with its start x and y".into()));
         }
@@ -610,6 +625,7 @@ impl World {
             checkpoints,
             start,
             robots,
+            time_scale: file.time_scale,
         })
     }
 }
@@ -629,6 +645,16 @@ mod tests {
         assert_eq!(w.walls.len(), 2);
         assert!((w.walls[0].seg.b.x - 1.5).abs() < 1e-9);
         assert!((w.walls[1].seg.a.x - 2.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_world_names_its_time_scale_within_range() {
+        assert_eq!(parse("time_scale = 4.0\n[robot]\nx=1\ny=1\n").expect("valid").time_scale, Some(4.0));
+        assert_eq!(parse("[robot]\nx=1\ny=1\n").expect("valid").time_scale, None);
+        for bad in ["0", "-2", "1000", "nan"] {
+            let e = parse(&format!("time_scale = {bad}\n[robot]\nx=1\ny=1\n")).expect_err(bad);
+            assert!(e.to_string().contains("time_scale"), "{e}");
+        }
     }
 
     #[test]

@@ -154,12 +154,16 @@ impl Checker<'_> {
             }
             // before serving, so that statistics asked after a quiet while are fresh
             let now_ns = now_ns();
+            // on simulated time, CPU per simulated second (what the robot
+            // would use in real time: the resource manager's policy holds
+            // at any scale), but the guard against a runaway real-time
+            // task watches the machine's own time
             if now_ns.saturating_sub(last_cpu) >= 1_000_000_000 {
                 cpu.sample(now_ns);
                 last_cpu = now_ns;
             }
             if let Some((task, g, priority)) = &mut guard {
-                self.guard_task(task, g, *priority, now_ns);
+                self.guard_task(task, g, *priority, crate::clock::wall_now_ns());
             }
             if self.serve(server, &cpu, link, reply_id) || self.shared.stopping() {
                 return;

@@ -1,11 +1,13 @@
 //! The task thread: the agent's `start`, then its periodic loop (absolute
 //! deadlines, run-time period, lateness and overruns) or its event loop
 //! (a WaitSet of the inputs' listeners and a private wake-up event), each
-//! held while the agent is suspended, and the agent's `stop`.
+//! held while the agent is suspended, and the agent's `stop`. On simulated
+//! time the deadlines are the simulated clock's, and the simulator's task
+//! publishes how far the clock may run ([`crate::simclock`]).
 
 use super::Shared;
 use crate::agent::{Agent, AgentError, Context, Task};
-use crate::clock::{now_ns, sleep_until_ns};
+use crate::clock::{now_ns, sleep_toward_ns};
 use crate::ports::DynInput;
 use crate::world::Ipc;
 use iceoryx2::port::listener::Listener;
@@ -33,6 +35,16 @@ pub(super) fn task_main<A: Agent>(
         inputs: inputs.iter().map(|i| i.name().to_owned()).collect(),
         woken: vec![false; inputs.len()],
     };
+    match crate::simclock::check() {
+        Ok(None) => {}
+        Ok(Some(scale)) => tracing::info!(scale, "on simulated time"),
+        Err(e) => {
+            tracing::error!("{e}; stopping");
+            sh.request_stop();
+            let _ = started.send(Err(AgentError::Config(e.to_string())));
+            return;
+        }
+    }
     if let Err(e) = agent.start(&mut ctx) {
         tracing::error!("start failed: {e}; stopping");
         sh.request_stop();
@@ -123,7 +135,8 @@ fn periodic_loop<A: Agent>(agent: &mut A, sh: &Shared, ctx: &mut Context) {
             if now >= next {
                 break;
             }
-            sleep_until_ns(next.min(now.saturating_add(SLEEP_CHUNK_NS)));
+            // at most a chunk of wall time: also when a simulator holds the robot's clock
+            sleep_toward_ns(next, now, SLEEP_CHUNK_NS);
         }
         if sh.suspended.load(Ordering::Acquire) {
             wait_while_suspended(sh);
@@ -140,6 +153,12 @@ fn periodic_loop<A: Agent>(agent: &mut A, sh: &Shared, ctx: &mut Context) {
         ctx.now_ns = woke;
         ctx.period = Some(Duration::from_nanos(period));
         ctx.deadline_ns = next.max(1);
+        if crate::simclock::is_owner() {
+            // the simulator's step to `next + period` begins: the robot's clock may run to its end
+            if let Some(c) = crate::simclock::active() {
+                c.publish_horizon(next.saturating_add(period));
+            }
+        }
         run_step(agent, sh, ctx);
         let done = now_ns();
         {

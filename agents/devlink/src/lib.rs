@@ -392,6 +392,8 @@ pub fn open_link(device: &Option<PathBuf>, label: &str, missing: &str) -> Result
     let Some(path) = device else {
         return Err(agent_sdk::AgentError::Config(missing.into()));
     };
+    // a real board beside a simulated robot's clock is refused with what to do
+    agent_sdk::simclock::refuse_real_device(path).map_err(|e| agent_sdk::AgentError::Config(e.to_string()))?;
     DeviceLink::spawn(path, LinkOptions { backoff: Default::default(), label: label.into() })
         .map_err(|e| agent_sdk::AgentError::Device(e.to_string()))
 }

@@ -136,7 +136,7 @@ impl Agent for Head {
                         tilt_rad: f64::from(s.tilt_cdeg).to_radians() / 100.0,
                         target_pan_rad: pan,
                         target_tilt_rad: tilt,
-                        stamp_ns: now.saturating_sub(at.elapsed().as_nanos() as u64),
+                        stamp_ns: now.saturating_sub(agent_sdk::clock::elapsed_ns(at)),
                     };
                     if let Err(e) = self.out.send(state) {
                         result = Err(e.into());

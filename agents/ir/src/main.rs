@@ -85,7 +85,7 @@ impl Agent for Ir {
             }
             let sighting = IrSighting {
                 seq: self.seq,
-                stamp_ns: ctx.now_ns().saturating_sub(at.elapsed().as_nanos() as u64),
+                stamp_ns: ctx.now_ns().saturating_sub(agent_sdk::clock::elapsed_ns(at)),
                 seen: u8::from(seen.is_some()),
                 checkpoint_id: seen.map_or(0, |s| s.0),
                 transmitters: seen.map_or(0, |s| s.1),

@@ -210,7 +210,7 @@ impl Agent for Motor {
             while let Some(ev) = link.try_recv() {
                 match ev {
                     DeviceEvent::Message(Message::EncoderReport(r), at) => {
-                        reports.push((r, now.saturating_sub(at.elapsed().as_nanos() as u64)))
+                        reports.push((r, now.saturating_sub(agent_sdk::clock::elapsed_ns(at))))
                     }
                     DeviceEvent::Connected => self.last_report = None,
                     _ => {}

@@ -217,7 +217,8 @@ impl Agent for Resource {
                         importance,
                         period_ns: if v.task == TaskKind::Periodic { v.period_ns } else { None },
                         suspended: v.state == AgentState::Suspended,
-                        cpu_percent: p.map_or(0.0, |p| f64::from(p.cpu_usage())),
+                        // per simulated second on simulated time: the policy holds at any scale
+                        cpu_percent: p.map_or(0.0, |p| f64::from(p.cpu_usage())) / agent_sdk::simclock::scale(),
                     },
                     p.map_or(0, |p| p.memory()),
                 )

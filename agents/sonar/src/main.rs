@@ -25,7 +25,7 @@ use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
 use nerve_sonar::{DIRECTIONS, RiskEstimator, RiskParams, SeqUnwrapper};
 use shm_schemas::payloads::SonarScan;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// What `start` says when no `--device` was given.
 const NO_DEVICE: &str = "no device: give the sonar module's serial port after `--`, e.g. `nerve start sonar -- --device /dev/ttyUSB0` \
@@ -52,7 +52,8 @@ struct Sonar {
     artefacts: Param<u64>,
     estimator: RiskEstimator,
     seq: SeqUnwrapper,
-    t0: Instant,
+    /// The robot clock's ns at start: risk times count from here.
+    t0_ns: u64,
 }
 
 impl Agent for Sonar {
@@ -81,7 +82,7 @@ impl Agent for Sonar {
             artefacts: setup.param_checked("artefacts", 0u64, read_only),
             estimator: RiskEstimator::new(),
             seq: SeqUnwrapper::default(),
-            t0: Instant::now(),
+            t0_ns: agent_sdk::clock::now_ns(),
         })
     }
 
@@ -107,12 +108,12 @@ impl Agent for Sonar {
                 smoothing: self.smoothing.get(),
                 max_closing: self.max_closing.get(),
             };
-            let t = at.duration_since(self.t0).as_secs_f64();
+            // the stamp: when the device thread read it, on the SDK's clock
+            // (the robot's: simulated time when the simulator owns it)
+            let stamp_ns = ctx.now_ns().saturating_sub(agent_sdk::clock::elapsed_ns(at));
+            let t = stamp_ns.saturating_sub(self.t0_ns) as f64 / 1e9;
             let risk = self.estimator.update(t, &ranges, &p);
             let seq = self.seq.unwrap(s.seq);
-            // the stamp: when the device thread read it, on the SDK's clock
-            let age = at.elapsed().as_nanos() as u64;
-            let stamp_ns = ctx.now_ns().saturating_sub(age);
             let scan = SonarScan {
                 seq,
                 stamp_ns,
