@@ -225,6 +225,7 @@ fn describe<A: Agent>(args: &CommonArgs) -> Result<String, StartupError> {
         inputs: setup.inputs.iter().map(|i| i.spec()).collect(),
         outputs: setup.outputs.clone(),
         params: setup.params.snapshot(),
+        schemas: setup.schemas.clone(),
     };
     drop(agent);
     drop(setup);

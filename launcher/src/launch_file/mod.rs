@@ -25,16 +25,21 @@
 //! Parsing is strict (unknown keys are refused) and the whole file is
 //! checked before anything starts: syntax, names, unknown kinds, missing
 //! executables, duplicate names, periods, connections to unknown agents or
-//! ports, mismatched types. Ports and types come from each agent executable's
-//! `--describe`. Every problem is reported as `FILE:LINE: what, and what to do`.
+//! ports, mismatched types, and one type name laid out differently at the
+//! two ends (field by field, by the rule of the router and the agent,
+//! [`shm_schemas::schema::compat`]). Ports, types and layouts come from each
+//! agent executable's `--describe` (once per distinct executable, parameters
+//! and arguments). Every problem is reported as `FILE:LINE: what, and what
+//! to do`.
 
 use crate::kinds::resolve_kind;
 use agent_sdk::World;
 use agent_sdk::cpu_latency::CpuLatencySetting;
 use agent_sdk::rt::CpuList;
 use serde::Deserialize;
-use shm_schemas::control::agent_to_router::TaskKind;
+use shm_schemas::control::agent_to_router::{PortSpec, TaskKind};
 use shm_schemas::control::describe::Description;
+use shm_schemas::schema::compat::{self, Declared};
 use shm_schemas::{AgentName, PortRef, RobotName};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -600,7 +605,7 @@ pub fn load_with_args(
                 None
             }
             Some(a) => match a.description.outputs.iter().find(|o| o.name == from.port) {
-                Some(o) => Some(o.type_name.clone()),
+                Some(o) => Some(declared(a, o)),
                 None => {
                     let names: Vec<&str> = a.description.outputs.iter().map(|o| o.name.as_str()).collect();
                     cx.err(
@@ -625,7 +630,7 @@ pub fn load_with_args(
                 None
             }
             Some(a) => match a.description.inputs.iter().find(|i| i.name == to.port) {
-                Some(i) => Some(i.type_name.clone()),
+                Some(i) => Some(declared(a, i)),
                 None => {
                     let names: Vec<&str> = a.description.inputs.iter().map(|i| i.name.as_str()).collect();
                     cx.err(
@@ -642,10 +647,12 @@ pub fn load_with_args(
                 }
             },
         };
-        if let (Some(ft), Some(tt)) = (&from_type, &to_type)
-            && ft != tt
+        // the rule of the router and the agent, on the layouts the agents
+        // described: a difference is refused here, before anything starts
+        if let (Some(fd), Some(td)) = (from_type, to_type)
+            && let Err(e) = compat::check(fd, td)
         {
-            cx.err(&c.from, format!("cannot connect {from} to {to}: {from} sends {ft} but {to} takes {tt}"));
+            cx.err(&c.from, e.refusal(&from.to_string(), &to.to_string()));
             continue;
         }
         if from_type.is_some() && to_type.is_some() {
@@ -683,6 +690,19 @@ pub fn load_with_args(
         return Err(Box::new(LaunchErrors::of(&sources, errors)));
     }
     Ok((LaunchFile { path: path.to_path_buf(), agents, connections, allow_cycle }, world))
+}
+
+/// Port `spec` of agent `a`, with its layout when the agent described it.
+fn declared<'a>(a: &'a AgentSpec, spec: &'a PortSpec) -> Declared<'a> {
+    Declared {
+        type_name: &spec.type_name,
+        fingerprint: Some(spec.fingerprint),
+        schema: a
+            .description
+            .schemas
+            .iter()
+            .find(|s| s.type_name == spec.type_name && s.fingerprint() == spec.fingerprint),
+    }
 }
 
 fn list(v: &[&str]) -> String {

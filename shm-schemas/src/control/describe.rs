@@ -23,4 +23,8 @@ pub struct Description {
     pub outputs: Vec<PortSpec>,
     /// parameters with their default values
     pub params: Vec<(String, String)>,
+    /// the layout of each payload type of its ports, so that a launch file's
+    /// connections are checked field by field before anything starts
+    #[serde(default)]
+    pub schemas: Vec<crate::Schema>,
 }
