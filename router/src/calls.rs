@@ -140,6 +140,13 @@ impl Calls {
         ticket
     }
 
+    /// Queues `cmd` for the agent `name` under `ticket`, numbered by the
+    /// caller (the router's core numbers the commands it asks for); its
+    /// outcome comes as for [`Calls::submit`].
+    pub fn queue(&mut self, ticket: Ticket, name: &str, cmd: AgentCommand, timeout: Duration) {
+        self.links.entry(name.to_owned()).or_default().queue.push_back(Queued { ticket, cmd, timeout });
+    }
+
     /// An agent of this name registered (again): its next command goes
     /// through a freshly opened client, bound to the new instance's service.
     pub fn registered(&mut self, name: &str) {

@@ -13,7 +13,9 @@
 //! * [`supervision`]: restart policies, back-off, failure, persisted;
 //! * [`remembered`]: run-time state re-applied to a re-registering agent;
 //! * [`calls`]: commands to agents, sent without waiting;
-//! * `serving`: what each request does, as jobs that wait for agents;
+//! * `serving`: the core, a state machine without I/O: what each request
+//!   does, as jobs that wait for agents, and what to do about it (effects);
+//! * `driver`: looks at processes and carries the core's effects out;
 //! * this file: start-up and the serving loop.
 //!
 //! * **Never blocked by an agent**: the loop sleeps until a request comes
@@ -35,6 +37,7 @@
 //!   user's wiring, persisted, and is never dropped behind their back.
 
 pub mod calls;
+mod driver;
 pub mod events;
 pub mod journal;
 pub mod registry;
@@ -114,7 +117,7 @@ pub struct Router {
     /// `cli_server`)
     tool_socket: Option<ToolSocket<RouterRequest, RouterReply>>,
     epoch_pub: Publisher<Ipc, RouterEpoch, ()>,
-    state: serving::State,
+    state: driver::Driver,
 }
 
 impl std::fmt::Debug for Router {
@@ -198,25 +201,21 @@ impl Router {
             cli_server,
             tool_socket,
             epoch_pub,
-            state: serving::State {
-                world,
+            state: driver::Driver::new(
+                world.clone(),
                 node,
-                epoch,
-                registry: registry::Registry::default(),
-                wiring: wiring::Wiring::new(connections),
-                transient: transient::Transient::default(),
-                store,
-                saves: store::ListSaves::default(),
-                writer: store::Writer::start()
+                serving::State::new(
+                    epoch,
+                    connections,
+                    supervisor,
+                    store.path().to_owned(),
+                    world.logs_dir(),
+                    Instant::now(),
+                ),
+                store::Writer::start()
                     .map_err(|e| StartError::Other(format!("cannot start the persisting thread: {e}")))?,
-                supervisor,
-                remembered: remembered::Remembered::default(),
-                calls: calls::Calls::default(),
-                jobs: Vec::new(),
-                events: events::EventLog::default(),
-                shutdown: false,
-                last_gc: Instant::now(),
-            },
+                store.path().to_owned(),
+            ),
         })
     }
 
@@ -340,7 +339,7 @@ impl Router {
             };
             self.state.pump(&looks);
             poll = if progressed { Duration::from_micros(10) } else { (poll * 2).min(MAX_POLL_INTERVAL) };
-            if self.state.shutdown && self.state.jobs.is_empty() {
+            if self.state.core.stopped() {
                 break;
             }
             if tidy.due(Instant::now()) {
@@ -350,13 +349,11 @@ impl Router {
             }
             if last_liveness.elapsed() >= LIVENESS_PERIOD {
                 last_liveness = Instant::now();
-                self.state.check_liveness();
                 if last_sweep.elapsed() >= SWEEP_PERIOD {
                     last_sweep = Instant::now();
                     self.state.sweep();
                 }
-                self.state.run_restarts();
-                self.state.forget_gone();
+                self.state.tick();
                 self.server.tidy();
                 self.cli_server.tidy();
                 let _ = self.epoch_pub.update_connections();

@@ -1,15 +1,17 @@
 //! The registry: the agents live now, as they registered (name, pid, kind,
 //! task, ports, log file) and the state the router last set (running or
 //! suspended). It holds live agents only: a dead agent is removed by the
-//! liveness check ([`Registry::dead`]) and its supervision decides what
+//! liveness check (run by the router's driver) and its supervision decides what
 //! follows.
 //!
-//! A registration's pid is checked before it is believed ([`check_process`]):
-//! a buggy or hostile client could otherwise register another process's pid,
-//! which `nerve kill` and `nerve down` would then signal (reliability review
-//! R10). Each entry keeps a [`ProcessHandle`] taken at registration, so its
-//! liveness and `nerve kill` follow that process, not whatever has its pid
-//! later (R6).
+//! A registration's pid is checked before it is believed ([`check_process`],
+//! run by the router's driver): a buggy or hostile client could otherwise
+//! register another process's pid, which `nerve kill` and `nerve down` would
+//! then signal (reliability review R10). Each entry keeps the
+//! [`ProcessHandle`] (pid and start time) taken at registration, so that the
+//! driver's liveness checks and `nerve kill` follow that process, not
+//! whatever has its pid later (R6). The registry itself never looks at a
+//! process: it is told.
 //!
 //! The schemas a registration carries (one per payload type of its ports)
 //! must be valid ([`shm_schemas::Schema::validate`]): tools decode samples
@@ -43,8 +45,14 @@ pub struct Registry {
 impl Registry {
     /// Adds `reg` (of the process `process`, see [`check_process`]),
     /// replacing an earlier instance of the same name that is dead; refuses
-    /// a bad name or a name a live process holds.
-    pub fn register(&mut self, reg: Registration, process: ProcessHandle) -> Result<(), RouterError> {
+    /// a bad name or a name a live process holds (`holder_alive`: the
+    /// registered instance of this name, if its pid is another, still runs).
+    pub fn register(
+        &mut self,
+        reg: Registration,
+        process: ProcessHandle,
+        holder_alive: bool,
+    ) -> Result<(), RouterError> {
         AgentName::new(&reg.name).map_err(|e| RouterError::InvalidName(e.to_string()))?;
         for schema in &reg.schemas {
             schema.validate().map_err(|e| RouterError::RegistrationRefused {
@@ -55,7 +63,7 @@ impl Registry {
         }
         if let Some(existing) = self.agents.get(&reg.name)
             && existing.reg.pid != reg.pid
-            && existing.process.is_alive()
+            && holder_alive
         {
             return Err(RouterError::DuplicateName { name: reg.name, pid: existing.reg.pid });
         }
@@ -73,15 +81,9 @@ impl Registry {
         false
     }
 
-    /// Removes the agents whose process is gone (a few `/proc` reads);
-    /// returns their names and pids.
-    pub fn dead(&mut self) -> Vec<(String, u32)> {
-        let dead: Vec<(String, u32)> =
-            self.agents.iter().filter(|(_, e)| !e.process.is_alive()).map(|(n, e)| (n.clone(), e.reg.pid)).collect();
-        for (name, _) in &dead {
-            self.agents.remove(name);
-        }
-        dead
+    /// Removes `name` if its pid is `pid` (an agent found dead); whether it did.
+    pub fn remove_dead(&mut self, name: &str, pid: u32) -> bool {
+        self.unregister(name, pid)
     }
 
     /// The live agent `name`.
@@ -236,7 +238,7 @@ mod tests {
         let mut bad = shm_schemas::payloads::Tick::schema();
         bad.align = 0;
         reg.schemas = vec![shm_schemas::payloads::Scalar::schema(), bad];
-        match registry.register(reg.clone(), me()) {
+        match registry.register(reg.clone(), me(), false) {
             Err(e @ RouterError::RegistrationRefused { .. }) => {
                 let text = e.to_string();
                 assert!(text.contains("schema nerve::Tick: align 0 is not a power of two"), "{text}");
@@ -245,7 +247,7 @@ mod tests {
         }
         assert!(!registry.contains("t1"));
         reg.schemas.pop();
-        registry.register(reg, me()).expect("valid schemas register");
+        registry.register(reg, me(), false).expect("valid schemas register");
         assert!(registry.contains("t1"));
     }
 

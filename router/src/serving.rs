@@ -1,10 +1,19 @@
-//! What each request does. The router's state ([`State`]) and its answer to
-//! every request, agent or command line.
+//! The router's core: what the router knows and its answer to every input,
+//! as a state machine without I/O.
+//!
+//! [`State::handle`] takes one [`Input`] (a request of an agent or a tool,
+//! an agent's reply, a save on disk, a death, the liveness tick) with the
+//! time it came, changes the state, and returns the [`Effect`]s to carry
+//! out: a command to an agent, a save, a spawn, a kill, a reply. It holds no
+//! iceoryx2 node, no thread and no process, and reads no clock of its own:
+//! `crate::driver` looks at processes and carries the effects out, and the
+//! unit tests (`serving/tests.rs`) drive it directly, every request and
+//! every fault the end-to-end tests inject, in milliseconds.
 //!
 //! A request the router can answer from what it knows (register, `Supervise`,
 //! a refused `connect`) is answered at once. One that needs agents becomes a
-//! [`Job`]: its commands go out through [`Calls`], the job keeps the
-//! caller's [`Responder`], and it is answered when the last outcome is in.
+//! [`Job`]: its commands go out as [`Effect::Send`], the job keeps the
+//! caller's [`RequestId`], and it is answered when the last outcome is in.
 //! Nothing here waits, so a hung agent delays its own commands only
 //! (reliability review R5, F2c).
 //!
@@ -12,34 +21,188 @@
 //! (F2d, F2e): an edge leaves the list when its input agent has let go of
 //! it (or is not running), a `Suspend` marks the agent suspended when it
 //! obeyed, and a `Stop` cancels the agent's restarts only when it obeyed.
+//! The connection list is saved once per change, after the agent answered,
+//! and the change is answered once that save is on disk (review R11a).
 
-use crate::calls::{AGENT_TIMEOUT, Calls, Looks, Outcome, STATS_TIMEOUT, Ticket};
+use crate::calls::{AGENT_TIMEOUT, Outcome, STATS_TIMEOUT, Ticket};
 use crate::events::EventLog;
 use crate::registry::{Entry, Registry};
 use crate::remembered::{self, FORGET_AFTER, Remembered};
-use crate::store::{Connection, ListSaves, Saved, Store, Writer};
+use crate::store::{Connection, Store};
 use crate::supervision::{Exit, Supervisor};
 use crate::transient::{Attached, Transient};
 use crate::wiring::{self, Wiring};
-use agent_sdk::control::Responder;
-use agent_sdk::process::{ProcessError, ProcessHandle};
-use agent_sdk::world::{Ipc, World};
-use iceoryx2::prelude::Node;
+use agent_sdk::process::ProcessHandle;
 use shm_schemas::control::ProtocolError;
-use shm_schemas::control::agent_to_router::{AgentToRouter, PortSpec, Registration, TaskKind};
+use shm_schemas::control::agent_to_router::{PortSpec, Registration, TaskKind};
 use shm_schemas::control::cli_to_router::{
-    AgentState, AgentView, CliRequest, EventKind, GraphView, RouterError, RouterReply, RouterRequest,
+    AgentState, AgentView, CliRequest, EventKind, GraphView, RouterError, RouterReply,
 };
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
 use shm_schemas::cycles::event_cycle;
 use shm_schemas::stats::AgentStats;
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
+
+#[cfg(test)]
+mod tests;
 
 /// How often names gone for long are looked for.
 const GC_PERIOD: Duration = Duration::from_secs(60);
 /// How long `nerve kill` waits for the process to be gone.
-const KILL_WAIT: Duration = Duration::from_millis(500);
+pub const KILL_WAIT: Duration = Duration::from_millis(500);
+
+/// Names a request whose reply is owed ([`Effect::Reply`]); given by the driver.
+pub type RequestId = u64;
+/// Names a save of the connection list ([`Effect::SaveList`], [`Input::Saved`]).
+pub type SaveId = u64;
+
+/// What the router's core is told.
+#[derive(Debug)]
+pub enum Input {
+    /// An agent registers. `process`: its pid as the driver found it
+    /// ([`crate::registry::check_process`]); `holder_alive`: the instance
+    /// registered under this name with another pid still runs.
+    Register {
+        /// the request
+        id: RequestId,
+        /// what the agent sent
+        reg: Registration,
+        /// its process, or why it is not believed
+        process: Result<ProcessHandle, RouterError>,
+        /// the name's registered holder (another pid) is alive
+        holder_alive: bool,
+    },
+    /// An agent leaves cleanly.
+    Unregister {
+        /// the request
+        id: RequestId,
+        /// agent
+        name: String,
+        /// its pid
+        pid: u32,
+    },
+    /// A request of the command line or a tool. `tool`: for `Attach`, the
+    /// tool's process as the driver found it.
+    Cli {
+        /// the request
+        id: RequestId,
+        /// what was asked
+        req: CliRequest,
+        /// the attaching tool's process, or why there is none
+        tool: Option<Result<ProcessHandle, String>>,
+    },
+    /// An agent answered a command (or did not in time, or is gone).
+    Outcome(Outcome),
+    /// A save of the connection list is done (or failed, saying why).
+    Saved {
+        /// which save
+        save: SaveId,
+        /// done, or why not
+        result: Result<(), String>,
+    },
+    /// A kill asked for by [`Effect::Kill`] is over: whether the process is
+    /// still there after [`KILL_WAIT`], or why it could not be signalled.
+    Killed {
+        /// the kill's ticket
+        ticket: Ticket,
+        /// still alive, or the error
+        result: Result<bool, RouterError>,
+    },
+    /// The liveness check: agents whose process is gone (name, pid) and
+    /// tools (pids) that fed an input and are gone.
+    Liveness {
+        /// dead agents
+        dead: Vec<(String, u32)>,
+        /// pids of tools gone
+        gone_tools: Vec<u32>,
+    },
+    /// The start-up process of a restarted agent failed before it registered.
+    StartFailed {
+        /// agent
+        name: String,
+    },
+    /// The liveness tick: restarts due, agents missing after a router
+    /// restart, names gone for long.
+    Tick,
+}
+
+/// What the router's core asks to be done, in order.
+#[derive(Debug, Clone)]
+pub enum Effect {
+    /// Answer request `id`.
+    Reply {
+        /// the request
+        id: RequestId,
+        /// the answer
+        reply: RouterReply,
+    },
+    /// Queue a command to an agent; its outcome comes back as [`Input::Outcome`].
+    Send {
+        /// names the outcome
+        ticket: Ticket,
+        /// agent
+        agent: String,
+        /// command
+        cmd: AgentCommand,
+        /// how long to wait for the reply once sent
+        timeout: Duration,
+    },
+    /// An agent of this name registered: reach it through a fresh client.
+    Reach {
+        /// agent
+        agent: String,
+    },
+    /// An agent left or died: drop its client once nothing is pending.
+    Release {
+        /// agent
+        agent: String,
+    },
+    /// Save the connection list (through its journal); done is told by [`Input::Saved`].
+    SaveList {
+        /// names the save
+        save: SaveId,
+        /// the file's bytes ([`Store::encode`])
+        body: Vec<u8>,
+    },
+    /// Write a file atomically (the supervision list), nobody waiting.
+    Write {
+        /// file
+        path: PathBuf,
+        /// bytes
+        body: Vec<u8>,
+    },
+    /// Remove a file (the supervision list at `nerve down`).
+    Remove {
+        /// file
+        path: PathBuf,
+    },
+    /// Start an agent again (supervision); a failed start comes back as
+    /// [`Input::StartFailed`].
+    Spawn {
+        /// agent
+        name: String,
+        /// command line
+        argv: Vec<String>,
+        /// where it was launched
+        cwd: Option<String>,
+        /// its restart count
+        restart: u32,
+    },
+    /// SIGKILL this process and wait up to [`KILL_WAIT`] for it to go;
+    /// [`Input::Killed`] tells the end.
+    Kill {
+        /// names the end
+        ticket: Ticket,
+        /// agent
+        name: String,
+        /// its process as registered
+        process: ProcessHandle,
+    },
+    /// Clean up the shared-memory resources of dead nodes.
+    Sweep,
+}
 
 /// What a job does when its outcomes are in.
 #[derive(Debug)]
@@ -58,14 +221,15 @@ enum Work {
     Detach { conn: Connection },
     /// `rate`, `suspend`, `resume`, `param get/set`, `stop`
     Command { name: String, what: Asked },
-    /// `kill`: the process is gone
-    Kill { name: String, process: ProcessHandle, until: Instant },
+    /// `kill`: the process is gone (or the wait is over, or it could not be
+    /// signalled)
+    Kill { name: String, pid: u32, over: Option<Result<bool, RouterError>> },
     /// re-applying remembered state or a connection to a re-registered
     /// agent: logged, nobody waits
     Background { name: String, what: String, effect: Asked },
-    /// `connect`/`disconnect` done (or refused: `refused`): answered once
-    /// the connection list is on disk (review R11a)
-    Saved { saved: Saved, what: String, refused: Option<RouterError> },
+    /// `connect`/`disconnect` done: answered once the connection list is
+    /// on disk (review R11a)
+    Saved { save: SaveId, what: String, done: Option<Result<(), String>> },
 }
 
 impl Work {
@@ -106,7 +270,7 @@ enum Asked {
 /// A request waiting for agents.
 #[derive(Debug)]
 pub struct Job {
-    reply: Option<Responder<RouterReply>>,
+    reply: Option<RequestId>,
     waiting: Vec<Ticket>,
     outcomes: Vec<Outcome>,
     work: Work,
@@ -117,33 +281,48 @@ pub struct Job {
 
 impl Job {
     /// A job waiting for `waiting`, answered to nobody yet (the caller's
-    /// responder is set when a request made it), timed from now.
-    fn new(waiting: Vec<Ticket>, work: Work) -> Job {
-        Job { reply: None, waiting, outcomes: Vec::new(), work, since: Instant::now() }
+    /// request is set when a request made it), timed from `now`.
+    fn new(waiting: Vec<Ticket>, work: Work, now: Instant) -> Job {
+        Job { reply: None, waiting, outcomes: Vec::new(), work, since: now }
+    }
+
+    /// Whether it has all it waits for.
+    fn ready(&self) -> bool {
+        match &self.work {
+            Work::Kill { over, .. } => over.is_some(),
+            Work::Saved { done, .. } => done.is_some(),
+            _ => self.waiting.is_empty(),
+        }
     }
 }
 
 /// Everything the router knows.
+#[derive(Debug)]
 pub struct State {
-    pub(crate) world: World,
-    pub(crate) node: Node<Ipc>,
     pub(crate) epoch: u64,
     pub(crate) registry: Registry,
     pub(crate) wiring: Wiring,
     /// the edges of tools (`nerve cmd`), never saved
     pub(crate) transient: Transient,
-    pub(crate) store: Store,
-    pub(crate) writer: Writer,
-    /// the connection list's saves
-    pub(crate) saves: ListSaves,
+    /// the connection list's file, named in a failed save's message
+    list_file: PathBuf,
+    /// the robot's log folder (`<name>.log`)
+    logs_dir: PathBuf,
     pub(crate) supervisor: Supervisor,
     pub(crate) remembered: Remembered,
-    pub(crate) calls: Calls,
     pub(crate) jobs: Vec<Job>,
     /// what happened in the graph, for `CliRequest::Events`
     pub(crate) events: EventLog,
     pub(crate) shutdown: bool,
-    pub(crate) last_gc: Instant,
+    last_gc: Option<Instant>,
+    /// the last ticket given to a command or a kill
+    ticket: Ticket,
+    /// the last save of the connection list asked for
+    save: SaveId,
+    /// the effects of the input being handled
+    out: Vec<Effect>,
+    /// the time of the input being handled
+    now: Instant,
 }
 
 /// The answer to a request the router cannot decode.
@@ -151,46 +330,176 @@ pub fn protocol_error(e: ProtocolError) -> RouterReply {
     RouterReply::Error(RouterError::Internal(e.to_string()))
 }
 
-fn answer(reply: Option<Responder<RouterReply>>, r: Result<RouterReply, RouterError>) {
-    if let Some(responder) = reply {
-        let r = r.unwrap_or_else(RouterReply::Error);
-        responder.respond_or(&r, protocol_error);
-    }
+/// How a command-line request starts.
+enum Started {
+    /// answered at once
+    Answer(RouterReply),
+    /// waits for agents
+    Job(Box<Job>),
 }
 
 impl State {
-    /// Takes a request: answers it, or makes it a job.
-    pub fn accept(&mut self, req: Result<RouterRequest, ProtocolError>, responder: Responder<RouterReply>) {
-        let req = match req {
-            Ok(r) => r,
-            Err(e) => return responder.respond_or(&protocol_error(e), protocol_error),
-        };
-        match req {
-            RouterRequest::Agent(AgentToRouter::Register(reg)) => {
-                let reply = self.register(reg);
-                responder.respond_or(&reply, protocol_error);
-            }
-            RouterRequest::Agent(AgentToRouter::Unregister { name, pid }) => {
-                if self.registry.unregister(&name, pid) {
-                    tracing::info!(agent = %name, pid, "agent {name} (pid {pid}) left");
-                    self.events.push(EventKind::Left { agent: name.clone(), pid });
-                    self.calls.left(&name);
-                    self.exited(&name, false);
-                }
-                responder.respond_or(&RouterReply::Ok, protocol_error);
-            }
-            RouterRequest::Cli(cli) => match self.cli(cli) {
-                Ok(Started::Answer(reply)) => responder.respond_or(&reply, protocol_error),
-                Ok(Started::Job(mut job)) => {
-                    job.reply = Some(responder);
-                    self.jobs.push(*job);
-                }
-                Err(e) => responder.respond_or(&RouterReply::Error(e), protocol_error),
-            },
+    /// The router's state at start: `connections` and `supervisor` as the
+    /// last router saved them; the connection list's file and the log
+    /// folder are named in messages and views.
+    pub fn new(
+        epoch: u64,
+        connections: Vec<Connection>,
+        supervisor: Supervisor,
+        list_file: PathBuf,
+        logs_dir: PathBuf,
+        now: Instant,
+    ) -> State {
+        State {
+            epoch,
+            registry: Registry::default(),
+            wiring: Wiring::new(connections),
+            transient: Transient::default(),
+            list_file,
+            logs_dir,
+            supervisor,
+            remembered: Remembered::default(),
+            jobs: Vec::new(),
+            events: EventLog::default(),
+            shutdown: false,
+            last_gc: Some(now),
+            ticket: 0,
+            save: 0,
+            out: Vec::new(),
+            now,
         }
     }
 
-    fn register(&mut self, reg: Registration) -> RouterReply {
+    /// Takes `input`, which came at `now`; returns what to do, in order.
+    pub fn handle(&mut self, now: Instant, input: Input) -> Vec<Effect> {
+        self.now = now;
+        match input {
+            Input::Register { id, reg, process, holder_alive } => {
+                let reply = self.register(reg, process, holder_alive);
+                self.reply(id, reply);
+            }
+            Input::Unregister { id, name, pid } => {
+                if self.registry.unregister(&name, pid) {
+                    tracing::info!(agent = %name, pid, "agent {name} (pid {pid}) left");
+                    self.events.push(EventKind::Left { agent: name.clone(), pid });
+                    self.out.push(Effect::Release { agent: name.clone() });
+                    self.exited(&name, false);
+                }
+                self.reply(id, RouterReply::Ok);
+            }
+            Input::Cli { id, req, tool } => match self.cli(req, tool) {
+                Ok(Started::Answer(reply)) => self.reply(id, reply),
+                Ok(Started::Job(mut job)) => {
+                    job.reply = Some(id);
+                    self.jobs.push(*job);
+                }
+                Err(e) => self.reply(id, RouterReply::Error(e)),
+            },
+            Input::Outcome(o) => {
+                if let Some(job) = self.jobs.iter_mut().find(|j| j.waiting.contains(&o.ticket)) {
+                    job.waiting.retain(|t| *t != o.ticket);
+                    job.outcomes.push(o);
+                }
+            }
+            Input::Saved { save, result } => {
+                for job in &mut self.jobs {
+                    if let Work::Saved { save: s, done, .. } = &mut job.work
+                        && *s == save
+                    {
+                        *done = Some(result.clone());
+                    }
+                }
+            }
+            Input::Killed { ticket, result } => {
+                if let Some(job) = self.jobs.iter_mut().find(|j| j.waiting.contains(&ticket)) {
+                    job.waiting.clear();
+                    if let Work::Kill { over, .. } = &mut job.work {
+                        *over = Some(result);
+                    }
+                }
+            }
+            Input::Liveness { dead, gone_tools } => self.liveness(&dead, &gone_tools),
+            Input::StartFailed { name } => {
+                if !self.registry.contains(&name) {
+                    tracing::warn!(agent = %name, "the restarted {name} could not start (see its log)");
+                    self.exited(&name, true);
+                }
+            }
+            Input::Tick => self.tick(),
+        }
+        self.settle();
+        std::mem::take(&mut self.out)
+    }
+
+    /// Whether requests wait for agents, a kill or the disk.
+    pub fn busy(&self) -> bool {
+        !self.jobs.is_empty()
+    }
+
+    /// Whether the router is stopping and owes no answer any more.
+    pub fn stopped(&self) -> bool {
+        self.shutdown && self.jobs.is_empty()
+    }
+
+    fn reply(&mut self, id: RequestId, reply: RouterReply) {
+        self.out.push(Effect::Reply { id, reply });
+    }
+
+    /// Asks for `cmd` to be sent to `agent`; its ticket.
+    fn send(&mut self, agent: &str, cmd: AgentCommand, timeout: Duration) -> Ticket {
+        self.ticket = self.ticket.wrapping_add(1);
+        let ticket = self.ticket;
+        self.out.push(Effect::Send { ticket, agent: agent.to_owned(), cmd, timeout });
+        ticket
+    }
+
+    /// Asks for `cmd` to be sent to the live agent `name`, or says it is not live.
+    fn submit(&mut self, name: &str, cmd: AgentCommand, timeout: Duration) -> Result<Ticket, RouterError> {
+        self.registry.live(name)?;
+        Ok(self.send(name, cmd, timeout))
+    }
+
+    /// A job of nobody's waiting for `tickets`, from now.
+    fn job(&self, tickets: Vec<Ticket>, work: Work) -> Job {
+        Job::new(tickets, work, self.now)
+    }
+
+    /// Asks for the supervision list to be saved.
+    fn persist_supervision(&mut self) {
+        self.out.push(Effect::Write { path: self.supervisor.path().to_owned(), body: self.supervisor.encode() });
+    }
+
+    /// Asks for the connection list to be saved; the save to wait for.
+    fn persist_wiring(&mut self) -> SaveId {
+        self.save = self.save.wrapping_add(1);
+        self.out.push(Effect::SaveList { save: self.save, body: Store::encode(self.wiring.list()) });
+        self.save
+    }
+
+    /// The job that answers `what` (done) once save `save` is on disk.
+    fn when_saved(&self, save: SaveId, what: String) -> Job {
+        self.job(Vec::new(), Work::Saved { save, what, done: None })
+    }
+
+    /// Answers the jobs that have all they wait for.
+    fn settle(&mut self) {
+        let mut i = 0;
+        while i < self.jobs.len() {
+            if self.jobs[i].ready() {
+                let job = self.jobs.swap_remove(i);
+                self.finish(job);
+            } else {
+                i += 1;
+            }
+        }
+    }
+
+    fn register(
+        &mut self,
+        reg: Registration,
+        process: Result<ProcessHandle, RouterError>,
+        holder_alive: bool,
+    ) -> RouterReply {
         let name = reg.name.clone();
         let summary = format!(
             "kind {}, pid {}, {}, inputs [{}], outputs [{}]",
@@ -201,23 +510,24 @@ impl State {
             reg.outputs.iter().map(|p| format!("{}: {}", p.name, p.type_name)).collect::<Vec<_>>().join(", ")
         );
         let pid = reg.pid;
-        let process = match crate::registry::check_process(&reg, &self.world) {
+        let process = match process {
             Ok(p) => p,
             Err(e) => {
                 tracing::warn!(agent = %name, pid, "{e}");
                 return RouterReply::Error(e);
             }
         };
-        if let Err(e) = self.registry.register(reg, process) {
+        if let Err(e) = self.registry.register(reg, process, holder_alive) {
             return RouterReply::Error(e);
         }
         tracing::info!(agent = %name, pid, "agent {name} registered: {summary}");
         self.events.push(EventKind::Registered { agent: name.clone(), pid });
         self.supervisor.registered(&name);
-        self.calls.registered(&name);
-        // Sent after this reply, by the next pump: the agent goes on starting
-        // its threads meanwhile. Its own inputs' connections travel in the
-        // reply unless something re-applied must come first (a suspend).
+        self.out.push(Effect::Reach { agent: name.clone() });
+        // Sent after this reply, by the driver's next pump: the agent goes
+        // on starting its threads meanwhile. Its own inputs' connections
+        // travel in the reply unless something re-applied must come first
+        // (a suspend).
         let reapplied = self.reapply(&name);
         let first = self.rewire(&name, !reapplied);
         RouterReply::Registered { epoch: self.epoch, first }
@@ -251,9 +561,10 @@ impl State {
         }
         let queued = !todo.is_empty();
         for (cmd, what, effect) in todo {
-            let ticket = self.calls.submit(name, cmd, AGENT_TIMEOUT);
+            let ticket = self.send(name, cmd, AGENT_TIMEOUT);
             let work = Work::Background { name: name.into(), what: format!("re-applied to {name}: {what}"), effect };
-            self.jobs.push(Job::new(vec![ticket], work));
+            let job = self.job(vec![ticket], work);
+            self.jobs.push(job);
         }
         queued
     }
@@ -273,13 +584,14 @@ impl State {
                 first.push(cmd);
                 continue;
             }
-            let ticket = self.calls.submit(&agent, cmd, AGENT_TIMEOUT);
+            let ticket = self.send(&agent, cmd, AGENT_TIMEOUT);
             let work = Work::Background {
                 name: agent,
                 what: format!("rewired {} -> {}", c.from, c.to),
                 effect: Asked::Nothing,
             };
-            self.jobs.push(Job::new(vec![ticket], work));
+            let job = self.job(vec![ticket], work);
+            self.jobs.push(job);
         }
         first
     }
@@ -290,7 +602,7 @@ impl State {
         for a in self.transient.into_agent(name) {
             self.events.push(EventKind::Disconnected { from: a.conn.from, to: a.conn.to });
         }
-        let exit = if self.shutdown { Exit::Left } else { self.supervisor.exited(name, failure, Instant::now()) };
+        let exit = if self.shutdown { Exit::Left } else { self.supervisor.exited(name, failure, self.now) };
         match exit {
             Exit::Left => {}
             Exit::Restart(delay) => {
@@ -309,60 +621,45 @@ impl State {
                     restarts,
                     "agent {name} failed: {restarts} restarts within {window:?}; not restarting it (see its log, fix it, then `nerve start` it or launch again)"
                 );
-                self.supervisor.persist(&self.writer);
+                self.persist_supervision();
             }
         }
     }
 
-    /// Removes dead agents from the registry and cleans their resources.
-    pub fn check_liveness(&mut self) {
-        if !self.transient.is_empty() {
-            self.detach_orphans();
-        }
-        let dead = self.registry.dead();
-        if dead.is_empty() {
-            return;
-        }
-        for (name, pid) in &dead {
-            tracing::warn!(agent = %name, pid, "agent {name} (pid {pid}) died; its connections are kept for its restart");
-            self.events.push(EventKind::Died { agent: name.clone(), pid: *pid });
-            self.calls.left(name);
-            self.exited(name, true);
-        }
-        self.sweep();
-    }
-
-    /// Has agents let go of the ports of tools that are gone (a `nerve cmd`
-    /// killed before it detached).
-    fn detach_orphans(&mut self) {
-        for a in self.transient.orphaned() {
+    /// Takes the dead out of the registry and has agents let go of the
+    /// ports of tools that are gone (a `nerve cmd` killed before it
+    /// detached); the dead agents' connections are kept for their restart.
+    fn liveness(&mut self, dead: &[(String, u32)], gone_tools: &[u32]) {
+        for a in self.transient.orphaned(|p| gone_tools.contains(&p.pid())) {
             let (from, to) = (a.conn.from.clone(), a.conn.to.clone());
             self.events.push(EventKind::Disconnected { from: from.clone(), to: to.clone() });
             let (agent, cmd) = Wiring::disconnect_command(&a.conn);
             let what = format!("{to} let go of {from}, whose tool (pid {}) is gone", a.process.pid());
-            let ticket = self.calls.submit(&agent, cmd, AGENT_TIMEOUT);
-            self.jobs.push(Job::new(vec![ticket], Work::Background { name: agent, what, effect: Asked::Nothing }));
+            let ticket = self.send(&agent, cmd, AGENT_TIMEOUT);
+            let job = self.job(vec![ticket], Work::Background { name: agent, what, effect: Asked::Nothing });
+            self.jobs.push(job);
         }
-    }
-
-    /// Cleans up after dead processes that were not agents (tools, programs).
-    pub fn sweep(&mut self) {
-        let cleaned = self.world.cleanup_dead_nodes();
-        if cleaned > 0 {
-            tracing::info!(cleaned, "cleaned the shared-memory resources of {cleaned} dead node(s)");
-        }
-    }
-
-    /// Starts the supervised agents whose back-off has passed, and counts
-    /// as dead those an earlier router expected and that never came back.
-    pub fn run_restarts(&mut self) {
-        for name in self.supervisor.reap() {
-            if !self.registry.contains(&name) {
-                tracing::warn!(agent = %name, "the restarted {name} could not start (see its log)");
-                self.exited(&name, true);
+        let mut died = false;
+        for (name, pid) in dead {
+            if !self.registry.remove_dead(name, *pid) {
+                continue;
             }
+            died = true;
+            tracing::warn!(agent = %name, pid, "agent {name} (pid {pid}) died; its connections are kept for its restart");
+            self.events.push(EventKind::Died { agent: name.clone(), pid: *pid });
+            self.out.push(Effect::Release { agent: name.clone() });
+            self.exited(name, true);
         }
-        let now = Instant::now();
+        if died {
+            self.out.push(Effect::Sweep);
+        }
+    }
+
+    /// The liveness tick: counts as dead the agents an earlier router
+    /// expected and that never came back, starts the supervised agents
+    /// whose back-off has passed, and forgets names gone for long.
+    fn tick(&mut self) {
+        let now = self.now;
         let registry = &self.registry;
         for name in self.supervisor.missing(now, |n| registry.contains(n)) {
             tracing::warn!(agent = %name, "{name} was running under the previous router and has not come back");
@@ -370,23 +667,24 @@ impl State {
         }
         let registry = &self.registry;
         for (name, argv, restart) in self.supervisor.due(now, |n| registry.contains(n)) {
-            let log = self.world.log_file(&name);
-            self.supervisor.spawn(&name, &argv, &log, restart);
+            let cwd = self.supervisor.get(&name).and_then(|s| s.spec.cwd.clone());
+            self.out.push(Effect::Spawn { name, argv, cwd, restart });
         }
+        self.forget_gone();
     }
 
     /// Drops the remembered state and the supervision of names gone for
     /// [`FORGET_AFTER`]; keeps the time live names were last seen.
-    pub fn forget_gone(&mut self) {
-        let now = Instant::now();
+    fn forget_gone(&mut self) {
+        let now = self.now;
         for (name, _) in self.registry.iter() {
             self.remembered.seen(name, now);
             self.supervisor.seen(name, now);
         }
-        if now.duration_since(self.last_gc) < GC_PERIOD {
+        if self.last_gc.is_some_and(|t| now.saturating_duration_since(t) < GC_PERIOD) {
             return;
         }
-        self.last_gc = now;
+        self.last_gc = Some(now);
         let registry = &self.registry;
         for name in self.remembered.forget_gone(now, |n| registry.contains(n)) {
             tracing::info!(agent = %name, "forgot the run-time state of {name}: gone for more than {FORGET_AFTER:?}");
@@ -396,48 +694,8 @@ impl State {
             tracing::info!(agent = %name, "stopped supervising {name}: gone for more than {FORGET_AFTER:?}");
         }
         if !gone.is_empty() {
-            self.supervisor.persist(&self.writer);
+            self.persist_supervision();
         }
-    }
-
-    /// Hands the connection list to the writer thread, which saves it off
-    /// the request path (its fsyncs take 10-60 ms on a busy disk).
-    fn persist_wiring(&mut self) -> Saved {
-        self.saves.save(&self.writer, &self.store, self.wiring.list())
-    }
-
-    /// Queues `list` for the disk (see [`ListSaves`]: a rewire queues the
-    /// list it expects while the agent works).
-    fn persist_list(&mut self, list: &[Connection]) -> Saved {
-        self.saves.save(&self.writer, &self.store, list)
-    }
-
-    /// Answers a rewire the agent refused once the list is back on disk as
-    /// it is: the list it was expected to become may have been written
-    /// meanwhile ([`State::persist_list`]).
-    fn answer_when_written_back(&mut self, reply: Option<Responder<RouterReply>>, since: Instant, e: RouterError) {
-        let saved = self.persist_wiring();
-        let work = Work::Saved { saved, what: String::new(), refused: Some(e) };
-        self.jobs.push(Job { reply, since, ..Job::new(Vec::new(), work) });
-    }
-
-    /// The job that answers `what` (done) once save `saved` is on disk.
-    fn when_saved(saved: Saved, what: String) -> Job {
-        Job::new(Vec::new(), Work::Saved { saved, what, refused: None })
-    }
-
-    /// Whether jobs wait for something the loop must look at soon.
-    pub fn busy(&self) -> bool {
-        // a job waits for agents, a death or a save: each is looked at soon
-        self.calls.busy() || !self.jobs.is_empty()
-    }
-
-    /// Whether a job waits for something no event announces (a process to
-    /// die, the disk writer), so that the serving loop must look again soon
-    /// by itself; replies of agents wake it (see [`crate::calls`]).
-    pub fn needs_polling(&self) -> bool {
-        self.jobs.iter().any(|j| matches!(j.work, Work::Kill { .. } | Work::Saved { .. }))
-            || (self.calls.busy() && !self.calls.in_flight())
     }
 
     /// (from agent, to agent) of every connect still waiting for its agent
@@ -449,17 +707,12 @@ impl State {
         })
     }
 
-    fn submit(&mut self, name: &str, cmd: AgentCommand, timeout: Duration) -> Result<Ticket, RouterError> {
-        self.registry.live(name)?;
-        Ok(self.calls.submit(name, cmd, timeout))
-    }
-
-    fn cli(&mut self, req: CliRequest) -> Result<Started, RouterError> {
-        // answer from a registry without dead agents (a few /proc reads)
-        self.check_liveness();
+    /// A command-line request, from a registry without dead agents (the
+    /// driver's liveness check comes first).
+    fn cli(&mut self, req: CliRequest, tool: Option<Result<ProcessHandle, String>>) -> Result<Started, RouterError> {
         let command = |s: &mut Self, name: String, cmd: AgentCommand, what: Asked| -> Result<Started, RouterError> {
             let ticket = s.submit(&name, cmd, AGENT_TIMEOUT)?;
-            Ok(Started::waiting(vec![ticket], Work::Command { name, what }))
+            Ok(s.waiting(vec![ticket], Work::Command { name, what }))
         };
         match req {
             CliRequest::Ps | CliRequest::Graph => {
@@ -467,15 +720,15 @@ impl State {
                 let names: Vec<String> = self.registry.iter().map(|(n, _)| n.clone()).collect();
                 let mut asked = BTreeMap::new();
                 for name in names {
-                    let ticket = self.calls.submit(&name, AgentCommand::Stats, STATS_TIMEOUT);
+                    let ticket = self.send(&name, AgentCommand::Stats, STATS_TIMEOUT);
                     asked.insert(ticket, name);
                 }
-                Ok(Started::waiting(asked.keys().copied().collect(), Work::Views { graph, asked }))
+                Ok(self.waiting(asked.keys().copied().collect(), Work::Views { graph, asked }))
             }
             CliRequest::Agent { name } => {
                 self.registry.live(&name)?;
-                let ticket = self.calls.submit(&name, AgentCommand::Stats, STATS_TIMEOUT);
-                Ok(Started::waiting(vec![ticket], Work::AgentView { name }))
+                let ticket = self.send(&name, AgentCommand::Stats, STATS_TIMEOUT);
+                Ok(self.waiting(vec![ticket], Work::AgentView { name }))
             }
             CliRequest::Attach { from, pid, type_name, fingerprint, to } => {
                 if self.registry.contains(from.agent.as_str()) {
@@ -483,9 +736,19 @@ impl State {
                         "{from} is an agent's port: connect it with `nerve connect {from} {to}`"
                     )));
                 }
-                let process = ProcessHandle::take(pid).map_err(|e| {
-                    RouterError::NotApplicable(format!("cannot attach {from}: its process {pid} is not there ({e})"))
-                })?;
+                let process = match tool {
+                    Some(Ok(p)) if p.pid() == pid => p,
+                    Some(Err(e)) => {
+                        return Err(RouterError::NotApplicable(format!(
+                            "cannot attach {from}: its process {pid} is not there ({e})"
+                        )));
+                    }
+                    _ => {
+                        return Err(RouterError::NotApplicable(format!(
+                            "cannot attach {from}: its process {pid} was not looked at"
+                        )));
+                    }
+                };
                 let spec = PortSpec { name: from.port.clone(), type_name, fingerprint };
                 self.registry.check_input(&from, &spec, &to)?;
                 let conn = Connection {
@@ -496,7 +759,7 @@ impl State {
                 };
                 let (agent, cmd) = Wiring::connect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
-                Ok(Started::waiting(vec![ticket], Work::Attach { attached: Attached { conn, process } }))
+                Ok(self.waiting(vec![ticket], Work::Attach { attached: Attached { conn, process } }))
             }
             CliRequest::Detach { from, to } => {
                 let (f, t) = (from.to_string(), to.to_string());
@@ -513,7 +776,7 @@ impl State {
                 };
                 let (agent, cmd) = Wiring::disconnect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
-                Ok(Started::waiting(vec![ticket], Work::Detach { conn }))
+                Ok(self.waiting(vec![ticket], Work::Detach { conn }))
             }
             CliRequest::Events { after } => Ok(Started::Answer(RouterReply::Events {
                 epoch: self.epoch,
@@ -537,11 +800,9 @@ impl State {
                 let conn = Connection { from: from.to_string(), to: to.to_string(), type_name: from_type, allow_cycle };
                 let (agent, cmd) = Wiring::connect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
-                let mut expected = Wiring::new(self.wiring.list().to_vec());
-                if expected.add(conn.clone()) {
-                    self.persist_list(expected.list());
-                }
-                Ok(Started::waiting(vec![ticket], Work::Connect { conn }))
+                // saved once the agent has subscribed (the list on disk
+                // never holds an edge an agent refused)
+                Ok(self.waiting(vec![ticket], Work::Connect { conn }))
             }
             CliRequest::Disconnect { from, to } => {
                 let (f, t) = (from.to_string(), to.to_string());
@@ -552,16 +813,14 @@ impl State {
                     // nobody reads it: the list is the whole truth
                     self.wiring.remove(&f, &t);
                     self.events.push(EventKind::Disconnected { from: f.clone(), to: t.clone() });
-                    let saved = self.persist_wiring();
+                    let save = self.persist_wiring();
                     tracing::info!(from = %f, to = %t, "disconnected {f} -> {t}");
-                    return Ok(Started::Job(Box::new(Self::when_saved(saved, format!("disconnected {f} -> {t}")))));
+                    return Ok(Started::Job(Box::new(self.when_saved(save, format!("disconnected {f} -> {t}")))));
                 }
                 let (agent, cmd) = Wiring::disconnect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
-                let mut expected = Wiring::new(self.wiring.list().to_vec());
-                expected.remove(&f, &t);
-                self.persist_list(expected.list());
-                Ok(Started::waiting(vec![ticket], Work::Disconnect { conn }))
+                // saved once the agent has let go
+                Ok(self.waiting(vec![ticket], Work::Disconnect { conn }))
             }
             CliRequest::Rate { name, period_ns } => {
                 command(self, name, AgentCommand::SetPeriod { period_ns }, Asked::Rate(period_ns))
@@ -579,7 +838,7 @@ impl State {
                     // a supervised agent waiting for its restart: stopping it
                     // cancels the restart (there is no process to disagree)
                     if self.supervisor.stopped_by_user(&name) {
-                        self.supervisor.persist(&self.writer);
+                        self.persist_supervision();
                     }
                     return Err(self.registry.unknown(&name));
                 }
@@ -595,8 +854,8 @@ impl State {
                     Duration::from_nanos(spec.window_ns)
                 );
                 let registry = &self.registry;
-                self.supervisor.supervise(spec, Instant::now(), |n| registry.contains(n))?;
-                self.supervisor.persist(&self.writer);
+                self.supervisor.supervise(spec, self.now, |n| registry.contains(n))?;
+                self.persist_supervision();
                 Ok(Started::Answer(RouterReply::Ok))
             }
             CliRequest::Kill { name } => {
@@ -604,53 +863,30 @@ impl State {
                 // the agent died (and before the liveness check saw it) is not signalled
                 let process = self.registry.live(&name)?.process.clone();
                 let pid = process.pid();
-                match process.signal(nix::sys::signal::Signal::SIGKILL) {
-                    Ok(()) => tracing::info!(agent = %name, pid, "killed agent {name} (pid {pid}) on request"),
-                    Err(ProcessError::Gone { .. }) => {
-                        tracing::info!(agent = %name, pid, "{name} (pid {pid}) had exited already")
-                    }
-                    Err(e) => return Err(RouterError::Internal(e.to_string())),
-                }
-                Ok(Started::waiting(vec![], Work::Kill { name, process, until: Instant::now() + KILL_WAIT }))
+                self.ticket = self.ticket.wrapping_add(1);
+                let ticket = self.ticket;
+                self.out.push(Effect::Kill { ticket, name: name.clone(), process });
+                Ok(self.waiting(vec![ticket], Work::Kill { name, pid, over: None }))
             }
             CliRequest::Shutdown => {
                 self.shutdown = true;
-                self.supervisor.forget_all(&self.writer);
+                self.supervisor.stop_all();
+                self.out.push(Effect::Remove { path: self.supervisor.path().to_owned() });
                 Ok(Started::Answer(RouterReply::Ok))
             }
         }
     }
 
-    /// Hands the outcomes of agent commands to their jobs, and answers the
-    /// jobs that are complete.
-    pub fn pump(&mut self, looks: &Looks) {
-        let outcomes = self.calls.pump(&self.world, &self.node, Instant::now(), looks);
-        for o in outcomes {
-            if let Some(job) = self.jobs.iter_mut().find(|j| j.waiting.contains(&o.ticket)) {
-                job.waiting.retain(|t| *t != o.ticket);
-                job.outcomes.push(o);
-            }
-        }
-        let mut i = 0;
-        while i < self.jobs.len() {
-            let ready = match &self.jobs[i].work {
-                Work::Kill { process, until, .. } => !process.is_alive() || Instant::now() >= *until,
-                Work::Saved { saved, .. } => self.writer.outcome(*saved).is_some(),
-                _ => self.jobs[i].waiting.is_empty(),
-            };
-            if ready {
-                let job = self.jobs.swap_remove(i);
-                self.finish(job);
-            } else {
-                i += 1;
-            }
-        }
+    /// A job of the request being handled, waiting for `tickets`.
+    fn waiting(&self, tickets: Vec<Ticket>, work: Work) -> Started {
+        Started::Job(Box::new(self.job(tickets, work)))
     }
 
     fn finish(&mut self, job: Job) {
         let Job { reply, mut outcomes, work, since, .. } = job;
         let label = work.label();
-        tracing::debug!(job = label, us = since.elapsed().as_micros() as u64, "job ready");
+        let now = self.now;
+        tracing::debug!(job = label, us = now.saturating_duration_since(since).as_micros() as u64, "job ready");
         let mut single = || {
             outcomes
                 .pop()
@@ -681,12 +917,14 @@ impl State {
                     let event = EventKind::Connected { from: conn.from.clone(), to: conn.to.clone() };
                     if self.wiring.add(conn) {
                         self.events.push(event);
-                        let saved = self.persist_wiring();
-                        return self.jobs.push(Job { reply, since, ..Self::when_saved(saved, what) });
+                        let save = self.persist_wiring();
+                        let job = Job { reply, since, ..self.when_saved(save, what) };
+                        return self.jobs.push(job);
                     }
                     Ok(RouterReply::Ok)
                 }
-                Err(e) => return self.answer_when_written_back(reply, since, e),
+                // nothing was saved for it: the list stays as it is
+                Err(e) => Err(e),
             },
             Work::AgentView { name } => match single() {
                 // one view, not every agent's (`nerve cmd` asks every 20 ms); none if it left meanwhile
@@ -720,36 +958,35 @@ impl State {
                 Ok(_) | Err(RouterError::AgentRefused { .. }) => {
                     self.wiring.remove(&conn.from, &conn.to);
                     self.events.push(EventKind::Disconnected { from: conn.from.clone(), to: conn.to.clone() });
-                    let saved = self.persist_wiring();
+                    let save = self.persist_wiring();
                     tracing::info!(from = %conn.from, to = %conn.to, "disconnected {} -> {}", conn.from, conn.to);
                     let what = format!("disconnected {} -> {}", conn.from, conn.to);
-                    return self.jobs.push(Job { reply, since, ..Self::when_saved(saved, what) });
+                    let job = Job { reply, since, ..self.when_saved(save, what) };
+                    return self.jobs.push(job);
                 }
-                Err(RouterError::AgentUnreachable { name, detail }) => {
-                    let e = RouterError::AgentUnreachable {
-                        detail: format!(
-                            "{detail}; {} -> {} stays in the connection list since {name} may still read it: try again, or `nerve kill {name}` and disconnect then",
-                            conn.from, conn.to
-                        ),
-                        name,
-                    };
-                    return self.answer_when_written_back(reply, since, e);
-                }
-                Err(e) => return self.answer_when_written_back(reply, since, e),
+                Err(RouterError::AgentUnreachable { name, detail }) => Err(RouterError::AgentUnreachable {
+                    detail: format!(
+                        "{detail}; {} -> {} stays in the connection list since {name} may still read it: try again, or `nerve kill {name}` and disconnect then",
+                        conn.from, conn.to
+                    ),
+                    name,
+                }),
+                Err(e) => Err(e),
             },
             Work::Command { name, what } => single().map(|reply| self.obeyed(&name, &what, reply)),
-            Work::Kill { name, process, .. } => {
-                self.check_liveness();
-                let pid = process.pid();
-                if process.is_alive() {
-                    tracing::warn!(agent = %name, pid, "{name} (pid {pid}) is still there {KILL_WAIT:?} after SIGKILL");
+            Work::Kill { name, pid, over } => match over {
+                Some(Ok(still_there)) => {
+                    if still_there {
+                        tracing::warn!(agent = %name, pid, "{name} (pid {pid}) is still there {KILL_WAIT:?} after SIGKILL");
+                    }
+                    Ok(RouterReply::Ok)
                 }
-                Ok(RouterReply::Ok)
-            }
-            Work::Saved { refused: Some(e), .. } => Err(e),
-            Work::Saved { saved, what, refused: None } => match self.writer.outcome(saved) {
+                Some(Err(e)) => Err(e),
+                None => Err(RouterError::Internal("a kill without an end".into())),
+            },
+            Work::Saved { what, done, .. } => match done {
                 Some(Err(detail)) => {
-                    Err(RouterError::NotSaved { what, file: self.store.path().display().to_string(), detail })
+                    Err(RouterError::NotSaved { what, file: self.list_file.display().to_string(), detail })
                 }
                 _ => Ok(RouterReply::Ok),
             },
@@ -764,15 +1001,15 @@ impl State {
                 return;
             }
         };
-        if reply.is_some() {
-            tracing::debug!(job = label, us = since.elapsed().as_micros() as u64, "answered");
+        if let Some(id) = reply {
+            tracing::debug!(job = label, us = now.saturating_duration_since(since).as_micros() as u64, "answered");
+            self.reply(id, result.unwrap_or_else(RouterReply::Error));
         }
-        answer(reply, result);
     }
 
     /// Records what an agent obeyed; the reply to give.
     fn obeyed(&mut self, name: &str, what: &Asked, reply: AgentReply) -> RouterReply {
-        let now = Instant::now();
+        let now = self.now;
         match what {
             Asked::Rate(period_ns) => {
                 if let Some(e) = self.registry.get_mut(name) {
@@ -810,7 +1047,7 @@ impl State {
             }
             Asked::Stop => {
                 if self.supervisor.stopped_by_user(name) {
-                    self.supervisor.persist(&self.writer);
+                    self.persist_supervision();
                 }
             }
             Asked::Nothing => {}
@@ -839,7 +1076,7 @@ impl State {
                 period_ns: None,
                 inputs: vec![],
                 outputs: vec![],
-                log_file: Some(self.world.log_file(name).display().to_string()),
+                log_file: Some(self.logs_dir.join(format!("{name}.log")).display().to_string()),
                 stats: None,
                 restarts: sup.total,
                 importance: Some(sup.spec.importance),
@@ -869,19 +1106,5 @@ impl State {
             importance: sup.map(|s| s.spec.importance),
             schemas: e.reg.schemas.clone(),
         }
-    }
-}
-
-/// How a command-line request starts.
-enum Started {
-    /// answered at once
-    Answer(RouterReply),
-    /// waits for agents
-    Job(Box<Job>),
-}
-
-impl Started {
-    fn waiting(tickets: Vec<Ticket>, work: Work) -> Started {
-        Started::Job(Box::new(Job::new(tickets, work)))
     }
 }

@@ -235,35 +235,6 @@ pub(crate) fn write_private(path: &Path, body: &[u8]) -> std::io::Result<()> {
     std::fs::rename(&tmp, path)
 }
 
-/// The connection list's saves: a list equal to the newest one queued is
-/// not queued again, and its save is the one to wait for.
-///
-/// A rewire queues the list it expects while the agent subscribes (or lets
-/// go), so that both take their time at once; the answer then waits for the
-/// save of the list as it is once the agent has answered. That is the same
-/// save when the agent obeyed and nothing else changed meanwhile, and a new
-/// one otherwise (a refusal writes the list back before it is answered, so
-/// that the disk never keeps an edge that was refused).
-#[derive(Debug, Default)]
-pub struct ListSaves {
-    last: Option<(Vec<u8>, Saved)>,
-}
-
-impl ListSaves {
-    /// Queues `list` for `store`'s file, unless the newest body queued is the same.
-    pub fn save(&mut self, writer: &Writer, store: &Store, list: &[Connection]) -> Saved {
-        let body = Store::encode(list);
-        if let Some((last, saved)) = &self.last
-            && *last == body
-        {
-            return *saved;
-        }
-        let saved = writer.journaled(store.path(), body.clone());
-        self.last = Some((body, saved));
-        saved
-    }
-}
-
 /// What the writer thread does to one file.
 #[derive(Debug)]
 enum Job {
@@ -647,27 +618,6 @@ mod tests {
         let got = store.load().expect("load");
         assert_eq!(got.len(), 1);
         assert_eq!(got[0].from, "a19/out");
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-
-    #[test]
-    fn a_list_equal_to_the_newest_queued_is_not_queued_again() {
-        let dir = fresh_dir("saves");
-        let store = Store::new(&dir);
-        let mut w = Writer::start().expect("thread");
-        let (l1, l2) = (vec![conn("a/out")], vec![conn("a/out"), conn("x/out")]);
-        let mut saves = ListSaves::default();
-        // expected while the agent subscribes, then the same once it has
-        let expected = saves.save(&w, &store, &l2);
-        assert_eq!(saves.save(&w, &store, &l2), expected, "the same list waits for the same save");
-        // it refused: the list goes back, a new save
-        let back = saves.save(&w, &store, &l1);
-        assert!(back > expected);
-        // the same list as an older save, but not the newest: saved again
-        let again = saves.save(&w, &store, &l2);
-        assert!(again > back);
-        w.flush();
-        assert_eq!(store.load().expect("load"), l2, "the newest list is on disk");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

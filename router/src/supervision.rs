@@ -18,10 +18,11 @@
 //! * **Bounded**: at most [`MAX_SUPERVISED`] names; the names gone for
 //!   [`crate::remembered::FORGET_AFTER`] are dropped.
 //!
-//! The logic here needs no router: [`Supervisor::exited`] and
-//! [`Supervisor::due`] take the time as an argument and are unit-tested.
+//! The logic here needs no router and no process: [`Supervisor::exited`]
+//! and [`Supervisor::due`] take the time as an argument and are
+//! unit-tested; the router's core asks for the file to be written
+//! ([`Supervisor::encode`]) and for restarts, which the [`Spawner`] starts.
 
-use crate::store::Writer;
 use serde::{Deserialize, Serialize};
 use shm_schemas::AgentName;
 use shm_schemas::control::cli_to_router::{RestartPolicy, RouterError, Supervision};
@@ -117,9 +118,6 @@ struct SavedFile {
 #[derive(Debug)]
 pub struct Supervisor {
     entries: BTreeMap<String, Supervised>,
-    /// start-up processes of restarted agents (with the agent's name),
-    /// reaped as they exit
-    children: Vec<(String, std::process::Child)>,
     path: PathBuf,
     /// the router is stopping: nothing is restarted any more
     stopping: bool,
@@ -139,7 +137,7 @@ pub fn check(spec: &Supervision) -> Result<(), RouterError> {
 impl Supervisor {
     /// An empty supervisor that saves into `state_dir`.
     pub fn new(state_dir: &Path) -> Self {
-        Supervisor { entries: BTreeMap::new(), children: Vec::new(), path: state_dir.join(FILE_NAME), stopping: false }
+        Supervisor { entries: BTreeMap::new(), path: state_dir.join(FILE_NAME), stopping: false }
     }
 
     /// The supervisor with what an earlier router of this robot saved. A file
@@ -184,8 +182,13 @@ impl Supervisor {
         sup
     }
 
+    /// The file the list is saved in.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
     /// The file's bytes.
-    fn encode(&self) -> Vec<u8> {
+    pub fn encode(&self) -> Vec<u8> {
         let agents = self
             .entries
             .values()
@@ -199,16 +202,10 @@ impl Supervisor {
         serde_json::to_vec_pretty(&SavedFile { version: FILE_VERSION, agents }).unwrap_or_default()
     }
 
-    /// Queues the list to be saved.
-    pub fn persist(&self, writer: &Writer) {
-        writer.write(&self.path, self.encode());
-    }
-
-    /// Queues the removal of the saved list and restarts nothing more: the
-    /// robot is being brought down on purpose.
-    pub fn forget_all(&mut self, writer: &Writer) {
+    /// Restarts nothing more: the robot is being brought down on purpose
+    /// (the caller removes the saved list, [`Supervisor::path`]).
+    pub fn stop_all(&mut self) {
         self.stopping = true;
-        writer.remove(&self.path);
     }
 
     /// One agent's state.
@@ -340,8 +337,47 @@ impl Supervisor {
         out
     }
 
+    /// Notes that `name` is live at `now`.
+    pub fn seen(&mut self, name: &str, now: Instant) {
+        if let Some(s) = self.entries.get_mut(name) {
+            s.last_seen = now;
+        }
+    }
+
+    /// Drops the supervision of names that are not live, not waiting for a
+    /// restart, and gone for more than `forget_after` before `now`; returns them.
+    pub fn forget_gone(&mut self, now: Instant, forget_after: Duration, live: impl Fn(&str) -> bool) -> Vec<String> {
+        let gone: Vec<String> = self
+            .entries
+            .iter()
+            .filter(|(n, s)| {
+                !live(n)
+                    && s.next_start.is_none()
+                    && s.awaiting.is_none()
+                    && now.saturating_duration_since(s.last_seen) > forget_after
+            })
+            .map(|(n, _)| n.clone())
+            .collect();
+        for n in &gone {
+            self.entries.remove(n);
+        }
+        gone
+    }
+}
+
+/// Starts the agents the supervisor restarts, and reaps their start-up
+/// processes: the part of supervision that touches processes, run by the
+/// router's driver ([`crate::driver`]).
+#[derive(Debug, Default)]
+pub struct Spawner {
+    /// start-up processes of restarted agents (with the agent's name),
+    /// reaped as they exit
+    children: Vec<(String, std::process::Child)>,
+}
+
+impl Spawner {
     /// Starts `argv` for the agent `name`, its start-up errors into `log`.
-    pub fn spawn(&mut self, name: &str, argv: &[String], log: &Path, restart: u32) {
+    pub fn spawn(&mut self, name: &str, argv: &[String], cwd: Option<&str>, log: &Path, restart: u32) {
         let Some((program, args)) = argv.split_first() else { return };
         // rotated by size, 0600, never through a symlink (see agent_sdk::daemon)
         let stderr = agent_sdk::daemon::open_log(log);
@@ -350,7 +386,7 @@ impl Supervisor {
         // where it was launched, so that relative paths in its arguments
         // hold: a router started elsewhere restarted the decision maker
         // without its knowledge base (found by the chaos test)
-        if let Some(cwd) = self.entries.get(name).and_then(|s| s.spec.cwd.as_deref()) {
+        if let Some(cwd) = cwd {
             cmd.current_dir(cwd);
         }
         // whatever policy the router runs under (SCHED_RESET_ON_FORK covers
@@ -398,39 +434,13 @@ impl Supervisor {
         });
         failed
     }
-
-    /// Notes that `name` is live at `now`.
-    pub fn seen(&mut self, name: &str, now: Instant) {
-        if let Some(s) = self.entries.get_mut(name) {
-            s.last_seen = now;
-        }
-    }
-
-    /// Drops the supervision of names that are not live, not waiting for a
-    /// restart, and gone for more than `forget_after` before `now`; returns them.
-    pub fn forget_gone(&mut self, now: Instant, forget_after: Duration, live: impl Fn(&str) -> bool) -> Vec<String> {
-        let gone: Vec<String> = self
-            .entries
-            .iter()
-            .filter(|(n, s)| {
-                !live(n)
-                    && s.next_start.is_none()
-                    && s.awaiting.is_none()
-                    && now.saturating_duration_since(s.last_seen) > forget_after
-            })
-            .map(|(n, _)| n.clone())
-            .collect();
-        for n in &gone {
-            self.entries.remove(n);
-        }
-        gone
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::remembered::FORGET_AFTER;
+    use crate::store::Writer;
 
     fn spec(name: &str, policy: RestartPolicy) -> Supervision {
         Supervision {
@@ -541,7 +551,7 @@ mod tests {
             s.supervise(spec(n, RestartPolicy::Always), t0, |_| false).expect("supervised");
         }
         s.stopped_by_user("stopped");
-        s.persist(&w);
+        w.write(s.path(), s.encode());
         w.flush();
         let mut again = Supervisor::load(&d, t0);
         assert_eq!(again.len(), 3);
@@ -555,7 +565,8 @@ mod tests {
         assert!(again.missing(later, |_| false).is_empty(), "counted once");
         // `nerve down` removes the file and restarts nothing more
         let mut w = Writer::start().expect("writer");
-        again.forget_all(&w);
+        again.stop_all();
+        w.remove(again.path());
         w.flush();
         assert!(!d.join(FILE_NAME).exists());
         assert!(again.due(later + Duration::from_secs(60), |_| false).is_empty());
@@ -567,9 +578,9 @@ mod tests {
     fn a_restart_whose_start_up_fails_is_reported_so_that_it_counts() {
         let d = dir("startfail");
         std::fs::create_dir_all(&d).expect("dir");
-        let mut s = Supervisor::new(&d);
-        s.spawn("bad", &["false".to_owned()], &d.join("bad.log"), 1);
-        s.spawn("good", &["true".to_owned()], &d.join("good.log"), 1);
+        let mut s = Spawner::default();
+        s.spawn("bad", &["false".to_owned()], None, &d.join("bad.log"), 1);
+        s.spawn("good", &["true".to_owned()], None, &d.join("good.log"), 1);
         let mut failed = Vec::new();
         for _ in 0..200 {
             failed.extend(s.reap());
@@ -587,13 +598,12 @@ mod tests {
         let d = dir("cwd");
         let launched = d.join("robot-folder");
         std::fs::create_dir_all(&launched).expect("dir");
-        let mut s = Supervisor::new(&d);
+        let mut s = Spawner::default();
         let mut spec = spec("kb-user", RestartPolicy::Always);
         // a relative path in its arguments, as `--kb kb/explore.toml`
         spec.argv = vec!["sh".into(), "-c".into(), "echo here > relative.txt".into()];
         spec.cwd = Some(launched.display().to_string());
-        s.supervise(spec.clone(), Instant::now(), |_| false).expect("supervise");
-        s.spawn("kb-user", &spec.argv, &d.join("kb-user.log"), 1);
+        s.spawn("kb-user", &spec.argv, spec.cwd.as_deref(), &d.join("kb-user.log"), 1);
         for _ in 0..200 {
             s.reap();
             if s.children.is_empty() {

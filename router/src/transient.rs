@@ -43,9 +43,10 @@ impl Transient {
         Some(self.edges.remove(i))
     }
 
-    /// Forgets and returns the edges of tools that are gone.
-    pub fn orphaned(&mut self) -> Vec<Attached> {
-        let (gone, kept) = std::mem::take(&mut self.edges).into_iter().partition(|a| !a.process.is_alive());
+    /// Forgets and returns the edges of the tools `gone` says are gone
+    /// (the router's driver looks at the processes, [`Transient::tools`]).
+    pub fn orphaned(&mut self, gone: impl Fn(&ProcessHandle) -> bool) -> Vec<Attached> {
+        let (gone, kept) = std::mem::take(&mut self.edges).into_iter().partition(|a| gone(&a.process));
         self.edges = kept;
         gone
     }
@@ -55,6 +56,11 @@ impl Transient {
         let (gone, kept) = std::mem::take(&mut self.edges).into_iter().partition(|a| port_agent(&a.conn.to) == name);
         self.edges = kept;
         gone
+    }
+
+    /// The tools' processes, one per edge.
+    pub fn tools(&self) -> impl Iterator<Item = &ProcessHandle> {
+        self.edges.iter().map(|a| &a.process)
     }
 
     /// Every edge, in the order they were made.
@@ -90,11 +96,11 @@ mod tests {
         assert!(t.add(a("cli-8/in", "r2/in", &gone_tool)));
         assert!(t.add(a("cli-9/in", "r1/in", &me)));
         assert_eq!(t.connections().count(), 3);
-        assert!(t.orphaned().is_empty(), "every tool runs");
+        assert!(t.orphaned(|p| !p.is_alive()).is_empty(), "every tool runs");
 
         tool.kill().expect("kill sleep");
         tool.wait().expect("reap sleep");
-        let gone = t.orphaned();
+        let gone = t.orphaned(|p| !p.is_alive());
         assert_eq!(gone.iter().map(|g| g.conn.from.as_str()).collect::<Vec<_>>(), ["cli-8/in"]);
         assert!(t.connections().all(|c| c.from != "cli-8/in"));
 
