@@ -37,6 +37,8 @@ use std::str::FromStr;
 use std::sync::Arc;
 use std::time::Duration;
 
+pub mod args;
+
 /// How the task is driven.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Task {
@@ -158,8 +160,27 @@ impl Setup {
         &self.world
     }
 
-    /// Arguments given after `--` on the agent's command line.
-    pub fn args(&self) -> &[String] {
+    /// The agent's own arguments (those after `--` on its command line)
+    /// parsed into `T`, its `#[derive(clap::Parser)]` struct, as clap
+    /// parses them; see [`args`]. A refusal is an [`AgentError::Config`]
+    /// that names the agent, clap's reason and how to list the arguments.
+    /// `--help` prints them and ends the process with status 0 (in a
+    /// [`crate::testing::Harness`] it is a refusal holding the help text).
+    pub fn args<T: clap::Parser>(&self) -> Result<T, AgentError> {
+        match args::parse::<T>(self.name(), &self.args) {
+            Ok(t) => Ok(t),
+            // `nerve-sonar -- --help` at a terminal: nothing of the agent
+            // is registered yet (the router hears of it after `new`)
+            Err(args::ArgsError::Help(help)) if !matches!(self.binding, Binding::Memory(_)) => {
+                let _ = help.print();
+                std::process::exit(0)
+            }
+            Err(e) => Err(AgentError::Config(e.to_string())),
+        }
+    }
+
+    /// The agent's own arguments as given, unparsed (see [`Setup::args`]).
+    pub fn raw_args(&self) -> &[String] {
         &self.args
     }
 

@@ -44,7 +44,7 @@ struct BenchAgentArgs {
 }
 
 fn agent_args(setup: &Setup) -> Result<BenchAgentArgs, AgentError> {
-    BenchAgentArgs::try_parse_from(setup.args()).map_err(|e| AgentError::Config(e.to_string()))
+    BenchAgentArgs::try_parse_from(setup.raw_args()).map_err(|e| AgentError::Config(e.to_string()))
 }
 
 /// Writes one value per line to `path` atomically (temp file, then rename).

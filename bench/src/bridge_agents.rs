@@ -53,7 +53,7 @@ struct Args {
 }
 
 fn args(setup: &Setup) -> Result<Args, AgentError> {
-    Args::try_parse_from(setup.args()).map_err(|e| AgentError::Config(e.to_string()))
+    Args::try_parse_from(setup.raw_args()).map_err(|e| AgentError::Config(e.to_string()))
 }
 
 /// Writes rows of numbers, one row per line, atomically (temp file, then rename).

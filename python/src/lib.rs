@@ -216,7 +216,7 @@ impl Setup {
     /// The arguments after `--` on the agent's command line.
     #[getter]
     fn args(&mut self) -> PyResult<Vec<String>> {
-        Ok(self.get()?.args().to_vec())
+        Ok(self.get()?.raw_args().to_vec())
     }
 
     /// Declares input `port` of the layout `schema` (JSON).

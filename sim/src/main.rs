@@ -293,10 +293,7 @@ impl Agent for SimAgent {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args: SimArgs = clap::Parser::try_parse_from(
-            std::iter::once("nerve-sim --".to_owned()).chain(setup.args().iter().cloned()),
-        )
-        .map_err(|e| AgentError::Config(format!("simulator arguments (after `--`): {e}")))?;
+        let args: SimArgs = setup.args()?;
         // the world is loaded (and checked) here if given; that it is given,
         // and the device directory, is checked in `start`: describing the
         // simulator, or testing it, needs neither

@@ -20,7 +20,7 @@
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_arm::{Command, Grasper, Gripper, Outcome, Settings};
 use nerve_devices::{ArmCommand, GRASP_NOTHING, GraspCommand, GripperPhase, Message};
-use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
+use nerve_devlink::{CounterFigures, DeviceEvent, DeviceLink};
 use shm_schemas::payloads::{ArmGraspState, GraspAction, GraspMiss, GraspPhase, GraspRequest, HELD_NOTHING};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -55,7 +55,7 @@ struct Arm {
     guess_x_m: Param<f64>,
     settle_deg: Param<f64>,
     timeout_ms: Param<u64>,
-    counters: CounterParams,
+    counters: CounterFigures,
     figures: Arc<Figures>,
     grasper: Grasper,
     /// The last state published (joints, nearest, connected), for the next report.
@@ -145,11 +145,12 @@ impl Agent for Arm {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
+        let args: Args = setup.args()?;
         let d = Settings::default();
         let figures = Arc::new(Figures::default());
         let f2 = figures.clone();
-        setup.figures(move || {
+        // its own figures after the device link's
+        let counters = nerve_devlink::counter_figures(setup, move || {
             let g = |a: &AtomicU64| a.load(Ordering::Relaxed).to_string();
             vec![("grasps".into(), g(&f2.grasps)), ("held".into(), g(&f2.held)), ("missed".into(), g(&f2.missed))]
         });
@@ -164,7 +165,7 @@ impl Agent for Arm {
             timeout_ms: setup.param_checked("timeout_ms", 4000u64, |v| {
                 if (500..=60_000).contains(v) { Ok(()) } else { Err("timeout_ms is 500 … 60000".into()) }
             }),
-            counters: nerve_devlink::counter_params(setup),
+            counters,
             figures,
             grasper: Grasper::new(d),
             state: ArmGraspState { nearest_m: -1.0, held_id: HELD_NOTHING, ..Default::default() },

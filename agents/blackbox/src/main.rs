@@ -393,9 +393,7 @@ impl Agent for Blackbox {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args =
-            Args::try_parse_from(std::iter::once("nerve-blackbox --".to_string()).chain(setup.args().iter().cloned()))
-                .map_err(|e| AgentError::Config(e.to_string()))?;
+        let args: Args = setup.args()?;
         let config = Config::load(&args.config).map_err(|e| AgentError::Config(e.to_string()))?;
         std::fs::create_dir_all(&config.dir).map_err(|e| {
             AgentError::Config(format!(

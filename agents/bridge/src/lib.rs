@@ -68,18 +68,24 @@ fn types() -> &'static Types {
     TYPES.get_or_init(Types::builtin)
 }
 
-/// `--config FILE` from the agent's own arguments.
-fn config_path(args: &[String]) -> Result<PathBuf, AgentError> {
-    let usage = || {
-        AgentError::Config(
-            "the bridge needs its configuration: nerve start bridge --name NAME -- --config FILE (see agents/bridge/README.md)"
-                .into(),
-        )
-    };
-    match args {
-        [flag, path] if flag == "--config" => Ok(PathBuf::from(path)),
-        [one] => one.strip_prefix("--config=").map(PathBuf::from).ok_or_else(usage),
-        _ => Err(usage()),
+/// The bridge's own arguments (after `--`).
+#[derive(Debug, clap::Parser)]
+#[command(name = "nerve-bridge")]
+struct BridgeArgs {
+    /// The bridge's configuration (TOML; see agents/bridge/README.md).
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+}
+
+impl BridgeArgs {
+    /// `--config FILE`, which the bridge cannot do without.
+    fn config_path(self) -> Result<PathBuf, AgentError> {
+        self.config.ok_or_else(|| {
+            AgentError::Config(
+                "the bridge needs its configuration: nerve start bridge --name NAME -- --config FILE (see agents/bridge/README.md)"
+                    .into(),
+            )
+        })
     }
 }
 
@@ -117,7 +123,7 @@ impl Agent for Bridge {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let path = config_path(setup.args())?;
+        let path = setup.args::<BridgeArgs>()?.config_path()?;
         let types = types();
         let cfg = config::load(&path, &|t| types.knows(t)).map_err(|e| AgentError::Config(e.to_string()))?;
         let robot = setup.world().robot().to_string();
@@ -318,11 +324,20 @@ fn wire_exports(world: &World, me: &Me, exports: &[Arc<ExportTopic>], router: &m
 mod tests {
     use super::*;
 
+    fn config_path(args: &[&str]) -> Result<PathBuf, AgentError> {
+        let args: Vec<String> = args.iter().map(|s| s.to_string()).collect();
+        agent_sdk::agent::args::parse::<BridgeArgs>("bridge", &args)
+            .map_err(|e| AgentError::Config(e.to_string()))?
+            .config_path()
+    }
+
     #[test]
     fn the_config_flag_is_required() {
-        assert_eq!(config_path(&["--config".into(), "b.toml".into()]).ok(), Some(PathBuf::from("b.toml")));
-        assert_eq!(config_path(&["--config=b.toml".into()]).ok(), Some(PathBuf::from("b.toml")));
+        assert_eq!(config_path(&["--config", "b.toml"]).ok(), Some(PathBuf::from("b.toml")));
+        assert_eq!(config_path(&["--config=b.toml"]).ok(), Some(PathBuf::from("b.toml")));
         let e = config_path(&[]).expect_err("missing").to_string();
         assert!(e.contains("--config FILE"), "{e}");
+        let e = config_path(&["--confg", "b.toml"]).expect_err("misspelt").to_string();
+        assert!(e.contains("--confg") && e.contains("nerve-bridge -- --help"), "{e}");
     }
 }

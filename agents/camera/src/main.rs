@@ -74,8 +74,10 @@ struct CameraArgs {
 }
 
 impl CameraArgs {
-    fn parse_agent_args(args: &[String]) -> Result<Self, clap::Error> {
-        CameraArgs::try_parse_from(std::iter::once("nerve-camera --".to_owned()).chain(args.iter().cloned()))
+    /// The camera's own arguments, before the SDK runs (`main` derives the
+    /// period from `--fps`); `new` has them from [`Setup::args`].
+    fn parse_agent_args(args: &[String]) -> Result<Self, agent_sdk::agent::args::ArgsError> {
+        agent_sdk::agent::args::parse(Camera::KIND, args)
     }
 }
 
@@ -198,7 +200,7 @@ impl Agent for Camera {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args = CameraArgs::parse_agent_args(setup.args()).map_err(|e| AgentError::Config(e.to_string()))?;
+        let args: CameraArgs = setup.args()?;
         if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
             return Err(AgentError::Config(format!("--fps {}: give a rate between 0 and 1000", args.fps)));
         }

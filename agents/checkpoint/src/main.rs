@@ -199,9 +199,7 @@ impl Agent for Checkpoint {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args =
-            Args::try_parse_from(std::iter::once("nerve-checkpoint --".to_owned()).chain(setup.args().iter().cloned()))
-                .map_err(|e| AgentError::Config(e.to_string()))?;
+        let args: Args = setup.args()?;
         let config = match &args.config {
             Some(p) => SensorConfig::load(p).map_err(|e| AgentError::Config(e.to_string()))?,
             None => SensorConfig::default(),

@@ -63,8 +63,7 @@ impl Agent for Decision {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args = Args::try_parse_from(std::iter::once("nerve-decision --".to_owned()).chain(setup.args().to_vec()))
-            .map_err(|e| AgentError::Config(e.to_string()))?;
+        let args: Args = setup.args()?;
         let path = std::path::absolute(&args.kb).unwrap_or(args.kb);
         let kb = KnowledgeBase::load(&path).map_err(|e| AgentError::Config(e.to_string()))?;
         let arbiter = Arbiter::new(kb.decision.min_dwell);

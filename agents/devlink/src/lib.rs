@@ -27,7 +27,7 @@
 
 use nerve_devices::{DecodeStats, Message, SerialLink};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -398,68 +398,90 @@ pub fn open_link(device: &Option<PathBuf>, label: &str, missing: &str) -> Result
         .map_err(|e| agent_sdk::AgentError::Device(e.to_string()))
 }
 
-/// Parses an agent's own arguments (those after `--`) with clap; the error
-/// is clap's message, which names the bad option and lists the good ones.
-pub fn parse_agent_args<T: clap::Parser>(kind: &str, args: &[String]) -> Result<T, agent_sdk::AgentError> {
-    T::try_parse_from(std::iter::once(format!("nerve-{kind} --")).chain(args.iter().cloned()))
-        .map_err(|e| agent_sdk::AgentError::Config(format!("agent arguments (after `--`): {e}")))
+/// Reports the counters of a device link as the agent's read-only figures
+/// (`nerve param get`, `nerve param list`, `nerve ps --json`), followed by
+/// what `more` reports (the agent's own figures; `Vec::new` for none): an
+/// agent has one figure source. Returns the handle the task copies
+/// [`LinkStats`] into, at each step.
+pub fn counter_figures(
+    setup: &mut agent_sdk::Setup,
+    more: impl Fn() -> Vec<(String, String)> + Send + Sync + 'static,
+) -> CounterFigures {
+    let shown = Arc::new(Mutex::new(LinkStats::default()));
+    let read = shown.clone();
+    setup.figures(move || {
+        let s = *read.lock().unwrap_or_else(|p| p.into_inner());
+        let mut v = link_figures(&s);
+        v.extend(more());
+        v
+    });
+    CounterFigures { shown, last_logged: DecodeStats::default(), last_log: None }
 }
 
-/// Declares the read-only counter parameters of a device link on `setup`
-/// and returns a handle that copies [`LinkStats`] into them.
-pub fn counter_params(setup: &mut agent_sdk::Setup) -> CounterParams {
-    let mut p = |k: &str| setup.param_checked(k, 0u64, |_| Err("this is a read-only counter kept by the agent".into()));
-    CounterParams {
-        frames: p("frames"),
-        garbage_bytes: p("garbage_bytes"),
-        bad_headers: p("bad_headers"),
-        bad_checksums: p("bad_checksums"),
-        truncated: p("truncated"),
-        invalid_payloads: p("invalid_payloads"),
-        opens: p("device_opens"),
-        losses: p("device_losses"),
-        failed_opens: p("device_failed_opens"),
-        stale: p("stale_frames"),
-        last_logged: DecodeStats::default(),
-        last_log: None,
+/// The figures of a device link's counters: `frames`, `garbage_bytes`,
+/// `bad_headers`, `bad_checksums`, `truncated`, `invalid_payloads`,
+/// `device_opens`, `device_losses`, `device_failed_opens`, `stale_frames`.
+pub fn link_figures(s: &LinkStats) -> Vec<(String, String)> {
+    let d = s.decode;
+    [
+        ("frames", d.frames),
+        ("garbage_bytes", d.garbage_bytes),
+        ("bad_headers", d.bad_headers),
+        ("bad_checksums", d.bad_checksums),
+        ("truncated", d.truncated),
+        ("invalid_payloads", d.invalid_payloads),
+        ("device_opens", s.opens),
+        ("device_losses", s.losses),
+        ("device_failed_opens", s.failed_opens),
+        ("stale_frames", s.stale),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_owned(), v.to_string()))
+    .collect()
+}
+
+/// A counter an agent keeps itself and reports among its figures (see
+/// [`counter_figures`]'s `more`): the task adds, the message checker reads.
+#[derive(Debug, Clone, Default)]
+pub struct Count(Arc<AtomicU64>);
+
+impl Count {
+    /// Adds `n` (wrapping at `u64::MAX`, which no counter reaches).
+    pub fn add(&self, n: u64) {
+        self.0.fetch_add(n, Ordering::Relaxed);
+    }
+
+    /// Sets the value (a count the agent keeps elsewhere, copied each step).
+    pub fn set(&self, v: u64) {
+        self.0.store(v, Ordering::Relaxed);
+    }
+
+    /// The value now.
+    pub fn get(&self) -> u64 {
+        self.0.load(Ordering::Relaxed)
+    }
+
+    /// The figure `key` with this count.
+    pub fn figure(&self, key: &str) -> (String, String) {
+        (key.to_owned(), self.get().to_string())
     }
 }
 
-/// The read-only counter parameters of a device link (see [`counter_params`]):
-/// `frames`, `garbage_bytes`, `bad_headers`, `bad_checksums`, `truncated`,
-/// `invalid_payloads`, `device_opens`, `device_losses`, `device_failed_opens`,
-/// `stale_frames`.
+/// The counters of a device link as figures (see [`counter_figures`]).
 #[derive(Debug)]
-pub struct CounterParams {
-    frames: agent_sdk::Param<u64>,
-    garbage_bytes: agent_sdk::Param<u64>,
-    bad_headers: agent_sdk::Param<u64>,
-    bad_checksums: agent_sdk::Param<u64>,
-    truncated: agent_sdk::Param<u64>,
-    invalid_payloads: agent_sdk::Param<u64>,
-    opens: agent_sdk::Param<u64>,
-    losses: agent_sdk::Param<u64>,
-    failed_opens: agent_sdk::Param<u64>,
-    stale: agent_sdk::Param<u64>,
+pub struct CounterFigures {
+    /// what the figures show, read by the message checker
+    shown: Arc<Mutex<LinkStats>>,
     last_logged: DecodeStats,
     last_log: Option<Instant>,
 }
 
-impl CounterParams {
-    /// Copies the counters into the parameters; logs (at most every 5 s)
+impl CounterFigures {
+    /// Copies the counters into the figures; logs (at most every 5 s)
     /// when the decoder dropped anything since the last log line.
     pub fn update(&mut self, s: &LinkStats, label: &str) {
         let d = s.decode;
-        self.frames.set(d.frames);
-        self.garbage_bytes.set(d.garbage_bytes);
-        self.bad_headers.set(d.bad_headers);
-        self.bad_checksums.set(d.bad_checksums);
-        self.truncated.set(d.truncated);
-        self.invalid_payloads.set(d.invalid_payloads);
-        self.opens.set(s.opens);
-        self.losses.set(s.losses);
-        self.failed_opens.set(s.failed_opens);
-        self.stale.set(s.stale);
+        *self.shown.lock().unwrap_or_else(|p| p.into_inner()) = *s;
         let dirty = d.garbage_bytes != self.last_logged.garbage_bytes
             || d.rejected_frames() != self.last_logged.rejected_frames();
         if dirty && self.last_log.is_none_or(|t| t.elapsed() >= Duration::from_secs(5)) {

@@ -11,8 +11,8 @@
 //! position (10 Hz) with the set-point.
 //!
 //! Parameters: `weights` (`sender:weight,...`), `default_weight`,
-//! `stale_ms`; read-only counters `accepted`, `refused` and the device
-//! link's counters. When the board vanishes the agent logs it and reopens
+//! `stale_ms`; figures (read-only counters) `accepted`, `refused` and the
+//! device link's counters. When the board vanishes the agent logs it and reopens
 //! it with exponential backoff; after recovery it sends the set-point again.
 
 mod aim;
@@ -20,7 +20,7 @@ mod aim;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use aim::Aim;
 use nerve_devices::Message;
-use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
+use nerve_devlink::{Count, CounterFigures, DeviceEvent, DeviceLink};
 use nerve_motor::{Limits, Weights};
 use shm_schemas::payloads::{HeadCommand, HeadState, LinguisticCommand};
 use std::path::PathBuf;
@@ -47,9 +47,9 @@ struct Head {
     weights: Param<String>,
     default_weight: Param<f64>,
     stale_ms: Param<u64>,
-    accepted: Param<u64>,
-    refused: Param<u64>,
-    counters: CounterParams,
+    accepted: Count,
+    refused: Count,
+    counters: CounterFigures,
     aim: Aim,
     sent: Option<(i16, i16)>,
     sent_at: u64,
@@ -68,8 +68,11 @@ impl Agent for Head {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
-        let read_only = |_: &u64| Err::<(), String>("this is a read-only counter kept by the agent".into());
+        let args: Args = setup.args()?;
+        // read-only counters: figures, after the device link's
+        let (accepted, refused) = (Count::default(), Count::default());
+        let (a, r) = (accepted.clone(), refused.clone());
+        let counters = nerve_devlink::counter_figures(setup, move || vec![a.figure("accepted"), r.figure("refused")]);
         Ok(Head {
             device: args.device,
             link: None,
@@ -83,9 +86,9 @@ impl Agent for Head {
             stale_ms: setup.param_checked("stale_ms", 500u64, |v: &u64| {
                 if (10..=60_000).contains(v) { Ok(()) } else { Err("must be between 10 and 60000 ms".into()) }
             }),
-            accepted: setup.param_checked("accepted", 0u64, read_only),
-            refused: setup.param_checked("refused", 0u64, read_only),
-            counters: nerve_devlink::counter_params(setup),
+            accepted,
+            refused,
+            counters,
             aim: Aim::default(),
             sent: None,
             sent_at: 0,
@@ -110,9 +113,9 @@ impl Agent for Head {
                 Err(c) => self.aim.offer_said(&sender, &c, now, &limits),
             };
             match r {
-                Ok(()) => self.accepted.set(self.accepted.get() + 1),
+                Ok(()) => self.accepted.add(1),
                 Err(e) => {
-                    self.refused.set(self.refused.get() + 1);
+                    self.refused.add(1);
                     if self.refused.get().is_power_of_two() {
                         tracing::warn!(
                             "refused a head command from {sender} ({} refused so far): {e}",

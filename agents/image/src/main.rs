@@ -111,9 +111,7 @@ impl Agent for ImageAgent {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args =
-            ImageArgs::try_parse_from(std::iter::once("nerve-image --".to_owned()).chain(setup.args().iter().cloned()))
-                .map_err(|e| AgentError::Config(e.to_string()))?;
+        let args: ImageArgs = setup.args()?;
         let hint = |e: AgentError| match e {
             AgentError::Config(m) => {
                 AgentError::Config(format!("{m}; this agent's rings are set with -- --hsi-ring NAME --red-ring NAME"))

@@ -7,7 +7,7 @@
 //! the checkpoint follows, `IrSighting::sector`). A change of what is seen
 //! is logged at info level.
 //!
-//! Periodic (default 50 ms). Parameters: read-only counters `frames`,
+//! Periodic (default 50 ms). Figures (read-only counters): `frames`,
 //! `garbage_bytes`, `bad_headers`, `bad_checksums`, `truncated`,
 //! `invalid_payloads`, `device_opens`, `device_losses`,
 //! `device_failed_opens`, `stale_frames`. A device that vanishes is logged and reopened with
@@ -16,7 +16,7 @@
 
 use agent_sdk::{Agent, AgentError, Context, Output, Setup, Task};
 use nerve_devices::Message;
-use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
+use nerve_devlink::{CounterFigures, DeviceEvent, DeviceLink};
 use shm_schemas::payloads::IrSighting;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -37,7 +37,7 @@ struct Ir {
     device: Option<PathBuf>,
     link: Option<DeviceLink>,
     out: Output<IrSighting>,
-    counters: CounterParams,
+    counters: CounterFigures,
     seq: u64,
     last_seq: Option<u16>,
     last_seen: Option<(u8, u8)>,
@@ -51,12 +51,12 @@ impl Agent for Ir {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
+        let args: Args = setup.args()?;
         Ok(Ir {
             device: args.device,
             link: None,
             out: setup.output("sighting")?,
-            counters: nerve_devlink::counter_params(setup),
+            counters: nerve_devlink::counter_figures(setup, Vec::new),
             seq: 0,
             last_seq: None,
             last_seen: None,

@@ -288,7 +288,7 @@ impl Agent for Mission {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
+        let args: Args = setup.args()?;
         let role = Role::parse(&args.role).map_err(|e| AgentError::Config(e.to_string()))?;
         let resend_ms = setup.param_checked("resend_ms", 2000u64, |v| {
             if (100..=60_000).contains(v) { Ok(()) } else { Err("resend_ms is 100 … 60000".into()) }

@@ -17,7 +17,7 @@
 //! (`nerve::VelocityCommand`, what was sent to the wheels, every cycle).
 //!
 //! Parameters: `weights` (`sender:weight,...`), `default_weight`, `v_max`,
-//! `omega_max`, `accel_max`, `stale_ms`, `cruise`; read-only counters
+//! `omega_max`, `accel_max`, `stale_ms`, `cruise`; figures (read-only counters)
 //! `accepted`, `refused` and the device link's counters. Agent arguments:
 //! `--device PATH` (required), `--robot-model h1|h2` (geometry and limits,
 //! default h1), `--start X,Y,THETA_DEG` (odometry start pose, default 0,0,0).
@@ -30,7 +30,7 @@
 use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_devices::{DiffDriveGeometry, Message, Pose2, WheelCommand, wrap_angle};
-use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
+use nerve_devlink::{Count, CounterFigures, DeviceEvent, DeviceLink};
 use nerve_motor::{Fusion, Limits, Weights, drive::wheel_speeds, refusals::Refusals};
 use shm_schemas::payloads::{LinguisticCommand, Odometry, SafetyStop, VelocityCommand};
 use std::path::PathBuf;
@@ -85,9 +85,9 @@ struct Motor {
     accel_max: Param<f64>,
     stale_ms: Param<u64>,
     cruise: Param<f64>,
-    accepted: Param<u64>,
-    refused: Param<u64>,
-    counters: CounterParams,
+    accepted: Count,
+    refused: Count,
+    counters: CounterFigures,
     base_limits: Limits,
     geometry: DiffDriveGeometry,
     wheel_max_mm_s: f64,
@@ -112,7 +112,7 @@ impl Motor {
     }
 
     fn refused_from(&mut self, sender: &str, what: &str, why: &dyn std::fmt::Display, now_ns: u64) {
-        self.refused.set(self.refused.get() + 1);
+        self.refused.add(1);
         let n = self.refusals_by_sender.record(sender, now_ns);
         if n.is_power_of_two() {
             tracing::warn!("refused {what} from {sender} ({n} so far from it): {why}");
@@ -145,12 +145,15 @@ impl Agent for Motor {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
+        let args: Args = setup.args()?;
         let (limits, geometry, wheel_max) = match args.robot_model.as_str() {
             "h2" => (Limits::H2, DiffDriveGeometry::H2, 600.0),
             _ => (Limits::H1, DiffDriveGeometry::H1, 800.0),
         };
-        let read_only = |_: &u64| Err::<(), String>("this is a read-only counter kept by the agent".into());
+        // read-only counters: figures, after the device link's
+        let (accepted, refused) = (Count::default(), Count::default());
+        let (a, r) = (accepted.clone(), refused.clone());
+        let counters = nerve_devlink::counter_figures(setup, move || vec![a.figure("accepted"), r.figure("refused")]);
         let (v_lim, w_lim) = (limits.v_max, limits.omega_max);
         Ok(Motor {
             device: args.device,
@@ -179,9 +182,9 @@ impl Agent for Motor {
                 if (10..=60_000).contains(v) { Ok(()) } else { Err("must be between 10 and 60000 ms".into()) }
             }),
             cruise: setup.param_checked("cruise", 0.3, positive),
-            accepted: setup.param_checked("accepted", 0u64, read_only),
-            refused: setup.param_checked("refused", 0u64, read_only),
-            counters: nerve_devlink::counter_params(setup),
+            accepted,
+            refused,
+            counters,
             base_limits: limits,
             geometry,
             wheel_max_mm_s: wheel_max,
@@ -238,7 +241,7 @@ impl Agent for Motor {
                     .map_err(|e| ("linguistic command", e)),
             };
             match r {
-                Ok(()) => self.accepted.set(self.accepted.get() + 1),
+                Ok(()) => self.accepted.add(1),
                 Err((what, e)) => self.refused_from(&sender, what, &e, now),
             }
         }

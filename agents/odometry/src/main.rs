@@ -87,9 +87,7 @@ impl Agent for OdometryAgent {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args =
-            Args::try_parse_from(std::iter::once("nerve-odometry --".to_owned()).chain(setup.args().iter().cloned()))
-                .map_err(|e| AgentError::Config(e.to_string()))?;
+        let args: Args = setup.args()?;
         let start = args.start.unwrap_or_default();
         let counters = Arc::new(Counters::default());
         let c2 = counters.clone();

@@ -143,8 +143,7 @@ impl Agent for Resource {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args = Args::try_parse_from(std::iter::once("nerve-resource --".to_owned()).chain(setup.args().to_vec()))
-            .map_err(|e| AgentError::Config(e.to_string()))?;
+        let args: Args = setup.args()?;
         let policy = match &args.kb {
             Some(p) => {
                 let path = std::path::absolute(p).unwrap_or_else(|_| p.clone());

@@ -9,7 +9,7 @@
 //!
 //! Periodic (default 50 ms): each cycle takes the scans the device thread
 //! received. Parameters: `ttc_horizon` (s), `near` (m), `smoothing`,
-//! `max_closing` (m/s); read-only counters `frames`, `garbage_bytes`,
+//! `max_closing` (m/s). Figures (read-only counters): `frames`, `garbage_bytes`,
 //! `bad_headers`, `bad_checksums`, `truncated`, `invalid_payloads`,
 //! `device_opens`, `device_losses`, `device_failed_opens`, `stale_frames`,
 //! `missed_scans`, `artefacts`. A device that vanishes is logged and reopened
@@ -21,7 +21,7 @@
 use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Output, Param, Setup, Task};
 use nerve_devices::{Message, SONAR_NO_ECHO};
-use nerve_devlink::{CounterParams, DeviceEvent, DeviceLink};
+use nerve_devlink::{Count, CounterFigures, DeviceEvent, DeviceLink};
 use nerve_sonar::{DIRECTIONS, RiskEstimator, RiskParams, SeqUnwrapper};
 use shm_schemas::payloads::SonarScan;
 use std::path::PathBuf;
@@ -47,9 +47,9 @@ struct Sonar {
     near: Param<f64>,
     smoothing: Param<f64>,
     max_closing: Param<f64>,
-    counters: CounterParams,
-    missed: Param<u64>,
-    artefacts: Param<u64>,
+    counters: CounterFigures,
+    missed: Count,
+    artefacts: Count,
     estimator: RiskEstimator,
     seq: SeqUnwrapper,
     /// The robot clock's ns at start: risk times count from here.
@@ -64,9 +64,13 @@ impl Agent for Sonar {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
+        let args: Args = setup.args()?;
         let d = RiskParams::default();
-        let read_only = |_: &u64| Err::<(), String>("this is a read-only counter kept by the agent".into());
+        // read-only counters: figures, after the device link's
+        let (missed, artefacts) = (Count::default(), Count::default());
+        let (m, a) = (missed.clone(), artefacts.clone());
+        let counters =
+            nerve_devlink::counter_figures(setup, move || vec![m.figure("missed_scans"), a.figure("artefacts")]);
         Ok(Sonar {
             device: args.device,
             link: None,
@@ -77,9 +81,9 @@ impl Agent for Sonar {
                 if *v > 0.0 && *v <= 1.0 { Ok(()) } else { Err("smoothing must be in (0, 1]".into()) }
             }),
             max_closing: setup.param_checked("max_closing", d.max_closing, positive),
-            counters: nerve_devlink::counter_params(setup),
-            missed: setup.param_checked("missed_scans", 0u64, read_only),
-            artefacts: setup.param_checked("artefacts", 0u64, read_only),
+            counters,
+            missed,
+            artefacts,
             estimator: RiskEstimator::new(),
             seq: SeqUnwrapper::default(),
             t0_ns: agent_sdk::clock::now_ns(),

@@ -44,7 +44,7 @@ struct ImgArgs {
 }
 
 fn img_args(setup: &Setup) -> Result<(ImgArgs, Res), AgentError> {
-    let a = ImgArgs::try_parse_from(setup.args()).map_err(|e| AgentError::Config(e.to_string()))?;
+    let a = ImgArgs::try_parse_from(setup.raw_args()).map_err(|e| AgentError::Config(e.to_string()))?;
     let res = Res::parse(&a.res).map_err(|e| AgentError::Config(format!("{e:#}")))?;
     Ok((a, res))
 }

@@ -55,7 +55,7 @@ impl Agent for TestAgent {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let mode = match setup.args() {
+        let mode = match setup.raw_args() {
             [] => Mode::Scalar,
             [flag, m] if flag == "--mode" => match m.as_str() {
                 "scalar" => Mode::Scalar,

@@ -17,6 +17,7 @@ use std::time::Duration;
 
 /// Arguments after `--`.
 #[derive(Debug, clap::Parser)]
+#[command(name = "nerve-via-path")]
 struct Args {
     /// The points, `X,Y[,KIND];...` (metres, world frame; may start with a minus).
     #[arg(long, allow_hyphen_values = true)]
@@ -79,7 +80,7 @@ impl Agent for ViaPathSource {
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let args: Args = nerve_devlink::parse_agent_args(Self::KIND, setup.args())?;
+        let args: Args = setup.args()?;
         let path =
             parse_points(&args.points, args.path_id).map_err(|e| AgentError::Config(format!("--points: {e}")))?;
         Ok(ViaPathSource {
