@@ -8,27 +8,11 @@
 
 use crate::messages::EncoderReport;
 
-/// Planar pose: metres and radians, heading counter-clockwise from +x.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Pose2 {
-    /// x, metres.
-    pub x: f64,
-    /// y, metres.
-    pub y: f64,
-    /// Heading, radians, normalised to (-π, π].
-    pub theta: f64,
-}
+/// Planar pose: metres and radians, heading counter-clockwise from +x,
+/// normalised to (-π, π]; the pose every agent uses ([`shm_schemas::geom`]).
+pub type Pose2 = shm_schemas::geom::Pose;
 
-/// Normalises an angle to (-π, π].
-pub fn wrap_angle(a: f64) -> f64 {
-    let mut a = a % std::f64::consts::TAU;
-    if a <= -std::f64::consts::PI {
-        a += std::f64::consts::TAU;
-    } else if a > std::f64::consts::PI {
-        a -= std::f64::consts::TAU;
-    }
-    a
-}
+pub use shm_schemas::geom::wrap_angle;
 
 /// Wheel and encoder geometry of a differential-drive base.
 #[derive(Debug, Clone, Copy, PartialEq)]

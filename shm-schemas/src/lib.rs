@@ -21,6 +21,7 @@ pub mod control;
 pub mod cycles;
 pub mod encode;
 pub mod fixed;
+pub mod geom;
 pub mod header;
 pub mod names;
 pub mod payloads;

@@ -32,24 +32,8 @@
 
 use crate::appendix_a::{Model, ModelError};
 use crate::bands::Tube;
+pub use shm_schemas::geom::{Pose, wrap_angle};
 use std::f64::consts::{FRAC_PI_2, PI};
-
-/// A planar pose, world frame.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Pose {
-    /// x, metres.
-    pub x: f64,
-    /// y, metres.
-    pub y: f64,
-    /// Heading, radians.
-    pub theta: f64,
-}
-
-/// Wraps an angle into (−π, π].
-pub fn wrap(a: f64) -> f64 {
-    let r = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if r <= -PI { r + 2.0 * PI } else { r }
-}
 
 /// The camera's geometry.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -98,7 +82,7 @@ pub fn observe(
     let a = camera.angle_of(f64::from(tube.col));
     Ok(Observation {
         range_m: depth / a.cos().max(0.1) + radius_m,
-        bearing_rad: wrap(a + pan_rad),
+        bearing_rad: wrap_angle(a + pan_rad),
         depth_m: depth,
         upright: tube.upright,
     })
@@ -133,7 +117,7 @@ pub fn ir_cone(heading: f64, transmitters: u8, half_angle: f64) -> Option<IrCone
         _ => return None,
     };
     let half_width = if pair { half_angle - FRAC_PI_2 / 2.0 } else { FRAC_PI_2 - half_angle };
-    Some(IrCone { centre: wrap(heading + sector * FRAC_PI_2), half_width: half_width.max(0.0) })
+    Some(IrCone { centre: wrap_angle(heading + sector * FRAC_PI_2), half_width: half_width.max(0.0) })
 }
 
 /// A corrected pose and what was corrected.
@@ -156,16 +140,16 @@ pub fn correct_pose(
     cone: Option<IrCone>,
     margin: f64,
 ) -> Correction {
-    let phi_est = wrap(estimate.theta + obs.bearing_rad + PI);
+    let phi_est = wrap_angle(estimate.theta + obs.bearing_rad + PI);
     let (phi, heading_corrected) = match cone {
         Some(c) => {
-            let off = wrap(phi_est - c.centre);
+            let off = wrap_angle(phi_est - c.centre);
             let lim = c.half_width + margin.max(0.0);
-            if off.abs() <= lim { (phi_est, false) } else { (wrap(c.centre + lim.copysign(off)), true) }
+            if off.abs() <= lim { (phi_est, false) } else { (wrap_angle(c.centre + lim.copysign(off)), true) }
         }
         None => (phi_est, false),
     };
-    let theta = if heading_corrected { wrap(phi - obs.bearing_rad - PI) } else { estimate.theta };
+    let theta = if heading_corrected { wrap_angle(phi - obs.bearing_rad - PI) } else { estimate.theta };
     Correction {
         pose: Pose { x: checkpoint.0 + obs.range_m * phi.cos(), y: checkpoint.1 + obs.range_m * phi.sin(), theta },
         heading_corrected,
@@ -203,7 +187,7 @@ mod tests {
     /// seen from `pose` (pinhole, exact).
     fn tube_of(pose: &Pose, cp: (f64, f64), upright: bool) -> Tube {
         let (dx, dy) = (cp.0 - pose.x, cp.1 - pose.y);
-        let a = wrap(dy.atan2(dx) - pose.theta);
+        let a = wrap_angle(dy.atan2(dx) - pose.theta);
         let depth = (dx.hypot(dy) - 0.05) * a.cos();
         let f = CAM.focal_px();
         let d = (0.2 * f / depth) as f32;
@@ -220,7 +204,7 @@ mod tests {
         let pose = Pose { x: 0.0, y: 0.0, theta: 0.3 };
         for cp in [(2.0, 0.9), (1.5, -0.2), (2.5, 1.5)] {
             let o = observe(&tube_of(&pose, cp, true), &CAM, &m, 0.0, 0.05).unwrap();
-            let want = (cp.0.hypot(cp.1), wrap(cp.1.atan2(cp.0) - 0.3));
+            let want = (cp.0.hypot(cp.1), wrap_angle(cp.1.atan2(cp.0) - 0.3));
             assert!(close(o.range_m, want.0, 1e-4) && close(o.bearing_rad, want.1, 1e-4), "{o:?} vs {want:?}");
             let (x, y) = place(&pose, &o);
             assert!(close(x, cp.0, 1e-4) && close(y, cp.1, 1e-4));
@@ -275,7 +259,7 @@ mod tests {
         let c = correct_pose(&est, cp, &obs, cone, 0.0);
         assert!(c.heading_corrected);
         // pulled back to the cone's edge (40° off the axis): heading 40° off, not 60°
-        assert!(close(wrap(c.pose.theta - truth.theta), 40f64.to_radians(), 1e-3), "{c:?}");
+        assert!(close(wrap_angle(c.pose.theta - truth.theta), 40f64.to_radians(), 1e-3), "{c:?}");
         assert!(close((c.pose.x - cp.0).hypot(c.pose.y - cp.1), obs.range_m, 1e-9));
         // without a cone the heading is kept
         assert!(!correct_pose(&est, cp, &obs, None, 0.0).heading_corrected);
@@ -299,7 +283,7 @@ mod tests {
     #[test]
     fn wrap_stays_in_range() {
         for a in [-7.0, -PI, 0.0, PI, 3.5 * PI, 100.0] {
-            let w = wrap(a);
+            let w = wrap_angle(a);
             assert!(w > -PI - 1e-12 && w <= PI + 1e-12, "{a} -> {w}");
             assert!(close(w.sin(), f64::sin(a), 1e-9) && close(w.cos(), f64::cos(a), 1e-9));
         }

@@ -37,7 +37,7 @@ use clap::Parser;
 use nerve_checkpoint::appendix_a::Model;
 use nerve_checkpoint::bands::{Pixels, Tube, TubeFinder};
 use nerve_checkpoint::config::{Calibration, SensorConfig};
-use nerve_checkpoint::locate::{Pose, wrap};
+use nerve_checkpoint::locate::{Pose, wrap_angle};
 use nerve_checkpoint::sensor::{FrameInput, Sensor, SensorSettings};
 use shm_schemas::payloads::{CheckpointSighting, HeadState, IrSighting, PoseCorrection, PoseEstimate};
 use std::path::PathBuf;
@@ -180,7 +180,7 @@ impl Checkpoint {
                 corrections = n,
                 dx = c.payload.x - c.from.x,
                 dy = c.payload.y - c.from.y,
-                dtheta_deg = wrap(c.payload.theta - c.from.theta).to_degrees(),
+                dtheta_deg = wrap_angle(c.payload.theta - c.from.theta).to_degrees(),
                 range_m = c.payload.range_m,
                 bearing_deg = f64::from(c.payload.bearing_rad).to_degrees(),
                 heading_corrected = c.correction.heading_corrected,

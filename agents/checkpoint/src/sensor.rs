@@ -27,7 +27,7 @@
 use crate::appendix_a::Model;
 use crate::bands::Tube;
 use crate::config::SensorConfig;
-use crate::locate::{Camera, Correction, Observation, Pose, correct_pose, identify, ir_cone, observe, place, wrap};
+use crate::locate::{Camera, Correction, Observation, Pose, correct_pose, identify, ir_cone, observe, place, wrap_angle};
 use shm_schemas::payloads::navigation::{CORRECTS_HEADING, CORRECTS_POSITION};
 use shm_schemas::payloads::{CheckpointSighting, IrSighting, PoseCorrection, PoseSource};
 use std::collections::BTreeMap;
@@ -196,7 +196,7 @@ impl Sensor {
         for (i, o) in seen.iter().enumerate() {
             let by_ir = named.filter(|(n, _)| *n == i).map(|(_, id)| id);
             let placed = f.pose.as_ref().map(|p| place(p, o));
-            let phi = f.pose.as_ref().map(|p| wrap(p.theta + o.bearing_rad + PI));
+            let phi = f.pose.as_ref().map(|p| wrap_angle(p.theta + o.bearing_rad + PI));
             // by where it falls: the one known checkpoint within gate_m, no other within twice that
             let by_map = || -> Option<u8> {
                 let (x, y) = placed?;
@@ -309,7 +309,7 @@ mod tests {
     /// The tube the simulator's camera shows of a tube at `cp` seen from `truth` (pinhole).
     fn tube_of(truth: &Pose, cp: (f64, f64), upright: bool) -> Tube {
         let (dx, dy) = (cp.0 - truth.x, cp.1 - truth.y);
-        let a = wrap(dy.atan2(dx) - truth.theta);
+        let a = wrap_angle(dy.atan2(dx) - truth.theta);
         let depth = (dx.hypot(dy) - 0.05) * a.cos();
         let f = camera().focal_px();
         let d = (0.2 * f / depth) as f32;

@@ -11,6 +11,8 @@
 //! moves are not trusted by the checkpoint sensor, so the dwell is what gives
 //! it still frames.
 
+pub use shm_schemas::geom::wrap_angle;
+
 /// What the sweep needs to know.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SweepSettings {
@@ -107,12 +109,6 @@ impl Sweep {
         }
         s.pans_rad[self.index]
     }
-}
-
-/// Wraps an angle into (−π, π].
-pub fn wrap(a: f64) -> f64 {
-    let r = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
-    if r <= -std::f64::consts::PI { r + std::f64::consts::TAU } else { r }
 }
 
 #[cfg(test)]

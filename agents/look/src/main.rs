@@ -122,7 +122,7 @@ impl Agent for Look {
         let hold_ns = self.hold_ms.get().saturating_mul(1_000_000);
         let gaze = self.target.filter(|t| now.saturating_sub(t.3) <= hold_ns).map(|(x, y, b, _)| {
             let pan = match self.last_pose {
-                Some(p) => nerve_look::wrap((y - p.y).atan2(x - p.x) - p.theta),
+                Some(p) => nerve_look::wrap_angle((y - p.y).atan2(x - p.x) - p.theta),
                 None => b,
             };
             pan.clamp(-PAN_LIMIT_DEG.to_radians(), PAN_LIMIT_DEG.to_radians())

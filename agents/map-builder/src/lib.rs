@@ -52,20 +52,10 @@
 
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
+pub use shm_schemas::geom::{Pose, wrap_angle};
 use shm_schemas::payloads::{CheckpointSighting, MAX_VIA_POINTS, ViaKind, ViaPath};
 use std::collections::HashMap;
-use std::f64::consts::{FRAC_PI_2, PI};
-
-/// A planar pose.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Pose {
-    /// x, metres.
-    pub x: f64,
-    /// y, metres.
-    pub y: f64,
-    /// Heading, radians.
-    pub theta: f64,
-}
+use std::f64::consts::FRAC_PI_2;
 
 /// Settings (the agent's parameters).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -141,7 +131,7 @@ impl Landmark {
         let from = self.seen_from.1.atan2(self.seen_from.0);
         let has_from = self.seen_from.0.hypot(self.seen_from.1) > 1e-9;
         // most votes; a tie goes to the direction nearer where the robot saw it from
-        let off = |dir: f64| if has_from { wrap(dir - from).abs() } else { 0.0 };
+        let off = |dir: f64| if has_from { wrap_angle(dir - from).abs() } else { 0.0 };
         let best = self
             .transmitter_votes
             .iter()
@@ -593,15 +583,10 @@ impl VisitedGrid {
     }
 }
 
-/// Wraps an angle into (−π, π].
-pub fn wrap(a: f64) -> f64 {
-    let r = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if r <= -PI { r + 2.0 * PI } else { r }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::PI;
 
     fn close(a: f64, b: f64, tol: f64) -> bool {
         (a - b).abs() <= tol
@@ -625,7 +610,7 @@ mod tests {
             transmitters: tx,
             from_ir: 1,
             from_camera: 1,
-            facing_rad: wrap(-FRAC_PI_2 + sector * FRAC_PI_2) as f32,
+            facing_rad: wrap_angle(-FRAC_PI_2 + sector * FRAC_PI_2) as f32,
             ..Default::default()
         }
     }
@@ -729,7 +714,7 @@ mod tests {
         assert_eq!(d.len(), 2);
         assert!(close(d[0].1, 0.0, 1e-12) && close(d[1].1, FRAC_PI_2, 1e-12), "{d:?}");
         let d = transmitter_directions(0b1001, -0.25 * PI);
-        assert!(close(d[0].1, 0.0, 1e-12) && close(wrap(d[1].1), -FRAC_PI_2, 1e-12), "{d:?}");
+        assert!(close(d[0].1, 0.0, 1e-12) && close(wrap_angle(d[1].1), -FRAC_PI_2, 1e-12), "{d:?}");
         assert!(transmitter_directions(0b0101, 0.0).is_empty());
     }
 

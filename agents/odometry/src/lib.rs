@@ -37,39 +37,16 @@
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
 use shm_schemas::payloads::navigation::{CORRECTS_HEADING, CORRECTS_POSITION};
+pub use shm_schemas::geom::{Pose, wrap_angle};
 use shm_schemas::payloads::{Odometry, PoseCorrection, PoseEstimate, PoseSource};
 use std::collections::VecDeque;
-use std::f64::consts::PI;
-
-/// A planar pose.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Pose {
-    /// x, metres.
-    pub x: f64,
-    /// y, metres.
-    pub y: f64,
-    /// Heading, radians.
-    pub theta: f64,
-}
-
-impl Pose {
-    fn finite(&self) -> bool {
-        self.x.is_finite() && self.y.is_finite() && self.theta.is_finite()
-    }
-}
-
-/// Wraps an angle into (−π, π].
-pub fn wrap(a: f64) -> f64 {
-    let r = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if r <= -PI { r + 2.0 * PI } else { r }
-}
 
 /// The rigid transform taking pose `from` onto pose `to`, applied to `p`.
 fn carry(from: &Pose, to: &Pose, p: &Pose) -> Pose {
-    let dth = wrap(to.theta - from.theta);
+    let dth = wrap_angle(to.theta - from.theta);
     let (s, c) = dth.sin_cos();
     let (dx, dy) = (p.x - from.x, p.y - from.y);
-    Pose { x: to.x + c * dx - s * dy, y: to.y + s * dx + c * dy, theta: wrap(p.theta + dth) }
+    Pose { x: to.x + c * dx - s * dy, y: to.y + s * dx + c * dy, theta: wrap_angle(p.theta + dth) }
 }
 
 /// Settings of the estimator (the agent's parameters).
@@ -254,7 +231,7 @@ impl DeadReckoning {
     /// Adds the motion of one report of the motor's odometry.
     pub fn on_odometry(&mut self, o: &Odometry, sender: &str) -> Result<Step, OdomError> {
         let raw = Pose { x: o.x, y: o.y, theta: o.theta };
-        if !raw.finite() {
+        if !raw.is_finite() {
             return Err(OdomError::NonFinite { what: "odometry", sender: sender.to_owned() });
         }
         let step = match self.last_raw {
@@ -265,7 +242,7 @@ impl DeadReckoning {
                 let (s, c) = prev.theta.sin_cos();
                 // the motion in the robot's frame at the previous report
                 let (fx, fy) = (c * dx + s * dy, -s * dx + c * dy);
-                let dth = wrap(raw.theta - prev.theta);
+                let dth = wrap_angle(raw.theta - prev.theta);
                 let len = dx.hypot(dy);
                 if len > self.settings.max_step_m || dth.abs() > self.settings.max_step_rad {
                     self.resets += 1;
@@ -274,7 +251,7 @@ impl DeadReckoning {
                     let (s, c) = self.pose.theta.sin_cos();
                     self.pose.x += c * fx - s * fy;
                     self.pose.y += s * fx + c * fy;
-                    self.pose.theta = wrap(self.pose.theta + dth);
+                    self.pose.theta = wrap_angle(self.pose.theta + dth);
                     Step::Moved
                 }
             }
@@ -307,7 +284,7 @@ impl DeadReckoning {
     /// Applies a checkpoint's correction (see the module's documentation).
     pub fn apply_correction(&mut self, c: &PoseCorrection, sender: &str) -> Result<Applied, OdomError> {
         let corr = Pose { x: c.x, y: c.y, theta: c.theta };
-        if !corr.finite() || !c.checkpoint_x.is_finite() || !c.checkpoint_y.is_finite() {
+        if !corr.is_finite() || !c.checkpoint_x.is_finite() || !c.checkpoint_y.is_finite() {
             return Err(OdomError::NonFinite { what: "correction", sender: sender.to_owned() });
         }
         if self.last_raw.is_none() {
@@ -341,7 +318,7 @@ impl DeadReckoning {
                 )
                 && resid <= self.settings.max_residual_m
             {
-                let theta = wrap(est.theta + delta);
+                let theta = wrap_angle(est.theta + delta);
                 let phi = theta + bearing;
                 target = Pose { x: c.checkpoint_x - range * phi.cos(), y: c.checkpoint_y - range * phi.sin(), theta };
                 from_two = true;
@@ -351,7 +328,7 @@ impl DeadReckoning {
         if jump_m > self.settings.max_jump_m {
             return Err(OdomError::TooFar { checkpoint: c.checkpoint_id, jump_m, max_m: self.settings.max_jump_m });
         }
-        let dtheta = wrap(target.theta - est.theta);
+        let dtheta = wrap_angle(target.theta - est.theta);
         self.pose = carry(&est, &target, &self.pose);
         for (_, p) in self.history.iter_mut() {
             *p = carry(&est, &target, p);
@@ -415,6 +392,7 @@ pub fn heading_from_two(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::PI;
 
     fn odo(x: f64, y: f64, theta: f64, t_ms: u64) -> Odometry {
         Odometry { x, y, theta, v: 0.0, omega: 0.0, stamp_ns: t_ms * 1_000_000 }

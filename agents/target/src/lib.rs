@@ -35,25 +35,9 @@
 
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
+pub use shm_schemas::geom::{Pose, wrap_angle};
 use shm_schemas::payloads::{MAX_VIA_POINTS, ViaKind, ViaPath};
 use std::f64::consts::PI;
-
-/// A planar pose.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Pose {
-    /// x, metres.
-    pub x: f64,
-    /// y, metres.
-    pub y: f64,
-    /// Heading, radians.
-    pub theta: f64,
-}
-
-/// Wraps an angle into (−π, π].
-pub fn wrap(a: f64) -> f64 {
-    let r = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if r <= -PI { r + 2.0 * PI } else { r }
-}
 
 /// Settings (the agent's parameters).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -358,7 +342,7 @@ impl Follower {
             match self.look.as_mut() {
                 Some(l) if !l.corrected && l.elapsed_s < s.look_timeout_s => {
                     l.elapsed_s += dt.max(0.0);
-                    let err = wrap((l.at.1 - pose.y).atan2(l.at.0 - pose.x) - pose.theta);
+                    let err = wrap_angle((l.at.1 - pose.y).atan2(l.at.0 - pose.x) - pose.theta);
                     out.error = err;
                     if err.abs() > s.rotate_until {
                         omega = (2.0 * err.abs()).clamp(0.15, s.omega_turn.max(0.15)).copysign(err);
@@ -375,7 +359,7 @@ impl Follower {
             while let Some(p) = self.points.get(self.index).copied() {
                 let (dx, dy) = (p.x - pose.x, p.y - pose.y);
                 let dist = dx.hypot(dy);
-                let err = wrap(dy.atan2(dx) - pose.theta);
+                let err = wrap_angle(dy.atan2(dx) - pose.theta);
                 let last = self.is_last();
                 let reached = if last {
                     if p.kind == ViaKind::Target { dist <= s.standoff_m } else { dist <= s.final_reach_m }
@@ -410,7 +394,7 @@ impl Follower {
         {
             let (dx, dy) = (p.x - pose.x, p.y - pose.y);
             let dist = dx.hypot(dy);
-            let err = wrap(dy.atan2(dx) - pose.theta);
+            let err = wrap_angle(dy.atan2(dx) - pose.theta);
             out.error = err;
             if self.phase == Phase::Rotating && err.abs() <= s.rotate_until {
                 self.phase = Phase::Driving;
@@ -582,7 +566,7 @@ mod tests {
                 rotated_in_place += 1;
             }
             // the robot: exact unicycle
-            pose.theta = wrap(pose.theta + s.omega * dt);
+            pose.theta = wrap_angle(pose.theta + s.omega * dt);
             pose.x += s.v * dt * pose.theta.cos();
             pose.y += s.v * dt * pose.theta.sin();
             t += dt;
@@ -618,7 +602,7 @@ mod tests {
         // it turns left to face the checkpoint (within the 6 s it waits)
         for _ in 0..110 {
             let s = f.step(&pose, 0.05);
-            pose.theta = wrap(pose.theta + s.omega * 0.05);
+            pose.theta = wrap_angle(pose.theta + s.omega * 0.05);
             pose.x += s.v * 0.05 * pose.theta.cos();
         }
         let want = 1.6f64.atan2(0.1);

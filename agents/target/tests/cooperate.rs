@@ -16,16 +16,13 @@ use nerve_checkpoint::locate::{self, Camera};
 use nerve_checkpoint::sensor::{FrameInput, Sensor, SensorSettings};
 use nerve_odometry::{DeadReckoning, Settings as OdoSettings};
 use nerve_target::{Event, Follower, Phase, Settings};
+use shm_schemas::geom::wrap_angle;
 use shm_schemas::payloads::{IrSighting, Odometry, ViaKind, ViaPath};
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
 const CHECKPOINTS: [(u8, f64, f64); 3] = [(1, 1.2, 1.2), (2, 6.0, 1.2), (3, 10.8, 1.2)];
 const TARGET: (f64, f64) = (12.8, -3.0);
-
-fn wrap(a: f64) -> f64 {
-    locate::wrap(a)
-}
 
 fn camera() -> Camera {
     Camera { width_px: 320.0, hfov_rad: 60f64.to_radians() }
@@ -58,7 +55,7 @@ fn frame(truth: (f64, f64, f64)) -> Vec<Tube> {
         .iter()
         .filter_map(|&(_, x, y)| {
             let (dx, dy) = (x - truth.0, y - truth.1);
-            let a = wrap(dy.atan2(dx) - truth.2);
+            let a = wrap_angle(dy.atan2(dx) - truth.2);
             let depth = (dx.hypot(dy) - 0.05) * a.cos();
             if a.abs() > 29f64.to_radians() || depth < 0.3 {
                 return None;
@@ -90,7 +87,7 @@ fn ir(truth: (f64, f64, f64), stamp_ns: u64) -> IrSighting {
         let phi = (truth.1 - y).atan2(truth.0 - x);
         let mut mask = 0u8;
         for i in 0..4 {
-            if wrap(phi - (-FRAC_PI_2 + f64::from(i) * FRAC_PI_2)).abs() <= 50f64.to_radians() {
+            if wrap_angle(phi - (-FRAC_PI_2 + f64::from(i) * FRAC_PI_2)).abs() <= 50f64.to_radians() {
                 mask |= 1 << i;
             }
         }
@@ -138,10 +135,10 @@ fn run(correct: bool) -> Run {
     for step in 0..8000u64 {
         let stamp = step * 50_000_000;
         // move: the wheels slant the path right by 1.15°/m and go 1 % further than counted
-        tth = wrap(tth + omega * dt - 0.02 * v * dt);
+        tth = wrap_angle(tth + omega * dt - 0.02 * v * dt);
         tx += 1.01 * v * dt * tth.cos();
         ty += 1.01 * v * dt * tth.sin();
-        rth = wrap(rth + omega * dt);
+        rth = wrap_angle(rth + omega * dt);
         rx += v * dt * rth.cos();
         ry += v * dt * rth.sin();
         odo.on_odometry(&Odometry { x: rx, y: ry, theta: rth, v, omega, stamp_ns: stamp }, "motor").unwrap();
