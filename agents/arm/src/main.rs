@@ -259,3 +259,108 @@ impl Agent for Arm {
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<Arm>()
 }
+
+#[cfg(test)]
+mod tests {
+    //! The agent's glue, through the SDK's harness, on a pseudo-terminal
+    //! board: a grasp request to the board's commands and to `state`
+    //! through `step`, the phase timeout set by a parameter, a refused
+    //! parameter and the refusal to start without a device. The grasp
+    //! itself is tested in the library.
+
+    use super::*;
+    use agent_sdk::testing::Harness;
+    use nerve_devices::FrameDecoder;
+    use std::io::Read;
+    use std::sync::mpsc::{Receiver, channel};
+
+    /// A pseudo-terminal standing in for the arm board: a thread decodes
+    /// what the agent writes until the line closes.
+    struct Board {
+        tty: PathBuf,
+        _slave: std::os::fd::OwnedFd,
+        heard: Receiver<Message>,
+    }
+
+    impl Board {
+        fn new() -> Board {
+            let (master, slave, tty) = nerve_devlink::raw_pty().expect("a pseudo-terminal in raw mode");
+            let mut master = std::fs::File::from(master);
+            let (tx, heard) = channel();
+            std::thread::spawn(move || {
+                let (mut decoder, mut buf) = (FrameDecoder::new(), [0u8; 256]);
+                // ends when the line closes (EIO) or the test is gone
+                while let Ok(n @ 1..) = master.read(&mut buf) {
+                    if decoder.push(&buf[..n]).try_for_each(|m| tx.send(m)).is_err() {
+                        return;
+                    }
+                }
+            });
+            Board { tty, _slave: slave, heard }
+        }
+
+        /// The first message the agent sent that `pick` accepts (at most 5 s).
+        fn first<T>(&self, pick: impl Fn(Message) -> Option<T>) -> Option<T> {
+            let end = std::time::Instant::now() + Duration::from_secs(5);
+            while let Some(left) = end.checked_duration_since(std::time::Instant::now()) {
+                match self.heard.recv_timeout(left) {
+                    Ok(m) => {
+                        if let Some(t) = pick(m) {
+                            return Some(t);
+                        }
+                    }
+                    Err(_) => return None,
+                }
+            }
+            None
+        }
+    }
+
+    fn grasp(id: u32) -> GraspRequest {
+        GraspRequest { request_id: id, action: GraspAction::Grasp as u8, ..Default::default() }
+    }
+
+    #[test]
+    fn without_a_device_the_arm_does_not_start_and_says_what_to_give() {
+        let e = Harness::<Arm>::new().expect_err("no --device").to_string();
+        assert!(e.contains("start") && e.contains("--device"), "{e}");
+    }
+
+    #[test]
+    fn a_grasp_opens_the_gripper_and_times_out_as_missed_when_the_board_is_silent() {
+        let board = Board::new();
+        let tty = board.tty.display().to_string();
+        let mut h = Harness::<Arm>::builder()
+            .args(["--device", tty.as_str()])
+            .param("timeout_ms", "500")
+            .start()
+            .expect("the arm starts on the board");
+        let e = h.set_param("timeout_ms", "100").expect_err("too short");
+        assert!(e.contains("500"), "{e}");
+        // the device thread opens the line on its own: wait for it (5 s at most)
+        let end = std::time::Instant::now() + Duration::from_secs(5);
+        while !h.agent().link.as_ref().is_some_and(|l| l.stats().connected) && std::time::Instant::now() < end {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+
+        h.send_from("cmd", "decision", grasp(3)).expect("grasp");
+        h.step().expect("step");
+        let s = *h.output::<ArmGraspState>("state").expect("state").last().expect("the phase changed: a state");
+        assert_eq!((s.request_id, GraspPhase::from_code(s.phase)), (3, Some(GraspPhase::Moving)), "{s:?}");
+        assert_eq!(h.param("grasps").as_deref(), Ok("1"));
+        let opened = board.first(|m| match m {
+            Message::GraspCommand(g) => Some(g.action),
+            _ => None,
+        });
+        assert_eq!(opened, Some(nerve_devices::GraspAction::Release), "the gripper is opened first");
+
+        // the board never reports: the phase ends after timeout_ms
+        h.advance(Duration::from_millis(600)).expect("steps");
+        let s = *h.output::<ArmGraspState>("state").expect("state").last().expect("missed: a state");
+        assert_eq!(GraspPhase::from_code(s.phase), Some(GraspPhase::Missed), "{s:?}");
+        assert_eq!(s.reason, GraspMiss::Timeout as u8, "{s:?}");
+        assert_eq!(h.param("missed").as_deref(), Ok("1"));
+        // the device link's counters are figures beside the arm's own
+        assert_eq!(h.param("device_opens").as_deref().map(|n| n.parse::<u64>().is_ok()), Ok(true));
+    }
+}

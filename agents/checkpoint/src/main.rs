@@ -313,3 +313,45 @@ impl Agent for Checkpoint {
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<Checkpoint>()
 }
+
+#[cfg(test)]
+mod tests {
+    //! The agent's glue, through the SDK's harness: its arguments and their
+    //! refusals, a step woken by the pose or the IR alone (no frame: nothing
+    //! is seen, nothing sent), the figures and a refused parameter. Finding
+    //! and placing tubes is tested in the library.
+
+    use super::*;
+    use agent_sdk::testing::Harness;
+
+    #[test]
+    fn a_missing_config_file_is_refused_with_its_path() {
+        let missing = std::env::temp_dir().join(format!("nerve-no-such-checkpoints-{}.toml", std::process::id()));
+        let e = Harness::<Checkpoint>::builder()
+            .args(["--config", missing.to_str().expect("a UTF-8 temp path")])
+            .start()
+            .expect_err("no such file")
+            .to_string();
+        assert!(e.contains(&missing.display().to_string()), "names the file: {e}");
+        let e = Harness::<Checkpoint>::builder().args(["--calibrate", "x"]).start().expect_err("misspelt").to_string();
+        assert!(e.contains("--calibrate") && e.contains("nerve-checkpoint -- --help"), "{e}");
+    }
+
+    #[test]
+    fn without_a_frame_nothing_is_seen_and_the_ranges_are_checked() {
+        let mut h = Harness::<Checkpoint>::new().expect("the checkpoint sensor starts without a config");
+        h.send("pose", PoseEstimate { x: 1.0, stamp_ns: h.now_ns(), ..Default::default() }).expect("pose");
+        h.send("ir", IrSighting { seen: 1, checkpoint_id: 2, transmitters: 1, stamp_ns: h.now_ns(), ..Default::default() })
+            .expect("ir");
+        h.step().expect("a step woken by the pose and the IR");
+        assert!(h.output::<CheckpointSighting>("sighting").expect("sighting").is_empty());
+        assert!(h.output::<PoseCorrection>("correction").expect("correction").is_empty());
+        assert_eq!(h.param("frames").as_deref(), Ok("0"), "no frame was read");
+
+        let e = h.set_param("range_max_m", "25").expect_err("out of range");
+        assert!(e.contains("outside"), "{e}");
+        h.set_param("range_max_m", "4").expect("in range");
+        assert_eq!(h.param("range_max_m").as_deref(), Ok("4"));
+        assert!(h.set_param("frames", "3").expect_err("a figure").contains("read-only"));
+    }
+}

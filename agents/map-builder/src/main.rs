@@ -279,3 +279,75 @@ impl Agent for MapBuilderAgent {
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<MapBuilderAgent>()
 }
+
+#[cfg(test)]
+mod tests {
+    //! The agent's glue, through the SDK's harness: sightings to `path` and
+    //! `mission` ("come") through `step`, the path sent again until robot 2
+    //! arrives, "resume" then, the figures and a refused parameter. The map
+    //! itself is tested in the library.
+
+    use super::*;
+    use agent_sdk::testing::Harness;
+
+    fn pose(x: f64, stamp_ns: u64) -> PoseEstimate {
+        PoseEstimate { x, stamp_ns, ..Default::default() }
+    }
+
+    fn target_at(x: f64, y: f64, stamp_ns: u64) -> CheckpointSighting {
+        CheckpointSighting { stamp_ns, x, y, range_m: 2.0, is_target: 1, from_camera: 1, ..Default::default() }
+    }
+
+    fn codes(h: &mut Harness<MapBuilderAgent>) -> Vec<(MissionCode, u32)> {
+        h.output::<MissionCommand>("mission").expect("mission").iter().filter_map(|m| Some((m.code()?, m.path_id))).collect()
+    }
+
+    #[test]
+    fn a_confirmed_target_sends_a_path_until_robot_2_arrives() {
+        let mut h = Harness::<MapBuilderAgent>::new().expect("the map builder starts");
+        h.send("pose", pose(0.0, h.now_ns())).expect("pose");
+        h.send("sighting", target_at(3.0, 0.0, h.now_ns())).expect("sighting");
+        h.step().expect("step");
+        assert!(h.output::<ViaPath>("path").expect("path").is_empty(), "one sighting does not confirm");
+        assert_eq!(h.param("landmarks").as_deref(), Ok("1"));
+        assert_eq!(h.param("confirmed").as_deref(), Ok("0"));
+
+        for _ in 0..2 {
+            h.send("pose", pose(0.0, h.now_ns())).expect("pose");
+            h.send("sighting", target_at(3.0, 0.0, h.now_ns())).expect("sighting");
+            h.step().expect("step");
+        }
+        let paths = h.output::<ViaPath>("path").expect("path");
+        let p = paths.last().expect("the third sighting confirms: a path");
+        let (last, kind, _) = p.entries().last().expect("points");
+        assert_eq!((last, ViaKind::from_code(kind)), ([3.0, 0.0], Some(ViaKind::Target)), "{p:?}");
+        assert_eq!(codes(&mut h), [(MissionCode::Come, p.path_id)]);
+        assert_eq!(h.param("paths_sent").as_deref(), Ok("1"));
+
+        // sent again every republish_ms until robot 2 arrives
+        h.advance(Duration::from_millis(1200)).expect("steps");
+        assert!(h.output::<ViaPath>("path").expect("path").iter().any(|q| q.path_id == p.path_id));
+        assert!(codes(&mut h).contains(&(MissionCode::Come, p.path_id)));
+
+        let mut arrived = MissionCommand::new(MissionCode::Arrived, p.path_id, h.now_ns());
+        arrived.index = p.count - 1;
+        h.send_from("mission_in", "bridge", arrived).expect("arrived");
+        h.step().expect("step");
+        assert_eq!(codes(&mut h), [(MissionCode::Resume, p.path_id)]);
+        h.advance(Duration::from_millis(1200)).expect("steps");
+        assert!(h.output::<ViaPath>("path").expect("path").is_empty(), "done: no more paths");
+    }
+
+    #[test]
+    fn min_sightings_is_checked_and_read_at_the_next_step() {
+        let mut h = Harness::<MapBuilderAgent>::new().expect("the map builder starts");
+        let e = h.set_param("min_sightings", "0").expect_err("at least one");
+        assert!(e.contains("at least 1"), "{e}");
+        h.set_param("min_sightings", "1").expect("one sighting is enough");
+        h.send("pose", pose(0.0, h.now_ns())).expect("pose");
+        h.send("sighting", target_at(2.5, 1.0, h.now_ns())).expect("sighting");
+        h.step().expect("step");
+        assert_eq!(h.output::<ViaPath>("path").expect("path").len(), 1, "confirmed by one sighting");
+        assert!(h.set_param("confirmed", "0").expect_err("a figure").contains("read-only"));
+    }
+}

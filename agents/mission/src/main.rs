@@ -363,3 +363,74 @@ impl Agent for Mission {
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<Mission>()
 }
+
+#[cfg(test)]
+mod tests {
+    //! The agent's glue, through the SDK's harness: `--role` and its
+    //! refusals, the explorer's path going out only in the decision maker's
+    //! `wait_mode` (a parameter), sent again until robot 2 arrives, and
+    //! "resume" then; a path refused and counted. The mission logic itself
+    //! is tested in the library.
+
+    use super::*;
+    use agent_sdk::testing::Harness;
+    use shm_schemas::FixedName;
+    use shm_schemas::payloads::MissionCode;
+
+    fn path(id: u32) -> ViaPath {
+        let mut p = ViaPath { path_id: id, count: 2, ..Default::default() };
+        p.points[0] = [1.0, 0.0];
+        p.kinds[0] = ViaKind::TargetApproach as u8;
+        p.points[1] = [2.0, 0.0];
+        p.kinds[1] = ViaKind::Target as u8;
+        p
+    }
+
+    fn orders(h: &mut Harness<Mission>) -> Vec<(MissionCode, u32)> {
+        h.output::<MissionCommand>("order").expect("order").iter().filter_map(|m| Some((m.code()?, m.path_id))).collect()
+    }
+
+    #[test]
+    fn the_role_is_required_and_checked() {
+        let e = Harness::<Mission>::new().expect_err("no role").to_string();
+        assert!(e.contains("--role") && e.contains("nerve-mission -- --help"), "{e}");
+        let e = Harness::<Mission>::builder().args(["--role", "pilot"]).start().expect_err("no such role").to_string();
+        assert!(e.contains("pilot"), "{e}");
+    }
+
+    #[test]
+    fn the_explorer_sends_the_path_when_stopped_and_resumes_when_robot_2_arrives() {
+        let mut h = Harness::<Mission>::builder()
+            .args(["--role", "explorer"])
+            .param("resend_ms", "500")
+            .start()
+            .expect("the explorer starts");
+        assert_eq!(h.param("role").as_deref(), Ok("explorer"));
+        h.send("path_in", path(4)).expect("path");
+        h.step().expect("step");
+        assert!(h.output::<ViaPath>("path").expect("path").is_empty(), "not before the robot waits");
+        assert_eq!(h.param("phase").as_deref(), Ok("found"));
+
+        h.send("mode", Mode { name: FixedName::new("wait"), ..Default::default() }).expect("mode");
+        h.step().expect("step");
+        assert_eq!(h.output::<ViaPath>("path").expect("path").iter().map(|p| p.path_id).collect::<Vec<_>>(), [4]);
+        assert_eq!(orders(&mut h), [(MissionCode::Come, 4)]);
+        assert_eq!(h.param("phase").as_deref(), Ok("sent"));
+
+        // no answer: sent again every resend_ms
+        h.advance(Duration::from_millis(600)).expect("steps");
+        assert_eq!(orders(&mut h), [(MissionCode::Come, 4)]);
+
+        h.send_from("report", "bridge", MissionCommand::new(MissionCode::Arrived, 4, h.now_ns())).expect("arrived");
+        h.step().expect("step");
+        assert_eq!(orders(&mut h), [(MissionCode::Resume, 4)]);
+        assert_eq!(h.param("phase").as_deref(), Ok("done"));
+
+        // a path without points is refused and counted
+        h.send("path_in", ViaPath { path_id: 5, ..Default::default() }).expect("empty path");
+        h.step().expect("step");
+        assert_eq!(h.param("refused").as_deref(), Ok("1"));
+        let e = h.set_param("resend_ms", "10").expect_err("too often");
+        assert!(e.contains("100"), "{e}");
+    }
+}

@@ -188,3 +188,86 @@ impl Agent for OdometryAgent {
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<OdometryAgent>()
 }
+
+#[cfg(test)]
+mod tests {
+    //! The agent's glue, through the SDK's harness: `--start`, odometry and
+    //! corrections to `pose` through `step`, the figures, a refused
+    //! correction, a refused parameter and a refused argument. The dead
+    //! reckoning itself is tested in the library.
+
+    use super::*;
+    use agent_sdk::testing::Harness;
+    use shm_schemas::payloads::PoseSource;
+    use shm_schemas::payloads::navigation::CORRECTS_POSITION;
+    use std::f64::consts::FRAC_PI_2;
+
+    fn odom(x: f64, stamp_ns: u64) -> Odometry {
+        Odometry { x, y: 0.0, theta: 0.0, v: 0.0, omega: 0.0, stamp_ns }
+    }
+
+    fn correction(x: f64, y: f64, stamp_ns: u64) -> PoseCorrection {
+        PoseCorrection {
+            x,
+            y,
+            checkpoint_x: x + 1.0,
+            checkpoint_y: y,
+            stamp_ns,
+            range_m: 1.0,
+            fields: CORRECTS_POSITION,
+            source: PoseSource::Checkpoint as u8,
+            checkpoint_id: 1,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn odometry_moves_the_start_pose_and_a_correction_moves_the_estimate() {
+        let mut h = Harness::<OdometryAgent>::builder()
+            .args(["--start", "1,2,90"])
+            .start()
+            .expect("the odometry agent starts");
+        let t0 = h.now_ns();
+        h.send_from("odom", "motor", odom(0.0, t0)).expect("odom");
+        h.step().expect("step");
+        let p = h.output::<PoseEstimate>("pose").expect("pose");
+        let p = p.last().expect("a pose per odometry report");
+        assert!((p.x, p.y) == (1.0, 2.0) && (p.theta - FRAC_PI_2).abs() < 1e-9, "the start pose: {p:?}");
+
+        // half a metre ahead in the motor's frame: north in the world
+        let t1 = t0 + 100_000_000;
+        h.send_from("odom", "motor", odom(0.5, t1)).expect("odom");
+        h.step().expect("step");
+        let p = *h.output::<PoseEstimate>("pose").expect("pose").last().expect("pose");
+        assert!((p.x - 1.0).abs() < 1e-9 && (p.y - 2.5).abs() < 1e-9, "{p:?}");
+
+        h.send_from("correction", "checkpoint", correction(1.2, 2.5, t1)).expect("correction");
+        h.step().expect("step");
+        let p = *h.output::<PoseEstimate>("pose").expect("pose").last().expect("a corrected pose");
+        assert!((p.x - 1.2).abs() < 1e-9 && (p.y - 2.5).abs() < 1e-9, "{p:?}");
+        assert_eq!((p.corrections, p.last_checkpoint), (1, 1));
+        assert_eq!(h.param("corrections").as_deref(), Ok("1"));
+
+        // a correction farther than max_jump_m is refused and counted; no pose goes out
+        h.send_from("correction", "checkpoint", correction(40.0, 2.5, t1)).expect("correction");
+        h.step().expect("step");
+        assert!(h.output::<PoseEstimate>("pose").expect("pose").is_empty());
+        assert_eq!(h.param("rejected").as_deref(), Ok("1"));
+        assert!(h.set_param("rejected", "0").expect_err("a figure").contains("read-only"));
+
+        let e = h.set_param("max_jump_m", "500").expect_err("out of range");
+        assert!(e.contains("outside"), "{e}");
+    }
+
+    #[test]
+    fn a_bad_start_pose_is_refused_with_what_to_write() {
+        let e = Harness::<OdometryAgent>::builder()
+            .args(["--start", "north"])
+            .start()
+            .expect_err("not a pose")
+            .to_string();
+        assert!(e.contains("agent \"odometry\"") && e.contains("--start"), "{e}");
+        assert!(e.contains("X,Y,THETA_DEG") || e.contains("not a number"), "says what to write: {e}");
+        assert!(e.contains("nerve-odometry -- --help"), "{e}");
+    }
+}

@@ -280,3 +280,93 @@ impl Agent for Target {
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<Target>()
 }
+
+#[cfg(test)]
+mod tests {
+    //! The agent's glue, through the SDK's harness: inputs to `cmd` and
+    //! `mission` through `step`, `come` and `abort`, a stale pose, a
+    //! parameter and a refusal. The follower itself is tested in the library.
+
+    use super::*;
+    use agent_sdk::testing::Harness;
+    use shm_schemas::payloads::ViaKind;
+
+    /// One waypoint at (1, 0), then the target at (3, 0).
+    fn path(id: u32) -> ViaPath {
+        let mut p = ViaPath { path_id: id, count: 2, ..Default::default() };
+        p.points[0] = [1.0, 0.0];
+        p.landmarks[0] = [1.0, 0.0];
+        p.kinds[0] = ViaKind::Waypoint as u8;
+        p.points[1] = [3.0, 0.0];
+        p.landmarks[1] = [3.0, 0.0];
+        p.kinds[1] = ViaKind::Target as u8;
+        p
+    }
+
+    fn pose(x: f64, stamp_ns: u64) -> PoseEstimate {
+        PoseEstimate { x, stamp_ns, ..Default::default() }
+    }
+
+    fn last_cmd(h: &mut Harness<Target>) -> Option<VelocityCommand> {
+        h.output::<VelocityCommand>("cmd").expect("cmd").last().copied()
+    }
+
+    #[test]
+    fn a_path_is_followed_only_when_asked_and_stopped_on_abort() {
+        let mut h = Harness::<Target>::new().expect("the target agent starts");
+        h.send("path", path(7)).expect("path");
+        h.send("pose", pose(0.0, h.now_ns())).expect("pose");
+        h.step().expect("step");
+        assert_eq!(last_cmd(&mut h), None, "a path alone is not followed (auto_start is off)");
+
+        // `come` for another path: still nothing
+        h.send("mission_in", MissionCommand::new(MissionCode::Come, 8, 0)).expect("come");
+        h.step().expect("step");
+        assert_eq!(last_cmd(&mut h), None);
+
+        h.send("mission_in", MissionCommand::new(MissionCode::Come, 7, 0)).expect("come");
+        h.send("pose", pose(0.0, h.now_ns())).expect("pose");
+        h.step().expect("step");
+        let c = last_cmd(&mut h).expect("following: a command each step");
+        assert!(c.v > 0.0 && c.v <= 0.3 + 1e-9, "drives ahead at most v_cruise: {c:?}");
+
+        // the via point is reached: reported on `mission` with its index
+        h.send("pose", pose(0.95, h.now_ns())).expect("pose");
+        h.step().expect("step");
+        let m = h.output::<MissionCommand>("mission").expect("mission");
+        assert!(
+            m.iter().any(|m| m.code() == Some(MissionCode::ViaReached) && m.path_id == 7 && m.index == 0),
+            "{m:?}"
+        );
+
+        h.send("mission_in", MissionCommand::new(MissionCode::Abort, 7, 0)).expect("abort");
+        h.step().expect("step");
+        let c = last_cmd(&mut h).expect("a stop on abort");
+        assert_eq!((c.v, c.omega), (0.0, 0.0));
+        h.step().expect("step");
+        assert_eq!(last_cmd(&mut h), None, "idle after the abort: nothing more is sent");
+    }
+
+    #[test]
+    fn a_stale_pose_stops_the_robot_and_v_cruise_is_a_checked_parameter() {
+        let mut h = Harness::<Target>::builder()
+            .param("auto_start", "true")
+            .param("v_cruise", "0.2")
+            .start()
+            .expect("the target agent starts");
+        h.send("path", path(1)).expect("path");
+        h.send("pose", pose(0.0, h.now_ns())).expect("pose");
+        h.step().expect("step");
+        let c = last_cmd(&mut h).expect("auto_start follows at once");
+        assert!(c.v > 0.0 && c.v <= 0.2 + 1e-9, "at most the v_cruise set: {c:?}");
+
+        // no pose for longer than 500 ms: stopped
+        h.advance(Duration::from_millis(600)).expect("steps without a pose");
+        let c = last_cmd(&mut h).expect("a stop");
+        assert_eq!((c.v, c.omega), (0.0, 0.0), "no fresh pose: stopped");
+
+        let e = h.set_param("v_cruise", "5").expect_err("too fast");
+        assert!(e.contains("outside"), "{e}");
+        assert_eq!(h.param("v_cruise").as_deref(), Ok("0.2"), "the refused value is not taken");
+    }
+}
