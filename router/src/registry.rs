@@ -129,8 +129,8 @@ impl Registry {
     }
 
     /// The type output `from` would send to input `to`, or why they cannot
-    /// be connected: another type, or the same type name built from another
-    /// definition (the agent to rebuild is named when the router can tell).
+    /// be connected: another type, or the same type name laid out
+    /// differently (the fields that differ listed, see [`Registry::check_input`]).
     pub fn check_compatible(&self, from: &PortRef, to: &PortRef) -> Result<String, RouterError> {
         let f = self.port(from, true)?;
         self.check_input(from, f, to)?;
@@ -138,38 +138,52 @@ impl Registry {
     }
 
     /// Whether input `to` takes what `from` sends (`f`: the spec of `from`,
-    /// an agent's output or a tool's port); why not, if not.
+    /// an agent's output or a tool's port); why not, if not. The rule is
+    /// the one the launch file and the agent apply
+    /// ([`shm_schemas::schema::compat::check`]): the same type name laid out
+    /// the same way, compared field by field through the schemas the two
+    /// agents registered (by fingerprint when one has none: a tool's port,
+    /// a registration too large for its schemas).
     pub fn check_input(&self, from: &PortRef, f: &PortSpec, to: &PortRef) -> Result<(), RouterError> {
+        use shm_schemas::schema::compat::{self, Declared, Incompatible};
         let t = self.port(to, false)?;
-        if f.type_name != t.type_name {
-            return Err(RouterError::TypeMismatch {
-                from: from.to_string(),
-                from_type: f.type_name.clone(),
-                to: to.to_string(),
-                to_type: t.type_name.clone(),
-            });
+        /// `spec` of `agent`'s port, with its layout if the agent registered it.
+        fn declared<'a>(registry: &'a Registry, agent: &PortRef, spec: &'a PortSpec) -> Declared<'a> {
+            let schemas = registry.agents.get(agent.agent.as_str()).map(|e| e.reg.schemas.as_slice());
+            Declared {
+                type_name: &spec.type_name,
+                fingerprint: Some(spec.fingerprint),
+                schema: schemas
+                    .unwrap_or_default()
+                    .iter()
+                    .find(|s| s.type_name == spec.type_name && s.fingerprint() == spec.fingerprint),
+            }
         }
-        if f.fingerprint != t.fingerprint {
-            let built = |agent: &str| {
-                let exe = &self.agents.get(agent)?.reg.executable;
-                std::fs::metadata(exe).and_then(|m| m.modified()).ok()
-            };
-            let (fa, ta) = (from.agent.as_str(), to.agent.as_str());
-            let rebuild = match (built(fa), built(ta)) {
-                (Some(a), Some(b)) if a < b => format!("{fa} is the older build: rebuild it and restart it"),
-                (Some(a), Some(b)) if b < a => format!("{ta} is the older build: rebuild it and restart it"),
-                _ => format!("rebuild the one of {fa} and {ta} built from the older definition, and restart it"),
-            };
-            return Err(RouterError::LayoutMismatch {
-                from: from.to_string(),
-                to: to.to_string(),
-                type_name: f.type_name.clone(),
-                from_fingerprint: f.fingerprint,
-                to_fingerprint: t.fingerprint,
-                rebuild,
-            });
+        let (from_text, to_text) = (from.to_string(), to.to_string());
+        match compat::check(declared(self, from, f), declared(self, to, t)) {
+            Ok(()) => Ok(()),
+            Err(Incompatible::Type { output, input }) => {
+                Err(RouterError::TypeMismatch { from: from_text, from_type: output, to: to_text, to_type: input })
+            }
+            Err(Incompatible::Layout { fields, .. }) => {
+                let differ = match &fields {
+                    Some(m) => format!("the fields differ:\n{}\n", m.list(&from_text, &to_text)),
+                    None => String::new(),
+                };
+                Err(RouterError::LayoutMismatch {
+                    from: from_text,
+                    to: to_text,
+                    type_name: f.type_name.clone(),
+                    from_fingerprint: f.fingerprint,
+                    to_fingerprint: t.fingerprint,
+                    rebuild: format!(
+                        "{differ}make both declare the same layout of {} (the same fields, types and order), \
+                         then restart the one you changed",
+                        f.type_name
+                    ),
+                })
+            }
         }
-        Ok(())
     }
 }
 

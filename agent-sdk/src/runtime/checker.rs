@@ -310,11 +310,10 @@ impl Checker<'_> {
                     Ok(i) => i,
                     Err(e) => return AgentReply::Error(e),
                 };
-                if inp.type_name() != type_name {
-                    return AgentReply::Error(format!(
-                        "input {input:?} takes {} but {from_agent}/{from_port} sends {type_name}",
-                        inp.type_name()
-                    ));
+                let (from, to) =
+                    (format!("{from_agent}/{from_port}"), format!("{}/{input}", self.node.name().as_str()));
+                if let Err(e) = connectable(&type_name, None, &inp.spec()) {
+                    return AgentReply::Error(e.refusal(&from, &to));
                 }
                 let _rewire =
                     tracing::info_span!("connect", input = %input, peer = %format_args!("{from_agent}/{from_port}"))
@@ -328,6 +327,16 @@ impl Checker<'_> {
                             self.changed_inputs();
                         }
                         AgentReply::Ok
+                    }
+                    Err(crate::ports::PortError::LayoutMismatch { type_name, theirs, .. }) => {
+                        // the service says the source's layout: the same rule
+                        // as the router's, without guessing which is older
+                        let refusal = match connectable(&type_name, Some(theirs), &inp.spec()) {
+                            Err(e) => e.refusal(&from, &to),
+                            Ok(()) => format!("cannot connect {from} to {to}: {type_name} is laid out differently"),
+                        };
+                        tracing::warn!(%from, %to, "cannot subscribe: {refusal}");
+                        AgentReply::Error(refusal)
                     }
                     Err(e) => {
                         tracing::warn!("cannot subscribe: {e}");
@@ -420,6 +429,24 @@ impl Checker<'_> {
     }
 }
 
+/// Whether input `spec` may read a source of `type_name` (the name the
+/// router checked) and, when the source's service says it, layout
+/// `fingerprint`: the rule of the router and the launch file
+/// ([`shm_schemas::schema::compat::check`]). The command carries no schema,
+/// so a layout difference is told by fingerprint here; the router, which
+/// holds both schemas, lists the fields before it sends the command.
+fn connectable(
+    type_name: &str,
+    fingerprint: Option<u64>,
+    spec: &shm_schemas::control::agent_to_router::PortSpec,
+) -> Result<(), shm_schemas::schema::compat::Incompatible> {
+    use shm_schemas::schema::compat::{Declared, check};
+    check(
+        Declared { type_name, fingerprint, schema: None },
+        Declared { type_name: &spec.type_name, fingerprint: Some(spec.fingerprint), schema: None },
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -431,5 +458,27 @@ mod tests {
         // pinged at half the interval: ticks at a quarter keep the pings in time
         assert_eq!(housekeeping_interval(Some(Duration::from_secs(4))), Duration::from_secs(1));
         assert!(housekeeping_interval(Some(Duration::ZERO)) > Duration::ZERO);
+    }
+
+    /// The agent's check is the router's rule: another type name is
+    /// refused naming both ports, another layout too, and neither refusal
+    /// guesses which side is older.
+    #[test]
+    fn a_connect_of_another_type_or_layout_is_refused_by_the_shared_rule() {
+        use shm_schemas::control::agent_to_router::PortSpec;
+        use shm_schemas::payloads::{Scalar, Tick};
+        let spec = PortSpec::of::<Tick>("in");
+        assert!(connectable("nerve::Tick", None, &spec).is_ok());
+        assert!(connectable("nerve::Tick", Some(spec.fingerprint), &spec).is_ok());
+        let e = connectable("nerve::Scalar", None, &spec).expect_err("another type");
+        assert_eq!(
+            e.refusal("a/out", "b/in"),
+            "cannot connect a/out to b/in: a/out sends nerve::Scalar but b/in takes nerve::Tick"
+        );
+        let theirs = <Scalar as shm_schemas::Payload>::layout_fingerprint();
+        let text =
+            connectable("nerve::Tick", Some(theirs), &spec).expect_err("another layout").refusal("a/out", "b/in");
+        assert!(text.contains("both declare nerve::Tick, but laid out differently"), "{text}");
+        assert!(text.contains("make both declare the same layout") && !text.contains("older"), "{text}");
     }
 }
