@@ -600,7 +600,7 @@ impl State {
     fn exited(&mut self, name: &str, failure: bool) {
         // its subscriptions to tools went with it, and a tool attaches anew
         for a in self.transient.into_agent(name) {
-            self.events.push(EventKind::Disconnected { from: a.conn.from, to: a.conn.to });
+            self.events.push(EventKind::Disconnected { from: a.conn.from.to_string(), to: a.conn.to.to_string() });
         }
         let exit = if self.shutdown { Exit::Left } else { self.supervisor.exited(name, failure, self.now) };
         match exit {
@@ -631,7 +631,7 @@ impl State {
     /// detached); the dead agents' connections are kept for their restart.
     fn liveness(&mut self, dead: &[(String, u32)], gone_tools: &[u32]) {
         for a in self.transient.orphaned(|p| gone_tools.contains(&p.pid())) {
-            let (from, to) = (a.conn.from.clone(), a.conn.to.clone());
+            let (from, to) = (a.conn.from.to_string(), a.conn.to.to_string());
             self.events.push(EventKind::Disconnected { from: from.clone(), to: to.clone() });
             let (agent, cmd) = Wiring::disconnect_command(&a.conn);
             let what = format!("{to} let go of {from}, whose tool (pid {}) is gone", a.process.pid());
@@ -751,28 +751,22 @@ impl State {
                 };
                 let spec = PortSpec { name: from.port.clone(), type_name, fingerprint };
                 self.registry.check_input(&from, &spec, &to)?;
-                let conn = Connection {
-                    from: from.to_string(),
-                    to: to.to_string(),
-                    type_name: spec.type_name,
-                    allow_cycle: false,
-                };
+                let conn = Connection { from, to, type_name: spec.type_name, allow_cycle: false };
                 let (agent, cmd) = Wiring::connect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
                 Ok(self.waiting(vec![ticket], Work::Attach { attached: Attached { conn, process } }))
             }
             CliRequest::Detach { from, to } => {
-                let (f, t) = (from.to_string(), to.to_string());
                 if self.registry.contains(from.agent.as_str()) {
-                    return Err(RouterError::NotConnected { from: f, to: t });
+                    return Err(RouterError::NotConnected { from: from.to_string(), to: to.to_string() });
                 }
-                let conn = match self.transient.remove(&f, &t) {
+                let conn = match self.transient.remove(&from, &to) {
                     Some(a) => {
-                        self.events.push(EventKind::Disconnected { from: f, to: t });
+                        self.events.push(EventKind::Disconnected { from: from.to_string(), to: to.to_string() });
                         a.conn
                     }
                     // attached under an earlier router: the agent may still hold it
-                    None => Connection { from: f, to: t, type_name: String::new(), allow_cycle: false },
+                    None => Connection { from, to, type_name: String::new(), allow_cycle: false },
                 };
                 let (agent, cmd) = Wiring::disconnect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
@@ -797,7 +791,7 @@ impl State {
                         return Err(RouterError::Cycle { from: from.to_string(), to: to.to_string(), cycle });
                     }
                 }
-                let conn = Connection { from: from.to_string(), to: to.to_string(), type_name: from_type, allow_cycle };
+                let conn = Connection { from, to, type_name: from_type, allow_cycle };
                 let (agent, cmd) = Wiring::connect_command(&conn);
                 let ticket = self.submit(&agent, cmd, AGENT_TIMEOUT)?;
                 // saved once the agent has subscribed (the list on disk
@@ -806,12 +800,12 @@ impl State {
             }
             CliRequest::Disconnect { from, to } => {
                 let (f, t) = (from.to_string(), to.to_string());
-                let Some(conn) = self.wiring.find(&f, &t).cloned() else {
+                let Some(conn) = self.wiring.find(&from, &to).cloned() else {
                     return Err(RouterError::NotConnected { from: f, to: t });
                 };
                 if !self.registry.contains(to.agent.as_str()) {
                     // nobody reads it: the list is the whole truth
-                    self.wiring.remove(&f, &t);
+                    self.wiring.remove(&from, &to);
                     self.events.push(EventKind::Disconnected { from: f.clone(), to: t.clone() });
                     let save = self.persist_wiring();
                     tracing::info!(from = %f, to = %t, "disconnected {f} -> {t}");
@@ -914,7 +908,7 @@ impl State {
                 Ok(_) => {
                     tracing::info!(from = %conn.from, to = %conn.to, "connected {} -> {}", conn.from, conn.to);
                     let what = format!("connected {} -> {}", conn.from, conn.to);
-                    let event = EventKind::Connected { from: conn.from.clone(), to: conn.to.clone() };
+                    let event = EventKind::Connected { from: conn.from.to_string(), to: conn.to.to_string() };
                     if self.wiring.add(conn) {
                         self.events.push(event);
                         let save = self.persist_wiring();
@@ -935,7 +929,7 @@ impl State {
                 Err(e) => Err(e),
             },
             Work::Attach { attached } => single().map(|_| {
-                let (from, to) = (attached.conn.from.clone(), attached.conn.to.clone());
+                let (from, to) = (attached.conn.from.to_string(), attached.conn.to.to_string());
                 let pid = attached.process.pid();
                 tracing::info!(from = %from, to = %to, pid, "attached {from} -> {to} (a tool, pid {pid})");
                 if self.transient.add(attached) {
@@ -957,7 +951,7 @@ impl State {
                 // it let go, or it did not have it: either way nothing flows
                 Ok(_) | Err(RouterError::AgentRefused { .. }) => {
                     self.wiring.remove(&conn.from, &conn.to);
-                    self.events.push(EventKind::Disconnected { from: conn.from.clone(), to: conn.to.clone() });
+                    self.events.push(EventKind::Disconnected { from: conn.from.to_string(), to: conn.to.to_string() });
                     let save = self.persist_wiring();
                     tracing::info!(from = %conn.from, to = %conn.to, "disconnected {} -> {}", conn.from, conn.to);
                     let what = format!("disconnected {} -> {}", conn.from, conn.to);

@@ -23,16 +23,20 @@
 
 use crate::journal;
 use serde::{Deserialize, Serialize};
+use shm_schemas::PortRef;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// One connection: output port → input port, with the checked payload type.
+/// The ports are written `agent/port` in the file, as they always were.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Connection {
-    /// `agent/port` of the output
-    pub from: String,
-    /// `agent/port` of the input
-    pub to: String,
+    /// the output
+    #[serde(with = "port_text")]
+    pub from: PortRef,
+    /// the input
+    #[serde(with = "port_text")]
+    pub to: PortRef,
     /// payload type name
     #[serde(rename = "type")]
     pub type_name: String,
@@ -43,6 +47,21 @@ pub struct Connection {
 
 /// Version of the file's layout.
 pub const FILE_VERSION: u32 = 1;
+
+/// A port as the file writes it: `agent/port`.
+mod port_text {
+    use serde::{Deserialize as _, Deserializer, Serializer};
+    use shm_schemas::PortRef;
+
+    pub fn serialize<S: Serializer>(p: &PortRef, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(p)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<PortRef, D::Error> {
+        let text = String::deserialize(d)?;
+        text.parse().map_err(|e| serde::de::Error::custom(format!("{text:?} does not name a port AGENT/PORT ({e})")))
+    }
+}
 
 #[derive(Debug, Serialize, Deserialize)]
 struct File {
@@ -60,10 +79,6 @@ fn parse(bytes: &[u8]) -> Result<Vec<Connection>, String> {
     }
     let mut list: Vec<Connection> = Vec::new();
     for c in f.connections {
-        let ok = |s: &str| s.parse::<shm_schemas::PortRef>().is_ok();
-        if !ok(&c.from) || !ok(&c.to) {
-            return Err(format!("entry {} -> {} does not name two ports AGENT/PORT", c.from, c.to));
-        }
         if !list.contains(&c) {
             list.push(c);
         }
@@ -462,8 +477,8 @@ mod tests {
         let store = Store::new(&dir);
         assert_eq!(store.load(), Ok(vec![]));
         let c = vec![Connection {
-            from: "t1/tick".into(),
-            to: "r1/in".into(),
+            from: port("t1/tick"),
+            to: port("r1/in"),
             type_name: "nerve::Tick".into(),
             allow_cycle: false,
         }];
@@ -504,9 +519,35 @@ mod tests {
         dir
     }
 
+    #[test]
+    fn a_file_of_an_earlier_router_loads_and_is_written_the_same_way() {
+        let dir = fresh_dir("format");
+        std::fs::create_dir_all(&dir).expect("dir");
+        let body = br#"{"version": 1, "connections": [
+            {"from": "t1/tick", "to": "r1/in", "type": "nerve::Tick"},
+            {"from": "a/out", "to": "b/in", "type": "T", "allow_cycle": true}]}"#;
+        std::fs::write(dir.join("connections.json"), body).expect("write");
+        let list = Store::new(&dir).load().expect("load");
+        assert_eq!(list.len(), 2);
+        assert_eq!((list[0].from.agent.as_str(), list[0].from.port.as_str()), ("t1", "tick"));
+        assert_eq!((list[0].to.agent.as_str(), list[0].to.port.as_str()), ("r1", "in"));
+        assert!(!list[0].allow_cycle && list[1].allow_cycle);
+        let text = String::from_utf8(Store::encode(&list)).expect("utf-8");
+        for field in [r#""from": "t1/tick""#, r#""to": "r1/in""#, r#""type": "nerve::Tick""#, r#""allow_cycle": true"#]
+        {
+            assert!(text.contains(field), "{field} in {text}");
+        }
+        assert_eq!(parse(text.as_bytes()), Ok(list));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     /// `from` → `b/in`, of type `T`.
     fn conn(from: &str) -> Connection {
-        Connection { from: from.into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false }
+        Connection { from: port(from), to: port("b/in"), type_name: "T".into(), allow_cycle: false }
+    }
+
+    fn port(text: &str) -> PortRef {
+        text.parse().expect("a port")
     }
 
     /// What became of `saved`, once the writer has done it (10 s at most).
@@ -526,7 +567,7 @@ mod tests {
         let dir = fresh_dir("follows");
         let store = Store::new(&dir);
         let mut w = Writer::start().expect("thread");
-        let c = Connection { from: "a/out".into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false };
+        let c = Connection { from: port("a/out"), to: port("b/in"), type_name: "T".into(), allow_cycle: false };
         let saved = w.save(&store, std::slice::from_ref(&c));
         assert_eq!(wait_outcome(&w, saved), Ok(()));
         // on disk: in the journal, in the file, or both by now
@@ -545,8 +586,8 @@ mod tests {
         let dir = fresh_dir("corrupt");
         let store = Store::new(&dir);
         let c = vec![Connection {
-            from: "t1/tick".into(),
-            to: "r1/in".into(),
+            from: port("t1/tick"),
+            to: port("r1/in"),
             type_name: "nerve::Tick".into(),
             allow_cycle: false,
         }];
@@ -607,8 +648,8 @@ mod tests {
             w.save(
                 &store,
                 &[Connection {
-                    from: format!("a{i}/out"),
-                    to: "b/in".into(),
+                    from: port(&format!("a{i}/out")),
+                    to: port("b/in"),
                     type_name: "nerve::Tick".into(),
                     allow_cycle: false,
                 }],
@@ -617,7 +658,7 @@ mod tests {
         w.flush();
         let got = store.load().expect("load");
         assert_eq!(got.len(), 1);
-        assert_eq!(got[0].from, "a19/out");
+        assert_eq!(got[0].from.to_string(), "a19/out");
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -626,7 +667,7 @@ mod tests {
         let dir = fresh_dir("outcome");
         let store = Store::new(&dir);
         let w = Writer::start().expect("thread");
-        let c = Connection { from: "a/out".into(), to: "b/in".into(), type_name: "T".into(), allow_cycle: false };
+        let c = Connection { from: port("a/out"), to: port("b/in"), type_name: "T".into(), allow_cycle: false };
         let wait = |saved| wait_outcome(&w, saved);
         let ok = w.save(&store, std::slice::from_ref(&c));
         assert_eq!(wait(ok), Ok(()));

@@ -11,8 +11,8 @@
 //! [`CliRequest::Attach`]: shm_schemas::control::cli_to_router::CliRequest::Attach
 
 use crate::store::Connection;
-use crate::wiring::port_agent;
 use agent_sdk::process::ProcessHandle;
+use shm_schemas::PortRef;
 
 /// One edge from a tool.
 #[derive(Debug, Clone)]
@@ -38,8 +38,8 @@ impl Transient {
     }
 
     /// Forgets the edge `from -> to` and returns it.
-    pub fn remove(&mut self, from: &str, to: &str) -> Option<Attached> {
-        let i = self.edges.iter().position(|a| a.conn.from == from && a.conn.to == to)?;
+    pub fn remove(&mut self, from: &PortRef, to: &PortRef) -> Option<Attached> {
+        let i = self.edges.iter().position(|a| a.conn.from == *from && a.conn.to == *to)?;
         Some(self.edges.remove(i))
     }
 
@@ -53,7 +53,7 @@ impl Transient {
 
     /// Forgets and returns the edges into agent `name`, which left.
     pub fn into_agent(&mut self, name: &str) -> Vec<Attached> {
-        let (gone, kept) = std::mem::take(&mut self.edges).into_iter().partition(|a| port_agent(&a.conn.to) == name);
+        let (gone, kept) = std::mem::take(&mut self.edges).into_iter().partition(|a| a.conn.to.agent.as_str() == name);
         self.edges = kept;
         gone
     }
@@ -80,7 +80,12 @@ mod tests {
 
     fn a(from: &str, to: &str, process: &ProcessHandle) -> Attached {
         Attached {
-            conn: Connection { from: from.into(), to: to.into(), type_name: "nerve::Tick".into(), allow_cycle: false },
+            conn: Connection {
+                from: from.parse().expect("a port"),
+                to: to.parse().expect("a port"),
+                type_name: "nerve::Tick".into(),
+                allow_cycle: false,
+            },
             process: process.clone(),
         }
     }
@@ -101,15 +106,18 @@ mod tests {
         tool.kill().expect("kill sleep");
         tool.wait().expect("reap sleep");
         let gone = t.orphaned(|p| !p.is_alive());
-        assert_eq!(gone.iter().map(|g| g.conn.from.as_str()).collect::<Vec<_>>(), ["cli-8/in"]);
-        assert!(t.connections().all(|c| c.from != "cli-8/in"));
+        assert_eq!(gone.iter().map(|g| g.conn.from.to_string()).collect::<Vec<_>>(), ["cli-8/in"]);
+        assert!(t.connections().all(|c| c.from.to_string() != "cli-8/in"));
 
         let left = t.into_agent("r1");
         assert_eq!(left.len(), 2, "both tools fed r1");
         assert!(t.is_empty());
 
         t.add(a("cli-7/in", "r1/in", &me));
-        assert_eq!(t.remove("cli-7/in", "r1/in").map(|x| x.process.pid()), Some(std::process::id()));
-        assert!(t.remove("cli-7/in", "r1/in").is_none());
+        assert_eq!(
+            t.remove(&"cli-7/in".parse().expect("a port"), &"r1/in".parse().expect("a port")).map(|x| x.process.pid()),
+            Some(std::process::id())
+        );
+        assert!(t.remove(&"cli-7/in".parse().expect("a port"), &"r1/in".parse().expect("a port")).is_none());
     }
 }

@@ -9,23 +9,14 @@
 //! the edge: the agent may still be reading (reliability review F2d).
 
 use crate::store::Connection;
+use shm_schemas::PortRef;
 use shm_schemas::control::cli_to_router::{AgentView, ConnectionView};
 use shm_schemas::control::router_to_agent::AgentCommand;
-
-/// `agent/port` split in two.
-pub fn split_port(p: &str) -> (&str, &str) {
-    p.split_once('/').unwrap_or((p, ""))
-}
-
-/// The agent of `agent/port`.
-pub fn port_agent(p: &str) -> &str {
-    split_port(p).0
-}
 
 /// `c` as an edge, agent to agent, that a loop may not run through; `None`
 /// when it is allowed to close one.
 pub fn loop_edge(c: &Connection) -> Option<(&str, &str)> {
-    (!c.allow_cycle).then(|| (port_agent(&c.from), port_agent(&c.to)))
+    (!c.allow_cycle).then(|| (c.from.agent.as_str(), c.to.agent.as_str()))
 }
 
 /// The connection list.
@@ -68,14 +59,14 @@ impl Wiring {
     }
 
     /// The connection `from` → `to`.
-    pub fn find(&self, from: &str, to: &str) -> Option<&Connection> {
-        self.list.iter().find(|c| c.from == from && c.to == to)
+    pub fn find(&self, from: &PortRef, to: &PortRef) -> Option<&Connection> {
+        self.list.iter().find(|c| c.from == *from && c.to == *to)
     }
 
     /// Removes `from` → `to`; whether it was there.
-    pub fn remove(&mut self, from: &str, to: &str) -> bool {
+    pub fn remove(&mut self, from: &PortRef, to: &PortRef) -> bool {
         let before = self.list.len();
-        self.list.retain(|c| !(c.from == from && c.to == to));
+        self.list.retain(|c| !(c.from == *from && c.to == *to));
         self.list.len() != before
     }
 
@@ -83,35 +74,31 @@ impl Wiring {
     pub fn involving(&self, name: &str, live: impl Fn(&str) -> bool) -> Vec<Connection> {
         self.list
             .iter()
-            .filter(|c| port_agent(&c.from) == name || port_agent(&c.to) == name)
-            .filter(|c| live(port_agent(&c.from)) && live(port_agent(&c.to)))
+            .filter(|c| c.from.agent.as_str() == name || c.to.agent.as_str() == name)
+            .filter(|c| live(c.from.agent.as_str()) && live(c.to.agent.as_str()))
             .cloned()
             .collect()
     }
 
     /// The agent to command and the command that carries `c` out.
     pub fn connect_command(c: &Connection) -> (String, AgentCommand) {
-        let (from_agent, from_port) = split_port(&c.from);
-        let (to_agent, to_port) = split_port(&c.to);
         let cmd = AgentCommand::Connect {
-            input: to_port.into(),
-            from_agent: from_agent.into(),
-            from_port: from_port.into(),
+            input: c.to.port.clone(),
+            from_agent: c.from.agent.to_string(),
+            from_port: c.from.port.clone(),
             type_name: c.type_name.clone(),
         };
-        (to_agent.to_owned(), cmd)
+        (c.to.agent.to_string(), cmd)
     }
 
     /// The agent to command and the command that undoes `c`.
     pub fn disconnect_command(c: &Connection) -> (String, AgentCommand) {
-        let (from_agent, from_port) = split_port(&c.from);
-        let (to_agent, to_port) = split_port(&c.to);
         let cmd = AgentCommand::Disconnect {
-            input: to_port.into(),
-            from_agent: from_agent.into(),
-            from_port: from_port.into(),
+            input: c.to.port.clone(),
+            from_agent: c.from.agent.to_string(),
+            from_port: c.from.port.clone(),
         };
-        (to_agent.to_owned(), cmd)
+        (c.to.agent.to_string(), cmd)
     }
 
     /// Each connection with the figures its input reports in `agents`.
@@ -123,8 +110,8 @@ impl Wiring {
 /// Connection `c` with the figures its input reports in `agents`
 /// (`transient`: made by a tool, see [`crate::transient`]).
 pub fn view(c: &Connection, agents: &[AgentView], transient: bool) -> ConnectionView {
-    let (fa, fp) = split_port(&c.from);
-    let (ta, tp) = split_port(&c.to);
+    let (fa, fp) = (c.from.agent.as_str(), c.from.port.as_str());
+    let (ta, tp) = (c.to.agent.as_str(), c.to.port.as_str());
     let input = agents
         .iter()
         .find(|a| a.name == ta)
@@ -133,8 +120,8 @@ pub fn view(c: &Connection, agents: &[AgentView], transient: bool) -> Connection
     // a tool is no agent: its edge is live while the input holds it
     let from_live = transient || agents.iter().any(|a| a.name == fa && a.pid != 0);
     ConnectionView {
-        from: c.from.clone(),
-        to: c.to.clone(),
+        from: c.from.to_string(),
+        to: c.to.to_string(),
         type_name: c.type_name.clone(),
         active: from_live && input.is_some(),
         rate_hz: input.map(|i| i.rate_hz).unwrap_or(0.0),
@@ -149,8 +136,12 @@ pub fn view(c: &Connection, agents: &[AgentView], transient: bool) -> Connection
 mod tests {
     use super::*;
 
+    fn p(text: &str) -> PortRef {
+        text.parse().expect("a port")
+    }
+
     fn c(from: &str, to: &str) -> Connection {
-        Connection { from: from.into(), to: to.into(), type_name: "nerve::Tick".into(), allow_cycle: false }
+        Connection { from: p(from), to: p(to), type_name: "nerve::Tick".into(), allow_cycle: false }
     }
 
     #[test]
@@ -166,8 +157,8 @@ mod tests {
         assert!(
             matches!(cmd, AgentCommand::Connect { ref input, ref from_agent, .. } if input == "in" && from_agent == "t1")
         );
-        assert!(w.remove("t1/tick", "r1/in"));
-        assert!(!w.remove("t1/tick", "r1/in"));
+        assert!(w.remove(&p("t1/tick"), &p("r1/in")));
+        assert!(!w.remove(&p("t1/tick"), &p("r1/in")));
         assert_eq!(w.list().len(), 1);
     }
 }

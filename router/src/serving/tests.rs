@@ -184,7 +184,7 @@ impl Bench {
     }
 
     fn edges(&self) -> Vec<(String, String)> {
-        self.core.wiring.list().iter().map(|c| (c.from.clone(), c.to.clone())).collect()
+        self.core.wiring.list().iter().map(|c| (c.from.to_string(), c.to.to_string())).collect()
     }
 
     /// `ps`, every agent answering its statistics except those in `silent`.
@@ -686,7 +686,7 @@ fn a_tools_edge_goes_with_the_tool_and_is_never_saved() {
 
 #[test]
 fn the_list_loaded_at_start_is_made_when_its_agents_register() {
-    let kept = Connection { from: "t1/tick".into(), to: "r1/in".into(), type_name: T.into(), allow_cycle: false };
+    let kept = Connection { from: p("t1/tick"), to: p("r1/in"), type_name: T.into(), allow_cycle: false };
     let mut b = Bench::with(vec![kept]);
     let (_, fx) = b.register("t1", 101, &[], &["tick"]);
     assert!(sends(&fx).is_empty(), "its input agent is not there yet");
