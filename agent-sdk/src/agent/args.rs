@@ -40,9 +40,9 @@ pub fn parse<T: clap::Parser>(agent: &str, args: &[String]) -> Result<T, ArgsErr
     T::try_parse_from(std::iter::once(program.clone()).chain(args.iter().cloned())).map_err(|source| {
         use clap::error::ErrorKind;
         match source.kind() {
-            ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
-                ArgsError::Help(source)
-            }
+            ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => ArgsError::Help(source),
             _ => {
                 let text = source.to_string();
                 // clap's first paragraph says what is wrong; usage and a

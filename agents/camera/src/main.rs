@@ -225,7 +225,8 @@ impl Agent for Camera {
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
         if matches!(self.args.source, SourceKind::V4l) {
             // a real camera beside a simulated robot's clock is refused with what to do
-            agent_sdk::simclock::refuse_real_device(&self.args.device).map_err(|e| AgentError::Config(e.to_string()))?;
+            agent_sdk::simclock::refuse_real_device(&self.args.device)
+                .map_err(|e| AgentError::Config(e.to_string()))?;
         }
         // the ring now (a clash with another writer stops the agent here);
         // the device at the first step, so that a missing one is retried

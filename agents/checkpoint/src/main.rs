@@ -341,8 +341,11 @@ mod tests {
     fn without_a_frame_nothing_is_seen_and_the_ranges_are_checked() {
         let mut h = Harness::<Checkpoint>::new().expect("the checkpoint sensor starts without a config");
         h.send("pose", PoseEstimate { x: 1.0, stamp_ns: h.now_ns(), ..Default::default() }).expect("pose");
-        h.send("ir", IrSighting { seen: 1, checkpoint_id: 2, transmitters: 1, stamp_ns: h.now_ns(), ..Default::default() })
-            .expect("ir");
+        h.send(
+            "ir",
+            IrSighting { seen: 1, checkpoint_id: 2, transmitters: 1, stamp_ns: h.now_ns(), ..Default::default() },
+        )
+        .expect("ir");
         h.step().expect("a step woken by the pose and the IR");
         assert!(h.output::<CheckpointSighting>("sighting").expect("sighting").is_empty());
         assert!(h.output::<PoseCorrection>("correction").expect("correction").is_empty());

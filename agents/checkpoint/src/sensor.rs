@@ -27,7 +27,9 @@
 use crate::appendix_a::Model;
 use crate::bands::Tube;
 use crate::config::SensorConfig;
-use crate::locate::{Camera, Correction, Observation, Pose, correct_pose, identify, ir_cone, observe, place, wrap_angle};
+use crate::locate::{
+    Camera, Correction, Observation, Pose, correct_pose, identify, ir_cone, observe, place, wrap_angle,
+};
 use shm_schemas::payloads::navigation::{CORRECTS_HEADING, CORRECTS_POSITION};
 use shm_schemas::payloads::{CheckpointSighting, IrSighting, PoseCorrection, PoseSource};
 use std::collections::BTreeMap;

@@ -299,7 +299,11 @@ mod tests {
     }
 
     fn codes(h: &mut Harness<MapBuilderAgent>) -> Vec<(MissionCode, u32)> {
-        h.output::<MissionCommand>("mission").expect("mission").iter().filter_map(|m| Some((m.code()?, m.path_id))).collect()
+        h.output::<MissionCommand>("mission")
+            .expect("mission")
+            .iter()
+            .filter_map(|m| Some((m.code()?, m.path_id)))
+            .collect()
     }
 
     #[test]

@@ -387,7 +387,11 @@ mod tests {
     }
 
     fn orders(h: &mut Harness<Mission>) -> Vec<(MissionCode, u32)> {
-        h.output::<MissionCommand>("order").expect("order").iter().filter_map(|m| Some((m.code()?, m.path_id))).collect()
+        h.output::<MissionCommand>("order")
+            .expect("order")
+            .iter()
+            .filter_map(|m| Some((m.code()?, m.path_id)))
+            .collect()
     }
 
     #[test]

@@ -36,8 +36,8 @@
 
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
-use shm_schemas::payloads::navigation::{CORRECTS_HEADING, CORRECTS_POSITION};
 pub use shm_schemas::geom::{Pose, wrap_angle};
+use shm_schemas::payloads::navigation::{CORRECTS_HEADING, CORRECTS_POSITION};
 use shm_schemas::payloads::{Odometry, PoseCorrection, PoseEstimate, PoseSource};
 use std::collections::VecDeque;
 

@@ -223,10 +223,8 @@ mod tests {
 
     #[test]
     fn odometry_moves_the_start_pose_and_a_correction_moves_the_estimate() {
-        let mut h = Harness::<OdometryAgent>::builder()
-            .args(["--start", "1,2,90"])
-            .start()
-            .expect("the odometry agent starts");
+        let mut h =
+            Harness::<OdometryAgent>::builder().args(["--start", "1,2,90"]).start().expect("the odometry agent starts");
         let t0 = h.now_ns();
         h.send_from("odom", "motor", odom(0.0, t0)).expect("odom");
         h.step().expect("step");
@@ -261,11 +259,8 @@ mod tests {
 
     #[test]
     fn a_bad_start_pose_is_refused_with_what_to_write() {
-        let e = Harness::<OdometryAgent>::builder()
-            .args(["--start", "north"])
-            .start()
-            .expect_err("not a pose")
-            .to_string();
+        let e =
+            Harness::<OdometryAgent>::builder().args(["--start", "north"]).start().expect_err("not a pose").to_string();
         assert!(e.contains("agent \"odometry\"") && e.contains("--start"), "{e}");
         assert!(e.contains("X,Y,THETA_DEG") || e.contains("not a number"), "says what to write: {e}");
         assert!(e.contains("nerve-odometry -- --help"), "{e}");

@@ -334,10 +334,7 @@ mod tests {
         h.send("pose", pose(0.95, h.now_ns())).expect("pose");
         h.step().expect("step");
         let m = h.output::<MissionCommand>("mission").expect("mission");
-        assert!(
-            m.iter().any(|m| m.code() == Some(MissionCode::ViaReached) && m.path_id == 7 && m.index == 0),
-            "{m:?}"
-        );
+        assert!(m.iter().any(|m| m.code() == Some(MissionCode::ViaReached) && m.path_id == 7 && m.index == 0), "{m:?}");
 
         h.send("mission_in", MissionCommand::new(MissionCode::Abort, 7, 0)).expect("abort");
         h.step().expect("step");
