@@ -6,6 +6,16 @@
 //! Python agent on the `nerve` package instead (an executable script, its
 //! `unittest` tests, a launch file, a README). The templates are
 //! `launcher/templates/{rust,python}/*.in`, built into the `nerve` program.
+//!
+//! A Rust project's first `cargo test` reuses what nerve's own build
+//! compiled: it builds into nerve's target folder (`.cargo/config.toml`),
+//! with nerve's `Cargo.lock`, nerve's profiles (copied from its root
+//! `Cargo.toml`) and the features nerve's workspace builds its dependencies
+//! with. Only nerve's own crates it uses (their package ids name another
+//! workspace) and the agent are compiled. `--own-target` builds in the
+//! project's `./target` instead, compiling everything once.
+
+mod reuse;
 
 use anyhow::{Context as _, Result, bail};
 use shm_schemas::AgentName;
@@ -34,6 +44,11 @@ pub struct NewArgs {
     /// the one this `nerve` was built from).
     #[arg(long, value_name = "PATH", env = "NERVE_SRC")]
     pub nerve_src: Option<PathBuf>,
+    /// Build in the project's own `./target` instead of nerve's target
+    /// folder: nothing nerve compiled is reused, so the first build compiles
+    /// iceoryx2 and every other dependency (minutes).
+    #[arg(long)]
+    pub own_target: bool,
 }
 
 /// The language of a new agent.
@@ -86,30 +101,71 @@ pub fn new(a: NewArgs) -> Result<ExitCode> {
         return new_python(&a.name, &drive, &root);
     }
     let nerve = nerve_source(a.nerve_src.as_deref())?;
-    let files = render(&a.name, &drive, &nerve, "target/debug");
-    std::fs::create_dir_all(root.join("src")).with_context(|| format!("cannot create {}", root.display()))?;
+    let shared = if a.own_target { None } else { Some(nerve_target(&nerve, a.nerve_src.is_some())) };
+    if let Some(t) = &shared {
+        check_shared_name(&a.name, t)?;
+    }
+    let profiles = nerve_profiles(&nerve);
+    let all_profiles = profiles_text(profiles.as_ref(), None);
+    let mut files = render(&a.name, &drive, &nerve, "target/debug", &all_profiles, "");
+    if let Some(t) = &shared {
+        files.push((".cargo/config.toml".into(), cargo_config(&nerve, t)));
+    }
     for (path, text) in &files {
         let p = root.join(path);
+        if let Some(folder) = p.parent() {
+            std::fs::create_dir_all(folder).with_context(|| format!("cannot create {}", folder.display()))?;
+        }
         std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
     }
-    // the launch file's `exe` where this user's cargo will put the build:
-    // CARGO_TARGET_DIR or a `build.target-dir` moves it out of ./target
-    let debug = target_dir(&root).join("debug");
-    let files = if debug == Path::new("target/debug") {
-        files
-    } else {
-        let files = render(&a.name, &drive, &nerve, &debug.display().to_string());
-        let launch = root.join("launch.toml");
-        let text = files.iter().find(|(p, _)| p == "launch.toml").map(|(_, t)| t.as_str()).unwrap_or_default();
-        std::fs::write(&launch, text).with_context(|| format!("cannot write {}", launch.display()))?;
-        println!("cargo builds into {}: launch.toml's exe is there", debug.display());
-        files
-    };
     // the versions nerve is built and tested with, so that the first build
-    // resolves nothing anew (and works offline when nerve has been built)
+    // resolves nothing anew (and works offline when nerve has been built),
+    // and reuses nerve's build of them
     let lock = nerve.join("Cargo.lock");
     if lock.is_file() {
         std::fs::copy(&lock, root.join("Cargo.lock")).with_context(|| format!("cannot copy {}", lock.display()))?;
+    }
+    let write_manifest = |profiles: &str, pins: &str| -> Result<()> {
+        let rendered = render(&a.name, &drive, &nerve, "target/debug", profiles, pins);
+        let text = rendered.iter().find(|(p, _)| p == "Cargo.toml").map(|(_, t)| t.as_str()).unwrap_or_default();
+        let p = root.join("Cargo.toml");
+        std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))
+    };
+    // nerve's features for the dependencies whose features differ here
+    let pins = match &shared {
+        Some(_) => match pin_features(&nerve, &root, |pins| write_manifest(&all_profiles, pins)) {
+            Ok(pins) => pins,
+            Err(error) => {
+                println!(
+                    "cannot read the features of nerve's build ({error:#}): the first build may compile some of \
+                     nerve's dependencies again"
+                );
+                write_manifest(&all_profiles, "")?;
+                String::new()
+            }
+        },
+        None => String::new(),
+    };
+    let meta = metadata(&root);
+    // the launch file's `exe` where this user's cargo will put the build:
+    // nerve's target folder, CARGO_TARGET_DIR or a `build.target-dir` moves
+    // it out of ./target; and nerve's profiles for the packages this
+    // project builds only (cargo warns of every other one)
+    let debug = meta.target.join("debug");
+    let rendered = render(
+        &a.name,
+        &drive,
+        &nerve,
+        &debug.display().to_string(),
+        &profiles_text(profiles.as_ref(), meta.packages.as_ref()),
+        &pins,
+    );
+    for (path, text) in rendered.iter().filter(|(p, _)| p == "launch.toml" || p == "Cargo.toml") {
+        let p = root.join(path);
+        std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    if debug != Path::new("target/debug") {
+        println!("cargo builds into {}: launch.toml's exe is there", debug.display());
     }
     println!("made agent {} ({}) in {}:", a.name, drive_words(&drive), root.display());
     for (path, _) in &files {
@@ -230,23 +286,186 @@ fn nerve_source(given: Option<&Path>) -> Result<PathBuf> {
     dir.canonicalize().with_context(|| format!("cannot resolve {}", dir.display()))
 }
 
-/// Where cargo builds the project at `root`, as `cargo metadata` says
+/// The features nerve's build compiled the project's dependencies with,
+/// for those whose features differ in the project, as the lines `Cargo.toml`
+/// takes after its own dependencies (see [`reuse`]); `write` writes the
+/// manifest with them, and they are read again until they agree (a pinned
+/// feature may bring in one more crate).
+fn pin_features(nerve: &Path, root: &Path, write: impl Fn(&str) -> Result<()>) -> Result<String> {
+    let theirs = reuse::features(nerve, true)?;
+    let mut pins = reuse::Sides::default();
+    let mut text = String::new();
+    for _ in 0..4 {
+        let ours = reuse::features(root, false)?;
+        let more = reuse::differences(&theirs, &ours);
+        if more.target.is_empty() && more.host.is_empty() {
+            tracing::debug!(
+                target = pins.target.len(),
+                host = pins.host.len(),
+                "features pinned as nerve's build has them"
+            );
+            return Ok(text);
+        }
+        pins.target.extend(more.target);
+        pins.host.extend(more.host);
+        text = pins_text(&pins);
+        write(&text)?;
+    }
+    bail!("the features of the project's dependencies still differ from nerve's after 4 rounds")
+}
+
+/// The pins, as `Cargo.toml` lines after the project's own dependencies.
+fn pins_text(pins: &reuse::Sides) -> String {
+    let mut out = String::from(
+        "\n# The features nerve's build compiled these dependencies with, which\n\
+         # `nerve new` read from `cargo tree`: cargo reuses nerve's build of a\n\
+         # crate only when its features are the same, so keep them as they are\n\
+         # (to use one of these crates, keep its line and add what you need).\n",
+    );
+    out.push_str(&reuse::lines(&pins.target));
+    if !pins.host.is_empty() {
+        out.push_str("\n# ... and of build scripts and proc-macros (the host side).\n[build-dependencies]\n");
+        out.push_str(&reuse::lines(&pins.host));
+    }
+    out
+}
+
+/// The target folder of the nerve this project builds against, which holds
+/// nerve's build of every dependency: the one this program was built in
+/// (`.../target/debug/nerve`, a folder with cargo's `CACHEDIR.TAG`), unless
+/// another source tree was given; else the tree's `target`.
+fn nerve_target(nerve: &Path, src_given: bool) -> PathBuf {
+    let built_in = std::env::current_exe()
+        .ok()
+        .and_then(|exe| exe.parent().and_then(Path::parent).map(Path::to_path_buf))
+        .filter(|t| t.join("CACHEDIR.TAG").is_file());
+    match built_in {
+        Some(t) if !src_given => t,
+        _ => nerve.join("target"),
+    }
+}
+
+/// Folders cargo keeps in a profile's output folder: an executable of one of
+/// these names cannot be written there.
+const CARGO_FOLDERS: [&str; 4] = ["build", "deps", "examples", "incremental"];
+
+/// A name whose executable, in nerve's target folder, would overwrite one of
+/// nerve's own programs (`nerve`, `nerve-KIND`) or clash with cargo's folders.
+fn check_shared_name(name: &str, target: &Path) -> Result<()> {
+    if name == "nerve" || name.starts_with("nerve-") || CARGO_FOLDERS.contains(&name) {
+        bail!(
+            "{name:?} cannot name an agent that builds into nerve's target folder {}: its executable would \
+             overwrite {}; choose another name (e.g. gripper-driver), or build in the project's own folder \
+             with --own-target",
+            target.display(),
+            if CARGO_FOLDERS.contains(&name) { "cargo's folder of that name" } else { "one of nerve's programs" }
+        );
+    }
+    Ok(())
+}
+
+/// `.cargo/config.toml`: the project builds into nerve's target folder.
+fn cargo_config(nerve: &Path, target: &Path) -> String {
+    let dir = toml::Value::String(target.display().to_string());
+    format!(
+        "# Made by `nerve new`: this project builds into the target folder of nerve\n\
+         # ({nerve}), where cargo finds every dependency nerve's build compiled\n\
+         # (iceoryx2 and the rest): the first `cargo test` compiles only nerve's\n\
+         # crates that the agent uses, and the agent. `cargo clean` here would\n\
+         # empty nerve's build too: use `cargo clean -p <this package>`. Delete\n\
+         # this file to build in ./target instead (and change launch.toml's exe).\n\
+         [build]\ntarget-dir = {dir}\n",
+        nerve = nerve.display()
+    )
+}
+
+/// nerve's `[profile]` table, from its root `Cargo.toml`; `None` (and a
+/// warning) when it cannot be read.
+fn nerve_profiles(nerve: &Path) -> Option<toml::Table> {
+    let path = nerve.join("Cargo.toml");
+    let read = std::fs::read_to_string(&path)
+        .map_err(|e| e.to_string())
+        .and_then(|text| text.parse::<toml::Table>().map_err(|e| e.to_string()));
+    match read {
+        Ok(mut t) => match t.remove("profile") {
+            Some(toml::Value::Table(p)) => Some(p),
+            _ => None,
+        },
+        Err(error) => {
+            tracing::warn!(manifest = %path.display(), %error, "cannot read nerve's profiles; the project gets the defaults");
+            None
+        }
+    }
+}
+
+/// The `[profile.*]` sections of the project: nerve's own, so that cargo
+/// reuses nerve's build of the dependencies; of the per-package settings
+/// only those of packages the project builds when `packages` is known.
+/// Without nerve's profiles, the workspace's main settings.
+fn profiles_text(profiles: Option<&toml::Table>, packages: Option<&std::collections::BTreeSet<String>>) -> String {
+    const DEFAULT: &str =
+        "[profile.dev]\nopt-level = 1\n\n[profile.dev.package.\"*\"]\nopt-level = 2\ndebug = \"line-tables-only\"\n";
+    let Some(profiles) = profiles else { return DEFAULT.to_owned() };
+    let mut profiles = profiles.clone();
+    if let Some(packages) = packages {
+        for (_, profile) in profiles.iter_mut() {
+            if let Some(per) = profile.get_mut("package").and_then(toml::Value::as_table_mut) {
+                let unused: Vec<String> =
+                    per.keys().filter(|name| *name != "*" && !packages.contains(*name)).cloned().collect();
+                for name in unused {
+                    per.remove(&name);
+                }
+            }
+        }
+    }
+    let mut top = toml::Table::new();
+    top.insert("profile".into(), toml::Value::Table(profiles));
+    toml::to_string(&top).unwrap_or_else(|error| {
+        tracing::warn!(%error, "cannot write nerve's profiles; the project gets the defaults");
+        DEFAULT.to_owned()
+    })
+}
+
+/// What cargo says of the project at `root`.
+#[derive(Debug)]
+struct Meta {
+    /// where it builds (see [`target_of`])
+    target: PathBuf,
+    /// the names of the packages it builds, when cargo could resolve them
+    /// offline
+    packages: Option<std::collections::BTreeSet<String>>,
+}
+
+/// `cargo metadata` of the project at `root`, offline: with its
+/// dependencies resolved (the lock file nerve's), else without them.
+fn metadata(root: &Path) -> Meta {
+    let run = |extra: &[&str]| {
+        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+        std::process::Command::new(cargo)
+            .args(["metadata", "--format-version", "1", "--offline"])
+            .args(extra)
+            .current_dir(root)
+            .stderr(std::process::Stdio::null())
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .and_then(|o| serde_json::from_slice::<serde_json::Value>(&o.stdout).ok())
+    };
+    let full = run(&[]);
+    let packages = full.as_ref().and_then(|v| v["packages"].as_array()).map(|ps| {
+        ps.iter().filter_map(|p| p["name"].as_str().map(str::to_owned)).collect::<std::collections::BTreeSet<_>>()
+    });
+    let value = full.or_else(|| run(&["--no-deps"]));
+    let from_cargo = value.and_then(|v| v["target_directory"].as_str().map(PathBuf::from));
+    Meta { target: target_of(root, from_cargo), packages }
+}
+
+/// Where cargo builds the project at `root`, as `cargo metadata` said
 /// (it honours CARGO_TARGET_DIR and a `build.target-dir` in any cargo
 /// config): `target` when that is the project's own `target` folder (the
 /// launch file then stays relative and the project can move), else the
 /// absolute folder. Without a working cargo: CARGO_TARGET_DIR, or `target`.
-fn target_dir(root: &Path) -> PathBuf {
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let meta = std::process::Command::new(cargo)
-        .args(["metadata", "--format-version", "1", "--no-deps", "--offline"])
-        .current_dir(root)
-        .stderr(std::process::Stdio::null())
-        .output();
-    let from_cargo = meta
-        .ok()
-        .filter(|o| o.status.success())
-        .and_then(|o| serde_json::from_slice::<serde_json::Value>(&o.stdout).ok())
-        .and_then(|v| v["target_directory"].as_str().map(PathBuf::from));
+fn target_of(root: &Path, from_cargo: Option<PathBuf>) -> PathBuf {
     let found = match from_cargo {
         Some(d) => d,
         None => {
@@ -285,7 +504,9 @@ fn type_name(name: &str) -> String {
 /// The project's files, by path in it.
 /// `debug` is the folder cargo's debug build lands in: `target/debug`, or
 /// an absolute folder when the user's cargo builds elsewhere.
-fn render(name: &str, drive: &Drive, nerve: &Path, debug: &str) -> Vec<(String, String)> {
+/// `profiles` is the `[profile.*]` sections of `Cargo.toml`, `pins` the
+/// lines after its own dependencies (see [`pins_text`]).
+fn render(name: &str, drive: &Drive, nerve: &Path, debug: &str, profiles: &str, pins: &str) -> Vec<(String, String)> {
     let (what, task, step, imports, period_line, task_words) = match drive {
         Drive::Event => (
             "an event-driven agent that sends every tick arriving on `in` on `out`, its sequence number multiplied by the parameter `gain`.".to_owned(),
@@ -319,6 +540,8 @@ fn render(name: &str, drive: &Drive, nerve: &Path, debug: &str) -> Vec<(String, 
             .replace("{{type}}", &type_name(name))
             .replace("{{nerve}}", &nerve.display().to_string())
             .replace("{{debug}}", debug)
+            .replace("{{profiles}}", profiles)
+            .replace("{{pins}}", pins)
             .replace("{{name}}", name)
     };
     vec![
@@ -352,9 +575,41 @@ mod tests {
     }
 
     #[test]
+    fn the_project_gets_nerves_profiles_for_the_packages_it_builds() {
+        let nerve: toml::Table = toml::from_str(
+            "[profile.release]\npanic = \"abort\"\n[profile.dev]\nopt-level = 1\n\
+             [profile.dev.package.\"*\"]\nopt-level = 2\n[profile.dev.package.syn]\nopt-level = 0\n\
+             [profile.dev.package.pyo3-macros]\nopt-level = 0\n",
+        )
+        .expect("profiles");
+        let profiles = nerve["profile"].as_table().expect("a table");
+        let used = ["syn".to_owned(), "iceoryx2".to_owned()].into_iter().collect();
+        let text = profiles_text(Some(profiles), Some(&used));
+        let back: toml::Table = toml::from_str(&text).expect("valid TOML");
+        let dev = &back["profile"]["dev"];
+        assert_eq!(dev["opt-level"].as_integer(), Some(1), "{text}");
+        assert_eq!(dev["package"]["*"]["opt-level"].as_integer(), Some(2), "{text}");
+        assert_eq!(dev["package"]["syn"]["opt-level"].as_integer(), Some(0), "{text}");
+        assert!(dev["package"].get("pyo3-macros").is_none(), "a package the project does not build: {text}");
+        assert_eq!(back["profile"]["release"]["panic"].as_str(), Some("abort"), "{text}");
+        // unknown packages: every setting kept; no profiles: the defaults
+        assert!(profiles_text(Some(profiles), None).contains("pyo3-macros"));
+        assert!(profiles_text(None, None).contains("opt-level = 1"));
+    }
+
+    #[test]
+    fn names_of_nerves_programs_are_refused_in_its_target_folder() {
+        for bad in ["nerve-ticker", "nerve-x", "deps", "build"] {
+            let e = format!("{:#}", check_shared_name(bad, Path::new("/t")).expect_err(bad));
+            assert!(e.contains("--own-target") && e.contains("/t"), "{e}");
+        }
+        check_shared_name("gripper", Path::new("/t")).expect("a name of its own");
+    }
+
+    #[test]
     fn every_placeholder_is_filled() {
         for drive in [Drive::Event, Drive::Periodic("50ms".into(), std::time::Duration::from_millis(50))] {
-            for (path, text) in render("my-agent", &drive, Path::new("/src/nerve"), "target/debug") {
+            for (path, text) in render("my-agent", &drive, Path::new("/src/nerve"), "target/debug", "", "") {
                 assert!(!text.contains("{{"), "{path} keeps a placeholder:\n{text}");
             }
             for (path, text) in render_python("my-agent", &drive) {
