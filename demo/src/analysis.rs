@@ -133,6 +133,10 @@ pub struct Summary {
     pub end_reason: String,
     /// Wall-clock seconds from launch to everything stopped.
     pub wall_time_s: f64,
+    /// The simulated clock's scale when the run was on simulated time
+    /// (`--sim-time`): the figures above are in simulated seconds either way.
+    #[serde(default)]
+    pub time_scale: Option<f64>,
     /// Thresholds used.
     pub criteria: Criteria,
     /// Decision maker's mode changes, in order.

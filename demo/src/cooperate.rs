@@ -197,6 +197,9 @@ pub struct CoopSummary {
     pub bridge: BridgeTraffic,
     /// Wall-clock time of the whole command, s.
     pub wall_time_s: f64,
+    /// The simulated clock's scale when the run was on simulated time
+    /// (`--sim-time`); the other times are simulated seconds either way.
+    pub time_scale: Option<f64>,
 }
 
 /// The truth sample nearest `stamp_ns`.
@@ -429,6 +432,8 @@ pub struct Run<'a> {
     pub robots: [&'a str; 2],
     /// When the command started, for the wall time.
     pub started: Instant,
+    /// The simulated clock's scale (`--sim-time --time-scale`); `None` on the wall clock.
+    pub time_scale: Option<f64>,
 }
 
 /// What [`report`] wrote.
@@ -460,6 +465,7 @@ pub fn report(out: &Path, scene: &Scene, rec: &Records, run: &Run<'_>) -> Result
     );
     let figures = write_trajectories(out, scene, rec, &title)?;
     s.wall_time_s = run.started.elapsed().as_secs_f64();
+    s.time_scale = run.time_scale;
     write_summary(out, &s)?;
     Ok(Report { summary: s, figures })
 }
@@ -470,7 +476,7 @@ impl Report {
     pub fn headline(&self) -> String {
         let s = &self.summary;
         format!(
-            "{}: target {}, path {}, robot 2 {} ({} m from the target), {} collision(s), corrections {:?}, {:.1} s simulated, {:.0} s wall",
+            "{}: target {}, path {}, robot 2 {} ({} m from the target), {} collision(s), corrections {:?}, {:.1} s simulated, {:.0} s wall{}",
             s.end_reason,
             if s.target_found { "found" } else { "NOT found" },
             if s.path_sent { "sent" } else { "NOT sent" },
@@ -479,7 +485,8 @@ impl Report {
             s.collisions.values().sum::<u64>(),
             s.corrections,
             s.stage_times_s.get("end").copied().unwrap_or(0.0),
-            s.wall_time_s
+            s.wall_time_s,
+            s.time_scale.map(|k| format!(" (simulated time at {k}x)")).unwrap_or_default()
         )
     }
 }

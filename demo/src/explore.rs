@@ -41,6 +41,8 @@ pub struct Run<'a> {
     pub criteria: Criteria,
     /// When the command started, for the wall time.
     pub started: Instant,
+    /// The simulated clock's scale (`--sim-time --time-scale`); `None` on the wall clock.
+    pub time_scale: Option<f64>,
 }
 
 /// What [`report`] wrote.
@@ -69,6 +71,7 @@ pub fn report(out: &Path, scene: &Scene, rec: &Recorded, run: &Run<'_>) -> Resul
     let title = format!("{} (seed {})", scene.world.name, run.seed);
     let figures = write_all(out, scene, &rec.rows, &analysis, &rec.modes, &title)?;
     s.wall_time_s = run.started.elapsed().as_secs_f64();
+    s.time_scale = run.time_scale;
     write_summary(out, &s)?;
     Ok(Report { summary: s, figures })
 }
@@ -80,7 +83,7 @@ impl Report {
         let s = &self.summary;
         let explored: f64 = EXPLORING_MODES.iter().filter_map(|m| s.time_in_mode_before_track_s.get(*m)).sum();
         format!(
-            "{}: explored {explored:.1} s{}, doorway {}{}, target {}{}, {} collision(s), min clearance {:.2} m, {:.1} s simulated, {} mode change(s), {:.0} s wall",
+            "{}: explored {explored:.1} s{}, doorway {}{}, target {}{}, {} collision(s), min clearance {:.2} m, {:.1} s simulated, {} mode change(s), {:.0} s wall{}",
             s.end_reason,
             s.first_track_s
                 .map(|t| format!(" before tracking at {t:.1} s"))
@@ -93,7 +96,8 @@ impl Report {
             s.min_clearance_m,
             s.duration_s,
             s.mode_changes.len(),
-            s.wall_time_s
+            s.wall_time_s,
+            s.time_scale.map(|k| format!(" (simulated time at {k}x)")).unwrap_or_default()
         )
     }
 }

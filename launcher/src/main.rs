@@ -12,6 +12,7 @@ mod kinds;
 mod launch_file;
 #[cfg(test)]
 mod proptests;
+mod sim_time;
 
 use agent_sdk::World;
 use anyhow::Result;

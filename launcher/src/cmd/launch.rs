@@ -27,6 +27,9 @@ pub struct LaunchArgs {
     /// Stay attached: stream the agents' logs, stop everything on Ctrl-C.
     #[arg(long)]
     pub foreground: bool,
+    /// `--sim-time [--time-scale K]`: the robot on the simulator's clock (docs/time.md).
+    #[command(flatten)]
+    pub time: crate::sim_time::SimTimeArgs,
 }
 
 pub fn launch(cli_robot: &str, explicit: bool, a: LaunchArgs) -> Result<ExitCode> {
@@ -47,6 +50,7 @@ pub fn launch(cli_robot: &str, explicit: bool, a: LaunchArgs) -> Result<ExitCode
     };
     super::shm_space::ensure_shm_space("launch")?;
     world.ensure_state_dirs()?;
+    crate::sim_time::for_launch(&world, &a.time, &file)?;
     let n = file.agents.len();
     eprintln!(
         "launching {} on robot {}: {n} agent(s), {} connection(s)",

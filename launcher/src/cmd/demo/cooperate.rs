@@ -24,6 +24,10 @@
 //!   the simulator's ground truth; `launch-r1.toml`, `launch-r2.toml` and the
 //!   bridge configurations that ran; `logs/r1`, `logs/r2`: every agent's log.
 //!
+//! With `--sim-time --time-scale 4` both robots run on the simulator's
+//! clock, four times as fast as real time (`docs/time.md`); the figures stay
+//! in simulated seconds, `wall_time_s` says how long it took.
+//!
 //! Exit code 0 when the run completed (whatever the robots achieved: read
 //! `summary.json`), 1 when it could not be run.
 
@@ -67,7 +71,7 @@ pub struct CooperateArgs {
     /// Stop after this many seconds of simulated time.
     #[arg(long, default_value_t = 300.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub time_limit: f64,
-    /// Seconds to follow the run after robot 1 was told to resume.
+    /// Seconds (simulated) to follow the run after robot 1 was told to resume.
     #[arg(long, default_value_t = 3.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub linger: f64,
     /// Robot 2's centre to the target's centre, m, that counts as reaching it.
@@ -82,6 +86,9 @@ pub struct CooperateArgs {
     /// Seconds between progress lines.
     #[arg(long, default_value_t = 3.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub progress: f64,
+    /// `--sim-time [--time-scale 4]`: the run on simulated time (both robots on the simulator's clock).
+    #[command(flatten)]
+    pub time: crate::sim_time::SimTimeArgs,
 }
 
 /// The launch files and bridge configurations the run derives from.
@@ -235,6 +242,14 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
     for w in &worlds {
         refuse_busy(w)?;
     }
+    // before any thread starts: one clock for both robots (one simulator serves both), in robot 1's folder
+    let scale = a.time.scale(scene.world.time_scale);
+    let page = scale.map(|k| crate::sim_time::start(&worlds[0], k)).transpose()?;
+    let finish_clock = || {
+        if let Some(p) = &page {
+            crate::sim_time::finish(p);
+        }
+    };
     // the run's launch files and bridge configurations, side by side in `out`
     let d = Derive {
         world: &world_file,
@@ -265,7 +280,7 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         let _ = std::fs::remove_file(out.join(f));
     }
     println!(
-        "nerve demo cooperate: world {} ({}), seed {}, robots {} and {}, checkpoint corrections {}, time limit {} s; output {}",
+        "nerve demo cooperate: world {} ({}), seed {}, robots {} and {}, checkpoint corrections {}, time limit {} s{}; output {}",
         scene.world.name,
         world_file.display(),
         a.seed,
@@ -273,6 +288,7 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         names[1],
         if a.no_checkpoints { "OFF" } else { "on" },
         a.time_limit,
+        scale.map(|k| format!(" of simulated time at {k}x")).unwrap_or_default(),
         out.display()
     );
     interrupt::catch();
@@ -288,12 +304,13 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         if let Err(e) = bring::launch_robot(&names[i], p) {
             eprintln!("error: robot {} did not come up: {e:#}", names[i]);
             bring_all_down();
+            finish_clock();
             return Ok(ExitCode::from(1));
         }
     }
     println!("both robots up in {:.1} s; following the run (Ctrl-C ends it early)", t_wall.elapsed().as_secs_f64());
 
-    let followed = follow(&worlds, &names, &a);
+    let followed = follow(&worlds, &names, &a, scale.unwrap_or(1.0));
     let bridge_figures: BTreeMap<String, BTreeMap<String, String>> = worlds
         .iter()
         .zip(&names)
@@ -302,6 +319,7 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
     let grasp = all_figures(&worlds[1]).get("mission").and_then(|m| m.get("grasp").cloned());
     let (stopped, killed) = bring_all_down();
     println!("{}", bring::stopped_line(stopped, killed));
+    finish_clock();
     let (end, mut rec) = followed?;
     rec.bridge = bridge_figures;
     rec.grasp = grasp;
@@ -319,6 +337,7 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         reach_m: a.reach,
         robots: [&names[0], &names[1]],
         started: t_wall,
+        time_scale: scale,
     };
     let report = cooperate::report(&out, &scene, &rec, &run)?;
     println!("{}", report.headline());
@@ -381,7 +400,7 @@ fn planned(p: &ViaPath) -> Vec<PlannedPoint> {
 }
 
 /// Follows the run until it ends, recording; prints progress.
-fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs) -> Result<(End, Records)> {
+fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs, scale: f64) -> Result<(End, Records)> {
     let nodes = [cli_node(&worlds[0])?, cli_node(&worlds[1])?];
     let mut taps = Taps::default();
     let mut rec = Records::default();
@@ -468,7 +487,7 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs) -> Result
         if arrived && (rec.resumed_ns.is_some() || phases.1 == "done") && done_at.is_none() {
             done_at = Some(Instant::now());
         }
-        if done_at.is_some_and(|t| t.elapsed().as_secs_f64() >= a.linger) {
+        if done_at.is_some_and(|t| t.elapsed().as_secs_f64() * scale >= a.linger) {
             break End::Goal("robot 2 arrived and robot 1 resumed");
         }
         if rec.r1_truth.last().is_some_and(|r| r.t >= a.time_limit) {
@@ -485,7 +504,8 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs) -> Result
                 "the simulation ran slower than real time; {wall_limit:?} of wall time passed"
             ));
         }
-        std::thread::sleep(Duration::from_millis(100));
+        // a look every 100 ms of simulated time: the taps keep 16 samples of the 100 Hz truth
+        std::thread::sleep(Duration::from_secs_f64(0.1 / scale));
     };
     progress(&rec, &phases);
     Ok((end, rec))

@@ -9,7 +9,9 @@
 //! distance to the target), and ends when the robot has followed the target
 //! (reached it, as defined in `docs/demo.md`, and stayed there for
 //! `--hold` seconds), at `--time-limit` seconds of simulated time, or on
-//! Ctrl-C. Then it stops everything as `nerve down` does and writes into
+//! Ctrl-C. With `--sim-time --time-scale 4` the simulator owns the robot's
+//! clock and runs four times as fast as real time (`docs/time.md`); the
+//! figures stay in simulated seconds, `wall_time_s` says how long it took. Then it stops everything as `nerve down` does and writes into
 //! `--out` (default `out/explore-<seed>/`):
 //!
 //! * `trajectory.png|svg`: the map with the robot's and the person's paths (Fig. 4-4);
@@ -69,6 +71,9 @@ pub struct ExploreArgs {
     /// Seconds between progress lines.
     #[arg(long, default_value_t = 3.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub progress: f64,
+    /// `--sim-time [--time-scale 4]`: the run on simulated time.
+    #[command(flatten)]
+    pub time: crate::sim_time::SimTimeArgs,
 }
 
 /// The run's launch file: the template with this robot, world and seed, and
@@ -150,6 +155,9 @@ pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
             live.join(", ")
         );
     }
+    // before any thread starts: the clock's page, named for everything started from here
+    let scale = a.time.scale(scene.world.time_scale);
+    let page = scale.map(|k| crate::sim_time::start(&nworld, k)).transpose()?;
     let derived = derive_launch(&template, robot, &world_file, a.seed)?;
     let launch_path = out.join("launch.toml");
     std::fs::write(&launch_path, &derived).with_context(|| format!("cannot write {}", launch_path.display()))?;
@@ -157,11 +165,12 @@ pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     let _ = std::fs::remove_file(&truth);
 
     println!(
-        "nerve demo explore: world {} ({}), seed {}, robot {robot}, time limit {} s; output {}",
+        "nerve demo explore: world {} ({}), seed {}, robot {robot}, time limit {} s{}; output {}",
         scene.world.name,
         world_file.display(),
         a.seed,
         a.time_limit,
+        scale.map(|k| format!(" of simulated time at {k}x")).unwrap_or_default(),
         out.display()
     );
     interrupt::catch();
@@ -172,15 +181,21 @@ pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
             eprintln!("error: the robot did not come up: {e:#}");
             let (_, _) = bring::down(&nworld, Duration::from_secs(2));
             bring::clean(&nworld);
+            if let Some(p) = &page {
+                crate::sim_time::finish(p);
+            }
             return Ok(ExitCode::from(1));
         }
     };
     println!("robot up in {:.1} s; following the run (Ctrl-C ends it early)", t_wall.elapsed().as_secs_f64());
 
-    let outcome = follow(&world, &scene, &a);
+    let outcome = follow(&world, &scene, &a, scale.unwrap_or(1.0));
     // whatever happened, stop everything and leave nothing behind
     let (stopped, killed) = bring::down_and_clean(&world);
     println!("{}", bring::stopped_line(stopped, killed));
+    if let Some(p) = &page {
+        crate::sim_time::finish(p);
+    }
     let Followed { end, rec } = outcome?;
 
     // the records: what the demo received on `sim/truth` and `decision/mode`
@@ -198,6 +213,7 @@ pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
         end_reason: end.reason(),
         criteria: Criteria { target_reach_m: a.reach },
         started: t_wall,
+        time_scale: scale,
     };
     let report = explore::report(&out, &scene, &rec, &run)?;
     println!("{}", report.headline());
@@ -235,7 +251,7 @@ fn clock_now() -> String {
 /// Follows the run until it ends, observing the robot through nerve: the
 /// simulator's `sim/truth` and the decision maker's `decision/mode`, each
 /// through a tap (the demo's own subscription); prints progress.
-fn follow(world: &World, scene: &Scene, a: &ExploreArgs) -> Result<Followed> {
+fn follow(world: &World, scene: &Scene, a: &ExploreArgs, scale: f64) -> Result<Followed> {
     let criteria = Criteria { target_reach_m: a.reach };
     let node = cli_node(world)?;
     let mut truth_tap: Option<Tap<GroundTruth>> = None;
@@ -340,7 +356,8 @@ fn follow(world: &World, scene: &Scene, a: &ExploreArgs) -> Result<Followed> {
                 "the simulation ran slower than real time; {wall_limit:?} of wall time passed"
             ));
         }
-        std::thread::sleep(Duration::from_millis(50));
+        // a look every 50 ms of simulated time: the tap keeps 16 samples of the 100 Hz truth
+        std::thread::sleep(Duration::from_secs_f64(0.05 / scale));
     };
     progress(scene, rows.last(), &mode, watch.crossed.is_some());
     if missed > 0 {

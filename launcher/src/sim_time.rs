@@ -1,0 +1,143 @@
+//! `--sim-time` and `--time-scale` of `nerve launch` and `nerve demo`: the
+//! robot's clock becomes the simulator's (`docs/time.md`).
+//!
+//! Before anything of the robot starts, the launcher writes the clock's page
+//! into the robot's state folder ([`agent_sdk::simclock::create`]) and names
+//! it in its own environment ([`agent_sdk::simclock::SIM_CLOCK_ENV`]), which
+//! every process it starts inherits: the router, every agent, and through
+//! the router every agent it restarts. The simulator takes the clock over
+//! when it starts.
+
+use agent_sdk::World;
+use agent_sdk::simclock::{self, PAGE_FILE, SCALE_RANGE, SIM_CLOCK_ENV};
+use anyhow::{Context as _, Result, bail};
+use std::path::PathBuf;
+
+/// The flags, as both commands take them.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct SimTimeArgs {
+    /// Run on simulated time: the simulator owns the robot's clock, and every
+    /// agent's time, deadlines, stamps and timeouts follow it (docs/time.md).
+    #[arg(long)]
+    pub sim_time: bool,
+    /// With --sim-time: how many times as fast as real time the robot runs
+    /// [default: the world's `time_scale`, else 1].
+    #[arg(long, requires = "sim_time", value_parser = parse_scale)]
+    pub time_scale: Option<f64>,
+}
+
+/// A time scale on the command line: from 0.01 to 100.
+pub fn parse_scale(s: &str) -> Result<f64, String> {
+    let v: f64 =
+        s.trim().parse().map_err(|_| format!("{s:?} is not a number; give e.g. 4 for four times real time"))?;
+    let (lo, hi) = SCALE_RANGE;
+    if !(v.is_finite() && (lo..=hi).contains(&v)) {
+        return Err(format!("{s:?}: give a time scale from {lo} (slower than real time) to {hi} (faster)"));
+    }
+    Ok(v)
+}
+
+impl SimTimeArgs {
+    /// The scale to run at: `None` on the wall clock; with `--sim-time` the
+    /// flag's, else the world's (`world_scale`), else 1.
+    pub fn scale(&self, world_scale: Option<f64>) -> Option<f64> {
+        self.sim_time.then(|| self.time_scale.or(world_scale).unwrap_or(1.0))
+    }
+}
+
+/// Puts `world`'s robot on simulated time at `scale`: writes the clock's
+/// page and names it for every process this command starts from now on.
+/// Refuses when this process already runs on another clock (a `nerve` run
+/// from a simulated robot's environment). Returns the page's path.
+///
+/// Call it before this process starts any thread: it sets an environment
+/// variable.
+pub fn start(world: &World, scale: f64) -> Result<PathBuf> {
+    world.ensure_state_dirs()?;
+    let page = world.state_dir().join(PAGE_FILE);
+    if let Some(other) = std::env::var_os(SIM_CLOCK_ENV).filter(|p| !p.is_empty() && *p != page.as_os_str()) {
+        bail!(
+            "this shell already names a simulated clock ({SIM_CLOCK_ENV}={}); unset {SIM_CLOCK_ENV} to give robot {} \
+             a clock of its own, or launch without --sim-time to join that clock",
+            PathBuf::from(other).display(),
+            world.robot()
+        );
+    }
+    let running = crate::bring::running_agents(world);
+    if !running.is_empty() {
+        bail!(
+            "robot {} already runs {} agent(s) ({}) on its own clock; bring it down first (`nerve --robot {} down`) \
+             to run it on simulated time",
+            world.robot(),
+            running.len(),
+            running.join(", "),
+            world.robot()
+        );
+    }
+    simclock::create(&page, scale).with_context(|| format!("robot {} cannot run on simulated time", world.robot()))?;
+    let threads = std::fs::read_dir("/proc/self/task").map(Iterator::count).unwrap_or(0);
+    if threads != 1 {
+        bail!("internal: the simulated clock must be named before the command starts threads ({threads} run)");
+    }
+    // SAFETY: this process runs one thread (counted just above: the
+    // interrupt handler, taps and launch lanes come later), so nothing
+    // reads the environment while it changes; the children inherit it.
+    unsafe { std::env::set_var(SIM_CLOCK_ENV, &page) };
+    tracing::info!(scale, page = %page.display(), "robot {} on simulated time", world.robot());
+    Ok(page)
+}
+
+/// The `time_scale` of the world the launch file's simulator (`kind =
+/// "sim"`, `--world FILE`) runs, if it names one that can be read.
+pub fn world_scale(file: &crate::launch_file::LaunchFile) -> Option<f64> {
+    let sim = file.agents.iter().find(|a| a.kind == "sim")?;
+    let i = sim.args.iter().position(|a| a == "--world")?;
+    let path = std::path::Path::new(sim.args.get(i + 1)?);
+    nerve_demo::nerve_sim::World::load(path).ok()?.time_scale
+}
+
+/// `nerve launch --sim-time`: the robot on simulated time, unless this
+/// shell names a simulated clock already (another robot's, served by the
+/// same simulator), which the launch then joins. Returns the scale.
+pub fn for_launch(world: &World, args: &SimTimeArgs, file: &crate::launch_file::LaunchFile) -> Result<Option<f64>> {
+    let Some(scale) = args.scale(world_scale(file)) else { return Ok(None) };
+    if let Some(joined) = std::env::var_os(SIM_CLOCK_ENV).filter(|p| !p.is_empty())
+        && args.time_scale.is_none()
+        && std::path::Path::new(&joined).exists()
+    {
+        eprintln!("robot {} joins the simulated clock {}", world.robot(), PathBuf::from(joined).display());
+        return Ok(Some(scale));
+    }
+    let page = start(world, scale)?;
+    eprintln!("robot {} runs on simulated time at {scale}x (clock {})", world.robot(), page.display());
+    Ok(Some(scale))
+}
+
+/// Removes the clock's page once the robot is down (nothing maps it any more).
+pub fn finish(page: &std::path::Path) {
+    if let Err(e) = std::fs::remove_file(page)
+        && e.kind() != std::io::ErrorKind::NotFound
+    {
+        tracing::warn!(page = %page.display(), "cannot remove the simulated clock: {e}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scales_are_checked_and_default_to_the_worlds() {
+        assert_eq!(parse_scale("4"), Ok(4.0));
+        for bad in ["0", "-1", "nan", "inf", "1000", "fast"] {
+            assert!(parse_scale(bad).is_err(), "{bad} accepted");
+        }
+        let wall = SimTimeArgs::default();
+        assert_eq!(wall.scale(Some(4.0)), None, "a world's scale alone does not make time simulated");
+        let sim = SimTimeArgs { sim_time: true, time_scale: None };
+        assert_eq!(sim.scale(Some(4.0)), Some(4.0));
+        assert_eq!(sim.scale(None), Some(1.0));
+        let given = SimTimeArgs { sim_time: true, time_scale: Some(2.0) };
+        assert_eq!(given.scale(Some(4.0)), Some(2.0));
+    }
+}
