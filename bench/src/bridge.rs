@@ -43,9 +43,10 @@
 use crate::agents::read_values;
 use crate::bridge_agents::{SETTLE, read_rows, take_sink_batch};
 use crate::hop::{NervePing, size_tag, spawn_bench_agent};
-use crate::machine::{Machine, command_line};
+use crate::machine::Machine;
 use crate::payloads::label;
 use crate::procs::{ChildGuard, Robot, self_command, wait_file_after};
+use crate::report::Report;
 use crate::stats::{Rounds, Summary, median_f64, ratio, us};
 use crate::with_payload;
 use anyhow::{Context as _, Result, anyhow, bail};
@@ -217,15 +218,12 @@ pub struct LocalRatio {
     pub target_met: bool,
 }
 
-/// The bridge report.
+/// The bridge report: the [`Head`](crate::report::Head) and [`BridgeResults`].
+pub type BridgeReport = Report<BridgeResults>;
+
+/// The results of the scenario, after the report's [`Head`](crate::report::Head).
 #[derive(Debug, Clone, Serialize)]
-pub struct BridgeReport {
-    /// "bridge"
-    pub scenario: &'static str,
-    /// the command that produced it
-    pub command: String,
-    /// the machine
-    pub machine: Machine,
+pub struct BridgeResults {
     /// measured rounds
     pub rounds: usize,
     /// one-way samples per latency batch
@@ -433,7 +431,7 @@ fn spawn_agent(
     cmd.args(["--robot", &robot.name, "--name", name]).args(common).arg("--").args(args).arg("--out").arg(dir);
     cmd.env("NERVE_HOME", &robot.home);
     robot.quiet(&mut cmd);
-    ChildGuard::spawn(&format!("agent {name}"), cmd)
+    Ok(ChildGuard::spawn(&format!("agent {name}"), cmd)?)
 }
 
 fn bridge_status(robot: &Robot) -> Result<serde_json::Value> {
@@ -915,27 +913,28 @@ fn report(
             });
         }
     }
-    BridgeReport {
-        scenario: "bridge",
-        command: command_line(),
+    Report::new(
+        "bridge",
         machine,
-        rounds: opts.rounds,
-        count: opts.count,
-        interval_us: opts.interval_us,
-        tput_ms: opts.tput_ms,
-        hop_count: opts.hop_count,
-        oneway,
-        throughput,
-        oneway_ratios,
-        local,
-        local_ratios,
-        oneway_target: ONEWAY_TARGET,
-        local_target: LOCAL_TARGET,
-        tls_target: TLS_TARGET,
-        tls_vs_plain,
-        bridge_status,
-        seconds: started.elapsed().as_secs_f64(),
-    }
+        BridgeResults {
+            rounds: opts.rounds,
+            count: opts.count,
+            interval_us: opts.interval_us,
+            tput_ms: opts.tput_ms,
+            hop_count: opts.hop_count,
+            oneway,
+            throughput,
+            oneway_ratios,
+            local,
+            local_ratios,
+            oneway_target: ONEWAY_TARGET,
+            local_target: LOCAL_TARGET,
+            tls_target: TLS_TARGET,
+            tls_vs_plain,
+            bridge_status,
+            seconds: started.elapsed().as_secs_f64(),
+        },
+    )
 }
 
 /// Prints the tables of a bridge report (markdown).

@@ -12,8 +12,9 @@
 //!   relays), from the command to all registered and connected, router start
 //!   included.
 
-use crate::machine::{Machine, command_line};
+use crate::machine::Machine;
 use crate::procs::Robot;
+use crate::report::Report;
 use crate::stats::Summary;
 use agent_sdk::World;
 use agent_sdk::clock::now_ns;
@@ -77,13 +78,12 @@ pub struct LaunchRow {
     pub launch: Summary,
 }
 
-/// Results of the control scenario.
+/// The control report: the [`Head`](crate::report::Head) and [`ControlResults`].
+pub type ControlReport = Report<ControlResults>;
+
+/// The results of the scenario, after the report's [`Head`](crate::report::Head).
 #[derive(Debug, Serialize)]
-pub struct ControlReport {
-    /// the machine
-    pub machine: Machine,
-    /// the command that produced it
-    pub command: String,
+pub struct ControlResults {
     /// `nerve start` to the first sample downstream, ns
     pub hot_add: Summary,
     /// `nerve start` to the command's exit (the agent registered and ready), ns
@@ -336,21 +336,22 @@ pub fn run(opts: &ControlOpts) -> Result<ControlReport> {
         }
     });
     let rewire_request = Summary::of(&req);
-    Ok(ControlReport {
+    Ok(Report::unnamed(
         machine,
-        command: command_line(),
-        hot_add_vs_target: hot_add.p50_ns as f64 / HOT_ADD_TARGET_NS,
-        rewire_vs_target: rewire_request.p50_ns as f64 / 5e6,
-        rewire_reply_vs_target: Summary::of(&reply).p50_ns as f64 / REWIRE_TARGET_NS,
-        hot_add,
-        hot_add_command: Summary::of(&hot.command),
-        hot_add_beside,
-        rewire_cli: Summary::of(&cli),
-        rewire_request,
-        rewire_reply: Summary::of(&reply),
-        launch: rows,
-        seconds: t0.elapsed().as_secs_f64(),
-    })
+        ControlResults {
+            hot_add_vs_target: hot_add.p50_ns as f64 / HOT_ADD_TARGET_NS,
+            rewire_vs_target: rewire_request.p50_ns as f64 / 5e6,
+            rewire_reply_vs_target: Summary::of(&reply).p50_ns as f64 / REWIRE_TARGET_NS,
+            hot_add,
+            hot_add_command: Summary::of(&hot.command),
+            hot_add_beside,
+            rewire_cli: Summary::of(&cli),
+            rewire_request,
+            rewire_reply: Summary::of(&reply),
+            launch: rows,
+            seconds: t0.elapsed().as_secs_f64(),
+        },
+    ))
 }
 
 fn ms(ns: u64) -> String {

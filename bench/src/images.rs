@@ -32,8 +32,9 @@ pub use iox2::reader_main as iox2_reader_main;
 pub use stm::run_agent;
 pub use uds::reader_main as uds_reader_main;
 
-use crate::machine::{Machine, command_line};
+use crate::machine::Machine;
 use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command, wait_file};
+use crate::report::Report;
 use crate::stats::{Summary, median_f64, ratio, us};
 use anyhow::{Context as _, Result, bail};
 use frame::{Acks, BatchReq, FramePub, Mode, ReaderRec, Res, WriterBatch};
@@ -174,15 +175,12 @@ pub struct CompareRow {
     pub max_fps: [f64; 3],
 }
 
-/// The images report.
+/// The images report: the [`Head`](crate::report::Head) and [`ImagesResults`].
+pub type ImagesReport = Report<ImagesResults>;
+
+/// The results of the scenario, after the report's [`Head`](crate::report::Head).
 #[derive(Debug, Clone, Serialize)]
-pub struct ImagesReport {
-    /// "images"
-    pub scenario: &'static str,
-    /// the command that produced it
-    pub command: String,
-    /// the machine
-    pub machine: Machine,
+pub struct ImagesResults {
     /// measured rounds (after one warm-up round, except --quick)
     pub rounds: usize,
     /// paced rate, frames per second
@@ -623,22 +621,23 @@ pub fn run(opts: &ImagesOpts) -> Result<ImagesReport> {
     let (scaling, compare) = ratios(&results, &ress, &counts);
     drop(_router);
     drop(robot);
-    Ok(ImagesReport {
-        scenario: "images",
-        command: command_line(),
+    Ok(Report::new(
+        "images",
         machine,
-        rounds: opts.rounds,
-        rate_fps: opts.rate,
-        paced_seconds: opts.paced_seconds,
-        max_seconds: opts.max_seconds,
-        discard: DISCARD,
-        touched: TOUCHED,
-        results,
-        scaling,
-        compare,
-        target_ratio: TARGET_RATIO,
-        seconds: started.elapsed().as_secs_f64(),
-    })
+        ImagesResults {
+            rounds: opts.rounds,
+            rate_fps: opts.rate,
+            paced_seconds: opts.paced_seconds,
+            max_seconds: opts.max_seconds,
+            discard: DISCARD,
+            touched: TOUCHED,
+            results,
+            scaling,
+            compare,
+            target_ratio: TARGET_RATIO,
+            seconds: started.elapsed().as_secs_f64(),
+        },
+    ))
 }
 
 fn ratios(results: &[ImagesResult], ress: &[Res], counts: &[usize]) -> (Vec<ScaleRatio>, Vec<CompareRow>) {

@@ -29,8 +29,9 @@
 //! ratio). Its raw buckets are its figures in the report less 0.5 µs.
 
 use crate::agents::read_values;
-use crate::machine::{Machine, command_line};
+use crate::machine::Machine;
 use crate::procs::{ChildGuard, Robot, self_command, wait_file};
+use crate::report::Report;
 use crate::stats::{Summary, median_f64, ratio, ratio_cell};
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
@@ -98,15 +99,12 @@ pub struct JitterRatio {
     pub nopmqos_p99_ratio: Option<f64>,
 }
 
-/// The jitter report.
+/// The jitter report: the [`Head`](crate::report::Head) and [`JitterResults`].
+pub type JitterReport = Report<JitterResults>;
+
+/// The results of the scenario, after the report's [`Head`](crate::report::Head).
 #[derive(Debug, Clone, Serialize)]
-pub struct JitterReport {
-    /// "jitter"
-    pub scenario: &'static str,
-    /// the command that produced it
-    pub command: String,
-    /// the machine
-    pub machine: Machine,
+pub struct JitterResults {
     /// seconds per chunk
     pub seconds_per_chunk: f64,
     /// chunks per system and condition
@@ -300,16 +298,17 @@ pub fn run(opts: &JitterOpts) -> Result<JitterReport> {
     }
     drop(_router);
     drop(robot);
-    Ok(JitterReport {
-        scenario: "jitter",
-        command: command_line(),
+    Ok(Report::new(
+        "jitter",
         machine,
-        seconds_per_chunk: opts.seconds,
-        rounds: opts.rounds,
-        results,
-        ratios,
-        seconds: started.elapsed().as_secs_f64(),
-    })
+        JitterResults {
+            seconds_per_chunk: opts.seconds,
+            rounds: opts.rounds,
+            results,
+            ratios,
+            seconds: started.elapsed().as_secs_f64(),
+        },
+    ))
 }
 
 /// Prints the tables of a jitter report (markdown).

@@ -47,6 +47,7 @@ mod plot_images;
 mod procs;
 mod raw;
 mod recording;
+mod report;
 mod scale;
 mod shared_page;
 mod soak;

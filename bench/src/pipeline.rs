@@ -42,9 +42,10 @@
 
 use crate::futex::FutexPing;
 use crate::hop::{NervePing, Pinger, Row, default_count, pm_qos_permitted, size_tag, spawn_bench_agent};
-use crate::machine::{Machine, command_line};
+use crate::machine::Machine;
 use crate::payloads::{SIZES, label};
 use crate::procs::{ChildGuard, Robot};
+use crate::report::Report;
 use crate::stats::{Rounds, Summary, median_f64, ratio, ratio_cell, us, verdict};
 use crate::uds::UdsPing;
 use anyhow::{Context as _, Result, bail};
@@ -137,15 +138,12 @@ pub struct PipelineRatio {
     pub one_hop_vs_futex_pmqos_p50: Option<f64>,
 }
 
-/// The pipeline report.
+/// The pipeline report: the [`Head`](crate::report::Head) and [`PipelineResults`].
+pub type PipelineReport = Report<PipelineResults>;
+
+/// The results of the scenario, after the report's [`Head`](crate::report::Head).
 #[derive(Debug, Clone, Serialize)]
-pub struct PipelineReport {
-    /// "pipeline"
-    pub scenario: &'static str,
-    /// the command that produced it
-    pub command: String,
-    /// the machine
-    pub machine: Machine,
+pub struct PipelineResults {
     /// measured rounds
     pub rounds: usize,
     /// samples per batch, by size
@@ -349,17 +347,18 @@ pub fn run(opts: &PipelineOpts) -> Result<PipelineReport> {
     }
     drop(_router);
     drop(robot);
-    Ok(PipelineReport {
-        scenario: "pipeline",
-        command: command_line(),
+    Ok(Report::new(
+        "pipeline",
         machine,
-        rounds: opts.rounds,
-        batch: counts,
-        results,
-        ratios,
-        target_ratio: TARGET_RATIO,
-        seconds: started.elapsed().as_secs_f64(),
-    })
+        PipelineResults {
+            rounds: opts.rounds,
+            batch: counts,
+            results,
+            ratios,
+            target_ratio: TARGET_RATIO,
+            seconds: started.elapsed().as_secs_f64(),
+        },
+    ))
 }
 
 /// Prints the tables (markdown).

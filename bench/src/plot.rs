@@ -33,6 +33,15 @@ pub(crate) fn colour(t: &str) -> RGBColor {
     }
 }
 
+/// A white PNG canvas of `size` pixels that writes to `path`, with the
+/// font of plot-font/ registered: the set-up of every figure of the benchmarks.
+pub(crate) fn canvas(path: &Path, size: (u32, u32)) -> Result<DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>> {
+    nerve_plot_font::register();
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| anyhow!("plot {}: {x}", path.display()))?;
+    Ok(root)
+}
+
 /// A logarithmic y range (µs) that holds every value of `ys`, with a margin.
 pub(crate) fn log_range(ys: &[f64]) -> std::ops::Range<f64> {
     let ymax = ys.iter().copied().fold(10.0, f64::max) * 2.0;
@@ -94,15 +103,13 @@ where
 /// Draws `report` into `path` (PNG, 1000x640).
 pub fn hop_png(report: &HopReport, path: &Path) -> Result<()> {
     let e = |x: &dyn std::fmt::Display| anyhow!("plot {}: {x}", path.display());
-    nerve_plot_font::register();
-    let root = BitMapBackend::new(path, (1000, 640)).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let root = canvas(path, (1000, 640))?;
     let ys: Vec<f64> =
         report.results.iter().flat_map(|r| [r.rtt.p50_ns, r.rtt.p99_ns]).map(|v| v as f64 / 1e3).collect();
     let title = format!(
         "one-hop round trip, 2 processes, event-driven and polling ({} CPUs, {})",
-        report.machine.nproc,
-        report.machine.cpu.split_whitespace().take(4).collect::<Vec<_>>().join(" ")
+        report.head.machine.nproc,
+        report.head.machine.cpu.split_whitespace().take(4).collect::<Vec<_>>().join(" ")
     );
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 20))

@@ -26,12 +26,10 @@ pub fn images_png(report: &ImagesReport, path: &Path) -> Result<()> {
         paced.iter().flat_map(|r| [r.latency.p50_ns, r.latency_last.p50_ns]).map(|v| v as f64 / 1e3).collect();
     let y_range = log_range(&ys);
     let xmax = paced.iter().map(|r| r.readers).max().unwrap_or(8) as f64 + 0.5;
-    nerve_plot_font::register();
-    let root = BitMapBackend::new(path, (1400, 520)).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let root = crate::plot::canvas(path, (1400, 520))?;
     let title = format!(
         "frame announce → read, {} fps paced, readers in separate processes ({} CPUs)",
-        report.rate_fps, report.machine.nproc
+        report.rate_fps, report.head.machine.nproc
     );
     let root = root.titled(&title, ("sans-serif", 20)).map_err(|x| e(&x))?;
     let panels = root.split_evenly((1, resolutions.len()));

@@ -1,175 +1,48 @@
 //! Processes the benchmarks start, and the robot they run in.
 //!
-//! Every child is held by a [`ChildGuard`] that stops it when dropped
-//! (SIGTERM, a short grace, then SIGKILL) and asks the kernel to send it
-//! SIGTERM should this process die first. A [`Robot`] has a unique name
-//! (`b<pid>`...) and runs `nerve --robot NAME down` when dropped, so nothing
-//! is left in `/dev/shm`.
+//! Every child is held by the test kit's [`ChildGuard`] (`nerve-testkit`,
+//! shared with the system tests), which stops it when dropped (SIGTERM, a
+//! short grace, then SIGKILL) and asks the kernel to send it SIGTERM should
+//! this process die first. A [`Robot`] is the kit's robot (a unique name
+//! `b<pid>...`, `nerve --robot NAME down` when dropped, so nothing is left
+//! in `/dev/shm`) with the benchmarks' options.
 
 use anyhow::{Context as _, Result, bail};
-use nix::sys::signal::{Signal, kill};
-use nix::unistd::Pid;
-use std::os::unix::process::CommandExt as _;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitCode, Stdio};
+use std::process::{Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
 
-/// How long a child may take to say it is ready.
-pub const READY_WITHIN: Duration = Duration::from_secs(60);
+pub use nerve_testkit::{ChildGuard, spawn_dying_with_us, wait_file, wait_file_after};
 
-/// A child process that is stopped when dropped.
-#[derive(Debug)]
-pub struct ChildGuard {
-    name: String,
-    child: Child,
-}
-
-/// Spawns `cmd` so that the child gets SIGTERM if this process dies
-/// (`PR_SET_PDEATHSIG`): a benchmark killed half-way leaves no process behind.
-pub fn spawn_dying_with_us(cmd: &mut Command) -> std::io::Result<Child> {
-    // SAFETY: prctl is async-signal-safe and touches no memory of the parent.
-    unsafe {
-        cmd.pre_exec(|| {
-            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong, 0, 0, 0) != 0 {
-                return Err(std::io::Error::last_os_error());
-            }
-            Ok(())
-        });
-    }
-    cmd.spawn()
-}
-
-impl ChildGuard {
-    /// Spawns `cmd`; the child gets SIGTERM if this process dies.
-    pub fn spawn(name: &str, mut cmd: Command) -> Result<Self> {
-        let child = spawn_dying_with_us(&mut cmd).with_context(|| format!("cannot start {name} ({cmd:?})"))?;
-        Ok(ChildGuard { name: name.into(), child })
-    }
-
-    /// The child's stdin, when piped.
-    pub fn stdin(&mut self) -> Option<std::process::ChildStdin> {
-        self.child.stdin.take()
-    }
-
-    /// The child's stdout, when piped.
-    pub fn stdout(&mut self) -> Option<std::process::ChildStdout> {
-        self.child.stdout.take()
-    }
-
-    /// Reads the child's `ready` line (its stdout must be piped); its exit,
-    /// any other line, or no line within [`READY_WITHIN`] is an error (a
-    /// child stuck in its start would otherwise hold the benchmark forever).
-    pub fn await_ready(&mut self, what: &str) -> Result<()> {
-        use std::io::BufRead as _;
-        let out = self.stdout().with_context(|| format!("{what}: no stdout"))?;
-        let (tx, rx) = std::sync::mpsc::channel();
-        // the reader ends with the child's stdout: at its line, its exit, or
-        // when the guard stops the child after a timeout
-        std::thread::spawn(move || {
-            let mut line = String::new();
-            let r = std::io::BufReader::new(out).read_line(&mut line).map(|_| line);
-            let _ = tx.send(r);
-        });
-        let line = match rx.recv_timeout(READY_WITHIN) {
-            Ok(r) => r.with_context(|| format!("{what}: reading readiness"))?,
-            Err(_) => {
-                self.check_alive()?;
-                bail!("{what} did not say it was ready within {READY_WITHIN:?}; run with --verbose to see its log")
-            }
-        };
-        if line.trim() != "ready" {
-            self.check_alive()?;
-            bail!("{what} did not become ready (said {line:?})");
-        }
-        Ok(())
-    }
-
-    /// Fails when the child has exited already.
-    pub fn check_alive(&mut self) -> Result<()> {
-        if let Some(status) = self.child.try_wait().with_context(|| format!("cannot wait for {}", self.name))? {
-            bail!("{} exited early ({status}); run with --verbose to see its log", self.name);
-        }
-        Ok(())
-    }
-
-    /// Stops the child: SIGTERM, up to `grace`, then SIGKILL.
-    pub fn stop(&mut self, grace: Duration) {
-        if matches!(self.child.try_wait(), Ok(Some(_))) {
-            return;
-        }
-        let pid = Pid::from_raw(self.child.id() as i32);
-        let _ = kill(pid, Signal::SIGTERM);
-        let t0 = Instant::now();
-        while t0.elapsed() < grace {
-            if matches!(self.child.try_wait(), Ok(Some(_))) {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for ChildGuard {
-    fn drop(&mut self) {
-        self.stop(Duration::from_secs(2));
-    }
-}
-
-/// Where the `nerve` command is: `$NERVE_BIN`, next to this executable (or
-/// its parent, for test executables under `deps/`), or on `PATH`.
-pub fn nerve_bin() -> Result<PathBuf> {
-    if let Some(p) = std::env::var_os("NERVE_BIN") {
-        return Ok(PathBuf::from(p));
-    }
-    let exe = std::env::current_exe().context("cannot find this executable")?;
-    for dir in exe.ancestors().skip(1).take(2) {
-        let cand = dir.join("nerve");
-        if cand.is_file() {
-            return Ok(cand);
-        }
-    }
-    if let Some(path) = std::env::var_os("PATH") {
-        for dir in std::env::split_paths(&path) {
-            let cand = dir.join("nerve");
-            if cand.is_file() {
-                return Ok(cand);
-            }
-        }
-    }
-    bail!(
-        "cannot find the `nerve` command next to {} or on PATH; build it into the same target dir \
-         (`CARGO_TARGET_DIR=/work/target-bench cargo build --release -p nerve`) or set NERVE_BIN",
-        exe.display()
-    )
-}
-
-/// One isolated robot for one benchmark run, taken down when dropped.
+/// One isolated robot for one benchmark run: the test kit's robot (a
+/// unique name `b<pid><tag>`, a private home, `nerve down` when dropped)
+/// with what the benchmarks add: `--verbose`, the agents' PM QoS bound, and
+/// commands that fail with the command's stderr instead of panicking.
 #[derive(Debug)]
 pub struct Robot {
-    /// the robot's name
-    pub name: String,
-    nerve: PathBuf,
-    /// NERVE_HOME of the run (a private temp dir, removed at the end)
-    pub home: PathBuf,
+    kit: nerve_testkit::Robot,
     verbose: bool,
     /// `NERVE_CPU_LATENCY` of every process the robot starts (None: the agents' default)
     cpu_latency: Option<&'static str>,
 }
 
+/// The kit's robot: its `name` and `home`.
+impl std::ops::Deref for Robot {
+    type Target = nerve_testkit::Robot;
+
+    fn deref(&self) -> &nerve_testkit::Robot {
+        &self.kit
+    }
+}
+
 impl Robot {
     /// The name [`Robot::new`] gives the robot of `tag`: `b<pid><tag>`.
     pub fn name_of(tag: &str) -> String {
-        format!("b{}{tag}", std::process::id())
+        nerve_testkit::Robot::bench_name(tag)
     }
 
     /// A robot named [`Robot::name_of`] `tag`, with its state in a private directory.
     pub fn new(tag: &str, verbose: bool) -> Result<Self> {
-        let name = Robot::name_of(tag);
-        let home = std::env::temp_dir().join(format!("nerve-bench-{name}"));
-        std::fs::create_dir_all(&home).with_context(|| format!("cannot create {}", home.display()))?;
-        Ok(Robot { name, nerve: nerve_bin()?, home, verbose, cpu_latency: None })
+        Ok(Robot { kit: nerve_testkit::Robot::for_bench(tag)?, verbose, cpu_latency: None })
     }
 
     /// Every agent of this robot holds `value` (`off`, or µs) as its PM QoS
@@ -182,7 +55,7 @@ impl Robot {
 
     /// A `nerve --robot NAME ...` command.
     pub fn nerve(&self) -> Command {
-        let mut c = Command::new(&self.nerve);
+        let mut c = Command::new(self.kit.nerve_path());
         c.arg("--robot").arg(&self.name).env("NERVE_HOME", &self.home);
         if let Some(v) = self.cpu_latency {
             c.env("NERVE_CPU_LATENCY", v);
@@ -264,59 +137,12 @@ impl Robot {
     }
 }
 
-impl Drop for Robot {
-    fn drop(&mut self) {
-        let out = self.nerve().args(["down", "--grace", "1"]).stdin(Stdio::null()).output();
-        match out {
-            Ok(o) if o.status.success() => {}
-            Ok(o) => eprintln!(
-                "warning: `nerve --robot {} down` failed: {}",
-                self.name,
-                String::from_utf8_lossy(&o.stderr).trim()
-            ),
-            Err(e) => eprintln!("warning: cannot run `nerve --robot {} down`: {e}", self.name),
-        }
-        let _ = std::fs::remove_dir_all(&self.home);
-    }
-}
-
 /// A command that re-runs this executable with a hidden subcommand.
 pub fn self_command(sub: &str) -> Result<Command> {
     let exe = std::env::current_exe().context("cannot find this executable")?;
     let mut c = Command::new(exe);
     c.arg(sub).stdin(Stdio::null());
     Ok(c)
-}
-
-/// Waits for a file to appear as [`wait_file`] does, after sleeping through
-/// `quiet` (at most `timeout`) without a wake-up: for a batch known to take
-/// about that long, so that this process's polling does not run on the
-/// CPUs beside the batch it measures (every 2 ms at SCHED_FIFO 20, which a
-/// woken agent would have to wait for).
-pub fn wait_file_after(
-    path: &Path,
-    quiet: Duration,
-    timeout: Duration,
-    children: &mut [&mut ChildGuard],
-) -> Result<bool> {
-    let quiet = quiet.min(timeout);
-    std::thread::sleep(quiet);
-    wait_file(path, timeout.saturating_sub(quiet), children)
-}
-
-/// Waits for a file to appear, watching `children` for early exits.
-pub fn wait_file(path: &Path, timeout: Duration, children: &mut [&mut ChildGuard]) -> Result<bool> {
-    let t0 = Instant::now();
-    while t0.elapsed() < timeout {
-        if path.exists() {
-            return Ok(true);
-        }
-        for c in children.iter_mut() {
-            c.check_alive()?;
-        }
-        std::thread::sleep(Duration::from_millis(2));
-    }
-    Ok(false)
 }
 
 /// Puts the calling thread under SCHED_FIFO at `prio`, not inherited by
@@ -364,29 +190,5 @@ pub fn exit_status(what: &str, r: Result<()>) -> ExitCode {
             eprintln!("error: {what}: {e:#}");
             ExitCode::from(1)
         }
-    }
-}
-
-#[cfg(test)]
-#[allow(clippy::unwrap_used)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn wait_file_after_sleeps_through_the_quiet_time_then_finds_the_file() {
-        let dir = std::env::temp_dir().join(format!("nerve-bench-wait-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("batch-1.txt");
-        std::fs::write(&path, "1\n").unwrap();
-        let t0 = Instant::now();
-        assert!(wait_file_after(&path, Duration::from_millis(100), Duration::from_secs(5), &mut []).unwrap());
-        assert!(t0.elapsed() >= Duration::from_millis(100), "it looked before its quiet time was over");
-        // a file that never comes: false once the whole timeout has passed
-        let t0 = Instant::now();
-        let none = dir.join("batch-2.txt");
-        let found = wait_file_after(&none, Duration::from_millis(50), Duration::from_millis(120), &mut []).unwrap();
-        let _ = std::fs::remove_dir_all(&dir);
-        assert!(!found);
-        assert!(t0.elapsed() >= Duration::from_millis(120));
     }
 }

@@ -14,10 +14,11 @@
 //!   (`acme::Gripper`, the test crate's `nerve-gripper`), both at 50 Hz,
 //!   interleaved: a custom type should cost no more.
 
-use crate::machine::{Machine, command_line};
+use crate::machine::Machine;
 use crate::observed::{TableRow, hop_with_and_without, print_table};
 use crate::payloads::label;
 use crate::procs::{ChildGuard, Robot};
+use crate::report::Report;
 use crate::stats::{Rounds, Summary, median_f64};
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
@@ -106,15 +107,12 @@ pub struct EchoCost {
     pub cpu_ms_p50: f64,
 }
 
-/// The record report.
+/// The record report: the [`Head`](crate::report::Head) and [`RecordResults`].
+pub type RecordReport = Report<RecordResults>;
+
+/// The results of the scenario, after the report's [`Head`](crate::report::Head).
 #[derive(Debug, Clone, Serialize)]
-pub struct RecordReport {
-    /// "record"
-    pub scenario: &'static str,
-    /// the command that produced it
-    pub command: String,
-    /// the machine
-    pub machine: Machine,
+pub struct RecordResults {
     /// measured hop rounds
     pub rounds: usize,
     /// the hop with and without the recorder
@@ -324,18 +322,19 @@ pub fn run(opts: &RecordOpts) -> Result<RecordReport> {
     drop(router);
     drop(robot);
     let echo_custom_vs_builtin = echo[1].cpu_ms_p50 / echo[0].cpu_ms_p50.max(1e-9);
-    Ok(RecordReport {
-        scenario: "record",
-        command: command_line(),
+    Ok(Report::new(
+        "record",
         machine,
-        rounds: opts.rounds,
-        hop,
-        target_ratio: TARGET_RATIO,
-        images,
-        echo,
-        echo_custom_vs_builtin,
-        seconds: started.elapsed().as_secs_f64(),
-    })
+        RecordResults {
+            rounds: opts.rounds,
+            hop,
+            target_ratio: TARGET_RATIO,
+            images,
+            echo,
+            echo_custom_vs_builtin,
+            seconds: started.elapsed().as_secs_f64(),
+        },
+    ))
 }
 
 /// Prints the tables (markdown).

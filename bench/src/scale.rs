@@ -18,8 +18,9 @@
 //! process and its ports stay) and the router's CPU is measured again: the
 //! issue's "100 idle agents: router under 1% of a core".
 
-use crate::machine::{Machine, clock_ticks, command_line};
+use crate::machine::{Machine, clock_ticks};
 use crate::procs::Robot;
+use crate::report::Report;
 use crate::stats::Summary;
 use anyhow::{Context as _, Result, anyhow, bail};
 use serde::Serialize;
@@ -63,15 +64,12 @@ pub struct Cpu {
     pub router_pct: f64,
 }
 
-/// The scale report.
+/// The scale report: the [`Head`](crate::report::Head) and [`ScaleResults`].
+pub type ScaleReport = Report<ScaleResults>;
+
+/// The results of the scenario, after the report's [`Head`](crate::report::Head).
 #[derive(Debug, Clone, Serialize)]
-pub struct ScaleReport {
-    /// "scale"
-    pub scenario: &'static str,
-    /// the command that produced it
-    pub command: String,
-    /// the machine
-    pub machine: Machine,
+pub struct ScaleResults {
     /// agents launched
     pub agents: usize,
     /// rate of every agent, Hz
@@ -244,28 +242,29 @@ pub fn run(opts: &ScaleOpts) -> Result<ScaleReport> {
     let rss = Summary::of(&mems.iter().map(|m| m.rss_kib).collect::<Vec<_>>());
     let pss = Summary::of(&mems.iter().map(|m| m.pss_kib).collect::<Vec<_>>());
     drop(robot); // nerve down
-    Ok(ScaleReport {
-        scenario: "scale",
-        command: command_line(),
+    Ok(Report::new(
+        "scale",
         machine,
-        agents: pids.len(),
-        rate_hz: 1e3 / opts.period_ms as f64,
-        window_s: opts.window_s,
-        launch_ms,
-        machine_before_pct,
-        running,
-        idle,
-        agent_rss_kib_p50: rss.p50_ns,
-        agent_rss_kib_max: rss.max_ns,
-        agent_pss_kib_p50: pss.p50_ns,
-        agent_pss_kib_max: pss.max_ns,
-        agents_pss_total_mib: mems.iter().map(|m| m.pss_kib).sum::<u64>() as f64 / 1024.0,
-        router: router_mem,
-        ps: Summary::of(&ps_ns),
-        router_idle_vs_target: idle.router_pct / ROUTER_TARGET_PCT,
-        target_met: idle.router_pct < ROUTER_TARGET_PCT,
-        seconds: started.elapsed().as_secs_f64(),
-    })
+        ScaleResults {
+            agents: pids.len(),
+            rate_hz: 1e3 / opts.period_ms as f64,
+            window_s: opts.window_s,
+            launch_ms,
+            machine_before_pct,
+            running,
+            idle,
+            agent_rss_kib_p50: rss.p50_ns,
+            agent_rss_kib_max: rss.max_ns,
+            agent_pss_kib_p50: pss.p50_ns,
+            agent_pss_kib_max: pss.max_ns,
+            agents_pss_total_mib: mems.iter().map(|m| m.pss_kib).sum::<u64>() as f64 / 1024.0,
+            router: router_mem,
+            ps: Summary::of(&ps_ns),
+            router_idle_vs_target: idle.router_pct / ROUTER_TARGET_PCT,
+            target_met: idle.router_pct < ROUTER_TARGET_PCT,
+            seconds: started.elapsed().as_secs_f64(),
+        },
+    ))
 }
 
 /// Prints the tables (markdown).

@@ -5,10 +5,11 @@
 //! by batch interleaved; target: the median with them at most 1.05x the
 //! median without.
 
-use crate::machine::{Machine, command_line};
+use crate::machine::Machine;
 use crate::observed::{TableRow, hop_with_and_without, print_table};
 use crate::payloads::label;
 use crate::procs::{ChildGuard, Robot};
+use crate::report::Report;
 use crate::stats::Summary;
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
@@ -54,15 +55,12 @@ pub struct UiHop {
     pub target_met: bool,
 }
 
-/// Results of the ui scenario.
+/// The ui report: the [`Head`](crate::report::Head) and [`UiResults`].
+pub type UiReport = Report<UiResults>;
+
+/// The results of the scenario, after the report's [`Head`](crate::report::Head).
 #[derive(Debug, Clone, Serialize)]
-pub struct UiReport {
-    /// "ui"
-    pub scenario: &'static str,
-    /// how it was run
-    pub command: String,
-    /// the machine
-    pub machine: Machine,
+pub struct UiResults {
     /// measured rounds
     pub rounds: usize,
     /// the hop with and without the page
@@ -124,27 +122,28 @@ pub fn run(opts: &UiOpts) -> Result<UiReport> {
     let measured = hop_with_and_without(&robot, &opts.sizes, opts.rounds, opts.quick, &opts.work, "u", &mut observe)?;
     drop(router);
     drop(robot);
-    Ok(UiReport {
-        scenario: "ui",
-        command: command_line(),
+    Ok(Report::new(
+        "ui",
         machine,
-        rounds: opts.rounds,
-        hop: measured
-            .into_iter()
-            .map(|m| UiHop {
-                size: m.size,
-                label: label(m.size).into(),
-                target_met: m.ratio_p50 <= TARGET_RATIO,
-                without: m.without,
-                with_ui: m.with,
-                ratio_p50: m.ratio_p50,
-                ratio_p50_round_median: m.ratio_p50_round_median,
-            })
-            .collect(),
-        target_ratio: TARGET_RATIO,
-        browser,
-        seconds: started.elapsed().as_secs_f64(),
-    })
+        UiResults {
+            rounds: opts.rounds,
+            hop: measured
+                .into_iter()
+                .map(|m| UiHop {
+                    size: m.size,
+                    label: label(m.size).into(),
+                    target_met: m.ratio_p50 <= TARGET_RATIO,
+                    without: m.without,
+                    with_ui: m.with,
+                    ratio_p50: m.ratio_p50,
+                    ratio_p50_round_median: m.ratio_p50_round_median,
+                })
+                .collect(),
+            target_ratio: TARGET_RATIO,
+            browser,
+            seconds: started.elapsed().as_secs_f64(),
+        },
+    ))
 }
 
 /// Prints the table (markdown).
