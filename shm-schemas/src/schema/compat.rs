@@ -88,8 +88,7 @@ impl Incompatible {
                 };
                 format!(
                     "cannot connect {from} to {to}: both declare {type_name}, but laid out differently{what}\n\
-                     make both declare the same layout of {type_name} (the same fields, types and order), \
-                     then restart the one you changed"
+                     make both declare the same layout of {type_name} (the same fields, types and order)"
                 )
             }
         }
@@ -610,7 +609,7 @@ mod tests {
         );
         assert!(text.contains("\n  field `spread` (f32, 4 bytes at offset 16): only in py/in\n"), "{text}");
         assert!(
-            text.ends_with("then restart the one you changed") && text.contains("make both declare the same layout"),
+            text.ends_with("make both declare the same layout of lab::Smoothed (the same fields, types and order)"),
             "{text}"
         );
         assert!(!text.contains("older"), "{text}");
