@@ -19,8 +19,7 @@ use agent_sdk::process::{ProcessError, ProcessHandle};
 use agent_sdk::world::pid_alive;
 use anyhow::{Context as _, Result, anyhow, bail};
 use nix::sys::signal::Signal;
-use shm_schemas::control::cli_to_router::{self as proto, CliRequest, EventKind, RouterReply};
-use std::collections::BTreeSet;
+use shm_schemas::control::cli_to_router::{self as proto, CliRequest, RouterReply};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -114,77 +113,38 @@ fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<
     Ok(failed)
 }
 
-/// How often a launch looks at the router's events while its agents register.
-const REGISTER_LOOK: Duration = Duration::from_millis(5);
-/// How often it asks for the whole list (`ps`) meanwhile: an agent held by
-/// its supervisor (restarting, failed) counts as there without registering,
-/// and the router keeps only its newest [`proto::EVENTS_KEPT`] events.
-const REGISTER_PS_EVERY: Duration = Duration::from_millis(250);
+/// How long one [`CliRequest::WaitRegistered`] may wait: well within the
+/// time a command waits for the router ([`crate::client::ROUTER_TIMEOUT`]).
+const REGISTER_ASK: Duration = Duration::from_secs(5);
 
 /// Waits until every agent of `file` that was neither `running` before nor
 /// reported as `failed` by its start has registered (or is in its
 /// supervisor's hands). A failed agent is not waited for: its `start` runs
 /// beside its registration, so it may have died before the router could
 /// check its pid, and then the router has never heard of it (CI of
-/// 2026-11-27 waited 20 s for a SIGSEGV in `start`). It follows the router's
-/// events, which the router answers from memory, and asks for `ps` only
-/// when the events have not told all by [`REGISTER_PS_EVERY`]: `ps` asks
-/// every agent for its statistics, and polled every 20 ms during a launch
-/// of 50 it woke every agent started so far, on the CPUs the others needed
-/// to start (and its last call, with 50 agents, took 90 ms).
+/// 2026-11-27 waited 20 s for a SIGSEGV in `start`). The router answers
+/// when all have registered ([`CliRequest::WaitRegistered`]), woken by the
+/// registrations themselves: nothing is polled, and no agent is asked for
+/// its statistics while the others start.
 fn wait_registered(session: &RouterSession, file: &LaunchFile, running: &[String], failed: &[String]) -> Result<()> {
     let t0 = Instant::now();
-    let wanted: BTreeSet<&str> =
-        file.agents.iter().map(|a| a.name.as_str()).filter(|n| !failed.iter().any(|f| f == n)).collect();
-    // not yet seen registering
-    let mut unheard: BTreeSet<String> =
-        wanted.iter().filter(|n| !running.iter().any(|r| r == *n)).map(|n| (*n).to_owned()).collect();
-    let mut last_ps = Instant::now();
-    let (mut after, mut epoch) = (0u64, None);
+    let mut unheard: Vec<String> =
+        file.agents.iter().map(|a| a.name.clone()).filter(|n| !failed.contains(n) && !running.contains(n)).collect();
     while !unheard.is_empty() {
-        if last_ps.elapsed() >= REGISTER_PS_EVERY {
-            // registered, or already in the supervisor's hands (restarting, failed)
-            let live: Vec<String> = match session.call(CliRequest::Ps)? {
-                RouterReply::Agents(v) => v.into_iter().map(|a| a.name).collect(),
-                _ => vec![],
-            };
-            unheard.retain(|n| !live.contains(n));
-            last_ps = Instant::now();
-            if unheard.is_empty() {
-                break;
-            }
-        }
-        if t0.elapsed() > REGISTER_TIMEOUT {
+        let left = REGISTER_TIMEOUT.saturating_sub(t0.elapsed());
+        if left.is_zero() {
             return Err(anyhow!(
                 "not registered after {REGISTER_TIMEOUT:?}: {} (see `nerve logs NAME`)",
-                unheard.iter().map(String::as_str).collect::<Vec<_>>().join(", ")
+                unheard.join(", ")
             ));
         }
-        if let RouterReply::Events { epoch: e, next, events } = session.call(CliRequest::Events { after })? {
-            if epoch.is_some_and(|p| p != e) {
-                // another router, whose events start again from 1: ask it
-                last_ps = t0;
-            }
-            epoch = Some(e);
-            after = next.saturating_sub(1);
-            for ev in events {
-                match ev.what {
-                    EventKind::Registered { agent, .. } => {
-                        unheard.remove(&agent);
-                    }
-                    // a process of ours died while starting: it comes back
-                    // (its supervisor) or fails, which `ps` tells
-                    EventKind::Died { agent, .. } | EventKind::Left { agent, .. }
-                        if wanted.contains(agent.as_str()) =>
-                    {
-                        unheard.insert(agent);
-                    }
-                    _ => {}
-                }
-            }
-        }
-        if !unheard.is_empty() {
-            std::thread::sleep(REGISTER_LOOK);
+        let ask = CliRequest::WaitRegistered {
+            names: unheard.clone(),
+            timeout_ns: agent_sdk::clock::nanos(left.min(REGISTER_ASK)),
+        };
+        match session.call(ask)? {
+            RouterReply::Waited { missing } => unheard = missing,
+            other => bail!("unexpected reply from the router: {other:?}"),
         }
     }
     Ok(())

@@ -50,6 +50,8 @@ mod tests;
 
 /// How often names gone for long are looked for.
 const GC_PERIOD: Duration = Duration::from_secs(60);
+/// The longest a [`CliRequest::WaitRegistered`] waits.
+pub const MAX_WAIT_REGISTERED: Duration = Duration::from_secs(60);
 /// How long `nerve kill` waits for the process to be gone.
 pub const KILL_WAIT: Duration = Duration::from_millis(500);
 
@@ -230,6 +232,8 @@ enum Work {
     /// `connect`/`disconnect` done: answered once the connection list is
     /// on disk (review R11a)
     Saved { save: SaveId, what: String, done: Option<Result<(), String>> },
+    /// `CliRequest::WaitRegistered`: until all are there or `until`
+    WaitRegistered { names: Vec<String>, until: Instant },
 }
 
 impl Work {
@@ -246,6 +250,7 @@ impl Work {
             Work::Kill { .. } => "kill",
             Work::Background { .. } => "background",
             Work::Saved { .. } => "saved",
+            Work::WaitRegistered { .. } => "wait-registered",
         }
     }
 }
@@ -431,9 +436,17 @@ impl State {
         std::mem::take(&mut self.out)
     }
 
-    /// Whether requests wait for agents, a kill or the disk.
+    /// Whether requests wait for agents, a kill or the disk (a wait for
+    /// registrations is not: registrations wake the router, and the
+    /// liveness tick ends the wait).
     pub fn busy(&self) -> bool {
-        !self.jobs.is_empty()
+        self.jobs.iter().any(|j| !matches!(j.work, Work::WaitRegistered { .. }))
+    }
+
+    /// Whether `name` has registered or is in its supervisor's hands
+    /// (restarting, failed): what a launch waits for.
+    fn there(&self, name: &str) -> bool {
+        self.registry.contains(name) || self.supervisor.get(name).is_some_and(|s| s.is_pending())
     }
 
     /// Whether the router is stopping and owes no answer any more.
@@ -485,7 +498,13 @@ impl State {
     fn settle(&mut self) {
         let mut i = 0;
         while i < self.jobs.len() {
-            if self.jobs[i].ready() {
+            let ready = match &self.jobs[i].work {
+                Work::WaitRegistered { names, until } => {
+                    self.shutdown || self.now >= *until || names.iter().all(|n| self.there(n))
+                }
+                _ => self.jobs[i].ready(),
+            };
+            if ready {
                 let job = self.jobs.swap_remove(i);
                 self.finish(job);
             } else {
@@ -862,6 +881,11 @@ impl State {
                 self.out.push(Effect::Kill { ticket, name: name.clone(), process });
                 Ok(self.waiting(vec![ticket], Work::Kill { name, pid, over: None }))
             }
+            CliRequest::WaitRegistered { names, timeout_ns } => {
+                let wait = Duration::from_nanos(timeout_ns).min(MAX_WAIT_REGISTERED);
+                let until = self.now.checked_add(wait).unwrap_or(self.now);
+                Ok(self.waiting(Vec::new(), Work::WaitRegistered { names, until }))
+            }
             CliRequest::Shutdown => {
                 self.shutdown = true;
                 self.supervisor.stop_all();
@@ -984,6 +1008,9 @@ impl State {
                 }
                 _ => Ok(RouterReply::Ok),
             },
+            Work::WaitRegistered { names, .. } => {
+                Ok(RouterReply::Waited { missing: names.into_iter().filter(|n| !self.there(n)).collect() })
+            }
             Work::Background { name, what, effect } => {
                 match single() {
                     Ok(reply) => {

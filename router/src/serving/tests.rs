@@ -693,3 +693,47 @@ fn the_list_loaded_at_start_is_made_when_its_agents_register() {
     let (r, _) = b.register("r1", 102, &["in"], &["out"]);
     assert!(matches!(r, RouterReply::Registered { first, .. } if first.len() == 1));
 }
+
+fn waited(r: Option<RouterReply>) -> Vec<String> {
+    match r {
+        Some(RouterReply::Waited { missing }) => missing,
+        other => panic!("not an answer to a wait: {other:?}"),
+    }
+}
+
+#[test]
+fn a_wait_for_registrations_is_answered_when_all_are_there_or_the_time_is_up() {
+    let mut b = Bench::new();
+    let names = vec!["t1".to_owned(), "r1".to_owned()];
+    let (id, fx) = b.cli(CliRequest::WaitRegistered { names, timeout_ns: 5_000_000_000 });
+    assert!(reply(&fx, id).is_none());
+    assert!(!b.core.busy(), "nothing to poll for while agents start");
+    let (_, fx) = b.register("t1", 101, &[], &["tick"]);
+    assert!(reply(&fx, id).is_none(), "r1 is not there yet");
+    let (_, fx) = b.register("r1", 102, &["in"], &["out"]);
+    assert!(waited(reply(&fx, id)).is_empty());
+    // the time is up: those missing are named
+    let (id, _) =
+        b.cli(CliRequest::WaitRegistered { names: vec!["r1".into(), "zz".into()], timeout_ns: 1_000_000_000 });
+    b.after(Duration::from_millis(999));
+    assert!(reply(&b.handle(Input::Tick), id).is_none());
+    b.after(Duration::from_millis(1));
+    assert_eq!(waited(reply(&b.handle(Input::Tick), id)), ["zz"]);
+    // an agent that died while starting and is restarting is in its
+    // supervisor's hands: not waited for; one that died for good is
+    b.cli(CliRequest::Supervise(supervision("r1", RestartPolicy::Always, 5)));
+    b.died("r1", 102);
+    b.died("t1", 101);
+    let (id, fx) = b.cli(CliRequest::WaitRegistered { names: vec!["r1".into()], timeout_ns: u64::MAX });
+    assert!(waited(reply(&fx, id)).is_empty());
+    let (id, fx) = b.cli(CliRequest::WaitRegistered { names: vec!["t1".into()], timeout_ns: u64::MAX });
+    assert!(reply(&fx, id).is_none());
+    // a huge time-out is capped
+    b.after(MAX_WAIT_REGISTERED);
+    assert_eq!(waited(reply(&b.handle(Input::Tick), id)), ["t1"]);
+    // a shutdown answers every wait
+    let (id, _) = b.cli(CliRequest::WaitRegistered { names: vec!["t1".into()], timeout_ns: 1_000_000_000 });
+    let (_, fx) = b.cli(CliRequest::Shutdown);
+    assert_eq!(waited(reply(&fx, id)), ["t1"]);
+    assert!(b.core.stopped());
+}

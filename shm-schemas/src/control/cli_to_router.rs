@@ -129,6 +129,17 @@ pub enum CliRequest {
         /// agent
         name: String,
     },
+    /// Wait until every agent named has registered, or is in its
+    /// supervisor's hands (restarting, failed), or `timeout_ns` has passed
+    /// (the router caps it at a minute); answered with
+    /// [`RouterReply::Waited`] naming those still missing. `nerve launch`
+    /// asks it instead of polling the events and `ps`.
+    WaitRegistered {
+        /// agents
+        names: Vec<String>,
+        /// the longest wait
+        timeout_ns: u64,
+    },
 }
 
 /// When a supervised agent is restarted.
@@ -377,6 +388,13 @@ pub enum RouterReply {
     },
     /// Refused.
     Error(RouterError),
+    /// The answer to [`CliRequest::WaitRegistered`]: the agents named that
+    /// have neither registered nor are in their supervisor's hands (none:
+    /// all are there).
+    Waited {
+        /// still missing, by name
+        missing: Vec<String>,
+    },
 }
 
 fn list(v: &[String]) -> String {
