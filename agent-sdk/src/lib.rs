@@ -32,6 +32,7 @@ pub mod clock;
 pub mod control;
 pub mod cpu_latency;
 pub mod daemon;
+pub mod device;
 pub mod dynamic;
 pub mod memory;
 pub mod meters;

@@ -17,10 +17,10 @@
 //! counters. A board that vanishes is reopened with exponential backoff; a
 //! grasp under way then ends as missed (`device-lost`).
 
+use agent_sdk::device::{CounterFigures, DeviceEvent, DeviceLink};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_arm::{Command, Grasper, Gripper, Outcome, Settings};
 use nerve_devices::{ArmCommand, GRASP_NOTHING, GraspCommand, GripperPhase, Message};
-use nerve_devlink::{CounterFigures, DeviceEvent, DeviceLink};
 use shm_schemas::payloads::{ArmGraspState, GraspAction, GraspMiss, GraspPhase, GraspRequest, HELD_NOTHING};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -150,7 +150,7 @@ impl Agent for Arm {
         let figures = Arc::new(Figures::default());
         let f2 = figures.clone();
         // its own figures after the device link's
-        let counters = nerve_devlink::counter_figures(setup, move || {
+        let counters = agent_sdk::device::counter_figures(setup, move || {
             let g = |a: &AtomicU64| a.load(Ordering::Relaxed).to_string();
             vec![("grasps".into(), g(&f2.grasps)), ("held".into(), g(&f2.held)), ("missed".into(), g(&f2.missed))]
         });
@@ -174,7 +174,7 @@ impl Agent for Arm {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.link = Some(nerve_devlink::open_link(&self.device, "arm", NO_DEVICE)?);
+        self.link = Some(agent_sdk::device::open_link(&self.device, "arm", NO_DEVICE)?);
         Ok(())
     }
 
@@ -284,7 +284,7 @@ mod tests {
 
     impl Board {
         fn new() -> Board {
-            let (master, slave, tty) = nerve_devlink::raw_pty().expect("a pseudo-terminal in raw mode");
+            let (master, slave, tty) = agent_sdk::device::raw_pty().expect("a pseudo-terminal in raw mode");
             let mut master = std::fs::File::from(master);
             let (tx, heard) = channel();
             std::thread::spawn(move || {

@@ -17,10 +17,10 @@
 
 mod aim;
 
+use agent_sdk::device::{Count, CounterFigures, DeviceEvent, DeviceLink};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use aim::Aim;
 use nerve_devices::Message;
-use nerve_devlink::{Count, CounterFigures, DeviceEvent, DeviceLink};
 use nerve_motor::{Limits, Weights};
 use shm_schemas::payloads::{HeadCommand, HeadState, LinguisticCommand};
 use std::path::PathBuf;
@@ -72,7 +72,8 @@ impl Agent for Head {
         // read-only counters: figures, after the device link's
         let (accepted, refused) = (Count::default(), Count::default());
         let (a, r) = (accepted.clone(), refused.clone());
-        let counters = nerve_devlink::counter_figures(setup, move || vec![a.figure("accepted"), r.figure("refused")]);
+        let counters =
+            agent_sdk::device::counter_figures(setup, move || vec![a.figure("accepted"), r.figure("refused")]);
         Ok(Head {
             device: args.device,
             link: None,
@@ -97,7 +98,7 @@ impl Agent for Head {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.link = Some(nerve_devlink::open_link(&self.device, "head", NO_DEVICE)?);
+        self.link = Some(agent_sdk::device::open_link(&self.device, "head", NO_DEVICE)?);
         Ok(())
     }
 

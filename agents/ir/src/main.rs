@@ -11,12 +11,12 @@
 //! `garbage_bytes`, `bad_headers`, `bad_checksums`, `truncated`,
 //! `invalid_payloads`, `device_opens`, `device_losses`,
 //! `device_failed_opens`, `stale_frames`. A device that vanishes is logged and reopened with
-//! exponential backoff (see `nerve_devlink`); no sightings are published
+//! exponential backoff (see `agent_sdk::device`); no sightings are published
 //! meanwhile.
 
+use agent_sdk::device::{CounterFigures, DeviceEvent, DeviceLink};
 use agent_sdk::{Agent, AgentError, Context, Output, Setup, Task};
 use nerve_devices::Message;
-use nerve_devlink::{CounterFigures, DeviceEvent, DeviceLink};
 use shm_schemas::payloads::IrSighting;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -56,7 +56,7 @@ impl Agent for Ir {
             device: args.device,
             link: None,
             out: setup.output("sighting")?,
-            counters: nerve_devlink::counter_figures(setup, Vec::new),
+            counters: agent_sdk::device::counter_figures(setup, Vec::new),
             seq: 0,
             last_seq: None,
             last_seen: None,
@@ -64,7 +64,7 @@ impl Agent for Ir {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.link = Some(nerve_devlink::open_link(&self.device, "ir", NO_DEVICE)?);
+        self.link = Some(agent_sdk::device::open_link(&self.device, "ir", NO_DEVICE)?);
         Ok(())
     }
 

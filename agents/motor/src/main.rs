@@ -27,10 +27,10 @@
 //! command after recovery is the current decision. On stop it commands the
 //! wheels to zero (the board has no command timeout).
 
+use agent_sdk::device::{Count, CounterFigures, DeviceEvent, DeviceLink};
 use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_devices::{DiffDriveGeometry, Message, Pose2, WheelCommand, wrap_angle};
-use nerve_devlink::{Count, CounterFigures, DeviceEvent, DeviceLink};
 use nerve_motor::{Fusion, Limits, Weights, drive::wheel_speeds, refusals::Refusals};
 use shm_schemas::payloads::{LinguisticCommand, Odometry, SafetyStop, VelocityCommand};
 use std::path::PathBuf;
@@ -153,7 +153,8 @@ impl Agent for Motor {
         // read-only counters: figures, after the device link's
         let (accepted, refused) = (Count::default(), Count::default());
         let (a, r) = (accepted.clone(), refused.clone());
-        let counters = nerve_devlink::counter_figures(setup, move || vec![a.figure("accepted"), r.figure("refused")]);
+        let counters =
+            agent_sdk::device::counter_figures(setup, move || vec![a.figure("accepted"), r.figure("refused")]);
         let (v_lim, w_lim) = (limits.v_max, limits.omega_max);
         Ok(Motor {
             device: args.device,
@@ -200,7 +201,7 @@ impl Agent for Motor {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.link = Some(nerve_devlink::open_link(&self.device, "motor", NO_DEVICE)?);
+        self.link = Some(agent_sdk::device::open_link(&self.device, "motor", NO_DEVICE)?);
         Ok(())
     }
 
@@ -327,7 +328,7 @@ mod tests {
 
     impl Board {
         fn new() -> Board {
-            let (master, slave, tty) = nerve_devlink::raw_pty().expect("a pseudo-terminal in raw mode");
+            let (master, slave, tty) = agent_sdk::device::raw_pty().expect("a pseudo-terminal in raw mode");
             let master = std::fs::File::from(master);
             let flags = nix::fcntl::fcntl(&master, nix::fcntl::FcntlArg::F_GETFL).expect("flags");
             let flags = nix::fcntl::OFlag::from_bits_truncate(flags) | nix::fcntl::OFlag::O_NONBLOCK;

@@ -16,12 +16,12 @@
 //! with exponential backoff; scans the module sent while the line was cut
 //! (waiting on the line when it is reopened) are discarded, not published
 //! in a burst stamped "now", and counted in `stale_frames`; see
-//! `nerve_devlink`.
+//! `agent_sdk::device`.
 
+use agent_sdk::device::{Count, CounterFigures, DeviceEvent, DeviceLink};
 use agent_sdk::params::positive;
 use agent_sdk::{Agent, AgentError, Context, Output, Param, Setup, Task};
 use nerve_devices::{Message, SONAR_NO_ECHO};
-use nerve_devlink::{Count, CounterFigures, DeviceEvent, DeviceLink};
 use nerve_sonar::{DIRECTIONS, RiskEstimator, RiskParams, SeqUnwrapper};
 use shm_schemas::payloads::SonarScan;
 use std::path::PathBuf;
@@ -70,7 +70,7 @@ impl Agent for Sonar {
         let (missed, artefacts) = (Count::default(), Count::default());
         let (m, a) = (missed.clone(), artefacts.clone());
         let counters =
-            nerve_devlink::counter_figures(setup, move || vec![m.figure("missed_scans"), a.figure("artefacts")]);
+            agent_sdk::device::counter_figures(setup, move || vec![m.figure("missed_scans"), a.figure("artefacts")]);
         Ok(Sonar {
             device: args.device,
             link: None,
@@ -91,7 +91,7 @@ impl Agent for Sonar {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.link = Some(nerve_devlink::open_link(&self.device, "sonar", NO_DEVICE)?);
+        self.link = Some(agent_sdk::device::open_link(&self.device, "sonar", NO_DEVICE)?);
         Ok(())
     }
 

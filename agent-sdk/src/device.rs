@@ -1,5 +1,6 @@
 //! The device thread of nerve's sensor and actuator agents (thesis Fig. 2-3:
-//! the "receiver" that listens to the hardware).
+//! the "receiver" that listens to the hardware), part of the SDK as DESIGN
+//! puts it (it was the `nerve-devlink` crate in an agent's folder).
 //!
 //! [`DeviceLink::spawn`] starts a thread that owns one serial device (a
 //! board's `/dev/ttyUSB*` or a simulator's pseudo-terminal), decodes its
@@ -388,14 +389,14 @@ pub fn raw_pty() -> nix::Result<(std::os::fd::OwnedFd, std::os::fd::OwnedFd, Pat
 /// which `--describe` and test harnesses run without a device); `label`
 /// names the device in logs, `missing` tells the user what to give when no
 /// `--device` was (`nerve start` prints it).
-pub fn open_link(device: &Option<PathBuf>, label: &str, missing: &str) -> Result<DeviceLink, agent_sdk::AgentError> {
+pub fn open_link(device: &Option<PathBuf>, label: &str, missing: &str) -> Result<DeviceLink, crate::AgentError> {
     let Some(path) = device else {
-        return Err(agent_sdk::AgentError::Config(missing.into()));
+        return Err(crate::AgentError::Config(missing.into()));
     };
     // a real board beside a simulated robot's clock is refused with what to do
-    agent_sdk::simclock::refuse_real_device(path).map_err(|e| agent_sdk::AgentError::Config(e.to_string()))?;
+    crate::simclock::refuse_real_device(path).map_err(|e| crate::AgentError::Config(e.to_string()))?;
     DeviceLink::spawn(path, LinkOptions { backoff: Default::default(), label: label.into() })
-        .map_err(|e| agent_sdk::AgentError::Device(e.to_string()))
+        .map_err(|e| crate::AgentError::Device(e.to_string()))
 }
 
 /// Reports the counters of a device link as the agent's read-only figures
@@ -404,7 +405,7 @@ pub fn open_link(device: &Option<PathBuf>, label: &str, missing: &str) -> Result
 /// agent has one figure source. Returns the handle the task copies
 /// [`LinkStats`] into, at each step.
 pub fn counter_figures(
-    setup: &mut agent_sdk::Setup,
+    setup: &mut crate::Setup,
     more: impl Fn() -> Vec<(String, String)> + Send + Sync + 'static,
 ) -> CounterFigures {
     let shown = Arc::new(Mutex::new(LinkStats::default()));
