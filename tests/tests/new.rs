@@ -2,13 +2,14 @@
 //! folder, run its tests with `cargo test`, build it, and launch its
 //! `launch.toml` as made, with data flowing from the ticker through it.
 //!
-//! The project's `target` is linked to this workspace's own target folder,
-//! so that the dependencies nerve's build compiled already are not compiled
-//! again (the project pins nerve's Cargo.lock and profiles), and cargo runs
-//! offline. The first build still compiles iceoryx2 and the SDK (about a
-//! minute and a half here: nerve's workspace unifies other features, e.g.
-//! `syn`'s and `toml`'s, so most proc-macros and what uses them are built
-//! again). These tests run one at a time in their own group, beside the
+//! The project builds into this workspace's own target folder, as `nerve
+//! new` makes it (its `.cargo/config.toml`), and pins nerve's Cargo.lock,
+//! profiles and features: its first `cargo test` must compile none of
+//! nerve's crates.io dependencies again (iceoryx2, serde, syn, ...), only
+//! nerve's own crates the agent uses (their package ids name another
+//! workspace, so their build differs) and the agent. That needs the
+//! workspace built first, as `.ci/run` does (`cargo build --workspace --bins
+//! --tests`). These tests run one at a time in their own group, beside the
 //! end-to-end runs of the demos, with cargo at nice 19 and one job: the
 //! robot beside them keeps the CPU it asks for, and its resource manager,
 //! which judges the whole machine's load (85 % of all cores is `high`),
@@ -37,11 +38,29 @@ fn cargo(dir: &Path, args: &[&str]) -> String {
     text
 }
 
+/// Fails unless every crate cargo compiled (its `Compiling` lines in
+/// `text`) is a path package: nerve's own crates and the project. A
+/// crates.io dependency compiled again means that the project did not
+/// reuse nerve's build of it: its profile, features or version differ from
+/// the workspace's.
+fn assert_compiled_no_dependency_again(text: &str) {
+    let compiled: Vec<&str> = text.lines().map(str::trim).filter(|l| l.starts_with("Compiling ")).collect();
+    let again: Vec<&&str> = compiled.iter().filter(|l| !l.contains(" (/")).collect();
+    assert!(
+        again.is_empty(),
+        "the new project compiled {} of nerve's dependencies again instead of reusing the workspace's build \
+         (a profile, feature or version differs; see launcher/src/cmd/new.rs): {again:#?}\n{text}",
+        again.len()
+    );
+    assert!(compiled.iter().any(|l| l.contains("agent-sdk")), "the SDK is built for the project:\n{text}");
+}
+
 /// Makes project `name` under the robot's home with `nerve new NAME EXTRA`,
-/// its `target` the workspace's; returns its folder.
+/// building into the workspace's target folder; returns its folder.
 fn make(r: &Robot, name: &str, extra: &[&str]) -> PathBuf {
-    // the build goes to the project's `target` (cargo() removes
-    // CARGO_TARGET_DIR too), so the launch file must say `target/debug`
+    // the build goes where the project's `.cargo/config.toml` says (cargo()
+    // removes CARGO_TARGET_DIR), so the launch file names the workspace's
+    // target folder
     let made = r
         .command("nerve")
         .args(["new", name, "--dir"])
@@ -53,11 +72,16 @@ fn make(r: &Robot, name: &str, extra: &[&str]) -> PathBuf {
     let out = String::from_utf8_lossy(&made.stdout).into_owned();
     assert!(made.status.success(), "nerve new failed: {}", String::from_utf8_lossy(&made.stderr));
     let dir = r.home.join(name);
-    for f in ["Cargo.toml", "Cargo.lock", "src/main.rs", "launch.toml", "README.md", ".gitignore"] {
+    for f in ["Cargo.toml", "Cargo.lock", "src/main.rs", "launch.toml", "README.md", ".gitignore", ".cargo/config.toml"]
+    {
         assert!(dir.join(f).is_file(), "{f} was not made: {out}");
     }
-    let target = bin_dir().parent().expect("target folder").to_path_buf();
-    std::os::unix::fs::symlink(&target, dir.join("target")).expect("link target");
+    let launch = std::fs::read_to_string(dir.join("launch.toml")).expect("launch.toml");
+    let exe = format!("exe = \"{}\"", bin_dir().join(name).display());
+    assert!(
+        launch.contains(&exe),
+        "the launch file runs the build in the workspace's target folder ({exe}):\n{launch}"
+    );
     dir
 }
 
@@ -92,6 +116,7 @@ fn a_new_event_driven_agent_tests_builds_and_runs_from_its_launch_file() {
     let dir = make(&r, &name, &["--event"]);
     let _built = Built(bin_dir().join(&name));
     let tests = cargo(&dir, &["test"]);
+    assert_compiled_no_dependency_again(&tests);
     assert!(tests.contains("test result: ok. 3 passed"), "the generated tests ran:\n{tests}");
     assert!(tests.contains("the_agent_passes_ticks_on_multiplied_by_gain ... ok"), "the harness test ran:\n{tests}");
     cargo(&dir, &["build"]);
@@ -118,6 +143,7 @@ fn a_new_periodic_agent_builds_and_describes_itself() {
     assert!(main.contains("Task::Periodic(Duration::from_nanos(50000000))"), "{main}");
     // the same tests, the harness one now driving it by its clock
     let tests = cargo(&dir, &["test"]);
+    assert_compiled_no_dependency_again(&tests);
     assert!(tests.contains("the_agent_passes_ticks_on_multiplied_by_gain ... ok"), "the harness test ran:\n{tests}");
     cargo(&dir, &["build"]);
     let out = Command::new(bin_dir().join(&name)).arg("--describe").output().expect("describe");
@@ -141,18 +167,29 @@ fn bad_requests_are_refused_with_what_to_do() {
     assert!(err.contains("already exists"), "{err}");
     let err = r.fails(&["new", "lost", "--dir", dir, "--nerve-src", "/nonexistent"]);
     assert!(err.contains("--nerve-src"), "{err}");
+    // an executable in nerve's target folder must not overwrite nerve's
+    for clash in ["nerve-ticker", "deps"] {
+        let err = r.fails(&["new", clash, "--dir", dir]);
+        assert!(err.contains("--own-target") && err.contains("target folder"), "{clash}: {err}");
+        assert!(!r.home.join(clash).exists(), "{clash}: nothing is made");
+    }
+    r.ok(&["new", "nerve-mine", "--own-target", "--dir", dir]);
 }
 
-/// The launch file's `exe` is where the user's cargo builds: the project's
-/// own `target` (relative), CARGO_TARGET_DIR, or a `build.target-dir` in a
-/// cargo config above the project (`nerve new` asks `cargo metadata`, no
-/// build needed).
+/// The launch file's `exe` is where the user's cargo builds: nerve's target
+/// folder (the default), the project's own `target` (relative, with
+/// `--own-target`), CARGO_TARGET_DIR, or a `build.target-dir` in a cargo
+/// config above the project (`nerve new` asks `cargo metadata`, no build
+/// needed).
 #[test]
 fn the_launch_file_finds_the_build_wherever_cargo_puts_it() {
     let r = Robot::new("newtgt");
     let exe_of = |dir: &Path, name: &str, target_dir: Option<&Path>| -> String {
         let mut c = r.command("nerve");
         c.args(["new", name, "--dir"]).arg(dir).env_remove("CARGO_TARGET_DIR");
+        if name != "shared" && name != "moved" {
+            c.arg("--own-target");
+        }
         if let Some(t) = target_dir {
             c.env("CARGO_TARGET_DIR", t);
         }
@@ -162,7 +199,9 @@ fn the_launch_file_finds_the_build_wherever_cargo_puts_it() {
         let exe = launch.lines().find_map(|l| l.strip_prefix("exe = ")).unwrap_or_else(|| panic!("no exe in {launch}"));
         exe.trim_matches('"').to_owned()
     };
+    assert_eq!(exe_of(&r.home, "shared", None), bin_dir().join("shared").display().to_string());
     assert_eq!(exe_of(&r.home, "plain", None), "target/debug/plain");
+    assert!(!r.home.join("plain/.cargo").exists(), "--own-target writes no cargo config");
     let elsewhere = r.home.join("builds");
     assert_eq!(exe_of(&r.home, "moved", Some(&elsewhere)), format!("{}/debug/moved", elsewhere.display()));
     // a cargo config above the project
