@@ -15,8 +15,15 @@
 //!   passed, the wall follower switches sides, leaves the island, and the
 //!   robot finds the door and the person.
 //!
-//! The end-to-end tests (`demo_*`) each run a whole robot in real time for
-//! about two minutes; `.config/nextest.toml` runs them one at a time.
+//! The end-to-end tests (`demo_*`) each run a whole robot on simulated
+//! time at four times real time (`--sim-time --time-scale 4`, issue 46):
+//! the same assertions as in real time, in about a quarter of the wall
+//! time. Seeds 1 to 3 of `explore.toml` run so (seed 1 in the tracker
+//! test), and the second world. The CPU-hungry agent's run stays in real
+//! time: its load is CPU time, which a faster clock cannot compress (at 4x
+//! the hog would need three cores), and it is the suite's real-time run of
+//! the same robot. The island run stays in real time too (see its test).
+//! `.config/nextest.toml` runs them one at a time.
 
 use nerve_demo::analysis::{EXPLORING_MODES, ModeChange, TRACKING_MODES, first_change_into, time_in_modes_before};
 use nerve_demo::{Criteria, Scene, analyse, read_truth};
@@ -229,6 +236,16 @@ fn figures_are_written_as_png_and_svg() {
 
 // ---------------------------------------------------------------- end to end
 
+/// How many times as fast as real time the simulated runs go.
+const SCALE: f64 = 4.0;
+/// The flags of a run on simulated time at [`SCALE`].
+const SIM_TIME: [&str; 3] = ["--sim-time", "--time-scale", "4"];
+
+/// `args` followed by [`SIM_TIME`].
+fn at_4x<'a>(args: &[&'a str]) -> Vec<&'a str> {
+    args.iter().copied().chain(SIM_TIME).collect()
+}
+
 /// Runs `nerve demo explore ARGS` for robot `r` with `launch/explore.toml`; returns the parsed summary.
 fn run_demo(r: &Robot, args: &[&str], during: impl FnOnce(&Robot)) -> Value {
     run_demo_with(r, &repo().join("launch/explore.toml"), args, during)
@@ -279,6 +296,14 @@ fn run_demo_with(r: &Robot, launch: &Path, args: &[&str], during: impl FnOnce(&R
     for f in ["trajectory.png", "trajectory.svg", "motion.png", "motion.svg", "truth.csv", "log.csv", "launch.toml"] {
         assert!(out.join(f).exists(), "{f} missing");
     }
+    // the run's clock, as the summary records it
+    if args.contains(&"--sim-time") {
+        assert_eq!(s["time_scale"].as_f64(), Some(SCALE), "{s:#}");
+        let sim_log = std::fs::read_to_string(out.join("logs/sim.log")).unwrap_or_default();
+        assert!(sim_log.contains("the simulator owns the robot's clock"), "the simulator's log:\n{sim_log}");
+    } else {
+        assert!(s["time_scale"].is_null(), "{s:#}");
+    }
     // nothing is left behind
     reap();
     assert!(r.shm_files().is_empty(), "left in /dev/shm: {:?}", r.shm_files());
@@ -324,10 +349,80 @@ fn clean_up(r: &Robot) {
     let _ = std::fs::remove_dir_all(&r.home);
 }
 
+/// On simulated time a device agent whose device is real hardware is
+/// refused with what to do, and so is an agent given a clock that is no
+/// clock (issue 46); the simulator's kind of device (a link that appears
+/// when the simulator starts) is accepted. No simulator needed.
+#[test]
+fn sim_time_refuses_a_real_device_and_a_broken_clock() {
+    let r = Robot::new("simref");
+    let page = r.home.join(agent_sdk::simclock::PAGE_FILE);
+    agent_sdk::simclock::create(&page, SCALE).expect("a clock page");
+    let start = |clock: &Path, kind: &str, args: &[&str]| {
+        let out = r
+            .command("nerve")
+            .args(["start", kind, "--name", kind, "--"])
+            .args(args)
+            .env(agent_sdk::simclock::SIM_CLOCK_ENV, clock)
+            .stdin(std::process::Stdio::null())
+            .output()
+            .expect("nerve start");
+        let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        (out.status.success(), text)
+    };
+    let (ok, text) = start(&page, "sonar", &["--device", "/dev/null"]);
+    assert!(!ok, "a real device was accepted on simulated time:\n{text}");
+    assert!(text.contains("real hardware") && text.contains("without --sim-time"), "{text}");
+    let junk = r.home.join("junk");
+    std::fs::write(&junk, "not a clock").expect("write");
+    let (ok, text) = start(&junk, "testagent", &[]);
+    assert!(!ok, "a broken clock was accepted:\n{text}");
+    assert!(text.contains("not a simulated clock") && text.contains("--sim-time"), "{text}");
+    let sim_link = r.home.join("dev").join("sonar").display().to_string();
+    let (ok, text) = start(&page, "sonar", &["--device", sim_link.as_str()]);
+    assert!(ok, "the simulator's device was refused:\n{text}");
+}
+
+/// `nerve launch --sim-time --time-scale 4`: the robot's clock page is
+/// made, every agent says it runs on it, and a robot already running on
+/// its own clock is not switched under its agents.
+#[test]
+fn sim_time_launch_puts_the_agents_on_the_clock() {
+    let r = Robot::new("simla");
+    let file =
+        r.launch_file("ticker.toml", "robot = \"x\"\n[[agent]]\nname = \"t1\"\nkind = \"ticker\"\nperiod = \"10ms\"\n");
+    let file = file.display().to_string();
+    let out = r.nerve(&["launch", "--sim-time", "--time-scale", "4", file.as_str()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "nerve launch --sim-time failed:\n{err}");
+    assert!(err.contains("runs on simulated time at 4x"), "{err}");
+    assert!(r.home.join(&r.name).join(agent_sdk::simclock::PAGE_FILE).exists(), "no clock page");
+    let log_file = r.home.join(&r.name).join("logs/t1.log");
+    let said = wait_until(Duration::from_secs(10), || {
+        std::fs::read_to_string(&log_file).is_ok_and(|l| l.contains("on simulated time") && l.contains("scale=4"))
+    });
+    assert!(
+        said,
+        "the ticker's log does not say it runs on simulated time:\n{}",
+        std::fs::read_to_string(&log_file).unwrap_or_default()
+    );
+    let again = r.nerve(&["launch", "--sim-time", file.as_str()]);
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(!again.status.success() && err.contains("already runs") && err.contains("down"), "{err}");
+}
+
 #[test]
 fn demo_explore_seed_2() {
     let r = Robot::new("demob");
-    let s = run_demo(&r, &["--seed", "2", "--world", world("explore.toml").as_str()], |_| {});
+    let s = run_demo(&r, &at_4x(&["--seed", "2", "--world", world("explore.toml").as_str()]), |_| {});
+    assert_success(&s);
+    clean_up(&r);
+}
+
+#[test]
+fn demo_explore_seed_3() {
+    let r = Robot::new("demo3");
+    let s = run_demo(&r, &at_4x(&["--seed", "3", "--world", world("explore.toml").as_str()]), |_| {});
     assert_success(&s);
     clean_up(&r);
 }
@@ -335,7 +430,7 @@ fn demo_explore_seed_2() {
 #[test]
 fn demo_explore_second_world() {
     let r = Robot::new("democ");
-    let s = run_demo(&r, &["--seed", "3", "--world", world("explore-2.toml").as_str()], |_| {});
+    let s = run_demo(&r, &at_4x(&["--seed", "3", "--world", world("explore-2.toml").as_str()]), |_| {});
     assert_success(&s);
     assert_eq!(s["world"], "explore-2");
     clean_up(&r);
@@ -346,7 +441,9 @@ fn demo_explore_second_world() {
 /// and follows it round. Back at the place it passed a lap ago (the map
 /// builder's `revisit`, from odometry), the wall follower switches sides,
 /// leaves the island for the room's walls, and so finds the door and the
-/// person — within the same time limit as the other runs.
+/// person — within the same time limit as the other runs. In real time:
+/// at 4x (issue 46) the robot switched sides twice in two runs but did not
+/// leave the island within 160 s simulated; the cause is not found yet.
 #[test]
 fn demo_explore_island_leaves_the_island() {
     let r = Robot::new("demoi");
@@ -369,13 +466,14 @@ fn demo_explore_island_leaves_the_island() {
 #[test]
 fn demo_survives_killing_the_tracker() {
     let r = Robot::new("demok");
-    let s = run_demo(&r, &["--seed", "1", "--world", world("explore.toml").as_str()], |r| {
+    let s = run_demo(&r, &at_4x(&["--seed", "1", "--world", world("explore.toml").as_str()]), |r| {
         let up = wait_until(Duration::from_secs(60), || {
             r.nerve(&["ps", "--json"]).status.success()
                 && r.agent("tracker").is_some_and(|a| a["pid"].as_u64() > Some(0))
         });
         assert!(up, "the tracker never came up");
-        std::thread::sleep(Duration::from_secs(20));
+        // about 20 s of simulated time in
+        std::thread::sleep(Duration::from_secs_f64(20.0 / SCALE));
         r.ok(&["kill", "tracker"]);
     });
     assert_success(&s);
@@ -397,7 +495,8 @@ args = ["--mode", "burn"]
 /// `kb/explore.toml`) sees the robot's agents over their CPU threshold and
 /// lengthens periods, least important first — the wall follower's, then
 /// the hog's — and the robot still reaches the doorway and the target
-/// without touching anything.
+/// without touching anything. In real time (see the module doc): the
+/// suite's run of the robot at 1x beside those at 4x.
 #[test]
 fn demo_with_a_cpu_hungry_agent() {
     let r = Robot::new("demoh");

@@ -8,10 +8,11 @@
 //! two other robots: robot 2 must reach the target within 0.5 m with no
 //! collision in the first, and be farther from where it believes it is at
 //! the via points in the second. Each run takes about two and a half
-//! minutes of simulated (= wall) time. The two run at the same time (their
-//! own robots, simulators and bridge ports; together about a third of one
-//! of the machine's two cores), which halves the test's share of CI's
-//! serial `demo-runs` group (`.config/nextest.toml`).
+//! minutes of simulated time, on simulated time at four times real time
+//! (`--sim-time --time-scale 4`, issue 46: the simulator owns both robots'
+//! clock; the same assertions as in real time). The two run at the same
+//! time (their own robots, simulators and bridge ports), which halves the
+//! test's share of CI's serial `demo-runs` group (`.config/nextest.toml`).
 
 use nerve_tests::{Robot, free_port, sigkill, wait_until};
 use serde_json::Value;
@@ -19,6 +20,9 @@ use std::io::{BufRead as _, BufReader};
 use std::path::Path;
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
+
+/// How many times as fast as real time the runs go.
+const SCALE: f64 = 4.0;
 
 /// The demo as a child process, killed (with its robots brought down by the
 /// robots' guards) if the test fails.
@@ -42,6 +46,7 @@ fn start(r1: &Robot, r2: &Robot, out: &Path, extra: &[&str]) -> (Demo, std::sync
     let mut cmd = r1.command("nerve");
     cmd.args(["demo", "cooperate", "--seed", "1", "--robots", &robots, "--port", &port, "--out"])
         .arg(out)
+        .args(["--sim-time", "--time-scale", &SCALE.to_string()])
         .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
@@ -113,8 +118,8 @@ fn demo_cooperate_robot_2_reaches_the_target_through_bridge_restarts_and_misses_
             .is_some_and(|a| a["pid"].as_u64().is_some_and(|p| p != 0 && p != u64::from(b2)))),
         "robot 2's bridge was not restarted"
     );
-    // a little later, robot 1's (robot 2's reports come in through it)
-    std::thread::sleep(Duration::from_secs(10));
+    // a little later (10 s of simulated time), robot 1's (robot 2's reports come in through it)
+    std::thread::sleep(Duration::from_secs_f64(10.0 / SCALE));
     let b1 = r1.pid("bridge");
     sigkill(b1);
     assert!(
@@ -125,6 +130,7 @@ fn demo_cooperate_robot_2_reaches_the_target_through_bridge_restarts_and_misses_
     );
     drop(lines);
     let with = finish(demo, &out, Duration::from_secs(480));
+    assert_eq!(with["time_scale"].as_f64(), Some(SCALE), "{with:#}");
     assert_eq!(with["target_found"], true, "{with:#}");
     assert_eq!(with["path_sent"], true, "{with:#}");
     assert_eq!(with["end_reason"], "robot 2 arrived and robot 1 resumed", "{with:#}");
