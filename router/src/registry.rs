@@ -265,6 +265,54 @@ mod tests {
         assert!(registry.contains("t1"));
     }
 
+    /// `nerve connect` of one type laid out two ways is refused by the
+    /// shared rule (`schema::compat`): the fields that differ are listed
+    /// from the registered schemas, or the fingerprints named when a side
+    /// registered none, and no side is called the older build.
+    #[test]
+    fn a_connection_of_one_type_laid_out_two_ways_is_refused_listing_the_fields() {
+        use shm_schemas::control::agent_to_router::PortSpec;
+        use shm_schemas::payloads::Tick;
+        use shm_schemas::schema::{Field, Kind};
+        let mut wide = Tick::schema();
+        let Kind::Struct { fields } = &mut wide.kind else { panic!("Tick is a struct") };
+        fields.push(Field { name: "spread".into(), offset: 16, schema: f64::schema() });
+        wide.size = 24;
+        let me = || ProcessHandle::take(std::process::id()).expect("this process");
+        let mut registry = Registry::default();
+        let mut t1 = registration(std::process::id());
+        t1.outputs = vec![PortSpec::of::<Tick>("tick")];
+        t1.schemas = vec![Tick::schema()];
+        let mut w = registration(std::process::id());
+        w.name = "w".into();
+        w.inputs =
+            vec![PortSpec { name: "tick".into(), type_name: "nerve::Tick".into(), fingerprint: wide.fingerprint() }];
+        w.schemas = vec![wide];
+        registry.register(t1.clone(), me(), false).expect("t1 registers");
+        registry.register(w.clone(), me(), false).expect("w registers");
+        let port = |p: &str| p.parse::<shm_schemas::PortRef>().expect("a port");
+        let text = match registry.check_compatible(&port("t1/tick"), &port("w/tick")) {
+            Err(e @ RouterError::LayoutMismatch { .. }) => e.to_string(),
+            other => panic!("connected one type of two layouts: {other:?}"),
+        };
+        assert!(text.contains("field `spread` (f64, 8 bytes at offset 16): only in w/tick"), "{text}");
+        assert!(text.contains("make both declare the same layout of nerve::Tick") && !text.contains("older"), "{text}");
+        // registered without its schemas (too large for the service): told by fingerprint
+        w.schemas.clear();
+        registry.register(w, me(), false).expect("w registers again");
+        let text = match registry.check_compatible(&port("t1/tick"), &port("w/tick")) {
+            Err(e @ RouterError::LayoutMismatch { .. }) => e.to_string(),
+            other => panic!("connected one type of two fingerprints: {other:?}"),
+        };
+        assert!(!text.contains("fields differ") && text.contains("make both declare the same layout"), "{text}");
+        // the same layout connects
+        let mut r = registration(std::process::id());
+        r.name = "r".into();
+        r.inputs = vec![PortSpec::of::<Tick>("in")];
+        registry.register(r, me(), false).expect("r registers");
+        assert_eq!(registry.check_compatible(&port("t1/tick"), &port("r/in")).expect("one layout"), "nerve::Tick");
+    }
+
     fn refusal(pid: u32, world: &World) -> String {
         match check_process(&registration(pid), world) {
             Err(e @ RouterError::RegistrationRefused { .. }) => e.to_string(),
