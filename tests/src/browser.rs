@@ -1,7 +1,7 @@
 //! A real browser for the tests of `nerve ui`: headless Chromium driven
 //! through chromedriver's WebDriver protocol (plain HTTP and JSON, spoken
 //! here over a `TcpStream`), and a small HTTP client for the tests' own
-//! requests to the server. `scripts/setup.sh` installs `chromium` and
+//! requests to the server. `scripts/setup.sh --test` installs `chromium` and
 //! `chromium-driver`; a machine without them fails the test with that hint.
 
 use serde_json::{Value, json};
@@ -112,7 +112,7 @@ impl Browser {
             .stderr(Stdio::null())
             .spawn()
             .unwrap_or_else(|e| {
-                panic!("cannot run chromedriver ({e}): install chromium and chromium-driver (scripts/setup.sh does)")
+                panic!("cannot run chromedriver ({e}): install chromium and chromium-driver (scripts/setup.sh --test does)")
             });
         let addr = format!("127.0.0.1:{port}");
         let up = crate::wait_until(Duration::from_secs(20), || TcpStream::connect(&addr).is_ok());

@@ -19,7 +19,7 @@ pub fn python_with_mcap() -> PathBuf {
         let st = Command::new("python3").arg("-m").arg("venv").arg(&dir).status().expect("python3");
         assert!(
             st.success(),
-            "python3 -m venv failed (Debian: apt-get install python3-venv; scripts/setup.sh does it)"
+            "python3 -m venv failed (Debian: apt-get install python3-venv; scripts/setup.sh --test does it)"
         );
         let st = Command::new(dir.join("bin").join("pip"))
             .args(["install", "--quiet", "--disable-pip-version-check", "mcap==1.6.0", "protobuf==5.29.3"])
