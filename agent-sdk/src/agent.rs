@@ -162,7 +162,7 @@ impl Setup {
 
     /// The agent's own arguments (those after `--` on its command line)
     /// parsed into `T`, its `#[derive(clap::Parser)]` struct, as clap
-    /// parses them; see [`args`]. A refusal is an [`AgentError::Config`]
+    /// parses them; see [`crate::agent::args`]. A refusal is an [`AgentError::Config`]
     /// that names the agent, clap's reason and how to list the arguments.
     /// `--help` prints them and ends the process with status 0 (in a
     /// [`crate::testing::Harness`] it is a refusal holding the help text).
