@@ -112,7 +112,9 @@ impl Browser {
             .stderr(Stdio::null())
             .spawn()
             .unwrap_or_else(|e| {
-                panic!("cannot run chromedriver ({e}): install chromium and chromium-driver (scripts/setup.sh --test does)")
+                panic!(
+                    "cannot run chromedriver ({e}): install chromium and chromium-driver (scripts/setup.sh --test does)"
+                )
             });
         let addr = format!("127.0.0.1:{port}");
         let up = crate::wait_until(Duration::from_secs(20), || TcpStream::connect(&addr).is_ok());
