@@ -47,13 +47,13 @@
 //!       --robot-model h1 --dev-dir $NERVE_HOME/coop-r1/dev --extra-robot coop-r2:h2
 //!   ```
 //!
-//! Parameters: read-only `sim_time` (s), `collisions` (the simulator's own
-//! robot); figures (`nerve param get sim`): collisions, gripper phase and
+//! Figures (`nerve param get sim`, read-only): `sim_time` (s) and
+//! `collisions` of the simulator's own robot; collisions, gripper phase and
 //! wheel bias of every robot.
 
 use agent_sdk::memory::stm::{CreateError, RingWriter};
 use agent_sdk::memory::{FrameDesc, MemorySetup, PixelFormat, RingName, RingOutput, RingSpec};
-use agent_sdk::{Agent, AgentError, Context, Output, Param, Setup, Task};
+use agent_sdk::{Agent, AgentError, Context, Output, Setup, Task};
 use nerve_sim::{
     CAMERA_FRAME_BYTES, CAMERA_HEIGHT, CAMERA_WIDTH, DeviceHub, NoiseModel, RobotId, RobotKind, RobotModel, SimConfig,
     Simulation, Truth, TruthLog, World, gripper_word,
@@ -197,8 +197,6 @@ struct SimAgent {
     truth_out: Output<GroundTruth>,
     camera: Option<RingOutput>,
     next_frame: f64,
-    sim_time: Param<f64>,
-    collisions: Param<u64>,
     camera_errors: u64,
     extras: Vec<Extra>,
     figures: Figures,
@@ -224,7 +222,12 @@ impl SimAgent {
 
     fn update_figures(&self) {
         let Some(sim) = &self.sim else { return };
-        let mut figs = Vec::new();
+        // the simulator's own robot's totals first, by the names they had
+        // as read-only parameters
+        let mut figs = vec![
+            ("sim_time".to_owned(), format!("{:.3}", sim.time())),
+            ("collisions".to_owned(), sim.collisions().to_string()),
+        ];
         for id in sim.robot_ids() {
             let r = sim.robot(id);
             let label = if id == RobotId::FIRST {
@@ -347,12 +350,9 @@ impl Agent for SimAgent {
         } else {
             Some(setup.ring_output("frames", RingSpec::new(8, CAMERA_FRAME_BYTES).named(&args.camera_ring))?)
         };
-        let read_only = |_: &u64| Err::<(), String>("read-only: kept by the simulator".into());
         let mut agent = SimAgent {
             truth_out: setup.output("truth")?,
             camera,
-            sim_time: setup.param_checked("sim_time", 0.0, |_: &f64| Err("read-only: kept by the simulator".into())),
-            collisions: setup.param_checked("collisions", 0u64, read_only),
             args,
             world: None,
             sim: None,
@@ -457,8 +457,6 @@ impl Agent for SimAgent {
                 log.flush().map_err(|e| AgentError::Other(e.to_string()))?;
             }
         }
-        self.sim_time.set(t.time);
-        self.collisions.set(t.collisions);
         let frame_due = t.time + 1e-9 >= self.next_frame;
         self.truth_out.send(ground_truth(&t, stamp_ns))?;
         if frame_due && self.camera.is_some() {
