@@ -31,22 +31,16 @@
 //! let _ = Types::default().with::<Grip>(); // error: Grip is not AnyBitPattern
 //! ```
 //!
-//! The same type with a `u8` flag, whose bytes are all values, is carried
-//! (this one compiles; it is not run, its schema is left out):
+//! The same type with a `u8` flag, whose bytes are all values, is carried;
+//! `#[derive(Payload)]` gives it its schema and the `AnyBitPattern` promise:
 //!
-//! ```no_run
+//! ```
 //! use nerve_bridge::types::Types;
+//! use shm_schemas::Payload;
+//! #[derive(Debug, Clone, Copy, Default, Payload, serde::Serialize)]
 //! #[repr(C)]
-//! #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+//! #[payload(name = "lab::Grip")]
 //! struct Grip { closed: u8 }
-//! // SAFETY: repr(C), one u8
-//! unsafe impl iceoryx2::prelude::ZeroCopySend for Grip {}
-//! // SAFETY: one u8: any byte is a value, no padding
-//! unsafe impl shm_schemas::schema::AnyBitPattern for Grip {}
-//! impl shm_schemas::schema::Described for Grip {
-//!     fn schema() -> shm_schemas::schema::Schema { unimplemented!() }
-//! }
-//! impl shm_schemas::Payload for Grip {}
 //! let _ = Types::default().with::<Grip>();
 //! ```
 //!
