@@ -38,6 +38,12 @@ pub fn parse_scale(s: &str) -> Result<f64, String> {
 }
 
 impl SimTimeArgs {
+    /// The flags over a launch file's `sim_time` and `time_scale`: the
+    /// file's apply where the command line gives none.
+    pub fn with_file(&self, file: &crate::launch_file::LaunchFile) -> Self {
+        SimTimeArgs { sim_time: self.sim_time || file.sim_time, time_scale: self.time_scale.or(file.time_scale) }
+    }
+
     /// The scale to run at: `None` on the wall clock; with `--sim-time` the
     /// flag's, else the world's (`world_scale`), else 1.
     pub fn scale(&self, world_scale: Option<f64>) -> Option<f64> {
@@ -96,10 +102,12 @@ pub fn world_scale(file: &crate::launch_file::LaunchFile) -> Option<f64> {
     nerve_demo::nerve_sim::World::load(path).ok()?.time_scale
 }
 
-/// `nerve launch --sim-time`: the robot on simulated time, unless this
-/// shell names a simulated clock already (another robot's, served by the
-/// same simulator), which the launch then joins. Returns the scale.
+/// `nerve launch --sim-time` (or a launch file's `sim_time = true`): the
+/// robot on simulated time, unless this shell names a simulated clock
+/// already (another robot's, served by the same simulator), which the launch
+/// then joins. Returns the scale.
 pub fn for_launch(world: &World, args: &SimTimeArgs, file: &crate::launch_file::LaunchFile) -> Result<Option<f64>> {
+    let args = &args.with_file(file);
     let Some(scale) = args.scale(world_scale(file)) else { return Ok(None) };
     if let Some(joined) = std::env::var_os(SIM_CLOCK_ENV).filter(|p| !p.is_empty())
         && args.time_scale.is_none()
@@ -139,5 +147,25 @@ mod tests {
         assert_eq!(sim.scale(None), Some(1.0));
         let given = SimTimeArgs { sim_time: true, time_scale: Some(2.0) };
         assert_eq!(given.scale(Some(4.0)), Some(2.0));
+    }
+
+    #[test]
+    fn the_flags_win_over_the_launch_files_keys() {
+        let file = |sim_time, time_scale| crate::launch_file::LaunchFile {
+            path: PathBuf::from("robot.toml"),
+            agents: Vec::new(),
+            connections: Vec::new(),
+            allow_cycle: Vec::new(),
+            sim_time,
+            time_scale,
+        };
+        let none = SimTimeArgs::default();
+        assert_eq!(none.with_file(&file(false, Some(4.0))).scale(None), None, "time_scale alone keeps the wall clock");
+        assert_eq!(none.with_file(&file(true, Some(4.0))).scale(Some(2.0)), Some(4.0), "the file's over the world's");
+        assert_eq!(none.with_file(&file(true, None)).scale(Some(2.0)), Some(2.0), "else the world's");
+        let flag = SimTimeArgs { sim_time: true, time_scale: None };
+        assert_eq!(flag.with_file(&file(false, Some(3.0))).scale(None), Some(3.0), "--sim-time takes the file's scale");
+        let both = SimTimeArgs { sim_time: true, time_scale: Some(8.0) };
+        assert_eq!(both.with_file(&file(true, Some(3.0))).scale(None), Some(8.0), "--time-scale wins");
     }
 }

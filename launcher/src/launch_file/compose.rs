@@ -70,6 +70,10 @@ pub(super) struct Composed {
     pub sources: Vec<Source>,
     /// the launch file's `robot`, arguments replaced
     pub robot: Option<Spanned<String>>,
+    /// the launch file's `sim_time` and `time_scale`, arguments replaced
+    /// (an included file's are ignored, as its `robot` is)
+    pub sim_time: Option<Spanned<toml::Value>>,
+    pub time_scale: Option<Spanned<toml::Value>>,
     pub agents: Vec<FlatAgent>,
     pub connections: Vec<FlatConnect>,
     /// (file, line, message)
@@ -154,6 +158,8 @@ impl Composed {
         let mut s = Subst { c: self, file: me, values: &values };
         if parent.is_none() {
             s.c.robot = raw.robot.as_ref().map(|r| s.string(r));
+            s.c.sim_time = raw.sim_time.as_ref().map(|v| s.value(v));
+            s.c.time_scale = raw.time_scale.as_ref().map(|v| s.value(v));
         }
         let cpu_latency = raw.cpu_latency.as_ref().map(|v| s.value(v));
         s.c.sources[me].cpu_latency = cpu_latency;

@@ -59,6 +59,10 @@ pub use shm_schemas::control::cli_to_router::RestartPolicy;
 struct RawFile {
     robot: Option<Spanned<String>>,
     cpu_latency: Option<Spanned<toml::Value>>,
+    /// `sim_time = true`: the robot on simulated time (docs/time.md)
+    sim_time: Option<Spanned<toml::Value>>,
+    /// `time_scale = K`: its speed on simulated time
+    time_scale: Option<Spanned<toml::Value>>,
     /// the file's arguments: NAME = default, or NAME = { default = .., doc = .. }
     args: Option<Spanned<BTreeMap<String, Spanned<toml::Value>>>>,
     #[serde(default)]
@@ -206,6 +210,11 @@ pub struct LaunchFile {
     /// the connections marked `allow_cycle = true`: they may close a loop
     /// of event-driven agents ([`shm_schemas::cycles`])
     pub allow_cycle: Vec<(PortRef, PortRef)>,
+    /// `sim_time = true`: the robot runs on simulated time (as with
+    /// `nerve launch --sim-time`, docs/time.md)
+    pub sim_time: bool,
+    /// `time_scale = K`: how fast simulated time runs (`--time-scale` wins)
+    pub time_scale: Option<f64>,
 }
 
 /// Every problem found in a launch file (and the files it includes), each with its line.
@@ -342,6 +351,38 @@ fn cpu_latency_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<CpuLatencySe
     parsed.map_err(|e| cx.err(v, format!("cpu_latency: {e}"))).ok()
 }
 
+/// A `sim_time` value: `true` or `false`, or a string that is one of them
+/// (`sim_time = "{arg.sim}"`, so that the command line can choose).
+fn sim_time_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<bool> {
+    match v.get_ref() {
+        toml::Value::Boolean(b) => Some(*b),
+        toml::Value::String(s) => match s.trim() {
+            "true" => Some(true),
+            "false" => Some(false),
+            other => {
+                cx.err(v, format!("sim_time is {other:?}; an argument that sets it must be \"true\" or \"false\""));
+                None
+            }
+        },
+        other => {
+            cx.err(v, format!("sim_time is {other}; write sim_time = true or sim_time = false"));
+            None
+        }
+    }
+}
+
+/// A `time_scale` value: a number (or a string of one) from 0.01 to 100, by
+/// the rule of `--time-scale`.
+fn time_scale_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<f64> {
+    let text = match v.get_ref() {
+        toml::Value::String(s) => s.clone(),
+        toml::Value::Integer(i) => i.to_string(),
+        toml::Value::Float(f) => f.to_string(),
+        other => other.to_string(),
+    };
+    crate::sim_time::parse_scale(&text).map_err(|e| cx.err(v, format!("time_scale: {e}"))).ok()
+}
+
 /// A `cpus` value: `[0, 1]`, `0` or a string such as `"0-1"`; a CPU this
 /// machine lacks is refused here, before anything starts.
 fn cpus_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<CpuList> {
@@ -399,9 +440,18 @@ pub fn load_with_args(
     if !composed.errors.is_empty() {
         return Err(Box::new(LaunchErrors::of(&composed.sources, composed.errors)));
     }
-    let compose::Composed { sources, robot: file_robot, agents: flat_agents, connections: flat_connections, .. } =
-        composed;
+    let compose::Composed {
+        sources,
+        robot: file_robot,
+        sim_time,
+        time_scale,
+        agents: flat_agents,
+        connections: flat_connections,
+        ..
+    } = composed;
     let mut cx = Ctx { sources: &sources, cur: 0, errors: Vec::new() };
+    let sim_time = sim_time.as_ref().and_then(|v| sim_time_of(&mut cx, v)).unwrap_or(false);
+    let time_scale = time_scale.as_ref().and_then(|v| time_scale_of(&mut cx, v));
     let robot = match &file_robot {
         Some(r) if explicit => {
             if r.get_ref() != cli_robot {
@@ -689,7 +739,7 @@ pub fn load_with_args(
         let errors = std::mem::take(&mut cx.errors);
         return Err(Box::new(LaunchErrors::of(&sources, errors)));
     }
-    Ok((LaunchFile { path: path.to_path_buf(), agents, connections, allow_cycle }, world))
+    Ok((LaunchFile { path: path.to_path_buf(), agents, connections, allow_cycle, sim_time, time_scale }, world))
 }
 
 /// Port `spec` of agent `a`, with its layout when the agent described it.
@@ -712,6 +762,77 @@ fn list(v: &[&str]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A launch file of this test, removed when dropped (also when the test fails).
+    struct TempFile(PathBuf);
+
+    impl TempFile {
+        fn new(tag: &str, body: &str) -> Self {
+            let p = std::env::temp_dir().join(format!("nerve-launch-{}-{tag}.toml", std::process::id()));
+            std::fs::write(&p, body).expect("write a launch file");
+            TempFile(p)
+        }
+    }
+
+    impl Drop for TempFile {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_file(&self.0);
+        }
+    }
+
+    /// The file's `sim_time` and `time_scale` as [`load_with_args`] reads
+    /// them, and the errors as (line, message).
+    fn time_keys(f: &TempFile, cli: &[&str]) -> (Option<bool>, Option<f64>, Vec<(usize, String)>) {
+        let cli: Vec<String> = cli.iter().map(|s| s.to_string()).collect();
+        let c = compose::compose(&f.0, &parse_cli_args(&cli).expect("NAME=VALUE")).expect("read");
+        assert!(c.errors.is_empty(), "{:?}", c.errors);
+        let mut cx = Ctx { sources: &c.sources, cur: 0, errors: Vec::new() };
+        let sim = c.sim_time.as_ref().and_then(|v| sim_time_of(&mut cx, v));
+        let scale = c.time_scale.as_ref().and_then(|v| time_scale_of(&mut cx, v));
+        (sim, scale, cx.errors.into_iter().map(|(_, l, m)| (l, m)).collect())
+    }
+
+    #[test]
+    fn sim_time_and_time_scale_are_read_from_the_file_and_its_arguments() {
+        let agent = "[[agent]]\nname = \"t1\"\nkind = \"ticker\"\n";
+        let f = TempFile::new("sim", &format!("sim_time = true\ntime_scale = 4\n{agent}"));
+        assert_eq!(time_keys(&f, &[]), (Some(true), Some(4.0), vec![]));
+        let f = TempFile::new(
+            "half",
+            &format!("sim_time = \"{{arg.sim}}\"\ntime_scale = 0.5\n[args]\nsim = \"false\"\n{agent}"),
+        );
+        assert_eq!(time_keys(&f, &[]), (Some(false), Some(0.5), vec![]));
+        assert_eq!(time_keys(&f, &["sim=true"]), (Some(true), Some(0.5), vec![]));
+        let f = TempFile::new("none", agent);
+        assert_eq!(time_keys(&f, &[]), (None, None, vec![]));
+    }
+
+    #[test]
+    fn bad_sim_time_and_time_scale_are_refused_at_their_lines() {
+        let f = TempFile::new(
+            "bad",
+            "robot = \"x\"\nsim_time = \"yes\"\ntime_scale = 1000\n[[agent]]\nname = \"t1\"\nexe = \"./nowhere\"\n",
+        );
+        let (sim, scale, errors) = time_keys(&f, &[]);
+        assert_eq!((sim, scale), (None, None));
+        assert_eq!(errors.len(), 2, "{errors:?}");
+        assert!(errors[0].0 == 2 && errors[0].1.contains("sim_time is \"yes\""), "{errors:?}");
+        assert!(
+            errors[1].0 == 3 && errors[1].1.contains("time_scale") && errors[1].1.contains("from 0.01"),
+            "{errors:?}"
+        );
+        // the whole load says where, and starts nothing
+        let e = load(&f.0, "x", false).expect_err("refused").to_string();
+        let at = |line: usize| format!("{}:{line}: ", f.0.display());
+        assert!(e.contains(&format!("{}sim_time", at(2))), "{e}");
+        assert!(e.contains(&format!("{}time_scale", at(3))), "{e}");
+        assert!(e.contains("nothing was started"), "{e}");
+        let f =
+            TempFile::new("word", "sim_time = 1\ntime_scale = \"fast\"\n[[agent]]\nname = \"t1\"\nkind = \"ticker\"\n");
+        let (_, _, errors) = time_keys(&f, &[]);
+        assert!(errors.iter().any(|(l, m)| *l == 1 && m.contains("write sim_time = true")), "{errors:?}");
+        assert!(errors.iter().any(|(l, m)| *l == 2 && m.contains("is not a number")), "{errors:?}");
+    }
 
     #[test]
     fn lines_are_counted_from_one() {
