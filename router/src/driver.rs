@@ -3,16 +3,16 @@
 //!
 //! The core decides; the driver does. It owns what touches the world: the
 //! iceoryx2 node and the agents' control clients ([`Calls`]), the writer
-//! thread ([`Writer`]), the restarted agents' start-up processes
-//! ([`Spawner`]), the responders of requests owed an answer, and the
+//! thread ([`Writer`]), the start-up processes of the agents it starts and
+//! restarts ([`Spawner`]), the responders of requests owed an answer, and the
 //! processes it waits for after a `nerve kill`. Before a command-line
 //! request it runs the liveness check, so that the core answers from a
 //! registry without dead agents.
 
 use crate::calls::{Calls, Looks, Ticket};
 use crate::serving::{Effect, Input, KILL_WAIT, RequestId, SaveId, State, protocol_error};
+use crate::spawner::Spawner;
 use crate::store::{Saved, Writer};
-use crate::supervision::Spawner;
 use agent_sdk::control::Responder;
 use agent_sdk::process::{ProcessError, ProcessHandle};
 use agent_sdk::world::{Ipc, World};
@@ -51,14 +51,21 @@ pub struct Driver {
 
 impl Driver {
     /// The driver of `core` in `world`.
-    pub fn new(world: World, node: Node<Ipc>, core: State, writer: Writer, list_file: PathBuf) -> Driver {
+    pub fn new(
+        world: World,
+        node: Node<Ipc>,
+        core: State,
+        writer: Writer,
+        spawner: Spawner,
+        list_file: PathBuf,
+    ) -> Driver {
         Driver {
             world,
             node,
             core,
             writer,
             calls: Calls::default(),
-            spawner: Spawner::default(),
+            spawner,
             list_file,
             responders: BTreeMap::new(),
             next_request: 0,
@@ -135,6 +142,9 @@ impl Driver {
                 let log = self.world.log_file(&name);
                 self.spawner.spawn(&name, &argv, cwd.as_deref(), &log, restart);
             }
+            Effect::Start { ticket, name, argv, cwd, env } => {
+                return self.spawner.start(ticket, &name, &argv, cwd.as_deref(), env.as_deref()).map(Input::StartEnded);
+            }
             Effect::Kill { ticket, name, process } => {
                 let pid = process.pid();
                 match process.signal(nix::sys::signal::Signal::SIGKILL) {
@@ -190,8 +200,11 @@ impl Driver {
     }
 
     /// Sends what is queued for agents, and tells the core the replies,
-    /// the saves on disk and the kills over.
+    /// the starts, the saves on disk and the kills over.
     pub fn pump(&mut self, looks: &Looks) {
+        for end in self.spawner.ended() {
+            self.feed(Input::StartEnded(end));
+        }
         for o in self.calls.pump(&self.world, &self.node, Instant::now(), looks) {
             self.feed(Input::Outcome(o));
         }
@@ -222,6 +235,9 @@ impl Driver {
     /// die, the disk writer), so that the serving loop must look again soon
     /// by itself; replies of agents wake it (see [`crate::calls`]).
     pub fn needs_polling(&self) -> bool {
-        !self.kills.is_empty() || !self.saves.is_empty() || (self.calls.busy() && !self.calls.in_flight())
+        !self.kills.is_empty()
+            || !self.saves.is_empty()
+            || (self.calls.busy() && !self.calls.in_flight())
+            || self.spawner.needs_polling()
     }
 }

@@ -11,6 +11,8 @@
 //! * [`registry`]: the live agents;
 //! * [`wiring`]: the connection list, persisted through [`store`];
 //! * [`supervision`]: restart policies, back-off, failure, persisted;
+//! * [`spawner`]: starts every agent (asked by `nerve launch` and `nerve
+//!   start`, or a restart) and reaps the start-up processes;
 //! * [`remembered`]: run-time state re-applied to a re-registering agent;
 //! * [`calls`]: commands to agents, sent without waiting;
 //! * `serving`: the core, a state machine without I/O: what each request
@@ -43,6 +45,7 @@ pub mod journal;
 pub mod registry;
 pub mod remembered;
 mod serving;
+pub mod spawner;
 pub mod store;
 pub mod supervision;
 pub mod transient;
@@ -117,6 +120,8 @@ pub struct Router {
     /// `cli_server`)
     tool_socket: Option<ToolSocket<RouterRequest, RouterReply>>,
     epoch_pub: Publisher<Ipc, RouterEpoch, ()>,
+    /// woken when a start-up process the router started has ended
+    start_wake: spawner::Wake,
     state: driver::Driver,
 }
 
@@ -163,6 +168,7 @@ impl Router {
                 None
             }
         };
+        let (start_wake, wake_handle) = spawner::wake_pipe().map_err(|e| StartError::Other(e.to_string()))?;
         let store = Store::new(world.state_dir());
         let connections = store.load().map_err(StartError::Other)?;
         let supervisor = supervision::Supervisor::load(world.state_dir(), Instant::now());
@@ -201,6 +207,7 @@ impl Router {
             cli_server,
             tool_socket,
             epoch_pub,
+            start_wake,
             state: driver::Driver::new(
                 world.clone(),
                 node,
@@ -214,6 +221,7 @@ impl Router {
                 ),
                 store::Writer::start()
                     .map_err(|e| StartError::Other(format!("cannot start the persisting thread: {e}")))?,
+                spawner::Spawner::with_wake(wake_handle),
                 store.path().to_owned(),
             ),
         })
@@ -237,6 +245,7 @@ impl Router {
             None => None,
         };
         let _tick = ws.attach_interval(LIVENESS_PERIOD).map_err(|e| format!("{e:?}"))?;
+        let _starts = ws.attach_notification(&self.start_wake).map_err(|e| format!("{e:?}"))?;
         // SIGTERM and SIGINT kept and woken through a pipe (iceoryx2's own
         // record of them can be overwritten, see `agent_sdk::termination`)
         let _term = match agent_sdk::termination::install() {
@@ -296,6 +305,7 @@ impl Router {
                 }
             }
             // before receiving, so that what comes after wakes the next wait
+            self.start_wake.drain();
             let mut replied = ReplyIds::default();
             self.server.take_wakeups(|id| replied.insert(id));
             self.cli_server.drain_wakeups();

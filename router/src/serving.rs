@@ -28,6 +28,7 @@ use crate::calls::{AGENT_TIMEOUT, Outcome, STATS_TIMEOUT, Ticket};
 use crate::events::EventLog;
 use crate::registry::{Entry, Registry};
 use crate::remembered::{self, FORGET_AFTER, Remembered};
+use crate::spawner::StartEnd;
 use crate::store::{Connection, Store};
 use crate::supervision::{Exit, Supervisor};
 use crate::transient::{Attached, Transient};
@@ -36,7 +37,8 @@ use agent_sdk::process::ProcessHandle;
 use shm_schemas::control::ProtocolError;
 use shm_schemas::control::agent_to_router::{PortSpec, Registration, TaskKind};
 use shm_schemas::control::cli_to_router::{
-    AgentState, AgentView, CliRequest, EventKind, GraphView, RouterError, RouterReply,
+    AgentState, AgentView, CliRequest, EventKind, GraphView, RouterError, RouterReply, StartOutcome, StartResult,
+    StartSpec,
 };
 use shm_schemas::control::router_to_agent::{AgentCommand, AgentReply};
 use shm_schemas::cycles::event_cycle;
@@ -120,6 +122,9 @@ pub enum Input {
         /// pids of tools gone
         gone_tools: Vec<u32>,
     },
+    /// An asked start ([`Effect::Start`]) is over: the start-up process
+    /// said its agent is ready, or why not, or could not be run.
+    StartEnded(StartEnd),
     /// The start-up process of a restarted agent failed before it registered.
     StartFailed {
         /// agent
@@ -192,6 +197,20 @@ pub enum Effect {
         /// its restart count
         restart: u32,
     },
+    /// Start an agent as a request asked ([`CliRequest::Start`]); the end
+    /// of its start-up process comes back as [`Input::StartEnded`].
+    Start {
+        /// names the end
+        ticket: Ticket,
+        /// agent
+        name: String,
+        /// command line (it starts the agent as a daemon)
+        argv: Vec<String>,
+        /// the folder to start it in
+        cwd: Option<String>,
+        /// its environment (`None`: the router's)
+        env: Option<Vec<(String, String)>>,
+    },
     /// SIGKILL this process and wait up to [`KILL_WAIT`] for it to go;
     /// [`Input::Killed`] tells the end.
     Kill {
@@ -234,6 +253,10 @@ enum Work {
     Saved { save: SaveId, what: String, done: Option<Result<(), String>> },
     /// `CliRequest::WaitRegistered`: until all are there or `until`
     WaitRegistered { names: Vec<String>, until: Instant },
+    /// `CliRequest::Start`: the agents in the request's order, and how
+    /// each start went (the running ones and refusals at once, the others
+    /// as their start-up processes end)
+    Start { order: Vec<String>, results: BTreeMap<String, StartResult> },
 }
 
 impl Work {
@@ -251,6 +274,7 @@ impl Work {
             Work::Background { .. } => "background",
             Work::Saved { .. } => "saved",
             Work::WaitRegistered { .. } => "wait-registered",
+            Work::Start { .. } => "start",
         }
     }
 }
@@ -324,6 +348,8 @@ pub struct State {
     ticket: Ticket,
     /// the last save of the connection list asked for
     save: SaveId,
+    /// agents whose asked start is under way, with its ticket
+    starting: BTreeMap<String, Ticket>,
     /// the effects of the input being handled
     out: Vec<Effect>,
     /// the time of the input being handled
@@ -370,6 +396,7 @@ impl State {
             last_gc: Some(now),
             ticket: 0,
             save: 0,
+            starting: BTreeMap::new(),
             out: Vec::new(),
             now,
         }
@@ -424,6 +451,7 @@ impl State {
                 }
             }
             Input::Liveness { dead, gone_tools } => self.liveness(&dead, &gone_tools),
+            Input::StartEnded(end) => self.start_ended(end),
             Input::StartFailed { name } => {
                 if !self.registry.contains(&name) {
                     tracing::warn!(agent = %name, "the restarted {name} could not start (see its log)");
@@ -440,7 +468,7 @@ impl State {
     /// registrations is not: registrations wake the router, and the
     /// liveness tick ends the wait).
     pub fn busy(&self) -> bool {
-        self.jobs.iter().any(|j| !matches!(j.work, Work::WaitRegistered { .. }))
+        self.jobs.iter().any(|j| !matches!(j.work, Work::WaitRegistered { .. } | Work::Start { .. }))
     }
 
     /// Whether `name` has registered or is in its supervisor's hands
@@ -509,6 +537,81 @@ impl State {
                 self.finish(job);
             } else {
                 i += 1;
+            }
+        }
+    }
+
+    /// `CliRequest::Start`: checks every spec first (nothing is started or
+    /// supervised when one is invalid), supervises those asked to be, and
+    /// starts each agent neither registered nor being started already.
+    fn start(&mut self, agents: Vec<StartSpec>) -> Result<Started, RouterError> {
+        if self.shutdown {
+            return Err(RouterError::NotApplicable(
+                "the router is stopping (`nerve down`): start the agents again once it is down".into(),
+            ));
+        }
+        let mut order: Vec<String> = Vec::with_capacity(agents.len());
+        for spec in &agents {
+            crate::supervision::check(&spec.agent)?;
+            if order.contains(&spec.agent.name) {
+                return Err(RouterError::InvalidName(format!(
+                    "{:?} is named twice in one start; give each agent a name of its own",
+                    spec.agent.name
+                )));
+            }
+            order.push(spec.agent.name.clone());
+        }
+        let mut supervised = false;
+        for spec in agents.iter().filter(|s| s.supervise) {
+            let registry = &self.registry;
+            self.supervisor.supervise(spec.agent.clone(), self.now, |n| registry.contains(n))?;
+            supervised = true;
+        }
+        if supervised {
+            self.persist_supervision();
+        }
+        let mut results = BTreeMap::new();
+        let mut tickets = Vec::new();
+        for spec in agents {
+            let StartSpec { agent, env, .. } = spec;
+            let name = agent.name;
+            if let Some(e) = self.registry.get(&name) {
+                results.insert(name, StartResult::Running { pid: e.reg.pid });
+                continue;
+            }
+            if self.starting.contains_key(&name) {
+                let said = format!("{name} is being started by another request; see `nerve ps` in a moment");
+                results.insert(name, StartResult::Failed { status: "not run".into(), said });
+                continue;
+            }
+            self.ticket = self.ticket.wrapping_add(1);
+            let ticket = self.ticket;
+            self.starting.insert(name.clone(), ticket);
+            tickets.push(ticket);
+            self.out.push(Effect::Start { ticket, name, argv: agent.argv, cwd: agent.cwd, env });
+        }
+        Ok(self.waiting(tickets, Work::Start { order, results }))
+    }
+
+    /// An asked start is over: its job learns how it went. A start-up that
+    /// failed is no death for supervision (the agent never ran: restarting
+    /// it would fail the same way); its caller shows why.
+    fn start_ended(&mut self, end: StartEnd) {
+        let StartEnd { ticket, name, result } = end;
+        if self.starting.get(&name) == Some(&ticket) {
+            self.starting.remove(&name);
+        }
+        match &result {
+            StartResult::Started { said } => tracing::info!(agent = %name, "{said}"),
+            StartResult::Failed { status, said } => {
+                tracing::warn!(agent = %name, status = %status, "{name} did not start ({status}): {said}")
+            }
+            StartResult::Running { .. } => {}
+        }
+        if let Some(job) = self.jobs.iter_mut().find(|j| j.waiting.contains(&ticket)) {
+            job.waiting.retain(|t| *t != ticket);
+            if let Work::Start { results, .. } = &mut job.work {
+                results.insert(name, result);
             }
         }
     }
@@ -886,6 +989,7 @@ impl State {
                 let until = self.now.checked_add(wait).unwrap_or(self.now);
                 Ok(self.waiting(Vec::new(), Work::WaitRegistered { names, until }))
             }
+            CliRequest::Start { agents } => self.start(agents),
             CliRequest::Shutdown => {
                 self.shutdown = true;
                 self.supervisor.stop_all();
@@ -1011,6 +1115,18 @@ impl State {
             Work::WaitRegistered { names, .. } => {
                 Ok(RouterReply::Waited { missing: names.into_iter().filter(|n| !self.there(n)).collect() })
             }
+            Work::Start { order, mut results } => Ok(RouterReply::Started(
+                order
+                    .into_iter()
+                    .map(|name| {
+                        let result = results.remove(&name).unwrap_or_else(|| StartResult::Failed {
+                            status: "unknown".into(),
+                            said: "the router lost this start".into(),
+                        });
+                        StartOutcome { name, result }
+                    })
+                    .collect(),
+            )),
             Work::Background { name, what, effect } => {
                 match single() {
                     Ok(reply) => {

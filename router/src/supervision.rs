@@ -21,7 +21,8 @@
 //! The logic here needs no router and no process: [`Supervisor::exited`]
 //! and [`Supervisor::due`] take the time as an argument and are
 //! unit-tested; the router's core asks for the file to be written
-//! ([`Supervisor::encode`]) and for restarts, which the [`Spawner`] starts.
+//! ([`Supervisor::encode`]) and for restarts, which the driver's
+//! [`crate::spawner::Spawner`] starts.
 
 use serde::{Deserialize, Serialize};
 use shm_schemas::AgentName;
@@ -365,77 +366,6 @@ impl Supervisor {
     }
 }
 
-/// Starts the agents the supervisor restarts, and reaps their start-up
-/// processes: the part of supervision that touches processes, run by the
-/// router's driver ([`crate::driver`]).
-#[derive(Debug, Default)]
-pub struct Spawner {
-    /// start-up processes of restarted agents (with the agent's name),
-    /// reaped as they exit
-    children: Vec<(String, std::process::Child)>,
-}
-
-impl Spawner {
-    /// Starts `argv` for the agent `name`, its start-up errors into `log`.
-    pub fn spawn(&mut self, name: &str, argv: &[String], cwd: Option<&str>, log: &Path, restart: u32) {
-        let Some((program, args)) = argv.split_first() else { return };
-        // rotated by size, 0600, never through a symlink (see agent_sdk::daemon)
-        let stderr = agent_sdk::daemon::open_log(log);
-        let mut cmd = std::process::Command::new(program);
-        cmd.args(args).stdin(std::process::Stdio::null()).stdout(std::process::Stdio::null());
-        // where it was launched, so that relative paths in its arguments
-        // hold: a router started elsewhere restarted the decision maker
-        // without its knowledge base (found by the chaos test)
-        if let Some(cwd) = cwd {
-            cmd.current_dir(cwd);
-        }
-        // whatever policy the router runs under (SCHED_RESET_ON_FORK covers
-        // a real-time one; SCHED_BATCH or IDLE would pass on), the agent
-        // starts under the normal one and asks for its own (R13)
-        // SAFETY: the closure runs in the child between fork and exec and
-        // only makes one system call, which is async-signal-safe.
-        unsafe {
-            std::os::unix::process::CommandExt::pre_exec(&mut cmd, || {
-                let normal = libc::sched_param { sched_priority: 0 };
-                libc::sched_setscheduler(0, libc::SCHED_OTHER, &normal);
-                Ok(())
-            });
-        }
-        match stderr {
-            Ok(f) => {
-                cmd.stderr(f);
-            }
-            Err(e) => tracing::warn!(agent = name, "{e}; its start-up errors go to the router's log"),
-        }
-        match cmd.spawn() {
-            Ok(child) => {
-                tracing::info!(agent = name, restart, "restarted {name} (restart {restart})");
-                self.children.push((name.to_owned(), child));
-            }
-            Err(e) => tracing::error!(agent = name, program = %program, "cannot restart {name}: {e}"),
-        }
-    }
-
-    /// Reaps the start-up processes that have exited; returns the names
-    /// of the agents whose start failed (the start-up process exits with
-    /// an error when the agent could not start): no agent registered, so
-    /// no death would be noticed, and the restart must count as failed.
-    pub fn reap(&mut self) -> Vec<String> {
-        let mut failed = Vec::new();
-        self.children.retain_mut(|(name, c)| match c.try_wait() {
-            Ok(Some(status)) => {
-                if !status.success() {
-                    failed.push(name.clone());
-                }
-                false
-            }
-            Ok(None) => true,
-            Err(_) => false,
-        });
-        failed
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -571,47 +501,6 @@ mod tests {
         assert!(!d.join(FILE_NAME).exists());
         assert!(again.due(later + Duration::from_secs(60), |_| false).is_empty());
         assert!(Supervisor::load(&d, later).is_empty());
-        let _ = std::fs::remove_dir_all(&d);
-    }
-
-    #[test]
-    fn a_restart_whose_start_up_fails_is_reported_so_that_it_counts() {
-        let d = dir("startfail");
-        std::fs::create_dir_all(&d).expect("dir");
-        let mut s = Spawner::default();
-        s.spawn("bad", &["false".to_owned()], None, &d.join("bad.log"), 1);
-        s.spawn("good", &["true".to_owned()], None, &d.join("good.log"), 1);
-        let mut failed = Vec::new();
-        for _ in 0..200 {
-            failed.extend(s.reap());
-            if s.children.is_empty() {
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        assert_eq!(failed, vec!["bad".to_owned()]);
-        let _ = std::fs::remove_dir_all(&d);
-    }
-
-    #[test]
-    fn a_restart_starts_where_the_agent_was_launched() {
-        let d = dir("cwd");
-        let launched = d.join("robot-folder");
-        std::fs::create_dir_all(&launched).expect("dir");
-        let mut s = Spawner::default();
-        let mut spec = spec("kb-user", RestartPolicy::Always);
-        // a relative path in its arguments, as `--kb kb/explore.toml`
-        spec.argv = vec!["sh".into(), "-c".into(), "echo here > relative.txt".into()];
-        spec.cwd = Some(launched.display().to_string());
-        s.spawn("kb-user", &spec.argv, spec.cwd.as_deref(), &d.join("kb-user.log"), 1);
-        for _ in 0..200 {
-            s.reap();
-            if s.children.is_empty() {
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        assert!(launched.join("relative.txt").is_file(), "not started in the launch folder");
         let _ = std::fs::remove_dir_all(&d);
     }
 

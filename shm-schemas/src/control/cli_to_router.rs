@@ -96,6 +96,14 @@ pub enum CliRequest {
     },
     /// Supervise an agent: restart it by `argv` when it dies, per `policy`.
     Supervise(Supervision),
+    /// Start agents: the router spawns each one not already running (in
+    /// parallel) and answers with [`RouterReply::Started`] once every
+    /// start-up process has said whether its agent started (protocol 9:
+    /// the router is the only process that starts agents).
+    Start {
+        /// the agents, answered in this order
+        agents: Vec<StartSpec>,
+    },
     /// Stop the router itself.
     Shutdown,
     /// Feed input `to` from port `from` of a tool that is not an agent
@@ -176,6 +184,55 @@ pub struct Supervision {
     /// too, wherever the router runs
     #[serde(default)]
     pub cwd: Option<String>,
+}
+
+/// One agent for [`CliRequest::Start`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StartSpec {
+    /// its name, the command line that starts it as a daemon (`--daemon`:
+    /// the start-up process exits once the agent is ready, or says why
+    /// not), the folder it starts in and, with `supervise`, how it is restarted
+    pub agent: Supervision,
+    /// hand it to supervision first (replacing an earlier spec of the
+    /// name), as `nerve launch` does; `nerve start` does not
+    pub supervise: bool,
+    /// its whole environment (the caller's, so that a launch's
+    /// `NERVE_SIM_CLOCK`, `PYTHONPATH`... reach the agent); `None`: the router's
+    pub env: Option<Vec<(String, String)>>,
+}
+
+/// How the start of one agent went ([`RouterReply::Started`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StartOutcome {
+    /// the agent
+    pub name: String,
+    /// what happened
+    pub result: StartResult,
+}
+
+/// What became of one agent of a [`CliRequest::Start`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum StartResult {
+    /// Its start-up process reported it ready.
+    Started {
+        /// what the start-up process printed: `NAME started (pid N, robot R)`
+        said: String,
+    },
+    /// An agent of this name was registered already: nothing was started.
+    Running {
+        /// the live agent's pid
+        pid: u32,
+    },
+    /// It did not start: the program could not be run, or its start-up
+    /// process exited with an error (the agent's own message, and how it
+    /// ended), or another request is starting the name.
+    Failed {
+        /// how the start-up process ended: `exit status 1`, `killed by
+        /// SIGSEGV`, `not run`
+        status: String,
+        /// what it wrote on its standard error (the agent's message)
+        said: String,
+    },
 }
 
 /// Whether an agent's task runs.
@@ -388,6 +445,9 @@ pub enum RouterReply {
     },
     /// Refused.
     Error(RouterError),
+    /// The answer to [`CliRequest::Start`]: one outcome per agent, in the
+    /// request's order.
+    Started(Vec<StartOutcome>),
     /// The answer to [`CliRequest::WaitRegistered`]: the agents named that
     /// have neither registered nor are in their supervisor's hands (none:
     /// all are there).
