@@ -24,11 +24,11 @@
 //! fn main() -> std::process::ExitCode { agent_sdk::run::<Ticker>() }
 //! ```
 
-use crate::dynamic::{SchemaInput, SchemaOutput};
 use crate::params::{Param, ParamTable};
-use crate::ports::{DynInput, Input, Output, PortError};
-use crate::world::{Ipc, World};
-use iceoryx2::prelude::Node;
+pub(crate) use crate::port::bytes::Binding;
+use crate::port::bytes::{DynInput, SchemaInput, SchemaOutput};
+use crate::port::{Input, Output, PortError};
+use crate::world::World;
 use shm_schemas::control::agent_to_router::{PortSpec, add_schema};
 use shm_schemas::names::validate_port_name;
 use shm_schemas::{AgentName, Payload, Schema};
@@ -100,23 +100,12 @@ pub trait Agent: Sized + Send + 'static {
     fn stop(&mut self, _ctx: &mut Context) {}
 }
 
-/// What the ports an agent declares are bound to. The SDK chooses it
-/// before it calls [`Agent::new`]; the agent never needs to know which.
-pub(crate) enum Binding {
-    /// `--describe`: nothing is made (no iceoryx2 node, no shared memory)
-    Nothing,
-    /// a running agent: iceoryx2 services of the robot, through its node
-    Shm(Arc<Node<Ipc>>),
-    /// a test ([`crate::testing`]): in-memory queues and lists
-    Memory(Arc<crate::testing::Bus>),
-}
-
 /// What [`Agent::new`] gets: the place to declare ports and parameters.
 ///
 /// Declaring is all `new` does: the same declarations serve a running
 /// agent (ports bound to iceoryx2), `--describe` (bound to nothing, so
 /// describing makes no shared memory) and a test
-/// ([`crate::testing::Harness`], ports bound to in-memory queues).
+/// (the test harness, `testing::Harness`, ports bound to in-memory queues).
 pub struct Setup {
     pub(crate) world: World,
     pub(crate) name: AgentName,
@@ -165,7 +154,7 @@ impl Setup {
     /// parses them; see [`crate::agent::args`]. A refusal is an [`AgentError::Config`]
     /// that names the agent, clap's reason and how to list the arguments.
     /// `--help` prints them and ends the process with status 0 (in a
-    /// [`crate::testing::Harness`] it is a refusal holding the help text).
+    /// the test harness it is a refusal holding the help text).
     pub fn args<T: clap::Parser>(&self) -> Result<T, AgentError> {
         match args::parse::<T>(self.name(), &self.args) {
             Ok(t) => Ok(t),
@@ -188,15 +177,7 @@ impl Setup {
     pub fn output<T: Payload>(&mut self, port: &str) -> Result<Output<T>, AgentError> {
         self.check_port(port)?;
         let service = self.world.robot().port_service(self.name.as_str(), port);
-        let out = match &self.binding {
-            Binding::Shm(node) => Output::create(node, &service, self.name.as_str())?,
-            Binding::Nothing => Output::unbound(&service, self.name.as_str()),
-            Binding::Memory(bus) => {
-                let (out, collected) = Output::in_memory(&service, self.name.as_str(), bus.clock());
-                bus.add_output(port, collected);
-                out
-            }
-        };
+        let out = Output::bind(&self.binding, port, &service, self.name.as_str())?;
         self.outputs.push(PortSpec::of::<T>(port));
         add_schema(&mut self.schemas, T::schema());
         Ok(out)
@@ -205,7 +186,7 @@ impl Setup {
     /// Declares an input port; the router connects it to outputs.
     pub fn input<T: Payload>(&mut self, port: &str) -> Result<Input<T>, AgentError> {
         self.check_port(port)?;
-        let (input, inner) = Input::<T>::new(port);
+        let (input, inner) = Input::<T>::new(port)?;
         self.inputs.push(inner);
         add_schema(&mut self.schemas, T::schema());
         Ok(input)
@@ -217,16 +198,7 @@ impl Setup {
     pub fn output_of(&mut self, port: &str, schema: Schema) -> Result<SchemaOutput, AgentError> {
         self.check_port(port)?;
         let service = self.world.robot().port_service(self.name.as_str(), port);
-        let out = match &self.binding {
-            Binding::Shm(node) => SchemaOutput::create(node, &service, schema.clone(), self.name.as_str())?,
-            Binding::Nothing => SchemaOutput::unbound(&service, schema.clone()),
-            Binding::Memory(bus) => {
-                let (out, collected) =
-                    SchemaOutput::in_memory(&service, schema.clone(), self.name.as_str(), bus.clock());
-                bus.add_bytes_output(port, &schema.type_name, collected);
-                out
-            }
-        };
+        let out = SchemaOutput::declare(&self.binding, port, &service, self.name.as_str(), schema.clone())?;
         self.outputs.push(PortSpec {
             name: port.into(),
             type_name: schema.type_name.clone(),
@@ -240,7 +212,7 @@ impl Setup {
     /// [`Setup::output_of`]); the router connects it to outputs of that layout.
     pub fn input_of(&mut self, port: &str, schema: Schema) -> Result<SchemaInput, AgentError> {
         self.check_port(port)?;
-        let (input, inner) = SchemaInput::new(port, schema.clone());
+        let (input, inner) = SchemaInput::new(port, schema.clone())?;
         self.inputs.push(inner);
         add_schema(&mut self.schemas, schema);
         Ok(input)

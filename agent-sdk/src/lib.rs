@@ -37,6 +37,7 @@ pub mod dynamic;
 pub mod memory;
 pub mod meters;
 pub mod params;
+pub mod port;
 pub mod ports;
 pub mod process;
 pub mod raw_port;

@@ -57,16 +57,16 @@
 //! fixed order; see [`wiring`] for the order and an example.
 
 use crate::agent::{Agent, AgentError, Binding, Context, Setup, Task};
-use crate::dynamic::{CollectedBytes, SchemaInputInner};
 use crate::params::ParamTable;
-use crate::ports::{Collected, DynInput, InputInner, Meta, PortError};
+use crate::port::PortError;
+use crate::port::bytes::{DynInput, Meta};
+use crate::port::memory::{Bus, Collected, SampleBuf};
 use crate::world::{World, WorldError};
 use shm_schemas::stats::InputStats;
 use shm_schemas::{AgentName, Payload};
-use std::any::Any;
 use std::marker::PhantomData;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 pub mod wiring;
@@ -190,88 +190,24 @@ pub enum HarnessError {
     },
 }
 
-/// The in-memory side of a test's ports: the clock that stamps samples and
-/// the outputs' collected samples, by port.
-pub(crate) struct Bus {
-    clock: Arc<AtomicU64>,
-    outputs: Mutex<Vec<Collector>>,
+/// A sample of `T` as a test's port holds it: `value`, in bytes of its own
+/// aligned for `T`.
+fn sample_of<T: Payload>(value: T) -> Result<SampleBuf, PortError> {
+    let mut buf = SampleBuf::zeroed(T::stable_type_name(), std::mem::size_of::<T>(), std::mem::align_of::<T>())?;
+    // SAFETY: the buffer is `size_of::<T>()` bytes aligned for `T`, and ours alone
+    unsafe { buf.bytes_mut().as_mut_ptr().cast::<T>().write(value) };
+    Ok(buf)
 }
 
-/// One output's collected samples, typed behind `Any` (a typed port's
-/// `Collected<T>`, a port declared by layout's `CollectedBytes`).
-struct Collector {
-    port: String,
-    type_name: String,
-    /// the layout fingerprint of a typed port (`None`: declared by layout)
-    fingerprint: Option<u64>,
-    samples: Arc<dyn Any + Send + Sync>,
-    /// takes the samples and queues each on every input given ([`Wiring`])
-    forward: Forward,
-}
-
-/// Takes an output's samples and queues each on every input given, from
-/// the sample's sender and the output's port, with the sample's stamp;
-/// returns how many samples it took, or why an input refused one.
-type Forward = Arc<dyn Fn(&[Arc<dyn DynInput>]) -> Result<usize, String> + Send + Sync>;
-
-impl Bus {
-    pub(crate) fn clock(&self) -> Arc<AtomicU64> {
-        self.clock.clone()
+/// The value of `T` a test's sample holds, if it is a whole `T`.
+fn value_of<T: Payload>(buf: &SampleBuf) -> Option<T> {
+    let bytes = buf.bytes();
+    if bytes.len() != std::mem::size_of::<T>() || buf.align() < std::mem::align_of::<T>() {
+        return None;
     }
-
-    pub(crate) fn add_output<T: Payload>(&self, port: &str, collected: Arc<Collected<T>>) {
-        let (from, port_name) = (collected.clone(), port.to_owned());
-        let forward: Forward = Arc::new(move |targets: &[Arc<dyn DynInput>]| {
-            let taken = from.take();
-            for (meta, value) in &taken {
-                for target in targets {
-                    let Some(input) = target.as_any().downcast_ref::<InputInner<T>>() else {
-                        return Err(format!(
-                            "input {:?} is declared by layout; the wiring carries only typed samples to it",
-                            target.name()
-                        ));
-                    };
-                    input.queue(meta.sender.as_str(), &port_name, **value, meta.stamp_ns).map_err(|e| e.to_string())?;
-                }
-            }
-            Ok(taken.len())
-        });
-        let c = Collector {
-            port: port.into(),
-            type_name: T::stable_type_name().into(),
-            fingerprint: Some(T::layout_fingerprint()),
-            samples: collected,
-            forward,
-        };
-        self.outputs.lock().unwrap_or_else(|p| p.into_inner()).push(c);
-    }
-
-    pub(crate) fn add_bytes_output(&self, port: &str, type_name: &str, collected: Arc<CollectedBytes>) {
-        let (from, port_name) = (collected.clone(), port.to_owned());
-        let forward: Forward = Arc::new(move |targets: &[Arc<dyn DynInput>]| {
-            let taken = from.take();
-            for (meta, bytes) in &taken {
-                for target in targets {
-                    let Some(input) = target.as_any().downcast_ref::<SchemaInputInner>() else {
-                        return Err(format!(
-                            "input {:?} is typed; the wiring carries only bytes of a layout to it",
-                            target.name()
-                        ));
-                    };
-                    input.queue(meta.sender.as_str(), &port_name, bytes, meta.stamp_ns).map_err(|e| e.to_string())?;
-                }
-            }
-            Ok(taken.len())
-        });
-        let c = Collector {
-            port: port.into(),
-            type_name: type_name.into(),
-            fingerprint: None,
-            samples: collected,
-            forward,
-        };
-        self.outputs.lock().unwrap_or_else(|p| p.into_inner()).push(c);
-    }
+    // SAFETY: the bytes are a whole `T`, aligned for it (checked above),
+    // written by an output of `T` (the caller checked the type name)
+    Some(unsafe { bytes.as_ptr().cast::<T>().read() })
 }
 
 /// The clock's reading when a harness starts: 1 s, so that a stamp of 0
@@ -335,7 +271,7 @@ impl<A: Agent> HarnessBuilder<A> {
         let world = World::new(&format!("test-{}-{n}", std::process::id()))?;
         let name = self.name.unwrap_or_else(|| A::kind().to_owned());
         let agent_name = AgentName::new(&name).map_err(|source| HarnessError::Name { name: name.clone(), source })?;
-        let bus = Arc::new(Bus { clock: Arc::new(AtomicU64::new(START_NS)), outputs: Mutex::new(Vec::new()) });
+        let bus = Arc::new(Bus::new(START_NS));
         let mut setup = Setup::new(world.clone(), agent_name, Binding::Memory(bus.clone()), self.args);
         // from here on the world's files are removed, whatever happens
         let cleanup = WorldCleanup(world);
@@ -489,7 +425,7 @@ impl<A: Agent> Harness<A> {
     /// dropped.
     pub fn send_from<T: Payload>(&mut self, input: &str, sender: &str, value: T) -> Result<(), HarnessError> {
         let port = self.input_port::<T>(input)?;
-        port.queue(sender, "out", value, self.ctx.now_ns)?;
+        port.queue(sender, "out", sample_of(value)?, self.ctx.now_ns)?;
         Ok(())
     }
 
@@ -501,13 +437,10 @@ impl<A: Agent> Harness<A> {
         })
     }
 
-    fn input_port<T: Payload>(&self, input: &str) -> Result<&InputInner<T>, HarnessError> {
+    fn input_port<T: Payload>(&self, input: &str) -> Result<&Arc<dyn DynInput>, HarnessError> {
         let port = self.find_input(input)?;
-        port.as_any().downcast_ref::<InputInner<T>>().ok_or_else(|| HarnessError::WrongType {
-            port: input.into(),
-            carries: port.type_name().into(),
-            asked: T::stable_type_name(),
-        })
+        typed_input::<T>(input, port)?;
+        Ok(port)
     }
 
     /// Takes what output `port` sent since the last call, oldest first.
@@ -517,46 +450,25 @@ impl<A: Agent> Harness<A> {
 
     /// Like [`Harness::output`], with each sample's sender, sequence number and stamp.
     pub fn output_with_meta<T: Payload>(&mut self, port: &str) -> Result<Vec<(Meta, T)>, HarnessError> {
-        let collected = self.collected::<Collected<T>>(port, T::stable_type_name())?;
-        Ok(collected.take().into_iter().map(|(m, v)| (m, *v)).collect())
+        typed_output::<T>(&self.bus, port)
     }
 
-    /// What output `port` collects, as the collector type `C` its binding
-    /// made (`asked` names what the test asked for, in the refusal).
-    fn collected<C: Any + Send + Sync>(&self, port: &str, asked: &'static str) -> Result<Arc<C>, HarnessError> {
-        let outputs = self.bus.outputs.lock().unwrap_or_else(|p| p.into_inner());
-        let Some(c) = outputs.iter().find(|c| c.port == port) else {
-            return Err(HarnessError::NoSuchPort {
-                direction: "output",
-                port: port.into(),
-                known: outputs.iter().map(|c| c.port.clone()).collect(),
-            });
-        };
-        c.samples.clone().downcast::<C>().map_err(|_| HarnessError::WrongType {
-            port: port.into(),
-            carries: c.type_name.clone(),
-            asked,
-        })
-    }
-
-    /// Queues `bytes` on input `input`, declared by layout
-    /// ([`Setup::input_of`]), from agent `sender` (its output `out`),
-    /// stamped now; as [`Harness::send_from`] does for a typed input.
+    /// Queues `bytes` on input `input` from agent `sender` (its output
+    /// `out`), stamped now; as [`Harness::send_from`] does with a value.
+    /// The bytes are the payload's, exactly its size: for an input
+    /// declared by layout ([`Setup::input_of`]) or by a type.
     pub fn send_bytes_from(&mut self, input: &str, sender: &str, bytes: &[u8]) -> Result<(), HarnessError> {
         let port = self.find_input(input)?;
-        let inner = port.as_any().downcast_ref::<SchemaInputInner>().ok_or_else(|| HarnessError::WrongType {
-            port: input.into(),
-            carries: port.type_name().into(),
-            asked: "bytes of a layout",
-        })?;
-        inner.queue(sender, "out", bytes, self.ctx.now_ns)?;
+        let (_, align) = port.payload_layout();
+        port.queue(sender, "out", SampleBuf::copy_of(input, bytes, align)?, self.ctx.now_ns)?;
         Ok(())
     }
 
-    /// Takes what output `port`, declared by layout ([`Setup::output_of`]),
-    /// sent since the last call, oldest first, as bytes.
+    /// Takes what output `port` sent since the last call, oldest first, as
+    /// bytes (of an output declared by layout, [`Setup::output_of`], or by a type).
     pub fn output_bytes(&mut self, port: &str) -> Result<Vec<(Meta, Vec<u8>)>, HarnessError> {
-        Ok(self.collected::<CollectedBytes>(port, "bytes of a layout")?.take())
+        let collected = collected(&self.bus, port)?.1;
+        Ok(collected.take().into_iter().map(|(h, b)| (Meta::of(&h), b.bytes().to_vec())).collect())
     }
 
     /// What each input counts about each source (`nerve ps --json`'s
@@ -659,7 +571,7 @@ impl<A: Agent> Harness<A> {
 
     fn set_clock(&mut self, ns: u64) {
         self.ctx.now_ns = self.ctx.now_ns.max(ns);
-        self.bus.clock.store(self.ctx.now_ns, Ordering::Release);
+        self.bus.set_now(self.ctx.now_ns);
     }
 
     fn run_step(&mut self) -> Result<(), AgentError> {
@@ -683,6 +595,35 @@ impl<A: Agent> Harness<A> {
         agent.stop(&mut self.ctx);
         agent
     }
+}
+
+/// Refuses input `input` unless it carries `T`.
+fn typed_input<T: Payload>(input: &str, port: &Arc<dyn DynInput>) -> Result<(), HarnessError> {
+    let layout = (std::mem::size_of::<T>(), std::mem::align_of::<T>());
+    if port.type_name() != T::stable_type_name() || port.payload_layout() != layout {
+        return Err(HarnessError::WrongType {
+            port: input.into(),
+            carries: port.type_name().into(),
+            asked: T::stable_type_name(),
+        });
+    }
+    Ok(())
+}
+
+/// Output `port` of a test's agent: its type name and collected samples.
+fn collected(bus: &Bus, port: &str) -> Result<(String, Arc<Collected>), HarnessError> {
+    bus.output(port).map_err(|known| HarnessError::NoSuchPort { direction: "output", port: port.into(), known })
+}
+
+/// Takes what output `port`, which must carry `T`, sent since the last call.
+fn typed_output<T: Payload>(bus: &Bus, port: &str) -> Result<Vec<(Meta, T)>, HarnessError> {
+    let (carries, collected) = collected(bus, port)?;
+    let wrong =
+        || HarnessError::WrongType { port: port.into(), carries: carries.clone(), asked: T::stable_type_name() };
+    if carries != T::stable_type_name() {
+        return Err(wrong());
+    }
+    collected.take().into_iter().map(|(h, b)| value_of::<T>(&b).map(|v| (Meta::of(&h), v)).ok_or_else(wrong)).collect()
 }
 
 impl<A: Agent> Drop for Harness<A> {

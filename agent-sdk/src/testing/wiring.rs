@@ -21,9 +21,9 @@
 //! - an output connected to an input gives its samples to the inputs; one
 //!   connected to none keeps them for [`Wiring::output`].
 
-use super::{Bus, Harness, HarnessBuilder, HarnessError, START_NS};
+use super::{Bus, Harness, HarnessBuilder, HarnessError, START_NS, sample_of, typed_input, typed_output};
 use crate::agent::{Agent, AgentError};
-use crate::ports::{Collected, DynInput};
+use crate::port::bytes::DynInput;
 use shm_schemas::Payload;
 use shm_schemas::control::cli_to_router::RouterError;
 use std::any::Any;
@@ -87,18 +87,19 @@ impl<A: Agent> Member for Harness<A> {
         &self.inputs
     }
     fn outputs(&self) -> Vec<(String, String, Option<u64>)> {
-        let outputs = self.bus.outputs.lock().unwrap_or_else(|p| p.into_inner());
-        outputs.iter().map(|c| (c.port.clone(), c.type_name.clone(), c.fingerprint)).collect()
+        self.bus.outputs()
     }
     fn forward(&self, port: &str, targets: &[Arc<dyn DynInput>]) -> Result<usize, String> {
-        let forward = {
-            let outputs = self.bus.outputs.lock().unwrap_or_else(|p| p.into_inner());
-            match outputs.iter().find(|c| c.port == port) {
-                Some(c) => c.forward.clone(),
-                None => return Ok(0),
+        let Ok((_, collected)) = self.bus.output(port) else { return Ok(0) };
+        let taken = collected.take();
+        for (header, sample) in &taken {
+            for target in targets {
+                target
+                    .queue(header.sender.as_str(), port, sample.clone(), header.stamp_ns)
+                    .map_err(|e| e.to_string())?;
             }
-        };
-        forward(targets)
+        }
+        Ok(taken.len())
     }
     fn set_suspended(&mut self, suspended: bool) {
         self.suspended = suspended;
@@ -375,10 +376,8 @@ impl Wiring {
     pub fn send<T: Payload>(&mut self, to: &str, value: T) -> Result<u64, HarnessError> {
         let (i, port) = self.port_ref(to)?;
         let input = self.input(i, port)?;
-        let inner = input.as_any().downcast_ref::<crate::ports::InputInner<T>>().ok_or_else(|| {
-            HarnessError::WrongType { port: to.into(), carries: input.type_name().into(), asked: T::stable_type_name() }
-        })?;
-        inner.queue("test", "out", value, self.now_ns)?;
+        typed_input::<T>(to, &input)?;
+        input.queue("test", "out", sample_of(value)?, self.now_ns)?;
         self.notified[i] = true;
         self.settle()
     }
@@ -387,14 +386,8 @@ impl Wiring {
     /// and kept: an output connected to inputs gives its samples to them.
     pub fn output<T: Payload>(&mut self, from: &str) -> Result<Vec<T>, HarnessError> {
         let (i, port) = self.port_ref(from)?;
-        let (carries, _) = self.output_spec(i, port)?;
-        let wrong = || HarnessError::WrongType { port: from.into(), carries, asked: T::stable_type_name() };
-        let samples = {
-            let outputs = self.members[i].bus().outputs.lock().unwrap_or_else(|p| p.into_inner());
-            outputs.iter().find(|c| c.port == port).map(|c| c.samples.clone())
-        };
-        let collected = samples.and_then(|s| s.downcast::<Collected<T>>().ok()).ok_or_else(wrong)?;
-        Ok(collected.take().into_iter().map(|(_, v)| *v).collect())
+        self.output_spec(i, port)?;
+        Ok(typed_output::<T>(self.members[i].bus(), port)?.into_iter().map(|(_, v)| v).collect())
     }
 
     /// Carries what the outputs sent to the inputs connected to them and

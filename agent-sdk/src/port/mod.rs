@@ -1,0 +1,27 @@
+//! Ports: one stack, from the iceoryx2 service up to the typed port.
+//!
+//! * [`error`]: [`PortError`], one variant per iceoryx2 operation;
+//! * [`service`]: the services behind a port (settings, attributes, the
+//!   layout check, the wake-up event), the same for every port;
+//! * [`bytes`]: THE port, samples of a layout a schema describes, read and
+//!   written in place as bytes; with the tools' [`RawPort`] and [`RawOutput`];
+//! * [`typed`]: [`Output<T>`] and [`Input<T>`], views of the byte port as a
+//!   Rust type, zero copy;
+//! * `memory`: the in-memory binding a test's ports use instead of iceoryx2.
+//!
+//! Each file uses only those above it in this list (`memory` only
+//! `error` and `service`), so there is no circle.
+
+pub mod bytes;
+pub mod error;
+pub(crate) mod memory;
+pub mod service;
+pub mod typed;
+
+pub use bytes::{Loan, Meta, RawOutput, RawPort, Received, SchemaInput, SchemaOutput};
+pub use error::PortError;
+pub use service::{
+    MAX_SOURCES, MAX_SUBSCRIBERS, SUBSCRIBER_BUFFER, existing_port_service, port_event, port_identity, port_service,
+    service_fingerprint,
+};
+pub use typed::{Input, Output};
