@@ -1,0 +1,427 @@
+//! The `ros2` agent's configuration (TOML, `--config FILE`): the Zenoh
+//! session, the ROS node it appears as, and the topics both ways.
+//!
+//! ```toml
+//! node = "nerve"                      # the ROS node name (default: the agent's name)
+//! namespace = ""                      # the ROS namespace ("" or "/robot1")
+//! domain = 0                          # ROS_DOMAIN_ID
+//! distro = "jazzy"                    # "humble": no type hashes in keys
+//! mode = "client"                     # or "peer"
+//! connect = ["tcp/127.0.0.1:7447"]    # rmw_zenohd's default
+//! listen = []                         # peer mode: endpoints to listen on
+//!
+//! [[publish]]                         # a nerve input becomes a ROS topic
+//! input = "odom"                      # the agent's input (wire it: motor/odom -> ros2/odom)
+//! from = "nerve::Odometry"
+//! topic = "/odom"
+//! type = "nav_msgs/msg/Odometry"
+//! frame_id = "odom"                   # header.frame_id (default "odom")
+//! child_frame_id = "base_link"        # (default "base_link")
+//! reliability = "reliable"            # or "best_effort"
+//! depth = 10
+//!
+//! [[subscribe]]                       # a ROS topic becomes a nerve output
+//! topic = "/cmd_vel"
+//! type = "geometry_msgs/msg/Twist"
+//! output = "cmd_vel"                  # the agent's output (wire it: ros2/cmd_vel -> motor/cmd)
+//! to = "nerve::VelocityCommand"
+//! ```
+
+use crate::wire::Distro;
+use std::path::{Path, PathBuf};
+
+/// A nerve payload → ROS message conversion the agent knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PubMap {
+    /// `nerve::Odometry` → `nav_msgs/msg/Odometry`
+    OdometryToOdometry,
+    /// `nerve::Odometry` → `tf2_msgs/msg/TFMessage` (frame_id → child_frame_id)
+    OdometryToTf,
+    /// `nerve::GroundTruth` → `nav_msgs/msg/Odometry`
+    TruthToOdometry,
+    /// `nerve::VelocityCommand` → `geometry_msgs/msg/Twist`
+    VelocityToTwist,
+    /// `nerve::SonarScan` → `sensor_msgs/msg/LaserScan` (12 rays, 30° apart)
+    SonarToLaserScan,
+}
+
+/// The conversions of `[[publish]]`: (nerve type, ROS type, conversion).
+pub const PUB_MAPS: &[(&str, &str, PubMap)] = &[
+    ("nerve::Odometry", "nav_msgs/msg/Odometry", PubMap::OdometryToOdometry),
+    ("nerve::Odometry", "tf2_msgs/msg/TFMessage", PubMap::OdometryToTf),
+    ("nerve::GroundTruth", "nav_msgs/msg/Odometry", PubMap::TruthToOdometry),
+    ("nerve::VelocityCommand", "geometry_msgs/msg/Twist", PubMap::VelocityToTwist),
+    ("nerve::SonarScan", "sensor_msgs/msg/LaserScan", PubMap::SonarToLaserScan),
+];
+
+/// A ROS message → nerve payload conversion the agent knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SubMap {
+    /// `geometry_msgs/msg/Twist` → `nerve::VelocityCommand` (linear.x, angular.z)
+    TwistToVelocity,
+}
+
+/// The conversions of `[[subscribe]]`: (ROS type, nerve type, conversion).
+pub const SUB_MAPS: &[(&str, &str, SubMap)] =
+    &[("geometry_msgs/msg/Twist", "nerve::VelocityCommand", SubMap::TwistToVelocity)];
+
+/// Reliable or best effort.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Reliability {
+    /// RELIABLE
+    #[default]
+    Reliable,
+    /// BEST_EFFORT
+    BestEffort,
+}
+
+/// Client of a router, or peer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// a client of the routers in `connect` (rmw_zenohd's default)
+    #[default]
+    Client,
+    /// a peer, with explicit `connect` and `listen` endpoints
+    Peer,
+}
+
+fn default_connect() -> Vec<String> {
+    vec!["tcp/127.0.0.1:7447".into()]
+}
+fn default_depth() -> u32 {
+    10
+}
+fn default_frame() -> String {
+    "odom".into()
+}
+fn default_child() -> String {
+    "base_link".into()
+}
+
+/// `[[publish]]` as written.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPublish {
+    input: String,
+    from: String,
+    topic: String,
+    #[serde(rename = "type")]
+    ros_type: String,
+    #[serde(default = "default_frame")]
+    frame_id: String,
+    #[serde(default = "default_child")]
+    child_frame_id: String,
+    #[serde(default)]
+    reliability: Reliability,
+    #[serde(default = "default_depth")]
+    depth: u32,
+}
+
+/// `[[subscribe]]` as written.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSubscribe {
+    topic: String,
+    #[serde(rename = "type")]
+    ros_type: String,
+    output: String,
+    to: String,
+    #[serde(default)]
+    reliability: Reliability,
+    #[serde(default = "default_depth")]
+    depth: u32,
+}
+
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    node: Option<String>,
+    #[serde(default)]
+    namespace: String,
+    #[serde(default)]
+    domain: u32,
+    #[serde(default)]
+    distro: Distro,
+    #[serde(default)]
+    mode: Mode,
+    #[serde(default = "default_connect")]
+    connect: Vec<String>,
+    #[serde(default)]
+    listen: Vec<String>,
+    #[serde(default)]
+    publish: Vec<RawPublish>,
+    #[serde(default)]
+    subscribe: Vec<RawSubscribe>,
+}
+
+/// One nerve input published as a ROS topic.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Publish {
+    /// the agent's input
+    pub input: String,
+    /// the fully qualified topic
+    pub topic: String,
+    /// `pkg/msg/Name`
+    pub ros_type: String,
+    /// the conversion
+    pub map: PubMap,
+    /// header.frame_id
+    pub frame_id: String,
+    /// child_frame_id (odometry, tf)
+    pub child_frame_id: String,
+    /// the QoS in its token
+    pub qos: crate::wire::Qos,
+}
+
+/// One ROS topic delivered on a nerve output.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Subscribe {
+    /// the fully qualified topic
+    pub topic: String,
+    /// `pkg/msg/Name`
+    pub ros_type: String,
+    /// the agent's output
+    pub output: String,
+    /// the conversion
+    pub map: SubMap,
+    /// the QoS in its token
+    pub qos: crate::wire::Qos,
+}
+
+/// The checked configuration.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Config {
+    /// the ROS node's name
+    pub node: String,
+    /// its namespace ("" for the root)
+    pub namespace: String,
+    /// ROS_DOMAIN_ID
+    pub domain: u32,
+    /// which type hashes the keys carry
+    pub distro: Distro,
+    /// client or peer
+    pub mode: Mode,
+    /// endpoints to connect to
+    pub connect: Vec<String>,
+    /// endpoints to listen on (peer)
+    pub listen: Vec<String>,
+    /// nerve → ROS
+    pub publish: Vec<Publish>,
+    /// ROS → nerve
+    pub subscribe: Vec<Subscribe>,
+}
+
+/// Why the configuration was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read the ros2 agent's configuration {path}: {source}")]
+    Read {
+        /// the file
+        path: PathBuf,
+        /// why
+        #[source]
+        source: std::io::Error,
+    },
+    /// Not TOML, or an unknown or mistyped key.
+    #[error("{path}: {source}")]
+    Toml {
+        /// the file
+        path: PathBuf,
+        /// what toml said (with line and column)
+        #[source]
+        source: toml::de::Error,
+    },
+    /// A value that cannot be used.
+    #[error("{path}: {what}")]
+    Invalid {
+        /// the file
+        path: PathBuf,
+        /// what is wrong and what to write instead
+        what: String,
+    },
+}
+
+/// A ROS name: letters, digits and `_`, not starting with a digit.
+fn ros_name_ok(s: &str) -> bool {
+    !s.is_empty() && s.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') && !s.as_bytes()[0].is_ascii_digit()
+}
+
+/// A topic: `/`-separated ROS names, absolute or relative.
+fn topic_ok(s: &str) -> bool {
+    let body = s.strip_prefix('/').unwrap_or(s);
+    !body.is_empty() && body.split('/').all(ros_name_ok)
+}
+
+fn list(pairs: impl Iterator<Item = String>) -> String {
+    pairs.collect::<Vec<_>>().join(", ")
+}
+
+/// Parses and checks the text of a configuration; `agent` is the agent's
+/// name (the default node name, with `-` as `_`).
+pub fn parse(path: &Path, text: &str, agent: &str) -> Result<Config, ConfigError> {
+    let invalid = |what: String| ConfigError::Invalid { path: path.to_owned(), what };
+    let raw: RawConfig = toml::from_str(text).map_err(|source| ConfigError::Toml { path: path.to_owned(), source })?;
+    let node = raw.node.unwrap_or_else(|| agent.replace('-', "_"));
+    if !ros_name_ok(&node) {
+        return Err(invalid(format!(
+            "node = {node:?} is not a ROS node name (letters, digits and _, not starting with a digit)"
+        )));
+    }
+    let namespace = raw.namespace.trim_end_matches('/').to_owned();
+    if !namespace.is_empty() && (!namespace.starts_with('/') || !topic_ok(&namespace)) {
+        return Err(invalid(format!("namespace = {:?} must be empty or like \"/robot1\"", raw.namespace)));
+    }
+    if raw.domain > 232 {
+        return Err(invalid(format!("domain = {} is not a ROS domain id (0 to 232)", raw.domain)));
+    }
+    if raw.connect.is_empty() && raw.mode == Mode::Client {
+        return Err(invalid("mode = \"client\" needs a router in connect = [\"tcp/HOST:7447\"]".into()));
+    }
+    let mut inputs = std::collections::BTreeSet::new();
+    let mut publish = Vec::new();
+    for p in raw.publish {
+        if !topic_ok(&p.topic) {
+            return Err(invalid(format!("[[publish]] topic = {:?} is not a ROS topic name", p.topic)));
+        }
+        if !ros_name_ok(&p.input) || !inputs.insert(p.input.clone()) {
+            return Err(invalid(format!("[[publish]] input = {:?}: a port name, once per agent", p.input)));
+        }
+        let map = PUB_MAPS.iter().find(|(from, to, _)| *from == p.from && *to == p.ros_type).map(|m| m.2).ok_or_else(
+            || {
+                invalid(format!(
+                    "[[publish]] {}: no conversion from {} to {}; the agent knows {}",
+                    p.topic,
+                    p.from,
+                    p.ros_type,
+                    list(PUB_MAPS.iter().map(|(a, b, _)| format!("{a} -> {b}")))
+                ))
+            },
+        )?;
+        publish.push(Publish {
+            input: p.input,
+            topic: crate::wire::qualified_topic(&namespace, &p.topic),
+            ros_type: p.ros_type,
+            map,
+            frame_id: p.frame_id,
+            child_frame_id: p.child_frame_id,
+            qos: crate::wire::Qos {
+                reliable: p.reliability == Reliability::Reliable,
+                transient_local: false,
+                depth: p.depth,
+            },
+        });
+    }
+    let mut outputs = std::collections::BTreeSet::new();
+    let mut subscribe = Vec::new();
+    for s in raw.subscribe {
+        if !topic_ok(&s.topic) {
+            return Err(invalid(format!("[[subscribe]] topic = {:?} is not a ROS topic name", s.topic)));
+        }
+        if !ros_name_ok(&s.output) || !outputs.insert(s.output.clone()) {
+            return Err(invalid(format!("[[subscribe]] output = {:?}: a port name, once per agent", s.output)));
+        }
+        let map =
+            SUB_MAPS.iter().find(|(from, to, _)| *from == s.ros_type && *to == s.to).map(|m| m.2).ok_or_else(|| {
+                invalid(format!(
+                    "[[subscribe]] {}: no conversion from {} to {}; the agent knows {}",
+                    s.topic,
+                    s.ros_type,
+                    s.to,
+                    list(SUB_MAPS.iter().map(|(a, b, _)| format!("{a} -> {b}")))
+                ))
+            })?;
+        subscribe.push(Subscribe {
+            topic: crate::wire::qualified_topic(&namespace, &s.topic),
+            ros_type: s.ros_type,
+            output: s.output,
+            map,
+            qos: crate::wire::Qos {
+                reliable: s.reliability == Reliability::Reliable,
+                transient_local: false,
+                depth: s.depth,
+            },
+        });
+    }
+    Ok(Config {
+        node,
+        namespace,
+        domain: raw.domain,
+        distro: raw.distro,
+        mode: raw.mode,
+        connect: raw.connect,
+        listen: raw.listen,
+        publish,
+        subscribe,
+    })
+}
+
+/// Reads and checks the configuration file.
+pub fn load(path: &Path, agent: &str) -> Result<Config, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.to_owned(), source })?;
+    parse(path, &text, agent)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(text: &str) -> Result<Config, String> {
+        parse(Path::new("r.toml"), text, "ros-2").map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn defaults_are_rmw_zenoh_s() {
+        let c = p("").expect("empty is fine");
+        assert_eq!(c.node, "ros_2");
+        assert_eq!((c.domain, c.distro, c.mode), (0, Distro::Jazzy, Mode::Client));
+        assert_eq!(c.connect, ["tcp/127.0.0.1:7447"]);
+    }
+
+    #[test]
+    fn topics_both_ways() {
+        let c = p(r#"
+namespace = "/robot1"
+distro = "humble"
+[[publish]]
+input = "odom"
+from = "nerve::Odometry"
+topic = "odom"
+type = "nav_msgs/msg/Odometry"
+reliability = "best_effort"
+[[subscribe]]
+topic = "/cmd_vel"
+type = "geometry_msgs/msg/Twist"
+output = "cmd_vel"
+to = "nerve::VelocityCommand"
+"#)
+        .expect("valid");
+        assert_eq!(c.publish[0].topic, "/robot1/odom");
+        assert_eq!(c.publish[0].map, PubMap::OdometryToOdometry);
+        assert!(!c.publish[0].qos.reliable);
+        assert_eq!(c.subscribe[0].topic, "/cmd_vel");
+        assert_eq!(c.distro, Distro::Humble);
+    }
+
+    #[test]
+    fn mistakes_are_named() {
+        let e =
+            p("[[publish]]\ninput = \"o\"\nfrom = \"nerve::Tick\"\ntopic = \"/o\"\ntype = \"nav_msgs/msg/Odometry\"\n")
+                .expect_err("no such conversion");
+        assert!(
+            e.contains("no conversion from nerve::Tick") && e.contains("nerve::Odometry -> nav_msgs/msg/Odometry"),
+            "{e}"
+        );
+        let e = p("nodes = \"x\"").expect_err("unknown key");
+        assert!(e.contains("unknown field") && e.contains("nodes"), "{e}");
+        let e = p("distro = \"foxy\"").expect_err("unknown distro");
+        assert!(e.contains("foxy"), "{e}");
+        let e = p("[[subscribe]]\ntopic = \"/cmd vel\"\ntype = \"geometry_msgs/msg/Twist\"\noutput = \"c\"\nto = \"nerve::VelocityCommand\"\n")
+            .expect_err("bad topic");
+        assert!(e.contains("not a ROS topic name"), "{e}");
+        let e = p("mode = \"client\"\nconnect = []").expect_err("client without router");
+        assert!(e.contains("needs a router"), "{e}");
+    }
+}

@@ -1,0 +1,190 @@
+//! nerve's built-in payloads to and from standard ROS 2 messages. Pure
+//! functions: the agent supplies the ROS stamp ([`ros_stamp`]) and frames.
+//!
+//! | nerve | ROS 2 |
+//! |---|---|
+//! | `nerve::Odometry` (x, y, θ, v, ω) | `nav_msgs/msg/Odometry`: position (x, y, 0), yaw θ, twist linear.x v, angular.z ω |
+//! | `nerve::Odometry` | `tf2_msgs/msg/TFMessage`: one transform frame_id → child_frame_id |
+//! | `nerve::GroundTruth` | `nav_msgs/msg/Odometry`, as above |
+//! | `nerve::VelocityCommand` (v, ω) | `geometry_msgs/msg/Twist`: linear.x, angular.z |
+//! | `nerve::SonarScan` (12 directions, 30° apart) | `sensor_msgs/msg/LaserScan`, a direction without echo is +inf (REP-117) |
+//! | `geometry_msgs/msg/Twist` | `nerve::VelocityCommand`: v = linear.x, ω = angular.z (the other four must be 0) |
+
+use crate::msgs::{Header, LaserScan, Odometry, Quaternion, TfMessage, Time, TransformStamped, Twist, Vector3};
+use shm_schemas::payloads::motion::{GroundTruth, Odometry as NerveOdometry, VelocityCommand};
+use shm_schemas::payloads::sonar::{SONAR_DIRECTIONS, SonarScan};
+
+/// The ROS stamp (ns since the UNIX epoch) of a sample stamped `stamp_ns`
+/// on the robot's clock when that clock reads `now_ns` and the system clock
+/// reads `epoch_now_ns`: the epoch time less the sample's age.
+pub fn ros_stamp(stamp_ns: u64, now_ns: u64, epoch_now_ns: i128) -> Time {
+    let age = i128::from(now_ns) - i128::from(stamp_ns);
+    Time::from_ns(epoch_now_ns - age.max(0))
+}
+
+/// The system clock, ns since the UNIX epoch.
+pub fn epoch_now_ns() -> i128 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as i128).unwrap_or_default()
+}
+
+/// The pose (x, y, θ) and speeds (v, ω) of a ground robot.
+struct Planar {
+    x: f64,
+    y: f64,
+    theta: f64,
+    v: f64,
+    omega: f64,
+}
+
+fn odometry(stamp: Time, frame: &str, child: &str, p: Planar) -> Odometry {
+    let Planar { x, y, theta, v, omega } = p;
+    Odometry {
+        header: Header { stamp, frame_id: frame.to_owned() },
+        child_frame_id: child.to_owned(),
+        position: Vector3 { x, y, z: 0.0 },
+        orientation: Quaternion::from_yaw(theta),
+        pose_covariance: [0.0; 36],
+        twist: Twist { linear: Vector3 { x: v, y: 0.0, z: 0.0 }, angular: Vector3 { x: 0.0, y: 0.0, z: omega } },
+        twist_covariance: [0.0; 36],
+    }
+}
+
+/// `nerve::Odometry` → `nav_msgs/msg/Odometry`.
+pub fn odometry_to_ros(o: &NerveOdometry, stamp: Time, frame: &str, child: &str) -> Odometry {
+    odometry(stamp, frame, child, Planar { x: o.x, y: o.y, theta: o.theta, v: o.v, omega: o.omega })
+}
+
+/// `nerve::GroundTruth` → `nav_msgs/msg/Odometry`.
+pub fn truth_to_ros(t: &GroundTruth, stamp: Time, frame: &str, child: &str) -> Odometry {
+    odometry(stamp, frame, child, Planar { x: t.x, y: t.y, theta: t.theta, v: t.v, omega: t.omega })
+}
+
+/// `nerve::Odometry` → `tf2_msgs/msg/TFMessage` with one transform.
+pub fn odometry_to_tf(o: &NerveOdometry, stamp: Time, frame: &str, child: &str) -> TfMessage {
+    TfMessage {
+        transforms: vec![TransformStamped {
+            header: Header { stamp, frame_id: frame.to_owned() },
+            child_frame_id: child.to_owned(),
+            translation: Vector3 { x: o.x, y: o.y, z: 0.0 },
+            rotation: Quaternion::from_yaw(o.theta),
+        }],
+    }
+}
+
+/// `nerve::VelocityCommand` → `geometry_msgs/msg/Twist`.
+pub fn velocity_to_twist(c: &VelocityCommand) -> Twist {
+    Twist { linear: Vector3 { x: c.v, y: 0.0, z: 0.0 }, angular: Vector3 { x: 0.0, y: 0.0, z: c.omega } }
+}
+
+/// The angle between two sonar directions, rad.
+pub const SONAR_STEP: f32 = std::f32::consts::TAU / SONAR_DIRECTIONS as f32;
+/// The sonar's shortest range, m.
+pub const SONAR_RANGE_MIN: f32 = 0.15;
+/// The sonar's longest range, m.
+pub const SONAR_RANGE_MAX: f32 = 5.0;
+
+/// `nerve::SonarScan` → `sensor_msgs/msg/LaserScan`: direction i at
+/// i·30°, a direction without echo +inf.
+pub fn sonar_to_scan(s: &SonarScan, stamp: Time, frame: &str) -> LaserScan {
+    LaserScan {
+        header: Header { stamp, frame_id: frame.to_owned() },
+        angle_min: 0.0,
+        angle_max: SONAR_STEP * (SONAR_DIRECTIONS - 1) as f32,
+        angle_increment: SONAR_STEP,
+        time_increment: 0.0,
+        scan_time: 0.0,
+        range_min: SONAR_RANGE_MIN,
+        range_max: SONAR_RANGE_MAX,
+        ranges: (0..SONAR_DIRECTIONS)
+            .map(|i| if s.valid[i] == 1 && s.ranges_m[i].is_finite() { s.ranges_m[i] } else { f32::INFINITY })
+            .collect(),
+        intensities: Vec::new(),
+    }
+}
+
+/// Why a ROS message was not delivered to nerve.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RefusedMessage {
+    /// A value is NaN or infinite.
+    #[error("a Twist with a value that is not finite ({twist:?})")]
+    NotFinite {
+        /// the message
+        twist: Twist,
+    },
+    /// A component a ground robot cannot follow.
+    #[error(
+        "a Twist asks for motion a ground robot cannot make (linear.y/z or angular.x/y not 0: {twist:?}); only linear.x and angular.z are followed"
+    )]
+    NotPlanar {
+        /// the message
+        twist: Twist,
+    },
+}
+
+/// `geometry_msgs/msg/Twist` → `nerve::VelocityCommand` stamped `now_ns`
+/// (the robot's clock: the motor refuses stale commands by it).
+pub fn twist_to_velocity(t: &Twist, now_ns: u64) -> Result<VelocityCommand, RefusedMessage> {
+    let all = [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z];
+    if !all.iter().all(|v| v.is_finite()) {
+        return Err(RefusedMessage::NotFinite { twist: *t });
+    }
+    if [t.linear.y, t.linear.z, t.angular.x, t.angular.y].iter().any(|v| *v != 0.0) {
+        return Err(RefusedMessage::NotPlanar { twist: *t });
+    }
+    Ok(VelocityCommand { v: t.linear.x, omega: t.angular.z, stamp_ns: now_ns })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn odometry_maps_pose_and_speeds() {
+        let o = NerveOdometry { x: 1.5, y: -2.0, theta: std::f64::consts::FRAC_PI_2, v: 0.3, omega: 0.1, stamp_ns: 5 };
+        let r = odometry_to_ros(&o, Time { sec: 1, nanosec: 0 }, "odom", "base_link");
+        assert_eq!((r.position.x, r.position.y, r.position.z), (1.5, -2.0, 0.0));
+        let q = r.orientation;
+        assert!(
+            (q.z - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12
+                && (q.w - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12
+        );
+        assert_eq!((r.twist.linear.x, r.twist.angular.z), (0.3, 0.1));
+        assert_eq!((r.header.frame_id.as_str(), r.child_frame_id.as_str()), ("odom", "base_link"));
+        let tf = odometry_to_tf(&o, Time::default(), "odom", "base_link");
+        assert_eq!(tf.transforms[0].translation.x, 1.5);
+    }
+
+    #[test]
+    fn twist_both_ways_and_refusals() {
+        let c = VelocityCommand { v: 0.2, omega: -0.4, stamp_ns: 7 };
+        let t = velocity_to_twist(&c);
+        assert_eq!(twist_to_velocity(&t, 9), Ok(VelocityCommand { v: 0.2, omega: -0.4, stamp_ns: 9 }));
+        let mut bad = t;
+        bad.linear.x = f64::NAN;
+        assert!(matches!(twist_to_velocity(&bad, 9), Err(RefusedMessage::NotFinite { .. })));
+        let mut side = t;
+        side.linear.y = 0.1;
+        assert!(twist_to_velocity(&side, 9).expect_err("sideways").to_string().contains("linear.y"));
+    }
+
+    #[test]
+    fn stamps_move_to_the_epoch_by_the_sample_age() {
+        // a sample 0.25 s old when the epoch reads 100.5 s
+        assert_eq!(ros_stamp(750_000_000, 1_000_000_000, 100_500_000_000), Time { sec: 100, nanosec: 250_000_000 });
+        // a stamp from the future counts as now
+        assert_eq!(ros_stamp(2, 1, 3_000_000_000), Time { sec: 3, nanosec: 0 });
+    }
+
+    #[test]
+    fn sonar_without_echo_is_infinite() {
+        let mut s = SonarScan::default();
+        s.ranges_m[0] = 1.25;
+        s.valid[0] = 1;
+        s.ranges_m[3] = 2.0; // no echo flag: not a reading
+        let l = sonar_to_scan(&s, Time::default(), "base_link");
+        assert_eq!(l.ranges.len(), 12);
+        assert_eq!(l.ranges[0], 1.25);
+        assert!(l.ranges[3].is_infinite());
+        assert!((l.angle_increment - 30f32.to_radians()).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,352 @@
+//! The Zenoh side of the `ros2` agent: one session (client of a router, as
+//! rmw_zenoh's nodes are by default, or a peer with explicit endpoints), the
+//! node's liveliness token, a publisher and a token per published topic, a
+//! subscriber and a token per subscribed topic ([`crate::wire`] spells them).
+//!
+//! It runs in a thread of its own that first drops real-time scheduling, so
+//! that Zenoh's runtime (started by the session) never competes with the
+//! robot's real-time tasks. The task hands it CDR bytes through a bounded
+//! channel ([`Outgoing`]); the subscribers' callbacks leave what arrives in a
+//! bounded [`Inbox`] per topic, which the task empties every step.
+
+use crate::config::{Config, Mode};
+use crate::msgs::{RosMessage, Twist};
+use crate::wire::{self, Attachment, EntityKind, NodeId};
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+use zenoh::Wait;
+use zenoh::qos::CongestionControl;
+
+/// How many received messages per topic wait for the task at most (the
+/// oldest is dropped beyond).
+const INBOX: usize = 64;
+
+/// Why the session or a declaration failed.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// Zenoh refused a configuration value.
+    #[error("zenoh configuration {key} = {value}: {source}")]
+    Config {
+        /// the key
+        key: &'static str,
+        /// the value
+        value: String,
+        /// what zenoh said
+        #[source]
+        source: zenoh::Error,
+    },
+    /// The session could not be opened.
+    #[error(
+        "cannot open the zenoh session ({mode:?}, connect {connect:?}, listen {listen:?}): {source}; is a router (rmw_zenohd, or nerve-ros2-router) running there?"
+    )]
+    Open {
+        /// client or peer
+        mode: Mode,
+        /// the endpoints
+        connect: Vec<String>,
+        /// the endpoints listened on
+        listen: Vec<String>,
+        /// what zenoh said
+        #[source]
+        source: zenoh::Error,
+    },
+    /// A publisher, subscriber or token could not be declared.
+    #[error("zenoh refused to declare the {what} {key}: {source}")]
+    Declare {
+        /// publisher, subscriber, token
+        what: &'static str,
+        /// its key
+        key: String,
+        /// what zenoh said
+        #[source]
+        source: zenoh::Error,
+    },
+    /// A topic's type has no hash (not vendored).
+    #[error("{ros_type} is not among the vendored messages (agents/ros2/msg): no type hash for its key")]
+    UnknownType {
+        /// the type
+        ros_type: String,
+    },
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// CDR bytes of published topic number `topic`, for the link thread.
+#[derive(Debug)]
+pub struct Outgoing {
+    /// index into the configuration's `publish`
+    pub topic: usize,
+    /// the message, header first
+    pub bytes: Vec<u8>,
+}
+
+/// What one subscription received, for the task; and its counters.
+#[derive(Debug, Default)]
+pub struct Inbox {
+    queue: Mutex<VecDeque<Twist>>,
+    received: AtomicU64,
+    refused: AtomicU64,
+    overflow: AtomicU64,
+    last_refusal: Mutex<String>,
+}
+
+impl Inbox {
+    /// Keeps a decoded message (dropping the oldest when full).
+    pub fn put(&self, t: Twist) {
+        self.received.fetch_add(1, Ordering::Relaxed);
+        let mut q = lock(&self.queue);
+        if q.len() >= INBOX {
+            q.pop_front();
+            self.overflow.fetch_add(1, Ordering::Relaxed);
+        }
+        q.push_back(t);
+    }
+
+    /// Everything waiting, oldest first.
+    pub fn take(&self) -> Vec<Twist> {
+        lock(&self.queue).drain(..).collect()
+    }
+
+    /// Counts a message that was not delivered, and logs why at counts 1,
+    /// 2, 4, 8, ...
+    pub fn refuse(&self, why: &str) {
+        let n = self.refused.fetch_add(1, Ordering::Relaxed) + 1;
+        if n.is_power_of_two() {
+            tracing::warn!(refused = n, reason = why, "a ROS message was refused");
+        }
+        *lock(&self.last_refusal) = why.to_owned();
+    }
+
+    /// The figures of topic `topic`.
+    pub fn figures(&self, topic: &str) -> Vec<(String, String)> {
+        vec![
+            (format!("received{topic}"), self.received.load(Ordering::Relaxed).to_string()),
+            (format!("refused{topic}"), self.refused.load(Ordering::Relaxed).to_string()),
+            (format!("overflow{topic}"), self.overflow.load(Ordering::Relaxed).to_string()),
+        ]
+    }
+}
+
+/// Counters of the published topics, and the session id.
+#[derive(Debug)]
+pub struct Stats {
+    published: Vec<AtomicU64>,
+    dropped: Vec<AtomicU64>,
+    session: Mutex<String>,
+}
+
+impl Stats {
+    /// Counters for `n` published topics.
+    pub fn new(n: usize) -> Self {
+        Stats {
+            published: (0..n).map(|_| AtomicU64::new(0)).collect(),
+            dropped: (0..n).map(|_| AtomicU64::new(0)).collect(),
+            session: Mutex::new(String::new()),
+        }
+    }
+
+    /// A message of topic `i` found the link thread's queue full.
+    pub fn dropped(&self, i: usize) {
+        if let Some(d) = self.dropped.get(i) {
+            d.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// The figures, `published/odom` etc. for the topics named.
+    pub fn figures(&self, topics: &[String]) -> Vec<(String, String)> {
+        let mut v = vec![("session".to_string(), lock(&self.session).clone())];
+        for (i, t) in topics.iter().enumerate() {
+            let get = |c: &Vec<AtomicU64>| c.get(i).map_or(0, |a| a.load(Ordering::Relaxed)).to_string();
+            v.push((format!("published{t}"), get(&self.published)));
+            v.push((format!("dropped{t}"), get(&self.dropped)));
+        }
+        v
+    }
+}
+
+struct Publisher {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    gid: [u8; 16],
+}
+
+/// An open session with everything declared; dropping it undeclares all.
+pub struct Link {
+    session: zenoh::Session,
+    publishers: Vec<Publisher>,
+    _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+    _tokens: Vec<zenoh::liveliness::LivelinessToken>,
+}
+
+impl std::fmt::Debug for Link {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Link").field("zid", &self.session.zid()).finish()
+    }
+}
+
+fn json_list(v: &[String]) -> String {
+    let items: Vec<String> = v.iter().map(|s| format!("{s:?}")).collect();
+    format!("[{}]", items.join(","))
+}
+
+/// The Zenoh configuration: the mode and endpoints of `cfg`, multicast
+/// scouting off (rmw_zenoh's default: discovery goes through the router),
+/// and a start that does not wait for ever for a router that is not up
+/// (the session keeps dialling in the background).
+pub fn zenoh_config(cfg: &Config) -> Result<zenoh::Config, LinkError> {
+    let mut z = zenoh::Config::default();
+    let mode = match cfg.mode {
+        Mode::Client => "\"client\"",
+        Mode::Peer => "\"peer\"",
+    };
+    let settings: Vec<(&'static str, String)> = vec![
+        ("mode", mode.into()),
+        ("connect/endpoints", json_list(&cfg.connect)),
+        ("listen/endpoints", json_list(&cfg.listen)),
+        ("scouting/multicast/enabled", "false".into()),
+        ("connect/timeout_ms", "3000".into()),
+        ("connect/exit_on_failure", "false".into()),
+        ("connect/retry", "{period_init_ms: 200, period_max_ms: 2000, period_increase_factor: 2}".into()),
+    ];
+    for (key, value) in settings {
+        z.insert_json5(key, &value).map_err(|source| LinkError::Config { key, value: value.clone(), source })?;
+    }
+    Ok(z)
+}
+
+fn declare_err(what: &'static str, key: &str) -> impl FnOnce(zenoh::Error) -> LinkError {
+    let key = key.to_owned();
+    move |source| LinkError::Declare { what, key, source }
+}
+
+impl Link {
+    /// Opens the session, declares the node, its publishers and
+    /// subscriptions with their tokens. `inboxes` are the subscriptions'
+    /// (in the order of `cfg.subscribe`).
+    pub fn open(cfg: &Config, inboxes: Vec<Arc<Inbox>>) -> Result<Link, LinkError> {
+        let session = zenoh::open(zenoh_config(cfg)?).wait().map_err(|source| LinkError::Open {
+            mode: cfg.mode,
+            connect: cfg.connect.clone(),
+            listen: cfg.listen.clone(),
+            source,
+        })?;
+        let node = NodeId {
+            domain: cfg.domain,
+            session: session.zid().to_string(),
+            node: 0,
+            enclave: String::new(),
+            namespace: cfg.namespace.clone(),
+            name: cfg.node.clone(),
+        };
+        let mut tokens = Vec::new();
+        let token = |key: String| -> Result<zenoh::liveliness::LivelinessToken, LinkError> {
+            session.liveliness().declare_token(key.clone()).wait().map_err(declare_err("liveliness token", &key))
+        };
+        tokens.push(token(node.node_token())?);
+        let mut entity = 0u32;
+        let mut publishers = Vec::new();
+        for p in &cfg.publish {
+            entity += 1;
+            let (dds, hash) = type_of(cfg, &p.ros_type)?;
+            let key = wire::topic_key(cfg.domain, &p.topic, &dds, hash);
+            let publisher = session
+                .declare_publisher(key.clone())
+                .congestion_control(CongestionControl::Drop)
+                .wait()
+                .map_err(declare_err("publisher", &key))?;
+            let tok = node.entity_token(EntityKind::Publisher, entity, &p.topic, &dds, hash, &p.qos);
+            let gid = wire::gid_of(&tok);
+            tokens.push(token(tok)?);
+            tracing::info!(topic = %p.topic, key = %key, "publishing {} as {}", p.input, p.ros_type);
+            publishers.push(Publisher { publisher, gid });
+        }
+        let mut subscribers = Vec::new();
+        for (s, inbox) in cfg.subscribe.iter().zip(inboxes) {
+            entity += 1;
+            let (dds, hash) = type_of(cfg, &s.ros_type)?;
+            let key = wire::topic_key(cfg.domain, &s.topic, &dds, hash);
+            let topic = s.topic.clone();
+            let sub = session
+                .declare_subscriber(key.clone())
+                .callback(move |sample| {
+                    if let Some(a) = sample.attachment()
+                        && let Err(e) = Attachment::decode(&a.to_bytes())
+                    {
+                        tracing::debug!(topic = %topic, error = %e, "a message with a malformed attachment (taken all the same)");
+                    }
+                    match Twist::from_cdr(&sample.payload().to_bytes()) {
+                        Ok(t) => inbox.put(t),
+                        Err(e) => inbox.refuse(&format!("{topic}: {e}")),
+                    }
+                })
+                .wait()
+                .map_err(declare_err("subscriber", &key))?;
+            tokens.push(token(node.entity_token(EntityKind::Subscription, entity, &s.topic, &dds, hash, &s.qos))?);
+            tracing::info!(topic = %s.topic, key = %key, "subscribed as {} for output {}", s.ros_type, s.output);
+            subscribers.push(sub);
+        }
+        tracing::info!(
+            zid = %session.zid(),
+            node = %node.node_token(),
+            mode = ?cfg.mode,
+            connect = ?cfg.connect,
+            "zenoh session open: ROS 2 node {} in domain {}",
+            cfg.node,
+            cfg.domain
+        );
+        Ok(Link { session, publishers, _subscribers: subscribers, _tokens: tokens })
+    }
+
+    /// Publishes what the task hands over until `stop` is set or the task
+    /// drops its end of the channel.
+    pub fn run(&self, rx: &Receiver<Outgoing>, stats: &Stats, stop: &AtomicBool) {
+        *lock(&stats.session) = self.session.zid().to_string();
+        // sequence numbers per publisher, from 1
+        let mut seqs: Vec<i64> = vec![0; self.publishers.len()];
+        while !stop.load(Ordering::Acquire) {
+            let out = match rx.recv_timeout(Duration::from_millis(100)) {
+                Ok(o) => o,
+                Err(RecvTimeoutError::Timeout) => continue,
+                Err(RecvTimeoutError::Disconnected) => break,
+            };
+            let (Some(p), Some(seq)) = (self.publishers.get(out.topic), seqs.get_mut(out.topic)) else { continue };
+            *seq = seq.saturating_add(1);
+            let att = Attachment {
+                sequence_number: *seq,
+                source_timestamp: i64::try_from(crate::convert::epoch_now_ns()).unwrap_or(i64::MAX),
+                gid: p.gid,
+            };
+            match p.publisher.put(out.bytes).attachment(att.encode().to_vec()).wait() {
+                Ok(()) => {
+                    if let Some(c) = stats.published.get(out.topic) {
+                        c.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                Err(e) => {
+                    stats.dropped(out.topic);
+                    tracing::debug!(key = %p.publisher.key_expr(), error = %e, "put failed");
+                }
+            }
+        }
+    }
+
+    /// Undeclares everything and closes the session.
+    pub fn close(self) {
+        let Link { session, publishers, _subscribers, _tokens } = self;
+        drop((publishers, _subscribers, _tokens));
+        if let Err(e) = session.close().wait() {
+            tracing::debug!(error = %e, "zenoh session close");
+        }
+    }
+}
+
+fn type_of(cfg: &Config, ros_type: &str) -> Result<(String, &'static str), LinkError> {
+    let unknown = || LinkError::UnknownType { ros_type: ros_type.to_owned() };
+    let dds = wire::dds_type_name(ros_type).ok_or_else(unknown)?;
+    let hash = cfg.distro.type_hash(ros_type).ok_or_else(unknown)?;
+    Ok((dds, hash))
+}
