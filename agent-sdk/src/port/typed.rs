@@ -263,7 +263,7 @@ impl<T: Payload> Input<T> {
 
 #[cfg(test)]
 mod tests {
-    use super::Input;
+    use super::{Input, Output};
     use crate::port::PortError;
     use crate::port::bytes::{DynInput, gap};
     use crate::port::service::{MAX_SOURCES, port_event, port_service};
@@ -410,5 +410,155 @@ mod tests {
         assert_eq!(gap(u64::MAX, 1), 0, "a hostile u64::MAX does not overflow (review R9)");
         assert_eq!(gap(1, u64::MAX), u64::MAX - 2);
         assert_eq!(gap(u64::MAX - 1, u64::MAX), 0);
+    }
+
+    /// A typed view is made only over a byte port of the type's own size,
+    /// alignment and name: a schema that says another layout (a
+    /// hand-written `Described`, a Python class of that name) is refused
+    /// on both sides, before a sample is ever read as the type.
+    #[test]
+    fn a_typed_view_over_a_port_of_another_size_alignment_or_type_is_refused() {
+        use crate::port::bytes::{Binding, SchemaInput, SchemaOutput};
+        use shm_schemas::Described as _;
+        let renamed = |mut schema: shm_schemas::Schema| {
+            schema.type_name = "nerve::Tick".into();
+            schema
+        };
+        // 16 bytes as Tick, aligned to 1; 24 bytes aligned to 8
+        for (schema, size, align) in [(renamed(<[u8; 16]>::schema()), 16, 1), (renamed(<[u64; 3]>::schema()), 24, 8)] {
+            let out = SchemaOutput::declare(&Binding::Nothing, "tick", "nerve/r/a/tick", "a", schema.clone())
+                .expect("a valid schema");
+            match Output::<Tick>::over(out) {
+                Err(e @ PortError::TypeLayout { .. }) => {
+                    let text = e.to_string();
+                    assert!(text.contains(&format!("{size} bytes aligned to {align}")), "{text}");
+                    assert!(text.contains("16 bytes aligned to 8"), "the type's own layout: {text}");
+                }
+                other => panic!("a view of {size} bytes aligned to {align} as Tick: {other:?}"),
+            }
+            let (input, _) = SchemaInput::new("in", schema).expect("input");
+            assert!(matches!(Input::<Tick>::over(input), Err(PortError::TypeLayout { .. })));
+        }
+        // the same layout under another name is another type
+        let out = SchemaOutput::declare(&Binding::Nothing, "v", "nerve/r/a/v", "a", Scalar::schema()).expect("scalar");
+        assert!(matches!(Output::<Tick>::over(out), Err(PortError::IncompatibleType { .. })));
+        // and the type's own schema makes a view
+        let out = SchemaOutput::declare(&Binding::Nothing, "t", "nerve/r/a/t", "a", Tick::schema()).expect("tick");
+        assert!(Output::<Tick>::over(out).is_ok());
+    }
+
+    /// Wire compatibility: a typed port of this stack is the very service
+    /// a port made with the type itself (`publish_subscribe::<T>()`) is, so
+    /// a program built before this stack (or a tool publishing with
+    /// iceoryx2 directly) and an agent of it read each other; and typed
+    /// and byte ports of one layout read each other in place.
+    #[test]
+    fn typed_ports_read_and_are_read_by_iceoryx2_typed_ports_and_byte_ports() {
+        use crate::port::bytes::{RawPort, SchemaInput, SchemaOutput};
+        use crate::port::service::existing_port_service;
+        use shm_schemas::Described as _;
+        let world = World::new(&format!("view{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+
+        // a typed output, read by iceoryx2 as the type, by bytes and by a tool
+        let service = robot.port_service("a", "tick");
+        let out = Output::<Tick>::create(&node, &service, "a").expect("typed output");
+        let ps = existing_port_service::<Tick>(&node, &service).expect("iceoryx2 opens it as Tick");
+        let typed_sub = ps.subscriber_builder().create().expect("typed subscriber");
+        let raw = RawPort::open(&node, &service).expect("raw");
+        let (bytes_in, bytes_inner) = SchemaInput::new("in", Tick::schema()).expect("input");
+        assert!(bytes_inner.connect(&node, &robot, "a", "tick").expect("bytes open it"));
+        out.send(Tick { seq: 7, stamp_ns: 70 }).expect("send");
+        out.send_with(|t| t.seq = 8).expect("send_with");
+        // SAFETY: both fields are written
+        unsafe {
+            out.send_uninit(|t| {
+                t.write(Tick { seq: 9, stamp_ns: 90 });
+            })
+        }
+        .expect("send_uninit");
+        let sample = typed_sub.receive().expect("receive").expect("a sample");
+        assert_eq!((*sample.payload(), sample.user_header().seq), (Tick { seq: 7, stamp_ns: 70 }, 1));
+        assert_eq!(sample.user_header().sender.as_str(), "a");
+        let mut seen = Vec::new();
+        raw.receive(|h, b| {
+            seen.push((h.seq, b.to_vec()));
+            true
+        })
+        .expect("raw receive");
+        assert_eq!(seen.len(), 3);
+        assert_eq!(seen[1].1, [8u64.to_ne_bytes(), 0u64.to_ne_bytes()].concat(), "send_with starts from the default");
+        let mut got = Vec::new();
+        assert_eq!(bytes_in.drain(|m, b| got.push((m.seq, b.len()))), 3);
+        assert_eq!(got, [(1, 16), (2, 16), (3, 16)]);
+
+        // an iceoryx2 typed publisher of the type, read by a typed input of this stack
+        let service = robot.port_service("old", "tick");
+        let publisher = crate::port::service::port_service::<Tick>(&node, &service)
+            .expect("typed service")
+            .publisher_builder()
+            .create()
+            .expect("publisher");
+        let _ev = crate::port::service::port_event(&node, &service).expect("event");
+        let (input, inner) = Input::<Tick>::new("in").expect("input");
+        assert!(inner.connect(&node, &robot, "old", "tick").expect("a typed input opens it"));
+        for seq in 1..=3 {
+            let sample = publisher.loan_uninit().expect("loan");
+            let mut sample = sample.write_payload(Tick { seq, stamp_ns: 100 - seq });
+            *sample.user_header_mut() =
+                shm_schemas::SampleHeader { sender: shm_schemas::FixedName::new("old"), seq, stamp_ns: 100 - seq };
+            sample.send().expect("send");
+        }
+        assert_eq!(input.recv().map(|(m, t)| (m.seq, t.seq)), Some((1, 1)));
+        let newest = input.latest().expect("the newest by stamp");
+        assert_eq!((newest.0.seq, newest.1), (2, Tick { seq: 2, stamp_ns: 98 }));
+        assert_eq!(inner.stats(crate::clock::now_ns())[0].received, 3);
+
+        // a byte output, read in place by a typed input
+        let service = robot.port_service("py", "tick");
+        let mut by_layout = SchemaOutput::create(&node, &service, Tick::schema(), "py").expect("byte output");
+        let (input, inner) = Input::<Tick>::new("in2").expect("input");
+        assert!(inner.connect(&node, &robot, "py", "tick").expect("a typed input opens it"));
+        by_layout.send_bytes(&[5u64.to_ne_bytes(), 50u64.to_ne_bytes()].concat()).expect("send");
+        let mut seen = Vec::new();
+        assert_eq!(input.drain(|m, t| seen.push((m.sender.as_str().to_owned(), *t))), 1);
+        assert_eq!(seen, [("py".to_owned(), Tick { seq: 5, stamp_ns: 50 })]);
+    }
+
+    /// In a test, a typed port's samples are bytes like any other: the
+    /// harness reads a typed output as bytes and feeds a typed input bytes.
+    #[test]
+    fn a_harness_carries_typed_samples_as_bytes_and_back() {
+        use crate::testing::Harness;
+        use crate::{Agent, AgentError, Context, Setup, Task};
+        struct Echo {
+            input: Input<Tick>,
+            out: Output<Tick>,
+        }
+        impl Agent for Echo {
+            const KIND: &'static str = "echo";
+            fn task() -> Task {
+                Task::EventDriven
+            }
+            fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+                Ok(Echo { input: setup.input("in")?, out: setup.output("out")? })
+            }
+            fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+                self.input.try_drain(|_, t| self.out.send(Tick { seq: t.seq + 1, stamp_ns: t.stamp_ns }))?;
+                Ok(())
+            }
+        }
+        let mut h = Harness::<Echo>::new().expect("start");
+        h.send_bytes_from("in", "py", &[41u64.to_ne_bytes(), 3u64.to_ne_bytes()].concat()).expect("bytes in");
+        h.send("in", Tick { seq: 1, stamp_ns: 4 }).expect("a value in");
+        h.step().expect("step");
+        let out = h.output_bytes("out").expect("bytes out");
+        assert_eq!(out.len(), 2);
+        assert_eq!(out[0].1, [42u64.to_ne_bytes(), 3u64.to_ne_bytes()].concat());
+        assert_eq!((out[1].0.seq, out[1].0.sender.as_str()), (2, "echo"));
+        assert!(h.send_bytes_from("in", "py", &[0; 15]).is_err(), "15 bytes are no Tick");
+        assert!(h.send("in", Scalar { value: 1.0, stamp_ns: 0 }).is_err(), "a Scalar is no Tick");
     }
 }
