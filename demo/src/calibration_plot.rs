@@ -13,6 +13,7 @@
 
 use crate::DemoError;
 use crate::plot::Figures;
+use nerve_plot_font::figure::{DrawResult, Figure, write_png_and_svg};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -62,7 +63,7 @@ fn padded(values: impl Iterator<Item = f64>, min_pad: f64) -> (f64, f64) {
 }
 
 fn draw<DB: DrawingBackend>(
-    root: DrawingArea<DB, Shift>,
+    root: &DrawingArea<DB, Shift>,
     points: &[CalibrationPoint],
     title: &str,
 ) -> Result<(), String>
@@ -70,7 +71,6 @@ where
     DB::ErrorType: 'static,
 {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    root.fill(&WHITE).map_err(e)?;
     let root = root.titled(title, ("sans-serif", 20)).map_err(e)?;
     let (top, bottom) = root.split_vertically(root.dim_in_pixel().1 * 3 / 5);
     let (rms_pinhole, rms_fitted) = rms_errors(points);
@@ -110,14 +110,7 @@ where
         .map_err(e)?
         .label(fitted_label.clone())
         .legend(|(x, y)| Cross::new((x + 9, y), 4, FITTED.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.4))
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font(("sans-serif", 13))
-        .draw()
-        .map_err(e)?;
+    nerve_plot_font::figure::legend(&mut chart, SeriesLabelPosition::UpperLeft, 13).map_err(e)?;
 
     // (b) residuals, millimetres
     let res = |v: &[(f64, f64)]| -> Vec<(f64, f64)> {
@@ -153,15 +146,7 @@ where
         .map_err(e)?
         .label(fitted_label)
         .legend(|(x, y)| Cross::new((x + 9, y), 4, FITTED.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.4))
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(("sans-serif", 13))
-        .draw()
-        .map_err(e)?;
-    root.present().map_err(e)?;
+    nerve_plot_font::figure::legend(&mut chart, SeriesLabelPosition::UpperRight, 13).map_err(e)?;
     Ok(())
 }
 
@@ -173,17 +158,23 @@ pub fn write_fit(dir: &Path, points: &[CalibrationPoint], title: &str) -> Result
             problem: "no calibration samples to draw; collect or give some first".into(),
         });
     }
-    let plot_err = |p: &Path| {
-        let p = p.to_path_buf();
-        move |message: String| DemoError::Plot { path: p.clone(), message }
-    };
-    let size = (1000, 900);
-    nerve_plot_font::register();
-    let png = dir.join("fit.png");
-    draw(BitMapBackend::new(&png, size).into_drawing_area(), points, title).map_err(plot_err(&png))?;
-    let svg = dir.join("fit.svg");
-    draw(SVGBackend::new(&svg, size).into_drawing_area(), points, title).map_err(plot_err(&svg))?;
-    Ok(Figures { files: vec![png, svg] })
+    let files = write_png_and_svg(&dir.join("fit"), (1000, 900), &Fit { points, title })?;
+    Ok(Figures { files: files.into() })
+}
+
+/// The fit against the pinhole term, and their residuals.
+struct Fit<'a> {
+    points: &'a [CalibrationPoint],
+    title: &'a str,
+}
+
+impl Figure for Fit<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        Ok(draw(root, self.points, self.title)?)
+    }
 }
 
 #[cfg(test)]

@@ -13,9 +13,10 @@
 //! [`report`] is the launcher's one call: it does both and writes
 //! `estimates.csv` and `summary.json` beside the figure.
 
-use crate::plot::{Figures, err, map_chart, map_size};
+use crate::plot::{Figures, map_chart, map_size};
 use crate::scene::Scene;
 use crate::{DemoError, write_summary};
+use nerve_plot_font::figure::{DrawResult, Figure, write_png_and_svg};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Serialize;
@@ -321,7 +322,7 @@ pub fn jumps(est: &[EstPose]) -> Vec<((f64, f64), (f64, f64))> {
 }
 
 fn draw<DB: DrawingBackend>(
-    root: DrawingArea<DB, Shift>,
+    root: &DrawingArea<DB, Shift>,
     scene: &Scene,
     rec: &Records,
     title: &str,
@@ -331,7 +332,7 @@ where
     DB::ErrorType: 'static,
 {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    let mut chart = map_chart(&root, scene, title, 18, (xr, yr))?;
+    let mut chart = map_chart(root, scene, title, 18, (xr, yr))?;
     // the planned path and its via points
     if !rec.path.is_empty() {
         let pts: Vec<(f64, f64)> = rec.path.iter().map(|p| (p.at[0], p.at[1])).collect();
@@ -389,30 +390,33 @@ where
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], JUMP.stroke_width(2)));
         chart.draw_series(all_jumps.iter().map(|(_, b)| Circle::new(*b, 3, JUMP.filled()))).map_err(e)?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.4))
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(("sans-serif", 12))
-        .draw()
-        .map_err(e)?;
-    root.present().map_err(e)?;
+    nerve_plot_font::figure::legend(&mut chart, SeriesLabelPosition::UpperRight, 12).map_err(e)?;
     Ok(())
 }
 
 /// Writes `trajectories.png` and `trajectories.svg` into `dir`.
 pub fn write_trajectories(dir: &Path, scene: &Scene, rec: &Records, title: &str) -> Result<Figures, DemoError> {
-    nerve_plot_font::register();
     let (w, h, xr, yr) = map_size(scene);
-    let mut files = Vec::new();
-    let p = dir.join("trajectories.png");
-    draw(BitMapBackend::new(&p, (w, h)).into_drawing_area(), scene, rec, title, (xr, yr)).map_err(err(&p))?;
-    files.push(p);
-    let p = dir.join("trajectories.svg");
-    draw(SVGBackend::new(&p, (w, h)).into_drawing_area(), scene, rec, title, (xr, yr)).map_err(err(&p))?;
-    files.push(p);
-    Ok(Figures { files })
+    let figure = Trajectories { scene, rec, title, range: (xr, yr) };
+    let files = write_png_and_svg(&dir.join("trajectories"), (w, h), &figure)?;
+    Ok(Figures { files: files.into() })
+}
+
+/// Both robots' trajectories (Fig. 4-10).
+struct Trajectories<'a> {
+    scene: &'a Scene,
+    rec: &'a Records,
+    title: &'a str,
+    range: ((f64, f64), (f64, f64)),
+}
+
+impl Figure for Trajectories<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        Ok(draw(root, self.scene, self.rec, self.title, self.range)?)
+    }
 }
 
 /// How the cooperation run was made.

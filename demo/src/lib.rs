@@ -95,14 +95,9 @@ pub enum DemoError {
     /// A summary that JSON cannot hold.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
-    /// Drawing a figure.
-    #[error("cannot draw {path}: {message}")]
-    Plot {
-        /// The figure.
-        path: std::path::PathBuf,
-        /// What plotters said.
-        message: String,
-    },
+    /// A figure could not be drawn or written.
+    #[error(transparent)]
+    Figure(#[from] nerve_plot_font::figure::FigureError),
 }
 
 /// Writes `summary.json` (pretty JSON and a line break) into `out`.

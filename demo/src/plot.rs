@@ -12,6 +12,7 @@ use crate::DemoError;
 use crate::analysis::{Analysis, ModeChange, unwrap_angles};
 use crate::scene::Scene;
 use crate::truth::TruthRow;
+use nerve_plot_font::figure::{DrawResult, Figure, write_png_and_svg};
 use nerve_sim::world::Motion;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
@@ -34,10 +35,6 @@ const DOOR: RGBColor = RGBColor(20, 150, 60);
 
 /// At most this many points of the robot's path are drawn (the log has 100 per second).
 const MAX_POINTS: usize = 4000;
-
-pub(crate) fn err<E: std::fmt::Display>(path: &Path) -> impl Fn(E) -> DemoError + '_ {
-    move |e| DemoError::Plot { path: path.to_path_buf(), message: e.to_string() }
-}
 
 fn thin(rows: &[TruthRow]) -> Vec<&TruthRow> {
     let step = rows.len().div_ceil(MAX_POINTS).max(1);
@@ -117,7 +114,7 @@ where
     Ok(())
 }
 
-/// A white figure with `title` (caption font size `font`), metre axes over
+/// A figure with `title` (caption font size `font`), metre axes over
 /// `(xr, yr)` and the map drawn: what every trajectory figure starts from.
 pub(crate) fn map_chart<'a, DB: DrawingBackend>(
     root: &'a DrawingArea<DB, Shift>,
@@ -130,7 +127,6 @@ where
     DB::ErrorType: 'static,
 {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    root.fill(&WHITE).map_err(e)?;
     let mut chart = ChartBuilder::on(root)
         .caption(title, ("sans-serif", font))
         .margin(15)
@@ -151,7 +147,7 @@ where
 }
 
 fn draw_trajectory<DB: DrawingBackend>(
-    root: DrawingArea<DB, Shift>,
+    root: &DrawingArea<DB, Shift>,
     scene: &Scene,
     rows: &[TruthRow],
     a: &Analysis,
@@ -162,7 +158,7 @@ where
     DB::ErrorType: 'static,
 {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    let mut chart = map_chart(&root, scene, title, 20, (xr, yr))?;
+    let mut chart = map_chart(root, scene, title, 20, (xr, yr))?;
     // moving objects: the person's path (and the red object's)
     for (i, o) in scene.world.objects.iter().enumerate() {
         let is_target = scene.target == Some(i);
@@ -223,20 +219,12 @@ where
             .label("target reached")
             .legend(|(x, y)| Circle::new((x + 9, y), 5, TARGET.stroke_width(2)));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.4))
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(("sans-serif", 13))
-        .draw()
-        .map_err(e)?;
-    root.present().map_err(e)?;
+    nerve_plot_font::figure::legend(&mut chart, SeriesLabelPosition::UpperRight, 13).map_err(e)?;
     Ok(())
 }
 
 fn draw_motion<DB: DrawingBackend>(
-    root: DrawingArea<DB, Shift>,
+    root: &DrawingArea<DB, Shift>,
     rows: &[TruthRow],
     a: &Analysis,
     modes: &[ModeChange],
@@ -246,7 +234,6 @@ where
     DB::ErrorType: 'static,
 {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    root.fill(&WHITE).map_err(e)?;
     let root = root.titled(title, ("sans-serif", 20)).map_err(e)?;
     let panels = root.split_evenly((3, 1));
     let rows = thin(rows);
@@ -322,7 +309,6 @@ where
             .draw_series(LineSeries::new(rows.iter().zip(ys).map(|(r, y)| (r.t, *y)), ROBOT.stroke_width(1)))
             .map_err(e)?;
     }
-    root.present().map_err(e)?;
     Ok(())
 }
 
@@ -343,24 +329,45 @@ pub fn write_all(
         if s.reached_target { "reached" } else { "NOT reached" },
         s.collisions
     );
-    let mut files = Vec::new();
-    nerve_plot_font::register();
-    let p = dir.join("trajectory.png");
-    draw_trajectory(BitMapBackend::new(&p, (w, h)).into_drawing_area(), scene, rows, analysis, &verdict, (xr, yr))
-        .map_err(err(&p))?;
-    files.push(p);
-    let p = dir.join("trajectory.svg");
-    draw_trajectory(SVGBackend::new(&p, (w, h)).into_drawing_area(), scene, rows, analysis, &verdict, (xr, yr))
-        .map_err(err(&p))?;
-    files.push(p);
+    let trajectory = Trajectory { scene, rows, analysis, title: &verdict, range: (xr, yr) };
+    let mut files = Vec::from(write_png_and_svg(&dir.join("trajectory"), (w, h), &trajectory)?);
     let mtitle = format!("{title} — velocity, angular speed and heading");
-    let p = dir.join("motion.png");
-    draw_motion(BitMapBackend::new(&p, (1100, 900)).into_drawing_area(), rows, analysis, modes, &mtitle)
-        .map_err(err(&p))?;
-    files.push(p);
-    let p = dir.join("motion.svg");
-    draw_motion(SVGBackend::new(&p, (1100, 900)).into_drawing_area(), rows, analysis, modes, &mtitle)
-        .map_err(err(&p))?;
-    files.push(p);
+    let motion = MotionFigure { rows, analysis, modes, title: &mtitle };
+    files.extend(write_png_and_svg(&dir.join("motion"), (1100, 900), &motion)?);
     Ok(Figures { files })
+}
+
+/// The trajectory figure (Fig. 4-4).
+struct Trajectory<'a> {
+    scene: &'a Scene,
+    rows: &'a [TruthRow],
+    analysis: &'a Analysis,
+    title: &'a str,
+    range: ((f64, f64), (f64, f64)),
+}
+
+impl Figure for Trajectory<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        Ok(draw_trajectory(root, self.scene, self.rows, self.analysis, self.title, self.range)?)
+    }
+}
+
+/// The motion figure (Fig. 4-6).
+struct MotionFigure<'a> {
+    rows: &'a [TruthRow],
+    analysis: &'a Analysis,
+    modes: &'a [ModeChange],
+    title: &'a str,
+}
+
+impl Figure for MotionFigure<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        Ok(draw_motion(root, self.rows, self.analysis, self.modes, self.title)?)
+    }
 }

@@ -1,7 +1,6 @@
 //! The agents' log files, read without loading them whole: the last lines
 //! of a log (`nerve logs --lines`), a [`Tail`] following one (`nerve logs
-//! --follow`, `nerve launch --foreground`), and a copy of a robot's logs
-//! for the record of a run (`nerve demo`, `nerve calibrate`).
+//! --follow`, `nerve launch --foreground`).
 //!
 //! Logs can be large (they are rotated at 8 MiB, see
 //! `agent_sdk::daemon::open_log`), so nothing here reads a whole file into
@@ -10,10 +9,9 @@
 //! A tail notices a rotated log (another file under the name) and starts
 //! again at its beginning.
 
-use agent_sdk::World;
 use std::io::{Read, Seek, SeekFrom};
 use std::os::unix::fs::MetadataExt;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// The most a [`Tail`] reads in one poll; the rest comes at the next.
 pub const TAIL_READ_MAX: u64 = 1 << 20;
@@ -149,19 +147,6 @@ pub fn last_lines<F: Read + Seek>(f: &mut F, n: usize) -> std::io::Result<(Vec<u
         out = block;
     }
     Ok((out, end))
-}
-
-/// Copies every agent's log (and the router's) of `world` into `dir`: what
-/// a demo or a calibration keeps of its run.
-pub fn copy_logs(world: &World, dir: &Path) {
-    if let Err(e) = std::fs::create_dir_all(dir) {
-        tracing::warn!("cannot create {}: {e}", dir.display());
-        return;
-    }
-    let Ok(rd) = std::fs::read_dir(world.logs_dir()) else { return };
-    for e in rd.flatten() {
-        let _ = std::fs::copy(e.path(), dir.join(e.file_name()));
-    }
 }
 
 #[cfg(test)]

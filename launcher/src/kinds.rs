@@ -50,8 +50,8 @@ pub fn find_program(file: &str) -> Option<PathBuf> {
 }
 
 /// Programs named like agents that are not agents: `nerve-bench` runs the
-/// benchmarks (`nerve bench`).
-const NOT_AGENTS: [&str; 1] = ["bench"];
+/// benchmarks (`nerve bench`), `nerve-demo` the demos (`nerve demo`).
+const NOT_AGENTS: [&str; 2] = ["bench", "demo"];
 
 /// Agent kinds installed next to this program.
 pub fn known_kinds() -> Vec<String> {

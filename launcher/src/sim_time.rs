@@ -99,7 +99,10 @@ pub fn world_scale(file: &crate::launch_file::LaunchFile) -> Option<f64> {
     let sim = file.agents.iter().find(|a| a.kind == "sim")?;
     let i = sim.args.iter().position(|a| a == "--world")?;
     let path = std::path::Path::new(sim.args.get(i + 1)?);
-    nerve_demo::nerve_sim::World::load(path).ok()?.time_scale
+    // the world file's top-level `time_scale` (the simulator checks the rest)
+    let world: toml::Table = toml::from_str(&std::fs::read_to_string(path).ok()?).ok()?;
+    let scale = world.get("time_scale")?;
+    scale.as_float().or_else(|| scale.as_integer().and_then(|k| i32::try_from(k).ok()).map(f64::from))
 }
 
 /// `nerve launch --sim-time` (or a launch file's `sim_time = true`): the
@@ -119,15 +122,6 @@ pub fn for_launch(world: &World, args: &SimTimeArgs, file: &crate::launch_file::
     let page = start(world, scale)?;
     eprintln!("robot {} runs on simulated time at {scale}x (clock {})", world.robot(), page.display());
     Ok(Some(scale))
-}
-
-/// Removes the clock's page once the robot is down (nothing maps it any more).
-pub fn finish(page: &std::path::Path) {
-    if let Err(e) = std::fs::remove_file(page)
-        && e.kind() != std::io::ErrorKind::NotFound
-    {
-        tracing::warn!(page = %page.display(), "cannot remove the simulated clock: {e}");
-    }
 }
 
 #[cfg(test)]

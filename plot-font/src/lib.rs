@@ -11,6 +11,10 @@
 //! nerve is developed on, so the figures look as they did.
 //!
 //! Call [`register`] before drawing text; it is cheap after the first call.
+//! [`figure`] does it, and the rest of a figure's set-up: every figure of
+//! nerve is written through it.
+
+pub mod figure;
 
 use plotters::style::{FontStyle, register_font};
 use std::sync::Once;

@@ -4,6 +4,8 @@
 //!   target after it settled, clearance and collisions; the time explored
 //!   before the target was first tracked, from the decision maker's log;
 //! * the figures are written and not empty;
+//! * `nerve demo` and `nerve calibrate` run the program `nerve-demo`, and
+//!   say what to build where it is missing;
 //! * end to end: the whole robot against the simulator on two seeds and on
 //!   the second world must explore (follow walls) for a while before it sees
 //!   the person, then reach the doorway and the target without a
@@ -347,6 +349,40 @@ fn clean_up(r: &Robot) {
         }
     }
     let _ = std::fs::remove_dir_all(&r.home);
+}
+
+/// `nerve demo` and `nerve calibrate` run the program `nerve-demo`: their
+/// help is its help, and a `nerve` without `nerve-demo` beside it (or on
+/// `PATH`) says what to build instead of failing obscurely (issue 41 part 4).
+#[test]
+fn demo_and_calibrate_run_nerve_demo_or_say_what_to_build() {
+    let r = Robot::new("nodemo");
+    let help = r.nerve(&["demo", "--help"]);
+    let text = String::from_utf8_lossy(&help.stdout);
+    assert!(help.status.success() && text.contains("explore") && text.contains("cooperate"), "{text}");
+    let help = r.nerve(&["calibrate", "checkpoint", "--help"]);
+    let text = String::from_utf8_lossy(&help.stdout);
+    assert!(help.status.success() && text.contains("--samples") && text.contains("nerve calibrate"), "{text}");
+
+    // a `nerve` alone in a folder, with a PATH that has no nerve-demo
+    let alone = r.home.join("alone");
+    std::fs::create_dir_all(&alone).expect("a folder for nerve alone");
+    std::fs::copy(nerve_tests::bin_dir().join("nerve"), alone.join("nerve")).expect("copy nerve");
+    for args in [&["demo", "explore"][..], &["calibrate", "checkpoint", "--samples", "s.csv"]] {
+        let out = std::process::Command::new(alone.join("nerve"))
+            .args(args)
+            .env("PATH", "/usr/bin:/bin")
+            .env("NERVE_ROBOT", &r.name)
+            .env("NERVE_HOME", &r.home)
+            .output()
+            .expect("run nerve");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(
+            err.contains("nerve-demo is not installed") && err.contains("cargo build --release -p nerve-demo"),
+            "{args:?}: {err}"
+        );
+    }
 }
 
 /// On simulated time a device agent whose device is real hardware is

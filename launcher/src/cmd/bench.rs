@@ -5,11 +5,14 @@
 //!
 //! The scenarios and what they measure are described in BENCHMARKS.md. Every
 //! scenario starts robots of its own (`b<pid>...`) and takes them down; the
-//! `--robot` option of `nerve` does not apply.
+//! `--robot` option of `nerve` does not apply. [`exec_program`], which runs
+//! a program beside `nerve` in its place, serves `nerve demo` and `nerve
+//! calibrate` too.
 
 use crate::kinds::find_program;
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
+use std::ffi::OsStr;
 use std::os::unix::process::CommandExt as _;
 use std::process::{Command, ExitCode};
 
@@ -55,19 +58,29 @@ pub struct BenchArgs {
 
 /// Replaces this process with `nerve-bench SCENARIO ARGS...`.
 pub fn bench(a: BenchArgs) -> Result<ExitCode> {
-    let Some(program) = find_program(BENCH_PROGRAM) else {
-        bail!(
-            "{BENCH_PROGRAM} is not installed next to nerve or on PATH; build it with \
-             `cargo build --release -p nerve-bench -p nerve --bins` and run target/release/nerve bench"
-        );
-    };
     let scenario = a.scenario.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
-    let mut cmd = Command::new(&program);
-    cmd.arg(&scenario).args(&a.args);
-    // the scenarios start `nerve` themselves: this very executable
+    let hint =
+        "build it with `cargo build --release -p nerve-bench -p nerve --bins` and run target/release/nerve bench";
+    exec_program(BENCH_PROGRAM, hint, std::iter::once(scenario.as_str()).chain(a.args.iter().map(String::as_str)))
+}
+
+/// Replaces this process with `program ARGS...`, found next to `nerve` or on
+/// `PATH`, with `NERVE_BIN` naming this `nerve` (the program starts robots
+/// with it); where it is not found, says so and how to build it (`build`).
+/// Returns only on failure.
+pub fn exec_program<S: AsRef<OsStr>>(
+    program: &str,
+    build: &str,
+    args: impl IntoIterator<Item = S>,
+) -> Result<ExitCode> {
+    let Some(path) = find_program(program) else {
+        bail!("{program} is not installed next to nerve or on PATH; {build}");
+    };
+    let mut cmd = Command::new(&path);
+    cmd.args(args);
     if let Ok(me) = std::env::current_exe() {
         cmd.env("NERVE_BIN", me);
     }
     let err = cmd.exec();
-    bail!("cannot run {}: {err}", program.display())
+    bail!("cannot run {}: {err}", path.display())
 }

@@ -154,21 +154,6 @@ pub fn add(dir: &Path, robot: &str) -> Result<()> {
     write_new(&crt_path, &cert.pem())
 }
 
-/// Makes what is missing in `dir` for `robots`: the CA when there is none,
-/// then each robot's key and certificate (used by `nerve demo cooperate`).
-pub fn ensure(dir: &Path, robots: &[&str]) -> Result<()> {
-    if std::fs::symlink_metadata(dir.join("ca.key")).is_err() && std::fs::symlink_metadata(dir.join("ca.crt")).is_err()
-    {
-        init(dir)?;
-    }
-    for r in robots {
-        if std::fs::symlink_metadata(dir.join(format!("{r}.crt"))).is_err() {
-            add(dir, r)?;
-        }
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -199,8 +184,6 @@ mod tests {
         assert!(e.contains("r1.key exists already"), "{e}");
         let e = add(&d, "R 1").expect_err("bad name").to_string();
         assert!(e.contains("robot"), "{e}");
-        ensure(&d, &["r1", "r3"]).expect("ensure keeps what is there and adds r3");
-        assert!(d.join("r3.key").exists());
         let _ = std::fs::remove_dir_all(&d);
     }
 

@@ -26,6 +26,7 @@ use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
+use nerve_plot_font::figure::{self, DrawResult, Figure, Format};
 use nerve_recording::{MESSAGE_ENCODING, SCHEMA_ENCODING};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -82,12 +83,6 @@ const COLOURS: [RGBColor; 8] = [
 ];
 
 /// The figure's file format, by the output's extension.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Format {
-    Png,
-    Svg,
-}
-
 fn format_of(path: &Path) -> Result<Format> {
     match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
         Some("png") => Ok(Format::Png),
@@ -431,12 +426,23 @@ fn live(world: &World, ports: &[PortRef], fields: &[String], duration: f64, quie
 
 /// Writes the figure to `path`.
 fn draw_to(path: &Path, format: Format, lines: &[Line], title: &str, y_desc: &str) -> Result<()> {
-    nerve_plot_font::register();
-    let r = match format {
-        Format::Png => draw(BitMapBackend::new(path, SIZE).into_drawing_area(), lines, title, y_desc),
-        Format::Svg => draw(SVGBackend::new(path, SIZE).into_drawing_area(), lines, title, y_desc),
-    };
-    r.map_err(|e| anyhow!("cannot draw the figure {}: {e}", path.display()))
+    Ok(figure::write(path, format, SIZE, &Plot { lines, title, y_desc })?)
+}
+
+/// The figure: one line per field against time.
+struct Plot<'a> {
+    lines: &'a [Line],
+    title: &'a str,
+    y_desc: &'a str,
+}
+
+impl Figure for Plot<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        Ok(draw(root, self.lines, self.title, self.y_desc)?)
+    }
 }
 
 /// (low, high) of `values`, padded by 5 % (a flat line: by 1, or 5 % of its value).
@@ -467,7 +473,7 @@ fn tick_label(v: f64, step: f64) -> String {
 }
 
 fn draw<DB: DrawingBackend>(
-    root: DrawingArea<DB, Shift>,
+    root: &DrawingArea<DB, Shift>,
     lines: &[Line],
     title: &str,
     y_desc: &str,
@@ -476,10 +482,9 @@ where
     DB::ErrorType: 'static,
 {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    root.fill(&WHITE).map_err(e)?;
     let t1 = lines.iter().flat_map(|l| l.points.iter().map(|p| p.0)).fold(0.0, f64::max);
     let (y0, y1) = padded(lines.iter().flat_map(|l| l.points.iter().map(|p| p.1)));
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(root)
         .caption(title, ("sans-serif", 20))
         .margin(15)
         .x_label_area_size(45)
@@ -506,15 +511,7 @@ where
             chart.draw_series(line.points.iter().map(|p| Circle::new(*p, 3, colour.filled()))).map_err(e)?;
         }
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.4))
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font(("sans-serif", 14))
-        .draw()
-        .map_err(e)?;
-    root.present().map_err(e)
+    figure::legend(&mut chart, SeriesLabelPosition::UpperLeft, 14).map_err(e)
 }
 
 #[cfg(test)]

@@ -13,7 +13,8 @@
 //! checkpoint tube straight ahead of the robot (`DIR/world.toml`) and a
 //! launch file with the simulator and the motor agent (`DIR/launch.toml`),
 //! launches them on a private robot (`calib-<pid>`, or the robot named with
-//! `--robot`/`NERVE_ROBOT`, which must not be running anything), and drives
+//! `--robot`/`NERVE_ROBOT`, which must not be running anything) with `nerve
+//! launch`, and drives
 //! the robot at the tube with `nerve cmd motor --v SPEED --hold ...` from
 //! `--far` (3.5 m) to `--near` (0.8 m). Every camera frame the simulator
 //! renders into its ring `simcam` is searched by the checkpoint agent's own
@@ -46,10 +47,7 @@
 //! `out/calibrate-checkpoint` for a samples file. Exit code 0 when the
 //! calibration was written, 1 when not.
 
-use super::tap::Tap;
-use crate::bring;
-use crate::client::cli_node;
-use crate::interrupt;
+use crate::nerve::{self, Tap, cli_node};
 use agent_sdk::World;
 use anyhow::{Context as _, Result, anyhow, bail};
 use nerve_checkpoint::appendix_a::Sample;
@@ -251,7 +249,7 @@ fn depth(tube: &TubeGeometry, t: &GroundTruth) -> f64 {
 
 /// Refuses a robot that already runs agents (they would be stopped at the end).
 fn refuse_busy(world: &World) -> Result<()> {
-    let live = bring::running_agents(world);
+    let live = nerve::running_agents(world);
     if !live.is_empty() {
         bail!(
             "robot {r} already runs {} agent(s) ({}); the calibration brings its robot down at the end: \
@@ -286,19 +284,18 @@ fn simulate(robot: &str, explicit: bool, a: &CheckpointArgs, dir: &Path) -> Resu
         a.speed,
         dir.display()
     );
-    interrupt::catch();
+    nerve::catch_interrupts();
     let t0 = Instant::now();
-    let result = match bring::launch_robot(&robot, &launch_path) {
-        Ok(w) => {
+    let result = match nerve::launch(&robot, &launch_path, None) {
+        Ok(()) => {
             println!("simulator up in {:.1} s; driving at the tube (Ctrl-C stops)", t0.elapsed().as_secs_f64());
-            collect(&w, &tube, a)
+            collect(&nworld, &tube, a)
         }
         Err(e) => Err(e.context("the simulator did not come up")),
     };
     // whatever happened: stop everything and leave nothing behind
-    let (stopped, killed) = bring::down_and_clean(&nworld);
-    println!("{}", bring::stopped_line(stopped, killed));
-    crate::agent_logs::copy_logs(&nworld, &dir.join("logs"));
+    println!("{}", nerve::down(&robot));
+    nerve::copy_logs(&nworld, &dir.join("logs"));
     if !explicit && let Err(e) = std::fs::remove_dir_all(nworld.state_dir()) {
         eprintln!("warning: cannot remove {}: {e}", nworld.state_dir().display());
     }
@@ -365,8 +362,7 @@ struct Driver {
 
 impl Driver {
     fn spawn(robot: &RobotName, speed: f64, hold: Duration) -> Result<Self> {
-        let exe = std::env::current_exe().context("cannot find the nerve executable")?;
-        let child = std::process::Command::new(exe)
+        let child = std::process::Command::new(nerve::nerve_exe())
             .args(["--robot", robot.as_str(), "cmd", "motor", "--sender", "calibrate"])
             .args(["--v", &format!("{speed}"), "--hold", &format!("{}ms", hold.as_millis())])
             .stdin(Stdio::null())
@@ -481,7 +477,7 @@ fn collect(world: &World, tube: &TubeGeometry, a: &CheckpointArgs) -> Result<Col
     let mut passed_near = false;
     let mut still_since: Option<Instant> = None;
     loop {
-        if interrupt::requested() {
+        if nerve::interrupted() {
             bail!("interrupted (Ctrl-C): no calibration written");
         }
         truth.drain(&sub)?;

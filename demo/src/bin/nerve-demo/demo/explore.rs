@@ -27,17 +27,12 @@
 //! `summary.json`), 1 when it could not be run.
 
 use super::{End, find_file, set_flag};
-use crate::agent_logs::copy_logs;
-use crate::bring;
-use crate::client::{RouterSession, cli_node};
-use crate::cmd::tap::Tap;
-use crate::interrupt;
+use crate::nerve::{self, SimClock, Tap, cli_node, copy_logs};
 use agent_sdk::World;
 use anyhow::{Context as _, Result, bail};
 use nerve_demo::analysis::{DoorwayWatch, ModeChange, at_target};
 use nerve_demo::cpu::CpuTable;
 use nerve_demo::{Criteria, Scene, TruthRow, explore};
-use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::payloads::{GroundTruth, Mode};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -73,7 +68,7 @@ pub struct ExploreArgs {
     pub progress: f64,
     /// `--sim-time [--time-scale 4]`: the run on simulated time.
     #[command(flatten)]
-    pub time: crate::sim_time::SimTimeArgs,
+    pub time: nerve::SimTimeArgs,
 }
 
 /// The run's launch file: the template with this robot, world and seed, and
@@ -120,18 +115,16 @@ fn truth_path(launch_text: &str, world: &World) -> Option<PathBuf> {
     let sim = agents.iter().find(|a| a.get("kind").and_then(|k| k.as_str()) == Some("sim"))?;
     let args = sim.get("args")?.as_array()?;
     let i = args.iter().position(|a| a.as_str() == Some("--truth"))?;
-    Some(PathBuf::from(crate::launch_file::expand(args.get(i + 1)?.as_str()?, world)))
+    Some(PathBuf::from(nerve::expand(args.get(i + 1)?.as_str()?, world)))
 }
 
 /// Agents running on `world`: (name, kind, pid, cpu percent, restarts).
-pub(super) fn sample_agents(world: &World) -> Vec<(String, String, u32, Option<f64>, u32)> {
-    let Ok(s) = RouterSession::open(world) else { return vec![] };
-    match s.call(CliRequest::Ps) {
-        Ok(RouterReply::Agents(v)) => {
-            v.into_iter().map(|a| (a.name, a.kind, a.pid, a.stats.map(|s| s.cpu_percent), a.restarts)).collect()
-        }
-        _ => vec![],
-    }
+fn sample_agents(world: &World) -> Vec<(String, String, u32, Option<f64>, u32)> {
+    nerve::agents(world)
+        .unwrap_or_default()
+        .into_iter()
+        .map(|a| (a.name, a.kind, a.pid, a.stats.map(|s| s.cpu_percent), a.restarts))
+        .collect()
 }
 
 pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
@@ -147,17 +140,10 @@ pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
     let out = std::fs::canonicalize(&out).with_context(|| format!("cannot use output directory {}", out.display()))?;
 
     let nworld = World::new(robot)?;
-    let live = bring::running_agents(&nworld);
-    if !live.is_empty() {
-        bail!(
-            "robot {robot} already runs {} agent(s) ({}); stop them with `nerve --robot {robot} down` or pick another --robot",
-            live.len(),
-            live.join(", ")
-        );
-    }
-    // before any thread starts: the clock's page, named for everything started from here
+    nerve::refuse_busy(&nworld, "", " or pick another --robot")?;
+    // the clock's page, named to everything `nerve launch` starts for the run
     let scale = a.time.scale(scene.world.time_scale);
-    let page = scale.map(|k| crate::sim_time::start(&nworld, k)).transpose()?;
+    let clock = scale.map(|k| SimClock::start(&nworld, k)).transpose()?;
     let derived = derive_launch(&template, robot, &world_file, a.seed)?;
     let launch_path = out.join("launch.toml");
     std::fs::write(&launch_path, &derived).with_context(|| format!("cannot write {}", launch_path.display()))?;
@@ -173,29 +159,19 @@ pub(super) fn explore(robot: &str, a: ExploreArgs) -> Result<ExitCode> {
         scale.map(|k| format!(" of simulated time at {k}x")).unwrap_or_default(),
         out.display()
     );
-    interrupt::catch();
-    let launched = bring::launch_robot(robot, &launch_path);
-    let world = match launched {
-        Ok(w) => w,
-        Err(e) => {
-            eprintln!("error: the robot did not come up: {e:#}");
-            let (_, _) = bring::down(&nworld, Duration::from_secs(2));
-            bring::clean(&nworld);
-            if let Some(p) = &page {
-                crate::sim_time::finish(p);
-            }
-            return Ok(ExitCode::from(1));
-        }
-    };
+    nerve::catch_interrupts();
+    if let Err(e) = nerve::launch(robot, &launch_path, clock.as_ref().map(SimClock::page)) {
+        eprintln!("error: the robot did not come up: {e:#}");
+        println!("{}", nerve::down(robot));
+        return Ok(ExitCode::from(1));
+    }
+    let world = nworld;
     println!("robot up in {:.1} s; following the run (Ctrl-C ends it early)", t_wall.elapsed().as_secs_f64());
 
     let outcome = follow(&world, &scene, &a, scale.unwrap_or(1.0));
     // whatever happened, stop everything and leave nothing behind
-    let (stopped, killed) = bring::down_and_clean(&world);
-    println!("{}", bring::stopped_line(stopped, killed));
-    if let Some(p) = &page {
-        crate::sim_time::finish(p);
-    }
+    println!("{}", nerve::down(robot));
+    drop(clock);
     let Followed { end, rec } = outcome?;
 
     // the records: what the demo received on `sim/truth` and `decision/mode`
@@ -272,7 +248,7 @@ fn follow(world: &World, scene: &Scene, a: &ExploreArgs, scale: f64) -> Result<F
     let mut next_sample = Instant::now();
     let wall_limit = Duration::from_secs_f64(a.time_limit * 1.5 + 30.0);
     let end = loop {
-        if interrupt::requested() {
+        if nerve::interrupted() {
             break End::Interrupted;
         }
         if truth_tap.is_none() {

@@ -1,10 +1,10 @@
 //! `nerve demo`: the experiments of the thesis from one command, each in
 //! its module ([`explore`]: section 4.2, [`cooperate`]: section 4.3). Both
 //! derive the run's launch files from templates of the source tree, bring
-//! the robots up ([`crate::bring`]), record the run through taps, bring
-//! them down and hand what they recorded to the `nerve-demo` crate, which
-//! analyses it and writes the figures. What they share is here: finding
-//! the templates, deriving launch files, how a run ended.
+//! the robots up and down with the `nerve` executable ([`crate::nerve`]),
+//! record the run through taps and hand what they recorded to this crate's
+//! library, which analyses it and writes the figures. What they share is
+//! here: finding the templates, deriving launch files, how a run ended.
 
 mod cooperate;
 mod explore;
@@ -34,14 +34,14 @@ pub fn demo(robot: &str, cmd: DemoCmd) -> Result<ExitCode> {
 }
 
 /// Finds `rel` relative to the current directory, else above the running
-/// executable (`<tree>/target/<profile>/nerve`), else in the source tree
-/// this `nerve` was compiled from.
+/// executable (`<tree>/target/<profile>/nerve-demo`), else in the source
+/// tree this program was compiled from.
 fn find_file(rel: &Path, what: &str) -> Result<PathBuf> {
     if rel.is_absolute() || rel.exists() {
         return std::fs::canonicalize(rel).with_context(|| format!("cannot use {what} {}", rel.display()));
     }
-    let exe = std::env::current_exe().context("cannot find the nerve executable")?;
-    // the source tree this nerve was built from (also when CARGO_TARGET_DIR is elsewhere)
+    let exe = std::env::current_exe().context("cannot find the nerve-demo executable")?;
+    // the source tree this program was built from (also when CARGO_TARGET_DIR is elsewhere)
     let built_from = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     for dir in exe.ancestors().skip(1).chain(std::iter::once(built_from.as_path())) {
         let p = dir.join(rel);

@@ -32,18 +32,13 @@
 //! `summary.json`), 1 when it could not be run.
 
 use super::{End, absolutize_args, find_file, set_flag};
-use crate::agent_logs::copy_logs;
-use crate::bring;
-use crate::client::{RouterSession, cli_node};
-use crate::cmd::tap::Tap;
-use crate::interrupt;
+use crate::nerve::{self, SimClock, Tap, cli_node, copy_logs};
 use agent_sdk::World;
 use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, bail};
 use iceoryx2::prelude::Node;
 use nerve_demo::Scene;
 use nerve_demo::cooperate::{self, EstPose, PlannedPoint, Reached, Records, TruePose};
-use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::payloads::{
     CheckpointSighting, GroundTruth, MissionCode, MissionCommand, Odometry, PoseEstimate, ViaKind, ViaPath,
 };
@@ -88,7 +83,7 @@ pub struct CooperateArgs {
     pub progress: f64,
     /// `--sim-time [--time-scale 4]`: the run on simulated time (both robots on the simulator's clock).
     #[command(flatten)]
-    pub time: crate::sim_time::SimTimeArgs,
+    pub time: nerve::SimTimeArgs,
 }
 
 /// The launch files and bridge configurations the run derives from.
@@ -176,32 +171,6 @@ fn derive(template: &Path, d: &Derive<'_>) -> Result<String> {
     ))
 }
 
-/// Every figure of every agent of `world`.
-fn all_figures(world: &World) -> BTreeMap<String, BTreeMap<String, String>> {
-    let Ok(s) = RouterSession::open(world) else { return BTreeMap::new() };
-    match s.call(CliRequest::Ps) {
-        Ok(RouterReply::Agents(v)) => v
-            .into_iter()
-            .map(|a| (a.name, a.stats.map(|s| s.figures.into_iter().collect()).unwrap_or_default()))
-            .collect(),
-        _ => BTreeMap::new(),
-    }
-}
-
-/// Refuses robots that already run agents.
-fn refuse_busy(world: &World) -> Result<()> {
-    let live = bring::running_agents(world);
-    if !live.is_empty() {
-        let r = world.robot();
-        bail!(
-            "robot {r} already runs {} agent(s) ({}); stop them with `nerve --robot {r} down`",
-            live.len(),
-            live.join(", ")
-        );
-    }
-    Ok(())
-}
-
 /// Runs the experiment.
 pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
     let t_wall = Instant::now();
@@ -240,16 +209,11 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
     let out = std::fs::canonicalize(&out).with_context(|| format!("cannot use output directory {}", out.display()))?;
     let worlds = [World::new(&names[0])?, World::new(&names[1])?];
     for w in &worlds {
-        refuse_busy(w)?;
+        nerve::refuse_busy(w, "", "")?;
     }
-    // before any thread starts: one clock for both robots (one simulator serves both), in robot 1's folder
+    // one clock for both robots (one simulator serves both), in robot 1's folder
     let scale = a.time.scale(scene.world.time_scale);
-    let page = scale.map(|k| crate::sim_time::start(&worlds[0], k)).transpose()?;
-    let finish_clock = || {
-        if let Some(p) = &page {
-            crate::sim_time::finish(p);
-        }
-    };
+    let clock = scale.map(|k| SimClock::start(&worlds[0], k)).transpose()?;
     // the run's launch files and bridge configurations, side by side in `out`
     let d = Derive {
         world: &world_file,
@@ -261,7 +225,7 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
     };
     // the bridges talk mutual TLS: the run's fleet keys, made once in `out/keys`
     let keys = out.join("keys");
-    crate::cmd::bridge_keys::ensure(&keys, &[names[0].as_str(), names[1].as_str()])
+    nerve::ensure_bridge_keys(&keys, &[names[0].as_str(), names[1].as_str()])
         .with_context(|| format!("cannot make the bridges' keys in {}", keys.display()))?;
     let mut launch_paths = Vec::new();
     for (i, t) in templates.iter().enumerate() {
@@ -291,20 +255,15 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
         scale.map(|k| format!(" of simulated time at {k}x")).unwrap_or_default(),
         out.display()
     );
-    interrupt::catch();
-    let bring_all_down = || {
-        let mut n = (0, 0);
-        for w in worlds.iter().rev() {
-            let (s, k) = bring::down_and_clean(w);
-            n = (n.0 + s, n.1 + k);
-        }
-        n
-    };
+    nerve::catch_interrupts();
+    // robot 2 first: robot 1's simulator serves its boards
+    let bring_all_down = || names.iter().rev().map(|n| nerve::down(n)).collect::<Vec<_>>();
     for (i, p) in launch_paths.iter().enumerate() {
-        if let Err(e) = bring::launch_robot(&names[i], p) {
+        if let Err(e) = nerve::launch(&names[i], p, clock.as_ref().map(SimClock::page)) {
             eprintln!("error: robot {} did not come up: {e:#}", names[i]);
-            bring_all_down();
-            finish_clock();
+            for line in bring_all_down() {
+                println!("{line}");
+            }
             return Ok(ExitCode::from(1));
         }
     }
@@ -314,12 +273,13 @@ pub fn cooperate(a: CooperateArgs) -> Result<ExitCode> {
     let bridge_figures: BTreeMap<String, BTreeMap<String, String>> = worlds
         .iter()
         .zip(&names)
-        .map(|(w, n)| (n.clone(), all_figures(w).remove("bridge").unwrap_or_default()))
+        .map(|(w, n)| (n.clone(), nerve::all_figures(w).remove("bridge").unwrap_or_default()))
         .collect();
-    let grasp = all_figures(&worlds[1]).get("mission").and_then(|m| m.get("grasp").cloned());
-    let (stopped, killed) = bring_all_down();
-    println!("{}", bring::stopped_line(stopped, killed));
-    finish_clock();
+    let grasp = nerve::all_figures(&worlds[1]).get("mission").and_then(|m| m.get("grasp").cloned());
+    for line in bring_all_down() {
+        println!("{line}");
+    }
+    drop(clock);
     let (end, mut rec) = followed?;
     rec.bridge = bridge_figures;
     rec.grasp = grasp;
@@ -415,7 +375,7 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs, scale: f6
     let wall_limit = Duration::from_secs_f64(a.time_limit * 1.5 + 60.0);
     let truth2_port = format!("truth-{}", names[1]);
     let end = loop {
-        if interrupt::requested() {
+        if nerve::interrupted() {
             break End::Interrupted;
         }
         let (w1, w2, n1, n2) = (&worlds[0], &worlds[1], &nodes[0], &nodes[1]);
@@ -475,7 +435,7 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs, scale: f6
         if Instant::now() >= next_figures {
             next_figures = Instant::now() + Duration::from_secs(2);
             let phase = |w: &World| {
-                all_figures(w).get("mission").and_then(|m| m.get("phase").cloned()).unwrap_or_else(|| "-".into())
+                nerve::all_figures(w).get("mission").and_then(|m| m.get("phase").cloned()).unwrap_or_else(|| "-".into())
             };
             phases = (phase(w1), phase(w2));
         }
