@@ -3,7 +3,8 @@
 //! module under `cmd/`, next to the code that reads them.
 
 use crate::cmd::{
-    bench, bridge, demo, down, drive, echo, inspect, launch, logs, mem, new, plot, record, replay, start, ui, wire,
+    bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, new, plot, record, replay, start,
+    ui, wire,
 };
 use clap::{Parser, Subcommand};
 
@@ -104,14 +105,18 @@ pub enum Command {
     /// Short-term memory: list rings, dump an image slot as PNG.
     #[command(subcommand)]
     Mem(mem::MemCmd),
-    /// Reproduce an experiment of the thesis (`nerve demo explore`; runs `nerve-demo`).
-    Demo(demo::DemoArgs),
-    /// Calibrate a sensor (`nerve calibrate checkpoint`: Appendix A, in the simulator or from samples; runs `nerve-demo`).
-    Calibrate(demo::DemoArgs),
+    /// Reproduce an experiment of the thesis (`nerve demo explore`).
+    #[command(subcommand)]
+    Demo(demo::DemoCmd),
+    /// Calibrate a sensor (`nerve calibrate checkpoint`: Appendix A, in the simulator or from samples).
+    #[command(subcommand)]
+    Calibrate(calibrate::CalibrateCmd),
     /// Run a benchmark scenario (runs `nerve-bench`; see BENCHMARKS.md).
     Bench(bench::BenchArgs),
     /// Serve the robot's live graph to a browser: watch and rewire it.
     Ui(ui::UiArgs),
+    /// Serve the robot live to Foxglove and Lichtblick (the Foxglove WebSocket protocol).
+    Foxglove(crate::cmd::foxglove::FoxgloveArgs),
     /// Robots talking to each other: the bridge agents' peers and what crosses.
     #[command(subcommand)]
     Bridge(bridge::BridgeCmd),

@@ -19,7 +19,8 @@ use anyhow::Result;
 use clap::{CommandFactory, FromArgMatches};
 use cli::{Cli, Command};
 use cmd::{
-    bench, bridge, demo, down, drive, echo, inspect, iox2, launch, logs, mem, record, replay, shm_space, start, wire,
+    bench, bridge, calibrate, demo, down, drive, echo, inspect, iox2, launch, logs, mem, record, replay, shm_space,
+    start, wire,
 };
 use std::process::ExitCode;
 
@@ -63,6 +64,7 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
         Command::Router(a) => start::router(&world, a),
         Command::New(a) => cmd::new::new(a),
         Command::Ui(a) => cmd::ui::ui(&world, a),
+        Command::Foxglove(a) => cmd::foxglove::foxglove(&world, a),
         Command::Start(a) => start::start(&world, a),
         Command::Ps(a) => inspect::ps(&world, a),
         Command::Graph(a) => inspect::graph(&world, a),
@@ -107,8 +109,8 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
         Command::Launch(a) => launch::launch(&cli.robot, cli.robot_explicit, a),
         Command::Logs(a) => logs::logs(&world, a),
         Command::Exec(a) => start::exec(&world, a),
-        Command::Demo(a) => demo::run("demo", cli.robot_explicit.then_some(cli.robot.as_str()), a),
-        Command::Calibrate(a) => demo::run("calibrate", cli.robot_explicit.then_some(cli.robot.as_str()), a),
+        Command::Demo(c) => demo::demo(&cli.robot, c),
+        Command::Calibrate(c) => calibrate::calibrate(&cli.robot, cli.robot_explicit, c),
         Command::Mem(c) => mem::mem(&world, c),
         Command::Cmd(a) => drive::cmd(&world, a),
         Command::Bench(a) => bench::bench(a),

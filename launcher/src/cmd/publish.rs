@@ -51,7 +51,7 @@ pub struct PubArgs {
 }
 
 /// The input `port` of the robot's agent, its type's schema and fingerprint.
-fn input_schema(session: &RouterSession, port: &PortRef) -> Result<(Schema, u64)> {
+pub(crate) fn input_schema(session: &RouterSession, port: &PortRef) -> Result<(Schema, u64)> {
     let agent = port.agent.as_str();
     let views = match session.call(CliRequest::Agent { name: agent.to_owned() })? {
         RouterReply::Agents(v) => v,
@@ -79,7 +79,7 @@ fn input_schema(session: &RouterSession, port: &PortRef) -> Result<(Schema, u64)
 
 /// The offset of a top-level `stamp_ns: u64` the JSON leaves out, to be
 /// filled with each sample's send time.
-fn auto_stamp(schema: &Schema, json: &serde_json::Value) -> Option<usize> {
+pub(crate) fn auto_stamp(schema: &Schema, json: &serde_json::Value) -> Option<usize> {
     let Kind::Struct { fields } = &schema.kind else { return None };
     let f = fields.iter().find(|f| f.name == "stamp_ns")?;
     let is_u64 = matches!(f.schema.kind, Kind::Primitive { primitive: Primitive::U64 });

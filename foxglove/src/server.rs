@@ -1,0 +1,932 @@
+//! The server: a listener, a thread per client, and the serving thread
+//! (the caller of [`serve`]) that owns the [`Robot`].
+//!
+//! - The handshake refuses, with an HTTP status and a reason: a
+//!   subprotocol other than [`SUBPROTOCOLS`] (400), an `Origin` that is
+//!   neither loopback nor given with `--allow-origin` (403), a wrong token
+//!   (401), more clients than allowed (503).
+//! - A client's thread reads its requests and writes what the serving
+//!   thread queued for it: control messages (never dropped) and message
+//!   data (at most [`Options::queue`]; when full the oldest is dropped and
+//!   counted). It writes a new batch only once the last one has left, so a
+//!   client that stops reading holds at most one batch and its queue, and
+//!   is disconnected when nothing left for [`Options::stall_timeout`].
+//! - The serving thread refreshes the channels (advertise/unadvertise),
+//!   reads the subscribed ports only, fans samples out to the queues,
+//!   answers parameter, graph and publish requests, and never blocks on a
+//!   client.
+
+use crate::protocol::{self, Channel, ClientMessage, Level, Parameter, SUBPROTOCOLS};
+use crate::{GraphSpec, Robot};
+use serde_json::{Value, json};
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+use std::io::ErrorKind;
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::mpsc::{self, Sender};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use tungstenite::handshake::server::{ErrorResponse, Request as HttpRequest, Response};
+use tungstenite::protocol::WebSocketConfig;
+use tungstenite::{Message, WebSocket};
+
+/// How `nerve foxglove` serves.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// address to listen on (127.0.0.1:8765 by default)
+    pub bind: SocketAddr,
+    /// the robot's name (shown in `serverInfo`)
+    pub robot: String,
+    /// refuse every change: parameter sets and publishing
+    pub read_only: bool,
+    /// the edit token: a client that connects with `?token=` and it may
+    /// set parameters (and publish, with [`Options::publish`]); `None`:
+    /// nobody may
+    pub token: Option<String>,
+    /// offer `clientPublish` into input ports (to clients with the token)
+    pub publish: bool,
+    /// origins (`https://app.foxglove.dev`) allowed besides loopback ones
+    pub allowed_origins: Vec<String>,
+    /// clients served at once
+    pub max_clients: usize,
+    /// message data queued per client before the oldest is dropped
+    pub queue: usize,
+    /// a client that takes nothing for this long while data waits is disconnected
+    pub stall_timeout: Duration,
+    /// the serving thread's cycle (how often subscribed ports are read)
+    pub cycle: Duration,
+    /// how often channels and the graph are refreshed from the router
+    pub refresh: Duration,
+}
+
+impl Options {
+    /// The defaults of `nerve foxglove` on `bind`.
+    pub fn new(bind: SocketAddr, robot: &str) -> Options {
+        Options {
+            bind,
+            robot: robot.to_owned(),
+            read_only: false,
+            token: None,
+            publish: false,
+            allowed_origins: Vec::new(),
+            max_clients: 16,
+            queue: 1024,
+            stall_timeout: Duration::from_secs(10),
+            cycle: Duration::from_millis(5),
+            refresh: Duration::from_millis(500),
+        }
+    }
+}
+
+/// What a server did, told when it stops.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stats {
+    /// clients served
+    pub clients: u64,
+    /// connections refused at the handshake
+    pub refused: u64,
+    /// messages dropped because a client read too slowly
+    pub dropped_messages: u64,
+    /// clients disconnected because they stopped reading
+    pub dropped_clients: u64,
+}
+
+/// Why the server could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum FoxgloveError {
+    /// the address is taken or not ours
+    #[error(
+        "cannot listen on {addr}: {source}; is another Foxglove server (foxglove_bridge, another nerve foxglove) \
+         on that port? give another one with --bind ADDR (port 0: any free port)"
+    )]
+    Bind {
+        /// the address
+        addr: SocketAddr,
+        /// the system's reason
+        #[source]
+        source: std::io::Error,
+    },
+    /// the listener failed
+    #[error("the listener on {addr} failed: {source}")]
+    Listener {
+        /// the address
+        addr: SocketAddr,
+        /// the system's reason
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// How long a handshake may take.
+const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(3);
+/// A client's socket read timeout: how long its thread waits for a request
+/// before writing what is queued.
+const READ_SLICE: Duration = Duration::from_millis(4);
+/// A client's socket write timeout.
+const WRITE_SLICE: Duration = Duration::from_millis(40);
+/// Messages written per batch.
+const BATCH: usize = 64;
+/// Control messages a client may have waiting before it is disconnected.
+const CONTROL_MAX: usize = 4096;
+/// Largest message a client may send.
+const MAX_CLIENT_MESSAGE: usize = 1 << 20;
+/// Seconds between two drop reports to a client.
+const DROP_REPORT: Duration = Duration::from_secs(2);
+/// How often a client is pinged: one that does not answer within the
+/// stall timeout has stopped reading (WebSocket clients answer pings
+/// themselves, browsers included).
+const PING_EVERY: Duration = Duration::from_millis(500);
+
+/// What a client's thread sends to the serving thread.
+enum Request {
+    Get { client: Arc<Client>, names: Vec<String>, id: Option<String> },
+    Set { client: Arc<Client>, parameters: Vec<Parameter>, id: Option<String> },
+    Advertise { client: Arc<Client>, channels: Vec<protocol::ClientChannel> },
+    Publish { client: Arc<Client>, topic: String, payload: Vec<u8> },
+    Graph { client: Arc<Client> },
+}
+
+/// A queued message data frame.
+struct Data {
+    subscription: u32,
+    unix_ns: u64,
+    payload: Arc<Vec<u8>>,
+}
+
+#[derive(Default)]
+struct Outbox {
+    control: VecDeque<String>,
+    data: VecDeque<Data>,
+    dropped: u64,
+}
+
+impl Outbox {
+    /// Queues `d`; when `queue` messages already wait, the oldest is
+    /// dropped (and counted) instead of the robot waiting. Whether one was.
+    fn push_data(&mut self, d: Data, queue: usize) -> bool {
+        let full = self.data.len() >= queue.max(1);
+        if full {
+            self.data.pop_front();
+            self.dropped = self.dropped.saturating_add(1);
+        }
+        self.data.push_back(d);
+        full
+    }
+}
+
+/// A connected client, shared by its thread and the serving thread.
+struct Client {
+    id: u64,
+    peer: SocketAddr,
+    /// may set parameters and publish
+    edit: bool,
+    out: Mutex<Outbox>,
+    /// subscription id -> channel id
+    subs: Mutex<HashMap<u32, u32>>,
+    /// client channel id -> input port topic
+    publishing: Mutex<HashMap<u32, String>>,
+    graph: AtomicBool,
+    gone: AtomicBool,
+}
+
+impl Client {
+    fn say(&self, text: String) {
+        let mut out = lock(&self.out);
+        if out.control.len() >= CONTROL_MAX {
+            // a client that takes not even its control messages is going
+            self.gone.store(true, Ordering::Relaxed);
+            return;
+        }
+        out.control.push_back(text);
+    }
+
+    fn error(&self, message: &str) {
+        tracing::info!(client = self.id, peer = %self.peer, "refused: {message}");
+        self.say(protocol::status(Level::Error, message));
+    }
+}
+
+/// The channels advertised, by topic.
+#[derive(Default)]
+struct Channels {
+    by_topic: BTreeMap<String, Channel>,
+    next_id: u32,
+}
+
+/// What the threads share.
+struct Hub {
+    opts: Options,
+    channels: Mutex<Channels>,
+    clients: Mutex<BTreeMap<u64, Arc<Client>>>,
+    stop: AtomicBool,
+    live: AtomicUsize,
+    next_client: AtomicU64,
+    served: AtomicU64,
+    refused: AtomicU64,
+    dropped_messages: AtomicU64,
+    dropped_clients: AtomicU64,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // a panicking client thread must not take the server with it
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Compares a presented token with the real one in time that does not
+/// depend on where they differ.
+fn token_matches(presented: &str, token: &str) -> bool {
+    let (a, b) = (presented.as_bytes(), token.as_bytes());
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// The `token` of a query string.
+fn query_token(query: Option<&str>) -> Option<&str> {
+    query?.split('&').find_map(|kv| kv.strip_prefix("token="))
+}
+
+/// Whether a browser page of `origin` may connect: loopback pages (a
+/// Foxglove or Lichtblick served on this machine) and the origins given.
+fn origin_allowed(origin: &str, allowed: &[String]) -> bool {
+    if allowed.iter().any(|a| a.eq_ignore_ascii_case(origin)) {
+        return true;
+    }
+    let Some(rest) = origin.strip_prefix("http://").or_else(|| origin.strip_prefix("https://")) else {
+        return false;
+    };
+    let host = if rest.starts_with('[') {
+        rest.split_once(']').map_or(rest, |(h, _)| h).trim_start_matches('[')
+    } else {
+        rest.split(':').next().unwrap_or(rest)
+    };
+    matches!(host.to_ascii_lowercase().as_str(), "localhost" | "127.0.0.1" | "::1")
+}
+
+fn refusal(status: u16, why: &str) -> ErrorResponse {
+    let mut r = ErrorResponse::new(Some(why.to_owned()));
+    *r.status_mut() = tungstenite::http::StatusCode::from_u16(status).unwrap_or_default();
+    r
+}
+
+/// Serves until `stop` says so; calls `listening` with the bound address
+/// once the server listens.
+pub fn serve(
+    opts: &Options,
+    robot: &mut dyn Robot,
+    listening: &mut dyn FnMut(SocketAddr),
+    stop: &dyn Fn() -> bool,
+) -> Result<Stats, FoxgloveError> {
+    let listener = TcpListener::bind(opts.bind).map_err(|source| FoxgloveError::Bind { addr: opts.bind, source })?;
+    let addr = listener.local_addr().map_err(|source| FoxgloveError::Listener { addr: opts.bind, source })?;
+    listener.set_nonblocking(true).map_err(|source| FoxgloveError::Listener { addr, source })?;
+    let hub = Arc::new(Hub {
+        opts: opts.clone(),
+        channels: Mutex::default(),
+        clients: Mutex::default(),
+        stop: AtomicBool::new(false),
+        live: AtomicUsize::new(0),
+        next_client: AtomicU64::new(1),
+        served: AtomicU64::new(0),
+        refused: AtomicU64::new(0),
+        dropped_messages: AtomicU64::new(0),
+        dropped_clients: AtomicU64::new(0),
+    });
+    tracing::info!(%addr, read_only = opts.read_only, publish = opts.publish, "nerve foxglove listening");
+    // the channels are known before the first client is told them
+    refresh_channels(&hub, robot);
+    listening(addr);
+    let (tx, rx) = mpsc::channel();
+    let mut threads: Vec<JoinHandle<()>> = Vec::new();
+    let mut last_refresh = Instant::now();
+    let mut graph = GraphState::default();
+    while !stop() {
+        accept(&listener, &hub, &tx, &mut threads)?;
+        if last_refresh.elapsed() >= opts.refresh {
+            last_refresh = Instant::now();
+            refresh_channels(&hub, robot);
+            graph.refresh(&hub, robot);
+        }
+        while let Ok(req) = rx.try_recv() {
+            answer(robot, req);
+        }
+        read_ports(&hub, robot);
+        threads.retain(|t| !t.is_finished());
+        std::thread::sleep(opts.cycle);
+    }
+    hub.stop.store(true, Ordering::Relaxed);
+    drop(rx);
+    for t in threads {
+        let _ = t.join();
+    }
+    Ok(Stats {
+        clients: hub.served.load(Ordering::Relaxed),
+        refused: hub.refused.load(Ordering::Relaxed),
+        dropped_messages: hub.dropped_messages.load(Ordering::Relaxed),
+        dropped_clients: hub.dropped_clients.load(Ordering::Relaxed),
+    })
+}
+
+fn accept(
+    listener: &TcpListener,
+    hub: &Arc<Hub>,
+    tx: &Sender<Request>,
+    threads: &mut Vec<JoinHandle<()>>,
+) -> Result<(), FoxgloveError> {
+    loop {
+        match listener.accept() {
+            Ok((stream, peer)) => {
+                let (hub, tx) = (Arc::clone(hub), tx.clone());
+                let spawned = std::thread::Builder::new()
+                    .name("foxglove-client".into())
+                    .spawn(move || client(stream, peer, &hub, &tx));
+                match spawned {
+                    Ok(t) => threads.push(t),
+                    Err(e) => tracing::warn!(%peer, error = %e, "cannot start a thread for a client: refused"),
+                }
+            }
+            Err(e) if e.kind() == ErrorKind::WouldBlock => return Ok(()),
+            // a connection that died in the backlog, or out of descriptors for a moment
+            Err(e) if matches!(e.kind(), ErrorKind::ConnectionAborted | ErrorKind::Interrupted) => {}
+            Err(e) if e.raw_os_error().is_some_and(|c| c == 24 || c == 23) => {
+                tracing::warn!(error = %e, "out of file descriptors: a client waits");
+                return Ok(());
+            }
+            Err(source) => {
+                return Err(FoxgloveError::Listener { addr: hub.opts.bind, source });
+            }
+        }
+    }
+}
+
+/// What the handshake decided.
+struct Admission {
+    subprotocol: &'static str,
+    edit: bool,
+}
+
+// the callback's error type is tungstenite's (an HTTP response), not ours to box
+#[allow(clippy::result_large_err)]
+fn handshake(stream: TcpStream, hub: &Hub) -> Result<(WebSocket<TcpStream>, Admission), String> {
+    stream.set_read_timeout(Some(HANDSHAKE_TIMEOUT)).map_err(|e| e.to_string())?;
+    stream.set_write_timeout(Some(HANDSHAKE_TIMEOUT)).map_err(|e| e.to_string())?;
+    let _ = stream.set_nodelay(true);
+    let mut admission = None;
+    let full = hub.live.load(Ordering::Relaxed) > hub.opts.max_clients;
+    let callback = |req: &HttpRequest, mut resp: Response| -> Result<Response, ErrorResponse> {
+        if full {
+            return Err(refusal(503, "nerve foxglove serves no more clients now: close another and retry"));
+        }
+        if let Some(origin) = req.headers().get("origin") {
+            let origin = origin.to_str().unwrap_or("?");
+            if !origin_allowed(origin, &hub.opts.allowed_origins) {
+                return Err(refusal(
+                    403,
+                    &format!(
+                        "pages of {origin} may not connect to this robot: start nerve foxglove with \
+                         --allow-origin {origin} to let them"
+                    ),
+                ));
+            }
+        }
+        let offered = req.headers().get_all("sec-websocket-protocol").iter().filter_map(|v| v.to_str().ok());
+        let Some(subprotocol) = protocol::choose_subprotocol(offered) else {
+            return Err(refusal(
+                400,
+                &format!("nerve foxglove speaks the subprotocols {}: offer one of them", SUBPROTOCOLS.join(" and ")),
+            ));
+        };
+        let edit = match query_token(req.uri().query()) {
+            None => false,
+            Some(t) if hub.opts.token.as_deref().is_some_and(|k| token_matches(t, k)) => true,
+            Some(_) => return Err(refusal(401, "wrong token: connect with the edit token nerve foxglove printed")),
+        };
+        resp.headers_mut().insert("sec-websocket-protocol", tungstenite::http::HeaderValue::from_static(subprotocol));
+        admission = Some(Admission { subprotocol, edit });
+        Ok(resp)
+    };
+    let config =
+        WebSocketConfig::default().max_message_size(Some(MAX_CLIENT_MESSAGE)).max_frame_size(Some(MAX_CLIENT_MESSAGE));
+    let ws = tungstenite::accept_hdr_with_config(stream, callback, Some(config)).map_err(|e| e.to_string())?;
+    let admission = admission.ok_or("no admission")?;
+    Ok((ws, admission))
+}
+
+/// A client's thread: handshake, then requests in, queued messages out.
+fn client(stream: TcpStream, peer: SocketAddr, hub: &Hub, tx: &Sender<Request>) {
+    hub.live.fetch_add(1, Ordering::Relaxed);
+    let r = serve_client(stream, peer, hub, tx);
+    hub.live.fetch_sub(1, Ordering::Relaxed);
+    if let Err(why) = r {
+        tracing::info!(%peer, "client refused or gone: {why}");
+    }
+}
+
+fn serve_client(stream: TcpStream, peer: SocketAddr, hub: &Hub, tx: &Sender<Request>) -> Result<(), String> {
+    let (mut ws, admission) = match handshake(stream, hub) {
+        Ok(x) => x,
+        Err(e) => {
+            hub.refused.fetch_add(1, Ordering::Relaxed);
+            return Err(e);
+        }
+    };
+    ws.get_ref().set_read_timeout(Some(READ_SLICE)).map_err(|e| e.to_string())?;
+    ws.get_ref().set_write_timeout(Some(WRITE_SLICE)).map_err(|e| e.to_string())?;
+    let id = hub.next_client.fetch_add(1, Ordering::Relaxed);
+    let client = Arc::new(Client {
+        id,
+        peer,
+        edit: admission.edit && !hub.opts.read_only,
+        out: Mutex::default(),
+        subs: Mutex::default(),
+        publishing: Mutex::default(),
+        graph: AtomicBool::new(false),
+        gone: AtomicBool::new(false),
+    });
+    hub.served.fetch_add(1, Ordering::Relaxed);
+    tracing::info!(client = id, %peer, subprotocol = admission.subprotocol, edit = client.edit, "client connected");
+    register(hub, &client);
+    let r = client_loop(&mut ws, hub, &client, tx);
+    lock(&hub.clients).remove(&id);
+    client.gone.store(true, Ordering::Relaxed);
+    let _ = ws.get_ref().shutdown(std::net::Shutdown::Both);
+    tracing::info!(client = id, %peer, dropped = lock(&client.out).dropped, "client disconnected");
+    r
+}
+
+/// Tells a new client who we are and every channel, and lets it be fanned
+/// out to; under the channels' lock so that no change falls in between.
+fn register(hub: &Hub, client: &Arc<Client>) {
+    let opts = &hub.opts;
+    let mut caps = vec!["parameters", "connectionGraph"];
+    if opts.publish && client.edit {
+        caps.push("clientPublish");
+    }
+    let metadata = json!({
+        "robot": opts.robot,
+        "readOnly": opts.read_only.to_string(),
+        "edit": client.edit.to_string(),
+        "queue": opts.queue.to_string(),
+    });
+    let channels = lock(&hub.channels);
+    client.say(protocol::server_info(&format!("nerve ({})", opts.robot), &caps, metadata, &client.id.to_string()));
+    if !channels.by_topic.is_empty() {
+        client.say(protocol::advertise(channels.by_topic.values()));
+    }
+    lock(&hub.clients).insert(client.id, Arc::clone(client));
+}
+
+fn client_loop(
+    ws: &mut WebSocket<TcpStream>,
+    hub: &Hub,
+    client: &Arc<Client>,
+    tx: &Sender<Request>,
+) -> Result<(), String> {
+    let mut unflushed = false;
+    // the last moment the client had taken everything written to it
+    let mut took = Instant::now();
+    let (mut reported, mut report_at) = (0u64, Instant::now());
+    // the ping not answered yet: its number and when it was sent
+    let (mut pings, mut waiting): (u64, Option<(u64, Instant)>) = (0, None);
+    let mut last_ping = Instant::now();
+    loop {
+        if hub.stop.load(Ordering::Relaxed) {
+            let _ = ws.close(None);
+            let _ = ws.flush();
+            return Ok(());
+        }
+        if client.gone.load(Ordering::Relaxed) {
+            return Err("too many control messages waiting: the client stopped reading".into());
+        }
+        match ws.read() {
+            Ok(Message::Text(t)) => request(hub, client, tx, t.as_str()),
+            Ok(Message::Binary(b)) => publish(hub, client, tx, &b),
+            Ok(Message::Pong(p)) => {
+                if waiting.is_some_and(|(n, _)| p.as_ref() == n.to_le_bytes()) {
+                    waiting = None;
+                }
+            }
+            Ok(Message::Close(_)) => {
+                let _ = ws.flush();
+                return Ok(());
+            }
+            Ok(_) => {}
+            Err(tungstenite::Error::Io(e)) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+            Err(tungstenite::Error::ConnectionClosed | tungstenite::Error::AlreadyClosed) => return Ok(()),
+            Err(e) => return Err(format!("connection failed: {e}")),
+        }
+        if unflushed {
+            match ws.flush() {
+                Ok(()) => {
+                    unflushed = false;
+                    took = Instant::now();
+                }
+                Err(tungstenite::Error::Io(e)) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+                Err(e) => return Err(format!("connection failed: {e}")),
+            }
+        }
+        if !unflushed && waiting.is_none() && last_ping.elapsed() >= PING_EVERY {
+            pings = pings.wrapping_add(1);
+            ws.write(Message::Ping(pings.to_le_bytes().to_vec().into()))
+                .map_err(|e| format!("connection failed: {e}"))?;
+            unflushed = true;
+            waiting = Some((pings, Instant::now()));
+            last_ping = Instant::now();
+        }
+        if !unflushed {
+            let (control, data, dropped) = {
+                let mut out = lock(&client.out);
+                let control: Vec<String> = out.control.drain(..).collect();
+                let n = out.data.len().min(BATCH);
+                let data: Vec<Data> = out.data.drain(..n).collect();
+                (control, data, out.dropped)
+            };
+            if dropped > reported && report_at.elapsed() >= DROP_REPORT {
+                let msg = format!(
+                    "nerve foxglove dropped {} messages for this client (it reads slower than the robot publishes; \
+                     {dropped} in all, queue {})",
+                    dropped - reported,
+                    hub.opts.queue
+                );
+                tracing::warn!(client = client.id, peer = %client.peer, dropped, "{msg}");
+                let _ = ws.write(Message::text(protocol::status(Level::Warning, &msg)));
+                (reported, report_at) = (dropped, Instant::now());
+                unflushed = true;
+            }
+            for text in control {
+                ws.write(Message::text(text)).map_err(|e| format!("connection failed: {e}"))?;
+                unflushed = true;
+            }
+            for d in data {
+                let frame = protocol::message_data(d.subscription, d.unix_ns, &d.payload);
+                ws.write(Message::binary(frame)).map_err(|e| format!("connection failed: {e}"))?;
+                unflushed = true;
+            }
+            if !unflushed {
+                took = Instant::now();
+            }
+        }
+        let unanswered = waiting.is_some_and(|(_, at)| at.elapsed() > hub.opts.stall_timeout);
+        if unanswered || (unflushed && took.elapsed() > hub.opts.stall_timeout) {
+            hub.dropped_clients.fetch_add(1, Ordering::Relaxed);
+            tracing::warn!(
+                client = client.id,
+                peer = %client.peer,
+                stalled_s = hub.opts.stall_timeout.as_secs_f64(),
+                "client disconnected: it took nothing (or answered no ping) for the stall timeout"
+            );
+            return Err("the client stopped reading".into());
+        }
+    }
+}
+
+/// A client's JSON request.
+fn request(hub: &Hub, client: &Arc<Client>, tx: &Sender<Request>, text: &str) {
+    let msg: ClientMessage = match serde_json::from_str(text) {
+        Ok(m) => m,
+        Err(e) => {
+            client.error(&format!("nerve foxglove does not understand this request ({e})"));
+            return;
+        }
+    };
+    let send = |r: Request| {
+        let _ = tx.send(r);
+    };
+    match msg {
+        ClientMessage::Subscribe { subscriptions } => {
+            let channels = lock(&hub.channels);
+            let known: BTreeSet<u32> = channels.by_topic.values().map(|c| c.id).collect();
+            let mut subs = lock(&client.subs);
+            for s in subscriptions {
+                if known.contains(&s.channel_id) {
+                    subs.insert(s.id, s.channel_id);
+                } else {
+                    client.error(&format!("no channel {} is advertised (any more)", s.channel_id));
+                }
+            }
+        }
+        ClientMessage::Unsubscribe { subscription_ids } => {
+            let mut subs = lock(&client.subs);
+            for id in subscription_ids {
+                subs.remove(&id);
+            }
+        }
+        ClientMessage::GetParameters { parameter_names, id } => {
+            send(Request::Get { client: Arc::clone(client), names: parameter_names, id })
+        }
+        ClientMessage::SetParameters { parameters, id } => {
+            if let Some(why) = edit_refused(hub, client, "set parameters") {
+                client.error(&why);
+            } else {
+                send(Request::Set { client: Arc::clone(client), parameters, id });
+            }
+        }
+        ClientMessage::Advertise { channels } => {
+            if !hub.opts.publish {
+                client.error("this nerve foxglove does not take publishing: start it with --publish");
+            } else if let Some(why) = edit_refused(hub, client, "publish") {
+                client.error(&why);
+            } else {
+                // known at once, so that messages sent right after the advertise are taken; the
+                // serving thread checks the port (in order, before them) and forgets a refused one
+                let mut p = lock(&client.publishing);
+                for ch in &channels {
+                    p.insert(ch.id, ch.topic.clone());
+                }
+                drop(p);
+                send(Request::Advertise { client: Arc::clone(client), channels });
+            }
+        }
+        ClientMessage::Unadvertise { channel_ids } => {
+            let mut p = lock(&client.publishing);
+            for id in channel_ids {
+                p.remove(&id);
+            }
+        }
+        ClientMessage::SubscribeParameterUpdates { .. } | ClientMessage::UnsubscribeParameterUpdates { .. } => {
+            client.error("nerve foxglove does not send parameter updates: ask with getParameters")
+        }
+        ClientMessage::SubscribeConnectionGraph => {
+            client.graph.store(true, Ordering::Relaxed);
+            send(Request::Graph { client: Arc::clone(client) });
+        }
+        ClientMessage::UnsubscribeConnectionGraph => client.graph.store(false, Ordering::Relaxed),
+    }
+}
+
+/// Why `client` may not change the robot, if it may not.
+fn edit_refused(hub: &Hub, client: &Client, what: &str) -> Option<String> {
+    if hub.opts.read_only {
+        return Some(format!("this nerve foxglove is read-only: it does not let clients {what}"));
+    }
+    if !client.edit {
+        return Some(format!(
+            "to {what}, connect with the edit token: ws://ADDRESS/?token=TOKEN (nerve foxglove printed it, or it is \
+             the one in NERVE_FOXGLOVE_TOKEN)"
+        ));
+    }
+    None
+}
+
+/// A client's binary frame: a message to publish.
+fn publish(hub: &Hub, client: &Arc<Client>, tx: &Sender<Request>, frame: &[u8]) {
+    let Some((channel, payload)) = protocol::client_message_data(frame) else {
+        client.error("a binary frame that is not a client message (opcode 1, channel id, payload) was ignored");
+        return;
+    };
+    if let Some(why) = edit_refused(hub, client, "publish") {
+        client.error(&why);
+        return;
+    }
+    let topic = lock(&client.publishing).get(&channel).cloned();
+    match topic {
+        Some(topic) => {
+            let _ = tx.send(Request::Publish { client: Arc::clone(client), topic, payload: payload.to_vec() });
+        }
+        None => client.error(&format!("channel {channel} was not advertised by this client (or was refused)")),
+    }
+}
+
+/// Brings the channels up to date with the robot's output ports and tells
+/// every client what came and went.
+fn refresh_channels(hub: &Hub, robot: &mut dyn Robot) {
+    let specs = match robot.channels() {
+        Ok(s) => s,
+        Err(e) => {
+            tracing::debug!("no channels now: {e}");
+            return;
+        }
+    };
+    let mut channels = lock(&hub.channels);
+    let wanted: BTreeMap<&str, &crate::ChannelSpec> = specs.iter().map(|s| (s.topic.as_str(), s)).collect();
+    let mut removed = Vec::new();
+    channels.by_topic.retain(|topic, c| {
+        let same = wanted.get(topic.as_str()).is_some_and(|s| s.schema == c.schema && s.schema_name == c.schema_name);
+        if !same {
+            removed.push(c.id);
+        }
+        same
+    });
+    let mut added = Vec::new();
+    for s in &specs {
+        if channels.by_topic.contains_key(&s.topic) {
+            continue;
+        }
+        channels.next_id = channels.next_id.wrapping_add(1);
+        let c = Channel {
+            id: channels.next_id,
+            topic: s.topic.clone(),
+            encoding: "json".into(),
+            schema_name: s.schema_name.clone(),
+            schema: s.schema.clone(),
+            schema_encoding: "jsonschema".into(),
+        };
+        added.push(c.clone());
+        channels.by_topic.insert(s.topic.clone(), c);
+    }
+    if removed.is_empty() && added.is_empty() {
+        return;
+    }
+    tracing::info!(added = added.len(), removed = removed.len(), "channels changed");
+    let clients = lock(&hub.clients);
+    for c in clients.values() {
+        if !removed.is_empty() {
+            lock(&c.subs).retain(|_, ch| !removed.contains(ch));
+            c.say(protocol::unadvertise(&removed));
+        }
+        if !added.is_empty() {
+            c.say(protocol::advertise(&added));
+        }
+    }
+}
+
+/// Reads the subscribed ports and queues each sample for its subscribers.
+fn read_ports(hub: &Hub, robot: &mut dyn Robot) {
+    // channel id -> [(client, subscription)]
+    let mut fan: HashMap<u32, Vec<(Arc<Client>, u32)>> = HashMap::new();
+    for c in lock(&hub.clients).values() {
+        for (&sub, &ch) in lock(&c.subs).iter() {
+            fan.entry(ch).or_default().push((Arc::clone(c), sub));
+        }
+    }
+    let topics: Vec<(String, u32)> = {
+        let channels = lock(&hub.channels);
+        channels.by_topic.values().filter(|c| fan.contains_key(&c.id)).map(|c| (c.topic.clone(), c.id)).collect()
+    };
+    let names: Vec<&str> = topics.iter().map(|(t, _)| t.as_str()).collect();
+    let queue = hub.opts.queue.max(1);
+    robot.read(&names, &mut |topic, unix_ns, payload| {
+        let Some(ch) = topics.iter().find(|(t, _)| t == topic).map(|(_, c)| *c) else { return };
+        let payload = Arc::new(payload);
+        for (c, sub) in fan.get(&ch).into_iter().flatten() {
+            let d = Data { subscription: *sub, unix_ns, payload: Arc::clone(&payload) };
+            if lock(&c.out).push_data(d, queue) {
+                hub.dropped_messages.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    });
+}
+
+/// The connection graph last sent.
+#[derive(Default)]
+struct GraphState {
+    last: Option<GraphSpec>,
+}
+
+impl GraphState {
+    /// Reads the graph when a client watches it and sends what changed.
+    fn refresh(&mut self, hub: &Hub, robot: &mut dyn Robot) {
+        let watchers: Vec<Arc<Client>> =
+            lock(&hub.clients).values().filter(|c| c.graph.load(Ordering::Relaxed)).cloned().collect();
+        if watchers.is_empty() {
+            self.last = None;
+            return;
+        }
+        let g = match robot.graph() {
+            Ok(g) => g,
+            Err(e) => {
+                tracing::debug!("no graph now: {e}");
+                return;
+            }
+        };
+        if self.last.as_ref() == Some(&g) {
+            return;
+        }
+        let old: BTreeSet<&str> =
+            self.last.iter().flat_map(|l| l.published.iter().chain(&l.subscribed).map(|(t, _)| t.as_str())).collect();
+        let now: BTreeSet<&str> = g.published.iter().chain(&g.subscribed).map(|(t, _)| t.as_str()).collect();
+        let removed: Vec<&str> = old.difference(&now).copied().collect();
+        let msg = graph_update(&g, &removed);
+        for c in &watchers {
+            c.say(msg.clone());
+        }
+        self.last = Some(g);
+    }
+}
+
+fn graph_update(g: &GraphSpec, removed: &[&str]) -> String {
+    let published: Vec<Value> = g.published.iter().map(|(t, ids)| json!({ "name": t, "publisherIds": ids })).collect();
+    let subscribed: Vec<Value> =
+        g.subscribed.iter().map(|(t, ids)| json!({ "name": t, "subscriberIds": ids })).collect();
+    json!({
+        "op": "connectionGraphUpdate",
+        "publishedTopics": published,
+        "subscribedTopics": subscribed,
+        "advertisedServices": [],
+        "removedTopics": removed,
+        "removedServices": [],
+    })
+    .to_string()
+}
+
+/// Answers a request that needs the robot.
+fn answer(robot: &mut dyn Robot, req: Request) {
+    match req {
+        Request::Get { client, names, id } => match robot.parameters() {
+            Ok(all) => {
+                let chosen: Vec<Parameter> =
+                    all.into_iter().filter(|p| names.is_empty() || names.contains(&p.name)).collect();
+                client.say(protocol::parameter_values(&chosen, id.as_deref()));
+            }
+            Err(e) => client.error(&format!("cannot read the parameters: {e}")),
+        },
+        Request::Set { client, parameters, id } => {
+            let mut done = Vec::new();
+            for p in &parameters {
+                match robot.set_parameter(&p.name, &p.value) {
+                    Ok(()) => {
+                        tracing::info!(client = client.id, name = %p.name, value = %p.value, "parameter set");
+                        done.push(p.name.clone());
+                    }
+                    Err(e) => client.error(&format!("{} was not set to {}: {e}", p.name, p.value)),
+                }
+            }
+            if id.is_some() {
+                let all = robot.parameters().unwrap_or_default();
+                let values: Vec<Parameter> = all.into_iter().filter(|p| done.contains(&p.name)).collect();
+                client.say(protocol::parameter_values(&values, id.as_deref()));
+            }
+        }
+        Request::Advertise { client, channels } => {
+            for ch in channels {
+                if ch.encoding != "json" {
+                    lock(&client.publishing).remove(&ch.id);
+                    client.error(&format!(
+                        "channel {} ({}) is in {:?}: nerve foxglove takes json",
+                        ch.id, ch.topic, ch.encoding
+                    ));
+                    continue;
+                }
+                match robot.input(&ch.topic) {
+                    Ok(type_name) => {
+                        tracing::info!(client = client.id, topic = %ch.topic, type_name, "client publishes");
+                    }
+                    Err(e) => {
+                        lock(&client.publishing).remove(&ch.id);
+                        client.error(&format!("cannot publish on {}: {e}", ch.topic));
+                    }
+                }
+            }
+        }
+        Request::Publish { client, topic, payload } => {
+            if let Err(e) = robot.publish(&topic, &payload) {
+                client.error(&format!("a message for {topic} was refused: {e}"));
+            }
+        }
+        Request::Graph { client } => match robot.graph() {
+            // the whole graph to the new watcher; the others hear of changes only
+            Ok(g) => client.say(graph_update(&g, &[])),
+            Err(e) => client.error(&format!("cannot read the connection graph: {e}")),
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn loopback_origins_and_the_given_ones_are_allowed() {
+        let allowed = vec!["https://app.foxglove.dev".to_owned()];
+        for ok in ["http://localhost:8080", "http://127.0.0.1", "https://[::1]:3000", "https://app.foxglove.dev"] {
+            assert!(origin_allowed(ok, &allowed), "{ok} refused");
+        }
+        for bad in ["https://evil.example", "http://localhost.evil.example", "null", "file://", "http://[::2]:1"] {
+            assert!(!origin_allowed(bad, &allowed), "{bad} allowed");
+        }
+    }
+
+    #[test]
+    fn the_token_comes_from_the_query_and_is_compared_exactly() {
+        assert_eq!(query_token(Some("a=1&token=abc")), Some("abc"));
+        assert_eq!(query_token(Some("xtoken=abc")), None);
+        assert_eq!(query_token(None), None);
+        assert!(token_matches("abcdef", "abcdef"));
+        assert!(!token_matches("abcdeg", "abcdef"));
+        assert!(!token_matches("abc", "abcdef"));
+    }
+
+    #[test]
+    fn a_full_queue_drops_its_oldest_and_counts_it() {
+        let mut out = Outbox::default();
+        let d = |n: u64| Data { subscription: 1, unix_ns: n, payload: Arc::new(Vec::new()) };
+        assert!(!out.push_data(d(1), 2));
+        assert!(!out.push_data(d(2), 2));
+        assert!(out.push_data(d(3), 2));
+        assert_eq!(out.dropped, 1);
+        let kept: Vec<u64> = out.data.iter().map(|d| d.unix_ns).collect();
+        assert_eq!(kept, [2, 3], "the newest are kept");
+    }
+
+    #[test]
+    fn a_graph_update_names_what_left() {
+        let g = GraphSpec {
+            published: vec![("/t/tick".into(), vec!["t".into()])],
+            subscribed: vec![("/t/tick".into(), vec!["r".into()])],
+        };
+        let v: Value = serde_json::from_str(&graph_update(&g, &["/x/y"])).expect("json");
+        assert_eq!(v["op"], "connectionGraphUpdate");
+        assert_eq!(v["publishedTopics"][0]["publisherIds"][0], "t");
+        assert_eq!(v["subscribedTopics"][0]["subscriberIds"][0], "r");
+        assert_eq!(v["removedTopics"][0], "/x/y");
+    }
+}
