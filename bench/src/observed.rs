@@ -1,12 +1,16 @@
 //! One hop with an observer running and without it, batch by batch
 //! interleaved: what watching the robot costs its data path. The observer
 //! is `nerve record --all` (scenario `record`) or `nerve ui` with a browser
-//! showing the page (scenario `ui`); both targets are ≤ 1.05x.
+//! showing the page (scenario `ui`); both targets are ≤ 1.05x. Both
+//! reports write each size as an [`ObservedHop`], which differ only in the
+//! name of the observed round trips (`with_recorder`, `with_ui`).
 
 use crate::hop::{NervePing, default_count, size_tag, spawn_bench_agent};
+use crate::payloads::label;
 use crate::procs::{ChildGuard, Robot};
 use crate::stats::{Rounds, Summary, median_f64, ratio, us};
 use anyhow::{Context as _, Result};
+use serde::Serialize;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -102,6 +106,64 @@ pub fn hop_with_and_without(
         .collect())
 }
 
+/// One payload size as the `record` and `ui` reports write it. `W` holds
+/// the round trips with the observer under the report's own JSON name
+/// ([`WithObserver`]), the name its results files have always had.
+#[derive(Debug, Clone, Serialize)]
+pub struct ObservedHop<W> {
+    /// payload bytes
+    pub size: usize,
+    /// payload label
+    pub label: String,
+    /// round trips without the observer, ns
+    pub without: Summary,
+    /// round trips while it runs, ns, under the observer's name
+    #[serde(flatten)]
+    pub with: W,
+    /// with / without, pooled medians
+    pub ratio_p50: f64,
+    /// median of the per-round ratios
+    pub ratio_p50_round_median: f64,
+    /// whether the pooled ratio is within the target
+    pub target_met: bool,
+}
+
+/// The round trips with an observer, serialized as one field named after
+/// the observer (`with_recorder`, `with_ui`).
+pub trait WithObserver: Serialize {
+    /// Holds `with`.
+    fn new(with: Summary) -> Self;
+    /// The round trips, ns.
+    fn summary(&self) -> &Summary;
+}
+
+impl<W: WithObserver> ObservedHop<W> {
+    /// The report's row of `m`, judged against `target` (with / without).
+    pub fn of(m: Observed, target: f64) -> Self {
+        ObservedHop {
+            size: m.size,
+            label: label(m.size).into(),
+            target_met: m.ratio_p50 <= target,
+            without: m.without,
+            with: W::new(m.with),
+            ratio_p50: m.ratio_p50,
+            ratio_p50_round_median: m.ratio_p50_round_median,
+        }
+    }
+
+    /// Its row in the table [`print_table`] prints.
+    pub fn row(&self) -> TableRow<'_> {
+        TableRow {
+            label: &self.label,
+            without: &self.without,
+            with: self.with.summary(),
+            ratio_p50: self.ratio_p50,
+            ratio_p50_round_median: self.ratio_p50_round_median,
+            target_met: self.target_met,
+        }
+    }
+}
+
 /// One payload size in the table [`print_table`] prints.
 #[derive(Debug)]
 pub struct TableRow<'a> {
@@ -138,5 +200,44 @@ pub fn print_table<'a>(title: &str, target: f64, rows: impl IntoIterator<Item = 
             h.ratio_p50_round_median,
             if h.target_met { "yes" } else { "**no**" }
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::recording::HopCost;
+    use crate::ui_cost::UiHop;
+
+    /// The keys of `v`, sorted.
+    fn keys(v: &serde_json::Value) -> Vec<String> {
+        let mut k: Vec<String> = v.as_object().map(|o| o.keys().cloned().collect()).unwrap_or_default();
+        k.sort_unstable();
+        k
+    }
+
+    /// The keys of the first `hop` entry of the results file `name`.
+    fn kept_keys(name: &str) -> Vec<String> {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("results").join(name);
+        let text = std::fs::read_to_string(&path).expect("the results file is in the tree");
+        let v: serde_json::Value = serde_json::from_str(&text).expect("a results file is JSON");
+        keys(&v["hop"][0])
+    }
+
+    #[test]
+    fn the_rows_keep_the_fields_of_the_results_files() {
+        let (without, with) = (Summary::of(&[10, 20, 30]), Summary::of(&[11, 21, 31]));
+        let m = Observed { size: 8, without, with, ratio_p50: 1.05, ratio_p50_round_median: 1.02 };
+        let record = HopCost::of(m.clone(), 1.05);
+        assert!(record.target_met, "a ratio at the target meets it");
+        assert_eq!(record.row().with.p50_ns, 21);
+        let v = serde_json::to_value(&record).expect("a row encodes");
+        assert_eq!(keys(&v), kept_keys("record.json"));
+        assert_eq!(v["with_recorder"]["p50_ns"], 21);
+        let ui = UiHop::of(Observed { ratio_p50: 1.06, ..m }, 1.05);
+        assert!(!ui.target_met, "a ratio over the target misses it");
+        let v = serde_json::to_value(&ui).expect("a row encodes");
+        assert_eq!(keys(&v), kept_keys("ui.json"));
+        assert_eq!(v["with_ui"]["p50_ns"], 21);
     }
 }

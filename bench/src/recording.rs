@@ -15,8 +15,7 @@
 //!   interleaved: a custom type should cost no more.
 
 use crate::machine::Machine;
-use crate::observed::{TableRow, hop_with_and_without, print_table};
-use crate::payloads::label;
+use crate::observed::{ObservedHop, WithObserver, hop_with_and_without, print_table};
 use crate::procs::{ChildGuard, Robot};
 use crate::report::Report;
 use crate::stats::{Rounds, Summary, median_f64};
@@ -49,22 +48,23 @@ pub struct RecordOpts {
 }
 
 /// The hop with and without the recorder, one size.
+pub type HopCost = ObservedHop<WithRecorder>;
+
+/// Round trips while `nerve record --all` runs, ns (`with_recorder` in the JSON).
 #[derive(Debug, Clone, Serialize)]
-pub struct HopCost {
-    /// payload bytes
-    pub size: usize,
-    /// payload label
-    pub label: String,
-    /// round trips without a recorder, ns
-    pub without: Summary,
+pub struct WithRecorder {
     /// round trips while `nerve record --all` runs, ns
     pub with_recorder: Summary,
-    /// with / without, pooled medians
-    pub ratio_p50: f64,
-    /// median of the per-round ratios
-    pub ratio_p50_round_median: f64,
-    /// whether the pooled ratio is within the target
-    pub target_met: bool,
+}
+
+impl WithObserver for WithRecorder {
+    fn new(with_recorder: Summary) -> Self {
+        WithRecorder { with_recorder }
+    }
+
+    fn summary(&self) -> &Summary {
+        &self.with_recorder
+    }
 }
 
 /// One image recording.
@@ -166,18 +166,7 @@ fn hop(opts: &RecordOpts, robot: &Robot) -> Result<Vec<HopCost>> {
     };
     let measured = hop_with_and_without(robot, &opts.sizes, opts.rounds, opts.quick, &opts.work, "r", &mut record)?;
     let _ = std::fs::remove_file(&file);
-    Ok(measured
-        .into_iter()
-        .map(|m| HopCost {
-            size: m.size,
-            label: label(m.size).into(),
-            target_met: m.ratio_p50 <= TARGET_RATIO,
-            without: m.without,
-            with_recorder: m.with,
-            ratio_p50: m.ratio_p50,
-            ratio_p50_round_median: m.ratio_p50_round_median,
-        })
-        .collect())
+    Ok(measured.into_iter().map(|m| HopCost::of(m, TARGET_RATIO)).collect())
 }
 
 /// The figures of `nerve record`'s summary line for `topic`: (count, dropped).
@@ -339,14 +328,7 @@ pub fn run(opts: &RecordOpts) -> Result<RecordReport> {
 
 /// Prints the tables (markdown).
 pub fn print_tables(r: &RecordReport) {
-    let rows = r.hop.iter().map(|h| TableRow {
-        label: &h.label,
-        without: &h.without,
-        with: &h.with_recorder,
-        ratio_p50: h.ratio_p50,
-        ratio_p50_round_median: h.ratio_p50_round_median,
-        target_met: h.target_met,
-    });
+    let rows = r.hop.iter().map(HopCost::row);
     print_table("One hop with `nerve record --all` running (round trip, µs)", TARGET_RATIO, rows);
     println!("\n### Images recorded from a camera's ring\n");
     println!("| resolution | fps asked | camera fps | seconds | frames | dropped | MB/s | recorder CPU | file MB |");

@@ -6,8 +6,7 @@
 //! median without.
 
 use crate::machine::Machine;
-use crate::observed::{TableRow, hop_with_and_without, print_table};
-use crate::payloads::label;
+use crate::observed::{ObservedHop, WithObserver, hop_with_and_without, print_table};
 use crate::procs::{ChildGuard, Robot};
 use crate::report::Report;
 use crate::stats::Summary;
@@ -37,22 +36,23 @@ pub struct UiOpts {
 }
 
 /// The hop with and without the page, one size.
+pub type UiHop = ObservedHop<WithUi>;
+
+/// Round trips while `nerve ui` serves a browser, ns (`with_ui` in the JSON).
 #[derive(Debug, Clone, Serialize)]
-pub struct UiHop {
-    /// payload bytes
-    pub size: usize,
-    /// payload label
-    pub label: String,
-    /// round trips without `nerve ui`, ns
-    pub without: Summary,
+pub struct WithUi {
     /// round trips while `nerve ui` serves a browser, ns
     pub with_ui: Summary,
-    /// with / without, pooled medians
-    pub ratio_p50: f64,
-    /// median of the per-round ratios
-    pub ratio_p50_round_median: f64,
-    /// whether the pooled ratio is within the target
-    pub target_met: bool,
+}
+
+impl WithObserver for WithUi {
+    fn new(with_ui: Summary) -> Self {
+        WithUi { with_ui }
+    }
+
+    fn summary(&self) -> &Summary {
+        &self.with_ui
+    }
 }
 
 /// The ui report: the [`Head`](crate::report::Head) and [`UiResults`].
@@ -127,18 +127,7 @@ pub fn run(opts: &UiOpts) -> Result<UiReport> {
         machine,
         UiResults {
             rounds: opts.rounds,
-            hop: measured
-                .into_iter()
-                .map(|m| UiHop {
-                    size: m.size,
-                    label: label(m.size).into(),
-                    target_met: m.ratio_p50 <= TARGET_RATIO,
-                    without: m.without,
-                    with_ui: m.with,
-                    ratio_p50: m.ratio_p50,
-                    ratio_p50_round_median: m.ratio_p50_round_median,
-                })
-                .collect(),
+            hop: measured.into_iter().map(|m| UiHop::of(m, TARGET_RATIO)).collect(),
             target_ratio: TARGET_RATIO,
             browser,
             seconds: started.elapsed().as_secs_f64(),
@@ -148,14 +137,7 @@ pub fn run(opts: &UiOpts) -> Result<UiReport> {
 
 /// Prints the table (markdown).
 pub fn print_tables(r: &UiReport) {
-    let rows = r.hop.iter().map(|h| TableRow {
-        label: &h.label,
-        without: &h.without,
-        with: &h.with_ui,
-        ratio_p50: h.ratio_p50,
-        ratio_p50_round_median: h.ratio_p50_round_median,
-        target_met: h.target_met,
-    });
+    let rows = r.hop.iter().map(UiHop::row);
     let title = format!("One hop while `nerve ui` serves a browser (round trip, µs; {})", r.browser);
     print_table(&title, TARGET_RATIO, rows);
 }
