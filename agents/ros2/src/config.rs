@@ -405,6 +405,22 @@ to = "nerve::VelocityCommand"
         assert_eq!(c.distro, Distro::Humble);
     }
 
+    /// The configuration launch/ros2.toml starts the agent with.
+    #[test]
+    fn the_example_of_the_launch_file_is_valid() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join("explore.toml");
+        let c = load(&path, "ros2").expect("examples/explore.toml");
+        let topics: Vec<&str> = c.publish.iter().map(|p| p.topic.as_str()).collect();
+        assert_eq!(topics, ["/odom", "/tf", "/scan"]);
+        assert_eq!(c.subscribe[0].topic, "/cmd_vel");
+        let launch = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../launch/ros2.toml"))
+            .expect("launch/ros2.toml");
+        for input in ["ros2/odom", "ros2/tf", "ros2/scan"] {
+            assert!(launch.contains(&format!("to = \"{input}\"")), "launch/ros2.toml wires {input}");
+        }
+        assert!(launch.contains("from = \"ros2/cmd_vel\""), "launch/ros2.toml wires ros2/cmd_vel");
+    }
+
     #[test]
     fn mistakes_are_named() {
         let e =

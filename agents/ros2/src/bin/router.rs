@@ -4,8 +4,9 @@
 //!
 //! `nerve-ros2-router [--listen tcp/127.0.0.1:7447]...`: listens on the
 //! endpoints (rmw_zenohd's default when none is given), multicast scouting
-//! off, prints `nerve-ros2-router: listening on [...]` once it is, and runs
-//! until it is killed (SIGTERM or SIGINT end it; it keeps no state).
+//! off, prints `ready` on stdout once it is (and what it listens on to
+//! stderr), and runs until it is killed (SIGTERM or SIGINT end it; it keeps
+//! no state).
 
 use clap::Parser;
 use std::process::ExitCode;
@@ -42,7 +43,8 @@ fn main() -> ExitCode {
             return ExitCode::from(1);
         }
     };
-    println!("nerve-ros2-router: listening on {endpoints} (zid {})", session.zid());
+    println!("ready");
+    eprintln!("nerve-ros2-router: listening on {endpoints} (zid {})", session.zid());
     loop {
         std::thread::park();
     }

@@ -1,0 +1,182 @@
+"""A ROS 2 node as rmw_zenoh would be one, with no ROS: for tests/tests/ros2.rs.
+
+Built on PyPI eclipse-zenoh (the session, liveliness, puts with an
+attachment) and rosbags (ROS 2 Jazzy's message definitions, their RIHS01
+hashes, CDR). Its one argument is a JSON object:
+
+  connect     the router's endpoint, e.g. "tcp/127.0.0.1:7447"
+  domain      ROS_DOMAIN_ID
+  node        the robot's ROS node name to find
+  twist       [linear.x, angular.z] to publish on /cmd_vel
+  publish_s   for how long (10 Hz)
+  settle_s    how long to wait after, for the robot to stop
+
+It finds the node and its topics in the liveliness tokens (`@ros2_lv/...`),
+subscribes to /odom and /tf by the key the tokens give, decodes them with
+rosbags, publishes the Twist with the attachment rmw_zenoh puts on every
+message (and a publisher token of its own), and prints one JSON object.
+Every wait is bounded; any failure prints {"error": ...} and exits 1.
+"""
+
+import json
+import struct
+import sys
+import threading
+import time
+
+import zenoh
+from rosbags.typesys import Stores, get_typestore
+
+A = json.loads(sys.argv[1])
+TS = get_typestore(Stores.ROS2_JAZZY)
+
+
+def fail(msg):
+    print(json.dumps({"error": msg}))
+    sys.exit(1)
+
+
+def dds(ros_type):
+    pkg, kind, name = ros_type.split("/")
+    return f"{pkg}::{kind}::dds_::{name}_"
+
+
+conf = zenoh.Config()
+for k, v in [("mode", "peer"), ("connect/endpoints", [A["connect"]]), ("listen/endpoints", []),
+             ("scouting/multicast/enabled", False), ("connect/timeout_ms", 3000),
+             ("connect/exit_on_failure", False)]:
+    conf.insert_json5(k, json.dumps(v))
+session = zenoh.open(conf)
+dom = A["domain"]
+
+# 1. the graph, as rmw_zenoh's graph cache reads it
+want = {("NN", None), ("MP", "/odom"), ("MP", "/tf"), ("MS", "/cmd_vel")}
+found = {}
+deadline = time.monotonic() + 15
+while time.monotonic() < deadline:
+    for reply in session.liveliness().get(f"@ros2_lv/{dom}/**", timeout=2.0):
+        if reply.ok is None:
+            continue
+        parts = str(reply.ok.key_expr).split("/")
+        if len(parts) < 9 or parts[8] != A["node"]:
+            continue
+        kind = parts[5]
+        topic = parts[9].replace("%", "/") if len(parts) > 9 else None
+        found[(kind, topic)] = parts
+    if want <= set(found):
+        break
+    time.sleep(0.2)
+if not want <= set(found):
+    fail(f"tokens of node {A['node']} not all found: want {sorted(map(str, want))}, found {sorted(map(str, found))}")
+
+tokens = {}
+for (kind, topic), parts in found.items():
+    if kind == "NN":
+        if parts[3] != parts[4] or parts[6] != "%" or parts[7] != "%":
+            fail(f"node token {'/'.join(parts)}: node id twice, enclave and namespace %")
+        continue
+    ros_type, hash_ = parts[10], parts[11]
+    tokens[topic] = {"kind": kind, "type": ros_type, "hash": hash_, "qos": parts[12], "zid": parts[2]}
+
+expect = {"/odom": "nav_msgs/msg/Odometry", "/tf": "tf2_msgs/msg/TFMessage", "/cmd_vel": "geometry_msgs/msg/Twist"}
+for topic, ros_type in expect.items():
+    t = tokens[topic]
+    if t["type"] != dds(ros_type):
+        fail(f"{topic}: token type {t['type']}, expected {dds(ros_type)}")
+    if t["hash"] != TS.hash_rihs01(ros_type):
+        fail(f"{topic}: token hash {t['hash']}, rosbags says {TS.hash_rihs01(ros_type)}")
+
+
+def key(topic):
+    t = tokens[topic]
+    return f"{dom}/{topic.lstrip('/')}/{t['type']}/{t['hash']}"
+
+
+# 2. /odom and /tf, decoded by rosbags
+lock = threading.Lock()
+odoms, tfs, atts = [], [], []
+
+
+def on_odom(sample):
+    m = TS.deserialize_cdr(bytes(sample.payload.to_bytes()), "nav_msgs/msg/Odometry")
+    a = sample.attachment.to_bytes() if sample.attachment is not None else b""
+    with lock:
+        p, o = m.pose.pose.position, m.pose.pose.orientation
+        odoms.append({"x": p.x, "y": p.y, "z": p.z, "qz": o.z, "qw": o.w, "v": m.twist.twist.linear.x,
+                      "omega": m.twist.twist.angular.z, "frame": m.header.frame_id, "child": m.child_frame_id,
+                      "sec": m.header.stamp.sec, "t": time.time()})
+        atts.append(a)
+
+
+def on_tf(sample):
+    m = TS.deserialize_cdr(bytes(sample.payload.to_bytes()), "tf2_msgs/msg/TFMessage")
+    with lock:
+        tfs.append([(t.header.frame_id, t.child_frame_id, t.transform.translation.x) for t in m.transforms])
+
+
+subs = [session.declare_subscriber(key("/odom"), on_odom), session.declare_subscriber(key("/tf"), on_tf)]
+
+
+def wait_for(cond, secs, what):
+    end = time.monotonic() + secs
+    while time.monotonic() < end:
+        with lock:
+            if cond():
+                return
+        time.sleep(0.05)
+    fail(f"timed out waiting for {what}")
+
+
+wait_for(lambda: len(odoms) >= 5 and len(tfs) >= 1, 15, "5 /odom and 1 /tf messages")
+with lock:
+    first = dict(odoms[-1])
+
+# 3. a Twist on /cmd_vel with the attachment, as a ROS publisher would
+Twist, Vector3 = TS.types["geometry_msgs/msg/Twist"], TS.types["geometry_msgs/msg/Vector3"]
+cmd = Twist(linear=Vector3(x=A["twist"][0], y=0.0, z=0.0), angular=Vector3(x=0.0, y=0.0, z=A["twist"][1]))
+cdr = bytes(TS.serialize_cdr(cmd, "geometry_msgs/msg/Twist"))
+gid = bytes(range(16))
+me = session.zid()
+token = session.liveliness().declare_token(
+    f"@ros2_lv/{dom}/{me}/0/1/MP/%/%/teleop/%cmd_vel/{dds('geometry_msgs/msg/Twist')}/"
+    f"{TS.hash_rihs01('geometry_msgs/msg/Twist')}/::,10:,:,:,,")
+pub = session.declare_publisher(key("/cmd_vel"))
+seq = 0
+end = time.monotonic() + A["publish_s"]
+while time.monotonic() < end:
+    seq += 1
+    att = struct.pack("<qqB", seq, time.time_ns(), 16) + gid
+    pub.put(cdr, attachment=att)
+    time.sleep(0.1)
+time.sleep(A["settle_s"])
+with lock:
+    n0 = len(odoms)
+wait_for(lambda: len(odoms) >= n0 + 3, 10, "3 more /odom messages after the robot stopped")
+with lock:
+    last = dict(odoms[-1])
+    # the attachments: 33 bytes, sequence numbers rising, one GID
+    parsed = [struct.unpack("<qqB", a[:17]) + (a[17:],) for a in atts if len(a) == 33]
+    bad = len(atts) - len(parsed)
+    seqs = [p[0] for p in parsed]
+    gids = {p[3] for p in parsed}
+    now_ns = time.time_ns()
+    stamps_ok = all(abs(now_ns - p[1]) < 600e9 and p[2] == 16 for p in parsed)
+    tf_last = tfs[-1]
+
+for s in subs:
+    s.undeclare()
+pub.undeclare()
+token.undeclare()
+session.close()
+print(json.dumps({
+    "tokens": tokens,
+    "first": first,
+    "last": last,
+    "odom_count": len(odoms),
+    "tf_last": tf_last,
+    "bad_attachments": bad,
+    "seq_rising": len(seqs) > 0 and all(b > a for a, b in zip(seqs, seqs[1:])),
+    "gids": len(gids),
+    "stamps_ok": stamps_ok,
+    "sent": seq,
+}))

@@ -1,0 +1,184 @@
+//! ROS 2 on the wire (issue 44): a Zenoh router started by the test
+//! (`nerve-ros2-router`, zenoh's own router mode, on a loopback port the
+//! test picks), a simulated robot (sim, motor) with a `ros2` agent as a
+//! client of that router, and a Python peer playing a ROS 2 node exactly as
+//! rmw_zenoh would (`tests/py/ros2_peer.py`: PyPI eclipse-zenoh and
+//! rosbags, no ROS installation). The peer finds the robot's node and
+//! topics from the liveliness tokens, decodes /odom and /tf with rosbags,
+//! and drives the robot with a CDR Twist on /cmd_vel; the test checks the
+//! decoded odometry against `nerve echo motor/odom`.
+//!
+//! Needs the binaries: `cargo build -p nerve -p nerve-sim -p nerve-motor -p
+//! nerve-ros2 --bins`, and `target/nerve-py` with eclipse-zenoh and rosbags
+//! (`.ci/run` installs them).
+
+use nerve_tests::{ChildGuard, Robot, bin_dir, free_port, write_file};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+/// The Python of `target/nerve-py` with eclipse-zenoh 1.10.2 and rosbags
+/// 0.11.9 (installed here when it lacks them; `.ci/run` installs them).
+fn python_with_rosbags() -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("target").join("nerve-py");
+    let python = dir.join("bin").join("python");
+    let has = |p: &Path| {
+        Command::new(p).args(["-c", "import zenoh, rosbags.typesys"]).output().is_ok_and(|o| o.status.success())
+    };
+    if !has(&python) {
+        if !python.exists() {
+            let st = Command::new("python3").arg("-m").arg("venv").arg(&dir).status().expect("python3");
+            assert!(st.success(), "python3 -m venv failed (Debian: apt-get install python3-venv)");
+        }
+        let st = Command::new(dir.join("bin").join("pip"))
+            .args(["install", "--quiet", "--disable-pip-version-check", "eclipse-zenoh==1.10.2", "rosbags==0.11.9"])
+            .status()
+            .expect("pip");
+        assert!(st.success(), "pip install eclipse-zenoh rosbags failed (PyPI must be reachable)");
+    }
+    assert!(has(&python), "zenoh and rosbags do not import");
+    python
+}
+
+fn launch(r: &Robot, file: &Path) {
+    let out = r.command("nerve").arg("launch").arg(file).output().expect("run nerve launch");
+    assert!(out.status.success(), "launch failed: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+fn f(v: &Value, k: &str) -> f64 {
+    v[k].as_f64().unwrap_or_else(|| panic!("no number {k} in {v}"))
+}
+
+/// The robot seen and driven from ROS 2: the node and its publishers and
+/// subscription are in the graph with rmw_zenoh's keys and Jazzy's type
+/// hashes; /odom decodes with rosbags to what `nerve echo` shows; a Twist
+/// on /cmd_vel turns and moves the simulated robot.
+#[test]
+fn a_ros2_node_on_rmw_zenoh_sees_and_drives_the_robot() {
+    let python = python_with_rosbags();
+    let port = free_port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let mut router = Command::new(bin_dir().join("nerve-ros2-router"));
+    router.args(["--listen", &endpoint]).stdout(Stdio::piped());
+    let mut router = ChildGuard::spawn("nerve-ros2-router", router).expect("start nerve-ros2-router");
+    router.await_ready("nerve-ros2-router").expect("the router listens");
+
+    let r = Robot::new("ros2");
+    let cfg = write_file(
+        &r.home,
+        "ros2.toml",
+        &format!(
+            r#"node = "nerve_robot"
+connect = ["{endpoint}"]
+[[publish]]
+input = "odom"
+from = "nerve::Odometry"
+topic = "/odom"
+type = "nav_msgs/msg/Odometry"
+[[publish]]
+input = "tf"
+from = "nerve::Odometry"
+topic = "/tf"
+type = "tf2_msgs/msg/TFMessage"
+[[subscribe]]
+topic = "/cmd_vel"
+type = "geometry_msgs/msg/Twist"
+output = "cmd_vel"
+to = "nerve::VelocityCommand"
+"#
+        ),
+    );
+    let world = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("worlds").join("explore.toml");
+    let file = r.launch_file(
+        "robot.toml",
+        &format!(
+            r#"robot = "x"
+[[agent]]
+name = "sim"
+kind = "sim"
+args = ["--world", "{}", "--dev-dir", "{{state}}/dev", "--no-noise", "--no-camera"]
+[[agent]]
+name = "motor"
+kind = "motor"
+device = "{{state}}/dev/motor"
+args = ["--robot-model", "h1"]
+[[agent]]
+name = "ros2"
+kind = "ros2"
+args = ["--config", "{}"]
+[[connect]]
+from = "motor/odom"
+to = "ros2/odom"
+[[connect]]
+from = "motor/odom"
+to = "ros2/tf"
+[[connect]]
+from = "ros2/cmd_vel"
+to = "motor/cmd"
+"#,
+            world.display(),
+            cfg.display()
+        ),
+    );
+    launch(&r, &file);
+
+    let peer = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("py").join("ros2_peer.py");
+    let arg = serde_json::json!({
+        "connect": endpoint, "domain": 0, "node": "nerve_robot",
+        "twist": [0.15, 0.4], "publish_s": 2.5, "settle_s": 1.5,
+    });
+    let out = Command::new(&python).arg(&peer).arg(arg.to_string()).output().expect("run the ROS 2 peer");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    if !out.status.success() {
+        r.dump_logs();
+        panic!("the ROS 2 peer failed: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    }
+    let got: Value = serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("peer output {stdout}: {e}"));
+    eprintln!("the ROS 2 peer saw: {got}");
+
+    // the graph: publisher and subscription tokens with Jazzy's hashes (the
+    // peer checked the types and hashes against rosbags), one session
+    let tokens = &got["tokens"];
+    assert_eq!(tokens["/odom"]["kind"], "MP", "{tokens}");
+    assert_eq!(tokens["/tf"]["kind"], "MP", "{tokens}");
+    assert_eq!(tokens["/cmd_vel"]["kind"], "MS", "{tokens}");
+    assert_eq!(tokens["/odom"]["qos"], "::,10:,:,:,,", "{tokens}");
+    assert_eq!(tokens["/odom"]["zid"], r.figure("ros2", "session").as_str(), "the tokens carry the agent's session id");
+
+    // the attachment of every /odom message: 33 bytes, rising sequence
+    // numbers, one publisher GID, a source time of now
+    assert_eq!(got["bad_attachments"], 0, "{got}");
+    assert_eq!(got["seq_rising"], true, "{got}");
+    assert_eq!(got["gids"], 1, "{got}");
+    assert_eq!(got["stamps_ok"], true, "{got}");
+
+    // the robot moved: turned left and went forward while the Twist came
+    let (first, last) = (&got["first"], &got["last"]);
+    assert_eq!((first["frame"].as_str(), first["child"].as_str()), (Some("odom"), Some("base_link")));
+    let yaw = |o: &Value| 2.0 * f(o, "qz").atan2(f(o, "qw"));
+    let turned = yaw(last) - yaw(first);
+    let moved = (f(last, "x") - f(first, "x")).hypot(f(last, "y") - f(first, "y"));
+    assert!(turned > 0.3, "a Twist of 0.4 rad/s for 2.5 s turned the robot by {turned} rad: {got}");
+    assert!(moved > 0.1, "a Twist of 0.15 m/s for 2.5 s moved the robot by {moved} m: {got}");
+    // the dead man stopped it once the Twists ended
+    assert!(f(last, "v").abs() < 1e-6 && f(last, "omega").abs() < 1e-6, "stopped: {last}");
+    assert!(r.figure_u64("ros2", "received/cmd_vel") >= 10, "{:?}", r.figures("ros2"));
+
+    // the values rosbags decoded are nerve's own: the robot stands still, so
+    // `nerve echo motor/odom` shows the pose the peer saw last
+    let echo = r.echo("motor/odom", 1);
+    let d = &echo[0]["data"];
+    for (ros, nerve) in [("x", "x"), ("y", "y")] {
+        assert!((f(last, ros) - f(d, nerve)).abs() < 1e-9, "{ros}: ROS {last} / nerve {d}");
+    }
+    let dyaw =
+        (yaw(last) - f(d, "theta") + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    assert!(dyaw.abs() < 1e-9, "heading: ROS {last} / nerve {d}");
+    let tf = &got["tf_last"][0];
+    assert_eq!((tf[0].as_str(), tf[1].as_str()), (Some("odom"), Some("base_link")), "{tf}");
+    assert!((tf[2].as_f64().unwrap_or(f64::NAN) - f(d, "x")).abs() < 1e-9, "/tf x {tf} / nerve {d}");
+
+    r.down_and_check_clean();
+    router.stop(Duration::from_secs(2));
+}
