@@ -3,8 +3,7 @@
 //! module under `cmd/`, next to the code that reads them.
 
 use crate::cmd::{
-    bench, bridge, calibrate, demo, down, drive, echo, inspect, launch, logs, mem, new, plot, record, replay, start,
-    ui, wire,
+    bench, bridge, demo, down, drive, echo, inspect, launch, logs, mem, new, plot, record, replay, start, ui, wire,
 };
 use clap::{Parser, Subcommand};
 
@@ -105,12 +104,10 @@ pub enum Command {
     /// Short-term memory: list rings, dump an image slot as PNG.
     #[command(subcommand)]
     Mem(mem::MemCmd),
-    /// Reproduce an experiment of the thesis (`nerve demo explore`).
-    #[command(subcommand)]
-    Demo(demo::DemoCmd),
-    /// Calibrate a sensor (`nerve calibrate checkpoint`: Appendix A, in the simulator or from samples).
-    #[command(subcommand)]
-    Calibrate(calibrate::CalibrateCmd),
+    /// Reproduce an experiment of the thesis (`nerve demo explore`; runs `nerve-demo`).
+    Demo(demo::DemoArgs),
+    /// Calibrate a sensor (`nerve calibrate checkpoint`: Appendix A, in the simulator or from samples; runs `nerve-demo`).
+    Calibrate(demo::DemoArgs),
     /// Run a benchmark scenario (runs `nerve-bench`; see BENCHMARKS.md).
     Bench(bench::BenchArgs),
     /// Serve the robot's live graph to a browser: watch and rewire it.

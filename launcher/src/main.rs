@@ -19,8 +19,7 @@ use anyhow::Result;
 use clap::{CommandFactory, FromArgMatches};
 use cli::{Cli, Command};
 use cmd::{
-    bench, bridge, calibrate, demo, down, drive, echo, inspect, iox2, launch, logs, mem, record, replay, shm_space,
-    start, wire,
+    bench, bridge, demo, down, drive, echo, inspect, iox2, launch, logs, mem, record, replay, shm_space, start, wire,
 };
 use std::process::ExitCode;
 
@@ -109,8 +108,8 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
         Command::Launch(a) => launch::launch(&cli.robot, cli.robot_explicit, a),
         Command::Logs(a) => logs::logs(&world, a),
         Command::Exec(a) => start::exec(&world, a),
-        Command::Demo(c) => demo::demo(&cli.robot, c),
-        Command::Calibrate(c) => calibrate::calibrate(&cli.robot, cli.robot_explicit, c),
+        Command::Demo(a) => demo::run("demo", cli.robot_explicit.then_some(cli.robot.as_str()), a),
+        Command::Calibrate(a) => demo::run("calibrate", cli.robot_explicit.then_some(cli.robot.as_str()), a),
         Command::Mem(c) => mem::mem(&world, c),
         Command::Cmd(a) => drive::cmd(&world, a),
         Command::Bench(a) => bench::bench(a),

@@ -1,12 +1,12 @@
 //! One module per command (or family of commands), each owning its clap
 //! arguments and its code; `main` routes the parsed command line to them.
-//! Two modules serve several commands: [`tap`] (a tool's subscription to an
-//! output port) and [`shm_space`] (the free-space check on `/dev/shm`).
+//! Two modules serve several commands: [`shm_space`] (the free-space check on
+//! `/dev/shm`) and [`bench`] (running a program beside `nerve` in its place:
+//! `nerve bench`, and through [`demo`] `nerve demo` and `nerve calibrate`).
 
 pub mod bench;
 pub mod bridge;
 pub mod bridge_keys;
-pub mod calibrate;
 pub mod demo;
 pub mod down;
 pub mod drive;
@@ -26,7 +26,6 @@ pub mod replay;
 pub mod shm_space;
 pub mod snapshot;
 pub mod start;
-pub mod tap;
 pub mod types;
 pub mod ui;
 pub mod wire;
