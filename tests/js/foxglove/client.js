@@ -1,0 +1,207 @@
+// The outside client of tests/tests/foxglove.rs: Foxglove's own protocol
+// library (@foxglove/ws-protocol, on the npm package `ws`) against
+// `nerve foxglove`. Each scenario prints JSON lines on stdout for the Rust
+// test to check, and exits 0 when it ran to its end (what it saw is for the
+// test to judge), 1 when it could not. Every wait is bounded.
+//
+//   node client.js watch URL SUBPROTOCOL TOPIC COUNT
+//   node client.js refused URL SUBPROTOCOL [ORIGIN]
+//   node client.js stall URL TOPIC PAUSE_MS
+//   node client.js params URL NAME GOOD BAD
+//   node client.js graph URL TOPIC
+//   node client.js publish URL TOPIC JSON COUNT
+//   node client.js cycles URL TOPIC N
+"use strict";
+
+const { FoxgloveClient } = require("@foxglove/ws-protocol");
+const WebSocket = require("ws");
+
+const LIMIT_MS = 20000;
+const say = (obj) => process.stdout.write(JSON.stringify(obj) + "\n");
+const fail = (why) => {
+  say({ error: String(why) });
+  process.exit(1);
+};
+setTimeout(() => fail(`not done within ${LIMIT_MS} ms`), LIMIT_MS).unref();
+
+function connect(url, subprotocol) {
+  const ws = new WebSocket(url, [subprotocol || FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
+  const client = new FoxgloveClient({ ws });
+  const state = { ws, client, channels: new Map(), serverInfo: null, statuses: [] };
+  client.on("serverInfo", (info) => (state.serverInfo = info));
+  client.on("advertise", (chs) => chs.forEach((c) => state.channels.set(c.topic, c)));
+  client.on("unadvertise", (ids) => {
+    for (const [t, c] of state.channels) if (ids.includes(c.id)) state.channels.delete(t);
+  });
+  client.on("status", (s) => state.statuses.push(s));
+  client.on("error", (e) => fail(`client error: ${e && e.message}`));
+  return state;
+}
+
+// Resolves when `check()` holds, polling every 20 ms, or fails after `ms`.
+function until(check, ms, what) {
+  return new Promise((resolve) => {
+    const t0 = Date.now();
+    const tick = () => {
+      const v = check();
+      if (v) return resolve(v);
+      if (Date.now() - t0 > ms) return fail(`timed out waiting for ${what}`);
+      setTimeout(tick, 20);
+    };
+    tick();
+  });
+}
+
+const decode = (data) => JSON.parse(Buffer.from(data.buffer, data.byteOffset, data.byteLength).toString("utf8"));
+
+async function watch(url, subprotocol, topic, count) {
+  const s = connect(url, subprotocol);
+  const ch = await until(() => s.serverInfo && s.channels.get(topic), 10000, `channel ${topic}`);
+  say({
+    subprotocol: s.ws.protocol,
+    serverInfo: s.serverInfo,
+    topics: [...s.channels.keys()].sort(),
+    channel: ch,
+  });
+  const samples = [];
+  const sub = s.client.subscribe(ch.id);
+  s.client.on("message", (m) => {
+    if (m.subscriptionId === sub) samples.push({ timestamp: m.timestamp.toString(), data: decode(m.data) });
+  });
+  await until(() => samples.length >= count, 10000, `${count} samples`);
+  s.client.unsubscribe(sub);
+  say({ samples: samples.slice(0, count) });
+  s.client.close();
+}
+
+function refused(url, subprotocol, origin) {
+  const ws = new WebSocket(url, [subprotocol], origin ? { origin } : {});
+  ws.on("open", () => fail(`the server accepted subprotocol ${subprotocol}`));
+  ws.on("unexpected-response", (req, res) => {
+    let body = "";
+    res.on("data", (d) => (body += d));
+    res.on("end", () => {
+      say({ refused: true, status: res.statusCode, body });
+      process.exit(0);
+    });
+  });
+  ws.on("error", (e) => {
+    say({ refused: true, error: e.message });
+    process.exit(0);
+  });
+}
+
+// Subscribes to `topic`, then stops reading its socket for `pause` ms
+// (the server's buffers fill, pings go unanswered), then reads again and
+// tells whether the server had closed the connection.
+async function stall(url, topic, pause) {
+  const s = connect(url);
+  const ch = await until(() => s.channels.get(topic), 10000, `channel ${topic}`);
+  let received = 0;
+  let closed = false;
+  s.client.on("message", () => received++);
+  s.client.on("close", () => (closed = true));
+  s.client.subscribe(ch.id);
+  await until(() => received > 0, 10000, "a first sample");
+  s.ws._socket.pause();
+  say({ paused: true, received });
+  await new Promise((r) => setTimeout(r, pause));
+  s.ws._socket.resume();
+  await until(() => closed, 10000, "the server to close the stalled connection");
+  say({ closed, received });
+  process.exit(0);
+}
+
+async function params(url, name, good, bad) {
+  const s = connect(url);
+  await until(() => s.serverInfo, 10000, "serverInfo");
+  const values = [];
+  s.client.on("parameterValues", (v) => values.push(v));
+  s.client.getParameters([], "all");
+  const all = await until(() => values.find((v) => v.id === "all"), 10000, "all parameters");
+  const before = all.parameters.find((p) => p.name === name);
+  let n = s.statuses.length;
+  s.client.setParameters([{ name, value: Number(good) }], "set");
+  // answered with the new value, or refused (no token) with a status
+  await until(() => values.find((v) => v.id === "set") || s.statuses.length > n, 10000, "the set's answer");
+  const set = values.find((v) => v.id === "set") || null;
+  const setRefusal = set ? null : s.statuses[s.statuses.length - 1];
+  n = s.statuses.length;
+  s.client.setParameters([{ name, value: Number(bad) }], "bad");
+  const refusal = await until(() => s.statuses.length > n && s.statuses[s.statuses.length - 1], 10000, "a refusal");
+  s.client.getParameters([name], "after");
+  const after = await until(() => values.find((v) => v.id === "after"), 10000, "the value after");
+  say({ serverInfo: s.serverInfo, count: all.parameters.length, before, set: set && set.parameters, setRefusal, refusal, after: after.parameters });
+  s.client.close();
+}
+
+// Prints the first connection graph, then the first one that shows `topic`
+// feeding an agent it did not feed before.
+async function graph(url, topic) {
+  const s = connect(url);
+  await until(() => s.serverInfo, 10000, "serverInfo");
+  const updates = [];
+  s.client.on("connectionGraphUpdate", (u) => updates.push(u));
+  s.client.subscribeConnectionGraph();
+  const first = await until(() => updates[0], 10000, "a connection graph");
+  const subs = (u) => (u.subscribedTopics.find((t) => t.name === topic) || { subscriberIds: [] }).subscriberIds;
+  const before = subs(first);
+  say({ first, capabilities: s.serverInfo.capabilities });
+  const changed = await until(
+    () => updates.find((u) => subs(u).some((id) => !before.includes(id))),
+    15000,
+    `a new subscriber of ${topic}`,
+  );
+  say({ changed });
+  s.client.close();
+}
+
+async function publish(url, topic, json, count) {
+  const s = connect(url);
+  await until(() => s.serverInfo, 10000, "serverInfo");
+  const id = s.client.advertise({ topic, encoding: "json", schemaName: "nerve::Tick" });
+  const bytes = new TextEncoder().encode(json);
+  say({ capabilities: s.serverInfo.capabilities, advertised: id });
+  for (let i = 0; i < count; i++) {
+    s.client.sendMessage(id, bytes);
+    await new Promise((r) => setTimeout(r, 50));
+  }
+  // a message of the wrong shape, refused with a status
+  const n = s.statuses.length;
+  s.client.sendMessage(id, new TextEncoder().encode('{"nope": 1}'));
+  const refusal = await until(() => s.statuses.length > n && s.statuses[s.statuses.length - 1], 10000, "a refusal");
+  say({ sent: count, refusal, statuses: s.statuses });
+  s.client.close();
+}
+
+// Subscribes and unsubscribes `n` times, each time waiting for a sample.
+async function cycles(url, topic, n) {
+  const s = connect(url);
+  const ch = await until(() => s.channels.get(topic), 10000, `channel ${topic}`);
+  let current = -1;
+  let got = 0;
+  s.client.on("message", (m) => {
+    if (m.subscriptionId === current) got++;
+  });
+  for (let i = 0; i < n; i++) {
+    got = 0;
+    current = s.client.subscribe(ch.id);
+    await until(() => got > 0, 10000, `a sample in cycle ${i}`);
+    s.client.unsubscribe(current);
+  }
+  say({ cycles: n });
+  s.client.close();
+}
+
+const [scenario, ...args] = process.argv.slice(2);
+const run = {
+  watch: () => watch(args[0], args[1], args[2], Number(args[3])),
+  refused: () => refused(args[0], args[1], args[2]),
+  stall: () => stall(args[0], args[1], Number(args[2])),
+  params: () => params(args[0], args[1], args[2], args[3]),
+  graph: () => graph(args[0], args[1]),
+  publish: () => publish(args[0], args[1], args[2], Number(args[3])),
+  cycles: () => cycles(args[0], args[1], Number(args[2])),
+}[scenario];
+if (!run) fail(`unknown scenario ${scenario}`);
+Promise.resolve(run()).catch(fail);

@@ -1,0 +1,341 @@
+//! `nerve foxglove` (issue 45) with an outside client: Foxglove's own
+//! protocol library (npm `@foxglove/ws-protocol` on `ws`, in
+//! `tests/js/foxglove/`, installed by `.ci/run`) against a robot started
+//! from `launch/pipeline.toml`, over loopback.
+//!
+//! The client connects with each subprotocol name, gets the channels of
+//! every output port, subscribes, and decodes JSON samples that are the
+//! ones `nerve echo` prints; an unknown subprotocol, a foreign `Origin` and
+//! a wrong token are refused; a client that stops reading is disconnected
+//! while the robot and the other clients go on; parameters are read and
+//! set through the router (a refused value refused, no token no change);
+//! the connection graph follows `nerve connect`; a message published into
+//! an input comes out of the relay, one of the wrong shape is refused; and
+//! 100 subscribe/unsubscribe cycles leave the server's memory flat.
+
+use nerve_tests::{Robot, wait_until};
+use serde_json::Value;
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+const TOKEN: &str = "foxglove-test-token-0123456789";
+
+fn pipeline() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("launch").join("pipeline.toml")
+}
+
+fn client_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("js").join("foxglove")
+}
+
+/// A robot of `launch/pipeline.toml` (t1/tick -> r1/in, r2/in).
+fn robot(tag: &str) -> Robot {
+    let r = Robot::new(tag);
+    r.ok(&["launch", pipeline().to_str().expect("path")]);
+    r
+}
+
+/// A running `nerve foxglove`; stopped with SIGINT by [`Fox::stop`], killed when dropped.
+struct Fox {
+    child: Child,
+    url: String,
+    /// what it printed after its address
+    lines: mpsc::Receiver<String>,
+}
+
+impl Fox {
+    fn start(r: &Robot, extra: &[&str]) -> Fox {
+        let mut child = r
+            .command("nerve")
+            .env("NERVE_FOXGLOVE_TOKEN", TOKEN)
+            .args(["foxglove", "--bind", "127.0.0.1:0"])
+            .args(extra)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("run nerve foxglove");
+        let mut stdout = BufReader::new(child.stdout.take().expect("stdout"));
+        let mut first = String::new();
+        stdout.read_line(&mut first).expect("read the address");
+        let url = first
+            .split("ws://")
+            .nth(1)
+            .and_then(|rest| rest.split_whitespace().next())
+            .map(|a| format!("ws://{a}"))
+            .unwrap_or_else(|| panic!("nerve foxglove printed no address: {first:?}"));
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for l in stdout.lines().map_while(Result::ok) {
+                eprintln!("nerve foxglove: {l}");
+                let _ = tx.send(l);
+            }
+        });
+        Fox { child, url, lines }
+    }
+
+    /// Stops it with SIGINT; returns what it printed (its closing figures).
+    fn stop(mut self) -> String {
+        let pid = nix::unistd::Pid::from_raw(i32::try_from(self.child.id()).expect("pid"));
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).expect("SIGINT");
+        let ok = wait_until(Duration::from_secs(10), || self.child.try_wait().ok().flatten().is_some());
+        assert!(ok, "nerve foxglove did not stop within 10 s of Ctrl-C");
+        let status = self.child.try_wait().ok().flatten().expect("status");
+        assert!(status.success(), "nerve foxglove ended with {status} after Ctrl-C");
+        let mut said = Vec::new();
+        while let Ok(l) = self.lines.recv_timeout(Duration::from_secs(2)) {
+            said.push(l);
+        }
+        said.join("\n")
+    }
+
+    /// Its resident memory, kB.
+    fn rss_kb(&self) -> u64 {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id())).expect("status");
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmRSS:"))
+            .and_then(|v| v.split_whitespace().next()?.parse().ok())
+            .expect("VmRSS")
+    }
+}
+
+impl Drop for Fox {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// `node client.js ARGS`, started (its stdout piped).
+fn client(args: &[&str]) -> Child {
+    let dir = client_dir();
+    assert!(
+        dir.join("node_modules").join("@foxglove").join("ws-protocol").is_dir(),
+        "the test client's packages are missing: run `npm ci --prefix tests/js/foxglove` (.ci/run does)"
+    );
+    Command::new("node")
+        .arg(dir.join("client.js"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("run node (node 20 is on every machine of the project)")
+}
+
+/// Runs the client to its end; its JSON lines. Its own 20 s limit bounds it.
+fn run_client(args: &[&str]) -> Vec<Value> {
+    let out = client(args).wait_with_output().expect("node client");
+    let lines = parse(&String::from_utf8_lossy(&out.stdout));
+    assert!(out.status.success(), "node client.js {} failed: {lines:?}", args.join(" "));
+    lines
+}
+
+fn parse(text: &str) -> Vec<Value> {
+    text.lines().map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}"))).collect()
+}
+
+/// The next JSON line of a running client (at most 20 s).
+fn next_line(lines: &mpsc::Receiver<String>) -> Value {
+    let l = lines.recv_timeout(Duration::from_secs(20)).expect("a line from the client");
+    serde_json::from_str(&l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}"))
+}
+
+fn lines_of(child: &mut Child) -> mpsc::Receiver<String> {
+    let stdout = child.stdout.take().expect("stdout");
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let _ = tx.send(l);
+        }
+    });
+    rx
+}
+
+#[test]
+fn foxglove_clients_read_the_pipeline_with_either_subprotocol_as_echo_does() {
+    let r = robot("fxread");
+    let fox = Fox::start(&r, &[]);
+    // `nerve echo` and the Foxglove client read t1/tick at the same time
+    let echo = r
+        .command("nerve")
+        .args(["echo", "t1/tick", "--json", "--count", "300", "--timeout", "5"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("nerve echo");
+    let seen = run_client(&["watch", &fox.url, "foxglove.sdk.v1", "/t1/tick", "20"]);
+    let echoed = echo.wait_with_output().expect("echo");
+    assert!(echoed.status.success(), "nerve echo failed");
+    let echoed = parse(&String::from_utf8_lossy(&echoed.stdout));
+
+    let head = &seen[0];
+    assert_eq!(head["subprotocol"], "foxglove.sdk.v1");
+    assert_eq!(head["serverInfo"]["metadata"]["robot"], r.name.as_str());
+    assert_eq!(head["topics"], serde_json::json!(["/r1/out", "/r2/out", "/t1/tick"]), "every output port a channel");
+    let ch = &head["channel"];
+    assert_eq!((ch["encoding"].as_str(), ch["schemaEncoding"].as_str()), (Some("json"), Some("jsonschema")));
+    assert_eq!(ch["schemaName"], "nerve::Tick");
+    let schema: Value = serde_json::from_str(ch["schema"].as_str().expect("schema")).expect("schema JSON");
+    assert_eq!(schema["properties"]["seq"]["type"], "integer");
+
+    let samples = seen[1]["samples"].as_array().expect("samples");
+    assert_eq!(samples.len(), 20);
+    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).expect("clock").as_nanos();
+    let mut common = 0;
+    for s in samples {
+        // the sample's stamp, on the wall clock as Foxglove's timestamps are
+        let ts: u128 = s["timestamp"].as_str().expect("timestamp").parse().expect("ns");
+        assert!(now.abs_diff(ts) < 60_000_000_000, "timestamp {ts} is not the wall clock's ({now})");
+        if let Some(e) = echoed.iter().find(|e| e["data"]["seq"] == s["data"]["seq"]) {
+            assert_eq!(e["data"], s["data"], "Foxglove's sample differs from nerve echo's");
+            common += 1;
+        }
+    }
+    assert!(common > 0, "no sample seen by both nerve echo and the Foxglove client");
+
+    // the other name, on a relay's port
+    let seen = run_client(&["watch", &fox.url, "foxglove.websocket.v1", "/r1/out", "3"]);
+    assert_eq!(seen[0]["subprotocol"], "foxglove.websocket.v1");
+    assert_eq!(seen[1]["samples"].as_array().map(Vec::len), Some(3));
+
+    // an agent that leaves takes its channel with it
+    r.ok(&["stop", "r1"]);
+    let mut topics = Value::Null;
+    let gone = wait_until(Duration::from_secs(10), || {
+        topics = run_client(&["watch", &fox.url, "foxglove.sdk.v1", "/t1/tick", "1"])[0]["topics"].clone();
+        topics == serde_json::json!(["/r2/out", "/t1/tick"])
+    });
+    assert!(gone, "/r1/out still advertised after r1 stopped: {topics}");
+    let stats = fox.stop();
+    assert!(stats.contains(" 0 refused"), "{stats}");
+}
+
+#[test]
+fn unknown_subprotocols_foreign_origins_and_wrong_tokens_are_refused() {
+    let r = robot("fxrefuse");
+    let fox = Fox::start(&r, &[]);
+    let said = run_client(&["refused", &fox.url, "foxglove.websocket.v2"]);
+    assert_eq!(said[0]["status"], 400, "{said:?}");
+    assert!(said[0]["body"].as_str().is_some_and(|b| b.contains("foxglove.sdk.v1")), "{said:?}");
+    let said = run_client(&["refused", &fox.url, "foxglove.sdk.v1", "https://evil.example"]);
+    assert_eq!(said[0]["status"], 403, "{said:?}");
+    let said = run_client(&["refused", &format!("{}/?token=wrong-token-0123456789", fox.url), "foxglove.sdk.v1"]);
+    assert_eq!(said[0]["status"], 401, "{said:?}");
+    // a page of this machine is let in
+    let said = run_client(&["watch", &fox.url, "foxglove.sdk.v1", "/t1/tick", "1"]);
+    assert_eq!(said[1]["samples"].as_array().map(Vec::len), Some(1));
+    let stats = fox.stop();
+    assert!(stats.contains("1 client(s) served, 3 refused"), "{stats}");
+}
+
+#[test]
+fn a_client_that_stops_reading_is_dropped_without_harm_to_the_robot() {
+    let r = robot("fxstall");
+    let fox = Fox::start(&r, &["--stall-timeout", "1", "--queue", "16"]);
+    let mut stalled = client(&["stall", &fox.url, "/t1/tick", "4000"]);
+    let lines = lines_of(&mut stalled);
+    assert_eq!(next_line(&lines)["paused"], true);
+    // while it reads nothing: the robot ticks on, and another client is served
+    let before = r.echo("t1/tick", 1)[0]["seq"].as_u64().expect("seq");
+    let seen = run_client(&["watch", &fox.url, "foxglove.sdk.v1", "/t1/tick", "5"]);
+    assert_eq!(seen[1]["samples"].as_array().map(Vec::len), Some(5));
+    let after = r.echo("t1/tick", 1)[0]["seq"].as_u64().expect("seq");
+    assert!(after > before, "the ticker stopped while a client stalled ({before} -> {after})");
+    assert!(r.echo("r1/out", 3).len() == 3, "the relay stopped while a client stalled");
+    // once it reads again it finds the server closed it
+    let end = next_line(&lines);
+    assert_eq!(end["closed"], true, "{end}");
+    assert!(stalled.wait().expect("client").success());
+    let stats = fox.stop();
+    assert!(stats.contains("1 client(s) disconnected for not reading"), "{stats}");
+}
+
+#[test]
+fn parameters_and_publishing_need_the_token_and_go_through_the_router() {
+    let r = robot("fxparam");
+    let fox = Fox::start(&r, &["--publish"]);
+    let with = format!("{}/?token={TOKEN}", fox.url);
+
+    // without the token: read, not changed
+    let said = run_client(&["params", &fox.url, "/t1/step", "3", "0"]);
+    let p = &said[0];
+    assert_eq!(p["serverInfo"]["metadata"]["edit"], "false");
+    assert!(!p["serverInfo"]["capabilities"].as_array().expect("caps").contains(&"clientPublish".into()));
+    assert_eq!(p["before"]["value"], 1);
+    assert!(p["setRefusal"]["message"].as_str().is_some_and(|m| m.contains("edit token")), "{p}");
+    assert_eq!(p["after"][0]["value"], 1, "changed without the token");
+
+    // with it: set, and a value the agent refuses refused with its reason
+    let said = run_client(&["params", &with, "/t1/step", "3", "0"]);
+    let p = &said[0];
+    assert_eq!(p["set"][0]["value"], 3, "{p}");
+    assert_eq!(p["refusal"]["level"], 2);
+    assert!(p["refusal"]["message"].as_str().is_some_and(|m| m.contains("step is in")), "{p}");
+    assert_eq!(p["after"][0]["value"], 3);
+    assert_eq!(r.ok(&["param", "get", "t1", "step"]).trim(), "3");
+
+    // a message into r1's input comes out of r1
+    let echo = r
+        .command("nerve")
+        .args(["echo", "r1/out", "--json", "--count", "400", "--timeout", "5"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("nerve echo");
+    let said = run_client(&["publish", &with, "/r1/in", r#"{"seq": 777777}"#, "5"]);
+    assert!(said[0]["capabilities"].as_array().expect("caps").contains(&"clientPublish".into()));
+    assert!(
+        said[1]["refusal"]["message"].as_str().is_some_and(|m| m.contains("has no field `nope`")),
+        "a message of the wrong shape was not refused: {said:?}"
+    );
+    let out = echo.wait_with_output().expect("echo");
+    let relayed = parse(&String::from_utf8_lossy(&out.stdout));
+    let ours = relayed.iter().filter(|e| e["data"]["seq"] == 777777).count();
+    assert!(ours >= 1, "no published message came out of r1");
+    // without --publish nobody may
+    let stats = fox.stop();
+    assert!(stats.contains("0 refused"), "{stats}");
+    let fox = Fox::start(&r, &[]);
+    let said = run_client(&["publish", &format!("{}/?token={TOKEN}", fox.url), "/r1/in", "{}", "0"]);
+    assert!(
+        said[1]["statuses"].to_string().contains("does not take publishing"),
+        "publishing taken without --publish: {said:?}"
+    );
+}
+
+#[test]
+fn the_connection_graph_follows_nerve_connect() {
+    let r = robot("fxgraph");
+    let fox = Fox::start(&r, &[]);
+    let mut watcher = client(&["graph", &fox.url, "/r1/out"]);
+    let lines = lines_of(&mut watcher);
+    let first = next_line(&lines);
+    let t1 = first["first"]["subscribedTopics"]
+        .as_array()
+        .and_then(|t| t.iter().find(|t| t["name"] == "/t1/tick"))
+        .map(|t| t["subscriberIds"].clone());
+    assert_eq!(t1, Some(serde_json::json!(["r1", "r2"])), "{first}");
+    r.ok(&["connect", "r1/out", "r2/in"]);
+    let changed = next_line(&lines);
+    let r1 = changed["changed"]["subscribedTopics"]
+        .as_array()
+        .and_then(|t| t.iter().find(|t| t["name"] == "/r1/out"))
+        .map(|t| t["subscriberIds"].clone());
+    assert_eq!(r1, Some(serde_json::json!(["r2"])), "{changed}");
+    assert!(watcher.wait().expect("client").success());
+}
+
+#[test]
+fn subscribe_cycles_leave_the_servers_memory_flat() {
+    let r = robot("fxcycle");
+    let fox = Fox::start(&r, &[]);
+    // the first hundred warm up allocators and the port's first opening
+    run_client(&["cycles", &fox.url, "/t1/tick", "100"]);
+    let warm = fox.rss_kb();
+    run_client(&["cycles", &fox.url, "/t1/tick", "100"]);
+    let after = fox.rss_kb();
+    assert!(after <= warm + 2048, "100 subscribe/unsubscribe cycles grew nerve foxglove from {warm} kB to {after} kB");
+}
