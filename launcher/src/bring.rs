@@ -2,15 +2,17 @@
 //! `nerve demo` and `nerve calibrate` share, so that none of them calls
 //! another command.
 //!
-//! * Up ([`up`], [`launch_robot`]): the router if none answers, every agent
-//!   handed to its supervision, the agents not yet running started as
-//!   daemons in parallel (a progress line each), a wait until each has
-//!   registered, then the connections.
+//! * Up ([`up`], [`launch_robot`]): the router if none answers; one
+//!   [`CliRequest::Start`] for every agent, which the router hands to its
+//!   supervision and starts in parallel if not yet running (the router is
+//!   the only process that starts agents: nothing here spawns one); a
+//!   progress line each, with a failed agent's message and last log lines;
+//!   one wait until each has registered, then the connections.
 //! * Down ([`down`], [`clean`]): ask the router to stop every agent and
 //!   itself, then a grace → SIGTERM → SIGKILL ladder for every process of
 //!   the robot (those with a pid file too); then remove pid files of dead
 //!   processes, stale iceoryx2 resources and, once nothing of the robot
-//!   runs, its shared-memory files.
+//!   runs, its shared-memory files and its simulated clock's page.
 
 use crate::client::RouterSession;
 use crate::launch_file::{self, LaunchFile};
@@ -51,66 +53,97 @@ pub fn ensure_router(world: &World) -> Result<()> {
 /// How many of its last log lines a launch shows of an agent that failed to start.
 const FAILED_LOG_LINES: usize = 12;
 
-/// Starts every agent not already running, in parallel; returns the names of
-/// those that failed.
-fn start_agents(world: &World, file: &LaunchFile, running: &[String]) -> Result<Vec<String>> {
-    let n = file.agents.len();
-    let mut children = Vec::new();
-    for spec in &file.agents {
-        if running.contains(&spec.name) {
-            children.push((spec, None));
-            continue;
-        }
-        let argv = spec.argv(world.robot().as_str());
-        // from the log's end now: a failure shows this start's lines only
-        let log = crate::agent_logs::Tail::from_end(world.log_file(&spec.name));
-        let child = Command::new(&argv[0])
-            .args(&argv[1..])
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .with_context(|| format!("cannot start {}", argv[0]))?;
-        children.push((spec, Some((child, log))));
+/// How long a command waits for the router to answer a [`CliRequest::Start`]:
+/// the router answers once every start-up process has ended, and an agent's
+/// start-up waits up to a minute for its own `start` before it reports
+/// ready anyway (`agent_sdk::runtime`).
+pub const START_WAIT: Duration = Duration::from_secs(90);
+
+/// This command's environment, for the agents the router starts: they get
+/// what they would have inherited from it (`NERVE_SIM_CLOCK`,
+/// `PYTHONPATH`, `RUST_LOG`...), not the router's. Variables that are not
+/// UTF-8 are left out.
+pub fn environment() -> Vec<(String, String)> {
+    std::env::vars_os().filter_map(|(k, v)| Some((k.into_string().ok()?, v.into_string().ok()?))).collect()
+}
+
+/// Asks the router to start `agents` (it spawns them in parallel; nothing
+/// here starts a process) and returns the outcomes in the same order.
+pub fn ask_start(session: &RouterSession, agents: Vec<proto::StartSpec>) -> Result<Vec<proto::StartOutcome>> {
+    let n = agents.len();
+    match session.call_within(CliRequest::Start { agents }, START_WAIT)? {
+        RouterReply::Started(v) if v.len() == n => Ok(v),
+        other => bail!("unexpected reply from the router to a start of {n} agent(s): {other:?}"),
     }
-    let mut failed = Vec::new();
-    for (i, (spec, child)) in children.into_iter().enumerate() {
-        let Some((child, mut log)) = child else {
-            eprintln!("  [{}/{n}] {} ({}) already running", i + 1, spec.name, spec.kind);
-            continue;
-        };
-        // Both pipes are read while waiting (wait_with_output drains them
-        // together): an agent that wrote more than a pipe holds (64 KiB)
-        // before it daemonized would otherwise block on its write while the
-        // launch blocked on its exit.
-        let output = child.wait_with_output()?;
-        let out = String::from_utf8_lossy(&output.stdout);
-        let err = String::from_utf8_lossy(&output.stderr);
-        if output.status.success() {
-            eprintln!(
+}
+
+/// Has the router start every agent of `file` not already running, each
+/// handed to its supervision first (so that an agent dying right after it
+/// starts is restarted), and prints a progress line for each; returns the
+/// names of those already running and of those that failed.
+fn start_agents(session: &RouterSession, world: &World, file: &LaunchFile) -> Result<(Vec<String>, Vec<String>)> {
+    let n = file.agents.len();
+    let cwd = std::env::current_dir().ok().map(|d| d.display().to_string());
+    let env = environment();
+    // from the logs' ends now: a failure shows this start's lines only
+    let mut logs: Vec<crate::agent_logs::Tail> =
+        file.agents.iter().map(|a| crate::agent_logs::Tail::from_end(world.log_file(&a.name))).collect();
+    let specs = file
+        .agents
+        .iter()
+        .map(|spec| proto::StartSpec {
+            agent: proto::Supervision {
+                name: spec.name.clone(),
+                argv: spec.argv(world.robot().as_str()),
+                policy: spec.restart,
+                max_restarts: spec.max_restarts,
+                window_ns: agent_sdk::clock::nanos(spec.restart_window),
+                backoff_ns: agent_sdk::clock::nanos(spec.backoff),
+                importance: spec.importance,
+                cwd: cwd.clone(),
+            },
+            supervise: true,
+            env: Some(env.clone()),
+        })
+        .collect();
+    let outcomes = ask_start(session, specs).context("the router could not start the agents")?;
+    let (mut running, mut failed) = (Vec::new(), Vec::new());
+    for (i, ((spec, outcome), log)) in file.agents.iter().zip(outcomes).zip(&mut logs).enumerate() {
+        match outcome.result {
+            proto::StartResult::Running { .. } => {
+                eprintln!("  [{}/{n}] {} ({}) already running", i + 1, spec.name, spec.kind);
+                running.push(spec.name.clone());
+            }
+            proto::StartResult::Started { said } => eprintln!(
                 "  [{}/{n}] {} ({}) {}",
                 i + 1,
                 spec.name,
                 spec.kind,
-                out.trim().trim_start_matches(&format!("{} ", spec.name))
-            );
-        } else {
-            failed.push(spec.name.clone());
-            let log_file = world.log_file(&spec.name).display().to_string();
-            let why = err.trim().trim_start_matches("error: ");
-            // the agent's own message may name its log already
-            let log_note = if why.contains(&log_file) { String::new() } else { format!(" (log: {log_file})") };
-            eprintln!("  [{}/{n}] {} ({}) FAILED: {why}{log_note}", i + 1, spec.name, spec.kind);
-            // what the agent wrote before it went: a failure without a
-            // message (a panic, a signal) is otherwise read in another window
-            let lines = crate::agent_logs::without_backtraces(&log.poll());
-            let lines: Vec<&String> = lines.iter().skip_while(|l| l.trim().is_empty()).collect();
-            for l in &lines[lines.len().saturating_sub(FAILED_LOG_LINES)..] {
-                eprintln!("        | {l}");
+                said.trim_start_matches(&format!("{} ", spec.name))
+            ),
+            proto::StartResult::Failed { status, said } => {
+                failed.push(spec.name.clone());
+                let log_file = world.log_file(&spec.name).display().to_string();
+                let why = said.trim().trim_start_matches("error: ");
+                let why = if why.is_empty() {
+                    format!("its start-up ended with {status} without a word")
+                } else {
+                    why.to_owned()
+                };
+                // the agent's own message may name its log already
+                let log_note = if why.contains(&log_file) { String::new() } else { format!(" (log: {log_file})") };
+                eprintln!("  [{}/{n}] {} ({}) FAILED: {why}{log_note}", i + 1, spec.name, spec.kind);
+                // what the agent wrote before it went: a failure without a
+                // message (a panic, a signal) is otherwise read in another window
+                let lines = crate::agent_logs::without_backtraces(&log.poll());
+                let lines: Vec<&String> = lines.iter().skip_while(|l| l.trim().is_empty()).collect();
+                for l in &lines[lines.len().saturating_sub(FAILED_LOG_LINES)..] {
+                    eprintln!("        | {l}");
+                }
             }
         }
     }
-    Ok(failed)
+    Ok((running, failed))
 }
 
 /// How long one [`CliRequest::WaitRegistered`] may wait: well within the
@@ -176,32 +209,14 @@ pub struct BroughtUp {
     pub wiring_failed: usize,
 }
 
-/// Starts the router if needed, hands every agent to its supervision (first,
-/// so that an agent dying right after it starts is restarted), starts the
-/// agents not yet running, waits until they have registered, and applies the
-/// connections — a progress line for each.
+/// Starts the router if needed, has it start the agents not yet running
+/// (each handed to its supervision first, so that an agent dying right after
+/// it starts is restarted), waits until they have registered, and applies
+/// the connections — a progress line for each.
 pub fn up(world: &World, file: &LaunchFile) -> Result<BroughtUp> {
     ensure_router(world)?;
     let session = RouterSession::open(world)?;
-    let running: Vec<String> = match session.call(CliRequest::Ps)? {
-        RouterReply::Agents(v) => v.into_iter().filter(|a| a.pid > 0).map(|a| a.name).collect(),
-        _ => vec![],
-    };
-    for spec in &file.agents {
-        session
-            .ok(CliRequest::Supervise(proto::Supervision {
-                name: spec.name.clone(),
-                argv: spec.argv(world.robot().as_str()),
-                policy: spec.restart,
-                max_restarts: spec.max_restarts,
-                window_ns: agent_sdk::clock::nanos(spec.restart_window),
-                backoff_ns: agent_sdk::clock::nanos(spec.backoff),
-                importance: spec.importance,
-                cwd: std::env::current_dir().ok().map(|d| d.display().to_string()),
-            }))
-            .with_context(|| format!("the router refused to supervise {}", spec.name))?;
-    }
-    let failed = start_agents(world, file, &running)?;
+    let (running, failed) = start_agents(&session, world, file)?;
     wait_registered(&session, file, &running, &failed)?;
     let mut wiring_failed = 0;
     for ((from, to), done) in file.connections.iter().zip(connect_all(world, file)) {
@@ -392,7 +407,8 @@ pub fn other_clients(world: &World, stopped: &[ProcessHandle]) -> Vec<ProcessHan
 }
 
 /// Removes pid files of dead processes, stale iceoryx2 resources and, when
-/// no process of the robot is left, its shared-memory files.
+/// no process of the robot is left, its shared-memory files and its
+/// simulated clock's page.
 pub fn clean(world: &World) -> usize {
     for (_, pid, path) in pid_files(world) {
         // dead, or its pid now names a process that is not nerve's
@@ -421,6 +437,14 @@ pub fn clean(world: &World) -> usize {
             if std::fs::remove_file(&f).is_ok() {
                 removed += 1;
             }
+        }
+        // the simulated clock's page of a robot on simulated time
+        // (`nerve launch --sim-time`): nothing of the robot maps it any more
+        let page = world.state_dir().join(agent_sdk::simclock::PAGE_FILE);
+        match std::fs::remove_file(&page) {
+            Ok(()) => tracing::info!(page = %page.display(), "removed the simulated clock"),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => tracing::warn!(page = %page.display(), "cannot remove the simulated clock: {e}"),
         }
         // node records live in a folder per node (`nodes/<id>/`): drop it once
         // empty. Never the shared folders themselves (the root, `nodes/`,

@@ -76,10 +76,10 @@ impl RouterSession {
         Ok(self.node.get_or_init(|| n))
     }
 
-    fn raw_call(&self, req: CliRequest) -> Result<RouterReply, ControlError> {
+    fn raw_call(&self, req: CliRequest, timeout: Duration) -> Result<RouterReply, ControlError> {
         let req = RouterRequest::Cli(req);
         match &self.client {
-            Some(client) => client.call(&req, ROUTER_TIMEOUT),
+            Some(client) => client.call(&req, timeout),
             None => {
                 // the connection `open` made, unless it waited so long that
                 // the router may have let it go
@@ -89,14 +89,21 @@ impl RouterSession {
                         service: self.world.tool_socket().display().to_string(),
                     })?,
                 };
-                conn.call(&req, ROUTER_TIMEOUT)
+                conn.call(&req, timeout)
             }
         }
     }
 
     /// Sends a request; a refusal becomes an error with the router's message.
     pub fn call(&self, req: CliRequest) -> Result<RouterReply> {
-        match self.raw_call(req) {
+        self.call_within(req, ROUTER_TIMEOUT)
+    }
+
+    /// [`RouterSession::call`] for a request the router answers late by
+    /// design (a [`CliRequest::Start`] waits for the agents' start-ups):
+    /// waits up to `timeout` for the answer.
+    pub fn call_within(&self, req: CliRequest, timeout: Duration) -> Result<RouterReply> {
+        match self.raw_call(req, timeout) {
             Ok(RouterReply::Error(e)) => Err(anyhow!(e)),
             Ok(reply) => Ok(reply),
             Err(e) => Err(no_router(&self.world, e)),

@@ -608,3 +608,28 @@ fn commands_reach_the_router_over_its_socket_or_iceoryx2() {
     r.down_and_check_clean();
     assert!(!sock.exists(), "`nerve down` removes a dead router's socket");
 }
+
+/// `nerve down` of a robot on simulated time removes its clock's page with
+/// the rest (it stayed behind in the state folder before), and a launch's
+/// agents, started by the router, still get the launch's clock through the
+/// environment the launch hands the router.
+#[test]
+fn down_removes_the_simulated_clock_page() {
+    let r = Robot::new("simdown");
+    let file =
+        r.launch_file("ticker.toml", "robot = \"x\"\n[[agent]]\nname = \"t1\"\nkind = \"ticker\"\nperiod = \"10ms\"\n");
+    let out = r.command("nerve").arg("launch").arg("--sim-time").arg(&file).output().expect("launch");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let page = r.home.join(&r.name).join(agent_sdk::simclock::PAGE_FILE);
+    assert!(page.exists(), "no clock page: {err}");
+    let log_file = r.home.join(&r.name).join("logs/t1.log");
+    assert!(
+        wait_until(Duration::from_secs(10), || std::fs::read_to_string(&log_file)
+            .is_ok_and(|l| l.contains("on simulated time"))),
+        "t1, started by the router, is not on the launch's clock: {}",
+        std::fs::read_to_string(&log_file).unwrap_or_default()
+    );
+    r.down_and_check_clean();
+    assert!(!page.exists(), "nerve down left the clock page {}", page.display());
+}

@@ -1,13 +1,19 @@
 //! `nerve router`, `nerve start` and `nerve exec`: running the router,
-//! hot-adding an agent as a daemon, and running an agent in place of this
-//! process (for systemd units).
+//! hot-adding an agent (the router starts it as a daemon, starting a router
+//! first if none runs: the router is the only process that starts agents),
+//! and running an agent in place of this process (for systemd units: `exec`
+//! replaces this process, it starts none).
 
+use crate::client::RouterSession;
 use crate::kinds::resolve_kind;
 use agent_sdk::World;
 use agent_sdk::daemon::{Readiness, daemonize, init_logging, sd_notify};
 use anyhow::{Context as _, Result, bail};
 use shm_schemas::AgentName;
-use std::process::{Command, ExitCode, Stdio};
+use shm_schemas::control::cli_to_router::{
+    CliRequest, RestartPolicy, RouterReply, StartOutcome, StartResult, StartSpec, Supervision,
+};
+use std::process::{Command, ExitCode};
 
 /// `nerve router`
 #[derive(Debug, clap::Args)]
@@ -103,57 +109,112 @@ pub fn start(world: &World, a: StartArgs) -> Result<ExitCode> {
     AgentName::new(&a.name)?;
     super::shm_space::ensure_shm_space("start an agent")?;
     let exe = resolve_kind(&a.kind)?;
-    let mut cmd = Command::new(&exe);
-    cmd.arg("--robot").arg(world.robot().as_str()).arg("--name").arg(&a.name).arg("--daemon");
+    let mut argv: Vec<String> = vec![
+        exe.display().to_string(),
+        "--robot".into(),
+        world.robot().to_string(),
+        "--name".into(),
+        a.name.clone(),
+        "--daemon".into(),
+    ];
     if let Some(p) = &a.period {
         agent_sdk::clock::parse_duration(p).map_err(anyhow::Error::msg).context("--period")?;
-        cmd.arg("--period").arg(p);
+        argv.extend(["--period".into(), p.clone()]);
     }
     if let Some(l) = &a.log_level {
-        cmd.arg("--log-level").arg(l);
+        argv.extend(["--log-level".into(), l.clone()]);
     }
     if a.suspended {
-        cmd.arg("--suspended");
+        argv.push("--suspended".into());
     }
     if let Some(c) = a.cpu_latency {
-        cmd.arg("--cpu-latency").arg(c.to_string());
+        argv.extend(["--cpu-latency".into(), c.to_string()]);
     }
     if let Some(c) = &a.cpus {
-        cmd.arg("--cpus").arg(c.to_string());
+        argv.extend(["--cpus".into(), c.to_string()]);
     }
     for p in &a.params {
-        cmd.arg("--param").arg(p);
+        argv.extend(["--param".into(), p.clone()]);
     }
     if !a.args.is_empty() {
-        cmd.arg("--").args(&a.args);
+        argv.push("--".into());
+        argv.extend(a.args.iter().cloned());
     }
-    let out = cmd.stdin(Stdio::null()).output().with_context(|| format!("cannot run {}", exe.display()))?;
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    print!("{stdout}");
-    eprint!("{stderr}");
-    // an agent's start-up says "NAME started (pid N, robot R)" or why it failed
-    let said_started = stdout.lines().any(|l| l.starts_with(&format!("{} started (pid ", a.name)));
-    if !out.status.success() {
-        if stderr.trim().is_empty() {
-            bail!(
-                "{} exited with {} without a word: is it a nerve agent? (agents are built on agent-sdk; try `{} --describe`)",
-                exe.display(),
-                out.status,
-                exe.display()
+    // the router starts it (the only process that starts agents): one if none runs
+    crate::bring::ensure_router(world)?;
+    let session = RouterSession::open(world)?;
+    let spec = StartSpec {
+        agent: Supervision {
+            name: a.name.clone(),
+            argv,
+            policy: RestartPolicy::Never,
+            max_restarts: 0,
+            window_ns: 0,
+            backoff_ns: 0,
+            importance: 5,
+            cwd: std::env::current_dir().ok().map(|d| d.display().to_string()),
+        },
+        // a hot-added agent is not supervised, and one supervised by a
+        // launch keeps its policy
+        supervise: false,
+        env: Some(crate::bring::environment()),
+    };
+    let outcome = crate::bring::ask_start(&session, vec![spec])?.into_iter().next();
+    let Some(StartOutcome { result, .. }) = outcome else { bail!("the router answered a start without its outcome") };
+    match result {
+        StartResult::Running { pid } => {
+            eprintln!(
+                "error: {} is already running as pid {pid}; stop it first (`nerve stop {}`), or choose another --name",
+                a.name, a.name
             );
+            Ok(ExitCode::from(1))
         }
-        return Ok(ExitCode::from(1));
+        StartResult::Failed { status, said } => {
+            if said.is_empty() {
+                bail!(
+                    "{} exited with {status} without a word: is it a nerve agent? (agents are built on agent-sdk; try `{} --describe`)",
+                    exe.display(),
+                    exe.display()
+                );
+            }
+            eprintln!("{said}");
+            Ok(ExitCode::from(1))
+        }
+        StartResult::Started { said } => {
+            // an agent's start-up says "NAME started (pid N, robot R)"
+            if !said.lines().any(|l| l.starts_with(&format!("{} started (pid ", a.name))) {
+                if !said.is_empty() {
+                    println!("{said}");
+                }
+                bail!(
+                    "{} exited without starting an agent: it is not a nerve agent, or it ignored --daemon (agents are built on agent-sdk; try `{} --describe`)",
+                    exe.display(),
+                    exe.display()
+                );
+            }
+            println!("{said}");
+            // it is ready once registered (its start-up said so after the
+            // router answered it): the router tells, woken by the registration
+            let ask = CliRequest::WaitRegistered {
+                names: vec![a.name.clone()],
+                timeout_ns: agent_sdk::clock::nanos(REGISTER_WAIT),
+            };
+            match session.call(ask) {
+                Ok(RouterReply::Waited { missing }) if missing.is_empty() => {}
+                Ok(_) => eprintln!(
+                    "warning: {} runs but has not registered with the router within {REGISTER_WAIT:?}; see `nerve logs {}`",
+                    a.name, a.name
+                ),
+                Err(e) => eprintln!("warning: cannot ask the router whether {} registered: {e:#}", a.name),
+            }
+            Ok(ExitCode::SUCCESS)
+        }
     }
-    if !said_started {
-        bail!(
-            "{} exited without starting an agent: it is not a nerve agent, or it ignored --daemon (agents are built on agent-sdk; try `{} --describe`)",
-            exe.display(),
-            exe.display()
-        );
-    }
-    Ok(ExitCode::SUCCESS)
 }
+
+/// How long `nerve start` waits for its agent's registration after its
+/// start-up said it started.
+const REGISTER_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
 
 /// Replaces this process with the agent of kind `a.kind` (same pid, so
 /// systemd's `Type=notify` and watchdog see the agent itself).
