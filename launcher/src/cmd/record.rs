@@ -226,163 +226,24 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
     let mut writer =
         RecordingWriter::new(BufWriter::with_capacity(WRITE_BUFFER, file)).map_err(|e| write_failed(&path, e))?;
 
-    let mut recordings: Vec<Recording> = Vec::new();
-    let add = |k: &Known, writer: &mut Out| -> Result<Option<Recording>> {
-        let Some(schema) = &k.schema else {
-            eprintln!(
-                "skipping {}: its type {} has no schema (the agent registered none and it is not built in)",
-                k.port, k.type_name
-            );
-            return Ok(None);
-        };
-        let service = world.robot().port_service(k.port.agent.as_str(), &k.port.port);
-        let raw = match RawPort::open(&node, &service) {
-            Ok(r) => r,
-            Err(e) => {
-                eprintln!("skipping {}: {e}", k.port);
-                return Ok(None);
-            }
-        };
-        let listener = Rc::new(port_event(&node, &service)?.listener_builder().create().map_err(|e| anyhow!("{e:?}"))?);
-        let channel = writer
-            .add_port(&PortChannel {
-                robot: world.robot().as_str(),
-                agent: k.port.agent.as_str(),
-                port: &k.port.port,
-                type_name: &k.type_name,
-                fingerprint: k.fingerprint,
-                schema,
-            })
-            .map_err(|e| write_failed(&path, e))?;
-        let images = if k.type_name == <RingNotice as Payload>::stable_type_name() {
-            Some(Images::add(writer, world.robot(), &k.port).map_err(|e| write_failed(&path, e))?)
-        } else {
-            None
-        };
-        Ok(Some(Recording {
-            known: k.clone(),
-            raw,
-            listener,
-            channel,
-            messages: 0,
-            bytes: 0,
-            dropped: 0,
-            last_seq: None,
-            images,
-        }))
-    };
-    // ports that could not be recorded (said once, not tried again)
-    let mut skipped: Vec<PortRef> = Vec::new();
+    let mut ports = Ports { world, node: &node, path: &path, recordings: Vec::new(), skipped: Vec::new() };
     for k in known.iter().filter(|k| a.all || wanted.contains(&k.port)) {
-        match add(k, &mut writer)? {
-            Some(r) => recordings.push(r),
-            None => skipped.push(k.port.clone()),
-        }
+        ports.add(k, &mut writer)?;
     }
-    if recordings.is_empty() && !a.all {
+    if ports.recordings.is_empty() && !a.all {
         bail!("nothing to record");
     }
 
     let start = Instant::now();
-    let until = a.duration.map(|d| start + Duration::from_secs_f64(d));
     let tty = std::io::stderr().is_terminal();
-    let mut next_progress = start + Duration::from_secs(1);
-    let mut next_look = start + Duration::from_millis(500);
-    let (mut next_flush, mut next_sync) = (start + FLUSH_PERIOD, start + SYNC_PERIOD);
     let events_node =
         world.node(&format!("cli-{}-events", std::process::id())).context("cannot join the robot's shared memory")?;
     let mut events = EventFollower::new(world, events_node);
     let _ = events.look();
-    // the loop and the file's end; what was recorded is told whether it
-    // ended well or on a failed write (a full disk)
-    let outcome = (|| -> Result<()> {
-        let mut interrupted = false;
-        crate::interrupt::catch();
-        loop {
-            // a fresh wait set each round: --all adds ports as agents appear
-            let ws = WaitSetBuilder::new()
-                .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-                .create::<Ipc>()
-                .map_err(|e| anyhow!("{e:?}"))?;
-            let listeners: Vec<Rc<Listener<Ipc>>> = recordings.iter().map(|r| r.listener.clone()).collect();
-            let mut guards = Vec::new();
-            for l in &listeners {
-                guards.push(ws.attach_notification(l.as_ref()).map_err(|e| anyhow!("{e:?}"))?);
-            }
-            let _tick = ws.attach_interval(Duration::from_millis(100)).map_err(|e| anyhow!("{e:?}"))?;
-            let mut round_done = false;
-            while !round_done {
-                match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
-                    Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
-                        interrupted = true;
-                        break;
-                    }
-                    Ok(_) if crate::interrupt::requested() => {
-                        interrupted = true;
-                        break;
-                    }
-                    Ok(_) => {}
-                    Err(e) => bail!("wait failed: {e:?}"),
-                }
-                for r in &mut recordings {
-                    let _ = r.listener.try_wait(|_| {});
-                    drain(r, &mut writer, &path)?;
-                }
-                let now = Instant::now();
-                if now >= next_flush {
-                    next_flush = now + FLUSH_PERIOD;
-                    writer.flush().map_err(|e| write_failed(&path, e))?;
-                    if now >= next_sync {
-                        next_sync = now + SYNC_PERIOD;
-                        data.sync_data().map_err(|e| write_failed(&path, mcap::McapError::Io(e).into()))?;
-                    }
-                }
-                if until.is_some_and(|u| now >= u) {
-                    break;
-                }
-                if now >= next_progress && !a.quiet {
-                    next_progress = now + Duration::from_secs(1);
-                    progress(&recordings, start.elapsed(), tty);
-                }
-                if a.all && now >= next_look {
-                    next_look = now + Duration::from_millis(500);
-                    // agents started meanwhile (the router's events say when one
-                    // registered): their ports join the recording
-                    let registered = match events.look() {
-                        Look::Events(ev) => ev.iter().any(|e| matches!(e.what, EventKind::Registered { .. })),
-                        Look::Fresh | Look::NoRouter => true,
-                    };
-                    if let Some(known) = registered.then(|| known_ports(world).ok()).flatten() {
-                        let new: Vec<&Known> = known
-                            .iter()
-                            .filter(|k| {
-                                !skipped.contains(&k.port) && !recordings.iter().any(|r| r.known.port == k.port)
-                            })
-                            .collect();
-                        for k in new {
-                            skipped.push(k.port.clone());
-                            if let Some(r) = add(k, &mut writer)? {
-                                skipped.pop();
-                                eprintln!("{}recording {} too", if tty { "\n" } else { "" }, k.port);
-                                recordings.push(r);
-                                round_done = true;
-                            }
-                        }
-                    }
-                }
-            }
-            if interrupted || until.is_some_and(|u| Instant::now() >= u) {
-                break;
-            }
-        }
-        // what arrived until the end
-        for r in &mut recordings {
-            drain(r, &mut writer, &path)?;
-        }
-        writer.finish().map_err(|e| write_failed(&path, e))?;
-        data.sync_data().map_err(|e| write_failed(&path, mcap::McapError::Io(e).into()))?;
-        Ok(())
-    })();
+    // what was recorded is told whether the recording ended well or on a
+    // failed write (a full disk)
+    let outcome = record_until(&mut ports, writer, &data, &mut events, &a, start);
+    let recordings = ports.recordings;
     let totals = sum(&recordings);
     if !a.quiet && tty {
         eprintln!();
@@ -422,6 +283,178 @@ pub fn record(world: &World, a: RecordArgs) -> Result<ExitCode> {
     }
     outcome?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// The ports being recorded, and what adding one needs.
+struct Ports<'a> {
+    world: &'a World,
+    node: &'a Node<Ipc>,
+    /// the file, for the errors of a failed write
+    path: &'a Path,
+    recordings: Vec<Recording>,
+    /// ports that could not be recorded (said once, not tried again)
+    skipped: Vec<PortRef>,
+}
+
+impl Ports<'_> {
+    /// Starts recording `k` into `writer`: its channel (and its image
+    /// channel, for ring notices) and a listener on its port. A port without
+    /// a schema, or one that cannot be opened, is said once and skipped from
+    /// then on. Returns whether `k` is recorded.
+    fn add(&mut self, k: &Known, writer: &mut Out) -> Result<bool> {
+        let Some(schema) = &k.schema else {
+            eprintln!(
+                "skipping {}: its type {} has no schema (the agent registered none and it is not built in)",
+                k.port, k.type_name
+            );
+            self.skipped.push(k.port.clone());
+            return Ok(false);
+        };
+        let robot = self.world.robot();
+        let service = robot.port_service(k.port.agent.as_str(), &k.port.port);
+        let raw = match RawPort::open(self.node, &service) {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("skipping {}: {e}", k.port);
+                self.skipped.push(k.port.clone());
+                return Ok(false);
+            }
+        };
+        let listener =
+            Rc::new(port_event(self.node, &service)?.listener_builder().create().map_err(|e| anyhow!("{e:?}"))?);
+        let channel = writer
+            .add_port(&PortChannel {
+                robot: robot.as_str(),
+                agent: k.port.agent.as_str(),
+                port: &k.port.port,
+                type_name: &k.type_name,
+                fingerprint: k.fingerprint,
+                schema,
+            })
+            .map_err(|e| write_failed(self.path, e))?;
+        let images = if k.type_name == <RingNotice as Payload>::stable_type_name() {
+            Some(Images::add(writer, robot, &k.port).map_err(|e| write_failed(self.path, e))?)
+        } else {
+            None
+        };
+        self.recordings.push(Recording {
+            known: k.clone(),
+            raw,
+            listener,
+            channel,
+            messages: 0,
+            bytes: 0,
+            dropped: 0,
+            last_seq: None,
+            images,
+        });
+        Ok(true)
+    }
+
+    /// With `--all`: the ports of agents registered since the last look
+    /// (the router's `events`) join the recording. Returns whether one did.
+    fn add_new(&mut self, events: &mut EventFollower, writer: &mut Out, tty: bool) -> Result<bool> {
+        let registered = match events.look() {
+            Look::Events(ev) => ev.iter().any(|e| matches!(e.what, EventKind::Registered { .. })),
+            Look::Fresh | Look::NoRouter => true,
+        };
+        let Some(known) = registered.then(|| known_ports(self.world).ok()).flatten() else { return Ok(false) };
+        let mut added = false;
+        for k in &known {
+            let tried = self.skipped.contains(&k.port) || self.recordings.iter().any(|r| r.known.port == k.port);
+            if !tried && self.add(k, writer)? {
+                eprintln!("{}recording {} too", if tty { "\n" } else { "" }, k.port);
+                added = true;
+            }
+        }
+        Ok(added)
+    }
+}
+
+/// The recording: every port's samples into `writer` until `--duration`
+/// ends or Ctrl-C, with the chunk closed every [`FLUSH_PERIOD`] and `data`
+/// synced every [`SYNC_PERIOD`], the progress line, and with `--all` the
+/// ports of agents started meanwhile; then the file's end. A failed write
+/// stops it with the error of [`write_failed`].
+fn record_until(
+    ports: &mut Ports,
+    mut writer: Out,
+    data: &std::fs::File,
+    events: &mut EventFollower,
+    a: &RecordArgs,
+    start: Instant,
+) -> Result<()> {
+    let path = ports.path;
+    let until = a.duration.map(|d| start + Duration::from_secs_f64(d));
+    let tty = std::io::stderr().is_terminal();
+    let mut next_progress = start + Duration::from_secs(1);
+    let mut next_look = start + Duration::from_millis(500);
+    let (mut next_flush, mut next_sync) = (start + FLUSH_PERIOD, start + SYNC_PERIOD);
+    let mut interrupted = false;
+    crate::interrupt::catch();
+    loop {
+        // a fresh wait set each round: --all adds ports as agents appear
+        let ws = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<Ipc>()
+            .map_err(|e| anyhow!("{e:?}"))?;
+        let listeners: Vec<Rc<Listener<Ipc>>> = ports.recordings.iter().map(|r| r.listener.clone()).collect();
+        let mut guards = Vec::new();
+        for l in &listeners {
+            guards.push(ws.attach_notification(l.as_ref()).map_err(|e| anyhow!("{e:?}"))?);
+        }
+        let _tick = ws.attach_interval(Duration::from_millis(100)).map_err(|e| anyhow!("{e:?}"))?;
+        let mut round_done = false;
+        while !round_done {
+            match ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                    interrupted = true;
+                    break;
+                }
+                Ok(_) if crate::interrupt::requested() => {
+                    interrupted = true;
+                    break;
+                }
+                Ok(_) => {}
+                Err(e) => bail!("wait failed: {e:?}"),
+            }
+            for r in &mut ports.recordings {
+                let _ = r.listener.try_wait(|_| {});
+                drain(r, &mut writer, path)?;
+            }
+            let now = Instant::now();
+            if now >= next_flush {
+                next_flush = now + FLUSH_PERIOD;
+                writer.flush().map_err(|e| write_failed(path, e))?;
+                if now >= next_sync {
+                    next_sync = now + SYNC_PERIOD;
+                    data.sync_data().map_err(|e| write_failed(path, mcap::McapError::Io(e).into()))?;
+                }
+            }
+            if until.is_some_and(|u| now >= u) {
+                break;
+            }
+            if now >= next_progress && !a.quiet {
+                next_progress = now + Duration::from_secs(1);
+                progress(&ports.recordings, start.elapsed(), tty);
+            }
+            if a.all && now >= next_look {
+                next_look = now + Duration::from_millis(500);
+                // a new port needs a new wait set
+                round_done = ports.add_new(events, &mut writer, tty)?;
+            }
+        }
+        if interrupted || until.is_some_and(|u| Instant::now() >= u) {
+            break;
+        }
+    }
+    // what arrived until the end
+    for r in &mut ports.recordings {
+        drain(r, &mut writer, path)?;
+    }
+    writer.finish().map_err(|e| write_failed(path, e))?;
+    data.sync_data().map_err(|e| write_failed(path, mcap::McapError::Io(e).into()))?;
+    Ok(())
 }
 
 /// Writes every waiting sample of `r` (and the frames its notices name) to
