@@ -12,9 +12,11 @@ hashes, CDR). Its one argument is a JSON object:
   settle_s    how long to wait after, for the robot to stop
 
 It finds the node and its topics in the liveliness tokens (`@ros2_lv/...`),
-subscribes to /odom and /tf by the key the tokens give, decodes them with
-rosbags, publishes the Twist with the attachment rmw_zenoh puts on every
-message (and a publisher token of its own), and prints one JSON object.
+subscribes to /odom, /tf and /scan by the keys the tokens give, decodes
+them with rosbags, publishes the Twist with the attachment rmw_zenoh puts
+on every message (and a publisher token of its own), then a malformed
+message and a sideways Twist that the robot must refuse, and prints one
+JSON object.
 Every wait is bounded; any failure prints {"error": ...} and exits 1.
 """
 
@@ -50,7 +52,7 @@ session = zenoh.open(conf)
 dom = A["domain"]
 
 # 1. the graph, as rmw_zenoh's graph cache reads it
-want = {("NN", None), ("MP", "/odom"), ("MP", "/tf"), ("MS", "/cmd_vel")}
+want = {("NN", None), ("MP", "/odom"), ("MP", "/tf"), ("MP", "/scan"), ("MS", "/cmd_vel")}
 found = {}
 deadline = time.monotonic() + 15
 while time.monotonic() < deadline:
@@ -78,7 +80,8 @@ for (kind, topic), parts in found.items():
     ros_type, hash_ = parts[10], parts[11]
     tokens[topic] = {"kind": kind, "type": ros_type, "hash": hash_, "qos": parts[12], "zid": parts[2]}
 
-expect = {"/odom": "nav_msgs/msg/Odometry", "/tf": "tf2_msgs/msg/TFMessage", "/cmd_vel": "geometry_msgs/msg/Twist"}
+expect = {"/odom": "nav_msgs/msg/Odometry", "/tf": "tf2_msgs/msg/TFMessage", "/scan": "sensor_msgs/msg/LaserScan",
+          "/cmd_vel": "geometry_msgs/msg/Twist"}
 for topic, ros_type in expect.items():
     t = tokens[topic]
     if t["type"] != dds(ros_type):
@@ -92,9 +95,9 @@ def key(topic):
     return f"{dom}/{topic.lstrip('/')}/{t['type']}/{t['hash']}"
 
 
-# 2. /odom and /tf, decoded by rosbags
+# 2. /odom, /tf and /scan, decoded by rosbags
 lock = threading.Lock()
-odoms, tfs, atts = [], [], []
+odoms, tfs, scans, atts = [], [], [], []
 
 
 def on_odom(sample):
@@ -114,7 +117,16 @@ def on_tf(sample):
         tfs.append([(t.header.frame_id, t.child_frame_id, t.transform.translation.x) for t in m.transforms])
 
 
-subs = [session.declare_subscriber(key("/odom"), on_odom), session.declare_subscriber(key("/tf"), on_tf)]
+def on_scan(sample):
+    m = TS.deserialize_cdr(bytes(sample.payload.to_bytes()), "sensor_msgs/msg/LaserScan")
+    with lock:
+        # JSON has no infinity: a ray without echo is null
+        scans.append({"frame": m.header.frame_id, "angle_increment": float(m.angle_increment),
+                      "ranges": [float(r) if r != float("inf") else None for r in m.ranges]})
+
+
+subs = [session.declare_subscriber(key("/odom"), on_odom), session.declare_subscriber(key("/tf"), on_tf),
+        session.declare_subscriber(key("/scan"), on_scan)]
 
 
 def wait_for(cond, secs, what):
@@ -127,7 +139,7 @@ def wait_for(cond, secs, what):
     fail(f"timed out waiting for {what}")
 
 
-wait_for(lambda: len(odoms) >= 5 and len(tfs) >= 1, 15, "5 /odom and 1 /tf messages")
+wait_for(lambda: len(odoms) >= 5 and len(tfs) >= 1 and len(scans) >= 1, 15, "5 /odom, 1 /tf and 1 /scan messages")
 with lock:
     first = dict(odoms[-1])
 
@@ -148,10 +160,19 @@ while time.monotonic() < end:
     att = struct.pack("<qqB", seq, time.time_ns(), 16) + gid
     pub.put(cdr, attachment=att)
     time.sleep(0.1)
+# two messages the robot must refuse: bytes that are not a Twist, and a
+# Twist asking for sideways motion
+seq += 1
+pub.put(b"\x00\x01\x00\x00\x07", attachment=struct.pack("<qqB", seq, time.time_ns(), 16) + gid)
+side = Twist(linear=Vector3(x=0.0, y=0.5, z=0.0), angular=Vector3(x=0.0, y=0.0, z=0.0))
+seq += 1
+pub.put(bytes(TS.serialize_cdr(side, "geometry_msgs/msg/Twist")),
+        attachment=struct.pack("<qqB", seq, time.time_ns(), 16) + gid)
 time.sleep(A["settle_s"])
 with lock:
-    n0 = len(odoms)
-wait_for(lambda: len(odoms) >= n0 + 3, 10, "3 more /odom messages after the robot stopped")
+    n0, s0 = len(odoms), len(scans)
+wait_for(lambda: len(odoms) >= n0 + 3 and len(scans) >= s0 + 2, 10,
+         "3 more /odom and 2 more /scan messages after the robot stopped")
 with lock:
     last = dict(odoms[-1])
     # the attachments: 33 bytes, sequence numbers rising, one GID
@@ -162,6 +183,7 @@ with lock:
     now_ns = time.time_ns()
     stamps_ok = all(abs(now_ns - p[1]) < 600e9 and p[2] == 16 for p in parsed)
     tf_last = tfs[-1]
+    scan_last = scans[-1]
 
 for s in subs:
     s.undeclare()
@@ -174,6 +196,7 @@ print(json.dumps({
     "last": last,
     "odom_count": len(odoms),
     "tf_last": tf_last,
+    "scan_last": scan_last,
     "bad_attachments": bad,
     "seq_rising": len(seqs) > 0 and all(b > a for a, b in zip(seqs, seqs[1:])),
     "gids": len(gids),

@@ -4,12 +4,12 @@
 //! client of that router, and a Python peer playing a ROS 2 node exactly as
 //! rmw_zenoh would (`tests/py/ros2_peer.py`: PyPI eclipse-zenoh and
 //! rosbags, no ROS installation). The peer finds the robot's node and
-//! topics from the liveliness tokens, decodes /odom and /tf with rosbags,
-//! and drives the robot with a CDR Twist on /cmd_vel; the test checks the
-//! decoded odometry against `nerve echo motor/odom`.
+//! topics from the liveliness tokens, decodes /odom, /tf and /scan with
+//! rosbags, and drives the robot with a CDR Twist on /cmd_vel; the test
+//! checks the decoded odometry and sonar ranges against `nerve echo`.
 //!
 //! Needs the binaries: `cargo build -p nerve -p nerve-sim -p nerve-motor -p
-//! nerve-ros2 --bins`, and `target/nerve-py` with eclipse-zenoh and rosbags
+//! nerve-sonar -p nerve-ros2 --bins`, and `target/nerve-py` with eclipse-zenoh and rosbags
 //! (`.ci/run` installs them).
 
 use nerve_tests::{ChildGuard, Robot, bin_dir, free_port, write_file};
@@ -81,6 +81,13 @@ input = "tf"
 from = "nerve::Odometry"
 topic = "/tf"
 type = "tf2_msgs/msg/TFMessage"
+[[publish]]
+input = "scan"
+from = "nerve::SonarScan"
+topic = "/scan"
+type = "sensor_msgs/msg/LaserScan"
+frame_id = "base_link"
+reliability = "best_effort"
 [[subscribe]]
 topic = "/cmd_vel"
 type = "geometry_msgs/msg/Twist"
@@ -104,6 +111,10 @@ kind = "motor"
 device = "{{state}}/dev/motor"
 args = ["--robot-model", "h1"]
 [[agent]]
+name = "sonar"
+kind = "sonar"
+device = "{{state}}/dev/sonar"
+[[agent]]
 name = "ros2"
 kind = "ros2"
 args = ["--config", "{}"]
@@ -113,6 +124,9 @@ to = "ros2/odom"
 [[connect]]
 from = "motor/odom"
 to = "ros2/tf"
+[[connect]]
+from = "sonar/scan"
+to = "ros2/scan"
 [[connect]]
 from = "ros2/cmd_vel"
 to = "motor/cmd"
@@ -142,8 +156,10 @@ to = "motor/cmd"
     let tokens = &got["tokens"];
     assert_eq!(tokens["/odom"]["kind"], "MP", "{tokens}");
     assert_eq!(tokens["/tf"]["kind"], "MP", "{tokens}");
+    assert_eq!(tokens["/scan"]["kind"], "MP", "{tokens}");
     assert_eq!(tokens["/cmd_vel"]["kind"], "MS", "{tokens}");
     assert_eq!(tokens["/odom"]["qos"], "::,10:,:,:,,", "{tokens}");
+    assert_eq!(tokens["/scan"]["qos"], "2::,10:,:,:,,", "best effort: {tokens}");
     assert_eq!(tokens["/odom"]["zid"], r.figure("ros2", "session").as_str(), "the tokens carry the agent's session id");
 
     // the attachment of every /odom message: 33 bytes, rising sequence
@@ -164,6 +180,12 @@ to = "motor/cmd"
     // the dead man stopped it once the Twists ended
     assert!(f(last, "v").abs() < 1e-6 && f(last, "omega").abs() < 1e-6, "stopped: {last}");
     assert!(r.figure_u64("ros2", "received/cmd_vel") >= 10, "{:?}", r.figures("ros2"));
+    // the malformed message and the sideways Twist were refused, not obeyed
+    assert!(
+        nerve_tests::wait_until(Duration::from_secs(5), || r.figure_u64("ros2", "refused/cmd_vel") == 2),
+        "two refusals: {:?}",
+        r.figures("ros2")
+    );
 
     // the values rosbags decoded are nerve's own: the robot stands still, so
     // `nerve echo motor/odom` shows the pose the peer saw last
@@ -178,6 +200,27 @@ to = "motor/cmd"
     let tf = &got["tf_last"][0];
     assert_eq!((tf[0].as_str(), tf[1].as_str()), (Some("odom"), Some("base_link")), "{tf}");
     assert!((tf[2].as_f64().unwrap_or(f64::NAN) - f(d, "x")).abs() < 1e-9, "/tf x {tf} / nerve {d}");
+
+    // the sonar ring as a LaserScan: 12 rays 30 degrees apart, each the
+    // range nerve shows, a direction without echo +inf (null here)
+    let scan = &got["scan_last"];
+    assert_eq!(scan["frame"], "base_link", "{scan}");
+    assert!((f(scan, "angle_increment") - 30f64.to_radians()).abs() < 1e-6, "{scan}");
+    let echo = r.echo("sonar/scan", 1);
+    let d = &echo[0]["data"];
+    let rays = scan["ranges"].as_array().expect("ranges");
+    assert_eq!(rays.len(), 12, "{scan}");
+    let mut echoes = 0;
+    for (i, ray) in rays.iter().enumerate() {
+        if d["valid"][i] == 1 {
+            echoes += 1;
+            let want = d["ranges_m"][i].as_f64().unwrap_or(f64::NAN);
+            assert!((ray.as_f64().unwrap_or(f64::NAN) - want).abs() < 1e-6, "ray {i}: ROS {ray} / nerve {d}");
+        } else {
+            assert!(ray.is_null(), "ray {i} without echo: ROS {ray} / nerve {d}");
+        }
+    }
+    assert!(echoes > 0, "the sonar hears some wall: {d}");
 
     r.down_and_check_clean();
     router.stop(Duration::from_secs(2));
