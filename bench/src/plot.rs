@@ -4,6 +4,7 @@
 
 use crate::hop::{HopReport, TRANSPORTS};
 use anyhow::{Result, anyhow};
+use nerve_plot_font::figure::write_png_with;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -31,15 +32,6 @@ pub(crate) fn colour(t: &str) -> RGBColor {
         "dora-pmqos" | "dora-5ms-pmqos" => RGBColor(185, 140, 95),
         _ => RGBColor(120, 120, 120),
     }
-}
-
-/// A white PNG canvas of `size` pixels that writes to `path`, with the
-/// font of plot-font/ registered: the set-up of every figure of the benchmarks.
-pub(crate) fn canvas(path: &Path, size: (u32, u32)) -> Result<DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>> {
-    nerve_plot_font::register();
-    let root = BitMapBackend::new(path, size).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| anyhow!("plot {}: {x}", path.display()))?;
-    Ok(root)
 }
 
 /// A logarithmic y range (µs) that holds every value of `ys`, with a margin.
@@ -102,51 +94,52 @@ where
 
 /// Draws `report` into `path` (PNG, 1000x640).
 pub fn hop_png(report: &HopReport, path: &Path) -> Result<()> {
-    let e = |x: &dyn std::fmt::Display| anyhow!("plot {}: {x}", path.display());
-    let root = canvas(path, (1000, 640))?;
-    let ys: Vec<f64> =
-        report.results.iter().flat_map(|r| [r.rtt.p50_ns, r.rtt.p99_ns]).map(|v| v as f64 / 1e3).collect();
-    let title = format!(
-        "one-hop round trip, 2 processes, event-driven and polling ({} CPUs, {})",
-        report.head.machine.nproc,
-        report.head.machine.cpu.split_whitespace().take(4).collect::<Vec<_>>().join(" ")
-    );
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d((4f64..2e7f64).log_scale(), log_range(&ys).log_scale())
-        .map_err(|x| e(&x))?;
-    chart
-        .configure_mesh()
-        .x_desc("payload bytes (8 B, 320x240 RGB, 1920x1080 RGB)")
-        .y_desc("round trip, µs (solid: median, thin: p99)")
-        .x_label_formatter(&|v| {
-            if *v >= 1e6 {
-                format!("{:.0}M", v / 1e6)
-            } else if *v >= 1e3 {
-                format!("{:.0}k", v / 1e3)
-            } else {
-                format!("{v:.0}")
+    // the figure's set-up (font, background, file) is nerve_plot_font::figure's
+    Ok(write_png_with(path, (1000, 640), |root| {
+        let e = |x: &dyn std::fmt::Display| anyhow!("plot {}: {x}", path.display());
+        let ys: Vec<f64> =
+            report.results.iter().flat_map(|r| [r.rtt.p50_ns, r.rtt.p99_ns]).map(|v| v as f64 / 1e3).collect();
+        let title = format!(
+            "one-hop round trip, 2 processes, event-driven and polling ({} CPUs, {})",
+            report.head.machine.nproc,
+            report.head.machine.cpu.split_whitespace().take(4).collect::<Vec<_>>().join(" ")
+        );
+        let mut chart = ChartBuilder::on(root)
+            .caption(title, ("sans-serif", 20))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d((4f64..2e7f64).log_scale(), log_range(&ys).log_scale())
+            .map_err(|x| e(&x))?;
+        chart
+            .configure_mesh()
+            .x_desc("payload bytes (8 B, 320x240 RGB, 1920x1080 RGB)")
+            .y_desc("round trip, µs (solid: median, thin: p99)")
+            .x_label_formatter(&|v| {
+                if *v >= 1e6 {
+                    format!("{:.0}M", v / 1e6)
+                } else if *v >= 1e3 {
+                    format!("{:.0}k", v / 1e3)
+                } else {
+                    format!("{v:.0}")
+                }
+            })
+            .y_label_formatter(&us_label)
+            .draw()
+            .map_err(|x| e(&x))?;
+        for t in TRANSPORTS {
+            let pts: Vec<(f64, f64, f64)> = report
+                .results
+                .iter()
+                .filter(|r| r.transport == t)
+                .map(|r| (r.size as f64, r.rtt.p50_ns as f64 / 1e3, r.rtt.p99_ns as f64 / 1e3))
+                .collect();
+            if pts.is_empty() {
+                continue;
             }
-        })
-        .y_label_formatter(&us_label)
-        .draw()
-        .map_err(|x| e(&x))?;
-    for t in TRANSPORTS {
-        let pts: Vec<(f64, f64, f64)> = report
-            .results
-            .iter()
-            .filter(|r| r.transport == t)
-            .map(|r| (r.size as f64, r.rtt.p50_ns as f64 / 1e3, r.rtt.p99_ns as f64 / 1e3))
-            .collect();
-        if pts.is_empty() {
-            continue;
+            draw_transport(&mut chart, t, &pts).map_err(|x| e(&x))?;
         }
-        draw_transport(&mut chart, t, &pts).map_err(|x| e(&x))?;
-    }
-    draw_legend(&mut chart, 16).map_err(|x| e(&x))?;
-    root.present().map_err(|x| e(&x))?;
-    Ok(())
+        draw_legend(&mut chart, 16).map_err(|x| e(&x))?;
+        Ok(())
+    })?)
 }

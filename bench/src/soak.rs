@@ -134,59 +134,64 @@ pub fn print_tables(r: &SoakReport) {
 pub fn png(r: &SoakReport, path: &Path) -> Result<()> {
     use plotters::prelude::*;
     let e = |x: &dyn std::fmt::Display| anyhow!("plot {}: {x}", path.display());
-    let root = crate::plot::canvas(path, (1200, 900))?;
-    let panels = root.split_evenly((2, 2));
-    let minutes: Vec<f64> = r.samples.iter().map(|s| s.t_s / 60.0).collect();
-    let xmax = minutes.last().copied().unwrap_or(1.0).max(0.1);
-    type Series<'a> = (&'a str, RGBColor, Vec<f64>);
-    let series: [(&str, Vec<Series<'_>>); 4] = [
-        (
-            "resident memory, MiB",
-            vec![
-                ("router", RGBColor(200, 30, 30), r.samples.iter().map(|s| s.router_rss_kib as f64 / 1024.0).collect()),
-                (
-                    "whole robot",
-                    RGBColor(30, 90, 200),
-                    r.samples.iter().map(|s| s.robot_rss_kib as f64 / 1024.0).collect(),
-                ),
-            ],
-        ),
-        (
-            "open descriptors",
-            vec![
-                ("router", RGBColor(200, 30, 30), r.samples.iter().map(|s| s.router_fds as f64).collect()),
-                ("whole robot", RGBColor(30, 90, 200), r.samples.iter().map(|s| s.robot_fds as f64).collect()),
-            ],
-        ),
-        (
-            "the robot's files",
-            vec![
-                ("/dev/shm", RGBColor(20, 150, 60), r.samples.iter().map(|s| s.shm_files as f64).collect()),
-                ("iceoryx2 root", RGBColor(140, 60, 170), r.samples.iter().map(|s| s.iox2_files as f64).collect()),
-            ],
-        ),
-        ("nerve ps, ms", vec![("ps", RGBColor(230, 140, 20), r.samples.iter().map(|s| s.ps_ms).collect())]),
-    ];
-    for (area, (title, lines)) in panels.iter().zip(series.iter()) {
-        let ymax = lines.iter().flat_map(|l| l.2.iter().copied()).fold(1.0, f64::max) * 1.15;
-        let mut chart = ChartBuilder::on(area)
-            .caption(*title, ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0f64..xmax, 0f64..ymax)
-            .map_err(|x| e(&x))?;
-        chart.configure_mesh().x_desc("minutes").draw().map_err(|x| e(&x))?;
-        for (label, colour, ys) in lines {
-            let c = *colour;
-            chart
-                .draw_series(LineSeries::new(minutes.iter().copied().zip(ys.iter().copied()), c.stroke_width(2)))
-                .map_err(|x| e(&x))?
-                .label(*label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+    // the figure's set-up (font, background, file) is nerve_plot_font::figure's
+    Ok(nerve_plot_font::figure::write_png_with(path, (1200, 900), |root| {
+        let panels = root.split_evenly((2, 2));
+        let minutes: Vec<f64> = r.samples.iter().map(|s| s.t_s / 60.0).collect();
+        let xmax = minutes.last().copied().unwrap_or(1.0).max(0.1);
+        type Series<'a> = (&'a str, RGBColor, Vec<f64>);
+        let series: [(&str, Vec<Series<'_>>); 4] = [
+            (
+                "resident memory, MiB",
+                vec![
+                    (
+                        "router",
+                        RGBColor(200, 30, 30),
+                        r.samples.iter().map(|s| s.router_rss_kib as f64 / 1024.0).collect(),
+                    ),
+                    (
+                        "whole robot",
+                        RGBColor(30, 90, 200),
+                        r.samples.iter().map(|s| s.robot_rss_kib as f64 / 1024.0).collect(),
+                    ),
+                ],
+            ),
+            (
+                "open descriptors",
+                vec![
+                    ("router", RGBColor(200, 30, 30), r.samples.iter().map(|s| s.router_fds as f64).collect()),
+                    ("whole robot", RGBColor(30, 90, 200), r.samples.iter().map(|s| s.robot_fds as f64).collect()),
+                ],
+            ),
+            (
+                "the robot's files",
+                vec![
+                    ("/dev/shm", RGBColor(20, 150, 60), r.samples.iter().map(|s| s.shm_files as f64).collect()),
+                    ("iceoryx2 root", RGBColor(140, 60, 170), r.samples.iter().map(|s| s.iox2_files as f64).collect()),
+                ],
+            ),
+            ("nerve ps, ms", vec![("ps", RGBColor(230, 140, 20), r.samples.iter().map(|s| s.ps_ms).collect())]),
+        ];
+        for (area, (title, lines)) in panels.iter().zip(series.iter()) {
+            let ymax = lines.iter().flat_map(|l| l.2.iter().copied()).fold(1.0, f64::max) * 1.15;
+            let mut chart = ChartBuilder::on(area)
+                .caption(*title, ("sans-serif", 20))
+                .margin(12)
+                .x_label_area_size(35)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0f64..xmax, 0f64..ymax)
+                .map_err(|x| e(&x))?;
+            chart.configure_mesh().x_desc("minutes").draw().map_err(|x| e(&x))?;
+            for (label, colour, ys) in lines {
+                let c = *colour;
+                chart
+                    .draw_series(LineSeries::new(minutes.iter().copied().zip(ys.iter().copied()), c.stroke_width(2)))
+                    .map_err(|x| e(&x))?
+                    .label(*label)
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+            }
+            crate::plot::draw_legend(&mut chart, 14).map_err(|x| e(&x))?;
         }
-        crate::plot::draw_legend(&mut chart, 14).map_err(|x| e(&x))?;
-    }
-    root.present().map_err(|x| e(&x))?;
-    Ok(())
+        Ok(())
+    })?)
 }

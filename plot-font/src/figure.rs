@@ -1,5 +1,6 @@
 //! One way to write a figure: [`write_png_and_svg`] (and [`write_png`],
-//! [`write_svg`]) make the backend, register the font ([`crate::register`]),
+//! [`write_svg`], [`write`]; [`write_png_with`] for a bitmap drawn by a
+//! closure) make the backend, register the font ([`crate::register`]),
 //! paint the background white, let the [`Figure`] draw, and write the
 //! file, so that every figure of nerve (the demos', the calibration's,
 //! `nerve plot`'s, the benchmarks') is set up alike and fails alike: with
@@ -115,6 +116,24 @@ pub fn write_svg(path: &Path, size: (u32, u32), figure: &impl Figure) -> Result<
     write(path, Format::Svg, size, figure)
 }
 
+/// Writes the PNG file `path` drawn by `draw`, for a figure drawn only as a
+/// bitmap (the benchmarks'): set up and written as [`write`] does.
+pub fn write_png_with(
+    path: &Path,
+    size: (u32, u32),
+    draw: impl FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> DrawResult,
+) -> Result<(), FigureError> {
+    crate::register();
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    let drawn = (|| -> DrawResult {
+        root.fill(&WHITE)?;
+        draw(&root)?;
+        root.present()?;
+        Ok(())
+    })();
+    drawn.map_err(|source| FigureError::Write { path: path.to_path_buf(), source })
+}
+
 /// Writes `figure` as `STEM.png` and `STEM.svg` (`stem` is the path
 /// without the extension, e.g. `out/trajectory`); returns both paths.
 pub fn write_png_and_svg(stem: &Path, size: (u32, u32), figure: &impl Figure) -> Result<[PathBuf; 2], FigureError> {
@@ -210,6 +229,11 @@ mod tests {
         let e = write_png(&d.join("broken.png"), (100, 100), &Broken).expect_err("it fails");
         assert!(e.to_string().contains("broken.png") && e.to_string().contains("no data"), "{e}");
         assert!(std::error::Error::source(&e).is_some_and(|s| s.to_string() == "no data"));
+        let e =
+            write_png_with(&d.join("closure.png"), (100, 100), |_| Err("nothing to draw".into())).expect_err("fails");
+        assert!(e.to_string().contains("closure.png") && e.to_string().contains("nothing to draw"), "{e}");
+        write_png_with(&d.join("ok.png"), (100, 100), |root| Diagonal.draw(root)).expect("a closure's figure");
+        assert!(std::fs::read(d.join("ok.png")).expect("png").starts_with(b"\x89PNG"));
         let missing = d.join("no-such-folder").join("f");
         let e = write_png_and_svg(&missing, (100, 100), &Diagonal).expect_err("no folder");
         assert!(e.to_string().contains("no-such-folder"), "{e}");
