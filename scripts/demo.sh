@@ -4,9 +4,10 @@
 # Plots, CSV logs and summary.json land in out/explore-<seed>/ (or $1).
 # It installs only what building and running nerve needs (`scripts/setup.sh`
 # without `--test`: no Chromium) and builds, in release, only the programs
-# the demo starts: `nerve` (router and demo) and the agents of
-# launch/explore.toml, not the benchmarks, the Python package or the test
-# agents (`cargo build --release --workspace --bins` builds everything).
+# the demo starts: `nerve` (router and launcher), `nerve-demo` (the demo
+# itself, which `nerve demo` runs) and the agents of launch/explore.toml,
+# not the benchmarks, the Python package or the test agents (`cargo build
+# --release --workspace --bins` builds everything).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -16,11 +17,11 @@ if [ -z "$kinds" ]; then
     echo "demo.sh: found no agent kinds in launch/explore.toml" >&2
     exit 1
 fi
-build=(-p nerve --bin nerve)
+build=(-p nerve --bin nerve -p nerve-demo --bin nerve-demo)
 for kind in $kinds; do
     build+=(-p "nerve-$kind" --bin "nerve-$kind")
 done
-echo "== building nerve and the demo's agents (release): $(echo $kinds)"
+echo "== building nerve, nerve-demo and the demo's agents (release): $(echo $kinds)"
 cargo build --release --locked "${build[@]}"
 out="${1:-out/explore-1}"
 echo "== running the exploration demo (about 2 minutes)"
