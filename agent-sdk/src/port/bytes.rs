@@ -276,13 +276,25 @@ impl SchemaOutput {
         self.publish(loan)
     }
 
+    /// The header of the next sample: this port's sender, its next
+    /// sequence number, stamped now.
+    pub(crate) fn next_header(&self) -> SampleHeader {
+        let seq = self.seq.fetch_add(1, Ordering::Relaxed).wrapping_add(1);
+        SampleHeader { sender: self.sender, seq, stamp_ns: now_ns() }
+    }
+
     /// Sends a loaned sample, stamped now, and wakes the readers; returns
     /// how many readers it reached (0 before a new subscriber is seen).
     pub(crate) fn publish(&self, loan: Loan) -> Result<usize, PortError> {
-        let seq = self.seq.fetch_add(1, Ordering::Relaxed).wrapping_add(1);
+        self.publish_as(loan, self.next_header())
+    }
+
+    /// Sends a loaned sample with `header` (from [`SchemaOutput::next_header`],
+    /// taken when the sample was loaned: a typed port stamps a sample when
+    /// it starts writing it) and wakes the readers.
+    pub(crate) fn publish_as(&self, loan: Loan, header: SampleHeader) -> Result<usize, PortError> {
         match (&self.sink, loan.0) {
             (Sink::Shm { notifier, .. }, LoanInner::Shm(mut sample)) => {
-                let header = SampleHeader { sender: self.sender, seq, stamp_ns: now_ns() };
                 // SAFETY: the service's user header is a SampleHeader (set in
                 // `service::output_builder`); the marker is a zero-sized
                 // stand-in at its address, which is aligned for it
@@ -292,7 +304,7 @@ impl SchemaOutput {
                 Ok(reached)
             }
             (Sink::Memory(c), LoanInner::Detached(sample)) => {
-                c.push(self.sender, seq, sample);
+                c.push(header.sender, header.seq, sample);
                 Ok(1)
             }
             (Sink::Nothing, _) => Ok(0),

@@ -110,6 +110,8 @@ impl<T: Payload> Output<T> {
     /// `write` must leave the `T` initialised (see [`Output::send_uninit`]).
     unsafe fn send_in_place(&self, write: impl FnOnce(&mut MaybeUninit<T>)) -> Result<(), PortError> {
         let mut loan = self.port.loan(false)?;
+        // stamped as it starts to be written, as a sample loaned from a typed iceoryx2 port always was
+        let header = self.port.next_header();
         let bytes = loan.bytes_mut();
         debug_assert!(bytes.len() == size_of::<T>() && (bytes.as_ptr() as usize).is_multiple_of(align_of::<T>()));
         // SAFETY: a loan of this port is `size_of::<T>()` bytes aligned for
@@ -117,7 +119,7 @@ impl<T: Payload> Output<T> {
         // aligns the payload as the service's type details say), and it is
         // the only reference to them until sent
         write(unsafe { &mut *bytes.as_mut_ptr().cast::<MaybeUninit<T>>() });
-        self.port.publish(loan).map(|_| ())
+        self.port.publish_as(loan, header).map(|_| ())
     }
 
     /// Sends `value` (written once, in place, into shared memory) and wakes the readers.
