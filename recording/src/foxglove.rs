@@ -16,6 +16,10 @@
 //!   bytes data = 6;
 //! }
 //! ```
+//!
+//! And the mapping of nerve's pose and sonar types to Foxglove's
+//! `FrameTransform` and `LaserScan` in JSON ([`mapping_of`]), which
+//! `nerve foxglove` offers beside each such port's own JSON.
 
 use nerve_stm::PixelFormat;
 
@@ -178,9 +182,218 @@ pub fn encode_raw_image(buf: &mut Vec<u8>, img: &RawImage<'_>) {
     bytes(buf, 6, img.data);
 }
 
+/// A nerve type also shown as one of Foxglove's own schemas (the 3D
+/// panel's), in JSON: the live server (`nerve foxglove`) offers it as a
+/// second channel of the port, `/<agent>/<port>/<suffix>`.
+#[derive(Debug, Clone, Copy)]
+pub struct Mapping {
+    /// Foxglove's schema name (`foxglove.FrameTransform`)
+    pub schema_name: &'static str,
+    /// the channel's suffix (`tf`)
+    pub suffix: &'static str,
+    /// the parent frame of a transform (`world`), or the frame of a scan
+    parent: &'static str,
+    /// the child frame of a transform (`base_link`)
+    child: &'static str,
+    kind: MappingKind,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum MappingKind {
+    /// `x`, `y`, `theta` as a planar transform
+    Transform,
+    /// H1's sonar ring (`ranges_m`, `valid`) as a laser scan
+    SonarScan,
+}
+
+/// The robot's frame, which the pose moves and the sonar is fixed to.
+pub const ROBOT_FRAME: &str = "base_link";
+
+const MAPPINGS: [(&str, Mapping); 4] = [
+    (
+        "nerve::PoseEstimate",
+        Mapping {
+            schema_name: "foxglove.FrameTransform",
+            suffix: "tf",
+            parent: "world",
+            child: ROBOT_FRAME,
+            kind: MappingKind::Transform,
+        },
+    ),
+    (
+        "nerve::GroundTruth",
+        Mapping {
+            schema_name: "foxglove.FrameTransform",
+            suffix: "tf",
+            parent: "world",
+            child: "truth",
+            kind: MappingKind::Transform,
+        },
+    ),
+    (
+        "nerve::Odometry",
+        Mapping {
+            schema_name: "foxglove.FrameTransform",
+            suffix: "tf",
+            parent: "odom",
+            child: "odom_base_link",
+            kind: MappingKind::Transform,
+        },
+    ),
+    (
+        "nerve::SonarScan",
+        Mapping {
+            schema_name: "foxglove.LaserScan",
+            suffix: "scan",
+            parent: ROBOT_FRAME,
+            child: ROBOT_FRAME,
+            kind: MappingKind::SonarScan,
+        },
+    ),
+];
+
+/// The Foxglove schema nerve's type `type_name` is also shown as, if any.
+pub fn mapping_of(type_name: &str) -> Option<Mapping> {
+    MAPPINGS.iter().find(|(t, _)| *t == type_name).map(|(_, m)| *m)
+}
+
+fn time_schema() -> serde_json::Value {
+    serde_json::json!({
+        "type": "object",
+        "properties": { "sec": { "type": "integer" }, "nsec": { "type": "integer" } },
+    })
+}
+
+fn vector_schema(fields: &[&str]) -> serde_json::Value {
+    let props: serde_json::Map<String, serde_json::Value> =
+        fields.iter().map(|f| ((*f).to_owned(), serde_json::json!({ "type": "number" }))).collect();
+    serde_json::json!({ "type": "object", "properties": props })
+}
+
+fn time_of(unix_ns: u64) -> serde_json::Value {
+    serde_json::json!({ "sec": unix_ns / 1_000_000_000, "nsec": unix_ns % 1_000_000_000 })
+}
+
+/// A rotation by `theta` about z as a quaternion.
+fn yaw(theta: f64) -> serde_json::Value {
+    serde_json::json!({ "x": 0.0, "y": 0.0, "z": (theta / 2.0).sin(), "w": (theta / 2.0).cos() })
+}
+
+impl Mapping {
+    /// The JSON Schema of the Foxglove message (schema encoding `jsonschema`).
+    pub fn json_schema(&self) -> serde_json::Value {
+        let mut s = match self.kind {
+            MappingKind::Transform => serde_json::json!({
+                "type": "object",
+                "properties": {
+                    "timestamp": time_schema(),
+                    "parent_frame_id": { "type": "string" },
+                    "child_frame_id": { "type": "string" },
+                    "translation": vector_schema(&["x", "y", "z"]),
+                    "rotation": vector_schema(&["x", "y", "z", "w"]),
+                },
+            }),
+            MappingKind::SonarScan => serde_json::json!({
+                "type": "object",
+                "properties": {
+                    "timestamp": time_schema(),
+                    "frame_id": { "type": "string" },
+                    "pose": {
+                        "type": "object",
+                        "properties": {
+                            "position": vector_schema(&["x", "y", "z"]),
+                            "orientation": vector_schema(&["x", "y", "z", "w"]),
+                        },
+                    },
+                    "start_angle": { "type": "number" },
+                    "end_angle": { "type": "number" },
+                    "ranges": { "type": "array", "items": { "type": "number" } },
+                    "intensities": { "type": "array", "items": { "type": "number" } },
+                },
+            }),
+        };
+        if let Some(o) = s.as_object_mut() {
+            o.insert("title".into(), serde_json::json!(self.schema_name));
+        }
+        s
+    }
+
+    /// The Foxglove message of a sample, from its JSON (as
+    /// [`shm_schemas::schema::Value`] prints it) and its time; `None` when
+    /// the sample lacks a field the mapping needs.
+    pub fn convert(&self, sample: &serde_json::Value, unix_ns: u64) -> Option<serde_json::Value> {
+        let num = |k: &str| sample.get(k).and_then(serde_json::Value::as_f64);
+        match self.kind {
+            MappingKind::Transform => Some(serde_json::json!({
+                "timestamp": time_of(unix_ns),
+                "parent_frame_id": self.parent,
+                "child_frame_id": self.child,
+                "translation": { "x": num("x")?, "y": num("y")?, "z": 0.0 },
+                "rotation": yaw(num("theta")?),
+            })),
+            MappingKind::SonarScan => {
+                let ranges = sample.get("ranges_m")?.as_array()?;
+                let valid = sample.get("valid")?.as_array()?;
+                let n = ranges.len();
+                // a direction that heard no echo has no range: 0, which the 3D panel leaves out
+                let ranges: Vec<f64> = ranges
+                    .iter()
+                    .zip(valid)
+                    .map(|(r, v)| if v.as_u64() == Some(1) { r.as_f64().unwrap_or(0.0) } else { 0.0 })
+                    .collect();
+                let step = std::f64::consts::TAU / n.max(1) as f64;
+                Some(serde_json::json!({
+                    "timestamp": time_of(unix_ns),
+                    "frame_id": self.parent,
+                    "pose": {
+                        "position": { "x": 0.0, "y": 0.0, "z": 0.0 },
+                        "orientation": { "x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0 },
+                    },
+                    "start_angle": 0.0,
+                    "end_angle": step * n.saturating_sub(1) as f64,
+                    "ranges": ranges,
+                    "intensities": [],
+                }))
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_pose_is_a_frame_transform_of_the_robot_in_the_world() {
+        let m = mapping_of("nerve::PoseEstimate").expect("pose mapped");
+        assert_eq!((m.schema_name, m.suffix), ("foxglove.FrameTransform", "tf"));
+        let pose = serde_json::json!({ "x": 1.5, "y": -2.0, "theta": std::f64::consts::FRAC_PI_2, "stamp_ns": 5 });
+        let t = m.convert(&pose, 3_000_000_007).expect("converted");
+        assert_eq!(t["timestamp"], serde_json::json!({ "sec": 3, "nsec": 7 }));
+        assert_eq!((t["parent_frame_id"].as_str(), t["child_frame_id"].as_str()), (Some("world"), Some(ROBOT_FRAME)));
+        assert_eq!(t["translation"], serde_json::json!({ "x": 1.5, "y": -2.0, "z": 0.0 }));
+        let (z, w) = (t["rotation"]["z"].as_f64().expect("z"), t["rotation"]["w"].as_f64().expect("w"));
+        assert!((z - w).abs() < 1e-12 && (z * z + w * w - 1.0).abs() < 1e-12, "a quarter turn: {t}");
+        assert!(m.convert(&serde_json::json!({ "x": 1 }), 0).is_none(), "a sample without theta");
+        assert_eq!(m.json_schema()["title"], "foxglove.FrameTransform");
+        assert!(mapping_of("nerve::Tick").is_none());
+    }
+
+    #[test]
+    fn the_sonar_ring_is_a_laser_scan_without_its_silent_directions() {
+        let m = mapping_of("nerve::SonarScan").expect("sonar mapped");
+        let mut ranges = vec![1.0; 12];
+        ranges[3] = 0.5;
+        let mut valid = vec![1; 12];
+        valid[6] = 0;
+        let scan = serde_json::json!({ "seq": 1, "stamp_ns": 2, "ranges_m": ranges, "valid": valid });
+        let l = m.convert(&scan, 0).expect("converted");
+        assert_eq!(l["frame_id"], ROBOT_FRAME);
+        assert_eq!(l["ranges"][3], 0.5);
+        assert_eq!(l["ranges"][6], 0.0, "no echo, no range");
+        let end = l["end_angle"].as_f64().expect("end");
+        assert!((end - 11.0 * std::f64::consts::TAU / 12.0).abs() < 1e-12);
+    }
 
     #[test]
     fn varints_are_protobufs() {

@@ -10,8 +10,9 @@
 //! while the robot and the other clients go on; parameters are read and
 //! set through the router (a refused value refused, no token no change);
 //! the connection graph follows `nerve connect`; a message published into
-//! an input comes out of the relay, one of the wrong shape is refused; and
-//! 100 subscribe/unsubscribe cycles leave the server's memory flat.
+//! an input comes out of the relay, one of the wrong shape is refused;
+//! 100 subscribe/unsubscribe cycles leave the server's memory flat; and an
+//! odometry agent's pose is also a `foxglove.FrameTransform` channel.
 
 use nerve_tests::{Robot, wait_until};
 use serde_json::Value;
@@ -338,4 +339,31 @@ fn subscribe_cycles_leave_the_servers_memory_flat() {
     run_client(&["cycles", &fox.url, "/t1/tick", "100"]);
     let after = fox.rss_kb();
     assert!(after <= warm + 2048, "100 subscribe/unsubscribe cycles grew nerve foxglove from {warm} kB to {after} kB");
+}
+
+#[test]
+fn a_pose_is_also_a_foxglove_frame_transform() {
+    let r = Robot::new("fxpose");
+    let file = r.launch_file(
+        "pose.toml",
+        "robot = \"x\"\n\n[[agent]]\nname = \"odo\"\nkind = \"odometry\"\nargs = [\"--start\", \"1,2,90\"]\n",
+    );
+    r.ok(&["launch", file.to_str().expect("path")]);
+    let fox = Fox::start(&r, &["--publish"]);
+    // the motor's odometry, published from Foxglove into the agent's input, moves the pose
+    let odom = r#"{"x": 0.5, "y": 0, "theta": 0, "v": 0, "omega": 0}"#;
+    let said = run_client(&["drive", &format!("{}/?token={TOKEN}", fox.url), "/odo/odom", odom, "/odo/pose/tf"]);
+    let d = &said[0];
+    assert_eq!(d["channel"]["schemaName"], "foxglove.FrameTransform", "{d}");
+    let schema: Value = serde_json::from_str(d["channel"]["schema"].as_str().expect("schema")).expect("schema JSON");
+    assert!(schema["properties"]["translation"].is_object(), "{schema}");
+    let m = &d["message"]["data"];
+    assert_eq!((m["parent_frame_id"].as_str(), m["child_frame_id"].as_str()), (Some("world"), Some("base_link")));
+    // the start pose 1, 2, 90 degrees: a quarter turn about z
+    assert_eq!(m["translation"]["z"], 0.0);
+    let (x, y) = (m["translation"]["x"].as_f64().expect("x"), m["translation"]["y"].as_f64().expect("y"));
+    assert!((x - 1.0).abs() < 1.0 && (y - 2.0).abs() < 1.0, "not near the start pose: {m}");
+    let (z, w) = (m["rotation"]["z"].as_f64().expect("z"), m["rotation"]["w"].as_f64().expect("w"));
+    assert!((z - w).abs() < 1e-6, "not a quarter turn: {m}");
+    assert!(d["statuses"].as_array().is_some_and(Vec::is_empty), "{d}");
 }

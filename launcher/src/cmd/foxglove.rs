@@ -25,6 +25,7 @@ use anyhow::{Context as _, Result};
 use iceoryx2::prelude::Node;
 use nerve_foxglove::protocol::Parameter;
 use nerve_foxglove::{ChannelSpec, GraphSpec, Options, Robot};
+use nerve_recording::foxglove::mapping_of;
 use serde_json::{Value, json};
 use shm_schemas::control::cli_to_router::{AgentView, CliRequest, RouterError, RouterReply};
 use shm_schemas::encode::encode_json;
@@ -184,6 +185,15 @@ fn port_of(topic: &str) -> Result<PortRef, String> {
     path.parse::<PortRef>().map_err(|e| format!("{topic:?} is not /AGENT/PORT: {e}"))
 }
 
+/// A channel's topic as the port it reads (`/<agent>/<port>`) and the
+/// suffix of a mapping (`/<agent>/<port>/tf`), if it is one.
+fn split_mapped(topic: &str) -> (&str, Option<&str>) {
+    match topic.rsplit_once('/') {
+        Some((base, suffix)) if base.matches('/').count() == 2 => (base, Some(suffix)),
+        _ => (topic, None),
+    }
+}
+
 /// A parameter's text as the JSON value of its type.
 fn typed(type_name: &str, text: &str) -> Value {
     let number =
@@ -279,11 +289,21 @@ impl Robot for FoxRobot {
             for o in &a.outputs {
                 let topic = format!("/{}/{}", a.name, o.name);
                 match a.schema_for(o.fingerprint) {
-                    Some(s) => out.push(ChannelSpec {
-                        topic,
-                        schema_name: o.type_name.clone(),
-                        schema: nerve_recording::json::json_schema(&s).to_string(),
-                    }),
+                    Some(s) => {
+                        // a pose or a scan also as Foxglove's own schema, for the 3D panel
+                        if let Some(m) = mapping_of(&o.type_name) {
+                            out.push(ChannelSpec {
+                                topic: format!("{topic}/{}", m.suffix),
+                                schema_name: m.schema_name.to_owned(),
+                                schema: m.json_schema().to_string(),
+                            });
+                        }
+                        out.push(ChannelSpec {
+                            topic,
+                            schema_name: o.type_name.clone(),
+                            schema: nerve_recording::json::json_schema(&s).to_string(),
+                        });
+                    }
                     None => {
                         if self.warned.insert(topic.clone()) {
                             tracing::warn!(%topic, type_name = %o.type_name, "not advertised: its agent registered no schema for it");
@@ -296,18 +316,24 @@ impl Robot for FoxRobot {
     }
 
     fn read(&mut self, topics: &[&str], sink: &mut dyn FnMut(&str, u64, Vec<u8>)) {
-        self.taps.retain(|t, _| topics.contains(&t.as_str()));
-        let missing: Vec<&str> = topics.iter().copied().filter(|t| !self.taps.contains_key(*t)).collect();
+        // each port read, and the channels of it asked for: its own (no suffix) or a mapping's
+        let mut wanted: BTreeMap<String, Vec<(&str, Option<&str>)>> = BTreeMap::new();
+        for t in topics {
+            let (base, suffix) = split_mapped(t);
+            wanted.entry(base.to_owned()).or_default().push((t, suffix));
+        }
+        self.taps.retain(|t, _| wanted.contains_key(t));
+        let missing: Vec<String> = wanted.keys().filter(|t| !self.taps.contains_key(*t)).cloned().collect();
         if !missing.is_empty() {
             let agents = self.agents().unwrap_or_default();
             for topic in missing {
-                match self.open_tap(topic, &agents) {
+                match self.open_tap(&topic, &agents) {
                     Ok(tap) => {
-                        self.warned.remove(topic);
-                        self.taps.insert(topic.to_owned(), tap);
+                        self.warned.remove(&topic);
+                        self.taps.insert(topic, tap);
                     }
                     Err(e) => {
-                        if self.warned.insert(topic.to_owned()) {
+                        if self.warned.insert(topic.clone()) {
                             tracing::warn!(%topic, "cannot read: {e}");
                         }
                     }
@@ -317,14 +343,25 @@ impl Robot for FoxRobot {
         // the robot's clock to the wall clock, as Foxglove's timestamps are
         let offset = i128::from(unix_now_ns()) - i128::from(now_ns());
         for (topic, tap) in &self.taps {
+            let Some(channels) = wanted.get(topic) else { continue };
+            let mapping = mapping_of(&tap.schema.type_name);
             let r = tap.raw.receive(|h, bytes| {
-                let json = match tap.schema.decode(bytes) {
-                    Ok(v) => serde_json::to_vec(&v),
-                    Err(e) => serde_json::to_vec(&json!({ "undecodable": e.to_string() })),
+                let value = match tap.schema.decode(bytes) {
+                    Ok(v) => serde_json::to_value(&v).unwrap_or(Value::Null),
+                    Err(e) => json!({ "undecodable": e.to_string() }),
                 };
                 let unix = u64::try_from(i128::from(h.stamp_ns).saturating_add(offset)).unwrap_or(0);
-                if let Ok(json) = json {
-                    sink(topic, unix, json);
+                for (channel, suffix) in channels {
+                    let out = match suffix {
+                        None => serde_json::to_vec(&value).ok(),
+                        Some(sx) => mapping
+                            .filter(|m| m.suffix == *sx)
+                            .and_then(|m| m.convert(&value, unix))
+                            .and_then(|v| serde_json::to_vec(&v).ok()),
+                    };
+                    if let Some(out) = out {
+                        sink(channel, unix, out);
+                    }
                 }
                 true
             });
@@ -462,5 +499,7 @@ mod tests {
         let p = port_of("/ticker/tick").expect("topic");
         assert_eq!((p.agent.as_str(), p.port.as_str()), ("ticker", "tick"));
         assert!(port_of("ticker/tick").is_err());
+        assert_eq!(split_mapped("/odometry/pose"), ("/odometry/pose", None));
+        assert_eq!(split_mapped("/odometry/pose/tf"), ("/odometry/pose", Some("tf")));
     }
 }

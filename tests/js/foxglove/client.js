@@ -11,6 +11,7 @@
 //   node client.js graph URL TOPIC
 //   node client.js publish URL TOPIC JSON COUNT
 //   node client.js cycles URL TOPIC N
+//   node client.js drive URL PUB_TOPIC JSON SUB_TOPIC
 "use strict";
 
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
@@ -193,6 +194,25 @@ async function cycles(url, topic, n) {
   s.client.close();
 }
 
+// Subscribes to `subTopic`, publishes `json` into `pubTopic` every 50 ms
+// until a message arrives on `subTopic`; prints that channel and message.
+async function drive(url, pubTopic, json, subTopic) {
+  const s = connect(url);
+  const ch = await until(() => s.channels.get(subTopic), 10000, `channel ${subTopic}`);
+  let got = null;
+  const sub = s.client.subscribe(ch.id);
+  s.client.on("message", (m) => {
+    if (m.subscriptionId === sub && !got) got = { timestamp: m.timestamp.toString(), data: decode(m.data) };
+  });
+  const id = s.client.advertise({ topic: pubTopic, encoding: "json", schemaName: "" });
+  const bytes = new TextEncoder().encode(json);
+  const timer = setInterval(() => s.client.sendMessage(id, bytes), 50);
+  await until(() => got, 10000, `a message on ${subTopic}`);
+  clearInterval(timer);
+  say({ channel: ch, message: got, statuses: s.statuses });
+  s.client.close();
+}
+
 const [scenario, ...args] = process.argv.slice(2);
 const run = {
   watch: () => watch(args[0], args[1], args[2], Number(args[3])),
@@ -202,6 +222,7 @@ const run = {
   graph: () => graph(args[0], args[1]),
   publish: () => publish(args[0], args[1], args[2], Number(args[3])),
   cycles: () => cycles(args[0], args[1], Number(args[2])),
+  drive: () => drive(args[0], args[1], args[2], args[3]),
 }[scenario];
 if (!run) fail(`unknown scenario ${scenario}`);
 Promise.resolve(run()).catch(fail);
