@@ -14,6 +14,8 @@
 //! a refused `connect`) is answered at once. One that needs agents becomes a
 //! [`Job`]: its commands go out as [`Effect::Send`], the job keeps the
 //! caller's [`RequestId`], and it is answered when the last outcome is in.
+//! A `Start` is a job too: its agents go out as [`Effect::Start`], and it is
+//! answered when the last start-up process has ended ([`Input::StartEnded`]).
 //! Nothing here waits, so a hung agent delays its own commands only
 //! (reliability review R5, F2c).
 //!

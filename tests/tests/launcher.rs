@@ -630,6 +630,9 @@ fn down_removes_the_simulated_clock_page() {
         "t1, started by the router, is not on the launch's clock: {}",
         std::fs::read_to_string(&log_file).unwrap_or_default()
     );
+    // the router started it, not the launch
+    let router_log = std::fs::read_to_string(r.home.join(&r.name).join("logs/router.log")).unwrap_or_default();
+    assert!(router_log.contains("starting t1 (start-up process "), "{router_log}");
     r.down_and_check_clean();
     assert!(!page.exists(), "nerve down left the clock page {}", page.display());
 }

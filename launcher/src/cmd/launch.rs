@@ -1,9 +1,9 @@
 //! `nerve launch FILE [NAME=VALUE ...]`: a robot from a launch file and its
 //! arguments (docs/launch.md). Validates the whole file
 //! first (nothing starts on any error), starts the router if none runs,
-//! batch-starts every agent as a daemon in parallel with a progress line per
-//! agent, waits until each has registered, hands them to the router's
-//! supervision, applies the connections, and returns — or, with
+//! has the router supervise and start every agent as a daemon in parallel
+//! (one request; a progress line per agent), waits until each has
+//! registered, applies the connections, and returns — or, with
 //! `--foreground`, streams every agent's log and stops everything on Ctrl-C.
 //! The bring-up itself is [`crate::bring::up`].
 
