@@ -355,7 +355,7 @@ fn clean_up(r: &Robot) {
 /// help is its help, and a `nerve` without `nerve-demo` beside it (or on
 /// `PATH`) says what to build instead of failing obscurely (issue 41 part 4).
 #[test]
-fn demo_and_calibrate_run_nerve_demo_or_say_what_to_build() {
+fn nerve_demo_runs_for_demo_and_calibrate_or_says_what_to_build() {
     let r = Robot::new("nodemo");
     let help = r.nerve(&["demo", "--help"]);
     let text = String::from_utf8_lossy(&help.stdout);
