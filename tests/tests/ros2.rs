@@ -59,11 +59,6 @@ fn a_ros2_node_on_rmw_zenoh_sees_and_drives_the_robot() {
     let python = python_with_rosbags();
     let port = free_port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
-    let mut router = Command::new(bin_dir().join("nerve-ros2-router"));
-    router.args(["--listen", &endpoint]).stdout(Stdio::piped());
-    let mut router = ChildGuard::spawn("nerve-ros2-router", router).expect("start nerve-ros2-router");
-    router.await_ready("nerve-ros2-router").expect("the router listens");
-
     let r = Robot::new("ros2");
     let cfg = write_file(
         &r.home,
@@ -135,7 +130,13 @@ to = "motor/cmd"
             cfg.display()
         ),
     );
+    // the robot first: its ros2 agent starts without a router (the
+    // session keeps dialling) and joins the graph once the router is up
     launch(&r, &file);
+    let mut router = Command::new(bin_dir().join("nerve-ros2-router"));
+    router.args(["--listen", &endpoint]).stdout(Stdio::piped());
+    let mut router = ChildGuard::spawn("nerve-ros2-router", router).expect("start nerve-ros2-router");
+    router.await_ready("nerve-ros2-router").expect("the router listens");
 
     let peer = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("py").join("ros2_peer.py");
     let arg = serde_json::json!({

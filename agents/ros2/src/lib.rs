@@ -137,8 +137,10 @@ impl Agent for Ros2 {
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
+        // a configuration zenoh refuses fails the start; a router that is
+        // not up yet does not: the link thread keeps trying
+        link::zenoh_config(&self.cfg).map_err(|e| AgentError::Config(e.to_string()))?;
         let (tx, rx) = std::sync::mpsc::sync_channel::<Outgoing>(OUTGOING);
-        let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
         let cfg = self.cfg.clone();
         let inboxes: Vec<Arc<Inbox>> = self.outputs.iter().map(|o| o.inbox.clone()).collect();
         let (stats, stop) = (self.stats.clone(), self.stop.clone());
@@ -146,27 +148,15 @@ impl Agent for Ros2 {
             .name("ros2-link".into())
             .spawn(move || {
                 agent_sdk::rt::drop_realtime();
-                let link = match link::Link::open(&cfg, inboxes) {
-                    Ok(l) => {
-                        let _ = ready_tx.send(Ok(()));
-                        l
-                    }
-                    Err(e) => {
-                        let _ = ready_tx.send(Err(e.to_string()));
-                        return;
-                    }
-                };
-                link.run(&rx, &stats, &stop);
-                link.close();
+                if let Some(link) = link::Link::open_retrying(&cfg, &inboxes, &rx, &stats, &stop) {
+                    link.run(&rx, &stats, &stop);
+                    link.close();
+                }
             })
             .map_err(|e| AgentError::Other(format!("cannot start the ros2 link thread: {e}")))?;
         self.link_thread = Some(handle);
         self.tx = Some(tx);
-        match ready_rx.recv_timeout(Duration::from_secs(20)) {
-            Ok(Ok(())) => Ok(()),
-            Ok(Err(e)) => Err(AgentError::Other(e)),
-            Err(_) => Err(AgentError::Other("the zenoh session did not open within 20 s".into())),
-        }
+        Ok(())
     }
 
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {

@@ -195,8 +195,8 @@ fn json_list(v: &[String]) -> String {
 
 /// The Zenoh configuration: the mode and endpoints of `cfg`, multicast
 /// scouting off (rmw_zenoh's default: discovery goes through the router),
-/// and a start that does not wait for ever for a router that is not up
-/// (the session keeps dialling in the background).
+/// and an open that gives up after 2 s when no router answers
+/// ([`Link::open_retrying`] tries again).
 pub fn zenoh_config(cfg: &Config) -> Result<zenoh::Config, LinkError> {
     let mut z = zenoh::Config::default();
     let mode = match cfg.mode {
@@ -208,8 +208,7 @@ pub fn zenoh_config(cfg: &Config) -> Result<zenoh::Config, LinkError> {
         ("connect/endpoints", json_list(&cfg.connect)),
         ("listen/endpoints", json_list(&cfg.listen)),
         ("scouting/multicast/enabled", "false".into()),
-        ("connect/timeout_ms", "3000".into()),
-        ("connect/exit_on_failure", "false".into()),
+        ("connect/timeout_ms", "2000".into()),
         ("connect/retry", "{period_init_ms: 200, period_max_ms: 2000, period_increase_factor: 2}".into()),
     ];
     for (key, value) in settings {
@@ -299,6 +298,47 @@ impl Link {
             cfg.domain
         );
         Ok(Link { session, publishers, _subscribers: subscribers, _tokens: tokens })
+    }
+
+    /// Opens the link, trying again (every 0.2 s, growing to 2 s) while no
+    /// router answers, until `stop` is set (then `None`). Meanwhile what the
+    /// task hands over is dropped and counted: nobody could receive it.
+    pub fn open_retrying(
+        cfg: &Config,
+        inboxes: &[Arc<Inbox>],
+        rx: &Receiver<Outgoing>,
+        stats: &Stats,
+        stop: &AtomicBool,
+    ) -> Option<Link> {
+        let mut wait = Duration::from_millis(200);
+        let mut attempts = 0u64;
+        loop {
+            if stop.load(Ordering::Acquire) {
+                return None;
+            }
+            match Link::open(cfg, inboxes.to_vec()) {
+                Ok(l) => {
+                    if attempts > 0 {
+                        tracing::info!(attempts, "zenoh session open after {attempts} failed attempt(s)");
+                    }
+                    return Some(l);
+                }
+                Err(e) => {
+                    attempts += 1;
+                    if attempts.is_power_of_two() {
+                        tracing::warn!(attempts, error = %e, "no zenoh session yet; trying again");
+                    }
+                }
+            }
+            let until = std::time::Instant::now() + wait;
+            while std::time::Instant::now() < until && !stop.load(Ordering::Acquire) {
+                while let Ok(out) = rx.try_recv() {
+                    stats.dropped(out.topic);
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            wait = (wait * 2).min(Duration::from_secs(2));
+        }
     }
 
     /// Publishes what the task hands over until `stop` is set or the task
