@@ -1,24 +1,27 @@
 //! Launch-file arguments, includes and conditions (issue 46) through real
 //! `nerve launch` processes: defaults and `NAME=VALUE` overrides reach the
 //! agents, an include's agents come up under its prefix and wired, a
-//! condition leaves an agent and its connection out, and every bad input
-//! is refused with FILE:LINE before anything starts.
+//! condition leaves an agent and its connection out, the file's
+//! `sim_time`/`time_scale` put the robot on simulated time, and every bad
+//! input is refused with FILE:LINE before anything starts.
 
-use nerve_tests::Robot;
+use nerve_tests::{Robot, wait_until};
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// `nerve launch FILE ARGS...`; panics unless it succeeds.
-fn launch(r: &Robot, file: &Path, args: &[&str]) {
+/// `nerve launch FILE ARGS...`; panics unless it succeeds. Returns its stderr.
+fn launch(r: &Robot, file: &Path, args: &[&str]) -> String {
     let out = r.command("nerve").arg("launch").arg(file).args(args).output().expect("run nerve launch");
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
     if !out.status.success() {
         r.dump_logs();
     }
     assert!(out.status.success(), "nerve launch {} {args:?} failed:\n{err}", file.display());
+    err
 }
 
 /// `nerve launch FILE ARGS...` must fail: returns its stderr, after checking
@@ -69,6 +72,40 @@ fn arguments_take_their_defaults_or_the_command_line() {
     assert_eq!(r.ok(&["param", "get", "t1", "step"]).trim(), "4");
     assert_eq!(r.edges(), ["t1/tick -> r1/in"], "and its connection");
     assert_eq!(r.echo("r1/out", 2).len(), 2);
+    r.down_and_check_clean();
+}
+
+/// `sim_time` and `time_scale` in the file (issue 46), `sim_time` set from
+/// an argument: by default the robot runs on the wall clock; `sim=true`
+/// puts it on simulated time at the file's scale (the clock's page made,
+/// the agent on it); `--time-scale` on the command line wins over the file.
+#[test]
+fn sim_time_in_the_file_puts_the_robot_on_simulated_time() {
+    let r = Robot::new("lsim");
+    let body = "sim_time = \"{arg.sim}\"\ntime_scale = 4\n[args]\nsim = false\n[[agent]]\nname = \"t1\"\nkind = \"ticker\"\nperiod = \"10ms\"\n";
+    let file = r.launch_file("sim.toml", body);
+    let page = r.home.join(&r.name).join(agent_sdk::simclock::PAGE_FILE);
+    let log = r.home.join(&r.name).join("logs/t1.log");
+    let on_sim_time = |scale: &str| {
+        wait_until(Duration::from_secs(10), || {
+            std::fs::read_to_string(&log).is_ok_and(|l| l.contains("on simulated time") && l.contains(scale))
+        })
+    };
+
+    let err = launch(&r, &file, &[]);
+    assert!(!err.contains("simulated time") && !page.exists(), "sim=false ran on simulated time:\n{err}");
+    r.down_and_check_clean();
+
+    let err = launch(&r, &file, &["sim=true"]);
+    assert!(err.contains("runs on simulated time at 4x"), "{err}");
+    assert!(page.exists(), "no clock page at {}", page.display());
+    assert!(on_sim_time("scale=4"), "t1 is not on the clock:\n{}", std::fs::read_to_string(&log).unwrap_or_default());
+    r.down_and_check_clean();
+    let _ = std::fs::remove_file(&log);
+
+    let err = launch(&r, &file, &["--time-scale", "2", "--sim-time"]);
+    assert!(err.contains("runs on simulated time at 2x"), "the flag does not win over the file:\n{err}");
+    assert!(on_sim_time("scale=2"), "t1 is not at 2x:\n{}", std::fs::read_to_string(&log).unwrap_or_default());
     r.down_and_check_clean();
 }
 
