@@ -1,8 +1,9 @@
-//! Bringing a robot up and down: the code `nerve launch`, `nerve down`,
-//! `nerve demo` and `nerve calibrate` share, so that none of them calls
-//! another command.
+//! Bringing a robot up and down: the code `nerve launch`, `nerve down` and
+//! the commands that bring a robot down share, so that none of them calls
+//! another command (`nerve demo` and `nerve calibrate`, in `nerve-demo`,
+//! run `nerve launch` and `nerve down` themselves).
 //!
-//! * Up ([`up`], [`launch_robot`]): the router if none answers; one
+//! * Up ([`up`]): the router if none answers; one
 //!   [`CliRequest::Start`] for every agent, which the router hands to its
 //!   supervision and starts in parallel if not yet running (the router is
 //!   the only process that starts agents: nothing here spawns one); a
@@ -15,7 +16,7 @@
 //!   runs, its shared-memory files and its simulated clock's page.
 
 use crate::client::RouterSession;
-use crate::launch_file::{self, LaunchFile};
+use crate::launch_file::LaunchFile;
 use agent_sdk::World;
 use agent_sdk::process::{ProcessError, ProcessHandle};
 use agent_sdk::world::pid_alive;
@@ -181,24 +182,6 @@ fn wait_registered(session: &RouterSession, file: &LaunchFile, running: &[String
         }
     }
     Ok(())
-}
-
-/// Launches `path` as `nerve launch` does (without `--foreground`) on robot
-/// `robot` unless the file names its own, and returns the robot's world.
-/// Unlike `nerve launch`, any failure — an invalid file, an agent that did not
-/// start or register, a connection refused — is an error. Used by `nerve demo`.
-pub fn launch_robot(robot: &str, path: &std::path::Path) -> Result<World> {
-    let (file, world) = launch_file::load(path, robot, false).map_err(|e| anyhow!("{e}"))?;
-    crate::cmd::shm_space::ensure_shm_space("launch")?;
-    world.ensure_state_dirs()?;
-    let up = up(&world, &file)?;
-    if up.failed > 0 {
-        bail!("{} agent(s) of {} did not start (see the lines above)", up.failed, path.display());
-    }
-    if up.wiring_failed > 0 {
-        bail!("{} connection(s) of {} could not be made (see the lines above)", up.wiring_failed, path.display());
-    }
-    Ok(world)
 }
 
 /// What [`up`] achieved.

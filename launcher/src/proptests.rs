@@ -1,4 +1,4 @@
-//! Property tests of the launch-file reader (`launch_file::load`) under
+//! Property tests of the launch-file reader (`launch_file::load_with_args`) under
 //! generated input (issue 40, "every decoder of outside bytes"): arbitrary
 //! bytes, arbitrary text, launch files built from the real keys with
 //! generated values, and such files with one character changed or cut.
@@ -13,7 +13,7 @@
 //! The default case count is proptest's (256, or `PROPTEST_CASES`); the long
 //! run is in `docs/robustness.md`.
 
-use crate::launch_file::{LaunchErrors, load};
+use crate::launch_file::{LaunchErrors, load_with_args};
 use proptest::prelude::*;
 use std::path::PathBuf;
 
@@ -42,7 +42,7 @@ fn check(bytes: &[u8]) -> Result<(), TestCaseError> {
     let dir = Folder::new();
     let path = dir.0.join("robot.toml");
     std::fs::write(&path, bytes).expect("write the launch file");
-    if let Err(e) = load(&path, "proptest", false)
+    if let Err(e) = load_with_args(&path, "proptest", false, &[])
         && let Some(errors) = e.downcast_ref::<LaunchErrors>()
     {
         let lines = bytes.iter().filter(|b| **b == b'\n').count() + 1;

@@ -416,19 +416,10 @@ fn cpus_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<CpuList> {
 
 /// Reads and checks a launch file for `world` (the robot the file runs on):
 /// `cli_robot` when it was named explicitly (`--robot`, `NERVE_ROBOT`), else
-/// the file's `robot`, else `cli_robot` (the default). The file's arguments
-/// take their defaults.
-pub fn load(
-    path: &Path,
-    cli_robot: &str,
-    explicit: bool,
-) -> Result<(LaunchFile, World), Box<dyn std::error::Error + Send + Sync>> {
-    load_with_args(path, cli_robot, explicit, &[])
-}
-
-/// [`load`] with the command line's launch arguments (`NAME=VALUE`, see
-/// [`parse_cli_args`]): the file's includes read, its arguments replaced and
-/// its conditions applied, then every agent and connection checked.
+/// the file's `robot`, else `cli_robot` (the default), with the command
+/// line's launch arguments (`NAME=VALUE`, see [`parse_cli_args`]; the others
+/// take their defaults): the file's includes read, its arguments replaced
+/// and its conditions applied, then every agent and connection checked.
 pub fn load_with_args(
     path: &Path,
     cli_robot: &str,
@@ -822,7 +813,7 @@ mod tests {
             "{errors:?}"
         );
         // the whole load says where, and starts nothing
-        let e = load(&f.0, "x", false).expect_err("refused").to_string();
+        let e = load_with_args(&f.0, "x", false, &[]).expect_err("refused").to_string();
         let at = |line: usize| format!("{}:{line}: ", f.0.display());
         assert!(e.contains(&format!("{}sim_time", at(2))), "{e}");
         assert!(e.contains(&format!("{}time_scale", at(3))), "{e}");
