@@ -312,6 +312,14 @@ fn publish<R: serde::Serialize>(
     Ok(())
 }
 
+/// Runs a scenario whose files go in `work`, then removes `work`, also
+/// when the run failed.
+fn removing_work<R>(work: &std::path::Path, run: impl FnOnce() -> Result<R>) -> Result<R> {
+    let report = run();
+    let _ = std::fs::remove_dir_all(work);
+    report
+}
+
 /// The plot step of [`publish`] for a figure that may fail without failing
 /// the run: `draw` writes `OUT/FILE`; its error is a warning.
 fn plot_or_warn<R>(
@@ -344,9 +352,7 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: common.verbose,
                 work: common.out.join(format!("pipeline-work-{}", std::process::id())),
             };
-            let report = pipeline::run(&opts);
-            let _ = std::fs::remove_dir_all(&opts.work);
-            let report = report?;
+            let report = removing_work(&opts.work, || pipeline::run(&opts))?;
             publish(&common, "pipeline", &report, report.seconds, |_| Ok(vec![]), pipeline::print_tables)?;
         }
         Scenario::Record { common, payloads, rounds, seconds } => {
@@ -359,9 +365,7 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: common.verbose,
                 work: recording::work_dir(&common.out),
             };
-            let report = recording::run(&opts);
-            let _ = std::fs::remove_dir_all(&opts.work);
-            let report = report?;
+            let report = removing_work(&opts.work, || recording::run(&opts))?;
             publish(&common, "record", &report, report.seconds, |_| Ok(vec![]), recording::print_tables)?;
         }
         Scenario::Ui { common, payloads, rounds } => {
@@ -372,9 +376,7 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: common.verbose,
                 work: ui_cost::work_dir(&common.out),
             };
-            let report = ui_cost::run(&opts);
-            let _ = std::fs::remove_dir_all(&opts.work);
-            let report = report?;
+            let report = removing_work(&opts.work, || ui_cost::run(&opts))?;
             publish(&common, "ui", &report, report.seconds, |_| Ok(vec![]), ui_cost::print_tables)?;
         }
         Scenario::Scale { common, agents, period_ms, window } => {
@@ -415,9 +417,7 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: common.verbose,
                 work: hop::work_dir(&common.out),
             };
-            let report = hop::run(&opts);
-            let _ = std::fs::remove_dir_all(&opts.work);
-            let report = report?;
+            let report = removing_work(&opts.work, || hop::run(&opts))?;
             let plot = plot_or_warn(&common.out, "hop-latency.png", plot::hop_png);
             publish(&common, "hop", &report, report.seconds, plot, hop::print_tables)?;
         }
@@ -444,9 +444,7 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: common.verbose,
                 work: images::work_dir(&common.out),
             };
-            let report = images::run(&opts);
-            let _ = std::fs::remove_dir_all(&opts.work);
-            let report = report?;
+            let report = removing_work(&opts.work, || images::run(&opts))?;
             let plot = plot_or_warn(&common.out, "images-latency.png", plot_images::images_png);
             publish(&common, "images", &report, report.seconds, plot, images::print_tables)?;
         }
@@ -462,9 +460,7 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: common.verbose,
                 work: common.out.join(format!("bridge-work-{}", std::process::id())),
             };
-            let report = bridge::run(&opts);
-            let _ = std::fs::remove_dir_all(&opts.work);
-            let report = report?;
+            let report = removing_work(&opts.work, || bridge::run(&opts))?;
             publish(&common, "bridge", &report, report.seconds, |_| Ok(vec![]), bridge::print_tables)?;
         }
         Scenario::Jitter { common, rates, seconds, rounds } => {
@@ -475,9 +471,7 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: common.verbose,
                 work: common.out.join(format!("jitter-work-{}", std::process::id())),
             };
-            let report = jitter::run(&opts);
-            let _ = std::fs::remove_dir_all(&opts.work);
-            let report = report?;
+            let report = removing_work(&opts.work, || jitter::run(&opts))?;
             publish(&common, "jitter", &report, report.seconds, |_| Ok(vec![]), jitter::print_tables)?;
         }
     }
