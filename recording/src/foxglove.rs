@@ -182,6 +182,58 @@ pub fn encode_raw_image(buf: &mut Vec<u8>, img: &RawImage<'_>) {
     bytes(buf, 6, img.data);
 }
 
+/// The suffix of a ring notice port's image channel in `nerve foxglove`.
+pub const IMAGE_SUFFIX: &str = "image";
+
+/// The JSON Schema of [`RAW_IMAGE`] in JSON (bytes as base64, as
+/// Foxglove's JSON encoding has them).
+pub fn raw_image_json_schema() -> serde_json::Value {
+    serde_json::json!({
+        "title": RAW_IMAGE,
+        "type": "object",
+        "properties": {
+            "timestamp": time_schema(),
+            "frame_id": { "type": "string" },
+            "width": { "type": "integer" },
+            "height": { "type": "integer" },
+            "encoding": { "type": "string" },
+            "step": { "type": "integer" },
+            "data": { "type": "string", "contentEncoding": "base64" },
+        },
+    })
+}
+
+/// `img` as a [`RAW_IMAGE`] message in JSON.
+pub fn raw_image_json(img: &RawImage<'_>) -> serde_json::Value {
+    serde_json::json!({
+        "timestamp": time_of(img.unix_ns),
+        "frame_id": img.frame_id,
+        "width": img.width,
+        "height": img.height,
+        "encoding": img.encoding,
+        "step": img.step,
+        "data": base64(img.data),
+    })
+}
+
+/// Standard base64 with padding (RFC 4648).
+fn base64(data: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(data.len().div_ceil(3) * 4);
+    for chunk in data.chunks(3) {
+        let b = [chunk[0], chunk.get(1).copied().unwrap_or(0), chunk.get(2).copied().unwrap_or(0)];
+        let n = u32::from(b[0]) << 16 | u32::from(b[1]) << 8 | u32::from(b[2]);
+        for i in 0..4 {
+            if i <= chunk.len() {
+                out.push(char::from(ALPHABET[(n >> (18 - 6 * i) & 63) as usize]));
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
 /// A nerve type also shown as one of Foxglove's own schemas (the 3D
 /// panel's), in JSON: the live server (`nerve foxglove`) offers it as a
 /// second channel of the port, `/<agent>/<port>/<suffix>`.
@@ -377,6 +429,35 @@ mod tests {
         assert!(m.convert(&serde_json::json!({ "x": 1 }), 0).is_none(), "a sample without theta");
         assert_eq!(m.json_schema()["title"], "foxglove.FrameTransform");
         assert!(mapping_of("nerve::Tick").is_none());
+    }
+
+    #[test]
+    fn base64_is_rfc_4648s() {
+        assert_eq!(base64(b""), "");
+        assert_eq!(base64(b"f"), "Zg==");
+        assert_eq!(base64(b"fo"), "Zm8=");
+        assert_eq!(base64(b"foo"), "Zm9v");
+        assert_eq!(base64(b"foobar"), "Zm9vYmFy");
+        assert_eq!(base64(&[0xff, 0xfe]), "//4=");
+    }
+
+    #[test]
+    fn an_image_in_json_carries_its_pixels_in_base64() {
+        let px = [1u8, 2, 3, 4, 5, 6];
+        let img = RawImage {
+            unix_ns: 1_500_000_001,
+            frame_id: "cam",
+            width: 2,
+            height: 1,
+            encoding: "rgb8",
+            step: 6,
+            data: &px,
+        };
+        let v = raw_image_json(&img);
+        assert_eq!(v["timestamp"], serde_json::json!({ "sec": 1, "nsec": 500_000_001 }));
+        assert_eq!((v["width"].as_u64(), v["step"].as_u64()), (Some(2), Some(6)));
+        assert_eq!(v["data"], "AQIDBAUG");
+        assert_eq!(raw_image_json_schema()["title"], RAW_IMAGE);
     }
 
     #[test]

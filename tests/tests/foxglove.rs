@@ -12,7 +12,8 @@
 //! the connection graph follows `nerve connect`; a message published into
 //! an input comes out of the relay, one of the wrong shape is refused;
 //! 100 subscribe/unsubscribe cycles leave the server's memory flat; and an
-//! odometry agent's pose is also a `foxglove.FrameTransform` channel.
+//! odometry agent's pose is also a `foxglove.FrameTransform` channel, and
+//! a camera's ring a `foxglove.RawImage` one.
 
 use nerve_tests::{Robot, wait_until};
 use serde_json::Value;
@@ -366,4 +367,30 @@ fn a_pose_is_also_a_foxglove_frame_transform() {
     let (z, w) = (m["rotation"]["z"].as_f64().expect("z"), m["rotation"]["w"].as_f64().expect("w"));
     assert!((z - w).abs() < 1e-6, "not a quarter turn: {m}");
     assert!(d["statuses"].as_array().is_some_and(Vec::is_empty), "{d}");
+}
+
+#[test]
+fn a_camera_ring_is_also_a_foxglove_raw_image() {
+    let r = Robot::new("fximage");
+    r.router();
+    r.ok(&["start", "camera", "--name", "cam", "--", "--source", "test-pattern"]);
+    let fox = Fox::start(&r, &[]);
+    let said = run_client(&["watch", &fox.url, "foxglove.sdk.v1", "/cam/frames/image", "2"]);
+    assert_eq!(said[0]["channel"]["schemaName"], "foxglove.RawImage");
+    for s in said[1]["samples"].as_array().expect("samples") {
+        let img = &s["data"];
+        let (w, h, step) = (img["width"].as_u64(), img["height"].as_u64(), img["step"].as_u64());
+        let (w, h, step) = (w.expect("width"), h.expect("height"), step.expect("step"));
+        assert!(w > 0 && h > 0, "{}", img["encoding"]);
+        let bpp = match img["encoding"].as_str() {
+            Some("rgb8") => 3,
+            Some("mono8") => 1,
+            other => panic!("encoding {other:?}"),
+        };
+        assert_eq!(step, w * bpp);
+        // base64 of step * height bytes
+        let data = img["data"].as_str().expect("data");
+        let pad = data.bytes().rev().take_while(|b| *b == b'=').count() as u64;
+        assert_eq!(data.len() as u64 / 4 * 3 - pad, step * h, "the pixels of a {w}x{h} frame");
+    }
 }

@@ -25,10 +25,13 @@ use anyhow::{Context as _, Result};
 use iceoryx2::prelude::Node;
 use nerve_foxglove::protocol::Parameter;
 use nerve_foxglove::{ChannelSpec, GraphSpec, Options, Robot};
-use nerve_recording::foxglove::mapping_of;
+use nerve_recording::foxglove::{
+    IMAGE_SUFFIX, RAW_IMAGE, RawImage, encoding_of, mapping_of, raw_image_json, raw_image_json_schema,
+};
 use serde_json::{Value, json};
 use shm_schemas::control::cli_to_router::{AgentView, CliRequest, RouterError, RouterReply};
 use shm_schemas::encode::encode_json;
+use shm_schemas::ring::RingNotice;
 use shm_schemas::{PortRef, Schema};
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{IsTerminal as _, Write as _};
@@ -118,6 +121,7 @@ pub fn foxglove(world: &World, a: FoxgloveArgs) -> Result<ExitCode> {
         taps: BTreeMap::new(),
         outputs: BTreeMap::new(),
         warned: BTreeSet::new(),
+        rings: BTreeMap::new(),
     };
     interrupt::catch();
     let say = |text: String| {
@@ -177,6 +181,65 @@ struct FoxRobot {
     outputs: BTreeMap<String, Output>,
     /// ports already reported as unreadable
     warned: BTreeSet<String>,
+    /// the short-term-memory rings of image channels, by name
+    rings: BTreeMap<String, nerve_stm::RingReader>,
+}
+
+/// The frame a ring notice announces, as a `foxglove.RawImage` in JSON;
+/// `None` for a ring of raw data or one that cannot be read (logged).
+fn image_of(
+    robot: &shm_schemas::RobotName,
+    rings: &mut BTreeMap<String, nerve_stm::RingReader>,
+    notice: &[u8],
+    unix_ns: u64,
+) -> Option<Vec<u8>> {
+    let notice = RingNotice::from_bytes(notice)?;
+    let name = nerve_stm::RingName::from_notice(&notice).ok()?;
+    let key = name.to_string();
+    if !rings.contains_key(&key) {
+        match nerve_stm::RingReader::open(robot, &name) {
+            Ok(r) => {
+                rings.insert(key.clone(), r);
+            }
+            Err(e) => {
+                tracing::debug!(ring = %key, "cannot open the ring: {e}");
+                return None;
+            }
+        }
+    }
+    let reader = rings.get(&key)?;
+    let r = reader.read_with(notice.seq, |meta, data| {
+        let format = meta.format()?;
+        let (encoding, bpp) = encoding_of(format)?;
+        let converted;
+        let data = if format == nerve_stm::PixelFormat::Hsi8 {
+            converted = nerve_stm::hsi8_to_rgb8(data);
+            &converted[..]
+        } else {
+            data
+        };
+        let step = meta.width.checked_mul(bpp)?;
+        let len = usize::try_from(u64::from(step) * u64::from(meta.height)).ok()?;
+        let img = RawImage {
+            unix_ns,
+            frame_id: &key,
+            width: meta.width,
+            height: meta.height,
+            encoding,
+            step,
+            data: data.get(..len)?,
+        };
+        serde_json::to_vec(&raw_image_json(&img)).ok()
+    });
+    match r {
+        Ok(v) => v,
+        Err(e) => {
+            // overwritten before it was read (a slow reader), or the ring was made anew
+            tracing::debug!(ring = %key, seq = notice.seq, "frame not read: {e}");
+            rings.remove(&key);
+            None
+        }
+    }
 }
 
 /// `/<agent>/<port>` as a port reference.
@@ -291,6 +354,13 @@ impl Robot for FoxRobot {
                 match a.schema_for(o.fingerprint) {
                     Some(s) => {
                         // a pose or a scan also as Foxglove's own schema, for the 3D panel
+                        if o.type_name == <RingNotice as shm_schemas::Payload>::stable_type_name() {
+                            out.push(ChannelSpec {
+                                topic: format!("{topic}/{IMAGE_SUFFIX}"),
+                                schema_name: RAW_IMAGE.to_owned(),
+                                schema: raw_image_json_schema().to_string(),
+                            });
+                        }
                         if let Some(m) = mapping_of(&o.type_name) {
                             out.push(ChannelSpec {
                                 topic: format!("{topic}/{}", m.suffix),
@@ -342,6 +412,8 @@ impl Robot for FoxRobot {
         }
         // the robot's clock to the wall clock, as Foxglove's timestamps are
         let offset = i128::from(unix_now_ns()) - i128::from(now_ns());
+        let robot = self.world.robot().clone();
+        let rings = &mut self.rings;
         for (topic, tap) in &self.taps {
             let Some(channels) = wanted.get(topic) else { continue };
             let mapping = mapping_of(&tap.schema.type_name);
@@ -354,6 +426,7 @@ impl Robot for FoxRobot {
                 for (channel, suffix) in channels {
                     let out = match suffix {
                         None => serde_json::to_vec(&value).ok(),
+                        Some(IMAGE_SUFFIX) => image_of(&robot, rings, bytes, unix),
                         Some(sx) => mapping
                             .filter(|m| m.suffix == *sx)
                             .and_then(|m| m.convert(&value, unix))
