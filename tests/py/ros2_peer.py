@@ -12,7 +12,7 @@ hashes, CDR). Its one argument is a JSON object:
   settle_s    how long to wait after, for the robot to stop
 
 It finds the node and its topics in the liveliness tokens (`@ros2_lv/...`),
-subscribes to /odom, /tf and /scan by the keys the tokens give, decodes
+subscribes to /odom, /tf, /scan and /camera/image_raw by the keys the tokens give, decodes
 them with rosbags, publishes the Twist with the attachment rmw_zenoh puts
 on every message (and a publisher token of its own), then a malformed
 message and a sideways Twist that the robot must refuse, and prints one
@@ -52,7 +52,7 @@ session = zenoh.open(conf)
 dom = A["domain"]
 
 # 1. the graph, as rmw_zenoh's graph cache reads it
-want = {("NN", None), ("MP", "/odom"), ("MP", "/tf"), ("MP", "/scan"), ("MS", "/cmd_vel")}
+want = {("NN", None), ("MP", "/odom"), ("MP", "/tf"), ("MP", "/scan"), ("MP", "/camera/image_raw"), ("MS", "/cmd_vel")}
 found = {}
 deadline = time.monotonic() + 15
 while time.monotonic() < deadline:
@@ -81,7 +81,7 @@ for (kind, topic), parts in found.items():
     tokens[topic] = {"kind": kind, "type": ros_type, "hash": hash_, "qos": parts[12], "zid": parts[2]}
 
 expect = {"/odom": "nav_msgs/msg/Odometry", "/tf": "tf2_msgs/msg/TFMessage", "/scan": "sensor_msgs/msg/LaserScan",
-          "/cmd_vel": "geometry_msgs/msg/Twist"}
+          "/camera/image_raw": "sensor_msgs/msg/Image", "/cmd_vel": "geometry_msgs/msg/Twist"}
 for topic, ros_type in expect.items():
     t = tokens[topic]
     if t["type"] != dds(ros_type):
@@ -95,9 +95,9 @@ def key(topic):
     return f"{dom}/{topic.lstrip('/')}/{t['type']}/{t['hash']}"
 
 
-# 2. /odom, /tf and /scan, decoded by rosbags
+# 2. /odom, /tf, /scan and /camera/image_raw, decoded by rosbags
 lock = threading.Lock()
-odoms, tfs, scans, atts = [], [], [], []
+odoms, tfs, scans, images, atts = [], [], [], [], []
 
 
 def on_odom(sample):
@@ -125,8 +125,21 @@ def on_scan(sample):
                       "ranges": [float(r) if r != float("inf") else None for r in m.ranges]})
 
 
+def on_image(sample):
+    m = TS.deserialize_cdr(bytes(sample.payload.to_bytes()), "sensor_msgs/msg/Image")
+    px = bytes(m.data)
+    # pixels of a strong red (the test pattern's disc)
+    red = sum(1 for i in range(0, len(px) - 2, 3) if px[i] > 180 and px[i + 1] < 70 and px[i + 2] < 70) \
+        if m.encoding == "rgb8" else 0
+    with lock:
+        images.append({"frame": m.header.frame_id, "width": int(m.width), "height": int(m.height),
+                       "encoding": m.encoding, "step": int(m.step), "bigendian": int(m.is_bigendian),
+                       "bytes": len(px), "red": red})
+
+
 subs = [session.declare_subscriber(key("/odom"), on_odom), session.declare_subscriber(key("/tf"), on_tf),
-        session.declare_subscriber(key("/scan"), on_scan)]
+        session.declare_subscriber(key("/scan"), on_scan),
+        session.declare_subscriber(key("/camera/image_raw"), on_image)]
 
 
 def wait_for(cond, secs, what):
@@ -139,7 +152,8 @@ def wait_for(cond, secs, what):
     fail(f"timed out waiting for {what}")
 
 
-wait_for(lambda: len(odoms) >= 5 and len(tfs) >= 1 and len(scans) >= 1, 15, "5 /odom, 1 /tf and 1 /scan messages")
+wait_for(lambda: len(odoms) >= 5 and len(tfs) >= 1 and len(scans) >= 1 and len(images) >= 1, 15,
+         "5 /odom, 1 /tf, 1 /scan and 1 /camera/image_raw messages")
 with lock:
     first = dict(odoms[-1])
 
@@ -184,6 +198,8 @@ with lock:
     stamps_ok = all(abs(now_ns - p[1]) < 600e9 and p[2] == 16 for p in parsed)
     tf_last = tfs[-1]
     scan_last = scans[-1]
+    image_last = images[-1]
+    image_count = len(images)
 
 for s in subs:
     s.undeclare()
@@ -197,6 +213,8 @@ print(json.dumps({
     "odom_count": len(odoms),
     "tf_last": tf_last,
     "scan_last": scan_last,
+    "image_last": image_last,
+    "image_count": image_count,
     "bad_attachments": bad,
     "seq_rising": len(seqs) > 0 and all(b > a for a, b in zip(seqs, seqs[1:])),
     "gids": len(gids),

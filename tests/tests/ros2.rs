@@ -4,12 +4,13 @@
 //! client of that router, and a Python peer playing a ROS 2 node exactly as
 //! rmw_zenoh would (`tests/py/ros2_peer.py`: PyPI eclipse-zenoh and
 //! rosbags, no ROS installation). The peer finds the robot's node and
-//! topics from the liveliness tokens, decodes /odom, /tf and /scan with
-//! rosbags, and drives the robot with a CDR Twist on /cmd_vel; the test
-//! checks the decoded odometry and sonar ranges against `nerve echo`.
+//! topics from the liveliness tokens, decodes /odom, /tf, /scan and
+//! /camera/image_raw with rosbags, and drives the robot with a CDR Twist on
+//! /cmd_vel; the test checks the decoded odometry and sonar ranges against
+//! `nerve echo`, and the camera's test pattern in the Image.
 //!
 //! Needs the binaries: `cargo build -p nerve -p nerve-sim -p nerve-motor -p
-//! nerve-sonar -p nerve-ros2 --bins`, and `target/nerve-py` with eclipse-zenoh and rosbags
+//! nerve-sonar -p nerve-camera -p nerve-ros2 --bins`, and `target/nerve-py` with eclipse-zenoh and rosbags
 //! (`.ci/run` installs them).
 
 use nerve_tests::{ChildGuard, Robot, bin_dir, free_port, write_file};
@@ -83,6 +84,13 @@ topic = "/scan"
 type = "sensor_msgs/msg/LaserScan"
 frame_id = "base_link"
 reliability = "best_effort"
+[[publish]]
+input = "image"
+from = "nerve::RingNotice"
+topic = "/camera/image_raw"
+type = "sensor_msgs/msg/Image"
+frame_id = "camera"
+reliability = "best_effort"
 [[subscribe]]
 topic = "/cmd_vel"
 type = "geometry_msgs/msg/Twist"
@@ -110,6 +118,10 @@ name = "sonar"
 kind = "sonar"
 device = "{{state}}/dev/sonar"
 [[agent]]
+name = "camera"
+kind = "camera"
+args = ["--source", "test-pattern"]
+[[agent]]
 name = "ros2"
 kind = "ros2"
 args = ["--config", "{}"]
@@ -122,6 +134,9 @@ to = "ros2/tf"
 [[connect]]
 from = "sonar/scan"
 to = "ros2/scan"
+[[connect]]
+from = "camera/frames"
+to = "ros2/image"
 [[connect]]
 from = "ros2/cmd_vel"
 to = "motor/cmd"
@@ -222,6 +237,21 @@ to = "motor/cmd"
         }
     }
     assert!(echoes > 0, "the sonar hears some wall: {d}");
+
+    // camera frames from the short-term-memory ring as sensor_msgs/Image:
+    // the test pattern's 320x240 rgb8 picture, its red disc of radius 30
+    let img = &got["image_last"];
+    assert_eq!(
+        (img["frame"].as_str(), img["width"].as_u64(), img["height"].as_u64(), img["encoding"].as_str()),
+        (Some("camera"), Some(320), Some(240), Some("rgb8")),
+        "{img}"
+    );
+    assert_eq!(
+        (img["step"].as_u64(), img["bytes"].as_u64(), img["bigendian"].as_u64()),
+        (Some(960), Some(230_400), Some(0))
+    );
+    let area = std::f64::consts::PI * 30.0 * 30.0;
+    assert!((f(img, "red") - area).abs() < area * 0.15, "red pixels {} for a disc of {area}", img["red"]);
 
     r.down_and_check_clean();
     router.stop(Duration::from_secs(2));

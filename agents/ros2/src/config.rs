@@ -43,6 +43,8 @@ pub enum PubMap {
     VelocityToTwist,
     /// `nerve::SonarScan` → `sensor_msgs/msg/LaserScan` (12 rays, 30° apart)
     SonarToLaserScan,
+    /// `nerve::RingNotice` of an rgb8 or gray8 ring → `sensor_msgs/msg/Image`
+    FramesToImage,
 }
 
 /// The conversions of `[[publish]]`: (nerve type, ROS type, conversion).
@@ -52,6 +54,7 @@ pub const PUB_MAPS: &[(&str, &str, PubMap)] = &[
     ("nerve::GroundTruth", "nav_msgs/msg/Odometry", PubMap::TruthToOdometry),
     ("nerve::VelocityCommand", "geometry_msgs/msg/Twist", PubMap::VelocityToTwist),
     ("nerve::SonarScan", "sensor_msgs/msg/LaserScan", PubMap::SonarToLaserScan),
+    ("nerve::RingNotice", "sensor_msgs/msg/Image", PubMap::FramesToImage),
 ];
 
 /// A ROS message → nerve payload conversion the agent knows.
@@ -411,11 +414,11 @@ to = "nerve::VelocityCommand"
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join("explore.toml");
         let c = load(&path, "ros2").expect("examples/explore.toml");
         let topics: Vec<&str> = c.publish.iter().map(|p| p.topic.as_str()).collect();
-        assert_eq!(topics, ["/odom", "/tf", "/scan"]);
+        assert_eq!(topics, ["/odom", "/tf", "/scan", "/camera/image_raw"]);
         assert_eq!(c.subscribe[0].topic, "/cmd_vel");
         let launch = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../launch/ros2.toml"))
             .expect("launch/ros2.toml");
-        for input in ["ros2/odom", "ros2/tf", "ros2/scan"] {
+        for input in ["ros2/odom", "ros2/tf", "ros2/scan", "ros2/image"] {
             assert!(launch.contains(&format!("to = \"{input}\"")), "launch/ros2.toml wires {input}");
         }
         assert!(launch.contains("from = \"ros2/cmd_vel\""), "launch/ros2.toml wires ros2/cmd_vel");

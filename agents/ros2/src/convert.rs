@@ -10,7 +10,9 @@
 //! | `nerve::SonarScan` (12 directions, 30° apart) | `sensor_msgs/msg/LaserScan`, a direction without echo is +inf (REP-117) |
 //! | `geometry_msgs/msg/Twist` | `nerve::VelocityCommand`: v = linear.x, ω = angular.z (the other four must be 0) |
 
-use crate::msgs::{Header, LaserScan, Odometry, Quaternion, TfMessage, Time, TransformStamped, Twist, Vector3};
+use crate::msgs::{
+    Header, LaserScan, Odometry, Quaternion, RosMessage as _, TfMessage, Time, TransformStamped, Twist, Vector3,
+};
 use shm_schemas::payloads::motion::{GroundTruth, Odometry as NerveOdometry, VelocityCommand};
 use shm_schemas::payloads::sonar::{SONAR_DIRECTIONS, SonarScan};
 
@@ -102,6 +104,46 @@ pub fn sonar_to_scan(s: &SonarScan, stamp: Time, frame: &str) -> LaserScan {
     }
 }
 
+/// The `encoding` of `sensor_msgs/msg/Image` for a ring's pixel format
+/// code (`rgb8`, `mono8`), or `None` for a format ROS has no name for.
+pub fn image_encoding(format: Option<agent_sdk::memory::PixelFormat>) -> Option<&'static str> {
+    use agent_sdk::memory::PixelFormat;
+    match format? {
+        PixelFormat::Rgb8 => Some("rgb8"),
+        PixelFormat::Gray8 => Some("mono8"),
+        _ => None,
+    }
+}
+
+/// A `sensor_msgs/msg/Image` written in CDR straight from the pixels of a
+/// ring slot (one copy, into the message): `width` x `height`, `channels`
+/// bytes per pixel, rows packed. `None` when the sizes overflow or do not
+/// fit in `px` (the sizes come from another process's ring).
+pub fn image_cdr(
+    stamp: Time,
+    frame: &str,
+    width: u32,
+    height: u32,
+    encoding: &str,
+    channels: u32,
+    px: &[u8],
+) -> Option<Result<Vec<u8>, crate::cdr::CdrError>> {
+    let step = width.checked_mul(channels)?;
+    let n = usize::try_from(u64::from(step).checked_mul(u64::from(height))?).ok()?;
+    let data = px.get(..n)?;
+    let mut w = crate::cdr::Writer::with_capacity(n + 64);
+    let run = |w: &mut crate::cdr::Writer| -> Result<(), crate::cdr::CdrError> {
+        Header { stamp, frame_id: frame.to_owned() }.write(w)?;
+        w.u32(height);
+        w.u32(width);
+        w.string(encoding)?;
+        w.u8(0); // is_bigendian
+        w.u32(step);
+        w.bytes(data)
+    };
+    Some(run(&mut w).map(|()| w.finish()))
+}
+
 /// Why a ROS message was not delivered to nerve.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RefusedMessage {
@@ -173,6 +215,24 @@ mod tests {
         assert_eq!(ros_stamp(750_000_000, 1_000_000_000, 100_500_000_000), Time { sec: 100, nanosec: 250_000_000 });
         // a stamp from the future counts as now
         assert_eq!(ros_stamp(2, 1, 3_000_000_000), Time { sec: 3, nanosec: 0 });
+    }
+
+    /// The Image as `sensor_msgs/msg/Image` lays it out, worked out by
+    /// hand: header (stamp 8, frame "cam" 4 + 4), height, width, encoding
+    /// "rgb8" (4 + 5), is_bigendian, 2 bytes of padding, step, the data's
+    /// count and bytes.
+    #[test]
+    fn image_is_written_from_the_ring_bytes() {
+        let px: Vec<u8> = (0..2 * 3 * 3 + 5).map(|i| i as u8).collect(); // a slot larger than the frame
+        let b = image_cdr(Time { sec: 1, nanosec: 2 }, "cam", 2, 3, "rgb8", 3, &px).expect("fits").expect("cdr");
+        let mut want = vec![0, 1, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0, 4, 0, 0, 0, b'c', b'a', b'm', 0];
+        want.extend_from_slice(&[3, 0, 0, 0, 2, 0, 0, 0, 5, 0, 0, 0, b'r', b'g', b'b', b'8', 0]);
+        want.extend_from_slice(&[0, 0, 0, 6, 0, 0, 0, 18, 0, 0, 0]);
+        want.extend_from_slice(&px[..18]);
+        assert_eq!(b, want);
+        // sizes that overflow or do not fit the slot are refused
+        assert!(image_cdr(Time::default(), "", u32::MAX, u32::MAX, "rgb8", 3, &px).is_none());
+        assert!(image_cdr(Time::default(), "", 4, 4, "rgb8", 3, &px).is_none());
     }
 
     #[test]

@@ -63,6 +63,7 @@ enum PubInput {
     Truth(Input<GroundTruth>),
     Velocity(Input<VelocityCommand>),
     Sonar(Input<SonarScan>),
+    Frames(agent_sdk::memory::RingInput),
 }
 
 struct SubOutput {
@@ -109,6 +110,7 @@ impl Agent for Ros2 {
                 PubMap::TruthToOdometry => PubInput::Truth(setup.input(&p.input)?),
                 PubMap::VelocityToTwist => PubInput::Velocity(setup.input(&p.input)?),
                 PubMap::SonarToLaserScan => PubInput::Sonar(setup.input(&p.input)?),
+                PubMap::FramesToImage => PubInput::Frames(agent_sdk::memory::MemorySetup::ring_input(setup, &p.input)?),
             });
         }
         let mut outputs = Vec::new();
@@ -162,7 +164,7 @@ impl Agent for Ros2 {
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
         let now = ctx.now_ns();
         let epoch = convert::epoch_now_ns();
-        for (i, (input, spec)) in self.inputs.iter().zip(&self.cfg.publish).enumerate() {
+        for (i, (input, spec)) in self.inputs.iter_mut().zip(&self.cfg.publish).enumerate() {
             let mut encoded: Vec<Vec<u8>> = Vec::new();
             let mut failed = None;
             let mut push = |r: Result<Vec<u8>, cdr::CdrError>| match r {
@@ -195,6 +197,24 @@ impl Agent for Ros2 {
                         let stamp = convert::ros_stamp(s.stamp_ns, now, epoch);
                         push(convert::sonar_to_scan(s, stamp, frame).to_cdr())
                     });
+                }
+                PubInput::Frames(ring) => {
+                    // the newest frame only, read in place from the ring and
+                    // written into the message (older notices are skipped)
+                    let read = ring.latest_with(|meta, px| {
+                        let enc = convert::image_encoding(meta.format());
+                        let channels = if enc == Some("rgb8") { 3 } else { 1 };
+                        let stamp = convert::ros_stamp(meta.stamp_ns, now, epoch);
+                        enc.and_then(|e| convert::image_cdr(stamp, frame, meta.width, meta.height, e, channels, px))
+                    });
+                    match read {
+                        Ok(None) => {}
+                        Ok(Some(Some(r))) => push(r),
+                        Ok(Some(None)) => self.stats.refused_frame(i),
+                        // overwritten before it was read: the next one comes
+                        Err(agent_sdk::memory::MemoryError::Read(e)) => tracing::debug!(error = %e, "frame skipped"),
+                        Err(e) => return Err(e.into()),
+                    }
                 }
             }
             if let Some(e) = failed {

@@ -137,6 +137,7 @@ impl Inbox {
 pub struct Stats {
     published: Vec<AtomicU64>,
     dropped: Vec<AtomicU64>,
+    refused_frames: AtomicU64,
     session: Mutex<String>,
 }
 
@@ -146,6 +147,7 @@ impl Stats {
         Stats {
             published: (0..n).map(|_| AtomicU64::new(0)).collect(),
             dropped: (0..n).map(|_| AtomicU64::new(0)).collect(),
+            refused_frames: AtomicU64::new(0),
             session: Mutex::new(String::new()),
         }
     }
@@ -157,9 +159,21 @@ impl Stats {
         }
     }
 
+    /// A frame of topic `i` that could not be an Image (a pixel format ROS
+    /// has no name for, or sizes that do not fit its slot).
+    pub fn refused_frame(&self, i: usize) {
+        let n = self.refused_frames.fetch_add(1, Ordering::Relaxed) + 1;
+        if n.is_power_of_two() {
+            tracing::warn!(topic = i, refused = n, "a frame is not rgb8 or gray8, or its sizes do not fit its slot");
+        }
+    }
+
     /// The figures, `published/odom` etc. for the topics named.
     pub fn figures(&self, topics: &[String]) -> Vec<(String, String)> {
-        let mut v = vec![("session".to_string(), lock(&self.session).clone())];
+        let mut v = vec![
+            ("session".to_string(), lock(&self.session).clone()),
+            ("refused_frames".to_string(), self.refused_frames.load(Ordering::Relaxed).to_string()),
+        ];
         for (i, t) in topics.iter().enumerate() {
             let get = |c: &Vec<AtomicU64>| c.get(i).map_or(0, |a| a.load(Ordering::Relaxed)).to_string();
             v.push((format!("published{t}"), get(&self.published)));
