@@ -394,3 +394,46 @@ fn a_camera_ring_is_also_a_foxglove_raw_image() {
         assert_eq!(data.len() as u64 / 4 * 3 - pad, step * h, "the pixels of a {w}x{h} frame");
     }
 }
+
+/// Every topic a panel of `docs/foxglove/explore.json` names, without a
+/// plot's field path.
+fn layout_topics(v: &Value, out: &mut Vec<String>) {
+    match v {
+        Value::Object(m) => {
+            for (k, x) in m {
+                if k == "topics" {
+                    out.extend(x.as_object().into_iter().flat_map(|t| t.keys().cloned()));
+                }
+                if let ("imageTopic" | "topicPath" | "value", Some(t)) = (k.as_str(), x.as_str()) {
+                    out.push(t.split('.').next().unwrap_or(t).to_owned());
+                }
+                layout_topics(x, out);
+            }
+        }
+        Value::Array(a) => a.iter().for_each(|x| layout_topics(x, out)),
+        _ => {}
+    }
+}
+
+#[test]
+fn the_explore_layout_names_only_ports_of_the_explore_robot() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let layout: Value =
+        serde_json::from_str(&std::fs::read_to_string(root.join("docs/foxglove/explore.json")).expect("layout"))
+            .expect("the layout is JSON");
+    // the output ports of launch/explore.toml: those its connections start from
+    let launch = std::fs::read_to_string(root.join("launch/explore.toml")).expect("launch file");
+    let outputs: Vec<&str> =
+        launch.lines().filter_map(|l| l.trim().strip_prefix("from = \"")).filter_map(|l| l.strip_suffix('"')).collect();
+    let mut topics = Vec::new();
+    layout_topics(&layout, &mut topics);
+    assert!(topics.len() >= 6, "{topics:?}");
+    for t in &topics {
+        let parts: Vec<&str> = t.trim_start_matches('/').split('/').collect();
+        let port = parts[..2.min(parts.len())].join("/");
+        assert!(outputs.contains(&port.as_str()), "{t}: {port} is no output port of launch/explore.toml");
+        if let Some(suffix) = parts.get(2) {
+            assert!(["tf", "scan", "image"].contains(suffix), "{t}: no channel of nerve foxglove ends in {suffix}");
+        }
+    }
+}
