@@ -16,6 +16,7 @@ use iceoryx2::prelude::Node;
 use shm_schemas::control::cli_to_router::{AgentView, CliRequest, RouterReply, RouterRequest};
 use shm_schemas::{Payload, SampleHeader};
 use std::collections::BTreeMap;
+use std::os::unix::process::CommandExt as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -37,10 +38,13 @@ pub fn nerve_exe() -> PathBuf {
         .unwrap_or_else(|| PathBuf::from("nerve"))
 }
 
-/// `nerve --robot ROBOT ARGS...`, as a command to finish and run.
+/// `nerve --robot ROBOT ARGS...`, as a command to finish and run. It runs
+/// in a process group of its own: Ctrl-C in the terminal reaches this
+/// program alone, which ends the run and then brings the robot down, so a
+/// launch or a `nerve down` under way is never cut short.
 pub fn nerve(robot: &str, args: &[&str]) -> Command {
     let mut c = Command::new(nerve_exe());
-    c.arg("--robot").arg(robot).args(args).stdin(Stdio::null());
+    c.arg("--robot").arg(robot).args(args).stdin(Stdio::null()).process_group(0);
     c
 }
 
