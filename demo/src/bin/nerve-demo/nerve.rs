@@ -100,6 +100,7 @@ pub fn ensure_bridge_keys(dir: &Path, robots: &[&str]) -> Result<()> {
         let out = Command::new(nerve_exe())
             .args(&args)
             .stdin(Stdio::null())
+            .process_group(0)
             .output()
             .with_context(|| format!("cannot run {}", nerve_exe().display()))?;
         if !out.status.success() {
