@@ -138,9 +138,9 @@ impl Driver {
             Effect::Remove { path } => {
                 self.writer.remove(&path);
             }
-            Effect::Spawn { name, argv, cwd, restart } => {
+            Effect::Spawn { name, argv, cwd, env, restart } => {
                 let log = self.world.log_file(&name);
-                self.spawner.spawn(&name, &argv, cwd.as_deref(), &log, restart);
+                self.spawner.spawn(&name, &argv, cwd.as_deref(), env.as_deref(), &log, restart);
             }
             Effect::Start { ticket, name, argv, cwd, env } => {
                 return self.spawner.start(ticket, &name, &argv, cwd.as_deref(), env.as_deref()).map(Input::StartEnded);

@@ -196,6 +196,8 @@ pub enum Effect {
         argv: Vec<String>,
         /// where it was launched
         cwd: Option<String>,
+        /// the environment it was launched with (`None`: the router's)
+        env: Option<Vec<(String, String)>>,
         /// its restart count
         restart: u32,
     },
@@ -567,6 +569,7 @@ impl State {
         for spec in agents.iter().filter(|s| s.supervise) {
             let registry = &self.registry;
             self.supervisor.supervise(spec.agent.clone(), self.now, |n| registry.contains(n))?;
+            self.supervisor.set_env(&spec.agent.name, spec.env.clone());
             supervised = true;
         }
         if supervised {
@@ -791,8 +794,10 @@ impl State {
         }
         let registry = &self.registry;
         for (name, argv, restart) in self.supervisor.due(now, |n| registry.contains(n)) {
-            let cwd = self.supervisor.get(&name).and_then(|s| s.spec.cwd.clone());
-            self.out.push(Effect::Spawn { name, argv, cwd, restart });
+            let sup = self.supervisor.get(&name);
+            let cwd = sup.and_then(|s| s.spec.cwd.clone());
+            let env = sup.and_then(|s| s.env.clone());
+            self.out.push(Effect::Spawn { name, argv, cwd, env, restart });
         }
         self.forget_gone();
     }

@@ -261,11 +261,19 @@ impl Spawner {
         self.waker.is_none() && self.in_flight > 0
     }
 
-    /// Starts `argv` again for the agent `name` (a restart), its start-up
-    /// errors into `log`.
-    pub fn spawn(&mut self, name: &str, argv: &[String], cwd: Option<&str>, log: &Path, restart: u32) {
+    /// Starts `argv` again for the agent `name` (a restart) in `cwd` with
+    /// `env` (else the router's), its start-up errors into `log`.
+    pub fn spawn(
+        &mut self,
+        name: &str,
+        argv: &[String],
+        cwd: Option<&str>,
+        env: Option<&[(String, String)]>,
+        log: &Path,
+        restart: u32,
+    ) {
         let program = argv.first().map(String::as_str).unwrap_or_default();
-        let Some(mut cmd) = command(argv, cwd, None) else { return };
+        let Some(mut cmd) = command(argv, cwd, env) else { return };
         cmd.stdout(Stdio::null());
         // rotated by size, 0600, never through a symlink (see agent_sdk::daemon)
         match agent_sdk::daemon::open_log(log) {
@@ -397,8 +405,8 @@ mod tests {
         let d = dir("startfail");
         std::fs::create_dir_all(&d).expect("dir");
         let mut s = Spawner::default();
-        s.spawn("bad", &["false".to_owned()], None, &d.join("bad.log"), 1);
-        s.spawn("good", &["true".to_owned()], None, &d.join("good.log"), 1);
+        s.spawn("bad", &["false".to_owned()], None, None, &d.join("bad.log"), 1);
+        s.spawn("good", &["true".to_owned()], None, None, &d.join("good.log"), 1);
         let mut failed = Vec::new();
         for _ in 0..200 {
             failed.extend(s.reap());
@@ -419,7 +427,7 @@ mod tests {
         let mut s = Spawner::default();
         // a relative path in its arguments, as `--kb kb/explore.toml`
         let argv = argv(&["sh", "-c", "echo here > relative.txt"]);
-        s.spawn("kb-user", &argv, Some(&launched.display().to_string()), &d.join("kb-user.log"), 1);
+        s.spawn("kb-user", &argv, Some(&launched.display().to_string()), None, &d.join("kb-user.log"), 1);
         for _ in 0..200 {
             s.reap();
             if s.children.is_empty() {

@@ -63,6 +63,10 @@ pub struct Supervised {
     /// loaded from the file of an earlier router: counted dead if it has
     /// not registered by then
     awaiting: Option<Instant>,
+    /// the environment of the start that asked for this supervision
+    /// (`nerve launch`'s), which restarts get too; kept in memory only (it
+    /// may hold secrets): a router started again restarts with its own
+    pub env: Option<Vec<(String, String)>>,
 }
 
 impl Supervised {
@@ -76,6 +80,7 @@ impl Supervised {
             stopped_by_user: false,
             last_seen: now,
             awaiting: None,
+            env: None,
         }
     }
 
@@ -245,6 +250,7 @@ impl Supervisor {
             s.failed = false;
             s.recent.clear();
             s.last_seen = now;
+            s.env = None;
             return Ok(());
         }
         if self.entries.len() >= MAX_SUPERVISED {
@@ -260,6 +266,13 @@ impl Supervisor {
         }
         self.entries.insert(name, Supervised::new(spec, now));
         Ok(())
+    }
+
+    /// Restarts of `name` get `env` (the environment its launch started it with).
+    pub fn set_env(&mut self, name: &str, env: Option<Vec<(String, String)>>) {
+        if let Some(s) = self.entries.get_mut(name) {
+            s.env = env;
+        }
     }
 
     /// An agent of this name registered: it runs, whatever was pending.

@@ -888,3 +888,25 @@ fn a_stopping_router_starts_nothing() {
     assert!(matches!(error(reply(&fx, id)), RouterError::NotApplicable(m) if m.contains("stopping")));
     assert!(starts(&fx).is_empty());
 }
+
+#[test]
+fn a_restart_gets_the_environment_its_launch_started_the_agent_with() {
+    let mut b = Bench::new();
+    let (_, fx) = b.cli(CliRequest::Start { agents: vec![start_spec("a1", true)] });
+    b.register("a1", 11, &[], &["out"]);
+    b.handle(ended(starts(&fx)[0].0, "a1", StartResult::Started { said: String::new() }));
+    b.died("a1", 11);
+    b.after(Duration::from_millis(100));
+    let fx = b.handle(Input::Tick);
+    let env: Vec<_> = fx
+        .iter()
+        .filter_map(|e| match e {
+            Effect::Spawn { name, env, .. } if name == "a1" => Some(env.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(env, vec![start_spec("a1", true).env], "the restart runs in the launch's environment (its clock...)");
+    // supervised again without a start (an older launcher): the router's own
+    b.cli(CliRequest::Supervise(supervision("a1", RestartPolicy::OnFailure, 3)));
+    assert_eq!(b.core.supervisor.get("a1").and_then(|s| s.env.clone()), None);
+}
