@@ -50,8 +50,9 @@ pub fn find_program(file: &str) -> Option<PathBuf> {
 }
 
 /// Programs named like agents that are not agents: `nerve-bench` runs the
-/// benchmarks (`nerve bench`), `nerve-demo` the demos (`nerve demo`).
-const NOT_AGENTS: [&str; 2] = ["bench", "demo"];
+/// benchmarks (`nerve bench`), `nerve-demo` the demos (`nerve demo`),
+/// `nerve-ros2-router` a plain Zenoh router for ROS 2 nodes (docs/ros2.md).
+const NOT_AGENTS: [&str; 3] = ["bench", "demo", "ros2-router"];
 
 /// Agent kinds installed next to this program.
 pub fn known_kinds() -> Vec<String> {
