@@ -104,7 +104,7 @@ pub enum ClientMessage {
         /// when given, the new values are sent back with this id
         id: Option<String>,
     },
-    /// be told of parameter changes (nerve does not offer it: refused politely)
+    /// be told of changes of these parameters
     #[serde(rename_all = "camelCase")]
     SubscribeParameterUpdates {
         /// names

@@ -187,6 +187,8 @@ struct Client {
     /// client channel id -> input port topic
     publishing: Mutex<HashMap<u32, String>>,
     graph: AtomicBool,
+    /// the parameters whose changes it is sent
+    params: Mutex<BTreeSet<String>>,
     gone: AtomicBool,
 }
 
@@ -299,12 +301,14 @@ pub fn serve(
     let mut threads: Vec<JoinHandle<()>> = Vec::new();
     let mut last_refresh = Instant::now();
     let mut graph = GraphState::default();
+    let mut params = ParamState::default();
     while !stop() {
         accept(&listener, &hub, &tx, &mut threads)?;
         if last_refresh.elapsed() >= opts.refresh {
             last_refresh = Instant::now();
             refresh_channels(&hub, robot);
             graph.refresh(&hub, robot);
+            params.refresh(&hub, robot);
         }
         while let Ok(req) = rx.try_recv() {
             answer(robot, req);
@@ -440,6 +444,7 @@ fn serve_client(stream: TcpStream, peer: SocketAddr, hub: &Hub, tx: &Sender<Requ
         subs: Mutex::default(),
         publishing: Mutex::default(),
         graph: AtomicBool::new(false),
+        params: Mutex::default(),
         gone: AtomicBool::new(false),
     });
     hub.served.fetch_add(1, Ordering::Relaxed);
@@ -457,7 +462,7 @@ fn serve_client(stream: TcpStream, peer: SocketAddr, hub: &Hub, tx: &Sender<Requ
 /// out to; under the channels' lock so that no change falls in between.
 fn register(hub: &Hub, client: &Arc<Client>) {
     let opts = &hub.opts;
-    let mut caps = vec!["parameters", "connectionGraph"];
+    let mut caps = vec!["parameters", "parametersSubscribe", "connectionGraph"];
     if opts.publish && client.edit {
         caps.push("clientPublish");
     }
@@ -642,8 +647,14 @@ fn request(hub: &Hub, client: &Arc<Client>, tx: &Sender<Request>, text: &str) {
                 p.remove(&id);
             }
         }
-        ClientMessage::SubscribeParameterUpdates { .. } | ClientMessage::UnsubscribeParameterUpdates { .. } => {
-            client.error("nerve foxglove does not send parameter updates: ask with getParameters")
+        ClientMessage::SubscribeParameterUpdates { parameter_names } => {
+            lock(&client.params).extend(parameter_names);
+        }
+        ClientMessage::UnsubscribeParameterUpdates { parameter_names } => {
+            let mut p = lock(&client.params);
+            for n in &parameter_names {
+                p.remove(n);
+            }
         }
         ClientMessage::SubscribeConnectionGraph => {
             client.graph.store(true, Ordering::Relaxed);
@@ -764,6 +775,48 @@ fn read_ports(hub: &Hub, robot: &mut dyn Robot) {
             }
         }
     });
+}
+
+/// The parameter values last seen, for the clients that subscribed to
+/// changes (the router sends no notice of them: they are looked at each
+/// refresh while someone listens).
+#[derive(Default)]
+struct ParamState {
+    last: Option<BTreeMap<String, Value>>,
+}
+
+impl ParamState {
+    fn refresh(&mut self, hub: &Hub, robot: &mut dyn Robot) {
+        let listeners: Vec<Arc<Client>> =
+            lock(&hub.clients).values().filter(|c| !lock(&c.params).is_empty()).cloned().collect();
+        if listeners.is_empty() {
+            self.last = None;
+            return;
+        }
+        let now: BTreeMap<String, Value> = match robot.parameters() {
+            Ok(all) => all.into_iter().map(|p| (p.name, p.value)).collect(),
+            Err(e) => {
+                tracing::debug!("no parameters now: {e}");
+                return;
+            }
+        };
+        if let Some(last) = &self.last {
+            let changed: Vec<Parameter> = now
+                .iter()
+                .filter(|(n, v)| last.get(*n) != Some(*v))
+                .map(|(n, v)| Parameter { name: n.clone(), value: v.clone() })
+                .collect();
+            for c in &listeners {
+                let wanted = lock(&c.params);
+                let mine: Vec<Parameter> = changed.iter().filter(|p| wanted.contains(&p.name)).cloned().collect();
+                drop(wanted);
+                if !mine.is_empty() {
+                    c.say(protocol::parameter_values(&mine, None));
+                }
+            }
+        }
+        self.last = Some(now);
+    }
 }
 
 /// The connection graph last sent.

@@ -279,6 +279,8 @@ fn parameters_and_publishing_need_the_token_and_go_through_the_router() {
     assert!(p["refusal"]["message"].as_str().is_some_and(|m| m.contains("step is in")), "{p}");
     assert_eq!(p["after"][0]["value"], 3);
     assert_eq!(r.ok(&["param", "get", "t1", "step"]).trim(), "3");
+    // the subscriber of updates was told of the change
+    assert_eq!(p["update"]["parameters"][0], serde_json::json!({ "name": "/t1/step", "value": 3 }), "{p}");
 
     // a message into r1's input comes out of r1
     let echo = r

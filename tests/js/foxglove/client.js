@@ -121,6 +121,9 @@ async function params(url, name, good, bad) {
   s.client.getParameters([], "all");
   const all = await until(() => values.find((v) => v.id === "all"), 10000, "all parameters");
   const before = all.parameters.find((p) => p.name === name);
+  s.client.subscribeParameterUpdates([name]);
+  // the first look at the values, which an update is measured against
+  await new Promise((r) => setTimeout(r, 1200));
   let n = s.statuses.length;
   s.client.setParameters([{ name, value: Number(good) }], "set");
   // answered with the new value, or refused (no token) with a status
@@ -130,9 +133,13 @@ async function params(url, name, good, bad) {
   n = s.statuses.length;
   s.client.setParameters([{ name, value: Number(bad) }], "bad");
   const refusal = await until(() => s.statuses.length > n && s.statuses[s.statuses.length - 1], 10000, "a refusal");
+  // a set that was taken is told to the subscriber of updates
+  const update = set
+    ? await until(() => values.find((v) => v.id === undefined && v.parameters.some((p) => p.name === name)), 10000, "an update")
+    : null;
   s.client.getParameters([name], "after");
   const after = await until(() => values.find((v) => v.id === "after"), 10000, "the value after");
-  say({ serverInfo: s.serverInfo, count: all.parameters.length, before, set: set && set.parameters, setRefusal, refusal, after: after.parameters });
+  say({ serverInfo: s.serverInfo, count: all.parameters.length, before, set: set && set.parameters, setRefusal, refusal, update, after: after.parameters });
   s.client.close();
 }
 
