@@ -234,6 +234,16 @@ fn base64(data: &[u8]) -> String {
     out
 }
 
+/// A `geometry_msgs/Twist` in JSON (`{"linear": {"x": ..}, "angular":
+/// {"z": ..}}`, what Foxglove's Teleop panel publishes) as the JSON of a
+/// `nerve::VelocityCommand` (`{"v": .., "omega": ..}`: forward speed and
+/// turn rate of a planar base); `None` for anything else.
+pub fn velocity_from_twist(value: &serde_json::Value) -> Option<serde_json::Value> {
+    let x = value.get("linear")?.get("x")?.as_f64()?;
+    let z = value.get("angular")?.get("z")?.as_f64()?;
+    Some(serde_json::json!({ "v": x, "omega": z }))
+}
+
 /// A nerve type also shown as one of Foxglove's own schemas (the 3D
 /// panel's), in JSON: the live server (`nerve foxglove`) offers it as a
 /// second channel of the port, `/<agent>/<port>/<suffix>`.
@@ -429,6 +439,15 @@ mod tests {
         assert!(m.convert(&serde_json::json!({ "x": 1 }), 0).is_none(), "a sample without theta");
         assert_eq!(m.json_schema()["title"], "foxglove.FrameTransform");
         assert!(mapping_of("nerve::Tick").is_none());
+    }
+
+    #[test]
+    fn a_teleop_twist_is_a_velocity_command() {
+        let twist =
+            serde_json::json!({ "linear": { "x": 0.3, "y": 0, "z": 0 }, "angular": { "x": 0, "y": 0, "z": -0.5 } });
+        assert_eq!(velocity_from_twist(&twist), Some(serde_json::json!({ "v": 0.3, "omega": -0.5 })));
+        assert_eq!(velocity_from_twist(&serde_json::json!({ "v": 0.3, "omega": 0 })), None);
+        assert_eq!(velocity_from_twist(&serde_json::json!({ "linear": { "x": "fast" }, "angular": { "z": 0 } })), None);
     }
 
     #[test]

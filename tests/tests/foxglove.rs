@@ -397,9 +397,9 @@ fn a_camera_ring_is_also_a_foxglove_raw_image() {
     }
 }
 
-/// Every topic a panel of `docs/foxglove/explore.json` names, without a
-/// plot's field path.
-fn layout_topics(v: &Value, out: &mut Vec<String>) {
+/// Every topic a panel of `docs/foxglove/explore.json` reads, without a
+/// plot's field path, and every topic one publishes on.
+fn layout_topics(v: &Value, out: &mut Vec<String>, publish: &mut Vec<String>) {
     match v {
         Value::Object(m) => {
             for (k, x) in m {
@@ -409,10 +409,13 @@ fn layout_topics(v: &Value, out: &mut Vec<String>) {
                 if let ("imageTopic" | "topicPath" | "value", Some(t)) = (k.as_str(), x.as_str()) {
                     out.push(t.split('.').next().unwrap_or(t).to_owned());
                 }
-                layout_topics(x, out);
+                if let ("topic", Some(t)) = (k.as_str(), x.as_str()) {
+                    publish.push(t.to_owned());
+                }
+                layout_topics(x, out, publish);
             }
         }
-        Value::Array(a) => a.iter().for_each(|x| layout_topics(x, out)),
+        Value::Array(a) => a.iter().for_each(|x| layout_topics(x, out, publish)),
         _ => {}
     }
 }
@@ -427,8 +430,14 @@ fn the_explore_layout_names_only_ports_of_the_explore_robot() {
     let launch = std::fs::read_to_string(root.join("launch/explore.toml")).expect("launch file");
     let outputs: Vec<&str> =
         launch.lines().filter_map(|l| l.trim().strip_prefix("from = \"")).filter_map(|l| l.strip_suffix('"')).collect();
-    let mut topics = Vec::new();
-    layout_topics(&layout, &mut topics);
+    let inputs: Vec<&str> =
+        launch.lines().filter_map(|l| l.trim().strip_prefix("to = \"")).filter_map(|l| l.strip_suffix('"')).collect();
+    let (mut topics, mut publish) = (Vec::new(), Vec::new());
+    layout_topics(&layout, &mut topics, &mut publish);
+    assert_eq!(publish, ["/motor/cmd"], "the Teleop panel drives the motor");
+    for t in &publish {
+        assert!(inputs.contains(&t.trim_start_matches('/')), "{t} is no input port of launch/explore.toml");
+    }
     assert!(topics.len() >= 6, "{topics:?}");
     for t in &topics {
         let parts: Vec<&str> = t.trim_start_matches('/').split('/').collect();

@@ -27,6 +27,7 @@ use nerve_foxglove::protocol::Parameter;
 use nerve_foxglove::{ChannelSpec, GraphSpec, Options, Robot};
 use nerve_recording::foxglove::{
     IMAGE_SUFFIX, RAW_IMAGE, RawImage, encoding_of, mapping_of, raw_image_json, raw_image_json_schema,
+    velocity_from_twist,
 };
 use serde_json::{Value, json};
 use shm_schemas::control::cli_to_router::{AgentView, CliRequest, RouterError, RouterReply};
@@ -523,7 +524,13 @@ impl Robot for FoxRobot {
 
     fn publish(&mut self, topic: &str, payload: &[u8]) -> Result<(), String> {
         let o = self.outputs.get_mut(topic).ok_or("the channel was not advertised")?;
-        let value: Value = serde_json::from_slice(payload).map_err(|e| format!("not JSON: {e}"))?;
+        let mut value: Value = serde_json::from_slice(payload).map_err(|e| format!("not JSON: {e}"))?;
+        // Foxglove's Teleop panel sends a geometry_msgs/Twist: a velocity command's speed and turn rate
+        if o.schema.type_name == "nerve::VelocityCommand"
+            && let Some(v) = velocity_from_twist(&value)
+        {
+            value = v;
+        }
         let stamp_at = o.stamp_at.filter(|_| value.get("stamp_ns").is_none());
         let bytes = encode_json(&o.schema, &value, &|p| p == "stamp_ns" && stamp_at.is_some())
             .map_err(|e| format!("{} takes {}: {e}", o.to, o.schema.type_name))?;
