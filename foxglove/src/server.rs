@@ -140,11 +140,31 @@ const PING_EVERY: Duration = Duration::from_millis(500);
 
 /// What a client's thread sends to the serving thread.
 enum Request {
-    Get { client: Arc<Client>, names: Vec<String>, id: Option<String> },
-    Set { client: Arc<Client>, parameters: Vec<Parameter>, id: Option<String> },
-    Advertise { client: Arc<Client>, channels: Vec<protocol::ClientChannel> },
-    Publish { client: Arc<Client>, topic: String, payload: Vec<u8> },
-    Graph { client: Arc<Client> },
+    Get {
+        client: Arc<Client>,
+        names: Vec<String>,
+        id: Option<String>,
+    },
+    Set {
+        client: Arc<Client>,
+        parameters: Vec<Parameter>,
+        id: Option<String>,
+    },
+    Advertise {
+        client: Arc<Client>,
+        channels: Vec<protocol::ClientChannel>,
+    },
+    Publish {
+        client: Arc<Client>,
+        topic: String,
+        payload: Vec<u8>,
+    },
+    Graph {
+        client: Arc<Client>,
+    },
+    /// a client subscribed to parameter updates: the values it is measured against are taken now,
+    /// before any later request of it (the channel keeps their order)
+    WatchParams,
 }
 
 /// A queued message data frame.
@@ -311,7 +331,7 @@ pub fn serve(
             params.refresh(&hub, robot);
         }
         while let Ok(req) = rx.try_recv() {
-            answer(robot, req);
+            answer(&hub, robot, req, &mut params);
         }
         read_ports(&hub, robot);
         threads.retain(|t| !t.is_finished());
@@ -649,6 +669,7 @@ fn request(hub: &Hub, client: &Arc<Client>, tx: &Sender<Request>, text: &str) {
         }
         ClientMessage::SubscribeParameterUpdates { parameter_names } => {
             lock(&client.params).extend(parameter_names);
+            send(Request::WatchParams);
         }
         ClientMessage::UnsubscribeParameterUpdates { parameter_names } => {
             let mut p = lock(&client.params);
@@ -872,7 +893,7 @@ fn graph_update(g: &GraphSpec, removed: &[&str]) -> String {
 }
 
 /// Answers a request that needs the robot.
-fn answer(robot: &mut dyn Robot, req: Request) {
+fn answer(hub: &Hub, robot: &mut dyn Robot, req: Request, params: &mut ParamState) {
     match req {
         Request::Get { client, names, id } => match robot.parameters() {
             Ok(all) => {
@@ -930,6 +951,7 @@ fn answer(robot: &mut dyn Robot, req: Request) {
             Ok(g) => client.say(graph_update(&g, &[])),
             Err(e) => client.error(&format!("cannot read the connection graph: {e}")),
         },
+        Request::WatchParams => params.refresh(hub, robot),
     }
 }
 

@@ -122,8 +122,6 @@ async function params(url, name, good, bad) {
   const all = await until(() => values.find((v) => v.id === "all"), 10000, "all parameters");
   const before = all.parameters.find((p) => p.name === name);
   s.client.subscribeParameterUpdates([name]);
-  // the first look at the values, which an update is measured against
-  await new Promise((r) => setTimeout(r, 1200));
   let n = s.statuses.length;
   s.client.setParameters([{ name, value: Number(good) }], "set");
   // answered with the new value, or refused (no token) with a status
