@@ -108,7 +108,7 @@ typedef void (*nerve_stop_fn)(struct nerve_ctx *ctx, void *user);
  What a C agent is: its kind, its period and its callbacks.
 
  The runtime copies it in [`nerve_run`]; `kind` is read there only.
- `new` is called once in the main thread (and once more, with a
+ `init` (the agent's `new`) is called once in the main thread (and once more, with a
  throw-away world, for `--describe`); `start`, `step` and `stop` in the
  agent's task thread, never two at once. A callback returning anything
  but `NERVE_OK` fails that call: a failed `new` or `start` ends the
@@ -125,9 +125,10 @@ typedef struct nerve_agent_vtable {
    */
   uint64_t period_ns;
   /*
-   Required: declares ports.
+   Required: the agent's `new`, declaring its ports (named `init`, as
+   `new` is a C++ keyword and the header is for C++ too).
    */
-  nerve_new_fn new_;
+  nerve_new_fn init;
   /*
    Optional (NULL): runs once before the first step.
    */
@@ -276,10 +277,7 @@ const char *nerve_last_error(void);
  null or points at a vtable whose non-null functions have the declared
  signatures and whose `kind` is a NUL-terminated string.
  */
-int nerve_run(int argc,
-              const char *const *argv,
-              const struct nerve_agent_vtable *agent,
-              void *user);
+int nerve_run(int argc, char *const *argv, const struct nerve_agent_vtable *agent, void *user);
 
 #ifdef __cplusplus
 }  // extern "C"

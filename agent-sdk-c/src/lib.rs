@@ -65,7 +65,7 @@ pub type nerve_stop_fn = Option<unsafe extern "C" fn(ctx: *mut nerve_ctx, user: 
 /// What a C agent is: its kind, its period and its callbacks.
 ///
 /// The runtime copies it in [`nerve_run`]; `kind` is read there only.
-/// `new` is called once in the main thread (and once more, with a
+/// `init` (the agent's `new`) is called once in the main thread (and once more, with a
 /// throw-away world, for `--describe`); `start`, `step` and `stop` in the
 /// agent's task thread, never two at once. A callback returning anything
 /// but `NERVE_OK` fails that call: a failed `new` or `start` ends the
@@ -79,8 +79,9 @@ pub struct nerve_agent_vtable {
     /// The period in nanoseconds for a periodic agent (at least 10000);
     /// 0 for an event-driven agent, which steps when an input has news.
     pub period_ns: u64,
-    /// Required: declares ports.
-    pub new: nerve_new_fn,
+    /// Required: the agent's `new`, declaring its ports (named `init`, as
+    /// `new` is a C++ keyword and the header is for C++ too).
+    pub init: nerve_new_fn,
     /// Optional (NULL): runs once before the first step.
     pub start: nerve_step_fn,
     /// Required: one cycle.
@@ -159,7 +160,7 @@ impl Agent for CAgent {
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let spec = spec()?;
-        let new = spec.new.ok_or_else(|| AgentError::Other("the C agent's vtable has no `new`".into()))?;
+        let new = spec.new.ok_or_else(|| AgentError::Other("the C agent's vtable has no `init`".into()))?;
         let mut s = nerve_setup { sdk: setup as *mut Setup, inputs: Vec::new(), outputs: Vec::new() };
         // SAFETY: `new` is the C program's function of this signature
         // (nerve_run's contract); `s` outlives the call.
@@ -566,7 +567,7 @@ pub extern "C" fn nerve_last_error() -> *const c_char {
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn nerve_run(
     argc: c_int,
-    argv: *const *const c_char,
+    argv: *const *mut c_char,
     agent: *const nerve_agent_vtable,
     user: *mut c_void,
 ) -> c_int {
@@ -577,8 +578,8 @@ pub unsafe extern "C" fn nerve_run(
         // SAFETY: the caller's contract
         let kind = unsafe { text(vt.kind, "agent->kind") }?;
         shm_schemas::AgentName::new(kind).map_err(|e| Failure::Invalid(format!("kind {kind:?}: {e}")))?;
-        if vt.new.is_none() || vt.step.is_none() {
-            return Err(Failure::Invalid("the agent's vtable needs `new` and `step` (not NULL)".into()));
+        if vt.init.is_none() || vt.step.is_none() {
+            return Err(Failure::Invalid("the agent's vtable needs `init` and `step` (not NULL)".into()));
         }
         let task = match vt.period_ns {
             0 => Task::EventDriven,
@@ -600,7 +601,8 @@ pub unsafe extern "C" fn nerve_run(
             args.push(a.to_owned());
         }
         let kind: &'static str = Box::leak(kind.to_owned().into_boxed_str());
-        let spec = Spec { kind, task, new: vt.new, start: vt.start, step: vt.step, stop: vt.stop, user: user as usize };
+        let spec =
+            Spec { kind, task, new: vt.init, start: vt.start, step: vt.step, stop: vt.stop, user: user as usize };
         SPEC.set(spec).map_err(|_| Failure::Invalid("nerve_run runs one agent per process, and it ran already".into()))
     });
     if status != nerve_status::NERVE_OK {

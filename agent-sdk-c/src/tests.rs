@@ -161,7 +161,7 @@ fn nerve_run_refuses_a_null_agent_and_a_bad_kind() {
     let vt = nerve_agent_vtable {
         kind: c"no spaces".as_ptr(),
         period_ns: 0,
-        new: Some(new),
+        init: Some(new),
         start: None,
         step: Some(step),
         stop: None,

@@ -1,0 +1,89 @@
+/* relay.c: a nerve agent written in C. It republishes every nerve::Tick
+ * that arrives on its input `in` on its output `out`, read and written in
+ * place in shared memory (no copy through nerve, one memcpy here).
+ *
+ * Build (from the nerve tree, after `cargo build -p nerve-agent-c`):
+ *   gcc -std=c11 -Wall -Wextra -I agent-sdk-c/include agent-sdk-c/examples/c/relay.c \
+ *       -L target/debug -lnerve -Wl,-rpath,$PWD/target/debug -o crelay
+ * and run it as any agent: from a launch file (`exe = "/path/to/crelay"`),
+ * or `./crelay --describe`. */
+#include "nerve.h"
+
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+/* nerve::Tick, as shm-schemas lays it out (checked when the port is
+ * declared: nerve refuses a struct of another size or alignment). */
+typedef struct {
+  uint64_t seq;      /* sequence number, from 1 */
+  uint64_t stamp_ns; /* CLOCK_MONOTONIC ns when the tick was made */
+} tick;
+
+_Static_assert(sizeof(tick) == 16, "nerve::Tick is 16 bytes");
+
+/* The agent's state: nerve hands this pointer to every callback. */
+typedef struct {
+  nerve_port in;
+  nerve_port out;
+  uint64_t relayed;
+} relay;
+
+static int fail(const char *what) {
+  fprintf(stderr, "crelay: %s: %s\n", what, nerve_last_error());
+  return 1;
+}
+
+static int relay_init(nerve_setup *setup, void *user) {
+  relay *r = user;
+  if (nerve_setup_input(setup, "in", "nerve::Tick", sizeof(tick), _Alignof(tick), 0, &r->in) != NERVE_OK) {
+    return fail("input in");
+  }
+  if (nerve_setup_output(setup, "out", "nerve::Tick", sizeof(tick), _Alignof(tick), 0, &r->out) != NERVE_OK) {
+    return fail("output out");
+  }
+  return 0;
+}
+
+static int relay_step(nerve_ctx *ctx, void *user) {
+  relay *r = user;
+  for (;;) {
+    const void *data = NULL;
+    size_t len = 0;
+    nerve_status s = nerve_take(ctx, r->in, &data, &len);
+    if (s == NERVE_NO_SAMPLE) {
+      return 0;
+    }
+    if (s != NERVE_OK) {
+      return fail("take");
+    }
+    void *slot = NULL;
+    if (nerve_loan(ctx, r->out, &slot) != NERVE_OK) {
+      return fail("loan");
+    }
+    memcpy(slot, data, sizeof(tick));
+    if (nerve_send(ctx, r->out) != NERVE_OK) {
+      return fail("send");
+    }
+    r->relayed++;
+  }
+}
+
+static void relay_stop(nerve_ctx *ctx, void *user) {
+  (void)ctx;
+  relay *r = user;
+  fprintf(stderr, "crelay: stopping after %llu ticks\n", (unsigned long long)r->relayed);
+}
+
+int main(int argc, char **argv) {
+  static relay r;
+  nerve_agent_vtable agent = {
+      .kind = "crelay",
+      .period_ns = 0, /* event-driven: steps when a tick arrives */
+      .init = relay_init,
+      .start = NULL,
+      .step = relay_step,
+      .stop = relay_stop,
+  };
+  return nerve_run(argc, argv, &agent, &r);
+}

@@ -1,0 +1,102 @@
+//! The C example agent (`examples/c/relay.c`) built with gcc against
+//! libnerve.so and run in a real robot: a ticker feeds it through the
+//! router, `nerve echo` reads what it republishes, `--describe` lists its
+//! ports, and `nerve stop` stops it cleanly. Needs the binaries `nerve`,
+//! `nerve-router` and `nerve-ticker` built beside the test (`cargo build
+//! --workspace --bins`) and gcc.
+
+use nerve_testkit::{Robot, bin_dir, wait_until};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+/// Builds `examples/c/NAME.c` into `dir`, linked to the libnerve.so beside
+/// the binaries; panics with gcc's message on a failure.
+fn build_c(name: &str, dir: &Path) -> PathBuf {
+    let crate_dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let lib = bin_dir();
+    assert!(
+        lib.join("libnerve.so").exists(),
+        "{} is missing: build it with `cargo build -p nerve-agent-c`",
+        lib.join("libnerve.so").display()
+    );
+    let exe = dir.join(name);
+    let out = Command::new("gcc")
+        .args(["-std=c11", "-Wall", "-Wextra", "-Werror", "-I"])
+        .arg(crate_dir.join("include"))
+        .arg(crate_dir.join("examples").join("c").join(format!("{name}.c")))
+        .arg("-L")
+        .arg(&lib)
+        .arg("-lnerve")
+        .arg(format!("-Wl,-rpath,{}", lib.display()))
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .expect("run gcc");
+    assert!(out.status.success(), "gcc failed on {name}.c: {}", String::from_utf8_lossy(&out.stderr));
+    exe
+}
+
+#[test]
+fn the_c_relay_runs_under_the_router_and_stops_cleanly() {
+    let r = Robot::new("crelay");
+    let exe = build_c("relay", &r.home);
+
+    // described without a robot's shared memory
+    let out = r.command(exe.to_str().expect("utf-8 path")).arg("--describe").output().expect("describe");
+    assert!(out.status.success(), "--describe failed: {}", String::from_utf8_lossy(&out.stderr));
+    let d: Value = serde_json::from_slice(&out.stdout).expect("description JSON");
+    assert_eq!(d["kind"], "crelay", "{d}");
+    assert_eq!(d["inputs"][0]["type_name"], "nerve::Tick", "{d}");
+    assert_eq!(d["outputs"][0]["type_name"], "nerve::Tick", "{d}");
+    assert!(r.shm_files().is_empty(), "describing made shared memory: {:?}", r.shm_files());
+
+    let file = r.launch_file(
+        "c.toml",
+        &format!(
+            r#"robot = "x"
+[[agent]]
+name = "t"
+kind = "ticker"
+period = "20ms"
+
+[[agent]]
+name = "crelay"
+exe = "{}"
+
+[[connect]]
+from = "t/tick"
+to = "crelay/in"
+"#,
+            exe.display()
+        ),
+    );
+    r.ok(&["launch", file.to_str().expect("utf-8 path")]);
+    let a = r.agent("crelay").expect("the C agent is listed");
+    assert_eq!(a["kind"], "crelay", "{a}");
+
+    // what it republishes is the ticker's ticks, in order
+    let got = r.echo("crelay/out", 3);
+    let seqs: Vec<u64> = got.iter().filter_map(|v| v["data"]["seq"].as_u64()).collect();
+    assert_eq!(seqs.len(), 3, "three ticks with a seq: {got:?}");
+    assert!(seqs.iter().all(|s| *s > 0), "ticks number from 1: {seqs:?}");
+    assert!(seqs.windows(2).all(|w| w[1] > w[0]), "in order: {seqs:?}");
+
+    assert!(got.iter().all(|v| v["from"] == "crelay"), "sent by the C agent: {got:?}");
+    let pid = r.pid("crelay");
+    r.ok(&["stop", "crelay"]);
+    assert!(wait_until(Duration::from_secs(10), || r.agent("crelay").is_none()), "crelay did not stop");
+    assert!(wait_until(Duration::from_secs(10), || !nerve_testkit::alive(pid)), "crelay's process {pid} lives on");
+    // its stop callback ran: it says so in its log
+    let logs = r.home.join(&r.name).join("logs");
+    let said = wait_until(Duration::from_secs(5), || {
+        std::fs::read_dir(&logs)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .any(|e| std::fs::read_to_string(e.path()).is_ok_and(|t| t.contains("crelay: stopping after")))
+    });
+    assert!(said, "no log in {} says the C agent's stop ran", logs.display());
+    r.down_and_check_clean();
+}
