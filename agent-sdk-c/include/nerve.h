@@ -29,7 +29,7 @@ typedef enum nerve_status {
    */
   NERVE_INVALID_ARGUMENT = 2,
   /*
-   No port of this agent has this handle (or not of this direction).
+   No port (or parameter) of this agent has this handle (or not of this direction).
    */
   NERVE_UNKNOWN_PORT = 3,
   /*
@@ -85,6 +85,11 @@ typedef struct nerve_setup nerve_setup;
  given where an output is expected is refused as an unknown port.
  */
 typedef uint32_t nerve_port;
+
+/*
+ A parameter handle, as `nerve_setup_param_f64` gives it: never 0.
+ */
+typedef uint32_t nerve_param;
 
 /*
  `new`: declares the agent's ports (and, later, parameters) on `setup`.
@@ -181,6 +186,36 @@ enum nerve_status nerve_setup_output(struct nerve_setup *setup,
                                      size_t align,
                                      uint64_t fingerprint,
                                      nerve_port *port);
+
+/*
+ Declares parameter `key`, a number with `default`, and bounds `min` and
+ `max` (inclusive; NaN for no bound): a value outside them is refused at
+ start (`--param`) and by `nerve param set`, with a message naming the
+ range. Writes its handle to `*param`; read it in a step with
+ [`nerve_param_f64`].
+
+ Call it in `init` only, with the `setup` given to it, from that thread.
+
+ # Safety
+ `setup` is null or the pointer given to `init`; `key` is null or a
+ NUL-terminated string; `param` is null or writable.
+ */
+enum nerve_status nerve_setup_param_f64(struct nerve_setup *setup,
+                                        const char *key,
+                                        double default_,
+                                        double min,
+                                        double max,
+                                        nerve_param *param);
+
+/*
+ Writes parameter `param`'s current value to `*value` (it changes when
+ `nerve param set` changes it).
+
+ # Safety
+ `ctx` is null or the pointer given to the running callback; `value` is
+ null or writable.
+ */
+enum nerve_status nerve_param_f64(struct nerve_ctx *ctx, nerve_param param, double *value);
 
 /*
  Takes the next sample waiting on input `port`: `*data` points at its

@@ -20,7 +20,7 @@ pub enum nerve_status {
     NERVE_NULL_POINTER = 1,
     /// An argument is not valid (a string not UTF-8, a bad kind or period).
     NERVE_INVALID_ARGUMENT = 2,
-    /// No port of this agent has this handle (or not of this direction).
+    /// No port (or parameter) of this agent has this handle (or not of this direction).
     NERVE_UNKNOWN_PORT = 3,
     /// No built-in payload type has this name.
     NERVE_UNKNOWN_TYPE = 4,
@@ -51,7 +51,7 @@ pub(crate) enum Failure {
     Invalid(String),
     #[error("{0} was used after the callback it was given to returned: use it only inside that call")]
     Stale(&'static str),
-    #[error("port handle {port} is not an {what} of this agent: use a handle nerve_setup_{what} gave")]
+    #[error("handle {port} names no {what} of this agent: use a handle nerve_setup_{what} gave")]
     UnknownPort { port: u32, what: &'static str },
     #[error("{0:?} is not a built-in payload type (names are like \"nerve::Tick\"; see shm-schemas' payloads)")]
     UnknownType(String),

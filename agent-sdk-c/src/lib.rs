@@ -26,7 +26,7 @@
 mod error;
 
 use agent_sdk::dynamic::{Loan, Received, SchemaInput, SchemaOutput};
-use agent_sdk::{Agent, AgentError, CommonArgs, Context, Setup, Task};
+use agent_sdk::{Agent, AgentError, CommonArgs, Context, Param, Setup, Task};
 use error::{Failure, guard, last_error_text};
 use shm_schemas::{Described, Schema};
 use std::ffi::{CStr, c_char, c_int, c_void};
@@ -112,7 +112,12 @@ pub struct nerve_setup {
     sdk: *mut Setup,
     inputs: Vec<SchemaInput>,
     outputs: Vec<SchemaOutput>,
+    params: Vec<Param<f64>>,
 }
+
+/// A parameter handle, as `nerve_setup_param_f64` gives it: never 0.
+#[allow(non_camel_case_types)]
+pub type nerve_param = u32;
 
 /// What `start`, `step` and `stop` get: the agent's ports and the
 /// samples and loans handed out during the call. It lives as long as the
@@ -129,6 +134,7 @@ pub struct nerve_ctx {
     held: Vec<Received>,
     /// one pending loan per output
     loans: Vec<Option<Loan>>,
+    params: Vec<Param<f64>>,
 }
 
 /// An SDK agent whose algorithm is C functions.
@@ -161,7 +167,8 @@ impl Agent for CAgent {
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let spec = spec()?;
         let new = spec.new.ok_or_else(|| AgentError::Other("the C agent's vtable has no `init`".into()))?;
-        let mut s = nerve_setup { sdk: setup as *mut Setup, inputs: Vec::new(), outputs: Vec::new() };
+        let mut s =
+            nerve_setup { sdk: setup as *mut Setup, inputs: Vec::new(), outputs: Vec::new(), params: Vec::new() };
         // SAFETY: `new` is the C program's function of this signature
         // (nerve_run's contract); `s` outlives the call.
         let status = unsafe { new(&mut s, spec.user as *mut c_void) };
@@ -177,6 +184,7 @@ impl Agent for CAgent {
                 outputs: s.outputs,
                 held: Vec::new(),
                 loans,
+                params: s.params,
             }),
         })
     }
@@ -351,6 +359,84 @@ pub unsafe extern "C" fn nerve_setup_output(
         let index = nerve_port::try_from(setup.outputs.len()).map_err(|_| Failure::TooManyPorts)?;
         *out = OUTPUT_BASE.checked_add(index).ok_or(Failure::TooManyPorts)?;
         setup.outputs.push(output);
+        Ok(())
+    })
+}
+
+/// Declares parameter `key`, a number with `default`, and bounds `min` and
+/// `max` (inclusive; NaN for no bound): a value outside them is refused at
+/// start (`--param`) and by `nerve param set`, with a message naming the
+/// range. Writes its handle to `*param`; read it in a step with
+/// [`nerve_param_f64`].
+///
+/// Call it in `init` only, with the `setup` given to it, from that thread.
+///
+/// # Safety
+/// `setup` is null or the pointer given to `init`; `key` is null or a
+/// NUL-terminated string; `param` is null or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn nerve_setup_param_f64(
+    setup: *mut nerve_setup,
+    key: *const c_char,
+    default: f64,
+    min: f64,
+    max: f64,
+    param: *mut nerve_param,
+) -> nerve_status {
+    guard(|| {
+        // SAFETY: the caller's contract
+        let (setup, out) = unsafe { (setup.as_mut(), param.as_mut()) };
+        let setup = setup.ok_or(Failure::Null("setup"))?;
+        let out = out.ok_or(Failure::Null("param"))?;
+        // SAFETY: the caller's contract
+        let key = unsafe { text(key, "key") }?;
+        // SAFETY: `sdk` is the SDK's setup during `init`, null after it
+        let sdk = unsafe { setup.sdk.as_mut() }.ok_or(Failure::Stale("setup"))?;
+        let (lo, hi) = (Some(min).filter(|x| !x.is_nan()), Some(max).filter(|x| !x.is_nan()));
+        if let (Some(l), Some(h)) = (lo, hi)
+            && l > h
+        {
+            return Err(Failure::Invalid(format!("parameter {key:?}: min {l} is above max {h}")));
+        }
+        let name = key.to_owned();
+        let check = move |v: &f64| -> Result<(), String> {
+            let inside = !v.is_nan() && lo.is_none_or(|l| *v >= l) && hi.is_none_or(|h| *v <= h);
+            if inside {
+                return Ok(());
+            }
+            Err(match (lo, hi) {
+                (Some(l), Some(h)) => format!("{name} is in [{l}, {h}]"),
+                (Some(l), None) => format!("{name} must be >= {l}"),
+                (None, Some(h)) => format!("{name} must be <= {h}"),
+                (None, None) => format!("{name} must be a number"),
+            })
+        };
+        check(&default)
+            .map_err(|e| Failure::Invalid(format!("parameter {key:?}: its default is out of its bounds ({e})")))?;
+        setup.params.push(sdk.param_checked(key, default, check));
+        *out = nerve_param::try_from(setup.params.len()).map_err(|_| Failure::TooManyPorts)?;
+        Ok(())
+    })
+}
+
+/// Writes parameter `param`'s current value to `*value` (it changes when
+/// `nerve param set` changes it).
+///
+/// # Safety
+/// `ctx` is null or the pointer given to the running callback; `value` is
+/// null or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn nerve_param_f64(ctx: *mut nerve_ctx, param: nerve_param, value: *mut f64) -> nerve_status {
+    guard(|| {
+        // SAFETY: the caller's contract
+        let value = unsafe { value.as_mut() }.ok_or(Failure::Null("value"))?;
+        // SAFETY: the caller's contract
+        let ctx = unsafe { live(ctx) }?;
+        let p = param
+            .checked_sub(1)
+            .and_then(|i| ctx.params.get(usize::try_from(i).ok()?))
+            .ok_or(Failure::UnknownPort { port: param, what: "param_f64" })?;
+        *value = p.get();
         Ok(())
     })
 }

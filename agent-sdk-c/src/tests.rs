@@ -13,6 +13,7 @@ use std::sync::atomic::{AtomicPtr, AtomicU32, Ordering};
 static WRONG: Mutex<Vec<String>> = Mutex::new(Vec::new());
 static IN: AtomicU32 = AtomicU32::new(0);
 static OUT: AtomicU32 = AtomicU32::new(0);
+static GAIN: AtomicU32 = AtomicU32::new(0);
 /// The context of the last step, kept past it on purpose.
 static KEPT: AtomicPtr<nerve_ctx> = AtomicPtr::new(std::ptr::null_mut());
 
@@ -79,6 +80,19 @@ unsafe extern "C" fn new(setup: *mut nerve_setup, _user: *mut c_void) -> c_int {
             NERVE_OK,
         );
         OUT.store(port, Ordering::Relaxed);
+        let mut gain = 0;
+        expect(
+            "default out of bounds",
+            nerve_setup_param_f64(setup, c"gain".as_ptr(), 20.0, 0.0, 10.0, &mut gain),
+            NERVE_INVALID_ARGUMENT,
+        );
+        expect(
+            "min above max",
+            nerve_setup_param_f64(setup, c"gain".as_ptr(), 2.0, 10.0, 0.0, &mut gain),
+            NERVE_INVALID_ARGUMENT,
+        );
+        expect("param", nerve_setup_param_f64(setup, c"gain".as_ptr(), 2.0, 0.0, 10.0, &mut gain), NERVE_OK);
+        GAIN.store(gain, Ordering::Relaxed);
     }
     0
 }
@@ -110,9 +124,12 @@ unsafe extern "C" fn step(ctx: *mut nerve_ctx, _user: *mut c_void) -> c_int {
             return 0;
         }
         let tick = data.cast::<Tick>().read();
+        let mut gain = 0.0;
+        expect("unknown param", nerve_param_f64(ctx, 77, &mut gain), NERVE_UNKNOWN_PORT);
+        expect("gain", nerve_param_f64(ctx, GAIN.load(Ordering::Relaxed), &mut gain), NERVE_OK);
         expect("loan", nerve_loan(ctx, output, &mut loan), NERVE_OK);
         expect("second loan", nerve_loan(ctx, output, &mut data.cast_mut()), NERVE_LOAN_PENDING);
-        loan.cast::<Tick>().write(Tick { seq: tick.seq * 10, stamp_ns: tick.stamp_ns });
+        loan.cast::<Tick>().write(Tick { seq: tick.seq * gain as u64, stamp_ns: tick.stamp_ns });
         expect("send", nerve_send(ctx, output), NERVE_OK);
     }
     0
@@ -130,7 +147,9 @@ fn a_relay_through_the_c_api_relays_and_every_misuse_is_a_status() {
         user: 0,
     })
     .expect("first spec");
-    let mut h = Harness::<CAgent>::new().expect("the harness makes the C agent");
+    let mut h = Harness::<CAgent>::builder().param("gain", "10").start().expect("the harness makes the C agent");
+    let refused = h.set_param("gain", "11").expect_err("a gain above its bound is refused");
+    assert!(refused.contains("[0, 10]"), "{refused}");
     h.send("in", Tick { seq: 1, stamp_ns: 10 }).expect("send");
     h.send("in", Tick { seq: 2, stamp_ns: 20 }).expect("send");
     h.step().expect("step");
