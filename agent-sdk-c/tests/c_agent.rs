@@ -11,11 +11,27 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-/// Builds `examples/c/NAME.c` into `dir`, linked to the libnerve.so beside
-/// the binaries; panics with gcc's message on a failure.
+/// Builds libnerve.so. Cargo builds only the rlib of a library its tests
+/// use, and `cargo build --tests` not even that, so without this the test
+/// would link a missing or stale libnerve.so. The rlib and the C libraries
+/// are two builds of this crate (only of it: seconds); the build lock is
+/// free while tests run.
+fn build_libnerve() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = Command::new(cargo)
+        .args(["build", "-p", "nerve-agent-c", "--lib"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("run cargo build");
+    assert!(out.status.success(), "cargo build -p nerve-agent-c failed: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// Builds `examples/c/NAME.c` into `dir`, linked to a fresh libnerve.so
+/// beside the binaries; panics with gcc's message on a failure.
 fn build_c(name: &str, dir: &Path) -> PathBuf {
     let crate_dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let lib = bin_dir();
+    build_libnerve();
     assert!(
         lib.join("libnerve.so").exists(),
         "{} is missing: build it with `cargo build -p nerve-agent-c`",
