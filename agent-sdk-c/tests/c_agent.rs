@@ -28,7 +28,7 @@ fn build_libnerve() {
 
 /// Builds `examples/c/NAME.c` into `dir`, linked to a fresh libnerve.so
 /// beside the binaries; panics with gcc's message on a failure.
-fn build_c(name: &str, dir: &Path) -> PathBuf {
+fn build_c(name: &str, dir: &Path, extra: &[&str]) -> PathBuf {
     let crate_dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let lib = bin_dir();
     build_libnerve();
@@ -39,7 +39,9 @@ fn build_c(name: &str, dir: &Path) -> PathBuf {
     );
     let exe = dir.join(name);
     let out = Command::new("gcc")
-        .args(["-std=c11", "-Wall", "-Wextra", "-Werror", "-I"])
+        .args(["-std=c11", "-Wall", "-Wextra", "-Werror"])
+        .args(extra)
+        .arg("-I")
         .arg(crate_dir.join("include"))
         .arg(crate_dir.join("examples").join("c").join(format!("{name}.c")))
         .arg("-L")
@@ -57,7 +59,7 @@ fn build_c(name: &str, dir: &Path) -> PathBuf {
 #[test]
 fn the_c_relay_runs_under_the_router_and_stops_cleanly() {
     let r = Robot::new("crelay");
-    let exe = build_c("relay", &r.home);
+    let exe = build_c("relay", &r.home, &[]);
 
     // described without a robot's shared memory
     let out = r.command(exe.to_str().expect("utf-8 path")).arg("--describe").output().expect("describe");
@@ -115,4 +117,26 @@ to = "crelay/in"
     });
     assert!(said, "no log in {} says the C agent's stop ran", logs.display());
     r.down_and_check_clean();
+}
+
+/// Every call of the header made wrong (NULL handles and out-pointers, no
+/// agent) from a C program built with the undefined-behaviour sanitizer:
+/// each answers its status and a message, and nothing crashes or reports.
+#[test]
+fn c_calls_with_null_pointers_are_statuses_not_crashes() {
+    let dir = std::env::temp_dir().join(format!("nerve-c-misuse-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("make a folder");
+    struct Remove(PathBuf);
+    impl Drop for Remove {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+    let _remove = Remove(dir.clone());
+    let exe = build_c("misuse", &dir, &["-fsanitize=undefined", "-fno-sanitize-recover=undefined"]);
+    let out = Command::new(&exe).output().expect("run misuse");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(stdout.lines().filter(|l| l.starts_with("ok ")).count(), 13, "{stdout}");
+    assert!(!stdout.contains("FAIL"), "{stdout}");
 }
