@@ -28,7 +28,7 @@ mod error;
 use agent_sdk::dynamic::{Loan, Received, SchemaInput, SchemaOutput};
 use agent_sdk::{Agent, AgentError, CommonArgs, Context, Param, Setup, Task};
 use error::{Failure, guard, last_error_text};
-use shm_schemas::{Described, Schema};
+use shm_schemas::Schema;
 use std::ffi::{CStr, c_char, c_int, c_void};
 use std::sync::OnceLock;
 use std::time::Duration;
@@ -246,20 +246,6 @@ impl CAgent {
     }
 }
 
-/// The schema of built-in payload type `type_name`, if there is one.
-fn builtin_schema(type_name: &str) -> Option<Schema> {
-    let mut found = None;
-    macro_rules! look {
-        ($t:ty) => {
-            if found.is_none() && <$t as shm_schemas::Payload>::stable_type_name() == type_name {
-                found = Some(<$t as Described>::schema());
-            }
-        };
-    }
-    shm_schemas::for_each_payload!(look);
-    found
-}
-
 /// A C string argument as UTF-8, or the failure naming `what`.
 ///
 /// # Safety
@@ -276,7 +262,8 @@ unsafe fn text<'a>(p: *const c_char, what: &'static str) -> Result<&'a str, Fail
 /// The schema for a port of `type_name` declared with C struct `size` and
 /// `align` (and `fingerprint`, unless 0), or why they disagree.
 fn port_schema(port: &str, type_name: &str, size: usize, align: usize, fingerprint: u64) -> Result<Schema, Failure> {
-    let schema = builtin_schema(type_name).ok_or_else(|| Failure::UnknownType(type_name.to_owned()))?;
+    let schema =
+        shm_schemas::schema::built_in_named(type_name).ok_or_else(|| Failure::UnknownType(type_name.to_owned()))?;
     let theirs = schema.fingerprint();
     if schema.size != size || schema.align != align || (fingerprint != 0 && fingerprint != theirs) {
         return Err(Failure::Layout {

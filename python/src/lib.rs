@@ -682,15 +682,7 @@ impl Loan {
 /// The layout (JSON) of the built-in payload type `type_name`, or None.
 #[pyfunction]
 fn builtin_schema(type_name: &str) -> Option<String> {
-    let mut found = None;
-    macro_rules! look {
-        ($t:ty) => {
-            if found.is_none() && <$t as shm_schemas::Payload>::stable_type_name() == type_name {
-                found = Some(<$t as Described>::schema());
-            }
-        };
-    }
-    shm_schemas::for_each_payload!(look);
+    let mut found = shm_schemas::schema::built_in_named(type_name);
     if found.is_none() && type_name == "nerve::FixedName" {
         found = Some(<shm_schemas::FixedName as Described>::schema());
     }

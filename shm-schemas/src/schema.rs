@@ -284,6 +284,22 @@ pub fn built_in(fingerprint: u64) -> Option<Schema> {
     found
 }
 
+/// The schema of the built-in payload type named `type_name` (its
+/// `stable_type_name`, e.g. `nerve::Twist`), for the C and Python SDKs that
+/// declare ports by type name.
+pub fn built_in_named(type_name: &str) -> Option<Schema> {
+    let mut found = None;
+    macro_rules! look {
+        ($t:ty) => {
+            if found.is_none() && <$t as crate::Payload>::stable_type_name() == type_name {
+                found = Some(<$t as Described>::schema());
+            }
+        };
+    }
+    crate::for_each_payload!(look);
+    found
+}
+
 /// A type that knows its [`Schema`]. Implemented for the primitives, fixed
 /// arrays and [`crate::FixedName`] here, and by `#[derive(Payload)]`.
 pub trait Described {
@@ -611,6 +627,22 @@ mod tests {
         // SAFETY: reading the bytes of a Copy #[repr(C)] value; its padding
         // is whatever it is, and the decoder reads fields only
         unsafe { std::slice::from_raw_parts((v as *const T).cast::<u8>(), std::mem::size_of::<T>()) }.to_vec()
+    }
+
+    #[test]
+    fn every_built_in_payload_is_found_by_its_name_and_an_unknown_name_is_not() {
+        let mut n = 0;
+        macro_rules! each {
+            ($t:ty) => {
+                n += 1;
+                let name = <$t as crate::Payload>::stable_type_name();
+                assert_eq!(built_in_named(name), Some(<$t as Described>::schema()), "{name}");
+            };
+        }
+        crate::for_each_payload!(each);
+        assert!(n > 20, "the list of payloads was walked: {n}");
+        assert_eq!(built_in_named("nerve::NoSuchType"), None);
+        assert_eq!(built_in_named(""), None);
     }
 
     #[test]
