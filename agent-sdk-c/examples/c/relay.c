@@ -22,6 +22,13 @@ typedef struct {
 
 _Static_assert(sizeof(tick) == 16, "nerve::Tick is 16 bytes");
 
+/* 0: step when a tick arrives. Build with -DRELAY_PERIOD_NS=20000000 for a
+ * relay that steps every 20 ms instead, taking all that waits (then
+ * `nerve rate` changes its period, as for any periodic agent). */
+#ifndef RELAY_PERIOD_NS
+#define RELAY_PERIOD_NS 0
+#endif
+
 /* The agent's state: nerve hands this pointer to every callback. */
 typedef struct {
   nerve_port in;
@@ -79,7 +86,7 @@ int main(int argc, char **argv) {
   static relay r;
   nerve_agent_vtable agent = {
       .kind = "crelay",
-      .period_ns = 0, /* event-driven: steps when a tick arrives */
+      .period_ns = RELAY_PERIOD_NS,
       .init = relay_init,
       .start = NULL,
       .step = relay_step,
