@@ -44,6 +44,40 @@ pub const PAGE_FILE: &str = "sim-clock";
 /// The fastest and slowest simulated time nerve runs: 1/100 to 100 × real time.
 pub const SCALE_RANGE: (f64, f64) = (0.01, 100.0);
 
+/// `--sim-time [--time-scale K]`, as `nerve launch` and `nerve-demo` take
+/// them (flatten it into a command's clap arguments).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct SimTimeArgs {
+    /// Run on simulated time: the simulator owns the robot's clock, and every
+    /// agent's time, deadlines, stamps and timeouts follow it (docs/time.md).
+    #[arg(long)]
+    pub sim_time: bool,
+    /// With --sim-time: how many times as fast as real time the robot runs
+    /// [default: the world's `time_scale`, else 1].
+    #[arg(long, requires = "sim_time", value_parser = parse_scale)]
+    pub time_scale: Option<f64>,
+}
+
+impl SimTimeArgs {
+    /// The scale to run at: `None` on the wall clock; with `--sim-time` the
+    /// flag's, else the world's (`world_scale`), else 1.
+    pub fn scale(&self, world_scale: Option<f64>) -> Option<f64> {
+        self.sim_time.then(|| self.time_scale.or(world_scale).unwrap_or(1.0))
+    }
+}
+
+/// A time scale on the command line or in a launch file: a number in
+/// [`SCALE_RANGE`], or a message saying what to give instead.
+pub fn parse_scale(s: &str) -> Result<f64, String> {
+    let v: f64 =
+        s.trim().parse().map_err(|_| format!("{s:?} is not a number; give e.g. 4 for four times real time"))?;
+    let (lo, hi) = SCALE_RANGE;
+    if !(v.is_finite() && (lo..=hi).contains(&v)) {
+        return Err(format!("{s:?}: give a time scale from {lo} (slower than real time) to {hi} (faster)"));
+    }
+    Ok(v)
+}
+
 /// `nrvclk01`: a page of this layout.
 const MAGIC: u64 = u64::from_le_bytes(*b"nrvclk01");
 
@@ -373,6 +407,22 @@ fn is_simulated_device(path: &Path) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scales_are_checked_and_default_to_the_worlds() {
+        assert_eq!(parse_scale("4"), Ok(4.0));
+        assert_eq!(parse_scale(" 0.5 "), Ok(0.5));
+        for bad in ["0", "-1", "nan", "inf", "1000", "fast", ""] {
+            assert!(parse_scale(bad).is_err(), "{bad} accepted");
+        }
+        let wall = SimTimeArgs::default();
+        assert_eq!(wall.scale(Some(4.0)), None, "a world's scale alone does not make time simulated");
+        let sim = SimTimeArgs { sim_time: true, time_scale: None };
+        assert_eq!(sim.scale(Some(4.0)), Some(4.0));
+        assert_eq!(sim.scale(None), Some(1.0));
+        let given = SimTimeArgs { sim_time: true, time_scale: Some(2.0) };
+        assert_eq!(given.scale(Some(4.0)), Some(2.0));
+    }
 
     fn temp_page(scale: f64) -> (PathBuf, SimClock) {
         let dir = std::env::temp_dir().join(format!("nerve-simclock-{}-{scale}", std::process::id()));

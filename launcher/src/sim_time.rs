@@ -9,46 +9,16 @@
 //! when it starts.
 
 use agent_sdk::World;
-use agent_sdk::simclock::{self, PAGE_FILE, SCALE_RANGE, SIM_CLOCK_ENV};
+use agent_sdk::simclock::{self, PAGE_FILE, SIM_CLOCK_ENV};
 use anyhow::{Context as _, Result, bail};
 use std::path::PathBuf;
 
-/// The flags, as both commands take them.
-#[derive(Debug, Clone, Default, clap::Args)]
-pub struct SimTimeArgs {
-    /// Run on simulated time: the simulator owns the robot's clock, and every
-    /// agent's time, deadlines, stamps and timeouts follow it (docs/time.md).
-    #[arg(long)]
-    pub sim_time: bool,
-    /// With --sim-time: how many times as fast as real time the robot runs
-    /// [default: the world's `time_scale`, else 1].
-    #[arg(long, requires = "sim_time", value_parser = parse_scale)]
-    pub time_scale: Option<f64>,
-}
+pub use agent_sdk::simclock::{SimTimeArgs, parse_scale};
 
-/// A time scale on the command line: from 0.01 to 100.
-pub fn parse_scale(s: &str) -> Result<f64, String> {
-    let v: f64 =
-        s.trim().parse().map_err(|_| format!("{s:?} is not a number; give e.g. 4 for four times real time"))?;
-    let (lo, hi) = SCALE_RANGE;
-    if !(v.is_finite() && (lo..=hi).contains(&v)) {
-        return Err(format!("{s:?}: give a time scale from {lo} (slower than real time) to {hi} (faster)"));
-    }
-    Ok(v)
-}
-
-impl SimTimeArgs {
-    /// The flags over a launch file's `sim_time` and `time_scale`: the
-    /// file's apply where the command line gives none.
-    pub fn with_file(&self, file: &crate::launch_file::LaunchFile) -> Self {
-        SimTimeArgs { sim_time: self.sim_time || file.sim_time, time_scale: self.time_scale.or(file.time_scale) }
-    }
-
-    /// The scale to run at: `None` on the wall clock; with `--sim-time` the
-    /// flag's, else the world's (`world_scale`), else 1.
-    pub fn scale(&self, world_scale: Option<f64>) -> Option<f64> {
-        self.sim_time.then(|| self.time_scale.or(world_scale).unwrap_or(1.0))
-    }
+/// The flags over a launch file's `sim_time` and `time_scale`: the file's
+/// apply where the command line gives none.
+pub fn with_file(args: &SimTimeArgs, file: &crate::launch_file::LaunchFile) -> SimTimeArgs {
+    SimTimeArgs { sim_time: args.sim_time || file.sim_time, time_scale: args.time_scale.or(file.time_scale) }
 }
 
 /// Puts `world`'s robot on simulated time at `scale`: writes the clock's
@@ -110,7 +80,7 @@ pub fn world_scale(file: &crate::launch_file::LaunchFile) -> Option<f64> {
 /// already (another robot's, served by the same simulator), which the launch
 /// then joins. Returns the scale.
 pub fn for_launch(world: &World, args: &SimTimeArgs, file: &crate::launch_file::LaunchFile) -> Result<Option<f64>> {
-    let args = &args.with_file(file);
+    let args = &with_file(args, file);
     let Some(scale) = args.scale(world_scale(file)) else { return Ok(None) };
     if let Some(joined) = std::env::var_os(SIM_CLOCK_ENV).filter(|p| !p.is_empty())
         && args.time_scale.is_none()
@@ -129,21 +99,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn scales_are_checked_and_default_to_the_worlds() {
-        assert_eq!(parse_scale("4"), Ok(4.0));
-        for bad in ["0", "-1", "nan", "inf", "1000", "fast"] {
-            assert!(parse_scale(bad).is_err(), "{bad} accepted");
-        }
-        let wall = SimTimeArgs::default();
-        assert_eq!(wall.scale(Some(4.0)), None, "a world's scale alone does not make time simulated");
-        let sim = SimTimeArgs { sim_time: true, time_scale: None };
-        assert_eq!(sim.scale(Some(4.0)), Some(4.0));
-        assert_eq!(sim.scale(None), Some(1.0));
-        let given = SimTimeArgs { sim_time: true, time_scale: Some(2.0) };
-        assert_eq!(given.scale(Some(4.0)), Some(2.0));
-    }
-
-    #[test]
     fn the_flags_win_over_the_launch_files_keys() {
         let file = |sim_time, time_scale| crate::launch_file::LaunchFile {
             path: PathBuf::from("robot.toml"),
@@ -154,12 +109,20 @@ mod tests {
             time_scale,
         };
         let none = SimTimeArgs::default();
-        assert_eq!(none.with_file(&file(false, Some(4.0))).scale(None), None, "time_scale alone keeps the wall clock");
-        assert_eq!(none.with_file(&file(true, Some(4.0))).scale(Some(2.0)), Some(4.0), "the file's over the world's");
-        assert_eq!(none.with_file(&file(true, None)).scale(Some(2.0)), Some(2.0), "else the world's");
+        assert_eq!(
+            with_file(&none, &file(false, Some(4.0))).scale(None),
+            None,
+            "time_scale alone keeps the wall clock"
+        );
+        assert_eq!(with_file(&none, &file(true, Some(4.0))).scale(Some(2.0)), Some(4.0), "the file's over the world's");
+        assert_eq!(with_file(&none, &file(true, None)).scale(Some(2.0)), Some(2.0), "else the world's");
         let flag = SimTimeArgs { sim_time: true, time_scale: None };
-        assert_eq!(flag.with_file(&file(false, Some(3.0))).scale(None), Some(3.0), "--sim-time takes the file's scale");
+        assert_eq!(
+            with_file(&flag, &file(false, Some(3.0))).scale(None),
+            Some(3.0),
+            "--sim-time takes the file's scale"
+        );
         let both = SimTimeArgs { sim_time: true, time_scale: Some(8.0) };
-        assert_eq!(both.with_file(&file(true, Some(3.0))).scale(None), Some(8.0), "--time-scale wins");
+        assert_eq!(with_file(&both, &file(true, Some(3.0))).scale(None), Some(8.0), "--time-scale wins");
     }
 }

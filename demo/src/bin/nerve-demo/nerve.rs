@@ -8,7 +8,7 @@
 use agent_sdk::World;
 use agent_sdk::control::{ToolConnection, router_client};
 use agent_sdk::ports::{SUBSCRIBER_BUFFER, existing_port_service};
-use agent_sdk::simclock::{self, PAGE_FILE, SCALE_RANGE, SIM_CLOCK_ENV};
+use agent_sdk::simclock::{self, PAGE_FILE, SIM_CLOCK_ENV};
 use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::port::subscriber::Subscriber;
@@ -236,37 +236,7 @@ impl<T: Payload> Tap<T> {
     }
 }
 
-/// `--sim-time [--time-scale K]`, as `nerve launch` takes them.
-#[derive(Debug, Clone, Default, clap::Args)]
-pub struct SimTimeArgs {
-    /// Run on simulated time: the simulator owns the robot's clock, and every
-    /// agent's time, deadlines, stamps and timeouts follow it (docs/time.md).
-    #[arg(long)]
-    pub sim_time: bool,
-    /// With --sim-time: how many times as fast as real time the robot runs
-    /// [default: the world's `time_scale`, else 1].
-    #[arg(long, requires = "sim_time", value_parser = parse_scale)]
-    pub time_scale: Option<f64>,
-}
-
-/// A time scale on the command line: from 0.01 to 100.
-fn parse_scale(s: &str) -> Result<f64, String> {
-    let v: f64 =
-        s.trim().parse().map_err(|_| format!("{s:?} is not a number; give e.g. 4 for four times real time"))?;
-    let (lo, hi) = SCALE_RANGE;
-    if !(v.is_finite() && (lo..=hi).contains(&v)) {
-        return Err(format!("{s:?}: give a time scale from {lo} (slower than real time) to {hi} (faster)"));
-    }
-    Ok(v)
-}
-
-impl SimTimeArgs {
-    /// The scale to run at: `None` on the wall clock; with `--sim-time` the
-    /// flag's, else the world's (`world_scale`), else 1.
-    pub fn scale(&self, world_scale: Option<f64>) -> Option<f64> {
-        self.sim_time.then(|| self.time_scale.or(world_scale).unwrap_or(1.0))
-    }
-}
+pub use agent_sdk::simclock::SimTimeArgs;
 
 /// The simulated clock of a run: its page, named to every robot the run
 /// launches ([`launch`]), removed when dropped (after the robots are down).
@@ -309,19 +279,5 @@ impl Drop for SimClock {
         {
             tracing::warn!(page = %self.page.display(), "cannot remove the simulated clock's page: {e}");
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn scales_outside_the_range_are_refused() {
-        assert_eq!(parse_scale("4"), Ok(4.0));
-        assert!(parse_scale("0").is_err() && parse_scale("fast").is_err() && parse_scale("1000").is_err());
-        let a = SimTimeArgs { sim_time: true, time_scale: None };
-        assert_eq!(a.scale(Some(2.0)), Some(2.0));
-        assert_eq!(SimTimeArgs::default().scale(Some(2.0)), None);
     }
 }
