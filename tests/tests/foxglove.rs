@@ -11,9 +11,10 @@
 //! set through the router (a refused value refused, no token no change);
 //! the connection graph follows `nerve connect`; a message published into
 //! an input comes out of the relay, one of the wrong shape is refused;
-//! 100 subscribe/unsubscribe cycles leave the server's memory flat; and an
+//! 100 subscribe/unsubscribe cycles leave the server's memory flat; an
 //! odometry agent's pose is also a `foxglove.FrameTransform` channel, and
-//! a camera's ring a `foxglove.RawImage` one.
+//! a camera's ring a `foxglove.RawImage` one; and Twists published as the
+//! Teleop panel does into the motor's `cmd` move the simulated robot.
 
 use nerve_tests::{Robot, wait_until};
 use serde_json::Value;
@@ -369,6 +370,78 @@ fn a_pose_is_also_a_foxglove_frame_transform() {
     let (z, w) = (m["rotation"]["z"].as_f64().expect("z"), m["rotation"]["w"].as_f64().expect("w"));
     assert!((z - w).abs() < 1e-6, "not a quarter turn: {m}");
     assert!(d["statuses"].as_array().is_some_and(Vec::is_empty), "{d}");
+}
+
+fn num(v: &Value, k: &str) -> f64 {
+    v[k].as_f64().unwrap_or_else(|| panic!("no number {k} in {v}"))
+}
+
+/// The heading change from `a` to `b`, in (-pi, pi].
+fn turn(a: &Value, b: &Value) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    (num(b, "theta") - num(a, "theta") + PI).rem_euclid(TAU) - PI
+}
+
+/// Foxglove's Teleop panel on `/motor/cmd`: the client advertises a
+/// `geometry_msgs/Twist` channel and publishes Twists (0.15 m/s, 0.4 rad/s,
+/// 10 a second for 2.5 s) into the motor's `cmd` input of a simulated
+/// robot; the simulator's ground truth and the motor's odometry (read with
+/// `nerve echo`, and on the client's own subscription) show it went
+/// forward and turned left, and the motor's dead man stopped it after.
+#[test]
+fn a_teleop_twist_published_from_foxglove_moves_the_simulated_robot() {
+    let r = Robot::new("fxteleop");
+    let world = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("worlds").join("explore.toml");
+    let file = r.launch_file(
+        "teleop.toml",
+        &format!(
+            r#"robot = "x"
+[[agent]]
+name = "sim"
+kind = "sim"
+args = ["--world", "{}", "--dev-dir", "{{state}}/dev", "--no-noise", "--no-camera"]
+[[agent]]
+name = "motor"
+kind = "motor"
+device = "{{state}}/dev/motor"
+args = ["--robot-model", "h1"]
+"#,
+            world.display()
+        ),
+    );
+    r.ok(&["launch", file.to_str().expect("path")]);
+    let fox = Fox::start(&r, &["--publish"]);
+    let truth_before = r.echo("sim/truth", 1)[0]["data"].clone();
+    let odom_before = r.echo("motor/odom", 1)[0]["data"].clone();
+
+    let url = format!("{}/?token={TOKEN}", fox.url);
+    let said = run_client(&["teleop", &url, "/motor/cmd", "0.15", "0.4", "2.5", "/motor/odom"]);
+    let t = &said[0];
+    assert!(t["statuses"].as_array().is_some_and(Vec::is_empty), "the server refused a Twist: {t}");
+    assert!(t["sent"].as_u64().is_some_and(|n| n >= 10), "{t}");
+    // what Foxglove's own subscription to the odometry saw
+    let (first, last) = (&t["first"], &t["last"]);
+    let moved = (num(last, "x") - num(first, "x")).hypot(num(last, "y") - num(first, "y"));
+    assert!(moved > 0.1, "Twists of 0.15 m/s for 2.5 s moved the odometry by {moved} m in Foxglove: {t}");
+    assert!(turn(first, last) > 0.3, "Twists of 0.4 rad/s for 2.5 s turned the odometry in Foxglove: {t}");
+
+    // the dead man stops the robot once the Twists end
+    let mut odom = Value::Null;
+    let stopped = wait_until(Duration::from_secs(5), || {
+        odom = r.echo("motor/odom", 1)[0]["data"].clone();
+        num(&odom, "v").abs() < 1e-6 && num(&odom, "omega").abs() < 1e-6
+    });
+    assert!(stopped, "the robot did not stop after the last Twist: {odom}");
+    // the simulated robot itself moved forward and turned left, and so did its odometry in nerve
+    let truth = r.echo("sim/truth", 1)[0]["data"].clone();
+    let moved = (num(&truth, "x") - num(&truth_before, "x")).hypot(num(&truth, "y") - num(&truth_before, "y"));
+    assert!(moved > 0.1, "the simulated robot moved by {moved} m: {truth_before} -> {truth}");
+    assert!(turn(&truth_before, &truth) > 0.3, "the simulated robot did not turn left: {truth_before} -> {truth}");
+    assert_eq!(truth["collisions"], 0, "{truth}");
+    let moved = (num(&odom, "x") - num(&odom_before, "x")).hypot(num(&odom, "y") - num(&odom_before, "y"));
+    assert!(moved > 0.1, "the odometry moved by {moved} m: {odom_before} -> {odom}");
+    let stats = fox.stop();
+    assert!(stats.contains(" 0 refused"), "{stats}");
 }
 
 #[test]

@@ -12,6 +12,7 @@
 //   node client.js publish URL TOPIC JSON COUNT
 //   node client.js cycles URL TOPIC N
 //   node client.js drive URL PUB_TOPIC JSON SUB_TOPIC
+//   node client.js teleop URL PUB_TOPIC LINEAR ANGULAR SECONDS SUB_TOPIC
 "use strict";
 
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
@@ -218,6 +219,39 @@ async function drive(url, pubTopic, json, subTopic) {
   s.client.close();
 }
 
+// As Foxglove's Teleop panel does: advertises `pubTopic` as a
+// geometry_msgs/Twist in JSON and publishes a Twist of `linear` m/s and
+// `angular` rad/s every 100 ms for `seconds`, then stops (the panel
+// released); meanwhile subscribed to `subTopic`, prints the first and last
+// message seen there, and the statuses the server sent.
+async function teleop(url, pubTopic, linear, angular, seconds, subTopic) {
+  const s = connect(url);
+  const ch = await until(() => s.serverInfo && s.channels.get(subTopic), 10000, `channel ${subTopic}`);
+  if (!s.serverInfo.capabilities.includes("clientPublish")) fail(`no clientPublish: ${s.serverInfo.capabilities}`);
+  const seen = [];
+  const sub = s.client.subscribe(ch.id);
+  s.client.on("message", (m) => {
+    if (m.subscriptionId === sub) seen.push(decode(m.data));
+  });
+  await until(() => seen.length > 0, 10000, `a first message on ${subTopic}`);
+  const first = seen[seen.length - 1];
+  const id = s.client.advertise({ topic: pubTopic, encoding: "json", schemaName: "geometry_msgs/Twist" });
+  const twist = { linear: { x: linear, y: 0, z: 0 }, angular: { x: 0, y: 0, z: angular } };
+  const bytes = new TextEncoder().encode(JSON.stringify(twist));
+  let sent = 0;
+  const t0 = Date.now();
+  while (Date.now() - t0 < seconds * 1000) {
+    s.client.sendMessage(id, bytes);
+    sent++;
+    await new Promise((r) => setTimeout(r, 100));
+  }
+  s.client.unadvertise(id);
+  const n = seen.length;
+  await until(() => seen.length > n, 10000, `a message on ${subTopic} after the last Twist`);
+  say({ sent, first, last: seen[seen.length - 1], count: seen.length, statuses: s.statuses });
+  s.client.close();
+}
+
 const [scenario, ...args] = process.argv.slice(2);
 const run = {
   watch: () => watch(args[0], args[1], args[2], Number(args[3])),
@@ -228,6 +262,7 @@ const run = {
   publish: () => publish(args[0], args[1], args[2], Number(args[3])),
   cycles: () => cycles(args[0], args[1], Number(args[2])),
   drive: () => drive(args[0], args[1], args[2], args[3]),
+  teleop: () => teleop(args[0], args[1], Number(args[2]), Number(args[3]), Number(args[4]), args[5]),
 }[scenario];
 if (!run) fail(`unknown scenario ${scenario}`);
 Promise.resolve(run()).catch(fail);
