@@ -4,7 +4,7 @@ use agent_sdk::control::{ControlClient, ControlError, ToolConnection, router_cli
 use agent_sdk::world::{Ipc, World};
 use anyhow::{Context as _, Result, anyhow, bail};
 use iceoryx2::prelude::Node;
-use shm_schemas::control::cli_to_router::{CliRequest, RouterReply, RouterRequest};
+use shm_schemas::control::cli_to_router::{CliRequest, RouterError, RouterReply, RouterRequest};
 use std::cell::{OnceCell, RefCell};
 use std::time::Duration;
 
@@ -116,6 +116,26 @@ impl RouterSession {
             other => bail!("unexpected reply from the router: {other:?}"),
         }
     }
+}
+
+/// The session a long-running command (`nerve ui`, `nerve foxglove`) keeps
+/// in `kept`: opened on first use, and again after [`call_kept`] dropped it.
+pub fn kept_session<'a>(kept: &'a mut Option<RouterSession>, world: &World) -> Result<&'a RouterSession, String> {
+    match kept {
+        Some(s) => Ok(s),
+        None => Ok(kept.insert(RouterSession::open(world).map_err(|e| format!("{e:#}"))?)),
+    }
+}
+
+/// [`RouterSession::call`] on the session kept in `kept`. A refusal is the
+/// router's answer; any other failure means no router (or a new one), so the
+/// session is dropped and the next call opens a fresh one.
+pub fn call_kept(kept: &mut Option<RouterSession>, world: &World, req: CliRequest) -> Result<RouterReply, String> {
+    let reply = kept_session(kept, world)?.call(req);
+    if reply.as_ref().is_err_and(|e| e.downcast_ref::<RouterError>().is_none()) {
+        *kept = None;
+    }
+    reply.map_err(|e| format!("{e:#}"))
 }
 
 pub fn no_router(world: &World, e: ControlError) -> anyhow::Error {

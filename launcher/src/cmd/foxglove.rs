@@ -30,7 +30,7 @@ use nerve_recording::foxglove::{
     velocity_from_twist,
 };
 use serde_json::{Value, json};
-use shm_schemas::control::cli_to_router::{AgentView, CliRequest, RouterError, RouterReply};
+use shm_schemas::control::cli_to_router::{AgentView, CliRequest, RouterReply};
 use shm_schemas::encode::encode_json;
 use shm_schemas::ring::RingNotice;
 use shm_schemas::{PortRef, Schema};
@@ -287,15 +287,7 @@ fn text_of(value: &Value) -> Result<String, String> {
 
 impl FoxRobot {
     fn call(&mut self, req: CliRequest) -> Result<RouterReply, String> {
-        let session = match &self.session {
-            Some(s) => s,
-            None => self.session.insert(RouterSession::open(&self.world).map_err(|e| format!("{e:#}"))?),
-        };
-        let reply = session.call(req);
-        if reply.as_ref().is_err_and(|e| e.downcast_ref::<RouterError>().is_none()) {
-            self.session = None;
-        }
-        reply.map_err(|e| format!("{e:#}"))
+        crate::client::call_kept(&mut self.session, &self.world, req)
     }
 
     fn agents(&mut self) -> Result<Vec<AgentView>, String> {
@@ -496,10 +488,7 @@ impl Robot for FoxRobot {
             return Ok(o.schema.type_name.clone());
         }
         let to = port_of(topic)?;
-        let session = match &self.session {
-            Some(s) => s,
-            None => self.session.insert(RouterSession::open(&self.world).map_err(|e| format!("{e:#}"))?),
-        };
+        let session = crate::client::kept_session(&mut self.session, &self.world)?;
         let (schema, fingerprint) = super::publish::input_schema(session, &to).map_err(|e| format!("{e:#}"))?;
         let from = PortRef::new(&format!("foxglove-{}", std::process::id()), &to.port).map_err(|e| e.to_string())?;
         let service = self.world.robot().port_service(from.agent.as_str(), &to.port);

@@ -25,7 +25,7 @@ use anyhow::{Context as _, Result};
 use iceoryx2::prelude::Node;
 use nerve_ui::{Action, Options, Robot};
 use serde_json::{Value, json};
-use shm_schemas::control::cli_to_router::{CliRequest, RouterError, RouterReply};
+use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::ring::RingNotice;
 use shm_schemas::{PortRef, Schema};
 use std::collections::{BTreeMap, VecDeque};
@@ -281,17 +281,7 @@ struct UiRobot {
 
 impl UiRobot {
     fn call(&mut self, req: CliRequest) -> Result<RouterReply, String> {
-        let session = match &self.session {
-            Some(s) => s,
-            None => self.session.insert(RouterSession::open(&self.world).map_err(|e| format!("{e:#}"))?),
-        };
-        let reply = session.call(req);
-        // a refusal is the router's answer; any other failure means no router (or a new
-        // one): the next call opens a fresh session
-        if reply.as_ref().is_err_and(|e| e.downcast_ref::<RouterError>().is_none()) {
-            self.session = None;
-        }
-        reply.map_err(|e| format!("{e:#}"))
+        crate::client::call_kept(&mut self.session, &self.world, req)
     }
 
     fn ok(&mut self, req: CliRequest) -> Result<Value, String> {
