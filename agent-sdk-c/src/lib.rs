@@ -280,6 +280,42 @@ fn port_schema(port: &str, type_name: &str, size: usize, align: usize, fingerpri
     Ok(schema)
 }
 
+/// The checked arguments of [`nerve_setup_input`] and
+/// [`nerve_setup_output`].
+struct PortDecl<'a> {
+    setup: &'a mut nerve_setup,
+    out: &'a mut nerve_port,
+    name: &'a str,
+    sdk: &'a mut Setup,
+    schema: Schema,
+}
+
+/// Checks a port declaration's arguments: no null pointer, UTF-8 names, a
+/// setup still in `new`, and a C struct matching the built-in type.
+///
+/// # Safety
+/// As for [`nerve_setup_input`].
+unsafe fn port_decl<'a>(
+    setup: *mut nerve_setup,
+    name: *const c_char,
+    type_name: *const c_char,
+    size: usize,
+    align: usize,
+    fingerprint: u64,
+    port: *mut nerve_port,
+) -> Result<PortDecl<'a>, Failure> {
+    // SAFETY: the caller's contract
+    let (setup, out) = unsafe { (setup.as_mut(), port.as_mut()) };
+    let setup = setup.ok_or(Failure::Null("setup"))?;
+    let out = out.ok_or(Failure::Null("port"))?;
+    // SAFETY: the caller's contract
+    let (name, type_name) = unsafe { (text(name, "name")?, text(type_name, "type_name")?) };
+    // SAFETY: `sdk` is the SDK's setup during `new`, null after it
+    let sdk = unsafe { setup.sdk.as_mut() }.ok_or(Failure::Stale("setup"))?;
+    let schema = port_schema(name, type_name, size, align, fingerprint)?;
+    Ok(PortDecl { setup, out, name, sdk, schema })
+}
+
 /// Declares input `name` of built-in payload type `type_name`
 /// (`"nerve::Tick"`); `size` and `align` are the C struct's (`sizeof`,
 /// `_Alignof`) and `fingerprint` its layout fingerprint, or 0 not to check
@@ -302,15 +338,9 @@ pub unsafe extern "C" fn nerve_setup_input(
     port: *mut nerve_port,
 ) -> nerve_status {
     guard(|| {
-        // SAFETY: the caller's contract
-        let (setup, out) = unsafe { (setup.as_mut(), port.as_mut()) };
-        let setup = setup.ok_or(Failure::Null("setup"))?;
-        let out = out.ok_or(Failure::Null("port"))?;
-        // SAFETY: the caller's contract
-        let (name, type_name) = unsafe { (text(name, "name")?, text(type_name, "type_name")?) };
-        // SAFETY: `sdk` is the SDK's setup during `new`, null after it
-        let sdk = unsafe { setup.sdk.as_mut() }.ok_or(Failure::Stale("setup"))?;
-        let schema = port_schema(name, type_name, size, align, fingerprint)?;
+        // SAFETY: the caller's contract, which is `port_decl`'s
+        let PortDecl { setup, out, name, sdk, schema } =
+            unsafe { port_decl(setup, name, type_name, size, align, fingerprint, port) }?;
         let input = sdk.input_of(name, schema).map_err(|source| Failure::Sdk { port: name.to_owned(), source })?;
         setup.inputs.push(input);
         *out = nerve_port::try_from(setup.inputs.len()).map_err(|_| Failure::TooManyPorts)?;
@@ -333,15 +363,9 @@ pub unsafe extern "C" fn nerve_setup_output(
     port: *mut nerve_port,
 ) -> nerve_status {
     guard(|| {
-        // SAFETY: the caller's contract
-        let (setup, out) = unsafe { (setup.as_mut(), port.as_mut()) };
-        let setup = setup.ok_or(Failure::Null("setup"))?;
-        let out = out.ok_or(Failure::Null("port"))?;
-        // SAFETY: the caller's contract
-        let (name, type_name) = unsafe { (text(name, "name")?, text(type_name, "type_name")?) };
-        // SAFETY: `sdk` is the SDK's setup during `new`, null after it
-        let sdk = unsafe { setup.sdk.as_mut() }.ok_or(Failure::Stale("setup"))?;
-        let schema = port_schema(name, type_name, size, align, fingerprint)?;
+        // SAFETY: the caller's contract, which is `port_decl`'s
+        let PortDecl { setup, out, name, sdk, schema } =
+            unsafe { port_decl(setup, name, type_name, size, align, fingerprint, port) }?;
         let output = sdk.output_of(name, schema).map_err(|source| Failure::Sdk { port: name.to_owned(), source })?;
         let index = nerve_port::try_from(setup.outputs.len()).map_err(|_| Failure::TooManyPorts)?;
         *out = OUTPUT_BASE.checked_add(index).ok_or(Failure::TooManyPorts)?;
