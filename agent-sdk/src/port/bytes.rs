@@ -1015,7 +1015,13 @@ mod tests {
             Err(PortError::LayoutMismatch { .. } | PortError::IncompatibleType { .. }) => {}
             other => panic!("another layout read: {other:?}"),
         }
-        assert!(SchemaOutput::create(&node, &service, other, "py").is_err(), "another layout published");
+        let ours = other.fingerprint();
+        match SchemaOutput::create(&node, &service, other, "py") {
+            Err(PortError::LayoutMismatch { ours: o, theirs, .. }) => {
+                assert_eq!((o, theirs), (ours, Scalar::layout_fingerprint()), "both layouts named");
+            }
+            other => panic!("another layout published: {:?}", other.err()),
+        }
     }
 
     /// What the Python binding's views rely on (issue 40): a loan and a

@@ -206,18 +206,7 @@ pub(crate) fn output_service(node: &Node<Ipc>, service: &str, carried: &Carried)
             Err(OpenOrCreate::PublishSubscribeOpenError(Open::IncompatibleAttributes)) => {
                 // created by another build: say which layouts disagree
                 let theirs = output_builder(node, service, carried)?.open().ok().and_then(|f| service_fingerprint(&f));
-                return Err(match theirs {
-                    Some(theirs) => PortError::LayoutMismatch {
-                        service: service.into(),
-                        type_name: carried.type_name.clone(),
-                        ours: carried.fingerprint,
-                        theirs,
-                    },
-                    None => PortError::Ipc {
-                        service: service.into(),
-                        detail: "the service exists with other attributes (made by another program?)".into(),
-                    },
-                });
+                return Err(other_attributes(service, &carried.type_name, carried.fingerprint, theirs));
             }
             Err(OpenOrCreate::PublishSubscribeOpenError(Open::IncompatibleTypes)) => {
                 return Err(PortError::IncompatibleType {
@@ -237,6 +226,22 @@ pub(crate) fn output_service(node: &Node<Ipc>, service: &str, carried: &Carried)
             }
             Err(source) => return Err(PortError::Service { service: service.into(), source }),
         }
+    }
+}
+
+/// Why output port `service` of `type_name` (layout `ours`) cannot open the
+/// service that exists with other attributes: another layout of the type
+/// when the service says its fingerprint (`theirs`), else a service made by
+/// another program.
+fn other_attributes(service: &str, type_name: &str, ours: u64, theirs: Option<u64>) -> PortError {
+    match theirs {
+        Some(theirs) => {
+            PortError::LayoutMismatch { service: service.into(), type_name: type_name.into(), ours, theirs }
+        }
+        None => PortError::Ipc {
+            service: service.into(),
+            detail: "the service exists with other attributes (made by another program?)".into(),
+        },
     }
 }
 
@@ -338,18 +343,7 @@ pub fn port_service<T: Payload>(
             Ok(f) => return Ok(f),
             Err(OpenOrCreate::PublishSubscribeOpenError(Open::IncompatibleAttributes)) => {
                 let theirs = port_builder::<T>(node, service)?.open().ok().and_then(|f| service_fingerprint(&f));
-                return Err(match theirs {
-                    Some(theirs) => PortError::LayoutMismatch {
-                        service: service.into(),
-                        type_name: T::stable_type_name().into(),
-                        ours: T::layout_fingerprint(),
-                        theirs,
-                    },
-                    None => PortError::Ipc {
-                        service: service.into(),
-                        detail: "the service exists with other attributes (made by another program?)".into(),
-                    },
-                });
+                return Err(other_attributes(service, T::stable_type_name(), T::layout_fingerprint(), theirs));
             }
             Err(OpenOrCreate::PublishSubscribeOpenError(Open::IncompatibleTypes)) => {
                 return Err(PortError::IncompatibleType {
