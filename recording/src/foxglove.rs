@@ -460,19 +460,22 @@ mod tests {
         assert_eq!(base64(&[0xff, 0xfe]), "//4=");
     }
 
-    #[test]
-    fn an_image_in_json_carries_its_pixels_in_base64() {
-        let px = [1u8, 2, 3, 4, 5, 6];
-        let img = RawImage {
+    /// An image of two rgb8 pixels (bytes 1 to 6) at 1.500000001 s.
+    fn two_pixels() -> RawImage<'static> {
+        RawImage {
             unix_ns: 1_500_000_001,
             frame_id: "cam",
             width: 2,
             height: 1,
             encoding: "rgb8",
             step: 6,
-            data: &px,
-        };
-        let v = raw_image_json(&img);
+            data: &[1, 2, 3, 4, 5, 6],
+        }
+    }
+
+    #[test]
+    fn an_image_in_json_carries_its_pixels_in_base64() {
+        let v = raw_image_json(&two_pixels());
         assert_eq!(v["timestamp"], serde_json::json!({ "sec": 1, "nsec": 500_000_001 }));
         assert_eq!((v["width"].as_u64(), v["step"].as_u64()), (Some(2), Some(6)));
         assert_eq!(v["data"], "AQIDBAUG");
@@ -507,20 +510,8 @@ mod tests {
 
     #[test]
     fn an_image_message_has_its_fields_in_order() {
-        let px = [1u8, 2, 3, 4, 5, 6];
         let mut buf = Vec::new();
-        encode_raw_image(
-            &mut buf,
-            &RawImage {
-                unix_ns: 1_500_000_001,
-                frame_id: "cam",
-                width: 2,
-                height: 1,
-                encoding: "rgb8",
-                step: 6,
-                data: &px,
-            },
-        );
+        encode_raw_image(&mut buf, &two_pixels());
         // timestamp { seconds: 1, nanos: 500000001 (a 5-byte varint) }
         assert_eq!(&buf[..2], &[0x0a, 8]);
         assert_eq!(&buf[2..5], &[0x08, 1, 0x10]);
