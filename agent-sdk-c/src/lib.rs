@@ -246,6 +246,20 @@ impl CAgent {
     }
 }
 
+/// Sets the out-pointers of [`nerve_take`] and [`nerve_latest`] to "no
+/// sample" (NULL and 0), or fails naming the one that is null.
+///
+/// # Safety
+/// `data` and `len` are null or writable.
+unsafe fn no_sample_yet(data: *mut *const c_void, len: *mut usize) -> Result<(), Failure> {
+    if data.is_null() || len.is_null() {
+        return Err(Failure::Null(if data.is_null() { "data" } else { "len" }));
+    }
+    // SAFETY: checked not null; writable by the caller's contract
+    unsafe { (*data, *len) = (std::ptr::null(), 0) };
+    Ok(())
+}
+
 /// A C string argument as UTF-8, or the failure naming `what`.
 ///
 /// # Safety
@@ -512,11 +526,8 @@ pub unsafe extern "C" fn nerve_take(
     len: *mut usize,
 ) -> nerve_status {
     guard(|| {
-        if data.is_null() || len.is_null() {
-            return Err(Failure::Null(if data.is_null() { "data" } else { "len" }));
-        }
-        // SAFETY: checked not null; writable by the caller's contract
-        unsafe { (*data, *len) = (std::ptr::null(), 0) };
+        // SAFETY: the caller's contract, which is `no_sample_yet`'s
+        unsafe { no_sample_yet(data, len) }?;
         // SAFETY: the caller's contract
         let ctx = unsafe { live(ctx) }?;
         let input = ctx.input(port)?;
@@ -538,11 +549,8 @@ pub unsafe extern "C" fn nerve_latest(
     len: *mut usize,
 ) -> nerve_status {
     guard(|| {
-        if data.is_null() || len.is_null() {
-            return Err(Failure::Null(if data.is_null() { "data" } else { "len" }));
-        }
-        // SAFETY: checked not null; writable by the caller's contract
-        unsafe { (*data, *len) = (std::ptr::null(), 0) };
+        // SAFETY: the caller's contract, which is `no_sample_yet`'s
+        unsafe { no_sample_yet(data, len) }?;
         // SAFETY: the caller's contract
         let ctx = unsafe { live(ctx) }?;
         let input = ctx.input(port)?;
