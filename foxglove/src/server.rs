@@ -18,6 +18,7 @@
 
 use crate::protocol::{self, Channel, ClientMessage, Level, Parameter, SUBPROTOCOLS};
 use crate::{GraphSpec, Robot};
+use nerve_ui::token_matches;
 use serde_json::{Value, json};
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::io::ErrorKind;
@@ -253,13 +254,6 @@ struct Hub {
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     // a panicking client thread must not take the server with it
     m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
-/// Compares a presented token with the real one in time that does not
-/// depend on where they differ.
-fn token_matches(presented: &str, token: &str) -> bool {
-    let (a, b) = (presented.as_bytes(), token.as_bytes());
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
 /// The `token` of a query string.

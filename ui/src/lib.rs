@@ -24,7 +24,7 @@ mod token;
 
 pub use action::Action;
 pub use server::{Options, UiError, WRITE_TIMEOUT, serve};
-pub use token::{new_token, token_problem};
+pub use token::{matches as token_matches, new_token, token_problem};
 
 /// What the page asks of the robot. `nerve ui` implements it with a router
 /// session; every call is made on the thread that called [`serve`].

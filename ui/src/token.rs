@@ -29,7 +29,7 @@ pub fn token_problem(token: &str) -> Option<&'static str> {
 
 /// Compares a presented token with the real one in time that does not
 /// depend on where they differ.
-pub(crate) fn matches(presented: &str, token: &str) -> bool {
+pub fn matches(presented: &str, token: &str) -> bool {
     let (a, b) = (presented.as_bytes(), token.as_bytes());
     if a.len() != b.len() {
         return false;
