@@ -1,6 +1,6 @@
 /* relay.c: a nerve agent written in C. It republishes every nerve::Tick
  * that arrives on its input `in` on its output `out`, read and written in
- * place in shared memory (no copy through nerve, one memcpy here).
+ * place in shared memory (no copy through nerve, one struct copy here).
  *
  * Build (from the nerve tree, after `cargo build -p nerve-agent-c`):
  *   gcc -std=c11 -Wall -Wextra -I agent-sdk-c/include agent-sdk-c/examples/c/relay.c \
@@ -8,19 +8,10 @@
  * and run it as any agent: from a launch file (`exe = "/path/to/crelay"`),
  * or `./crelay --describe`. */
 #include "nerve.h"
+#include "nerve_types.h" /* nerve_Tick: seq, stamp_ns, as shm-schemas lays it out */
 
 #include <stdint.h>
 #include <stdio.h>
-#include <string.h>
-
-/* nerve::Tick, as shm-schemas lays it out (checked when the port is
- * declared: nerve refuses a struct of another size or alignment). */
-typedef struct {
-  uint64_t seq;      /* sequence number, from 1 */
-  uint64_t stamp_ns; /* CLOCK_MONOTONIC ns when the tick was made */
-} tick;
-
-_Static_assert(sizeof(tick) == 16, "nerve::Tick is 16 bytes");
 
 /* 0: step when a tick arrives. Build with -DRELAY_PERIOD_NS=20000000 for a
  * relay that steps every 20 ms instead, taking all that waits (then
@@ -43,10 +34,11 @@ static int fail(const char *what) {
 
 static int relay_init(nerve_setup *setup, void *user) {
   relay *r = user;
-  if (nerve_setup_input(setup, "in", "nerve::Tick", sizeof(tick), _Alignof(tick), 0, &r->in) != NERVE_OK) {
+  /* the type's name, size, alignment and layout fingerprint, checked by nerve */
+  if (NERVE_SETUP_INPUT(setup, "in", nerve_Tick, &r->in) != NERVE_OK) {
     return fail("input in");
   }
-  if (nerve_setup_output(setup, "out", "nerve::Tick", sizeof(tick), _Alignof(tick), 0, &r->out) != NERVE_OK) {
+  if (NERVE_SETUP_OUTPUT(setup, "out", nerve_Tick, &r->out) != NERVE_OK) {
     return fail("output out");
   }
   return 0;
@@ -64,11 +56,18 @@ static int relay_step(nerve_ctx *ctx, void *user) {
     if (s != NERVE_OK) {
       return fail("take");
     }
+    if (len != sizeof(nerve_Tick)) {
+      fprintf(stderr, "crelay: a sample of %zu bytes, not a nerve_Tick\n", len);
+      return 1;
+    }
+    const nerve_Tick *in = data;
     void *slot = NULL;
     if (nerve_loan(ctx, r->out, &slot) != NERVE_OK) {
       return fail("loan");
     }
-    memcpy(slot, data, sizeof(tick));
+    nerve_Tick *out = slot;
+    out->seq = in->seq;
+    out->stamp_ns = in->stamp_ns;
     if (nerve_send(ctx, r->out) != NERVE_OK) {
       return fail("send");
     }
