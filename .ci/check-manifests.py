@@ -7,7 +7,11 @@
 * every member declares the workspace's `rust-version`;
 * that `rust-version` is at least the one every dependency in the lock file
   declares (iceoryx2 0.10 needs 1.89): no toolchain older than ours is
-  reachable here, so the minimum is checked against what the crates say.
+  reachable here, so the minimum is checked against what the crates say;
+* the Python package (`nerve-python`, built alone by maturin) resolves every
+  dependency with a feature set the whole workspace also has, so that its
+  build reuses the workspace's instead of compiling 70 crates again
+  (python/Cargo.toml, "Feature unification").
 
 Exit 1 with one line per problem.
 """
@@ -67,6 +71,32 @@ if ours:
             continue
         if version_tuple(rv) > version_tuple(ours):
             problems.append(f"{pkg['name']} {pkg['version']} needs Rust {rv}, above the workspace's rust-version {ours}: raise it in Cargo.toml")
+
+
+
+def feature_sets(edges, *selection):
+    """{"name vX": {"f1,f2", ...}} for the packages `cargo tree` resolves for the selection."""
+    out = subprocess.run(
+        ["cargo", "tree", "--locked", "-e", edges, "--prefix", "none", "-f", "{p} [{f}]", *selection],
+        cwd=root, check=True, capture_output=True, text=True,
+    ).stdout
+    sets = {}
+    for line in out.splitlines():
+        m = re.match(r"(\S+ v\S+)(?: \(.*?\))? \[(.*)\]", line.strip())
+        if m:
+            sets.setdefault(m.group(1), set()).add(m.group(2))
+    return sets
+
+
+workspace_sets = feature_sets("normal,build,dev", "--workspace")
+for name, sets in sorted(feature_sets("normal,build", "-p", "nerve-python").items()):
+    extra = sets - workspace_sets.get(name, set())
+    if extra:
+        problems.append(
+            f"python/Cargo.toml: `{name}` resolves with features {sorted(extra)} when the Python package is built alone, "
+            f"which the workspace never builds (it has {sorted(workspace_sets.get(name, set()))}): "
+            "name the crate in its feature unification with the workspace's features, or maturin compiles it and its dependents again"
+        )
 
 for p in problems:
     print(p)

@@ -12,18 +12,20 @@ use std::process::Command;
 use std::time::Duration;
 
 /// Builds libnerve.so. Cargo builds only the rlib of a library its tests
-/// use, and `cargo build --tests` not even that, so without this the test
-/// would link a missing or stale libnerve.so. The rlib and the C libraries
-/// are two builds of this crate (only of it: seconds); the build lock is
-/// free while tests run.
+/// use, so without this the test would link a missing or stale libnerve.so.
+/// The package selection is CI's own build step's (`.ci/run`: `cargo build
+/// --workspace --lib --bins --tests`), so that there this is a check of
+/// seconds, not a second build: `-p nerve-agent-c` alone resolves features
+/// for this crate only and rebuilt it and part of its dependencies (35 s a
+/// test in CI). The build lock is free while tests run.
 fn build_libnerve() {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let out = Command::new(cargo)
-        .args(["build", "-p", "nerve-agent-c", "--lib"])
+        .args(["build", "--workspace", "--lib", "--bins", "--tests"])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .expect("run cargo build");
-    assert!(out.status.success(), "cargo build -p nerve-agent-c failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "cargo build --workspace --lib failed: {}", String::from_utf8_lossy(&out.stderr));
 }
 
 /// Builds `examples/c/NAME.c` into `dir`, linked to a fresh libnerve.so
