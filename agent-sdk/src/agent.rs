@@ -57,6 +57,9 @@ pub enum AgentError {
     /// Bad configuration (arguments, parameters).
     #[error("configuration: {0}")]
     Config(String),
+    /// A call port could not be made or used.
+    #[error(transparent)]
+    Call(#[from] crate::port::call::CallError),
     /// A device failed.
     #[error("device: {0}")]
     Device(String),
@@ -116,6 +119,8 @@ pub struct Setup {
     /// the schema of each type the ports carry, once per layout
     pub(crate) schemas: Vec<shm_schemas::Schema>,
     pub(crate) params: ParamTable,
+    /// the services it answers and the clients it calls through (also in `inputs`, for wake-ups)
+    pub(crate) calls: crate::port::call::Declared,
 }
 
 impl std::fmt::Debug for Setup {
@@ -136,6 +141,7 @@ impl Setup {
             outputs: Vec::new(),
             schemas: Vec::new(),
             params: ParamTable::default(),
+            calls: Default::default(),
         }
     }
 
@@ -216,6 +222,43 @@ impl Setup {
         self.inputs.push(inner);
         add_schema(&mut self.schemas, schema);
         Ok(input)
+    }
+
+    /// Declares service `port`: requests `Req` answered by `Resp`, in the
+    /// agent's task, which a request wakes like an input (see [`crate::port::call`]).
+    pub fn serve<Req: Payload, Resp: Payload>(
+        &mut self,
+        port: &str,
+    ) -> Result<crate::port::Server<Req, Resp>, AgentError> {
+        self.check_port(port)?;
+        let service = self.world.robot().port_service(self.name.as_str(), port);
+        let (server, inner) = crate::port::Server::bind(&self.binding, port, &service)?;
+        self.calls.add_service::<Req, Resp>(port, &mut self.schemas);
+        self.inputs.push(inner);
+        Ok(server)
+    }
+
+    /// Declares client `port` of a service of `Req` answered by `Resp`, with
+    /// the default timeout and bound of calls in flight; the router wires it
+    /// to a service (`nerve connect AGENT/PORT SERVER/SERVICE`).
+    pub fn client<Req: Payload, Resp: Payload>(
+        &mut self,
+        port: &str,
+    ) -> Result<crate::port::Client<Req, Resp>, AgentError> {
+        self.client_with(port, crate::port::CallOptions::default())
+    }
+
+    /// [`Setup::client`] with its own timeout and bound of calls in flight.
+    pub fn client_with<Req: Payload, Resp: Payload>(
+        &mut self,
+        port: &str,
+        options: crate::port::CallOptions,
+    ) -> Result<crate::port::Client<Req, Resp>, AgentError> {
+        self.check_port(port)?;
+        let (client, inner) = crate::port::Client::bind(&self.binding, port, options)?;
+        self.calls.add_client::<Req, Resp>(port, &mut self.schemas);
+        self.inputs.push(inner);
+        Ok(client)
     }
 
     /// Declares a parameter with a default value.

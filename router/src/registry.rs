@@ -119,12 +119,14 @@ impl Registry {
     /// Port `p` (an output when `output`) as its agent registered it, or why there is none.
     pub fn port(&self, p: &PortRef, output: bool) -> Result<&PortSpec, RouterError> {
         let entry = self.live(p.agent.as_str())?;
-        let ports = if output { &entry.reg.outputs } else { &entry.reg.inputs };
-        ports.iter().find(|s| s.name == p.port).ok_or_else(|| RouterError::UnknownPort {
+        // a service is wired like an output, a client like an input (docs/calls.md)
+        let (ports, calls) =
+            if output { (&entry.reg.outputs, &entry.reg.services) } else { (&entry.reg.inputs, &entry.reg.clients) };
+        ports.iter().chain(calls).find(|s| s.name == p.port).ok_or_else(|| RouterError::UnknownPort {
             agent: p.agent.to_string(),
             port: p.port.clone(),
             direction: if output { "output" } else { "input" }.into(),
-            available: ports.iter().map(|s| s.name.clone()).collect(),
+            available: ports.iter().chain(calls).map(|s| s.name.clone()).collect(),
         })
     }
 
@@ -241,6 +243,8 @@ mod tests {
             log_file: None,
             suspended: false,
             schemas: vec![],
+            services: vec![],
+            clients: vec![],
         }
     }
 

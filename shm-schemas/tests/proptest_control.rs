@@ -199,6 +199,8 @@ fn registration() -> impl Strategy<Value = Registration> {
                     log_file,
                     suspended,
                     schemas,
+                    services: Vec::new(),
+                    clients: Vec::new(),
                 }
             },
         )

@@ -7,17 +7,21 @@
 //!   written in place as bytes; with the tools' [`RawPort`] and [`RawOutput`];
 //! * [`typed`]: [`Output<T>`] and [`Input<T>`], views of the byte port as a
 //!   Rust type, zero copy;
+//! * [`call`]: calls between agents, a [`Server`] and a [`Client`] on
+//!   iceoryx2 request-response;
 //! * `memory`: the in-memory binding a test's ports use instead of iceoryx2.
 //!
 //! Each file uses only those above it in this list (`memory` only
 //! `error` and `service`), so there is no circle.
 
 pub mod bytes;
+pub mod call;
 pub mod error;
 pub(crate) mod memory;
 pub mod service;
 pub mod typed;
 
+pub use call::{CallError, CallId, CallOptions, Client, Server};
 pub use bytes::{Loan, Meta, RawOutput, RawPort, Received, SchemaInput, SchemaOutput};
 pub use error::PortError;
 pub use service::{

@@ -222,10 +222,12 @@ fn describe<A: Agent>(args: &CommonArgs) -> Result<String, StartupError> {
         kind: A::kind().into(),
         task,
         default_period_ns,
-        inputs: setup.inputs.iter().map(|i| i.spec()).collect(),
+        inputs: setup.inputs.iter().filter(|i| !setup.calls.is_call(i.name())).map(|i| i.spec()).collect(),
         outputs: setup.outputs.clone(),
         params: setup.params.snapshot(),
         schemas: setup.schemas.clone(),
+        services: setup.calls.services.clone(),
+        clients: setup.calls.clients.clone(),
     };
     drop(agent);
     drop(setup);
@@ -318,7 +320,7 @@ fn start<A: Agent>(
     let agent =
         A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::kind(), name: name.into(), source })?;
     stage("agent and its ports created");
-    let Setup { inputs, outputs, schemas, params, .. } = setup;
+    let Setup { inputs, outputs, schemas, params, calls, .. } = setup;
     apply_params(&params, &args.params)?;
 
     let shared = Arc::new(Shared {
@@ -372,11 +374,13 @@ fn start<A: Agent>(
             Task::EventDriven => TaskKind::EventDriven,
         },
         period_ns: period.map(crate::clock::nanos),
-        inputs: inputs.iter().map(|i| i.spec()).collect(),
+        inputs: inputs.iter().filter(|i| !calls.is_call(i.name())).map(|i| i.spec()).collect(),
         outputs,
         log_file: readiness.pid_file().map(|_| world.log_file(name).display().to_string()),
         suspended: args.suspended,
         schemas,
+        services: calls.services,
+        clients: calls.clients,
     };
     let registered = link.register(&node, &world, &registration, &shared);
     stage("registration answered");

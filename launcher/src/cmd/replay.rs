@@ -191,6 +191,8 @@ pub fn replay(world: &World, a: ReplayArgs) -> Result<ExitCode> {
             log_file: None,
             suspended: false,
             schemas: vec![],
+            services: vec![],
+            clients: vec![],
         });
         reg.outputs.push(PortSpec {
             name: t.port.clone(),

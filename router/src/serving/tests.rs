@@ -36,6 +36,8 @@ fn registration(name: &str, pid: u32, inputs: &[&str], outputs: &[&str]) -> Regi
         log_file: None,
         suspended: false,
         schemas: vec![],
+        services: vec![],
+        clients: vec![],
     }
 }
 

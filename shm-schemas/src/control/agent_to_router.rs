@@ -80,6 +80,14 @@ pub struct Registration {
     /// tools need to read a port whose type they were not built with.
     #[serde(default)]
     pub schemas: Vec<Schema>,
+    /// Services the agent answers (`setup.serve`), each typed by
+    /// [`super::call::call_spec`]: the router wires clients to them.
+    #[serde(default)]
+    pub services: Vec<PortSpec>,
+    /// Clients the agent calls services through (`setup.client`), typed
+    /// as the services they may be wired to.
+    #[serde(default)]
+    pub clients: Vec<PortSpec>,
 }
 
 /// A message from an agent to the router.

@@ -27,4 +27,10 @@ pub struct Description {
     /// connections are checked field by field before anything starts
     #[serde(default)]
     pub schemas: Vec<crate::Schema>,
+    /// services it answers (see [`super::call`])
+    #[serde(default)]
+    pub services: Vec<PortSpec>,
+    /// clients it calls services through
+    #[serde(default)]
+    pub clients: Vec<PortSpec>,
 }

@@ -7,6 +7,7 @@
 //! [`ProtocolError::VersionMismatch`], whose text says what to do.
 
 pub mod agent_to_router;
+pub mod call;
 pub mod cli_to_router;
 pub mod describe;
 pub mod router_to_agent;
@@ -14,7 +15,7 @@ pub mod router_to_agent;
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 
 /// Version of the control protocol. Bump it on any change to a control type.
-pub const PROTOCOL_VERSION: u16 = 9;
+pub const PROTOCOL_VERSION: u16 = 10;
 
 /// A control message with the protocol version of its sender.
 #[derive(Debug, Serialize, Deserialize)]
