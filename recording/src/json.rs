@@ -41,6 +41,16 @@ fn of(schema: &Schema) -> Value {
             let required: Vec<&str> = fields.iter().map(|f| f.name.as_str()).collect();
             json!({ "type": "object", "title": schema.type_name, "properties": properties, "required": required })
         }
+        // a sample of any length: its header, then an array of its elements
+        Kind::Sequence { header, element } => {
+            use shm_schemas::seq::{HEADER_FIELD, ITEMS_FIELD};
+            json!({
+                "type": "object",
+                "title": schema.type_name,
+                "properties": { HEADER_FIELD: of(header), ITEMS_FIELD: { "type": "array", "items": of(element) } },
+                "required": [HEADER_FIELD, ITEMS_FIELD],
+            })
+        }
     }
 }
 
@@ -57,5 +67,13 @@ mod tests {
         assert_eq!(s["title"], "nerve::Tick");
         assert_eq!(s["properties"]["seq"]["type"], "integer");
         assert_eq!(s["required"], json!(["seq", "stamp_ns"]));
+    }
+
+    #[test]
+    fn a_sequence_becomes_its_header_and_an_array_of_any_length() {
+        let s = json_schema(&shm_schemas::Seq::<f32, Tick>::schema());
+        assert_eq!(s["properties"]["header"]["properties"]["seq"]["type"], "integer");
+        assert_eq!(s["properties"]["items"], json!({ "type": "array", "items": { "type": "number" } }));
+        assert!(s["properties"]["items"].get("maxItems").is_none(), "any length");
     }
 }

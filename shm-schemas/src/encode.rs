@@ -52,8 +52,69 @@ pub fn encode_json(
     value: &Value,
     zero_if_missing: &dyn Fn(&str) -> bool,
 ) -> Result<Vec<u8>, EncodeError> {
+    if let Kind::Sequence { header, element } = &schema.kind {
+        return encode_sequence(schema, header, element, value, zero_if_missing);
+    }
     let mut out = vec![0u8; schema.size];
     write(schema, value, "", &mut out, zero_if_missing)?;
+    Ok(out)
+}
+
+/// A sequence's sample ([`crate::seq`]) from `{"header": {...}, "items": [...]}`:
+/// as long as its items make it. A header without fields may be left out.
+fn encode_sequence(
+    schema: &Schema,
+    header: &Schema,
+    element: &Schema,
+    value: &Value,
+    zero_if_missing: &dyn Fn(&str) -> bool,
+) -> Result<Vec<u8>, EncodeError> {
+    use crate::seq::{HEADER_FIELD, ITEMS_FIELD};
+    let fields = || format!("{HEADER_FIELD}, {ITEMS_FIELD}");
+    let Value::Object(map) = value else {
+        return Err(bad(
+            "",
+            format!(
+                "expected a JSON object {{\"header\": ..., \"items\": [...]}} for {}, got {value}",
+                schema.type_name
+            ),
+        ));
+    };
+    if let Some(k) = map.keys().find(|k| *k != HEADER_FIELD && *k != ITEMS_FIELD) {
+        return Err(EncodeError::Unknown { type_name: schema.type_name.clone(), path: k.clone(), fields: fields() });
+    }
+    let Some(Value::Array(items)) = map.get(ITEMS_FIELD) else {
+        return Err(EncodeError::Missing {
+            type_name: schema.type_name.clone(),
+            path: ITEMS_FIELD.into(),
+            fields: format!("{} (an array of {})", fields(), element.type_name),
+        });
+    };
+    let shape = schema.sequence_shape().ok_or_else(|| bad("", "not a sequence".into()))?;
+    let len = shape
+        .len_of(items.len())
+        .filter(|len| *len <= crate::schema::MAX_SIZE)
+        .ok_or_else(|| bad(ITEMS_FIELD, format!("{} elements of {} bytes are too many", items.len(), element.size)))?;
+    let mut out = vec![0u8; len];
+    let head = out.get_mut(..header.size).ok_or_else(|| bad(HEADER_FIELD, "outside the sample".into()))?;
+    match map.get(HEADER_FIELD) {
+        Some(v) => write(header, v, HEADER_FIELD, head, zero_if_missing)?,
+        None if header.size == 0 || zero_if_missing(HEADER_FIELD) => {}
+        None => {
+            return Err(EncodeError::Missing {
+                type_name: schema.type_name.clone(),
+                path: HEADER_FIELD.into(),
+                fields: fields(),
+            });
+        }
+    }
+    for (i, v) in items.iter().enumerate() {
+        let at = shape.len_of(i).ok_or_else(|| bad(ITEMS_FIELD, "too many elements".into()))?;
+        let slot = out
+            .get_mut(at..at.saturating_add(element.size))
+            .ok_or_else(|| bad(ITEMS_FIELD, "outside the sample".into()))?;
+        write(element, v, &format!("{ITEMS_FIELD}[{i}]"), slot, zero_if_missing)?;
+    }
     Ok(out)
 }
 
@@ -138,6 +199,7 @@ fn write(
             out[r].copy_from_slice(s.as_bytes());
             Ok(())
         }
+        Kind::Sequence { .. } => Err(bad(path, format!("{} is a sequence inside another type", schema.type_name))),
         Kind::Primitive { primitive } => {
             let bytes = primitive_bytes(*primitive, value).map_err(|what| bad(path, what))?;
             let r = slot(0, bytes.len(), out.len())?;

@@ -27,6 +27,7 @@ pub mod names;
 pub mod payloads;
 pub mod ring;
 pub mod schema;
+pub mod seq;
 pub mod services;
 pub mod stats;
 
@@ -37,6 +38,7 @@ pub use names::{AgentName, NameError, PortRef, RobotName};
 /// The trait, and `#[derive(Payload)]` (see the `shm-schemas-derive` crate).
 pub use payloads::Payload;
 pub use schema::{Described, Schema};
+pub use seq::{NoHeader, Seq, SeqPart, SeqShape};
 
 /// What `#[derive(Payload)]` expands to names; not an interface.
 #[doc(hidden)]

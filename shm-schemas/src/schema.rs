@@ -237,6 +237,15 @@ pub enum Kind {
         /// Its fields in declaration order.
         fields: Vec<Field>,
     },
+    /// A variable-size payload ([`crate::seq`]): `header`, then as many
+    /// `element`s as the sample's length holds, starting at the schema's
+    /// `size`. Only a port's payload itself is one, never a field.
+    Sequence {
+        /// the fixed part at the start
+        header: Box<Schema>,
+        /// the type of each element
+        element: Box<Schema>,
+    },
 }
 
 /// A field of a struct.
@@ -475,16 +484,25 @@ impl Schema {
                     f.schema.feed(h);
                 }
             }
+            Kind::Sequence { header, element } => {
+                h.bytes(&[5]);
+                header.feed(h);
+                element.feed(h);
+            }
         }
     }
 
     /// Decodes `bytes` (at least [`Schema::size`] of them, as a sample's
     /// payload) into a [`Value`].
     pub fn decode(&self, bytes: &[u8]) -> Result<Value, DecodeError> {
-        let Some(bytes) = bytes.get(..self.size) else {
+        let Some(fixed) = bytes.get(..self.size) else {
             return Err(DecodeError::Short { type_name: self.type_name.clone(), size: self.size, got: bytes.len() });
         };
-        Ok(self.decode_exact(bytes))
+        match &self.kind {
+            // a sequence's sample is as long as its elements make it
+            Kind::Sequence { .. } => Ok(self.decode_exact(bytes)),
+            _ => Ok(self.decode_exact(fixed)),
+        }
     }
 
     /// Decodes `bytes`, which are exactly `self.size` long (checked by the caller).
@@ -512,6 +530,18 @@ impl Schema {
                     })
                     .collect(),
             ),
+            Kind::Sequence { header, element } => {
+                let head = bytes.get(..header.size).map_or(Value::Struct(Vec::new()), |b| header.decode_exact(b));
+                let items = bytes.get(self.size..).unwrap_or_default();
+                let items = match element.size {
+                    0 => Vec::new(),
+                    n => items.chunks_exact(n).map(|b| element.decode_exact(b)).collect(),
+                };
+                Value::Struct(vec![
+                    (crate::seq::HEADER_FIELD.into(), head),
+                    (crate::seq::ITEMS_FIELD.into(), Value::Array(items)),
+                ])
+            }
         }
     }
 
@@ -521,6 +551,30 @@ impl Schema {
         let (offset, schema) = self.field(path)?;
         let b = bytes.get(offset..offset.checked_add(schema.size)?)?;
         Some(schema.decode_exact(b))
+    }
+
+    /// Like [`Schema::decode_field`], and for a sequence's sample also
+    /// `items` (all its elements, as an array): what `nerve echo --field`
+    /// prints. `None` when the type has no such field or the sample is
+    /// too short (an element past the sample's length).
+    pub fn decode_path(&self, path: &str, bytes: &[u8]) -> Option<Value> {
+        if let Kind::Sequence { element, .. } = &self.kind
+            && path_parts(path).eq([crate::seq::ITEMS_FIELD])
+        {
+            let items = bytes.get(self.size..)?;
+            let n = element.size.max(1);
+            return Some(Value::Array(items.chunks_exact(n).map(|b| element.decode_exact(b)).collect()));
+        }
+        self.decode_field(path, bytes)
+    }
+
+    /// Whether [`Schema::decode_path`] knows `path` (for a sequence, an
+    /// element of any index).
+    pub fn has_path(&self, path: &str) -> bool {
+        match &self.kind {
+            Kind::Sequence { .. } if path_parts(path).eq([crate::seq::ITEMS_FIELD]) => true,
+            _ => self.field(path).is_some(),
+        }
     }
 
     /// Calls `visit(path, schema, lens)` for every field inside this type,
@@ -547,19 +601,34 @@ impl Schema {
                     visit(&path, element, &lens);
                     walk(element, &path, &lens, visit);
                 }
+                Kind::Sequence { header, element } => {
+                    let path = join(crate::seq::HEADER_FIELD);
+                    visit(&path, header, lens);
+                    walk(header, &path, lens, visit);
+                    let path = format!("{}.<i>", join(crate::seq::ITEMS_FIELD));
+                    visit(&path, element, lens);
+                    walk(element, &path, lens, visit);
+                }
                 _ => {}
             }
         }
         walk(self, "", &[], &mut visit);
     }
 
-    /// The schema of the field at `path` (`pose.x`, `ranges_m.3` for an
-    /// array element), with its offset from the start of this type.
+    /// The schema of the field at `path` (`pose.x`, `ranges_m.3` or
+    /// `ranges_m[3]` for an array element; `header.seq`, `items[3].x` in a
+    /// sequence's sample), with its offset from the start of this type.
     pub fn field(&self, path: &str) -> Option<(usize, &Schema)> {
         let mut at = (0usize, self);
-        for part in path.split('.').filter(|p| !p.is_empty()) {
+        let mut parts = path_parts(path);
+        while let Some(part) = parts.next() {
             let (offset, schema) = at;
             at = match &schema.kind {
+                Kind::Sequence { header, .. } if part == crate::seq::HEADER_FIELD => (offset, header.as_ref()),
+                Kind::Sequence { element, .. } if part == crate::seq::ITEMS_FIELD => {
+                    let i: usize = parts.next()?.parse().ok()?;
+                    (offset.checked_add(schema.size)?.checked_add(i.checked_mul(element.size)?)?, element.as_ref())
+                }
                 Kind::Struct { fields } => {
                     let f = fields.iter().find(|f| f.name == part)?;
                     (offset.checked_add(f.offset)?, &f.schema)
@@ -599,6 +668,12 @@ impl Primitive {
             Primitive::Bool => Value::Bool(le::<1>(b)[0] != 0),
         }
     }
+}
+
+/// The parts of a field path: `items[3].x` and `items.3.x` are both
+/// `items`, `3`, `x`.
+fn path_parts(path: &str) -> impl Iterator<Item = &str> {
+    path.split(['.', '[', ']']).filter(|p| !p.is_empty())
 }
 
 /// 64-bit FNV-1a.

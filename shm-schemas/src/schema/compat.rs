@@ -301,6 +301,9 @@ fn shape(s: &Schema) -> String {
         Kind::Array { len, element } => format!("an array of {len} {}", element.type_name),
         Kind::String { capacity } => format!("a string of capacity {capacity}"),
         Kind::Struct { fields } => format!("a struct of {} field(s)", fields.len()),
+        Kind::Sequence { header, element } => {
+            format!("a sequence of {} after a {}", element.type_name, header.type_name)
+        }
     }
 }
 
@@ -332,6 +335,10 @@ fn compare(path: &str, a: &Schema, b: &Schema, out: &mut Vec<Difference>) {
         }
         (Kind::Array { len: la, element: ea }, Kind::Array { len: lb, element: eb }) if la == lb => {
             compare(&join(path, "<i>"), ea, eb, out);
+        }
+        (Kind::Sequence { header: ha, element: ea }, Kind::Sequence { header: hb, element: eb }) => {
+            compare(&join(path, crate::seq::HEADER_FIELD), ha, hb, out);
+            compare(&join(path, &format!("{}.<i>", crate::seq::ITEMS_FIELD)), ea, eb, out);
         }
         (ka, kb) if ka != kb => {
             out.push(Difference::Shape { path: path.into(), output: shape(a), input: shape(b) });

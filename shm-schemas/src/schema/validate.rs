@@ -226,6 +226,17 @@ pub enum SchemaInvalid {
         /// its length, bytes
         len: usize,
     },
+    /// A sequence ([`Kind::Sequence`]) that is not laid out as nerve lays
+    /// one out.
+    #[error("schema {type_name}{}: {what}{FIX}", at(path))]
+    Sequence {
+        /// the schema's type name (shortened)
+        type_name: String,
+        /// where in it
+        path: String,
+        /// what is wrong
+        what: String,
+    },
 }
 
 /// What to do, said once for every message.
@@ -328,6 +339,32 @@ impl Check<'_> {
                         capacity: *capacity,
                         size: s.size,
                     });
+                }
+            }
+            Kind::Sequence { header, element } => {
+                let bad = |what: String| SchemaInvalid::Sequence { type_name: type_name(), path: path_s(), what };
+                if depth > 0 {
+                    return Err(bad("a sequence may only be a port's payload itself, not a field or element".into()));
+                }
+                self.schema(header, crate::seq::HEADER_FIELD, depth + 1)?;
+                self.schema(element, &format!("{}.<i>", crate::seq::ITEMS_FIELD), depth + 1)?;
+                if element.size == 0 {
+                    return Err(bad(format!("its element {} has no bytes", element.type_name)));
+                }
+                let want = Schema::sequence((**header).clone(), (**element).clone());
+                if (s.size, s.align) != (want.size, want.align) {
+                    return Err(bad(format!(
+                        "its elements must start at {} (its header's size rounded up to the element's alignment), \
+                         aligned to {}; the schema says size {} and align {}",
+                        want.size, want.align, s.size, s.align
+                    )));
+                }
+                if s.align > crate::seq::SEQ_MAX_ALIGN {
+                    return Err(bad(format!(
+                        "its header or element is aligned to {}, more than the {} bytes a sample starts at",
+                        s.align,
+                        crate::seq::SEQ_MAX_ALIGN
+                    )));
                 }
             }
             Kind::Struct { fields } => {
