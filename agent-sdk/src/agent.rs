@@ -27,11 +27,11 @@
 use crate::params::{Param, ParamTable};
 pub(crate) use crate::port::bytes::Binding;
 use crate::port::bytes::{DynInput, SchemaInput, SchemaOutput};
-use crate::port::{Input, Output, PortError};
+use crate::port::{Input, Output, PortError, SeqInput, SeqOutput};
 use crate::world::World;
 use shm_schemas::control::agent_to_router::{PortSpec, add_schema};
 use shm_schemas::names::validate_port_name;
-use shm_schemas::{AgentName, Payload, Schema};
+use shm_schemas::{AgentName, Described as _, Payload, Schema, SeqPart};
 use std::fmt::Display;
 use std::str::FromStr;
 use std::sync::Arc;
@@ -195,6 +195,35 @@ impl Setup {
         let (input, inner) = Input::<T>::new(port)?;
         self.inputs.push(inner);
         add_schema(&mut self.schemas, T::schema());
+        Ok(input)
+    }
+
+    /// Declares an output port of variable-size samples: a header `H`, then
+    /// any number of `T`, at most `max_len` of them ([`crate::port::seq`]).
+    pub fn output_seq<T: SeqPart, H: SeqPart>(
+        &mut self,
+        port: &str,
+        max_len: usize,
+    ) -> Result<SeqOutput<T, H>, AgentError> {
+        self.check_port(port)?;
+        let service = self.world.robot().port_service(self.name.as_str(), port);
+        let out = SeqOutput::bind(&self.binding, port, &service, self.name.as_str(), max_len)?;
+        let schema = shm_schemas::Seq::<T, H>::schema();
+        self.outputs.push(PortSpec {
+            name: port.into(),
+            type_name: schema.type_name.clone(),
+            fingerprint: schema.fingerprint(),
+        });
+        add_schema(&mut self.schemas, schema);
+        Ok(out)
+    }
+
+    /// Declares an input port of variable-size samples (see [`Setup::output_seq`]).
+    pub fn input_seq<T: SeqPart, H: SeqPart>(&mut self, port: &str) -> Result<SeqInput<T, H>, AgentError> {
+        self.check_port(port)?;
+        let (input, inner) = SeqInput::<T, H>::new(port)?;
+        self.inputs.push(inner);
+        add_schema(&mut self.schemas, shm_schemas::Seq::<T, H>::schema());
         Ok(input)
     }
 

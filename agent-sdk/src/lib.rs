@@ -52,6 +52,7 @@ pub mod world;
 pub use agent::{Agent, AgentError, Context, Setup, Task};
 pub use cli::CommonArgs;
 pub use params::Param;
+pub use port::{SeqInput, SeqOutput};
 pub use ports::{Input, Meta, Output, PortError};
 pub use runtime::{abort_on_panic, run, run_with_args};
 pub use world::{Ipc, World};

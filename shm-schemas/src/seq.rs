@@ -92,6 +92,11 @@ impl SeqShape {
         n.checked_mul(self.element)?.checked_add(self.items_at)
     }
 
+    /// The most elements a sample of at most `bytes` bytes holds.
+    pub fn count_of_at_most(&self, bytes: usize) -> usize {
+        bytes.saturating_sub(self.items_at).checked_div(self.element).unwrap_or(0)
+    }
+
     /// The elements in a sample of `len` bytes; `None` if `len` is not a
     /// header and a whole number of elements.
     pub fn count_of(&self, len: usize) -> Option<usize> {

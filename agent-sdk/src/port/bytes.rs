@@ -19,10 +19,14 @@
 //! running agent, nothing while the agent is described (`--describe`), or
 //! in-memory queues in a test (`port::memory`).
 //!
-//! A sample has the payload's fixed size today. A loan is made for a given
-//! length ([`SchemaOutput::loan`] asks for the layout's size), so that
-//! variable-size payloads (slices, iceoryx2's dynamic type variant) can be
-//! loaned here later without changing the ports built on top.
+//! A sample has the payload's fixed size, or, for a sequence
+//! ([`shm_schemas::seq`]), the length its elements make: a loan is made for
+//! a given length ([`SchemaOutput::loan_len`]), which a fixed-size port
+//! refuses unless it is the layout's size, and a sequence port refuses
+//! unless it is a header and whole elements within the port's declared
+//! maximum. A sequence port is iceoryx2's slice service of bytes; its
+//! publisher's memory grows (power of two) when a sample is larger than any
+//! before, and its readers follow.
 
 use super::error::{PortError, perr, port_err};
 use super::memory::{Bus, Collected, Queue, SampleBuf};
@@ -44,7 +48,7 @@ use iceoryx2::service::marker::{CustomHeaderMarker, CustomPayloadMarker};
 use shm_schemas::control::agent_to_router::PortSpec;
 use shm_schemas::services::port_attributes;
 use shm_schemas::stats::InputStats;
-use shm_schemas::{FixedName, SampleHeader, Schema};
+use shm_schemas::{FixedName, SampleHeader, Schema, SeqShape};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -99,7 +103,20 @@ pub struct SchemaOutput {
     sender: FixedName,
     seq: AtomicU64,
     sink: Sink,
+    /// a sequence port's shape and bound; `None` for a fixed size
+    limit: Option<SeqLimit>,
 }
+
+/// What a sequence port accepts: a header and whole elements, at most `max_len` of them.
+#[derive(Debug, Clone, Copy)]
+struct SeqLimit {
+    shape: SeqShape,
+    max_len: usize,
+}
+
+/// The bytes a sequence port's publisher reserves per sample at first
+/// (its memory then grows, power of two, with the largest sample sent).
+const SEQ_INITIAL_BYTES: usize = 4096;
 
 /// Where an output's samples go.
 // A running agent's variant is the large one and the only one on the data
@@ -156,7 +173,15 @@ impl SchemaOutput {
         carried: Carried,
     ) -> Result<Self, PortError> {
         let ps = output_service(node, service, &carried)?;
-        let publisher = ps.publisher_builder().create().map_err(port_err!(Publisher, service))?;
+        let builder = ps.publisher_builder();
+        let builder = match schema.sequence_shape() {
+            // a slice of bytes: as long as the first samples at most, then grown with the largest sent
+            Some(shape) if carried.is_sequence() => builder
+                .initial_max_slice_len(shape.items_at.max(SEQ_INITIAL_BYTES))
+                .allocation_strategy(AllocationStrategy::PowerOfTwo),
+            _ => builder,
+        };
+        let publisher = builder.create().map_err(port_err!(Publisher, service))?;
         let notifier = port_event(node, service)?.notifier_builder().create().map_err(port_err!(Notifier, service))?;
         Ok(Self::with_sink(service, sender, schema, carried, Sink::Shm { publisher, notifier }))
     }
@@ -183,6 +208,10 @@ impl SchemaOutput {
     }
 
     fn with_sink(service: &str, sender: &str, schema: Schema, carried: Carried, sink: Sink) -> Self {
+        let limit = schema
+            .sequence_shape()
+            .filter(|_| carried.is_sequence())
+            .map(|shape| SeqLimit { shape, max_len: shape.count_of_at_most(shm_schemas::schema::MAX_SIZE) });
         SchemaOutput {
             service: service.into(),
             schema,
@@ -190,7 +219,46 @@ impl SchemaOutput {
             sender: FixedName::new(sender),
             seq: AtomicU64::new(0),
             sink,
+            limit,
         }
+    }
+
+    /// The most elements a sample of this sequence port may hold; `None`
+    /// for a port of a fixed size.
+    pub fn max_len(&self) -> Option<usize> {
+        self.limit.map(|l| l.max_len)
+    }
+
+    /// Bounds this sequence port's samples to `max_len` elements (and the
+    /// [64 MiB](shm_schemas::schema::MAX_SIZE) every payload is bounded
+    /// to); a longer loan is refused ([`PortError::TooLong`]), nothing
+    /// sent. Refused for a port of a fixed size.
+    pub(crate) fn set_max_len(&mut self, max_len: usize) -> Result<(), PortError> {
+        let Some(limit) = &mut self.limit else {
+            return Err(PortError::Ipc {
+                service: self.service.clone(),
+                detail: format!("{} is not a sequence: it has no length", self.carried.type_name),
+            });
+        };
+        limit.max_len = max_len.min(limit.shape.count_of_at_most(shm_schemas::schema::MAX_SIZE));
+        Ok(())
+    }
+
+    /// Loans a sample of a sequence port with room for `n` elements after
+    /// its header, not zeroed (its bytes are what the slot last held).
+    pub fn loan_items(&self, n: usize) -> Result<Loan, PortError> {
+        let Some(limit) = &self.limit else {
+            return Err(PortError::Ipc {
+                service: self.service.clone(),
+                detail: format!("{} is not a sequence: loan it whole", self.carried.type_name),
+            });
+        };
+        let len = limit.shape.len_of(n).filter(|_| n <= limit.max_len).ok_or_else(|| PortError::TooLong {
+            service: self.service.clone(),
+            len: n,
+            max_len: limit.max_len,
+        })?;
+        self.loan_len(len, false)
     }
 
     /// The iceoryx2 service name of this port.
@@ -212,24 +280,47 @@ impl SchemaOutput {
     /// writer must write every field a reader looks at (a large frame then
     /// costs one write, not two).
     pub fn loan(&self, zeroed: bool) -> Result<Loan, PortError> {
-        self.loan_len(self.carried.size(), zeroed)
+        self.loan_len(self.schema.size, zeroed)
     }
 
-    /// Loans `len` bytes of payload. A fixed-size payload (the only kind
-    /// today) is loaned whole: another length is refused.
-    fn loan_len(&self, len: usize, zeroed: bool) -> Result<Loan, PortError> {
-        if len != self.carried.size() {
-            return Err(PortError::Ipc {
-                service: self.service.clone(),
-                detail: format!("a {len}-byte loan of a {}-byte type", self.carried.size()),
-            });
-        }
+    /// Loans `len` bytes of payload. A fixed-size payload is loaned whole:
+    /// another length is refused. A sequence's is a header and whole
+    /// elements, at most the port's maximum of them: another length is
+    /// refused, and nothing is loaned or sent.
+    pub fn loan_len(&self, len: usize, zeroed: bool) -> Result<Loan, PortError> {
+        let units = match &self.limit {
+            None if len != self.carried.size() => {
+                return Err(PortError::Ipc {
+                    service: self.service.clone(),
+                    detail: format!("a {len}-byte loan of a {}-byte type", self.carried.size()),
+                });
+            }
+            None => 1,
+            Some(limit) => match limit.shape.count_of(len) {
+                Some(n) if n <= limit.max_len => len,
+                Some(n) => {
+                    return Err(PortError::TooLong { service: self.service.clone(), len: n, max_len: limit.max_len });
+                }
+                None => {
+                    return Err(PortError::Ipc {
+                        service: self.service.clone(),
+                        detail: format!(
+                            "a {len}-byte sample of {} is not its {}-byte header and whole {}-byte elements",
+                            self.carried.type_name, limit.shape.items_at, limit.shape.element
+                        ),
+                    });
+                }
+            },
+        };
         match &self.sink {
             Sink::Shm { publisher, .. } => {
                 // SAFETY: one element of a FixedSize type (set in
                 // `service::output_builder`): `size` bytes, and the header's
-                // element count is set by iceoryx2 to 1
-                let mut sample = unsafe { publisher.loan_custom_payload(1) }.map_err(port_err!(Loan, &self.service))?;
+                // element count is set by iceoryx2 to 1; or, for a sequence,
+                // `len` one-byte elements of a Dynamic type
+                // (`Carried::of_sequence`), the count iceoryx2 sets to `len`
+                let mut sample =
+                    unsafe { publisher.loan_custom_payload(units) }.map_err(port_err!(Loan, &self.service))?;
                 let payload = sample.payload_mut();
                 if payload.len() != len {
                     return Err(PortError::Ipc {
@@ -265,13 +356,13 @@ impl SchemaOutput {
 
     /// [`SchemaOutput::send_bytes`], returning how many readers it reached.
     pub(crate) fn publish_bytes(&self, bytes: &[u8]) -> Result<usize, PortError> {
-        if bytes.len() != self.carried.size() {
+        if self.limit.is_none() && bytes.len() != self.carried.size() {
             return Err(PortError::Ipc {
                 service: self.service.clone(),
                 detail: format!("a {}-byte sample for a {}-byte type", bytes.len(), self.carried.size()),
             });
         }
-        let mut loan = self.loan(false)?;
+        let mut loan = self.loan_len(bytes.len(), false)?;
         loan.bytes_mut().copy_from_slice(bytes);
         self.publish(loan)
     }
@@ -626,6 +717,9 @@ impl DynInput for InputInner {
     }
 
     fn payload_layout(&self) -> (usize, usize) {
+        if self.carried.is_sequence() {
+            return (self.schema.size, self.schema.align);
+        }
         (self.carried.size(), self.carried.align())
     }
 
@@ -686,7 +780,12 @@ impl DynInput for InputInner {
     }
 
     fn queue(&self, sender: &str, port: &str, sample: SampleBuf, stamp_ns: u64) -> Result<(), PortError> {
-        if sample.bytes().len() != self.carried.size() || sample.align() < self.carried.align() {
+        let (size, align) = self.payload_layout();
+        let fits = match self.schema.sequence_shape().filter(|_| self.carried.is_sequence()) {
+            Some(shape) => shape.count_of(sample.bytes().len()).is_some(),
+            None => sample.bytes().len() == size,
+        };
+        if !fits || sample.align() < align {
             return Err(PortError::Ipc {
                 service: format!("{sender}/{port}"),
                 detail: format!(
@@ -742,7 +841,10 @@ impl SchemaInput {
     /// input connects: a bad one is refused then, with its own message,
     /// before its size and alignment reach iceoryx2.
     pub(crate) fn new(name: &str, schema: Schema) -> Result<(Self, Arc<InputInner>), PortError> {
-        let carried = Carried::from_parts(name, &schema.type_name, schema.size, schema.align, schema.fingerprint())?;
+        let carried = match schema.sequence_shape() {
+            Some(_) => Carried::of_sequence(name, &schema.type_name, schema.fingerprint())?,
+            None => Carried::from_parts(name, &schema.type_name, schema.size, schema.align, schema.fingerprint())?,
+        };
         Ok(Self::with(name, schema, carried, true))
     }
 

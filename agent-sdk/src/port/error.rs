@@ -183,6 +183,21 @@ pub enum PortError {
         /// the byte port's payload alignment
         port_align: usize,
     },
+    /// A sample of a sequence port with more elements than the port
+    /// declared it would ever send: refused before anything is loaned, so
+    /// nothing is sent.
+    #[error(
+        "port {service}: a sample of {len} elements is longer than the {max_len} the port declared; send at most \
+         {max_len} (split it), or declare a larger maximum where the output is declared"
+    )]
+    TooLong {
+        /// service name
+        service: String,
+        /// the elements asked for
+        len: usize,
+        /// the most the port takes
+        max_len: usize,
+    },
     /// Anything else: an invalid service name, a sample of the wrong size.
     #[error("port {service}: {detail}")]
     Ipc {

@@ -18,12 +18,14 @@ pub mod bytes;
 pub mod call;
 pub mod error;
 pub(crate) mod memory;
+pub mod seq;
 pub mod service;
 pub mod typed;
 
-pub use call::{CallError, CallId, CallOptions, Client, Server};
 pub use bytes::{Loan, Meta, RawOutput, RawPort, Received, SchemaInput, SchemaOutput};
+pub use call::{CallError, CallId, CallOptions, Client, Server};
 pub use error::PortError;
+pub use seq::{SeqInput, SeqOutput};
 pub use service::{
     MAX_SOURCES, MAX_SUBSCRIBERS, SUBSCRIBER_BUFFER, existing_port_service, port_event, port_identity, port_service,
     service_fingerprint,

@@ -91,7 +91,28 @@ impl Carried {
     /// divides by the alignment and builds a `Layout` from it unchecked.
     pub(crate) fn of_schema(service: &str, schema: &Schema, fingerprint: u64) -> Result<Self, PortError> {
         schema.validate().map_err(|e| PortError::InvalidSchema { service: service.into(), source: Box::new(e) })?;
+        if schema.sequence_shape().is_some() {
+            return Self::of_sequence(service, &schema.type_name, fingerprint);
+        }
         Self::from_parts(service, &schema.type_name, schema.size, schema.align, fingerprint)
+    }
+
+    /// What a port of a sequence ([`shm_schemas::seq`]) of type name
+    /// `type_name` carries: iceoryx2's slice of bytes (a dynamic payload of
+    /// one-byte elements), each sample as long as its elements make it.
+    pub(crate) fn of_sequence(service: &str, type_name: &str, fingerprint: u64) -> Result<Self, PortError> {
+        let details = TypeDetail::__internal_new_from_parts(TypeVariant::Dynamic, type_name, 1, 1).map_err(|e| {
+            PortError::Ipc {
+                service: service.into(),
+                detail: format!("the type name {type_name:?} is too long for iceoryx2: {e:?}"),
+            }
+        })?;
+        Ok(Carried { details, type_name: type_name.into(), fingerprint })
+    }
+
+    /// Whether samples are of any length (a sequence), not one fixed size.
+    pub(crate) fn is_sequence(&self) -> bool {
+        self.details.variant() == TypeVariant::Dynamic
     }
 
     pub(crate) fn from_parts(
