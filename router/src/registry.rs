@@ -130,6 +130,16 @@ impl Registry {
         })
     }
 
+    /// A call's wire in the router's order, service to client, also when
+    /// it is written client first (`nerve connect a/planner b/plan`, as
+    /// `ros2` users write it); any other pair as it is (docs/calls.md).
+    pub fn wire_order(&self, from: PortRef, to: PortRef) -> (PortRef, PortRef) {
+        let is_client = |p: &PortRef| {
+            self.agents.get(p.agent.as_str()).is_some_and(|e| e.reg.clients.iter().any(|c| c.name == p.port))
+        };
+        if is_client(&from) { (to, from) } else { (from, to) }
+    }
+
     /// The type output `from` would send to input `to`, or why they cannot
     /// be connected: another type, or the same type name laid out
     /// differently (the fields that differ listed, see [`Registry::check_input`]).

@@ -907,6 +907,7 @@ impl State {
                 events: self.events.after(after),
             })),
             CliRequest::Connect { from, to, allow_cycle } => {
+                let (from, to) = self.registry.wire_order(from, to);
                 let from_type = self.registry.check_compatible(&from, &to)?;
                 if !allow_cycle {
                     let registry = &self.registry;
@@ -928,6 +929,12 @@ impl State {
                 Ok(self.waiting(vec![ticket], Work::Connect { conn }))
             }
             CliRequest::Disconnect { from, to } => {
+                // a call's wire, written client first, is listed service to client
+                let (from, to) = if self.wiring.find(&from, &to).is_none() && self.wiring.find(&to, &from).is_some() {
+                    (to, from)
+                } else {
+                    (from, to)
+                };
                 let (f, t) = (from.to_string(), to.to_string());
                 let Some(conn) = self.wiring.find(&from, &to).cloned() else {
                     return Err(RouterError::NotConnected { from: f, to: t });
