@@ -243,3 +243,117 @@ impl<T: SeqPart, H: SeqPart> SeqInput<T, H> {
         self.port.sources()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::{SeqInput, SeqOutput};
+    use crate::port::PortError;
+    use crate::port::bytes::{DynInput as _, RawPort};
+    use crate::world::World;
+    use crate::world::test_support::Cleanup;
+    use shm_schemas::payloads::Tick;
+    use shm_schemas::{Described as _, Seq};
+
+    #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, shm_schemas::Payload)]
+    #[repr(C)]
+    #[payload(name = "test::Detection")]
+    struct Detection {
+        x: f32,
+        y: f32,
+        id: u32,
+    }
+
+    fn det(i: usize) -> Detection {
+        Detection { x: i as f32, y: -(i as f32), id: i as u32 }
+    }
+
+    /// Lengths 0 and 1, then one longer than the publisher's memory holds
+    /// (it grows), then the largest seen plus one: every one read in place
+    /// at its own length by a reader subscribed before the growth; past the
+    /// declared maximum, refused and nothing sent (the reader's next sample
+    /// is the next one sent, numbered without a gap).
+    #[test]
+    fn sequences_of_any_length_up_to_the_maximum_are_read_at_their_length() {
+        let world = World::new(&format!("seq{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+        let service = robot.port_service("cam", "dets");
+        let max = 2000;
+        let out = SeqOutput::<Detection, Tick>::create(&node, &service, "cam", max).expect("output");
+        assert_eq!(out.max_len(), max);
+        let (input, inner) = SeqInput::<Detection, Tick>::new("dets").expect("input");
+        assert!(inner.connect(&node, &robot, "cam", "dets").expect("subscribes"));
+        // 1000 detections are 12 kB: more than the 4 kB the publisher starts with
+        let lens = [0usize, 1, 1000, 1001, max];
+        for (k, n) in lens.iter().enumerate() {
+            let items: Vec<Detection> = (0..*n).map(det).collect();
+            out.send(&Tick { seq: k as u64, stamp_ns: 7 }, &items).expect("send");
+            let mut got = Vec::new();
+            input.drain(|meta, header, items| {
+                got.push((meta.seq, *header, items.len(), items.first().copied(), items.last().copied()));
+            });
+            assert_eq!(
+                got,
+                vec![(
+                    k as u64 + 1,
+                    Tick { seq: k as u64, stamp_ns: 7 },
+                    *n,
+                    items.first().copied(),
+                    items.last().copied()
+                )],
+                "length {n}"
+            );
+        }
+        // past the maximum: refused, nothing loaned or sent
+        match out.send_with(max + 1, |_, _| panic!("never written")) {
+            Err(e @ PortError::TooLong { .. }) => {
+                let text = e.to_string();
+                assert!(text.contains(&format!("{} elements", max + 1)) && text.contains(&max.to_string()), "{text}");
+            }
+            other => panic!("{} elements sent: {other:?}", max + 1),
+        }
+        assert_eq!(input.drain(|_, _, _| {}), 0, "nothing sent");
+        out.send_with(2, |h, items| {
+            *h = Tick { seq: 99, stamp_ns: 1 };
+            items.copy_from_slice(&[det(5), det(6)]);
+        })
+        .expect("send in place");
+        let (meta, header, items) = input.recv().expect("a sample");
+        assert_eq!((meta.seq, header.seq, items), (lens.len() as u64 + 1, 99, vec![det(5), det(6)]));
+    }
+
+    /// A tool reads a sequence port by its bytes (`nerve echo`): the
+    /// sample's bytes are its own length, decoded through the schema; a
+    /// reader of another element type is refused, and so is a string of
+    /// any length read as detections.
+    #[test]
+    fn a_sequence_port_is_read_by_its_bytes_and_another_element_is_refused() {
+        let world = World::new(&format!("seqraw{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+        let service = robot.port_service("log", "line");
+        let text = SeqOutput::<u8>::create(&node, &service, "log", 1 << 16).expect("output");
+        let raw = RawPort::open(&node, &service).expect("raw");
+        assert_eq!(raw.type_name(), Some("nerve::Seq<u8, nerve::NoHeader>"));
+        assert_eq!(raw.fingerprint(), Some(Seq::<u8>::schema().fingerprint()));
+        for line in ["", "a", "a longer line of text"] {
+            text.send(&shm_schemas::NoHeader, line.as_bytes()).expect("send");
+        }
+        let mut got = Vec::new();
+        raw.receive(|_, bytes| {
+            got.push(String::from_utf8_lossy(bytes).into_owned());
+            true
+        })
+        .expect("receive");
+        assert_eq!(got, ["", "a", "a longer line of text"]);
+        let (_, wrong) = SeqInput::<Detection>::new("in").expect("input");
+        match wrong.connect(&node, &robot, "log", "line") {
+            Err(PortError::IncompatibleType { .. } | PortError::LayoutMismatch { .. }) => {}
+            other => panic!("detections read from a string: {other:?}"),
+        }
+        let (_, fixed) = crate::port::Input::<Tick>::new("in").expect("input");
+        assert!(fixed.connect(&node, &robot, "log", "line").is_err(), "a fixed type read from a sequence");
+    }
+}
