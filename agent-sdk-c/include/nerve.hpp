@@ -1,0 +1,354 @@
+/* nerve.hpp: a header-only C++17 wrapper over nerve's C API (nerve.h) and
+ * its payload structs (nerve_types.h). Link libnerve as for a C agent.
+ *
+ *   #include "nerve.hpp"
+ *   int main(int argc, char **argv) {
+ *     nerve::input<nerve_Tick> in;
+ *     nerve::output<nerve_Tick> out;
+ *     nerve::agent a("cpprelay");
+ *     a.on_init([&](nerve::setup &s) { in = s.input<nerve_Tick>("in"); out = s.output<nerve_Tick>("out"); });
+ *     a.on_step([&](nerve::context &c) {
+ *       while (const nerve_Tick *t = c.take(in)) c.send(out, *t);
+ *     });
+ *     return a.run(argc, argv);
+ *   }
+ *
+ * Errors are exceptions: every nerve call that fails throws nerve::error
+ * (a std::runtime_error holding the nerve_status and nerve_last_error()'s
+ * text: what went wrong and what to do). "No sample waiting" is not an
+ * error: take and latest return nullptr. An exception leaving a callback
+ * never reaches nerve's Rust runtime: the wrapper catches it, prints
+ * "KIND: init|start|step|stop: MESSAGE" to stderr and fails that call
+ * (a failed init ends the agent, a failed step is counted as a C agent's).
+ *
+ * Threads and lifetimes are the C API's: init runs in main's thread (and
+ * once more for --describe), start, step and stop in the agent's task
+ * thread, never two at once. A sample pointer from take or latest, and a
+ * loan, are valid until the callback returns.
+ *
+ * Ports are typed by their payload struct: any struct T with a
+ * nerve::payload<T> specialisation (type_name, fingerprint); every type of
+ * nerve_types.h has one. */
+#ifndef NERVE_HPP
+#define NERVE_HPP
+
+#include "nerve.h"
+#include "nerve_types.h"
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <exception>
+#include <functional>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <utility>
+
+namespace nerve {
+
+/* The type name and layout fingerprint nerve knows payload struct T by. */
+template <class T>
+struct payload;
+
+#define NERVE_HPP_PAYLOAD(T)                                   \
+  template <>                                                  \
+  struct payload<::T> {                                        \
+    static constexpr const char *type_name = T##_TYPE_NAME;    \
+    static constexpr std::uint64_t fingerprint = T##_FINGERPRINT; \
+  };
+NERVE_BUILTIN_PAYLOADS(NERVE_HPP_PAYLOAD)
+#undef NERVE_HPP_PAYLOAD
+
+/* A failed nerve call: its status and nerve's message. */
+class error : public std::runtime_error {
+ public:
+  error(nerve_status status, const std::string &what) : std::runtime_error(what), status_(status) {}
+  /* The C API's status (NERVE_LAYOUT_MISMATCH, NERVE_STALE, ...). */
+  nerve_status status() const noexcept { return status_; }
+
+ private:
+  nerve_status status_;
+};
+
+namespace detail {
+/* Throws nerve::error for a status other than NERVE_OK, naming `call`. */
+inline void check(nerve_status s, const char *call) {
+  if (s != NERVE_OK) {
+    throw error(s, std::string(call) + ": " + nerve_last_error());
+  }
+}
+}  // namespace detail
+
+/* An input port carrying T; a handle, cheap to copy. */
+template <class T>
+class input {
+ public:
+  input() = default;
+  nerve_port handle() const noexcept { return port_; }
+
+ private:
+  friend class setup;
+  explicit input(nerve_port p) : port_(p) {}
+  nerve_port port_ = 0;
+};
+
+/* An output port carrying T; a handle, cheap to copy. */
+template <class T>
+class output {
+ public:
+  output() = default;
+  nerve_port handle() const noexcept { return port_; }
+
+ private:
+  friend class setup;
+  explicit output(nerve_port p) : port_(p) {}
+  nerve_port port_ = 0;
+};
+
+/* A number parameter (nerve param set changes it at run time). */
+class param_f64 {
+ public:
+  param_f64() = default;
+  nerve_param handle() const noexcept { return param_; }
+
+ private:
+  friend class setup;
+  explicit param_f64(nerve_param p) : param_(p) {}
+  nerve_param param_ = 0;
+};
+
+/* What init declares ports and parameters on; valid during init only. */
+class setup {
+ public:
+  explicit setup(nerve_setup *s) noexcept : s_(s) {}
+
+  /* Declares input `name` of payload T; throws nerve::error if nerve
+   * refuses it (a name taken, a layout that is not nerve's). */
+  template <class T>
+  nerve::input<T> input(const char *name) {
+    static_assert(std::is_trivially_copyable<T>::value, "a payload is a plain struct");
+    nerve_port p = 0;
+    detail::check(nerve_setup_input(s_, name, payload<T>::type_name, sizeof(T), alignof(T), payload<T>::fingerprint, &p),
+                  "nerve_setup_input");
+    return nerve::input<T>(p);
+  }
+
+  /* Declares output `name` of payload T, as input does. */
+  template <class T>
+  nerve::output<T> output(const char *name) {
+    static_assert(std::is_trivially_copyable<T>::value, "a payload is a plain struct");
+    nerve_port p = 0;
+    detail::check(
+        nerve_setup_output(s_, name, payload<T>::type_name, sizeof(T), alignof(T), payload<T>::fingerprint, &p),
+        "nerve_setup_output");
+    return nerve::output<T>(p);
+  }
+
+  /* Declares number parameter `key` with its default and inclusive bounds
+   * (NAN: none); a value outside them is refused by --param and nerve param set. */
+  param_f64 param(const char *key, double def, double min = NAN, double max = NAN) {
+    nerve_param p = 0;
+    detail::check(nerve_setup_param_f64(s_, key, def, min, max, &p), "nerve_setup_param_f64");
+    return param_f64(p);
+  }
+
+  nerve_setup *raw() const noexcept { return s_; }
+
+ private:
+  nerve_setup *s_;
+};
+
+/* A slot of output T's shared memory to write in place, then send(). Not
+ * sent, it is given back when the callback returns. */
+template <class T>
+class loan {
+ public:
+  T *operator->() const noexcept { return data_; }
+  T &operator*() const noexcept { return *data_; }
+  /* Publishes the sample; the loan is spent. */
+  void send() {
+    detail::check(nerve_send(ctx_, port_), "nerve_send");
+    data_ = nullptr;
+  }
+
+ private:
+  friend class context;
+  loan(nerve_ctx *c, nerve_port p, T *d) noexcept : ctx_(c), port_(p), data_(d) {}
+  nerve_ctx *ctx_;
+  nerve_port port_;
+  T *data_;
+};
+
+/* What start, step and stop get; valid during the callback only. */
+class context {
+ public:
+  explicit context(nerve_ctx *c) noexcept : c_(c) {}
+
+  /* The next sample waiting on `in`, in shared memory until the callback
+   * returns; nullptr when none waits. */
+  template <class T>
+  const T *take(const input<T> &in) {
+    return sample<T>(nerve_take, in, "nerve_take");
+  }
+
+  /* The newest sample waiting on `in` (older ones are dropped); nullptr when none. */
+  template <class T>
+  const T *latest(const input<T> &in) {
+    return sample<T>(nerve_latest, in, "nerve_latest");
+  }
+
+  /* A zeroed slot of `out` to write in place, then loan::send(). */
+  template <class T>
+  nerve::loan<T> loan(const output<T> &out) {
+    void *d = nullptr;
+    detail::check(nerve_loan(c_, out.handle(), &d), "nerve_loan");
+    return nerve::loan<T>(c_, out.handle(), static_cast<T *>(d));
+  }
+
+  /* Sends a copy of `value` on `out` (a loan, one struct copy, a send). */
+  template <class T>
+  void send(const output<T> &out, const T &value) {
+    nerve::loan<T> l = loan(out);
+    *l = value;
+    l.send();
+  }
+
+  /* Parameter `p`'s current value. */
+  double param(const param_f64 &p) {
+    double v = 0;
+    detail::check(nerve_param_f64(c_, p.handle(), &v), "nerve_param_f64");
+    return v;
+  }
+
+  /* How many steps ran before this one. */
+  std::uint64_t cycle() {
+    std::uint64_t n = 0;
+    detail::check(nerve_cycle(c_, &n), "nerve_cycle");
+    return n;
+  }
+
+  /* Stops the agent after this callback. */
+  void request_stop() { detail::check(nerve_request_stop(c_), "nerve_request_stop"); }
+
+  nerve_ctx *raw() const noexcept { return c_; }
+
+ private:
+  template <class T>
+  const T *sample(nerve_status (*f)(nerve_ctx *, nerve_port, const void **, size_t *), const input<T> &in,
+                  const char *call) {
+    const void *d = nullptr;
+    size_t len = 0;
+    nerve_status s = f(c_, in.handle(), &d, &len);
+    if (s == NERVE_NO_SAMPLE) {
+      return nullptr;
+    }
+    detail::check(s, call);
+    if (len != sizeof(T)) {
+      throw error(NERVE_LAYOUT_MISMATCH, std::string(call) + ": a sample of " + std::to_string(len) +
+                                             " bytes on a port of " + payload<T>::type_name + " (" +
+                                             std::to_string(sizeof(T)) + " bytes)");
+    }
+    return static_cast<const T *>(d);
+  }
+
+  nerve_ctx *c_;
+};
+
+/* A C++ agent: its kind, period and callbacks (lambdas or any callable).
+ * run() hands it to the nerve runtime and returns main's exit status. */
+class agent {
+ public:
+  /* `kind` as nerve ps shows it; `period_ns` 0 for an event-driven agent
+   * (steps when an input has news), else its period (at least 10000). */
+  explicit agent(std::string kind, std::uint64_t period_ns = 0) : kind_(std::move(kind)), period_ns_(period_ns) {}
+  agent(const agent &) = delete;
+  agent &operator=(const agent &) = delete;
+
+  agent &on_init(std::function<void(setup &)> f) {
+    init_ = std::move(f);
+    return *this;
+  }
+  agent &on_start(std::function<void(context &)> f) {
+    start_ = std::move(f);
+    return *this;
+  }
+  agent &on_step(std::function<void(context &)> f) {
+    step_ = std::move(f);
+    return *this;
+  }
+  agent &on_stop(std::function<void(context &)> f) {
+    stop_ = std::move(f);
+    return *this;
+  }
+
+  /* Runs the agent with main's command line until it stops; call once,
+   * from main's thread. Returns the exit status for main. */
+  int run(int argc, char **argv) {
+    nerve_agent_vtable vt{};
+    vt.kind = kind_.c_str();
+    vt.period_ns = period_ns_;
+    vt.init = &agent::init_cb;
+    vt.start = start_ ? &agent::start_cb : nullptr;
+    vt.step = &agent::step_cb;
+    vt.stop = stop_ ? &agent::stop_cb : nullptr;
+    if (!init_ || !step_) {
+      std::fprintf(stderr, "%s: nerve::agent needs on_init and on_step before run\n", kind_.c_str());
+      return 2;
+    }
+    return nerve_run(argc, argv, &vt, this);
+  }
+
+ private:
+  /* Calls `f`; an exception becomes a message and a failed call (1). */
+  template <class F>
+  int guarded(const char *what, F &&f) noexcept {
+    try {
+      f();
+      return 0;
+    } catch (const std::exception &e) {
+      std::fprintf(stderr, "%s: %s: %s\n", kind_.c_str(), what, e.what());
+    } catch (...) {
+      std::fprintf(stderr, "%s: %s: an exception that is not a std::exception\n", kind_.c_str(), what);
+    }
+    return 1;
+  }
+
+  static int init_cb(nerve_setup *s, void *user) noexcept {
+    auto *a = static_cast<agent *>(user);
+    return a->guarded("init", [&] {
+      setup st(s);
+      a->init_(st);
+    });
+  }
+  static int start_cb(nerve_ctx *c, void *user) noexcept {
+    auto *a = static_cast<agent *>(user);
+    return a->guarded("start", [&] {
+      context cx(c);
+      a->start_(cx);
+    });
+  }
+  static int step_cb(nerve_ctx *c, void *user) noexcept {
+    auto *a = static_cast<agent *>(user);
+    return a->guarded("step", [&] {
+      context cx(c);
+      a->step_(cx);
+    });
+  }
+  static void stop_cb(nerve_ctx *c, void *user) noexcept {
+    auto *a = static_cast<agent *>(user);
+    a->guarded("stop", [&] {
+      context cx(c);
+      a->stop_(cx);
+    });
+  }
+
+  std::string kind_;
+  std::uint64_t period_ns_;
+  std::function<void(setup &)> init_;
+  std::function<void(context &)> start_, step_, stop_;
+};
+
+}  // namespace nerve
+
+#endif /* NERVE_HPP */

@@ -1,0 +1,52 @@
+//! What the C and C++ agent tests share: the libnerve.so the workspace's
+//! build left beside the binaries, and a compiler run against it. No test
+//! runs cargo: CI's build step (`cargo build --workspace --lib --bins
+//! --tests`) makes the library, as it makes the binaries the robots run.
+
+use nerve_testkit::bin_dir;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The folder of libnerve.so (the binaries' folder), checked to hold it.
+pub fn libnerve_dir() -> PathBuf {
+    let lib = bin_dir();
+    assert!(
+        lib.join("libnerve.so").exists(),
+        "{} is missing: build it with `cargo build --workspace --lib --bins` (or `cargo build -p nerve-agent-c`)",
+        lib.join("libnerve.so").display()
+    );
+    lib
+}
+
+/// The crate's `include/` folder (nerve.h, nerve_types.h, nerve.hpp).
+pub fn include_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("include")
+}
+
+/// Compiles and links `source` into `dir/name` with `compiler` (gcc, g++)
+/// and `flags`, against libnerve.so; panics with the compiler's message.
+pub fn compile(compiler: &str, flags: &[&str], source: &Path, dir: &Path, name: &str) -> PathBuf {
+    let lib = libnerve_dir();
+    let exe = dir.join(name);
+    let out = Command::new(compiler)
+        .args(["-Wall", "-Wextra", "-Werror"])
+        .args(flags)
+        .arg("-I")
+        .arg(include_dir())
+        .arg(source)
+        .arg("-L")
+        .arg(&lib)
+        .arg("-lnerve")
+        .arg(format!("-Wl,-rpath,{}", lib.display()))
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .unwrap_or_else(|e| panic!("run {compiler} (scripts/setup.sh --test installs it): {e}"));
+    assert!(
+        out.status.success(),
+        "{compiler} failed on {}: {}",
+        source.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    exe
+}
