@@ -10,6 +10,11 @@
 //! behind the [`Robot`] trait; it is called only on the thread that called
 //! [`serve`], so a router session (not `Send`) never leaves that thread.
 //!
+//! Nothing is looked at on a timer but the refresh of channels, graph and
+//! parameters (every half second) and a client's pings: the serving thread
+//! sleeps on its ports' events and its clients' requests ([`Robot::wait`]),
+//! a client's thread on its socket and its queue.
+//!
 //! A client is served by a thread of its own with a bounded queue: a client
 //! that reads slower than the robot publishes loses the oldest messages
 //! (counted, logged and told to it in a `status`), and one that stops
@@ -20,10 +25,14 @@
 
 pub mod protocol;
 mod server;
+mod wake;
 
 pub use server::{FoxgloveError, Options, Stats, serve};
+pub use wake::{Interest, wait_fds};
 
 use serde_json::Value;
+use std::os::fd::RawFd;
+use std::time::Duration;
 
 /// An output port as a channel.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -51,6 +60,18 @@ pub trait Robot {
     /// Every output port of every agent as a channel; an error says why
     /// there is none (no router).
     fn channels(&mut self) -> Result<Vec<ChannelSpec>, String>;
+    /// Sleeps until a port read by the last [`Robot::read`] has a sample,
+    /// one of `also` (the server's own: a client's request, a connection)
+    /// is readable, or `timeout` passed; whichever comes first. An
+    /// implementation waits on its ports' events (see [`wait_fds`]); this
+    /// default, for a robot without them, waits for `also` only.
+    fn wait(&mut self, also: &[RawFd], timeout: Duration) {
+        let fds: Vec<(RawFd, Interest)> = also.iter().map(|&fd| (fd, Interest::Read)).collect();
+        if let Err(e) = wait_fds(&fds, timeout) {
+            tracing::warn!(error = %e, "cannot wait for the server's descriptors: sleeping instead");
+            std::thread::sleep(timeout);
+        }
+    }
     /// Reads the samples that arrived on the ports of `topics` (the
     /// subscribed channels; subscriptions to others are let go) and hands
     /// each to `sink` as `(topic, stamp in ns since 1970, JSON payload)`.

@@ -17,12 +17,14 @@
 //!   client.
 
 use crate::protocol::{self, Channel, ClientMessage, Level, Parameter, SUBPROTOCOLS};
+use crate::wake::{Interest, Wake, wait_fds};
 use crate::{GraphSpec, Robot};
 use nerve_ui::token_matches;
 use serde_json::{Value, json};
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::io::ErrorKind;
 use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::os::fd::AsRawFd as _;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Sender};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -55,8 +57,6 @@ pub struct Options {
     pub queue: usize,
     /// a client that takes nothing for this long while data waits is disconnected
     pub stall_timeout: Duration,
-    /// the serving thread's cycle (how often subscribed ports are read)
-    pub cycle: Duration,
     /// how often channels and the graph are refreshed from the router
     pub refresh: Duration,
 }
@@ -74,7 +74,6 @@ impl Options {
             max_clients: 16,
             queue: 1024,
             stall_timeout: Duration::from_secs(10),
-            cycle: Duration::from_millis(5),
             refresh: Duration::from_millis(500),
         }
     }
@@ -121,11 +120,8 @@ pub enum FoxgloveError {
 
 /// How long a handshake may take.
 const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(3);
-/// A client's socket read timeout: how long its thread waits for a request
-/// before writing what is queued.
-const READ_SLICE: Duration = Duration::from_millis(4);
-/// A client's socket write timeout.
-const WRITE_SLICE: Duration = Duration::from_millis(40);
+/// Requests read from a client in a row before its queue is looked at.
+const READS_IN_A_ROW: usize = 64;
 /// Messages written per batch.
 const BATCH: usize = 64;
 /// Control messages a client may have waiting before it is disconnected.
@@ -211,6 +207,8 @@ struct Client {
     /// the parameters whose changes it is sent
     params: Mutex<BTreeSet<String>>,
     gone: AtomicBool,
+    /// wakes its thread: something was queued for it, or the server stops
+    wake: Wake,
 }
 
 impl Client {
@@ -219,9 +217,11 @@ impl Client {
         if out.control.len() >= CONTROL_MAX {
             // a client that takes not even its control messages is going
             self.gone.store(true, Ordering::Relaxed);
-            return;
+        } else {
+            out.control.push_back(text);
         }
-        out.control.push_back(text);
+        drop(out);
+        self.wake.wake();
     }
 
     fn error(&self, message: &str) {
@@ -249,6 +249,17 @@ struct Hub {
     refused: AtomicU64,
     dropped_messages: AtomicU64,
     dropped_clients: AtomicU64,
+    /// wakes the serving thread: a client asked something
+    wake: Wake,
+}
+
+impl Hub {
+    /// Hands `req` to the serving thread and wakes it.
+    fn ask(&self, tx: &Sender<Request>, req: Request) {
+        // the serving thread is gone only when the server stops
+        let _ = tx.send(req);
+        self.wake.wake();
+    }
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -295,6 +306,7 @@ pub fn serve(
     let listener = TcpListener::bind(opts.bind).map_err(|source| FoxgloveError::Bind { addr: opts.bind, source })?;
     let addr = listener.local_addr().map_err(|source| FoxgloveError::Listener { addr: opts.bind, source })?;
     listener.set_nonblocking(true).map_err(|source| FoxgloveError::Listener { addr, source })?;
+    let wake = Wake::new().map_err(|source| FoxgloveError::Listener { addr, source })?;
     let hub = Arc::new(Hub {
         opts: opts.clone(),
         channels: Mutex::default(),
@@ -306,6 +318,7 @@ pub fn serve(
         refused: AtomicU64::new(0),
         dropped_messages: AtomicU64::new(0),
         dropped_clients: AtomicU64::new(0),
+        wake,
     });
     tracing::info!(%addr, read_only = opts.read_only, publish = opts.publish, "nerve foxglove listening");
     // the channels are known before the first client is told them
@@ -329,9 +342,16 @@ pub fn serve(
         }
         read_ports(&hub, robot);
         threads.retain(|t| !t.is_finished());
-        std::thread::sleep(opts.cycle);
+        // until a sample, a request or a connection comes, or the next refresh is due (a stop
+        // request is seen then at the latest; a signal ends the wait at once)
+        let due = opts.refresh.saturating_sub(last_refresh.elapsed());
+        robot.wait(&[hub.wake.fd(), listener.as_raw_fd()], due);
+        hub.wake.drain();
     }
     hub.stop.store(true, Ordering::Relaxed);
+    for c in lock(&hub.clients).values() {
+        c.wake.wake();
+    }
     drop(rx);
     for t in threads {
         let _ = t.join();
@@ -447,8 +467,11 @@ fn serve_client(stream: TcpStream, peer: SocketAddr, hub: &Hub, tx: &Sender<Requ
             return Err(e);
         }
     };
-    ws.get_ref().set_read_timeout(Some(READ_SLICE)).map_err(|e| e.to_string())?;
-    ws.get_ref().set_write_timeout(Some(WRITE_SLICE)).map_err(|e| e.to_string())?;
+    // from now on the thread sleeps in poll(2) (its socket, its queue's wake) and never in a read or write
+    ws.get_ref().set_read_timeout(None).map_err(|e| e.to_string())?;
+    ws.get_ref().set_write_timeout(None).map_err(|e| e.to_string())?;
+    ws.get_ref().set_nonblocking(true).map_err(|e| e.to_string())?;
+    let wake = Wake::new().map_err(|e| format!("cannot make the client's wake-up pair: {e}"))?;
     let id = hub.next_client.fetch_add(1, Ordering::Relaxed);
     let client = Arc::new(Client {
         id,
@@ -460,6 +483,7 @@ fn serve_client(stream: TcpStream, peer: SocketAddr, hub: &Hub, tx: &Sender<Requ
         graph: AtomicBool::new(false),
         params: Mutex::default(),
         gone: AtomicBool::new(false),
+        wake,
     });
     hub.served.fetch_add(1, Ordering::Relaxed);
     tracing::info!(client = id, %peer, subprotocol = admission.subprotocol, edit = client.edit, "client connected");
@@ -494,12 +518,22 @@ fn register(hub: &Hub, client: &Arc<Client>) {
     lock(&hub.clients).insert(client.id, Arc::clone(client));
 }
 
+/// Whether a socket operation failed only because it would have waited.
+fn would_block(e: &tungstenite::Error) -> bool {
+    matches!(e, tungstenite::Error::Io(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted))
+}
+
+/// A client's thread after the handshake: its socket is non-blocking, and
+/// it sleeps in `poll(2)` until the client sent something, its queue got
+/// something (the serving thread wakes it), its socket takes more of what
+/// waits to be written, or a ping or the stall timeout is due.
 fn client_loop(
     ws: &mut WebSocket<TcpStream>,
     hub: &Hub,
     client: &Arc<Client>,
     tx: &Sender<Request>,
 ) -> Result<(), String> {
+    let stall = hub.opts.stall_timeout;
     let mut unflushed = false;
     // the last moment the client had taken everything written to it
     let mut took = Instant::now();
@@ -508,6 +542,8 @@ fn client_loop(
     let (mut pings, mut waiting): (u64, Option<(u64, Instant)>) = (0, None);
     let mut last_ping = Instant::now();
     loop {
+        // what was queued before this is taken below; what is queued after it wakes the poll
+        client.wake.drain();
         if hub.stop.load(Ordering::Relaxed) {
             let _ = ws.close(None);
             let _ = ws.flush();
@@ -516,37 +552,38 @@ fn client_loop(
         if client.gone.load(Ordering::Relaxed) {
             return Err("too many control messages waiting: the client stopped reading".into());
         }
-        match ws.read() {
-            Ok(Message::Text(t)) => request(hub, client, tx, t.as_str()),
-            Ok(Message::Binary(b)) => publish(hub, client, tx, &b),
-            Ok(Message::Pong(p)) => {
-                if waiting.is_some_and(|(n, _)| p.as_ref() == n.to_le_bytes()) {
-                    waiting = None;
+        // the requests that arrived, a bounded number in a row (tungstenite may hold more)
+        let mut more_to_read = true;
+        for _ in 0..READS_IN_A_ROW {
+            match ws.read() {
+                Ok(Message::Text(t)) => request(hub, client, tx, t.as_str()),
+                Ok(Message::Binary(b)) => publish(hub, client, tx, &b),
+                Ok(Message::Pong(p)) => {
+                    if waiting.is_some_and(|(n, _)| p.as_ref() == n.to_le_bytes()) {
+                        waiting = None;
+                    }
                 }
-            }
-            Ok(Message::Close(_)) => {
-                let _ = ws.flush();
-                return Ok(());
-            }
-            Ok(_) => {}
-            Err(tungstenite::Error::Io(e)) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
-            Err(tungstenite::Error::ConnectionClosed | tungstenite::Error::AlreadyClosed) => return Ok(()),
-            Err(e) => return Err(format!("connection failed: {e}")),
-        }
-        if unflushed {
-            match ws.flush() {
-                Ok(()) => {
-                    unflushed = false;
-                    took = Instant::now();
+                Ok(Message::Close(_)) => {
+                    let _ = ws.flush();
+                    return Ok(());
                 }
-                Err(tungstenite::Error::Io(e)) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+                Ok(_) => {}
+                Err(e) if would_block(&e) => {
+                    more_to_read = false;
+                    break;
+                }
+                Err(tungstenite::Error::ConnectionClosed | tungstenite::Error::AlreadyClosed) => return Ok(()),
                 Err(e) => return Err(format!("connection failed: {e}")),
             }
         }
         if !unflushed && waiting.is_none() && last_ping.elapsed() >= PING_EVERY {
             pings = pings.wrapping_add(1);
-            ws.write(Message::Ping(pings.to_le_bytes().to_vec().into()))
-                .map_err(|e| format!("connection failed: {e}"))?;
+            match ws.write(Message::Ping(pings.to_le_bytes().to_vec().into())) {
+                Ok(()) => {}
+                // queued in tungstenite's buffer: it leaves with the flush
+                Err(e) if would_block(&e) => {}
+                Err(e) => return Err(format!("connection failed: {e}")),
+            }
             unflushed = true;
             waiting = Some((pings, Instant::now()));
             last_ping = Instant::now();
@@ -559,6 +596,7 @@ fn client_loop(
                 let data: Vec<Data> = out.data.drain(..n).collect();
                 (control, data, out.dropped)
             };
+            let mut frames: Vec<Message> = Vec::with_capacity(control.len() + data.len() + 1);
             if dropped > reported && report_at.elapsed() >= DROP_REPORT {
                 let msg = format!(
                     "nerve foxglove dropped {} messages for this client (it reads slower than the robot publishes; \
@@ -567,34 +605,66 @@ fn client_loop(
                     hub.opts.queue
                 );
                 tracing::warn!(client = client.id, peer = %client.peer, dropped, "{msg}");
-                let _ = ws.write(Message::text(protocol::status(Level::Warning, &msg)));
+                frames.push(Message::text(protocol::status(Level::Warning, &msg)));
                 (reported, report_at) = (dropped, Instant::now());
-                unflushed = true;
             }
-            for text in control {
-                ws.write(Message::text(text)).map_err(|e| format!("connection failed: {e}"))?;
-                unflushed = true;
-            }
-            for d in data {
-                let frame = protocol::message_data(d.subscription, d.unix_ns, &d.payload);
-                ws.write(Message::binary(frame)).map_err(|e| format!("connection failed: {e}"))?;
+            frames.extend(control.into_iter().map(Message::text));
+            frames.extend(
+                data.iter().map(|d| Message::binary(protocol::message_data(d.subscription, d.unix_ns, &d.payload))),
+            );
+            for frame in frames {
+                match ws.write(frame) {
+                    Ok(()) => {}
+                    Err(e) if would_block(&e) => {}
+                    Err(e) => return Err(format!("connection failed: {e}")),
+                }
                 unflushed = true;
             }
             if !unflushed {
                 took = Instant::now();
             }
         }
-        let unanswered = waiting.is_some_and(|(_, at)| at.elapsed() > hub.opts.stall_timeout);
-        if unanswered || (unflushed && took.elapsed() > hub.opts.stall_timeout) {
+        if unflushed {
+            match ws.flush() {
+                Ok(()) => {
+                    unflushed = false;
+                    took = Instant::now();
+                }
+                Err(e) if would_block(&e) => {}
+                Err(e) => return Err(format!("connection failed: {e}")),
+            }
+        }
+        let unanswered = waiting.is_some_and(|(_, at)| at.elapsed() > stall);
+        if unanswered || (unflushed && took.elapsed() > stall) {
             hub.dropped_clients.fetch_add(1, Ordering::Relaxed);
             tracing::warn!(
                 client = client.id,
                 peer = %client.peer,
-                stalled_s = hub.opts.stall_timeout.as_secs_f64(),
+                stalled_s = stall.as_secs_f64(),
                 "client disconnected: it took nothing (or answered no ping) for the stall timeout"
             );
             return Err("the client stopped reading".into());
         }
+        let queued = {
+            let out = lock(&client.out);
+            !out.data.is_empty() || !out.control.is_empty()
+        };
+        if more_to_read || (queued && !unflushed) {
+            continue;
+        }
+        // asleep until the next ping or stall check at the latest
+        let mut due =
+            if waiting.is_none() && !unflushed { PING_EVERY.saturating_sub(last_ping.elapsed()) } else { PING_EVERY };
+        if let Some((_, at)) = waiting {
+            due = due.min(stall.saturating_sub(at.elapsed()));
+        }
+        if unflushed {
+            due = due.min(stall.saturating_sub(took.elapsed()));
+        }
+        let socket = (ws.get_ref().as_raw_fd(), if unflushed { Interest::ReadWrite } else { Interest::Read });
+        // just past the deadline, so that the check above sees it passed
+        wait_fds(&[socket, (client.wake.fd(), Interest::Read)], due.saturating_add(Duration::from_millis(1)))
+            .map_err(|e| format!("cannot wait for the client's socket: {e}"))?;
     }
 }
 
@@ -607,9 +677,7 @@ fn request(hub: &Hub, client: &Arc<Client>, tx: &Sender<Request>, text: &str) {
             return;
         }
     };
-    let send = |r: Request| {
-        let _ = tx.send(r);
-    };
+    let send = |r: Request| hub.ask(tx, r);
     match msg {
         ClientMessage::Subscribe { subscriptions } => {
             let channels = lock(&hub.channels);
@@ -706,7 +774,7 @@ fn publish(hub: &Hub, client: &Arc<Client>, tx: &Sender<Request>, frame: &[u8]) 
     let topic = lock(&client.publishing).get(&channel).cloned();
     match topic {
         Some(topic) => {
-            let _ = tx.send(Request::Publish { client: Arc::clone(client), topic, payload: payload.to_vec() });
+            hub.ask(tx, Request::Publish { client: Arc::clone(client), topic, payload: payload.to_vec() });
         }
         None => client.error(&format!("channel {channel} was not advertised by this client (or was refused)")),
     }
@@ -780,6 +848,8 @@ fn read_ports(hub: &Hub, robot: &mut dyn Robot) {
     };
     let names: Vec<&str> = topics.iter().map(|(t, _)| t.as_str()).collect();
     let queue = hub.opts.queue.max(1);
+    // the clients that got something: woken once each, after the read
+    let mut fed: BTreeMap<u64, Arc<Client>> = BTreeMap::new();
     robot.read(&names, &mut |topic, unix_ns, payload| {
         let Some(ch) = topics.iter().find(|(t, _)| t == topic).map(|(_, c)| *c) else { return };
         let payload = Arc::new(payload);
@@ -788,8 +858,12 @@ fn read_ports(hub: &Hub, robot: &mut dyn Robot) {
             if lock(&c.out).push_data(d, queue) {
                 hub.dropped_messages.fetch_add(1, Ordering::Relaxed);
             }
+            fed.entry(c.id).or_insert_with(|| Arc::clone(c));
         }
     });
+    for c in fed.values() {
+        c.wake.wake();
+    }
 }
 
 /// The parameter values last seen, for the clients that subscribed to

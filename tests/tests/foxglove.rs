@@ -95,6 +95,18 @@ impl Fox {
         said.join("\n")
     }
 
+    /// How often its threads have gone to sleep so far (voluntary context
+    /// switches, summed over its threads): a loop on a timer adds hundreds a second.
+    fn sleeps(&self) -> u64 {
+        let tasks = std::fs::read_dir(format!("/proc/{}/task", self.child.id())).expect("its threads");
+        tasks
+            .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("status")).ok())
+            .filter_map(|s| {
+                s.lines().find_map(|l| l.strip_prefix("voluntary_ctxt_switches:"))?.trim().parse::<u64>().ok()
+            })
+            .sum()
+    }
+
     /// Its resident memory, kB.
     fn rss_kb(&self) -> u64 {
         let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id())).expect("status");
@@ -343,6 +355,28 @@ fn subscribe_cycles_leave_the_servers_memory_flat() {
     run_client(&["cycles", &fox.url, "/t1/tick", "100"]);
     let after = fox.rss_kb();
     assert!(after <= warm + 2048, "100 subscribe/unsubscribe cycles grew nerve foxglove from {warm} kB to {after} kB");
+}
+
+#[test]
+fn an_idle_server_sleeps_instead_of_looking_at_its_ports() {
+    let r = robot("fxidle");
+    let fox = Fox::start(&r, &[]);
+    // a client connected and subscribed to nothing, while the ticker publishes: nothing to do
+    let mut idle = client(&["idle", &fox.url, "4000"]);
+    let lines = lines_of(&mut idle);
+    assert_eq!(next_line(&lines)["connected"], true);
+    let before = fox.sleeps();
+    std::thread::sleep(Duration::from_secs(2));
+    let woke = fox.sleeps() - before;
+    eprintln!("nerve foxglove, idle with a client: {woke} sleeps in 2 s");
+    // asleep: the half-second refresh (a router call or two), the client's pings; a 5 ms loop
+    // and a 4 ms socket timeout woke it about 900 times in these 2 s
+    assert!(woke < 200, "an idle nerve foxglove woke {woke} times in 2 s: something looks on a timer");
+    assert_eq!(next_line(&lines)["done"], true);
+    assert!(idle.wait().expect("client").success());
+    // and it still serves at once
+    let seen = run_client(&["watch", &fox.url, "foxglove.sdk.v1", "/t1/tick", "3"]);
+    assert_eq!(seen[1]["samples"].as_array().map(Vec::len), Some(3));
 }
 
 #[test]

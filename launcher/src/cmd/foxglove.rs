@@ -19,12 +19,15 @@ use crate::client::{RouterSession, cli_node};
 use crate::interrupt;
 use agent_sdk::World;
 use agent_sdk::clock::{now_ns, unix_now_ns};
+use agent_sdk::ports::port_event;
 use agent_sdk::raw_port::{RawOutput, RawPort};
 use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::prelude::FileDescriptorBased as _;
 use iceoryx2::prelude::Node;
 use nerve_foxglove::protocol::Parameter;
-use nerve_foxglove::{ChannelSpec, GraphSpec, Options, Robot};
+use nerve_foxglove::{ChannelSpec, GraphSpec, Interest, Options, Robot, wait_fds};
 use nerve_recording::foxglove::{
     IMAGE_SUFFIX, RAW_IMAGE, RawImage, encoding_of, mapping_of, raw_image_json, raw_image_json_schema,
     velocity_from_twist,
@@ -37,6 +40,7 @@ use shm_schemas::{PortRef, Schema};
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{IsTerminal as _, Write as _};
 use std::net::SocketAddr;
+use std::os::fd::RawFd;
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -156,6 +160,8 @@ pub fn foxglove(world: &World, a: FoxgloveArgs) -> Result<ExitCode> {
 /// A subscribed output port.
 struct Tap {
     raw: RawPort,
+    /// the port's event, notified on every sample: the serving thread sleeps on it
+    listener: Listener<Ipc>,
     schema: Schema,
 }
 
@@ -304,7 +310,12 @@ impl FoxRobot {
         let schema = agent.schema_for(spec.fingerprint).ok_or("its agent registered no schema for it")?;
         let service = self.world.robot().port_service(port.agent.as_str(), &port.port);
         let raw = RawPort::open(&self.node, &service).map_err(|e| format!("cannot subscribe: {e}"))?;
-        Ok(Tap { raw, schema })
+        let listener = port_event(&self.node, &service)
+            .map_err(|e| format!("cannot wait for its samples: {e}"))?
+            .listener_builder()
+            .create()
+            .map_err(|e| format!("cannot wait for its samples: {e:?}"))?;
+        Ok(Tap { raw, listener, schema })
     }
 
     /// Sends `bytes` again until the input takes it, at most [`FIRST_DELIVERY`].
@@ -376,6 +387,23 @@ impl Robot for FoxRobot {
             }
         }
         Ok(out)
+    }
+
+    fn wait(&mut self, also: &[RawFd], timeout: Duration) {
+        let mut fds: Vec<(RawFd, Interest)> = also.iter().map(|&fd| (fd, Interest::Read)).collect();
+        for tap in self.taps.values() {
+            // SAFETY: the descriptor is only handed to poll(2) below, while `tap` (and so its
+            // listener, which owns the descriptor) is borrowed; it is neither kept nor closed
+            fds.push((unsafe { tap.listener.file_descriptor().native_handle() }, Interest::Read));
+        }
+        if let Err(e) = wait_fds(&fds, timeout) {
+            tracing::warn!(error = %e, "cannot wait for the ports' events: sleeping instead");
+            std::thread::sleep(timeout.min(Duration::from_millis(5)));
+        }
+        // the events are taken before the samples are read, so that one sent after the read wakes the next wait
+        for tap in self.taps.values() {
+            let _ = tap.listener.try_wait(|_| {});
+        }
     }
 
     fn read(&mut self, topics: &[&str], sink: &mut dyn FnMut(&str, u64, Vec<u8>)) {

@@ -13,6 +13,7 @@
 //   node client.js cycles URL TOPIC N
 //   node client.js drive URL PUB_TOPIC JSON SUB_TOPIC
 //   node client.js teleop URL PUB_TOPIC LINEAR ANGULAR SECONDS SUB_TOPIC
+//   node client.js idle URL MS
 "use strict";
 
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
@@ -252,6 +253,16 @@ async function teleop(url, pubTopic, linear, angular, seconds, subTopic) {
   s.client.close();
 }
 
+// Connects, subscribes to nothing, says so, and stays connected for `ms`.
+async function idle(url, ms) {
+  const s = connect(url);
+  await until(() => s.serverInfo, 10000, "serverInfo");
+  say({ connected: true, channels: s.channels.size });
+  await new Promise((r) => setTimeout(r, ms));
+  say({ done: true, statuses: s.statuses });
+  s.client.close();
+}
+
 const [scenario, ...args] = process.argv.slice(2);
 const run = {
   watch: () => watch(args[0], args[1], args[2], Number(args[3])),
@@ -263,6 +274,7 @@ const run = {
   cycles: () => cycles(args[0], args[1], Number(args[2])),
   drive: () => drive(args[0], args[1], args[2], args[3]),
   teleop: () => teleop(args[0], args[1], Number(args[2]), Number(args[3]), Number(args[4]), args[5]),
+  idle: () => idle(args[0], Number(args[1])),
 }[scenario];
 if (!run) fail(`unknown scenario ${scenario}`);
 Promise.resolve(run()).catch(fail);
