@@ -34,3 +34,71 @@ fn a_call_is_answered_and_the_wire_shows_in_the_graph() {
     assert!(graph.contains("c/planner") && graph.contains("s/plan"), "{graph}");
     r.down_and_check_clean();
 }
+
+/// Calls past the client's bound of calls in flight are refused with
+/// nothing sent, and every call sent is answered.
+#[test]
+fn a_thousand_calls_at_once_are_refused_past_the_bound_and_the_rest_answered() {
+    let r = wired("call-bound", &["--burst", "1000", "--max", "64", "--timeout-ms", "5000"]);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("c", "answered") >= 64),
+        "the 64 calls in flight were not all answered: {:?}",
+        r.figures("c")
+    );
+    let c = r.figures("c");
+    let get = |k: &str| c.get(k).and_then(|v| v.parse::<u64>().ok()).unwrap_or_else(|| panic!("figure {k}: {c:?}"));
+    assert_eq!((get("sent"), get("refused"), get("answered"), get("wrong")), (64, 936, 64, 0), "{c:?}");
+    assert_eq!(r.figure_u64("s", "answered"), 64, "the server answered calls that were refused: {:?}", r.figures("s"));
+    r.down_and_check_clean();
+}
+
+/// A server killed with calls in flight: each call ends with an error in
+/// bounded time (its timeout at most), the client runs on; the server
+/// started again is wired again by the router and answers.
+#[test]
+fn a_killed_server_ends_the_calls_in_bounded_time_and_a_restarted_one_is_rewired() {
+    let r = wired("call-kill", &["--timeout-ms", "400"]);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("c", "answered") >= 5),
+        "no answers before the kill: {:?}",
+        r.figures("c")
+    );
+    let count = |r: &Robot, keys: &[&str]| {
+        let c = r.figures("c");
+        keys.iter().map(|k| c.get(*k).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0)).sum::<u64>()
+    };
+    // a server that holds the calls (suspended, it never steps): they time out
+    r.ok(&["suspend", "s"]);
+    assert!(
+        wait_until(Duration::from_secs(10), || count(&r, &["timed_out"]) >= 1),
+        "a call to a held server did not time out: {:?}",
+        r.figures("c")
+    );
+    // killed with a call in flight: that call and the next end in an error
+    let failed = count(&r, &["timed_out", "gone", "no_server"]);
+    nerve_tests::sigkill(r.pid("s"));
+    assert!(
+        wait_until(Duration::from_secs(10), || count(&r, &["timed_out", "gone", "no_server"]) >= failed + 2),
+        "calls to a killed server did not fail: {:?}",
+        r.figures("c")
+    );
+    // the client's task runs on
+    let steps = r.figure_u64("c", "steps");
+    assert!(
+        wait_until(Duration::from_secs(5), || r.figure_u64("c", "steps") > steps + 10),
+        "the client stopped stepping: {:?}",
+        r.figures("c")
+    );
+    // started again under its name: the router wires the client to it again
+    r.ok(&["start", "caller", "--name", "s", "--", "--serve"]);
+    // (the router re-applies the suspend it was last told: resumed by hand)
+    r.ok(&["resume", "s"]);
+    let answered = r.figure_u64("c", "answered");
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("c", "answered") >= answered + 5),
+        "the restarted server did not answer: {:?}",
+        r.figures("c")
+    );
+    assert_eq!(r.figure("c", "wrong"), "0");
+    r.down_and_check_clean();
+}
