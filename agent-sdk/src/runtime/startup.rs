@@ -7,7 +7,7 @@
 use super::checker::Checker;
 use super::router_link::{RegisterError, RouterLink};
 use super::runaway;
-use super::task::{SuspendGate, task_main};
+use super::task::{Stepper, SuspendGate, task_main};
 use super::{Shared, TaskFigures};
 use crate::agent::{Agent, AgentError, Binding, Setup, Task};
 use crate::cli::CommonArgs;
@@ -148,10 +148,24 @@ pub fn run_with_args<A: Agent>(args: CommonArgs) -> ExitCode {
 /// or [`EXIT_STARTUP`] when the agent could not start), for a host that
 /// ends the process itself (the Python package's `nerve.run`).
 pub fn run_status<A: Agent>(args: CommonArgs) -> u8 {
+    let mut make = |setup: &mut Setup| A::new(setup).map(|a| Box::new(a) as Box<dyn Stepper>);
+    run_status_erased(args, AgentKind { kind: A::kind(), task: A::task(), make: &mut make })
+}
+
+/// What the start-up needs of an agent type, without being generic over it
+/// (see [`Stepper`]): its kind, its task, and how to make one.
+struct AgentKind<'a> {
+    kind: &'static str,
+    task: Task,
+    make: &'a mut dyn FnMut(&mut Setup) -> Result<Box<dyn Stepper>, AgentError>,
+}
+
+/// [`run_status`], compiled once here rather than in every agent program.
+fn run_status_erased(args: CommonArgs, mut agent: AgentKind<'_>) -> u8 {
     // the start-up's debug lines count from here, through the daemon's forks
     let began = Instant::now();
     abort_on_panic();
-    let name = args.name.clone().unwrap_or_else(|| A::kind().to_owned());
+    let name = args.name.clone().unwrap_or_else(|| agent.kind.to_owned());
     let mut readiness = Readiness::foreground();
     let world = match World::new(&args.robot) {
         Ok(w) => w,
@@ -161,7 +175,7 @@ pub fn run_status<A: Agent>(args: CommonArgs) -> u8 {
         return startup_error(&mut readiness, &StartupError::Name(e));
     }
     if args.describe {
-        return match describe::<A>(&args) {
+        return match describe(&args, &mut agent) {
             Ok(json) => {
                 println!("{json}");
                 0
@@ -183,7 +197,7 @@ pub fn run_status<A: Agent>(args: CommonArgs) -> u8 {
     if let Err(e) = crate::termination::install() {
         tracing::warn!("{e}; a SIGTERM may go unseen when another signal follows it");
     }
-    match start::<A>(&args, &name, world, &mut readiness, began) {
+    match start(&args, &name, world, &mut readiness, began, agent) {
         Ok(()) => 0,
         Err(e) => startup_error(&mut readiness, &e),
     }
@@ -205,21 +219,21 @@ fn startup_error(readiness: &mut Readiness, e: &StartupError) -> u8 {
 /// open devices in [`Agent::start`], which describing never runs). The
 /// world the agent sees is a private robot's (`describe-PID`), so that a
 /// check of what else runs (a ring's writer) never refuses a description.
-fn describe<A: Agent>(args: &CommonArgs) -> Result<String, StartupError> {
+fn describe(args: &CommonArgs, kind: &mut AgentKind<'_>) -> Result<String, StartupError> {
     use shm_schemas::control::describe::Description;
     let world = World::new(&format!("describe-{}", std::process::id()))?;
     let mut setup =
-        Setup::new(world, AgentName::new(A::kind()).map_err(StartupError::Name)?, Binding::Nothing, args.args.clone());
+        Setup::new(world, AgentName::new(kind.kind).map_err(StartupError::Name)?, Binding::Nothing, args.args.clone());
     let agent =
-        A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::kind(), name: A::kind().into(), source })?;
+        (kind.make)(&mut setup).map_err(|source| StartupError::Agent { kind: kind.kind, name: kind.kind.into(), source })?;
     apply_params(&setup.params, &args.params)?;
-    let (task, default_period_ns) = match A::task() {
+    let (task, default_period_ns) = match kind.task {
         Task::Periodic(p) => (TaskKind::Periodic, Some(crate::clock::nanos(p))),
         Task::EventDriven => (TaskKind::EventDriven, None),
     };
     let d = Description {
         protocol: shm_schemas::PROTOCOL_VERSION,
-        kind: A::kind().into(),
+        kind: kind.kind.into(),
         task,
         default_period_ns,
         inputs: setup.inputs.iter().filter(|i| !setup.calls.is_call(i.name())).map(|i| i.spec()).collect(),
@@ -245,22 +259,40 @@ fn apply_params(table: &ParamTable, settings: &[String]) -> Result<(), StartupEr
     Ok(())
 }
 
-fn start<A: Agent>(
+fn start(
     args: &CommonArgs,
     name: &str,
     world: World,
     readiness: &mut Readiness,
     began: Instant,
+    agent: AgentKind<'_>,
+) -> Result<(), StartupError> {
+    let AgentKind { kind, task: task_kind, make } = agent;
+    start_erased(args, name, world, readiness, began, kind, task_kind, make)
+}
+
+/// The whole start-up of an agent of kind `kind`, made by `make`: not
+/// generic over the agent, so compiled once here rather than in every
+/// agent program (see [`Stepper`]).
+#[allow(clippy::too_many_arguments)]
+fn start_erased(
+    args: &CommonArgs,
+    name: &str,
+    world: World,
+    readiness: &mut Readiness,
+    began: Instant,
+    kind: &'static str,
+    task_kind: Task,
+    make: &mut dyn FnMut(&mut Setup) -> Result<Box<dyn Stepper>, AgentError>,
 ) -> Result<(), StartupError> {
     let agent_name = AgentName::new(name).map_err(StartupError::Name)?;
-    let task_kind = A::task();
     let period = match (task_kind, &args.period) {
         (Task::Periodic(default), None) => Some(default),
         (Task::Periodic(_), Some(p)) => Some(parse_duration(p).map_err(|e| StartupError::Period(e.to_string()))?),
         (Task::EventDriven, Some(_)) => {
             return Err(StartupError::Period(format!(
                 "agent kind {} is event-driven; it takes no --period",
-                A::kind()
+                kind
             )));
         }
         (Task::EventDriven, None) => None,
@@ -271,7 +303,7 @@ fn start<A: Agent>(
         rt::set_affinity(cpus).map_err(StartupError::Cpus)?;
     }
     // every line of the start-up says so, with the agent's name and kind
-    let startup = tracing::info_span!("start-up", agent = name, kind = A::kind()).entered();
+    let startup = tracing::info_span!("start-up", agent = name, kind = kind).entered();
     // held until this function returns, or the kernel drops it when the process ends
     let (_cpu_latency_hold, cpu_latency) = if args.no_realtime {
         (None, shm_schemas::stats::CpuLatency::Off)
@@ -317,8 +349,7 @@ fn start<A: Agent>(
     }
 
     let mut setup = Setup::new(world.clone(), agent_name.clone(), Binding::Shm(node.clone()), args.args.clone());
-    let agent =
-        A::new(&mut setup).map_err(|source| StartupError::Agent { kind: A::kind(), name: name.into(), source })?;
+    let agent = make(&mut setup).map_err(|source| StartupError::Agent { kind, name: name.into(), source })?;
     stage("agent and its ports created");
     let Setup { inputs, outputs, schemas, params, calls, .. } = setup;
     apply_params(&params, &args.params)?;
@@ -367,7 +398,7 @@ fn start<A: Agent>(
     let registration = Registration {
         name: name.to_owned(),
         pid: std::process::id(),
-        kind: A::kind().to_owned(),
+        kind: kind.to_owned(),
         executable: std::env::current_exe().map(|p| p.display().to_string()).unwrap_or_default(),
         task: match task_kind {
             Task::Periodic(_) => TaskKind::Periodic,
@@ -405,10 +436,10 @@ fn start<A: Agent>(
         Ok(Ok(())) => stage("agent started"),
         Ok(Err(source)) => {
             let _ = handle.join();
-            return Err(StartupError::Agent { kind: A::kind(), name: name.into(), source });
+            return Err(StartupError::Agent { kind, name: name.into(), source });
         }
         Err(_) if handle.is_finished() => {
-            return Err(StartupError::StoppedWhileStarting { kind: A::kind(), name: name.into() });
+            return Err(StartupError::StoppedWhileStarting { kind, name: name.into() });
         }
         Err(_) => tracing::warn!(
             "the agent's start has not finished after {} s; reporting ready anyway",
@@ -419,7 +450,7 @@ fn start<A: Agent>(
     let startup_msg = format!("{name} started (pid {}, robot {})", std::process::id(), world.robot());
     tracing::info!(
         "started: kind {}, {}{}",
-        A::kind(),
+        kind,
         match period {
             Some(p) => format!("periodic every {}", crate::clock::format_duration(p)),
             None => "event-driven".into(),
