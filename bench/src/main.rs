@@ -5,6 +5,7 @@
 //! nerve-bench jitter [--quick] [--json] [--out DIR] [--rates 1000,100] [--seconds S] [--rounds N]
 //! nerve-bench control [--quick] [--json] [--out DIR] [--rounds N] [--launch 10,50]
 //! nerve-bench bridge [--quick] [--json] [--out DIR] [--payloads 8,4096,230400] [--rounds N]
+//! nerve-bench foxglove [--quick] [--json] [--out DIR] [--payloads 8,4096] [--rounds N] [--seconds S]
 //! ```
 //!
 //! * `hop`: one-hop round-trip latency, event-driven, nerve SDK agents
@@ -15,6 +16,9 @@
 //! * `control`: hot-add, rewire and launch latencies of the control plane.
 //! * `bridge`: one way across the Zenoh bridge agent against raw Zenoh, and
 //!   the cost of a bridge on the local one-hop round trip.
+//! * `foxglove`: one hop while `nerve foxglove` serves a Foxglove client
+//!   subscribed to every channel vs without, and a 640x480 camera at 30 fps
+//!   to one client.
 //!
 //! Results go to `DIR/<scenario>.json` (and `DIR/hop-latency.png`); the
 //! tables are printed as markdown on stdout, or the JSON with `--json`.
@@ -33,6 +37,7 @@ mod bridge_agents;
 mod control;
 mod dds;
 mod dora;
+mod foxglove_cost;
 mod futex;
 mod hop;
 mod idle;
@@ -230,6 +235,24 @@ enum Scenario {
         #[arg(long)]
         rounds: Option<usize>,
     },
+    /// What Foxglove costs: one hop while `nerve foxglove` serves a client subscribed to every channel vs
+    /// without, and a 640x480 camera at 30 fps to one client (server CPU per frame, frames delivered).
+    Foxglove {
+        #[command(flatten)]
+        common: Common,
+        /// Payload sizes of the hop, in bytes.
+        #[arg(long, value_delimiter = ',', default_values_t = [8usize, 4096])]
+        payloads: Vec<usize>,
+        /// Measured rounds (each condition one batch per round, interleaved).
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// Seconds the camera's frames are counted (default 20; 2 with --quick).
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// The client script (default: tests/js/foxglove/client.js of this build's tree, `npm ci` done there).
+        #[arg(long)]
+        client: Option<PathBuf>,
+    },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
         #[command(flatten)]
@@ -378,6 +401,19 @@ fn run(cli: Cli) -> Result<()> {
             };
             let report = removing_work(&opts.work, || ui_cost::run(&opts))?;
             publish(&common, "ui", &report, report.seconds, |_| Ok(vec![]), ui_cost::print_tables)?;
+        }
+        Scenario::Foxglove { common, payloads, rounds, seconds, client } => {
+            let opts = foxglove_cost::FoxOpts {
+                quick: common.quick,
+                sizes: payloads,
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 7 }).max(1),
+                camera_seconds: seconds.unwrap_or(if common.quick { 2.0 } else { 20.0 }).clamp(0.5, 3600.0),
+                client: client.unwrap_or_else(foxglove_cost::default_client),
+                verbose: common.verbose,
+                work: foxglove_cost::work_dir(&common.out),
+            };
+            let report = removing_work(&opts.work, || foxglove_cost::run(&opts))?;
+            publish(&common, "foxglove", &report, report.seconds, |_| Ok(vec![]), foxglove_cost::print_tables)?;
         }
         Scenario::Scale { common, agents, period_ms, window } => {
             let opts = scale::ScaleOpts {

@@ -130,7 +130,7 @@ pub struct RecordResults {
 }
 
 /// User + system CPU seconds of a live process, from `/proc/PID/stat`.
-fn cpu_seconds(pid: u32) -> Option<f64> {
+pub(crate) fn cpu_seconds(pid: u32) -> Option<f64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // after the command name in parentheses: field 14 and 15 are utime, stime
     let rest = &stat[stat.rfind(')')? + 2..];

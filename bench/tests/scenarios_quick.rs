@@ -206,3 +206,27 @@ fn bridge_quick_measures_both_paths_and_the_local_cost() {
     assert!(lo["target_met"].is_boolean());
     assert_eq!(r["bridge_status"].as_array().map(Vec::len), Some(2), "both bridges reported their figures");
 }
+
+/// `nerve foxglove` with Foxglove's client library (npm packages of
+/// `tests/js/foxglove`, installed by `.ci/run`): the hop was measured with
+/// the client subscribed to the hop's own ports, and the camera's frames
+/// reached it at the camera's size (how many were dropped is a number of
+/// the report, not checked: the machine may be loaded).
+#[test]
+fn foxglove_quick_measures_the_hop_beside_a_client_and_the_camera() {
+    let r = run("foxglove", &["--payloads", "8", "--seconds", "1"]);
+    let hop = &r["hop"][0];
+    for k in ["without", "with_foxglove"] {
+        assert!(hop[k]["n"].as_u64().unwrap_or(0) > 0, "{k}: no samples in {hop}");
+    }
+    let channels: Vec<&str> =
+        r["hop_channels"].as_array().expect("channels").iter().filter_map(|c| c.as_str()).collect();
+    assert!(
+        channels.iter().any(|c| c.ends_with("/out")),
+        "the client did not subscribe to the hop's ports: {channels:?}"
+    );
+    let cam = &r["camera"];
+    assert_eq!((cam["width"].as_u64(), cam["height"].as_u64()), (Some(640), Some(480)), "{cam}");
+    assert!(cam["delivered"].as_u64().unwrap_or(0) > 0, "no frame delivered: {cam}");
+    assert!(cam["server_cpu_ms_per_frame"].as_f64().is_some_and(|v| v > 0.0), "{cam}");
+}

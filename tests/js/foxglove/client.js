@@ -14,6 +14,8 @@
 //   node client.js drive URL PUB_TOPIC JSON SUB_TOPIC
 //   node client.js teleop URL PUB_TOPIC LINEAR ANGULAR SECONDS SUB_TOPIC
 //   node client.js idle URL MS
+//   node client.js all URL MS          (nerve-bench foxglove: every channel, read until killed or MS)
+//   node client.js camera URL NOTICE_TOPIC MS   (nerve-bench foxglove: NOTICE_TOPIC and its /image)
 "use strict";
 
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
@@ -25,7 +27,12 @@ const fail = (why) => {
   say({ error: String(why) });
   process.exit(1);
 };
-setTimeout(() => fail(`not done within ${LIMIT_MS} ms`), LIMIT_MS).unref();
+let limit = setTimeout(() => fail(`not done within ${LIMIT_MS} ms`), LIMIT_MS).unref();
+// A scenario that runs `ms` on purpose is bounded by that plus the usual limit.
+const limitTo = (ms) => {
+  clearTimeout(limit);
+  limit = setTimeout(() => fail(`not done within ${ms + LIMIT_MS} ms`), ms + LIMIT_MS).unref();
+};
 
 function connect(url, subprotocol) {
   const ws = new WebSocket(url, [subprotocol || FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
@@ -263,6 +270,89 @@ async function idle(url, ms) {
   s.client.close();
 }
 
+// Subscribes to every channel advertised (and to those advertised later)
+// and reads every message, as a Foxglove window showing everything would;
+// prints the count per topic when `ms` have passed.
+async function all(url, ms) {
+  limitTo(ms);
+  const s = connect(url);
+  await until(() => s.serverInfo && s.channels.size > 0, 10000, "channels");
+  const subscribed = new Map();
+  const counts = {};
+  const subscribeNew = () => {
+    for (const [topic, ch] of s.channels) {
+      if (subscribed.has(topic)) continue;
+      subscribed.set(topic, s.client.subscribe(ch.id));
+      counts[topic] = 0;
+    }
+  };
+  s.client.on("advertise", subscribeNew);
+  subscribeNew();
+  const topicOf = new Map();
+  s.client.on("message", (m) => {
+    if (!topicOf.has(m.subscriptionId)) {
+      for (const [t, id] of subscribed) if (id === m.subscriptionId) topicOf.set(id, t);
+    }
+    const t = topicOf.get(m.subscriptionId);
+    if (t !== undefined) counts[t]++;
+  });
+  say({ subscribed: [...subscribed.keys()].sort() });
+  await new Promise((r) => setTimeout(r, ms));
+  say({ counts, statuses: s.statuses });
+  s.client.close();
+}
+
+// A camera's ring notices (`notice`, whose `seq` numbers the frames) and
+// its frames as foxglove.RawImage (`notice`/image): from the first notice
+// on, for `ms`, counts the frames announced and the images delivered.
+async function camera(url, notice, ms) {
+  limitTo(ms);
+  const s = connect(url);
+  const image = `${notice}/image`;
+  const n = await until(() => s.channels.get(notice), 10000, `channel ${notice}`);
+  const i = await until(() => s.channels.get(image), 10000, `channel ${image}`);
+  const subN = s.client.subscribe(n.id);
+  const subI = s.client.subscribe(i.id);
+  const st = { first: null, last: null, notices: 0, images: 0, bytes: 0, started: 0, done: false, width: 0, height: 0 };
+  s.client.on("message", (m) => {
+    if (st.done) return;
+    if (m.subscriptionId === subN) {
+      const seq = Number(decode(m.data).seq);
+      if (st.first === null) {
+        st.first = seq;
+        st.started = Date.now();
+        say({ counting: true, first: seq });
+      }
+      st.last = seq;
+      st.notices++;
+    } else if (m.subscriptionId === subI && st.first !== null) {
+      st.images++;
+      st.bytes += m.data.byteLength;
+      if (st.width === 0) {
+        const img = decode(m.data);
+        st.width = img.width;
+        st.height = img.height;
+      }
+    }
+  });
+  await until(() => st.first !== null, 10000, "a first frame");
+  await new Promise((r) => setTimeout(r, ms));
+  st.done = true;
+  const seconds = (Date.now() - st.started) / 1000;
+  say({
+    seconds,
+    announced: st.last - st.first + 1,
+    notices: st.notices,
+    images: st.images,
+    bytes: st.bytes,
+    width: st.width,
+    height: st.height,
+    statuses: s.statuses,
+  });
+  s.client.close();
+  process.exit(0);
+}
+
 const [scenario, ...args] = process.argv.slice(2);
 const run = {
   watch: () => watch(args[0], args[1], args[2], Number(args[3])),
@@ -275,6 +365,8 @@ const run = {
   drive: () => drive(args[0], args[1], args[2], args[3]),
   teleop: () => teleop(args[0], args[1], Number(args[2]), Number(args[3]), Number(args[4]), args[5]),
   idle: () => idle(args[0], Number(args[1])),
+  all: () => all(args[0], Number(args[1])),
+  camera: () => camera(args[0], args[1], Number(args[2])),
 }[scenario];
 if (!run) fail(`unknown scenario ${scenario}`);
 Promise.resolve(run()).catch(fail);
