@@ -4,8 +4,8 @@
 # only what is missing. Used by `scripts/demo.sh` (no flag: only what
 # building and running nerve needs) and `.ci/run` (`--test`).
 # `scripts/setup.sh --test` also installs what the tests alone need: socat,
-# systemd (`systemd-analyze`), iproute2 (network namespaces), python3-venv
-# and headless Chromium with its WebDriver (`nerve ui`'s page tests); the
+# systemd (`systemd-analyze`), iproute2 (network namespaces), python3-venv,
+# g++ and cmake (C and C++ agents) and headless Chromium with its WebDriver (`nerve ui`'s page tests); the
 # flags combine (`--test --bench`).
 # `scripts/setup.sh --bench` also installs the peers of the benchmarks:
 # cyclictest (rt-tests), ddsperf (cyclonedds-tools) and Chromium, and builds dora-rs
@@ -34,6 +34,8 @@ if [ $test = 1 ]; then
     command -v ip >/dev/null || need+=(iproute2)                       # network namespaces and veth pairs of the bridge tests
     command -v chromedriver >/dev/null || need+=(chromium-driver)      # `nerve ui`'s tests drive Chromium through WebDriver (tests/src/browser.rs)
     python3 -c 'import ensurepip' 2>/dev/null || need+=(python3-venv)  # the virtual environment of the MCAP reader (tests/tests/record.rs)
+    command -v g++ >/dev/null || need+=(g++)                           # the C++ agents of agent-sdk-c (nerve.hpp) and `nerve new --lang cpp`
+    command -v cmake >/dev/null || need+=(cmake)                       # the projects of `nerve new --lang c|cpp` (agent-sdk-c/tests/new_project.rs)
 fi
 if [ $test = 1 ] || [ $bench = 1 ]; then
     command -v chromium >/dev/null || need+=(chromium)                 # headless: `nerve ui`'s tests, and `nerve bench ui`'s page load

@@ -2,6 +2,8 @@
 //! build left beside the binaries, and a compiler run against it. No test
 //! runs cargo: CI's build step (`cargo build --workspace --lib --bins
 //! --tests`) makes the library, as it makes the binaries the robots run.
+//! Each test binary uses a part of it.
+#![allow(dead_code)]
 
 use nerve_testkit::bin_dir;
 use std::path::{Path, PathBuf};

@@ -4,8 +4,10 @@
 //! file that wires it to a ticker, a README. `cargo test`, `cargo build` and
 //! `nerve launch launch.toml` work on it as made. `--lang python` makes a
 //! Python agent on the `nerve` package instead (an executable script, its
-//! `unittest` tests, a launch file, a README). The templates are
-//! `launcher/templates/{rust,python}/*.in`, built into the `nerve` program.
+//! `unittest` tests, a launch file, a README). `--lang c` and `--lang cpp`
+//! make a CMake project on nerve's C API ([`native`]). The templates are
+//! `launcher/templates/{rust,python}/*.in` and `new/native/*.in`, built
+//! into the `nerve` program.
 //!
 //! A Rust project's first `cargo test` reuses what nerve's own build
 //! compiled: it builds into nerve's target folder (`.cargo/config.toml`),
@@ -15,6 +17,7 @@
 //! workspace) and the agent are compiled. `--own-target` builds in the
 //! project's `./target` instead, compiling everything once.
 
+mod native;
 mod reuse;
 
 use anyhow::{Context as _, Result, bail};
@@ -58,6 +61,10 @@ pub enum Lang {
     Rust,
     /// A Python agent on the `nerve` Python package (`python/`).
     Python,
+    /// A C agent on libnerve (`agent-sdk-c/`), built with CMake.
+    C,
+    /// A C++17 agent on `nerve.hpp` over libnerve, built with CMake.
+    Cpp,
 }
 
 const CARGO_TOML: &str = include_str!("../../templates/rust/Cargo.toml.in");
@@ -99,6 +106,15 @@ pub fn new(a: NewArgs) -> Result<ExitCode> {
     }
     if a.lang == Lang::Python {
         return new_python(&a.name, &drive, &root);
+    }
+    if let Some(lang) = match a.lang {
+        Lang::C => Some(native::Native::C),
+        Lang::Cpp => Some(native::Native::Cpp),
+        Lang::Rust | Lang::Python => None,
+    } {
+        let nerve = nerve_source(a.nerve_src.as_deref())?;
+        let found = native::find(&nerve, &nerve_target(&nerve, a.nerve_src.is_some()));
+        return native::new_native(&a.name, &drive, &root, lang, &nerve, &found);
     }
     let nerve = nerve_source(a.nerve_src.as_deref())?;
     let shared = if a.own_target { None } else { Some(nerve_target(&nerve, a.nerve_src.is_some())) };
