@@ -91,6 +91,8 @@ pub struct Registration {
 }
 
 /// A message from an agent to the router.
+// sent once per registration and decoded at once: its size on the stack does not matter
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub enum AgentToRouter {
     /// The agent starts (or re-registers with a restarted router).
