@@ -157,6 +157,20 @@ fn path_json(p: &std::path::Path) -> String {
     format!("{:?}", p.display().to_string())
 }
 
+/// The link lease Zenoh is given, in real milliseconds, for a configured
+/// `lease` on a robot whose clock runs `scale` times as fast as real time
+/// (1 on the wall clock): the configured lease is in the robot's seconds,
+/// simulated ones on simulated time (issue 46), so that a cut link is
+/// noticed after the same simulated time at any scale. Zenoh's keep-alive
+/// runs on the machine's clock: a simulator that holds its clock while the
+/// machine is slow does not hold the lease. Never under 100 ms, Zenoh's
+/// floor for a lease that still lets its keep-alives through.
+pub fn link_lease_ms(lease: std::time::Duration, scale: f64) -> u64 {
+    let scale = if scale.is_finite() && scale > 0.0 { scale } else { 1.0 };
+    let ms = lease.as_secs_f64() * 1000.0 / scale;
+    (ms as u64).max(100)
+}
+
 /// The Zenoh configuration of a bridge: peer mode, the given endpoints,
 /// multicast scouting only when asked, a short lease so that a cut is
 /// noticed quickly, and quick re-dialling of `connect` endpoints. With
@@ -170,7 +184,7 @@ pub fn session_config(
     max_payload: usize,
 ) -> Result<zenoh::Config, LinkError> {
     let mut z = zenoh::Config::default();
-    let lease_ms = cfg.lease.as_millis().max(100);
+    let lease_ms = link_lease_ms(cfg.lease, agent_sdk::simclock::scale());
     let mut settings: Vec<(&'static str, String)> = vec![
         ("mode", "\"peer\"".into()),
         ("listen/endpoints", json_list(&cfg.listen)),
@@ -426,6 +440,17 @@ fn ack_key_of(data_key: &str, me: &Me) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_lease_is_in_the_robots_seconds_with_a_floor() {
+        let s = std::time::Duration::from_secs;
+        assert_eq!(link_lease_ms(s(3), 1.0), 3000);
+        assert_eq!(link_lease_ms(s(3), 4.0), 750, "3 simulated seconds at 4x are 0.75 real ones");
+        assert_eq!(link_lease_ms(s(3), 0.5), 6000, "slower than real time: longer");
+        assert_eq!(link_lease_ms(s(1), 100.0), 100, "never under Zenoh's floor");
+        assert_eq!(link_lease_ms(s(3), f64::NAN), 3000, "a broken scale is taken as real time");
+        assert_eq!(link_lease_ms(s(3), 0.0), 3000);
+    }
 
     #[test]
     fn keys_and_config() {
