@@ -6,6 +6,12 @@
 //! knows, found by the layout fingerprint in the port's attributes). `hz`
 //! needs no decoding. Tools subscribe like any agent (zero copy) and never
 //! disturb the publisher.
+//!
+//! A sequence port's samples ([`shm_schemas::seq`]) are as long as their
+//! elements make them: echo prints `{ header: {...}, items: [...] }` (JSON
+//! arrays with `--json`), and `--field` takes `header.frame`, `items` or
+//! one element's field, `items[3].x` (`null`, `-` in the human form, when
+//! a sample has fewer elements).
 
 use crate::client::{RouterSession, cli_node};
 use agent_sdk::World;
@@ -38,7 +44,8 @@ pub struct EchoArgs {
     /// Give up after this many seconds without a sample (default: wait for ever).
     #[arg(long, value_parser = agent_sdk::clock::parse_seconds)]
     pub timeout: Option<f64>,
-    /// Print only this field (`pose.x`, `ranges_m.3`).
+    /// Print only this field (`pose.x`, `ranges_m.3` or `ranges_m[3]`; in a
+    /// sequence `header.frame`, `items`, `items[3].x`).
     #[arg(long)]
     pub field: Option<String>,
 }
@@ -195,6 +202,13 @@ fn watch(
 fn selection(info: &PortInfo, port: &PortRef, field: Option<&str>) -> Result<(usize, Schema)> {
     let schema = info.schema_or_why(port)?.clone();
     let Some(path) = field else { return Ok((0, schema)) };
+    if schema.sequence_shape().is_some() {
+        // where an element lies depends on the sample: picked from each (`decode_path`)
+        if schema.has_path(path) {
+            return Ok((0, schema));
+        }
+        bail!("{} has no field {path:?}; its fields: {}", info.type_name, field_paths(&schema).join(", "));
+    }
     match schema.field(path) {
         Some((offset, s)) => Ok((offset, s.clone())),
         None => bail!("{} has no field {path:?}; its fields: {}", info.type_name, field_paths(&schema).join(", ")),
@@ -217,6 +231,8 @@ pub fn echo(world: &World, a: EchoArgs) -> Result<ExitCode> {
     let node = cli_node(world)?;
     let info = port_info(world, &node, &port)?;
     let (offset, schema) = selection(&info, &port, a.field.as_deref())?;
+    // a field of a sequence's sample, picked from each sample
+    let seq_field = a.field.as_deref().filter(|_| schema.sequence_shape().is_some());
     let service = world.robot().port_service(port.agent.as_str(), &port.port);
     let mut n = 0u64;
     let stdout = std::io::stdout();
@@ -224,14 +240,15 @@ pub fn echo(world: &World, a: EchoArgs) -> Result<ExitCode> {
     let mut failed = None;
     let finished = watch(&node, &service, Duration::from_millis(200), idle, |ev| {
         let Event::Sample(h, bytes) = ev else { return true };
-        let value = match bytes.get(offset..).map(|b| schema.decode(b)) {
-            Some(Ok(v)) => v,
-            Some(Err(e)) => {
+        let value = match seq_field {
+            // an element past this sample's length: nothing to print of it
+            Some(path) => Ok(schema.decode_path(path, bytes)),
+            None => decoded(&schema, offset, bytes).map(Some),
+        };
+        let value = match value {
+            Ok(v) => v,
+            Err(e) => {
                 failed = Some(anyhow!("port {port}: {e}"));
-                return false;
-            }
-            None => {
-                failed = Some(anyhow!("port {port}: a {}-byte sample is shorter than its schema", bytes.len()));
                 return false;
             }
         };
@@ -249,6 +266,7 @@ pub fn echo(world: &World, a: EchoArgs) -> Result<ExitCode> {
             }
             writeln!(out, "{line}")
         } else {
+            let value = value.map_or_else(|| "-".to_string(), |v| v.to_string());
             match &a.field {
                 Some(f) => writeln!(out, "[{} #{}] {f}: {value}", h.sender, h.seq),
                 None => writeln!(out, "[{} #{}] {} {value}", h.sender, h.seq, info.type_name),
@@ -271,6 +289,15 @@ pub fn echo(world: &World, a: EchoArgs) -> Result<ExitCode> {
         bail!("no sample on {port} for {:.1} s", a.timeout.unwrap_or_default());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The value `schema` describes at `offset` in a sample's `bytes`.
+fn decoded(schema: &Schema, offset: usize, bytes: &[u8]) -> Result<shm_schemas::schema::Value> {
+    match bytes.get(offset..).map(|b| schema.decode(b)) {
+        Some(Ok(v)) => Ok(v),
+        Some(Err(e)) => Err(e.into()),
+        None => bail!("a {}-byte sample is shorter than its schema", bytes.len()),
+    }
 }
 
 pub fn hz(world: &World, a: HzArgs) -> Result<ExitCode> {

@@ -1,0 +1,80 @@
+//! Variable-size payloads end to end (issue 42): a real agent (`detector`,
+//! `src/bin/detector.rs`) publishes detections of lengths 0, 1, 400 and
+//! 401 on a sequence port (the third grows the port's memory, the fourth
+//! is the largest seen plus one) and is refused past its maximum; `nerve
+//! echo` prints each sample at its own length (JSON arrays, `--field
+//! items[3].x`, `header.frame`), `nerve hz` counts them, and a second agent,
+//! connected through the router (its check of header and element), reads
+//! them all in place, the grown ones included.
+
+use nerve_tests::{Robot, wait_until};
+use serde_json::Value;
+use std::time::Duration;
+
+/// The lengths the detector sends in turn (its `LENGTHS`).
+const LENGTHS: [usize; 4] = [0, 1, 400, 401];
+
+fn length_of(seq: u64) -> usize {
+    LENGTHS[(seq as usize - 1) % LENGTHS.len()]
+}
+
+#[test]
+fn sequences_of_any_length_are_echoed_counted_read_and_refused_past_their_maximum() {
+    let r = Robot::new("seq");
+    r.router();
+    r.ok(&["start", "detector", "--name", "a"]);
+    r.ok(&["start", "detector", "--name", "b"]);
+    let a = r.agent("a").expect("a in ps");
+    let dets = a["outputs"].as_array().expect("outputs").iter().find(|o| o["name"] == "dets").expect("dets").clone();
+    assert_eq!(dets["type_name"], "nerve::Seq<acme::Detection, acme::DetectionsHeader>", "{dets}");
+
+    // echo --json: the header and every element, at each sample's own length
+    let samples = r.echo("a/dets", 8);
+    assert_eq!(samples.len(), 8);
+    for s in &samples {
+        let seq = s["seq"].as_u64().expect("seq");
+        let items = s["data"]["items"].as_array().expect("items");
+        assert_eq!(items.len(), length_of(seq), "sample {seq}: {}", s["data"]["header"]);
+        assert_eq!(s["data"]["header"]["frame"].as_u64(), Some(seq), "{}", s["data"]["header"]);
+        assert_eq!(s["data"]["header"]["count"].as_u64(), Some(items.len() as u64));
+        if let Some(last) = items.last() {
+            let j = items.len() - 1;
+            assert_eq!((last["x"].as_f64(), last["id"].as_u64()), (Some(j as f64), Some(j as u64)), "{last}");
+        }
+    }
+
+    // one element's field: null where a sample has fewer elements
+    let field = r.ok(&["echo", "a/dets", "--field", "items[3].x", "--count", "8", "--json", "--timeout", "5"]);
+    let lines: Vec<Value> = field.lines().map(|l| serde_json::from_str(l).expect("json")).collect();
+    assert_eq!(lines.len(), 8, "{field}");
+    for l in &lines {
+        let seq = l["seq"].as_u64().expect("seq");
+        let want = if length_of(seq) > 3 { Value::from(3.0) } else { Value::Null };
+        assert_eq!(l["data"], want, "{l}");
+    }
+    let human = r.ok(&["echo", "a/dets", "--field", "header.frame", "--count", "1", "--timeout", "5"]);
+    assert!(human.contains("header.frame: "), "{human}");
+    let e = r.fails(&["echo", "a/dets", "--field", "items[1].z", "--count", "1", "--timeout", "5"]);
+    assert!(e.contains("no field \"items[1].z\"") && e.contains("items.<i>.x"), "{e}");
+
+    // hz reads a sequence port by its bytes, as any port
+    let hz = r.ok(&["hz", "a/dets", "--count", "1", "--json", "--window", "0.5"]);
+    let rate: Value = serde_json::from_str(hz.trim()).expect("hz json");
+    assert!(rate["samples"].as_u64().is_some_and(|n| n > 0), "{rate}");
+
+    // an agent reads them in place through a connection the router checked
+    r.ok(&["connect", "a/dets", "b/dets_in"]);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("b", "received") >= 8),
+        "b read {} samples",
+        r.figure("b", "received")
+    );
+    assert_eq!(r.figure_u64("b", "largest"), 401, "the grown samples were read");
+    assert_eq!(r.figure_u64("b", "bad"), 0, "every element as sent");
+
+    // past the maximum: refused every step, saying what to do, and never sent
+    assert!(r.figure_u64("a", "refused") > 0);
+    let refusal = r.figure("a", "refusal");
+    assert!(refusal.contains("1001 elements") && refusal.contains("the 1000 the port declared"), "{refusal}");
+    r.down_and_check_clean();
+}
