@@ -10,6 +10,9 @@ hashes, CDR). Its one argument is a JSON object:
   twist       [linear.x, angular.z] to publish on /cmd_vel
   publish_s   for how long (10 Hz)
   settle_s    how long to wait after, for the robot to stop
+  tf_static   (optional) [[parent, child, x, y, z], ...] the robot's static
+              transforms, which this peer, joining after the robot sent them,
+              must still get on /tf_static (transient local)
 
 It finds the node and its topics in the liveliness tokens (`@ros2_lv/...`),
 subscribes to /odom, /tf, /scan and /camera/image_raw by the keys the tokens give, decodes
@@ -21,6 +24,7 @@ Every wait is bounded; any failure prints {"error": ...} and exits 1.
 """
 
 import json
+import os
 import struct
 import sys
 import threading
@@ -34,8 +38,11 @@ TS = get_typestore(Stores.ROS2_JAZZY)
 
 
 def fail(msg):
-    print(json.dumps({"error": msg}))
-    sys.exit(1)
+    # os._exit: an open zenoh session (its threads, an advanced subscriber's
+    # pending queries) can keep sys.exit from ending the interpreter
+    print(json.dumps({"error": msg}), flush=True)
+    sys.stderr.flush()
+    os._exit(1)
 
 
 def dds(ros_type):
@@ -53,6 +60,8 @@ dom = A["domain"]
 
 # 1. the graph, as rmw_zenoh's graph cache reads it
 want = {("NN", None), ("MP", "/odom"), ("MP", "/tf"), ("MP", "/scan"), ("MP", "/camera/image_raw"), ("MS", "/cmd_vel")}
+if A.get("tf_static"):
+    want.add(("MP", "/tf_static"))
 found = {}
 deadline = time.monotonic() + 15
 while time.monotonic() < deadline:
@@ -152,6 +161,29 @@ def wait_for(cond, secs, what):
     fail(f"timed out waiting for {what}")
 
 
+# /tf_static, transient local: sent once when the robot joined the router,
+# before this peer existed; a late-joining subscription gets it from the
+# publisher's cache, as rmw_zenoh's does (zenoh-ext's advanced subscriber
+# with history and late-publisher detection)
+statics = []
+if A.get("tf_static"):
+    import zenoh.ext
+
+    def on_static(sample):
+        m = TS.deserialize_cdr(bytes(sample.payload.to_bytes()), "tf2_msgs/msg/TFMessage")
+        a = sample.attachment.to_bytes() if sample.attachment is not None else b""
+        with lock:
+            statics.append({"transforms": [[t.header.frame_id, t.child_frame_id, t.transform.translation.x,
+                                            t.transform.translation.y, t.transform.translation.z,
+                                            t.transform.rotation.z, t.transform.rotation.w]
+                                           for t in m.transforms],
+                            "attachment": len(a), "seq": struct.unpack("<q", a[:8])[0] if len(a) == 33 else None})
+
+    subs.append(zenoh.ext.declare_advanced_subscriber(
+        session, key("/tf_static"), on_static,
+        history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1)))
+    wait_for(lambda: len(statics) >= 1, 10, "the static transforms on /tf_static (transient local)")
+
 wait_for(lambda: len(odoms) >= 5 and len(tfs) >= 1 and len(scans) >= 1 and len(images) >= 1, 15,
          "5 /odom, 1 /tf, 1 /scan and 1 /camera/image_raw messages")
 with lock:
@@ -200,6 +232,7 @@ with lock:
     scan_last = scans[-1]
     image_last = images[-1]
     image_count = len(images)
+    statics_got = list(statics)
 
 for s in subs:
     s.undeclare()
@@ -220,4 +253,5 @@ print(json.dumps({
     "gids": len(gids),
     "stamps_ok": stamps_ok,
     "sent": seq,
+    "tf_static": statics_got,
 }))

@@ -5,8 +5,9 @@
 //! rmw_zenoh would (`tests/py/ros2_peer.py`: PyPI eclipse-zenoh and
 //! rosbags, no ROS installation). The peer finds the robot's node and
 //! topics from the liveliness tokens, decodes /odom, /tf, /scan and
-//! /camera/image_raw with rosbags, and drives the robot with a CDR Twist on
-//! /cmd_vel; the test checks the decoded odometry and sonar ranges against
+//! /camera/image_raw with rosbags, gets /tf_static although it joined after
+//! the robot sent it (transient local), and drives the robot with a CDR
+//! Twist on /cmd_vel; the test checks the decoded odometry and sonar ranges against
 //! `nerve echo`, and the camera's test pattern in the Image.
 //!
 //! Needs the binaries: `cargo build -p nerve -p nerve-sim -p nerve-motor -p
@@ -96,6 +97,15 @@ topic = "/cmd_vel"
 type = "geometry_msgs/msg/Twist"
 output = "cmd_vel"
 to = "nerve::VelocityCommand"
+[[static_transform]]
+frame_id = "base_link"
+child_frame_id = "camera"
+translation = [0.12, 0.0, 0.3]
+rotation = [0.0, 0.0, 1.5707963267948966]
+[[static_transform]]
+frame_id = "base_link"
+child_frame_id = "sonar"
+translation = [0.0, 0.0, 0.2]
 "#
         ),
     );
@@ -157,6 +167,7 @@ to = "motor/cmd"
     let arg = serde_json::json!({
         "connect": endpoint, "domain": 0, "node": "nerve_robot",
         "twist": [0.15, 0.4], "publish_s": 2.5, "settle_s": 1.5,
+        "tf_static": [["base_link", "camera"], ["base_link", "sonar"]],
     });
     let out = Command::new(&python).arg(&peer).arg(arg.to_string()).output().expect("run the ROS 2 peer");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -177,6 +188,26 @@ to = "motor/cmd"
     assert_eq!(tokens["/odom"]["qos"], "::,10:,:,:,,", "{tokens}");
     assert_eq!(tokens["/scan"]["qos"], "2::,10:,:,:,,", "best effort: {tokens}");
     assert_eq!(tokens["/odom"]["zid"], r.figure("ros2", "session").as_str(), "the tokens carry the agent's session id");
+
+    // /tf_static, transient local: the agent sent it once when it joined
+    // the router, before the peer started; the peer's late-joining
+    // subscription (rmw_zenoh's: an advanced subscriber with history) got
+    // it from the publisher's cache, both transforms in one message, with
+    // the attachment of the first (and only) message
+    assert_eq!(tokens["/tf_static"]["kind"], "MP", "{tokens}");
+    assert_eq!(tokens["/tf_static"]["qos"], ":1:,1:,:,:,,", "reliable, transient local, depth 1: {tokens}");
+    let stat = &got["tf_static"][0];
+    assert_eq!((stat["attachment"].as_u64(), stat["seq"].as_i64()), (Some(33), Some(1)), "{stat}");
+    let tfs = stat["transforms"].as_array().expect("transforms");
+    assert_eq!(tfs.len(), 2, "{stat}");
+    let num = |t: &Value, i: usize| t[i].as_f64().unwrap_or(f64::NAN);
+    let cam = &tfs[0];
+    assert_eq!((cam[0].as_str(), cam[1].as_str()), (Some("base_link"), Some("camera")), "{cam}");
+    assert!((num(cam, 2) - 0.12).abs() < 1e-12 && (num(cam, 4) - 0.3).abs() < 1e-12, "{cam}");
+    // a quarter turn about z: (z, w) = (sin 45°, cos 45°)
+    let half = std::f64::consts::FRAC_1_SQRT_2;
+    assert!((num(cam, 5) - half).abs() < 1e-9 && (num(cam, 6) - half).abs() < 1e-9, "{cam}");
+    assert_eq!((tfs[1][1].as_str(), num(&tfs[1], 4)), (Some("sonar"), 0.2), "{stat}");
 
     // the attachment of every /odom message: 33 bytes, rising sequence
     // numbers, one publisher GID, a source time of now

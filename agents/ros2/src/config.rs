@@ -25,6 +25,12 @@
 //! type = "geometry_msgs/msg/Twist"
 //! output = "cmd_vel"                  # the agent's output (wire it: ros2/cmd_vel -> motor/cmd)
 //! to = "nerve::VelocityCommand"
+//!
+//! [[static_transform]]                # on /tf_static, transient local (late joiners get it)
+//! frame_id = "base_link"
+//! child_frame_id = "camera"
+//! translation = [0.1, 0.0, 0.3]       # m (default 0)
+//! rotation = [0.0, 0.0, 0.0]          # roll, pitch, yaw in rad (default 0)
 //! ```
 
 use crate::wire::Distro;
@@ -79,6 +85,18 @@ pub enum Reliability {
     BestEffort,
 }
 
+/// Volatile, or transient local (the last `depth` messages served to
+/// subscriptions that join later, as rmw_zenoh's advanced publisher cache).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Durability {
+    /// VOLATILE: only subscriptions present when a message is sent get it
+    #[default]
+    Volatile,
+    /// TRANSIENT_LOCAL: late joiners get the last `depth` messages
+    TransientLocal,
+}
+
 /// Client of a router, or peer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -118,8 +136,22 @@ struct RawPublish {
     child_frame_id: String,
     #[serde(default)]
     reliability: Reliability,
+    #[serde(default)]
+    durability: Durability,
     #[serde(default = "default_depth")]
     depth: u32,
+}
+
+/// `[[static_transform]]` as written.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStatic {
+    frame_id: String,
+    child_frame_id: String,
+    #[serde(default)]
+    translation: [f64; 3],
+    #[serde(default)]
+    rotation: [f64; 3],
 }
 
 /// `[[subscribe]]` as written.
@@ -157,6 +189,8 @@ struct RawConfig {
     publish: Vec<RawPublish>,
     #[serde(default)]
     subscribe: Vec<RawSubscribe>,
+    #[serde(default)]
+    static_transform: Vec<RawStatic>,
 }
 
 /// One nerve input published as a ROS topic.
@@ -193,6 +227,27 @@ pub struct Subscribe {
     pub qos: crate::wire::Qos,
 }
 
+/// The topic static transforms go on, as tf2's static broadcaster's.
+pub const TF_STATIC_TOPIC: &str = "/tf_static";
+
+/// A fixed transform between two frames (a sensor's place on the robot),
+/// published once on [`TF_STATIC_TOPIC`], transient local: a
+/// `[[static_transform]]`, checked (frame names, finite numbers).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Static {
+    /// the parent frame
+    pub frame_id: String,
+    /// the child frame
+    pub child_frame_id: String,
+    /// x, y, z in m
+    pub translation: [f64; 3],
+    /// roll, pitch, yaw in rad
+    pub rotation: [f64; 3],
+}
+
+// the numbers are finite (checked by `parse`), so equality is reflexive
+impl Eq for Static {}
+
 /// The checked configuration.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Config {
@@ -214,6 +269,17 @@ pub struct Config {
     pub publish: Vec<Publish>,
     /// ROS → nerve
     pub subscribe: Vec<Subscribe>,
+    /// fixed transforms for /tf_static (none: no /tf_static publisher)
+    pub static_transforms: Vec<Static>,
+}
+
+impl Config {
+    /// The QoS of /tf_static: reliable, transient local, keep the last one
+    /// (all the transforms go in one message, as tf2's static broadcaster
+    /// sends them).
+    pub fn tf_static_qos() -> crate::wire::Qos {
+        crate::wire::Qos { reliable: true, transient_local: true, depth: 1 }
+    }
 }
 
 /// Why the configuration was refused.
@@ -312,7 +378,7 @@ pub fn parse(path: &Path, text: &str, agent: &str) -> Result<Config, ConfigError
             child_frame_id: p.child_frame_id,
             qos: crate::wire::Qos {
                 reliable: p.reliability == Reliability::Reliable,
-                transient_local: false,
+                transient_local: p.durability == Durability::TransientLocal,
                 depth: p.depth,
             },
         });
@@ -348,6 +414,27 @@ pub fn parse(path: &Path, text: &str, agent: &str) -> Result<Config, ConfigError
             },
         });
     }
+    let mut static_transforms = Vec::new();
+    for t in raw.static_transform {
+        if !frame_ok(&t.frame_id) || !frame_ok(&t.child_frame_id) || t.frame_id == t.child_frame_id {
+            return Err(invalid(format!(
+                "[[static_transform]] {:?} -> {:?}: two different frame names (letters, digits, _ and /)",
+                t.frame_id, t.child_frame_id
+            )));
+        }
+        if !t.translation.iter().chain(&t.rotation).all(|v| v.is_finite()) {
+            return Err(invalid(format!(
+                "[[static_transform]] {} -> {}: translation and rotation must be finite numbers",
+                t.frame_id, t.child_frame_id
+            )));
+        }
+        static_transforms.push(Static {
+            frame_id: t.frame_id,
+            child_frame_id: t.child_frame_id,
+            translation: t.translation,
+            rotation: t.rotation,
+        });
+    }
     Ok(Config {
         node,
         namespace,
@@ -358,7 +445,14 @@ pub fn parse(path: &Path, text: &str, agent: &str) -> Result<Config, ConfigError
         listen: raw.listen,
         publish,
         subscribe,
+        static_transforms,
     })
+}
+
+/// A tf frame name: a ROS name, possibly with `/` inside.
+fn frame_ok(s: &str) -> bool {
+    let body = s.strip_prefix('/').unwrap_or(s);
+    !body.is_empty() && body.split('/').all(ros_name_ok)
 }
 
 /// Reads and checks the configuration file.
@@ -442,5 +536,33 @@ to = "nerve::VelocityCommand"
         assert!(e.contains("not a ROS topic name"), "{e}");
         let e = p("mode = \"client\"\nconnect = []").expect_err("client without router");
         assert!(e.contains("needs a router"), "{e}");
+    }
+
+    #[test]
+    fn static_transforms_and_transient_local_topics() {
+        let c = p(r#"
+[[publish]]
+input = "odom"
+from = "nerve::Odometry"
+topic = "/odom"
+type = "nav_msgs/msg/Odometry"
+durability = "transient_local"
+depth = 3
+[[static_transform]]
+frame_id = "base_link"
+child_frame_id = "camera"
+translation = [0.1, 0.0, 0.3]
+"#)
+        .expect("valid");
+        assert_eq!(c.publish[0].qos, crate::wire::Qos { reliable: true, transient_local: true, depth: 3 });
+        assert_eq!(c.static_transforms[0].child_frame_id, "camera");
+        assert_eq!(c.static_transforms[0].rotation, [0.0; 3]);
+        let e = p("[[static_transform]]\nframe_id = \"a\"\nchild_frame_id = \"a\"\n").expect_err("one frame");
+        assert!(e.contains("two different frame names"), "{e}");
+        let e = p("[[static_transform]]\nframe_id = \"a\"\nchild_frame_id = \"b\"\ntranslation = [nan, 0.0, 0.0]\n")
+            .expect_err("not finite");
+        assert!(e.contains("finite"), "{e}");
+        let e = p("[[static_transform]]\nframe_id = \"a\"\nchild = \"b\"\n").expect_err("unknown key");
+        assert!(e.contains("unknown field"), "{e}");
     }
 }

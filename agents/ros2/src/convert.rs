@@ -73,6 +73,27 @@ pub fn odometry_to_tf(o: &NerveOdometry, stamp: Time, frame: &str, child: &str) 
     }
 }
 
+/// The `[[static_transform]]`s of the configuration as one
+/// `tf2_msgs/msg/TFMessage` for /tf_static, all stamped `stamp` (as tf2's
+/// static broadcaster sends them: every transform in one message).
+pub fn static_tf(transforms: &[crate::config::Static], stamp: Time) -> TfMessage {
+    TfMessage {
+        transforms: transforms
+            .iter()
+            .map(|t| {
+                let [x, y, z] = t.translation;
+                let [roll, pitch, yaw] = t.rotation;
+                TransformStamped {
+                    header: Header { stamp, frame_id: t.frame_id.clone() },
+                    child_frame_id: t.child_frame_id.clone(),
+                    translation: Vector3 { x, y, z },
+                    rotation: Quaternion::from_rpy(roll, pitch, yaw),
+                }
+            })
+            .collect(),
+    }
+}
+
 /// `nerve::VelocityCommand` → `geometry_msgs/msg/Twist`.
 pub fn velocity_to_twist(c: &VelocityCommand) -> Twist {
     Twist { linear: Vector3 { x: c.v, y: 0.0, z: 0.0 }, angular: Vector3 { x: 0.0, y: 0.0, z: c.omega } }
@@ -233,6 +254,28 @@ mod tests {
         // sizes that overflow or do not fit the slot are refused
         assert!(image_cdr(Time::default(), "", u32::MAX, u32::MAX, "rgb8", 3, &px).is_none());
         assert!(image_cdr(Time::default(), "", 4, 4, "rgb8", 3, &px).is_none());
+    }
+
+    /// tf2's `setRPY` conventions: a quarter turn about z is (0, 0, sin 45°,
+    /// cos 45°); a half turn about x is (1, 0, 0, 0); all transforms go in
+    /// one message.
+    #[test]
+    fn static_transforms_in_one_message() {
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let q = Quaternion::from_rpy(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        assert!((q.z - h).abs() < 1e-12 && (q.w - h).abs() < 1e-12 && q.x == 0.0 && q.y == 0.0, "{q:?}");
+        let q = Quaternion::from_rpy(std::f64::consts::PI, 0.0, 0.0);
+        assert!((q.x - 1.0).abs() < 1e-12 && q.w.abs() < 1e-12, "{q:?}");
+        let t = |child: &str| crate::config::Static {
+            frame_id: "base_link".into(),
+            child_frame_id: child.into(),
+            translation: [1.0, 2.0, 3.0],
+            rotation: [0.0; 3],
+        };
+        let m = static_tf(&[t("camera"), t("sonar")], Time { sec: 5, nanosec: 6 });
+        assert_eq!(m.transforms.len(), 2);
+        assert_eq!((m.transforms[1].child_frame_id.as_str(), m.transforms[1].header.stamp.sec), ("sonar", 5));
+        assert_eq!(m.transforms[0].translation, Vector3 { x: 1.0, y: 2.0, z: 3.0 });
     }
 
     #[test]

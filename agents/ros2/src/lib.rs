@@ -150,7 +150,7 @@ impl Agent for Ros2 {
             .name("ros2-link".into())
             .spawn(move || {
                 agent_sdk::rt::drop_realtime();
-                if let Some(link) = link::Link::open_retrying(&cfg, &inboxes, &rx, &stats, &stop) {
+                if let Some(mut link) = link::Link::open_retrying(&cfg, &inboxes, &rx, &stats, &stop) {
                     link.run(&rx, &stats, &stop);
                     link.close();
                 }

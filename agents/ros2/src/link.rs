@@ -8,6 +8,13 @@
 //! robot's real-time tasks. The task hands it CDR bytes through a bounded
 //! channel ([`Outgoing`]); the subscribers' callbacks leave what arrives in a
 //! bounded [`Inbox`] per topic, which the task empties every step.
+//!
+//! A transient-local topic (`durability = "transient_local"`, and
+//! /tf_static) keeps its last `depth` messages, attachments included, and
+//! serves them to subscriptions that join later, as zenoh-ext's
+//! `AdvancedPublisher` with a cache and publisher detection does for
+//! rmw_zenoh: a queryable and a liveliness token on
+//! [`wire::cache_key`].
 
 use crate::config::{Config, Mode};
 use crate::msgs::{RosMessage, Twist};
@@ -63,6 +70,15 @@ pub enum LinkError {
         /// what zenoh said
         #[source]
         source: zenoh::Error,
+    },
+    /// A message could not be written as CDR.
+    #[error("the message for {topic} could not be written as CDR: {source}")]
+    Encode {
+        /// the topic
+        topic: String,
+        /// why
+        #[source]
+        source: crate::cdr::CdrError,
     },
     /// A topic's type has no hash (not vendored).
     #[error("{ros_type} is not among the vendored messages (agents/ros2/msg): no type hash for its key")]
@@ -183,15 +199,116 @@ impl Stats {
     }
 }
 
+/// The last messages of a transient-local publisher, for late joiners.
+#[derive(Debug)]
+struct Cache {
+    depth: usize,
+    /// (CDR bytes, attachment), oldest first
+    items: Mutex<VecDeque<(Vec<u8>, Vec<u8>)>>,
+}
+
+impl Cache {
+    fn keep(&self, bytes: &[u8], attachment: &[u8]) {
+        let mut q = lock(&self.items);
+        while q.len() >= self.depth {
+            q.pop_front();
+        }
+        q.push_back((bytes.to_vec(), attachment.to_vec()));
+    }
+}
+
 struct Publisher {
     publisher: zenoh::pubsub::Publisher<'static>,
     gid: [u8; 16],
+    /// transient local: the cache, its queryable and its detection token
+    cache: Option<(Arc<Cache>, zenoh::query::Queryable<()>, zenoh::liveliness::LivelinessToken)>,
+    /// the last sequence number sent
+    seq: i64,
+}
+
+impl Publisher {
+    /// Declares the publisher of `key` (and, when `qos` is transient local,
+    /// its cache) and its graph token; pushes the token onto `tokens`.
+    fn declare(
+        session: &zenoh::Session,
+        node: &NodeId,
+        entity: u32,
+        topic: &str,
+        ros_type: (&str, &str),
+        qos: &wire::Qos,
+        tokens: &mut Vec<zenoh::liveliness::LivelinessToken>,
+    ) -> Result<Publisher, LinkError> {
+        let (dds, hash) = ros_type;
+        let key = wire::topic_key(node.domain, topic, dds, hash);
+        let publisher = session
+            .declare_publisher(key.clone())
+            .congestion_control(CongestionControl::Drop)
+            .wait()
+            .map_err(declare_err("publisher", &key))?;
+        let cache = if qos.transient_local {
+            let cache = Arc::new(Cache {
+                depth: usize::try_from(qos.depth.max(1)).unwrap_or(1),
+                items: Mutex::new(VecDeque::new()),
+            });
+            let adv = wire::cache_key(&key, &node.session, entity);
+            let queryable = session
+                .declare_queryable(adv.clone())
+                .callback({
+                    let (cache, key) = (cache.clone(), key.clone());
+                    move |query| {
+                        // the replies carry the topic's own key, as the
+                        // advanced publisher's cache does (the querier
+                        // accepts any key)
+                        let items: Vec<(Vec<u8>, Vec<u8>)> = lock(&cache.items).iter().cloned().collect();
+                        for (bytes, att) in items {
+                            if let Err(e) = query.reply(key.clone(), bytes).attachment(att).wait() {
+                                tracing::debug!(key = %key, error = %e, "a late joiner's query was not answered");
+                            }
+                        }
+                    }
+                })
+                .wait()
+                .map_err(declare_err("queryable", &adv))?;
+            let token = session
+                .liveliness()
+                .declare_token(adv.clone())
+                .wait()
+                .map_err(declare_err("liveliness token", &adv))?;
+            Some((cache, queryable, token))
+        } else {
+            None
+        };
+        let tok = node.entity_token(EntityKind::Publisher, entity, topic, dds, hash, qos);
+        let gid = wire::gid_of(&tok);
+        tokens.push(
+            session.liveliness().declare_token(tok.clone()).wait().map_err(declare_err("liveliness token", &tok))?,
+        );
+        Ok(Publisher { publisher, gid, cache, seq: 0 })
+    }
+
+    /// Sends `bytes` with the next attachment (and keeps them for late
+    /// joiners when transient local).
+    fn put(&mut self, bytes: Vec<u8>) -> Result<(), zenoh::Error> {
+        self.seq = self.seq.saturating_add(1);
+        let att = Attachment {
+            sequence_number: self.seq,
+            source_timestamp: i64::try_from(crate::convert::epoch_now_ns()).unwrap_or(i64::MAX),
+            gid: self.gid,
+        }
+        .encode();
+        if let Some((cache, _, _)) = &self.cache {
+            cache.keep(&bytes, &att);
+        }
+        self.publisher.put(bytes).attachment(att.to_vec()).wait()
+    }
 }
 
 /// An open session with everything declared; dropping it undeclares all.
 pub struct Link {
     session: zenoh::Session,
     publishers: Vec<Publisher>,
+    /// /tf_static, when the configuration has static transforms
+    _tf_static: Option<Publisher>,
     _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
     _tokens: Vec<zenoh::liveliness::LivelinessToken>,
 }
@@ -265,18 +382,36 @@ impl Link {
         for p in &cfg.publish {
             entity += 1;
             let (dds, hash) = type_of(cfg, &p.ros_type)?;
-            let key = wire::topic_key(cfg.domain, &p.topic, &dds, hash);
-            let publisher = session
-                .declare_publisher(key.clone())
-                .congestion_control(CongestionControl::Drop)
-                .wait()
-                .map_err(declare_err("publisher", &key))?;
-            let tok = node.entity_token(EntityKind::Publisher, entity, &p.topic, &dds, hash, &p.qos);
-            let gid = wire::gid_of(&tok);
-            tokens.push(token(tok)?);
-            tracing::info!(topic = %p.topic, key = %key, "publishing {} as {}", p.input, p.ros_type);
-            publishers.push(Publisher { publisher, gid });
+            let publisher = Publisher::declare(&session, &node, entity, &p.topic, (&dds, hash), &p.qos, &mut tokens)?;
+            tracing::info!(topic = %p.topic, key = %publisher.publisher.key_expr(), "publishing {} as {}", p.input, p.ros_type);
+            publishers.push(publisher);
         }
+        let tf_static = if cfg.static_transforms.is_empty() {
+            None
+        } else {
+            entity += 1;
+            let topic = wire::qualified_topic(&cfg.namespace, crate::config::TF_STATIC_TOPIC);
+            let (dds, hash) = type_of(cfg, "tf2_msgs/msg/TFMessage")?;
+            let mut p = Publisher::declare(
+                &session,
+                &node,
+                entity,
+                &topic,
+                (&dds, hash),
+                &Config::tf_static_qos(),
+                &mut tokens,
+            )?;
+            let stamp = crate::msgs::Time::from_ns(crate::convert::epoch_now_ns());
+            let bytes = crate::convert::static_tf(&cfg.static_transforms, stamp)
+                .to_cdr()
+                .map_err(|source| LinkError::Encode { topic: topic.clone(), source })?;
+            // once: the cache serves it to whoever subscribes later
+            if let Err(e) = p.put(bytes) {
+                tracing::warn!(topic = %topic, error = %e, "the static transforms were not sent now; late joiners still get them");
+            }
+            tracing::info!(topic = %topic, transforms = cfg.static_transforms.len(), "static transforms published (transient local)");
+            Some(p)
+        };
         let mut subscribers = Vec::new();
         for (s, inbox) in cfg.subscribe.iter().zip(inboxes) {
             entity += 1;
@@ -311,7 +446,7 @@ impl Link {
             cfg.node,
             cfg.domain
         );
-        Ok(Link { session, publishers, _subscribers: subscribers, _tokens: tokens })
+        Ok(Link { session, publishers, _tf_static: tf_static, _subscribers: subscribers, _tokens: tokens })
     }
 
     /// Opens the link, trying again (every 0.2 s, growing to 2 s) while no
@@ -357,24 +492,16 @@ impl Link {
 
     /// Publishes what the task hands over until `stop` is set or the task
     /// drops its end of the channel.
-    pub fn run(&self, rx: &Receiver<Outgoing>, stats: &Stats, stop: &AtomicBool) {
+    pub fn run(&mut self, rx: &Receiver<Outgoing>, stats: &Stats, stop: &AtomicBool) {
         *lock(&stats.session) = self.session.zid().to_string();
-        // sequence numbers per publisher, from 1
-        let mut seqs: Vec<i64> = vec![0; self.publishers.len()];
         while !stop.load(Ordering::Acquire) {
             let out = match rx.recv_timeout(Duration::from_millis(100)) {
                 Ok(o) => o,
                 Err(RecvTimeoutError::Timeout) => continue,
                 Err(RecvTimeoutError::Disconnected) => break,
             };
-            let (Some(p), Some(seq)) = (self.publishers.get(out.topic), seqs.get_mut(out.topic)) else { continue };
-            *seq = seq.saturating_add(1);
-            let att = Attachment {
-                sequence_number: *seq,
-                source_timestamp: i64::try_from(crate::convert::epoch_now_ns()).unwrap_or(i64::MAX),
-                gid: p.gid,
-            };
-            match p.publisher.put(out.bytes).attachment(att.encode().to_vec()).wait() {
+            let Some(p) = self.publishers.get_mut(out.topic) else { continue };
+            match p.put(out.bytes) {
                 Ok(()) => {
                     if let Some(c) = stats.published.get(out.topic) {
                         c.fetch_add(1, Ordering::Relaxed);
@@ -390,8 +517,8 @@ impl Link {
 
     /// Undeclares everything and closes the session.
     pub fn close(self) {
-        let Link { session, publishers, _subscribers, _tokens } = self;
-        drop((publishers, _subscribers, _tokens));
+        let Link { session, publishers, _tf_static, _subscribers, _tokens } = self;
+        drop((publishers, _tf_static, _subscribers, _tokens));
         if let Err(e) = session.close().wait() {
             tracing::debug!(error = %e, "zenoh session close");
         }

@@ -134,6 +134,20 @@ impl Quaternion {
         let (s, c) = (yaw / 2.0).sin_cos();
         Quaternion { x: 0.0, y: 0.0, z: s, w: c }
     }
+
+    /// The rotation by `roll` about x, then `pitch` about y, then `yaw`
+    /// about z (fixed axes, as tf2's `setRPY`).
+    pub fn from_rpy(roll: f64, pitch: f64, yaw: f64) -> Self {
+        let (sr, cr) = (roll / 2.0).sin_cos();
+        let (sp, cp) = (pitch / 2.0).sin_cos();
+        let (sy, cy) = (yaw / 2.0).sin_cos();
+        Quaternion {
+            x: sr * cp * cy - cr * sp * sy,
+            y: cr * sp * cy + sr * cp * sy,
+            z: cr * cp * sy - sr * sp * cy,
+            w: cr * cp * cy + sr * sp * sy,
+        }
+    }
 }
 
 impl RosMessage for Quaternion {

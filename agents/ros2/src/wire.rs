@@ -75,6 +75,17 @@ pub fn topic_key(domain: u32, qualified_topic: &str, dds_type: &str, type_hash: 
     format!("{domain}/{}/{dds_type}/{type_hash}", qualified_topic.trim_start_matches('/'))
 }
 
+/// The key under which a transient-local publisher answers late joiners,
+/// and its publisher-detection liveliness token, as zenoh-ext's
+/// `AdvancedPublisher` (which rmw_zenoh uses for TRANSIENT_LOCAL) declares
+/// them: `<data key>/@adv/pub/<session id>/<entity id>/_` (`_`: no
+/// metadata). An `AdvancedSubscriber` with history queries
+/// `<data key>/@adv/**` when it starts and, with late-publisher detection,
+/// each publisher whose token appears.
+pub fn cache_key(data_key: &str, session: &str, entity: u32) -> String {
+    format!("{data_key}/@adv/pub/{session}/{entity}/_")
+}
+
 /// The QoS of a publisher or subscription, as far as the agent sets it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Qos {
@@ -324,6 +335,21 @@ mod tests {
         assert_eq!(mangle("/robot1/odom"), "%robot1%odom");
         // best effort, transient local
         assert_eq!(Qos { reliable: false, transient_local: true, depth: 1 }.keyexpr(), "2:1:,1:,:,:,,");
+    }
+
+    /// zenoh-ext 1.x's `AdvancedPublisher`: `KE_ADV_PREFIX / KE_PUB / zid /
+    /// eid / KE_EMPTY` under the publisher's key (`@adv`, `pub`, `_`), and
+    /// `ke_liveliness` = `${remaining:**}/@adv/${entity:*}/${zid:*}/${eid:*}/${meta:**}`
+    /// that subscribers parse it with.
+    #[test]
+    fn cache_key_as_zenoh_ext_declares_it() {
+        let key = topic_key(0, "/tf_static", "tf2_msgs::msg::dds_::TFMessage_", "RIHS01_e369");
+        assert_eq!(
+            cache_key(&key, "8b20917502ee955ac4476e0266340d5c", 5),
+            "0/tf_static/tf2_msgs::msg::dds_::TFMessage_/RIHS01_e369/@adv/pub/8b20917502ee955ac4476e0266340d5c/5/_"
+        );
+        // transient local, keep last 1, as /tf_static's token says it
+        assert_eq!(Qos { reliable: true, transient_local: true, depth: 1 }.keyexpr(), ":1:,1:,:,:,,");
     }
 
     #[test]
