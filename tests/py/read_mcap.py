@@ -27,6 +27,13 @@ def decode(schema, data, at=0):
         (n,) = struct.unpack_from("<I", data, at)
         n = min(n, kind["string"]["capacity"])
         return data[at + 4:at + 4 + n].decode("utf-8", "replace")
+    if "sequence" in kind:
+        # a header, then as many elements as the message's length holds
+        header, element = kind["sequence"]["header"], kind["sequence"]["element"]
+        start = at + schema["size"]
+        n = (len(data) - start) // element["size"]
+        return {"header": decode(header, data, at),
+                "items": [decode(element, data, start + i * element["size"]) for i in range(n)]}
     return {f["name"]: decode(f["schema"], data, at + f["offset"]) for f in kind["struct"]["fields"]}
 
 

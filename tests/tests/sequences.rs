@@ -7,6 +7,7 @@
 //! connected through the router (its check of header and element), reads
 //! them all in place, the grown ones included.
 
+use nerve_tests::py::{messages, read_mcap};
 use nerve_tests::{Robot, wait_until};
 use serde_json::Value;
 use std::time::Duration;
@@ -71,6 +72,31 @@ fn sequences_of_any_length_are_echoed_counted_read_and_refused_past_their_maximu
     );
     assert_eq!(r.figure_u64("b", "largest"), 401, "the grown samples were read");
     assert_eq!(r.figure_u64("b", "bad"), 0, "every element as sent");
+
+    // recorded at their own lengths, read by the PyPI `mcap` reader through
+    // the schema in the file; exported for JSON viewers with arrays
+    let file = r.home.join("dets.mcap");
+    let file_s = file.display().to_string();
+    let out = r.ok(&["record", "a/dets", "-o", &file_s, "--duration", "1", "-q"]);
+    assert!(out.contains(", 0 dropped"), "{out}");
+    let got = read_mcap(&file);
+    let recorded = messages(&got, "a/dets");
+    assert!(recorded.len() >= 8, "1 s of a 20 ms agent: {}", recorded.len());
+    for m in recorded {
+        let frame = m["data"]["header"]["frame"].as_u64().expect("frame");
+        assert_eq!(m["data"]["items"].as_array().map(Vec::len), Some(length_of(frame)), "frame {frame}");
+    }
+    let json_file = r.home.join("dets-json.mcap");
+    r.ok(&["export", &file_s, "-o", &json_file.display().to_string()]);
+    let exported = read_mcap(&json_file);
+    let c = &exported["channels"]["a/dets"];
+    assert_eq!(c["json_schema"]["properties"]["items"]["type"], "array", "{}", c["json_schema"]);
+    let js = messages(&exported, "a/dets");
+    assert_eq!(js.len(), recorded.len());
+    for (raw, j) in recorded.iter().zip(js) {
+        assert_eq!(raw["data"]["items"].as_array().map(Vec::len), j["data"]["items"].as_array().map(Vec::len));
+        assert_eq!(raw["data"]["header"], j["data"]["header"]);
+    }
 
     // past the maximum: refused every step, saying what to do, and never sent
     assert!(r.figure_u64("a", "refused") > 0);
