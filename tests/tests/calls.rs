@@ -102,3 +102,42 @@ fn a_killed_server_ends_the_calls_in_bounded_time_and_a_restarted_one_is_rewired
     assert_eq!(r.figure("c", "wrong"), "0");
     r.down_and_check_clean();
 }
+
+/// `[[connect]]` in a launch file wires a client to a service (written
+/// client first, as on the command line), checked before anything starts:
+/// a client wired to an output (another type) is refused.
+#[test]
+fn a_launch_file_wires_a_client_and_refuses_one_wired_to_an_output() {
+    let r = Robot::new("call-launch");
+    let agents = r#"
+[[agent]]
+name = "s"
+kind = "caller"
+args = ["--serve"]
+
+[[agent]]
+name = "c"
+kind = "caller"
+
+[[agent]]
+name = "v"
+kind = "testagent"
+"#;
+    let launch = |file: &std::path::Path| r.command("nerve").arg("launch").arg(file).output().expect("nerve launch");
+    let bad = r.launch_file("bad.toml", &format!("{agents}\n[[connect]]\nfrom = \"v/value\"\nto = \"c/planner\"\n"));
+    let out = launch(&bad);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("nothing was started"), "{err}");
+    assert!(err.contains("call(nerve::Tick -> nerve::Scalar)") && err.contains("nerve::Scalar"), "{err}");
+    r.ok(&["down"]);
+    let good = r.launch_file("good.toml", &format!("{agents}\n[[connect]]\nfrom = \"c/planner\"\nto = \"s/plan\"\n"));
+    let out = launch(&good);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(r.edges(), ["s/plan -> c/planner"]);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("c", "answered") >= 5),
+        "no answers through the launch file's wire: {:?}",
+        r.figures("c")
+    );
+    r.down_and_check_clean();
+}

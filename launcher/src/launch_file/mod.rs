@@ -638,6 +638,11 @@ pub fn load_with_args(
             }
         };
         let find = |p: &PortRef| agents.iter().find(|a| a.name == p.agent.as_str());
+        // a call's wire may be written client first (docs/calls.md): service to client from here on
+        let (from, to) = match find(&from) {
+            Some(a) if a.description.clients.iter().any(|c| c.name == from.port) => (to, from),
+            _ => (from, to),
+        };
         let from_type = match find(&from) {
             None => {
                 if !seen.contains_key(from.agent.as_str()) {
@@ -645,23 +650,31 @@ pub fn load_with_args(
                 }
                 None
             }
-            Some(a) => match a.description.outputs.iter().find(|o| o.name == from.port) {
-                Some(o) => Some(declared(a, o)),
-                None => {
-                    let names: Vec<&str> = a.description.outputs.iter().map(|o| o.name.as_str()).collect();
-                    cx.err(
-                        &c.from,
-                        format!(
-                            "agent {:?} ({}) has no output port {:?}; its outputs: {}",
-                            a.name,
-                            a.kind,
-                            from.port,
-                            list(&names)
-                        ),
-                    );
-                    None
+            Some(a) => {
+                match a.description.outputs.iter().chain(&a.description.services).find(|o| o.name == from.port) {
+                    Some(o) => Some(declared(a, o)),
+                    None => {
+                        let names: Vec<&str> = a
+                            .description
+                            .outputs
+                            .iter()
+                            .chain(&a.description.services)
+                            .map(|o| o.name.as_str())
+                            .collect();
+                        cx.err(
+                            &c.from,
+                            format!(
+                                "agent {:?} ({}) has no output port {:?}; its outputs: {}",
+                                a.name,
+                                a.kind,
+                                from.port,
+                                list(&names)
+                            ),
+                        );
+                        None
+                    }
                 }
-            },
+            }
         };
         let to_type = match find(&to) {
             None => {
@@ -670,10 +683,11 @@ pub fn load_with_args(
                 }
                 None
             }
-            Some(a) => match a.description.inputs.iter().find(|i| i.name == to.port) {
+            Some(a) => match a.description.inputs.iter().chain(&a.description.clients).find(|i| i.name == to.port) {
                 Some(i) => Some(declared(a, i)),
                 None => {
-                    let names: Vec<&str> = a.description.inputs.iter().map(|i| i.name.as_str()).collect();
+                    let names: Vec<&str> =
+                        a.description.inputs.iter().chain(&a.description.clients).map(|i| i.name.as_str()).collect();
                     cx.err(
                         &c.to,
                         format!(
