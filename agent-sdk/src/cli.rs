@@ -32,6 +32,10 @@ pub struct CommonArgs {
     /// samples back and forth wake each other fastest on one CPU.
     #[arg(long, value_name = "LIST")]
     pub cpus: Option<crate::rt::CpuList>,
+    /// Poll instead of sleeping: the task looks at its inputs (or its clock)
+    /// in a loop, for the fastest hop, and takes its CPU whole; needs --cpus.
+    #[arg(long)]
+    pub poll: bool,
     /// SCHED_FIFO priority of the task (the message checker runs one above).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(i32).range(1..=98))]
     pub priority: i32,

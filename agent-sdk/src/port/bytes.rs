@@ -612,6 +612,12 @@ pub(crate) trait DynInput: Send + Sync {
     /// its first sample. Past [`SUBSCRIBER_BUFFER`] waiting samples the
     /// oldest is overwritten and counted as dropped, as with iceoryx2.
     fn queue(&self, sender: &str, port: &str, sample: SampleBuf, stamp_ns: u64) -> Result<(), PortError>;
+    /// Whether a sample waits, read in shared memory without a system call
+    /// (a polling task's look, `runtime::poll`); `None` when the port cannot
+    /// tell so (a call's side: its listeners are looked at instead).
+    fn waiting(&self) -> Option<bool> {
+        None
+    }
 }
 
 /// The shared state of an input: its sources, made and dropped by the
@@ -777,6 +783,14 @@ impl DynInput for InputInner {
 
     fn has_queued(&self) -> bool {
         lock(&self.subs).iter().any(|s| matches!(&s.feed, Feed::Memory(q) if !q.is_empty()))
+    }
+
+    fn waiting(&self) -> Option<bool> {
+        Some(lock(&self.subs).iter().any(|s| match &s.feed {
+            // a source that cannot be looked at has nothing to take either
+            Feed::Shm { subscriber, .. } => subscriber.has_samples().unwrap_or(false),
+            Feed::Memory(q) => !q.is_empty(),
+        }))
     }
 
     fn queue(&self, sender: &str, port: &str, sample: SampleBuf, stamp_ns: u64) -> Result<(), PortError> {

@@ -424,7 +424,7 @@ impl Checker<'_> {
             realtime: self.shared.realtime.load(Ordering::Relaxed),
             cpu_latency: self.shared.cpu_latency,
             inputs: self.inputs.iter().flat_map(|i| i.stats(now)).collect(),
-            figures: self.params.figures(),
+            figures: super::poll::with_figure(self.shared, self.params.figures()),
         }
     }
 }

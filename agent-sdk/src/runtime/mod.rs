@@ -20,15 +20,18 @@
 //! * `router_link`: the agent's side of the router (register, notice a
 //!   restarted router, unregister);
 //! * `checker`: the message checker, serving the control service;
+//! * `poll`: polling mode (`--poll`), the task that never sleeps;
 //! * `runaway`: the guard that demotes a real-time task that takes a whole
 //!   CPU for seconds (a step that never yields, an event storm).
 
 mod checker;
+mod poll;
 mod router_link;
 mod runaway;
 mod startup;
 mod task;
 
+pub use poll::PollError;
 pub use router_link::epoch_service;
 pub use startup::{EXIT_STARTUP, StartupError, abort_on_panic, run, run_status, run_with_args};
 
@@ -64,6 +67,8 @@ struct Shared {
     figures: Mutex<TaskFigures>,
     gate: task::SuspendGate,
     wake: Notifier<Ipc>,
+    /// `--poll`: the task polls instead of sleeping (`poll`)
+    polling: Option<poll::Polling>,
 }
 
 impl Shared {

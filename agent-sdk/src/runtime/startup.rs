@@ -45,6 +45,9 @@ pub enum StartupError {
     /// `--cpus` names CPUs the agent may not run on.
     #[error("--cpus: {0}")]
     Cpus(String),
+    /// `--poll` without a placement.
+    #[error(transparent)]
+    Poll(#[from] super::poll::PollError),
     /// `--period` cannot be read, or is given to an event-driven agent.
     #[error("--period: {0}")]
     Period(String),
@@ -298,6 +301,7 @@ fn start_erased(
         (Task::EventDriven, None) => None,
     };
 
+    let polling = super::poll::from_args(args)?;
     // before any thread starts: they all inherit it
     if let Some(cpus) = &args.cpus {
         rt::set_affinity(cpus).map_err(StartupError::Cpus)?;
@@ -366,6 +370,7 @@ fn start_erased(
         wake,
     });
 
+        polling,
     // the task thread, before the registration: the agent's own `start`
     // (a device opened, a session up) runs on it while the router answers,
     // and the connections that come with the answer are made at most that
@@ -461,7 +466,8 @@ fn start_erased(
     let _ = sd_notify("READY=1");
     drop(startup);
 
-    let guard = if shared.realtime.load(Ordering::Relaxed) {
+    // a poller keeps its CPU by design: the runaway guard would demote it (see `poll`)
+    let guard = if shared.realtime.load(Ordering::Relaxed) && shared.polling.is_none() {
         use std::os::unix::thread::JoinHandleExt;
         runaway::TaskThread::new(handle.as_pthread_t()).map(|t| (t, runaway::Guard::new(args.rt_cpu_limit), prio))
     } else {

@@ -81,12 +81,13 @@ pub(super) fn task_main(
     let _ = started.send(Ok(()));
     match kind {
         Task::Periodic(_) => periodic_loop(agent.as_mut(), sh, &mut ctx),
+        Task::EventDriven if sh.polling.is_some() => super::poll::event_loop(agent.as_mut(), sh, inputs, &mut ctx),
         Task::EventDriven => event_loop(agent.as_mut(), sh, inputs, &wake, &mut ctx),
     }
     agent.stop(&mut ctx);
 }
 
-fn run_step(agent: &mut dyn Stepper, sh: &Shared, ctx: &mut Context) {
+pub(super) fn run_step(agent: &mut dyn Stepper, sh: &Shared, ctx: &mut Context) {
     sh.figures().in_step_since_ns = ctx.now_ns.max(1);
     let result = agent.step(ctx);
     sh.figures().in_step_since_ns = 0;
@@ -103,7 +104,7 @@ fn run_step(agent: &mut dyn Stepper, sh: &Shared, ctx: &mut Context) {
     }
 }
 
-fn wait_while_suspended(sh: &Shared) {
+pub(super) fn wait_while_suspended(sh: &Shared) {
     sh.gate.wait_while(|| sh.suspended.load(Ordering::Acquire) && !sh.stopping());
 }
 
@@ -161,6 +162,10 @@ fn periodic_loop(agent: &mut dyn Stepper, sh: &Shared, ctx: &mut Context) {
             let now = now_ns();
             if now >= next {
                 break;
+            }
+            if sh.polling.is_some() {
+                super::poll::spin_toward_ns(next, sh);
+                continue;
             }
             // at most a chunk of wall time: also when a simulator holds the robot's clock
             sleep_toward_ns(next, now, SLEEP_CHUNK_NS);

@@ -1,0 +1,169 @@
+//! Polling mode (`--poll`, `poll = true` in a launch file; issue 42): the
+//! task never sleeps. An event-driven task looks at its inputs' shared
+//! memory in a loop and steps as soon as a sample waits; a periodic task
+//! spins to its deadlines instead of sleeping to them. A hop then costs what
+//! iceoryx2's busy-polling costs (about a microsecond here) instead of the
+//! kernel's wake-up (15-20 µs a round trip), at the price of the whole CPU.
+//!
+//! So it is only allowed with a placement (`--cpus`): the poller takes the
+//! CPUs it is placed on and no other. Everything else is unchanged: the
+//! message checker's changes (stop, suspend, resume, rewiring, the period)
+//! are atomics the loop reads on every turn; a suspended poller waits at the
+//! suspend gate without spinning; the runaway guard, which demotes a
+//! real-time task that keeps its CPU, leaves a poller alone (keeping its CPU
+//! is what it was asked to do). `nerve ps` shows its CPU (about 100 %) and
+//! the figure `poll` (the CPUs it polls on).
+//!
+//! Inputs whose port can tell from shared memory that a sample waits
+//! ([`crate::ports::DynInput::waiting`]: every data input) are looked at
+//! without a system call, and their wake-up events are left as they are: an
+//! event already notified costs its notifier nothing more (iceoryx2 sends a
+//! wake-up only to a listener that has none pending), so the sender's hop
+//! is as cheap as the reader's. Other inputs (a service's requests, a
+//! client's answers) are looked at through their listeners (`try_wait`).
+
+use super::Shared;
+use super::task::{Stepper, run_step, wait_while_suspended};
+use crate::agent::Context;
+use crate::clock::now_ns;
+use crate::ports::DynInput;
+use crate::world::Ipc;
+use iceoryx2::port::listener::Listener;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+/// Why `--poll` was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum PollError {
+    /// `--poll` without `--cpus`.
+    #[error(
+        "--poll needs a placement: a polling task takes its CPU whole, so say which one with --cpus (e.g. `--poll --cpus 1`; in a launch file `cpus = [1]` beside `poll = true`), ideally a CPU nothing else runs on"
+    )]
+    NoPlacement,
+}
+
+/// What the runtime keeps of a polling task: the CPUs it polls on, as
+/// `nerve ps` shows them.
+#[derive(Debug, Clone)]
+pub(super) struct Polling {
+    cpus: String,
+}
+
+/// The polling mode the command line asks for: `None` when it does not,
+/// refused when it asks without a placement.
+pub(super) fn from_args(args: &crate::cli::CommonArgs) -> Result<Option<Polling>, PollError> {
+    match (args.poll, &args.cpus) {
+        (false, _) => Ok(None),
+        (true, None) => Err(PollError::NoPlacement),
+        (true, Some(cpus)) => Ok(Some(Polling { cpus: cpus.to_string() })),
+    }
+}
+
+/// The agent's figures with the polling task's own (`poll` = its CPUs),
+/// for `nerve ps` and `nerve ps --json`.
+pub(super) fn with_figure(sh: &Shared, mut figures: Vec<(String, String)>) -> Vec<(String, String)> {
+    if let Some(p) = &sh.polling {
+        figures.push(("poll".into(), format!("cpus {}", p.cpus)));
+        figures.sort();
+    }
+    figures
+}
+
+/// Waits, spinning, until `next` (ns, the task's clock) or until the
+/// message checker changes something the periodic loop must see (the
+/// caller looks again at once).
+pub(super) fn spin_toward_ns(next: u64, sh: &Shared) {
+    // a bounded number of turns, then the caller looks at stop, suspend and the period
+    for _ in 0..SPINS_BETWEEN_LOOKS {
+        if now_ns() >= next || sh.stopping() {
+            return;
+        }
+        std::hint::spin_loop();
+    }
+}
+
+/// Turns of a periodic poller's spin between looks at its shared state.
+const SPINS_BETWEEN_LOOKS: u32 = 256;
+
+/// The polling event loop: steps whenever an input has something waiting,
+/// never sleeps but while suspended.
+pub(super) fn event_loop(agent: &mut dyn Stepper, sh: &Shared, inputs: &[Arc<dyn DynInput>], ctx: &mut Context) {
+    let mut generation = u64::MAX;
+    // the inputs that cannot tell from shared memory, with their listeners
+    let mut by_listener: Vec<(usize, Arc<Listener<Ipc>>)> = Vec::new();
+    let mut was_suspended = sh.suspended.load(Ordering::Acquire);
+    tracing::info!(cpus = sh.polling.as_ref().map(|p| p.cpus.as_str()), "polling the inputs");
+    loop {
+        if sh.stopping() {
+            return;
+        }
+        let now_generation = sh.generation.load(Ordering::Acquire);
+        if now_generation != generation {
+            // rewired: the sources (and so the listeners) changed
+            generation = now_generation;
+            by_listener = inputs
+                .iter()
+                .enumerate()
+                .filter(|(_, i)| i.waiting().is_none())
+                .flat_map(|(k, i)| i.listeners().into_iter().map(move |l| (k, l)))
+                .collect();
+            tracing::debug!(listened = by_listener.len(), "inputs changed: polling the new sources");
+        }
+        let mut got_input = false;
+        for (k, input) in inputs.iter().enumerate() {
+            if input.waiting() == Some(true) {
+                ctx.woken[k] = true;
+                got_input = true;
+            }
+        }
+        for (k, l) in &by_listener {
+            if l.try_wait(|_| {}).is_ok_and(|n| n > 0) {
+                ctx.woken[*k] = true;
+                got_input = true;
+            }
+        }
+        let suspended = sh.suspended.load(Ordering::Acquire);
+        if suspended {
+            // held without spinning; what woke it counts for the step after resuming
+            was_suspended = true;
+            wait_while_suspended(sh);
+            continue;
+        }
+        let resumed = std::mem::replace(&mut was_suspended, false);
+        if got_input || resumed {
+            let t = now_ns();
+            ctx.now_ns = t;
+            run_step(agent, sh, ctx);
+            ctx.woken.fill(false);
+            let mut f = sh.figures();
+            f.cycles += 1;
+            f.rate.record(t);
+            f.last_cycle_ns = t;
+        } else {
+            std::hint::spin_loop();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::CommonArgs;
+    use clap::Parser;
+
+    #[test]
+    fn poll_without_cpus_is_refused_with_what_to_add() {
+        let args = CommonArgs::try_parse_from(["agent", "--poll"]).expect("parses");
+        let e = from_args(&args).expect_err("refused");
+        assert!(e.to_string().contains("--cpus"), "{e}");
+    }
+
+    #[test]
+    fn poll_with_cpus_is_taken_and_no_poll_is_none() {
+        let args = CommonArgs::try_parse_from(["agent", "--poll", "--cpus", "1"]).expect("parses");
+        let p = from_args(&args).expect("taken").expect("polling");
+        assert_eq!(p.cpus, "1");
+        let args = CommonArgs::try_parse_from(["agent", "--cpus", "1"]).expect("parses");
+        assert!(from_args(&args).expect("taken").is_none());
+    }
+}
