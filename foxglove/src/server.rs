@@ -11,16 +11,17 @@
 //!   counted). It writes a new batch only once the last one has left, so a
 //!   client that stops reading holds at most one batch and its queue, and
 //!   is disconnected when nothing left for [`Options::stall_timeout`].
-//! - The serving thread refreshes the channels (advertise/unadvertise),
+//! - The serving thread refreshes the channels (advertise/unadvertise) and
+//!   what clients watch (parameters, the graph: [`watched`]),
 //!   reads the subscribed ports only, fans samples out to the queues,
 //!   answers parameter, graph and publish requests, and never blocks on a
 //!   client.
 
+use crate::Robot;
 use crate::protocol::{self, Channel, ClientMessage, Level, Parameter, SUBPROTOCOLS};
 use crate::wake::{Interest, Wake, wait_fds};
-use crate::{GraphSpec, Robot};
 use nerve_ui::token_matches;
-use serde_json::{Value, json};
+use serde_json::json;
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::io::ErrorKind;
 use std::net::{SocketAddr, TcpListener, TcpStream};
@@ -33,6 +34,9 @@ use std::time::{Duration, Instant};
 use tungstenite::handshake::server::{ErrorResponse, Request as HttpRequest, Response};
 use tungstenite::protocol::WebSocketConfig;
 use tungstenite::{Message, WebSocket};
+use watched::{GraphState, ParamState, graph_update};
+
+mod watched;
 
 /// How `nerve foxglove` serves.
 #[derive(Debug, Clone)]
@@ -866,100 +870,6 @@ fn read_ports(hub: &Hub, robot: &mut dyn Robot) {
     }
 }
 
-/// The parameter values last seen, for the clients that subscribed to
-/// changes (the router sends no notice of them: they are looked at each
-/// refresh while someone listens).
-#[derive(Default)]
-struct ParamState {
-    last: Option<BTreeMap<String, Value>>,
-}
-
-impl ParamState {
-    fn refresh(&mut self, hub: &Hub, robot: &mut dyn Robot) {
-        let listeners: Vec<Arc<Client>> =
-            lock(&hub.clients).values().filter(|c| !lock(&c.params).is_empty()).cloned().collect();
-        if listeners.is_empty() {
-            self.last = None;
-            return;
-        }
-        let now: BTreeMap<String, Value> = match robot.parameters() {
-            Ok(all) => all.into_iter().map(|p| (p.name, p.value)).collect(),
-            Err(e) => {
-                tracing::debug!("no parameters now: {e}");
-                return;
-            }
-        };
-        if let Some(last) = &self.last {
-            let changed: Vec<Parameter> = now
-                .iter()
-                .filter(|(n, v)| last.get(*n) != Some(*v))
-                .map(|(n, v)| Parameter { name: n.clone(), value: v.clone() })
-                .collect();
-            for c in &listeners {
-                let wanted = lock(&c.params);
-                let mine: Vec<Parameter> = changed.iter().filter(|p| wanted.contains(&p.name)).cloned().collect();
-                drop(wanted);
-                if !mine.is_empty() {
-                    c.say(protocol::parameter_values(&mine, None));
-                }
-            }
-        }
-        self.last = Some(now);
-    }
-}
-
-/// The connection graph last sent.
-#[derive(Default)]
-struct GraphState {
-    last: Option<GraphSpec>,
-}
-
-impl GraphState {
-    /// Reads the graph when a client watches it and sends what changed.
-    fn refresh(&mut self, hub: &Hub, robot: &mut dyn Robot) {
-        let watchers: Vec<Arc<Client>> =
-            lock(&hub.clients).values().filter(|c| c.graph.load(Ordering::Relaxed)).cloned().collect();
-        if watchers.is_empty() {
-            self.last = None;
-            return;
-        }
-        let g = match robot.graph() {
-            Ok(g) => g,
-            Err(e) => {
-                tracing::debug!("no graph now: {e}");
-                return;
-            }
-        };
-        if self.last.as_ref() == Some(&g) {
-            return;
-        }
-        let old: BTreeSet<&str> =
-            self.last.iter().flat_map(|l| l.published.iter().chain(&l.subscribed).map(|(t, _)| t.as_str())).collect();
-        let now: BTreeSet<&str> = g.published.iter().chain(&g.subscribed).map(|(t, _)| t.as_str()).collect();
-        let removed: Vec<&str> = old.difference(&now).copied().collect();
-        let msg = graph_update(&g, &removed);
-        for c in &watchers {
-            c.say(msg.clone());
-        }
-        self.last = Some(g);
-    }
-}
-
-fn graph_update(g: &GraphSpec, removed: &[&str]) -> String {
-    let published: Vec<Value> = g.published.iter().map(|(t, ids)| json!({ "name": t, "publisherIds": ids })).collect();
-    let subscribed: Vec<Value> =
-        g.subscribed.iter().map(|(t, ids)| json!({ "name": t, "subscriberIds": ids })).collect();
-    json!({
-        "op": "connectionGraphUpdate",
-        "publishedTopics": published,
-        "subscribedTopics": subscribed,
-        "advertisedServices": [],
-        "removedTopics": removed,
-        "removedServices": [],
-    })
-    .to_string()
-}
-
 /// Answers a request that needs the robot.
 fn answer(hub: &Hub, robot: &mut dyn Robot, req: Request, params: &mut ParamState) {
     match req {
@@ -1058,18 +968,5 @@ mod tests {
         assert_eq!(out.dropped, 1);
         let kept: Vec<u64> = out.data.iter().map(|d| d.unix_ns).collect();
         assert_eq!(kept, [2, 3], "the newest are kept");
-    }
-
-    #[test]
-    fn a_graph_update_names_what_left() {
-        let g = GraphSpec {
-            published: vec![("/t/tick".into(), vec!["t".into()])],
-            subscribed: vec![("/t/tick".into(), vec!["r".into()])],
-        };
-        let v: Value = serde_json::from_str(&graph_update(&g, &["/x/y"])).expect("json");
-        assert_eq!(v["op"], "connectionGraphUpdate");
-        assert_eq!(v["publishedTopics"][0]["publisherIds"][0], "t");
-        assert_eq!(v["subscribedTopics"][0]["subscriberIds"][0], "r");
-        assert_eq!(v["removedTopics"][0], "/x/y");
     }
 }
