@@ -76,6 +76,8 @@ pub enum Command {
     /// Publish a sample of any type into an input port, from JSON (as `ros2 topic pub`).
     #[command(name = "pub")]
     Pub(crate::cmd::publish::PubArgs),
+    /// Call a service of an agent with a JSON request and print the answer (as `ros2 service call`).
+    Call(crate::cmd::call::CallArgs),
     /// List the payload types of this build and of the robot's agents, or show one's fields.
     Types(crate::cmd::types::TypesArgs),
     /// Print this robot's iceoryx2 configuration, for iceoryx2's own tools (`iox2`).

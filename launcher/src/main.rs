@@ -92,6 +92,7 @@ fn run(cli: Cli, world: &World) -> Result<ExitCode> {
             shm_space::ensure_shm_space("pub")?;
             crate::cmd::publish::publish(&world, a)
         }
+        Command::Call(a) => crate::cmd::call::call(&world, a),
         Command::Iox2Config => iox2::iox2_config(&world),
         Command::Record(a) => {
             shm_space::ensure_shm_space("record")?;

@@ -141,3 +141,24 @@ kind = "testagent"
     );
     r.down_and_check_clean();
 }
+
+/// `nerve call AGENT/SERVICE '<json>'` against a Rust server: the answer
+/// printed as JSON; a bad field, an unknown service and a server that does
+/// not answer (suspended) each refused with a message that says so.
+#[test]
+fn nerve_call_prints_the_answer_and_says_why_when_there_is_none() {
+    let r = Robot::new("call-cli");
+    r.router();
+    r.ok(&["start", "caller", "--name", "s", "--", "--serve"]);
+    let out = r.ok(&["call", "s/plan", r#"{"seq": 21}"#]);
+    let answer: serde_json::Value = serde_json::from_str(&out).expect("the answer as JSON");
+    assert_eq!(answer["value"].as_f64(), Some(42.0), "{out}");
+    let err = r.fails(&["call", "s/plan", r#"{"seq": 1, "sequence": 2}"#]);
+    assert!(err.contains("sequence"), "an unknown field: {err}");
+    let err = r.fails(&["call", "s/nonesuch", r#"{"seq": 1}"#]);
+    assert!(err.contains("no service \"nonesuch\""), "an unknown service: {err}");
+    r.ok(&["suspend", "s"]);
+    let err = r.fails(&["call", "s/plan", r#"{"seq": 1}"#, "--timeout", "300ms"]);
+    assert!(err.contains("no answer") && err.contains("300ms"), "a server that does not answer: {err}");
+    r.down_and_check_clean();
+}

@@ -9,6 +9,7 @@
 //!   Rust type, zero copy;
 //! * [`call`]: calls between agents, a [`Server`] and a [`Client`] on
 //!   iceoryx2 request-response;
+//! * [`depth`]: an input's depth and policy ([`InputOptions`]), its own queue;
 //! * `memory`: the in-memory binding a test's ports use instead of iceoryx2.
 //!
 //! Each file uses only those above it in this list (`memory` only
@@ -16,6 +17,7 @@
 
 pub mod bytes;
 pub mod call;
+pub mod depth;
 pub mod error;
 pub(crate) mod memory;
 pub mod seq;
@@ -23,7 +25,8 @@ pub mod service;
 pub mod typed;
 
 pub use bytes::{Loan, Meta, RawOutput, RawPort, Received, SchemaInput, SchemaOutput};
-pub use call::{CallError, CallId, CallOptions, Client, Server};
+pub use call::{CallError, CallId, CallOptions, Client, RawCaller, Server};
+pub use depth::{InputOptions, Keep};
 pub use error::PortError;
 pub use seq::{SeqInput, SeqOutput};
 pub use service::{

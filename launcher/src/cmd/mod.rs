@@ -7,6 +7,7 @@
 pub mod bench;
 pub mod bridge;
 pub mod bridge_keys;
+pub mod call;
 pub mod demo;
 pub mod down;
 pub mod drive;
