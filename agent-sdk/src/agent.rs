@@ -60,6 +60,15 @@ pub enum AgentError {
     /// A call port could not be made or used.
     #[error(transparent)]
     Call(#[from] crate::port::call::CallError),
+    /// An input's depth or policy is out of range (`setup.input_with`).
+    #[error("input {input:?}: {source}")]
+    InputOptions {
+        /// the input
+        input: String,
+        /// what is wrong with its options
+        #[source]
+        source: crate::port::depth::OptionsError,
+    },
     /// A device failed.
     #[error("device: {0}")]
     Device(String),
@@ -187,6 +196,23 @@ impl Setup {
         self.outputs.push(PortSpec::of::<T>(port));
         add_schema(&mut self.schemas, T::schema());
         Ok(out)
+    }
+
+    /// Declares an input port holding `options.depth` samples per source,
+    /// overwriting the oldest or keeping all ([`crate::port::InputOptions`],
+    /// docs/inputs.md); a launch file's `depth`/`keep` for it wins.
+    pub fn input_with<T: Payload>(
+        &mut self,
+        port: &str,
+        options: crate::port::InputOptions,
+    ) -> Result<Input<T>, AgentError> {
+        let options = options.check().map_err(|source| AgentError::InputOptions { input: port.into(), source })?;
+        self.check_port(port)?;
+        let (input, inner) = Input::<T>::new(port)?;
+        inner.depth.set(options);
+        self.inputs.push(inner);
+        add_schema(&mut self.schemas, T::schema());
+        Ok(input)
     }
 
     /// Declares an input port; the router connects it to outputs.

@@ -49,6 +49,10 @@ pub struct CommonArgs {
     /// Set a parameter before the task starts (repeatable): --param gain=1.5
     #[arg(long = "param", value_name = "KEY=VALUE")]
     pub params: Vec<String>,
+    /// An input's depth and policy (repeatable), as a launch file's
+    /// `[agent.inputs]` gives it: --input cmd:depth=64,keep=all
+    #[arg(long = "input", value_name = "NAME:depth=N,keep=latest|all")]
+    pub inputs: Vec<String>,
     /// Print the agent's kind, task, ports and parameters as JSON, and exit.
     #[arg(long)]
     pub describe: bool,

@@ -82,10 +82,10 @@ impl Meta {
 }
 
 /// A subscription to a port, handing out its samples' payloads as bytes.
-type ByteSubscriber = Subscriber<Ipc, [CustomPayloadMarker], SampleHeader>;
+pub(crate) type ByteSubscriber = Subscriber<Ipc, [CustomPayloadMarker], SampleHeader>;
 
 /// The bytes of a shared-memory payload.
-fn payload_bytes(payload: &[CustomPayloadMarker]) -> &[u8] {
+pub(crate) fn payload_bytes(payload: &[CustomPayloadMarker]) -> &[u8] {
     // SAFETY: CustomPayloadMarker is a #[repr(C)] wrapper of one u8: the
     // slice is the sample's payload bytes, alive as long as `payload` is.
     unsafe { std::slice::from_raw_parts(payload.as_ptr().cast::<u8>(), payload.len()) }
@@ -529,6 +529,8 @@ struct Source {
     from_port: String,
     feed: Feed,
     tally: Tally,
+    /// the input's own queue when it is deeper than iceoryx2's or keeps all ([`super::depth`])
+    held: Option<super::depth::Held>,
 }
 
 /// Where a source's samples come from.
@@ -550,6 +552,11 @@ impl Source {
     /// The next waiting sample of this source, if any, kept in place.
     fn take(&mut self, input: &str) -> Result<Option<Received>, PortError> {
         let got = match &mut self.feed {
+            Feed::Shm { subscriber, .. } if self.held.is_some() => self
+                .held
+                .as_mut()
+                .and_then(|held| held.take(subscriber, input))
+                .map(|(h, b)| (h, Received(ReceivedInner::Memory(h, b)))),
             Feed::Shm { subscriber, .. } => match subscriber.receive() {
                 Ok(sample) => sample.map(|s| (*s.user_header(), Received(ReceivedInner::Shm(s)))),
                 Err(e) => return Err(self.receive_error(input, e)),
@@ -566,6 +573,13 @@ impl Source {
     /// when none waits. The sample is released when `f` returns.
     fn take_with<R>(&mut self, input: &str, f: impl FnOnce(&SampleHeader, &[u8]) -> R) -> Result<Option<R>, PortError> {
         match &mut self.feed {
+            Feed::Shm { subscriber, .. } if self.held.is_some() => {
+                let Some((h, b)) = self.held.as_mut().and_then(|held| held.take(subscriber, input)) else {
+                    return Ok(None);
+                };
+                self.tally.account(&h, now_ns());
+                Ok(Some(f(&h, b.bytes())))
+            }
             Feed::Shm { subscriber, .. } => match subscriber.receive() {
                 Ok(Some(sample)) => {
                     let h = *sample.user_header();
@@ -612,6 +626,12 @@ pub(crate) trait DynInput: Send + Sync {
     /// its first sample. Past [`SUBSCRIBER_BUFFER`] waiting samples the
     /// oldest is overwritten and counted as dropped, as with iceoryx2.
     fn queue(&self, sender: &str, port: &str, sample: SampleBuf, stamp_ns: u64) -> Result<(), PortError>;
+    /// The input's depth and policy ([`super::depth`]); `None` for a call's side.
+    fn depth(&self) -> Option<&super::depth::InputDepth> {
+        None
+    }
+    /// Moves what waits in iceoryx2 into the input's own queues, if it has any.
+    fn refill(&self) {}
     /// Whether a sample waits, read in shared memory without a system call
     /// (a polling task's look, `runtime::poll`); `None` when the port cannot
     /// tell so (a call's side: its listeners are looked at instead).
@@ -630,6 +650,8 @@ pub(crate) struct InputInner {
     check: bool,
     subs: Mutex<Vec<Source>>,
     next: AtomicU64,
+    /// depth and policy ([`super::depth`])
+    pub(crate) depth: super::depth::InputDepth,
 }
 
 impl InputInner {
@@ -681,6 +703,16 @@ impl InputInner {
         Ok(count)
     }
 
+    /// Hands each iceoryx2 source's own queue, if it has one, to `f` with
+    /// its subscriber (the input's depth, [`super::depth`]).
+    pub(crate) fn each_held(&self, mut f: impl FnMut(&ByteSubscriber, &mut super::depth::Held)) {
+        for sub in lock(&self.subs).iter_mut() {
+            if let (Feed::Shm { subscriber, .. }, Some(held)) = (&sub.feed, sub.held.as_mut()) {
+                f(subscriber, held);
+            }
+        }
+    }
+
     pub(crate) fn carried(&self) -> &Carried {
         &self.carried
     }
@@ -696,7 +728,7 @@ impl InputInner {
         }
         let subscriber = source_service(node, service, &self.carried)?
             .subscriber_builder()
-            .buffer_size(SUBSCRIBER_BUFFER)
+            .buffer_size(self.depth.options().buffer_size())
             .create()
             .map_err(port_err!(Subscriber, service))?;
         let listener =
@@ -708,6 +740,14 @@ impl InputInner {
 impl DynInput for InputInner {
     fn name(&self) -> &str {
         &self.name
+    }
+
+    fn depth(&self) -> Option<&super::depth::InputDepth> {
+        Some(&self.depth)
+    }
+
+    fn refill(&self) {
+        self.refill_held();
     }
 
     fn type_name(&self) -> &str {
@@ -756,6 +796,7 @@ impl DynInput for InputInner {
             from_port: from_port.into(),
             feed: Feed::Shm { subscriber, listener: Arc::new(listener) },
             tally: Tally::default(),
+            held: super::depth::Held::of(self.depth.options(), self.payload_layout().1),
         });
         Ok(true)
     }
@@ -823,6 +864,7 @@ impl DynInput for InputInner {
                     from_port: port.into(),
                     feed: Feed::Memory(Queue::default()),
                     tally: Tally::default(),
+                    held: None,
                 });
                 subs.len() - 1
             }
@@ -873,6 +915,7 @@ impl SchemaInput {
             check,
             subs: Mutex::new(Vec::new()),
             next: AtomicU64::new(0),
+            depth: Default::default(),
         });
         (SchemaInput { inner: inner.clone() }, inner)
     }

@@ -181,7 +181,7 @@ impl<T: Payload> Input<T> {
         Ok(Input { port, _type: PhantomData })
     }
 
-    fn inner(&self) -> &InputInner {
+    pub(crate) fn inner(&self) -> &InputInner {
         self.port.inner()
     }
 

@@ -357,6 +357,8 @@ fn start_erased(
     stage("agent and its ports created");
     let Setup { inputs, outputs, schemas, params, calls, .. } = setup;
     apply_params(&params, &args.params)?;
+    crate::port::depth::apply_settings(&inputs, &args.inputs)
+        .map_err(|source| StartupError::Agent { kind, name: name.into(), source })?;
 
     let shared = Arc::new(Shared {
         period_ns: AtomicU64::new(period.map(crate::clock::nanos).unwrap_or(0)),

@@ -272,6 +272,10 @@ fn event_loop(
                 tracing::warn!("task wait failed: {e:?}");
                 std::thread::sleep(Duration::from_millis(10));
             }
+            if got_input {
+                // deep and keep-all inputs take what waits into their own queues (port::depth)
+                inputs.iter().for_each(|i| i.refill());
+            }
             if sh.stopping() {
                 return;
             }
