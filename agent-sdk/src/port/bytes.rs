@@ -1091,6 +1091,12 @@ impl RawOutput {
         self.0.loan(zeroed)
     }
 
+    /// Loans a sample of `len` bytes: the type's size, or for a sequence
+    /// its header and whole elements (see [`SchemaOutput::loan_len`]).
+    pub fn loan_len(&self, len: usize, zeroed: bool) -> Result<Loan, PortError> {
+        self.0.loan_len(len, zeroed)
+    }
+
     /// Sends a sample loaned by [`RawOutput::loan`], stamped now, and wakes the readers.
     pub fn send_loan(&mut self, loan: Loan) -> Result<(), PortError> {
         self.0.publish(loan).map(|_| ())

@@ -353,6 +353,26 @@ mod tests {
             Err(PortError::IncompatibleType { .. } | PortError::LayoutMismatch { .. }) => {}
             other => panic!("detections read from a string: {other:?}"),
         }
+        // `nerve replay` and `nerve pub` publish a sequence's bytes by its schema, at their length
+        let schema = Seq::<Detection, Tick>::schema();
+        let replayed = robot.port_service("rec", "dets");
+        let mut raw = crate::port::RawOutput::create(&node, &replayed, &schema, schema.fingerprint(), "rec")
+            .expect("a sequence port by schema");
+        let (dets, inner) = SeqInput::<Detection, Tick>::new("dets").expect("input");
+        assert!(inner.connect(&node, &robot, "rec", "dets").expect("a typed reader opens it"));
+        let tick = Tick { seq: 3, stamp_ns: 4 };
+        // SAFETY: the bytes of a Copy #[repr(C)] value without padding (16 bytes)
+        let mut sample = unsafe { std::slice::from_raw_parts((&tick as *const Tick).cast::<u8>(), 16) }.to_vec();
+        for i in 0..2 {
+            let d = det(i);
+            // SAFETY: the bytes of a Copy #[repr(C)] value without padding (12 bytes)
+            sample.extend_from_slice(unsafe { std::slice::from_raw_parts((&d as *const Detection).cast::<u8>(), 12) });
+        }
+        raw.send(&sample).expect("send");
+        assert!(raw.send(&sample[..17]).is_err(), "not a header and whole elements");
+        let (_, header, items) = dets.recv().expect("a sample");
+        assert_eq!((header.seq, items), (3, vec![det(0), det(1)]));
+        assert!(dets.recv().is_none(), "the malformed one was never sent");
         let (_, fixed) = crate::port::Input::<Tick>::new("in").expect("input");
         assert!(fixed.connect(&node, &robot, "log", "line").is_err(), "a fixed type read from a sequence");
     }
