@@ -55,6 +55,14 @@ pub fn emit(text: &str) -> Result<()> {
     }
 }
 
+/// The TASK column: the task's kind, `+poll` for a task that polls
+/// instead of sleeping (the figure `poll` its agent reports; its CPU% is
+/// then about a whole core's, by design).
+fn task_column(a: &AgentView) -> String {
+    let polls = a.stats.as_ref().is_some_and(|s| s.figures.iter().any(|(k, _)| k == "poll"));
+    if polls { format!("{}+poll", a.task) } else { a.task.to_string() }
+}
+
 /// The `nerve ps` table, with the figures agents report below it.
 pub fn agents_table(agents: &[AgentView]) -> String {
     let mut out = String::new();
@@ -101,7 +109,7 @@ pub fn agents_table(agents: &[AgentView]) -> String {
             a.pid,
             a.kind,
             a.state.to_string(),
-            a.task.to_string(),
+            task_column(a),
             a.period_ns.map(|p| format_duration(Duration::from_nanos(p))).unwrap_or_else(|| "-".into()),
             rate,
             jitter,

@@ -189,6 +189,7 @@ impl Composed {
                 log_level: s.opt(&a.log_level),
                 cpu_latency: a.cpu_latency.as_ref().map(|v| s.value(v)),
                 cpus: a.cpus.as_ref().map(|v| s.value(v)),
+                poll: a.poll.clone(),
                 cond: None,
                 unless: None,
             };

@@ -10,6 +10,7 @@
 //! restart = "on-failure"         # never | on-failure | always
 //! cpu_latency = "off"            # PM QoS bound in µs, or "off" (also top-level, for all)
 //! cpus = [0]                     # keep the agent on these CPUs (or "0-1")
+//! poll = true                    # poll instead of sleeping, on those CPUs (needs cpus)
 //! [[agent]]
 //! name = "r1"
 //! kind = "relay"
@@ -107,6 +108,7 @@ struct RawAgent {
     log_level: Option<Spanned<String>>,
     cpu_latency: Option<Spanned<toml::Value>>,
     cpus: Option<Spanned<toml::Value>>,
+    poll: Option<Spanned<bool>>,
     #[serde(rename = "if")]
     cond: Option<Spanned<String>>,
     unless: Option<Spanned<String>>,
@@ -157,6 +159,8 @@ pub struct AgentSpec {
     pub cpu_latency: Option<CpuLatencySetting>,
     /// CPUs the agent is kept on (`cpus`)
     pub cpus: Option<CpuList>,
+    /// poll instead of sleeping (`poll`), on `cpus`
+    pub poll: bool,
     /// the agent's own description
     pub description: Description,
 }
@@ -183,6 +187,9 @@ impl AgentSpec {
         }
         if let Some(c) = &self.cpus {
             v.extend(["--cpus".into(), c.to_string()]);
+        }
+        if self.poll {
+            v.push("--poll".into());
         }
         if self.suspended {
             v.push("--suspended".into());
@@ -381,6 +388,19 @@ fn time_scale_of(cx: &mut Ctx, v: &Spanned<toml::Value>) -> Option<f64> {
         other => other.to_string(),
     };
     crate::sim_time::parse_scale(&text).map_err(|e| cx.err(v, format!("time_scale: {e}"))).ok()
+}
+
+/// A `poll` value: polling is only allowed on a placement (`cpus`), as
+/// the agent's `--poll` needs `--cpus` (`agent_sdk::runtime::PollError`).
+fn poll_of(cx: &mut Ctx, v: Option<&Spanned<bool>>, placed: bool) -> bool {
+    let Some(v) = v else { return false };
+    if *v.get_ref() && !placed {
+        cx.err(
+            v,
+            "poll = true needs a placement: a polling agent takes its CPU whole; add `cpus = [1]` (a CPU nothing else runs on) to this agent",
+        );
+    }
+    *v.get_ref()
 }
 
 /// A `cpus` value: `[0, 1]`, `0` or a string such as `"0-1"`; a CPU this
@@ -614,6 +634,7 @@ pub fn load_with_args(
                 .and_then(|v| cpu_latency_of(&mut cx, v))
                 .or(file_cpu_latency.get(flat.file).cloned().flatten()),
             cpus: a.cpus.as_ref().and_then(|v| cpus_of(&mut cx, v)),
+            poll: poll_of(&mut cx, a.poll.as_ref(), a.cpus.is_some()),
             description,
         });
     }
