@@ -287,3 +287,130 @@ to = "motor/cmd"
     r.down_and_check_clean();
     router.stop(Duration::from_secs(2));
 }
+
+/// `nerve export --ros2` (issue 44, "bags ROS 2 reads"): a recording of a
+/// simulated robot (its ground truth, odometry, applied commands and sonar
+/// ring) becomes `run-ros2.mcap`, a rosbag2 MCAP file that PyPI rosbags
+/// reads (`tests/py/rosbag_read.py`: its `rosbag2.Reader` for topics,
+/// types, counts and QoS; its `AnyReader`, with the types built from the
+/// definitions in the file, for the values); each decoded message is the
+/// recorded sample, as the independent `mcap` reader decodes it.
+#[test]
+fn a_recording_exports_as_a_ros2_bag_that_rosbags_reads() {
+    let python = python_with_rosbags();
+    let r = Robot::new("ros2bag");
+    let world = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("worlds").join("explore.toml");
+    let file = r.launch_file(
+        "robot.toml",
+        &format!(
+            r#"robot = "x"
+[[agent]]
+name = "sim"
+kind = "sim"
+args = ["--world", "{}", "--dev-dir", "{{state}}/dev", "--no-noise", "--no-camera"]
+[[agent]]
+name = "motor"
+kind = "motor"
+device = "{{state}}/dev/motor"
+args = ["--robot-model", "h1"]
+[[agent]]
+name = "sonar"
+kind = "sonar"
+device = "{{state}}/dev/sonar"
+"#,
+            world.display()
+        ),
+    );
+    launch(&r, &file);
+    let run = r.home.join("run.mcap");
+    let run_s = run.display().to_string();
+    r.ok(&[
+        "record",
+        "sim/truth",
+        "motor/odom",
+        "motor/applied",
+        "sonar/scan",
+        "-o",
+        &run_s,
+        "--duration",
+        "1.5",
+        "-q",
+    ]);
+    r.down_and_check_clean();
+
+    // exported as the issue spells it: FILE-ros2.mcap beside the recording
+    let said = r.ok(&["export", "--ros2", &run_s]);
+    let bag = r.home.join("run-ros2.mcap");
+    assert!(bag.exists() && said.contains("a ROS 2 bag"), "{said}");
+    let out = Command::new(&python)
+        .arg(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("py").join("rosbag_read.py"))
+        .arg(&bag)
+        .output()
+        .expect("run rosbag_read.py");
+    assert!(out.status.success(), "rosbags could not read the bag: {}", String::from_utf8_lossy(&out.stderr));
+    let got: Value = serde_json::from_slice(&out.stdout).expect("rosbag_read.py prints JSON");
+    let raw = nerve_tests::py::read_mcap(&run);
+
+    // topics, types, counts (those of the recording), CDR with ros2msg
+    // definitions, reliable volatile keep-last QoS
+    let want = [
+        ("/sim/truth", "sim/truth", "nav_msgs/msg/Odometry"),
+        ("/motor/odom", "motor/odom", "nav_msgs/msg/Odometry"),
+        ("/motor/applied", "motor/applied", "geometry_msgs/msg/Twist"),
+        ("/sonar/scan", "sonar/scan", "sensor_msgs/msg/LaserScan"),
+    ];
+    let mut total = 0;
+    for (topic, port, ros_type) in want {
+        let t = &got["topics"][topic];
+        let n = nerve_tests::py::messages(&raw, port).len();
+        assert!(n > 0, "{port} recorded nothing");
+        assert_eq!(
+            (t["type"].as_str(), t["count"].as_u64(), t["serialization"].as_str(), t["definition_format"].as_str()),
+            (Some(ros_type), Some(n as u64), Some("cdr"), Some("MSG")),
+            "{topic}: {t}"
+        );
+        assert_eq!(t["qos"][0]["reliability"], "RELIABLE", "{t}");
+        assert_eq!(t["qos"][0]["durability"], "VOLATILE", "{t}");
+        assert_eq!(got["messages"][topic].as_array().map(Vec::len), Some(n), "{topic}: every message decodes");
+        total += n as u64;
+    }
+    assert_eq!(got["message_count"].as_u64(), Some(total), "{}", got["topics"]);
+
+    // values: each message is its recorded sample, stamped with its log time
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+    let ros = got["messages"]["/sim/truth"].as_array().expect("truth");
+    for (m, rec) in ros.iter().zip(nerve_tests::py::messages(&raw, "sim/truth")) {
+        let d = &rec["data"];
+        assert!(close(f(m, "x"), f(d, "x")) && close(f(m, "y"), f(d, "y")), "ROS {m} / nerve {d}");
+        let dyaw = (f(m, "yaw") - f(d, "theta") + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        assert!(dyaw.abs() < 1e-9, "heading: ROS {m} / nerve {d}");
+        assert_eq!(m["stamp_ns"], rec["log_time"], "{m}");
+        assert_eq!((m["frame"].as_str(), m["child"].as_str()), (Some("world"), Some("base_link")));
+    }
+    assert!(ros.iter().any(|m| f(m, "x") != 0.0), "the world pose is not the origin: {ros:?}");
+    let scans = got["messages"]["/sonar/scan"].as_array().expect("scan");
+    let mut echoes = 0;
+    for (m, rec) in scans.iter().zip(nerve_tests::py::messages(&raw, "sonar/scan")) {
+        let d = &rec["data"];
+        for (i, ray) in m["ranges"].as_array().expect("ranges").iter().enumerate() {
+            if d["valid"][i] == 1 {
+                echoes += 1;
+                let want = d["ranges_m"][i].as_f64().unwrap_or(f64::NAN);
+                assert!((ray.as_f64().unwrap_or(f64::NAN) - want).abs() < 1e-6, "ray {i}: ROS {m} / nerve {d}");
+            } else {
+                assert!(ray.is_null(), "ray {i} without echo: ROS {m} / nerve {d}");
+            }
+        }
+    }
+    assert!(echoes > 0, "the sonar heard some wall");
+
+    // the recording itself is never overwritten
+    let e = r.nerve(&["export", "--ros2", &run_s, "-o", &run_s]);
+    assert!(!e.status.success(), "-o naming the recording itself is refused");
+    assert_eq!(nerve_tests::py::messages(&nerve_tests::py::read_mcap(&run), "motor/odom").len(), ros_odom_count(&got));
+}
+
+fn ros_odom_count(got: &Value) -> usize {
+    got["messages"]["/motor/odom"].as_array().map_or(0, Vec::len)
+}

@@ -10,12 +10,15 @@
 //! * [`wire`]: rmw_zenoh's keys, liveliness tokens, QoS text and attachment;
 //! * [`convert`]: nerve's payloads to and from the standard messages;
 //! * [`config`]: the agent's TOML configuration;
-//! * [`link`]: the Zenoh session, in a thread of its own (not real-time).
+//! * [`link`]: the Zenoh session, in a thread of its own (not real-time);
+//! * [`bag`]: recorded samples as the CDR messages, definitions and
+//!   metadata of a rosbag2 MCAP file (`nerve export --ros2`).
 //!
 //! The task is periodic: each step it converts what arrived on the inputs
 //! and hands the CDR bytes to the link thread, and delivers on the outputs
 //! what the link's subscribers received.
 
+pub mod bag;
 pub mod cdr;
 pub mod config;
 pub mod convert;

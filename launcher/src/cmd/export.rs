@@ -13,6 +13,14 @@
 //! cut short (the recorder was killed, the disk filled) is exported up to
 //! its last whole message, with a warning that says what was lost, and the
 //! export itself is whole.
+//!
+//! `--ros2` writes a rosbag2 MCAP instead (`FILE-ros2.mcap`): profile
+//! `ros2`, the ports whose types map to standard ROS 2 messages
+//! ([`nerve_ros2::bag`]: odometry, ground truth, velocity commands, the
+//! sonar ring) as CDR messages with `ros2msg` schemas, each channel's
+//! `offered_qos_profiles`, and the `rosbag2` metadata record rosbag2
+//! writes; `ros2 bag info/play` and the `rosbags` library read it. Ports of
+//! other types are left out, and named.
 
 use anyhow::{Context as _, Result, anyhow, bail};
 use nerve_recording::read::{Event, RecordingReader, nerve_schema};
@@ -28,9 +36,14 @@ use std::process::ExitCode;
 pub struct ExportArgs {
     /// A recording written by `nerve record` or `nerve snapshot`.
     pub file: PathBuf,
-    /// The file to write (default: FILE's name with `-json.mcap`).
+    /// The file to write (default: FILE's name with `-json.mcap`, or
+    /// `-ros2.mcap` with --ros2).
     #[arg(short = 'o', long)]
     pub output: Option<PathBuf>,
+    /// Write a ROS 2 bag (rosbag2 MCAP: CDR messages of the standard types
+    /// nerve's odometry, velocity and sonar map to) instead of JSON.
+    #[arg(long)]
+    pub ros2: bool,
 }
 
 /// What a channel of the input becomes.
@@ -41,15 +54,18 @@ enum Out {
     Copy { channel: u16 },
 }
 
-fn default_output(file: &Path) -> PathBuf {
+fn default_output(file: &Path, suffix: &str) -> PathBuf {
     let stem = file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
-    file.with_file_name(format!("{stem}-json.mcap"))
+    file.with_file_name(format!("{stem}-{suffix}.mcap"))
 }
 
 pub fn export(a: ExportArgs) -> Result<ExitCode> {
+    if a.ros2 {
+        return export_ros2(a);
+    }
     let file = a.file.display().to_string();
     let mut reader = RecordingReader::open(&a.file)?;
-    let output = a.output.clone().unwrap_or_else(|| default_output(&a.file));
+    let output = a.output.clone().unwrap_or_else(|| default_output(&a.file, "json"));
     if output == a.file {
         bail!("-o names the recording itself; give another file");
     }
@@ -116,6 +132,128 @@ pub fn export(a: ExportArgs) -> Result<ExitCode> {
         a.file.display(),
         output.display(),
         channels.len()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A channel of the recording that goes into the bag.
+struct RosChannel {
+    channel: u16,
+    schema: Schema,
+    map: nerve_ros2::bag::BagMap,
+    topic: nerve_ros2::bag::TopicCount,
+}
+
+/// `nerve export --ros2`: the recording as a rosbag2 MCAP file.
+fn export_ros2(a: ExportArgs) -> Result<ExitCode> {
+    use nerve_ros2::bag;
+    let file = a.file.display().to_string();
+    let mut reader = RecordingReader::open(&a.file)?;
+    let output = a.output.clone().unwrap_or_else(|| default_output(&a.file, "ros2"));
+    if output == a.file {
+        bail!("-o names the recording itself; give another file");
+    }
+    let out_file = std::fs::File::create(&output).with_context(|| format!("cannot create {}", output.display()))?;
+    let mut w = mcap::WriteOptions::new()
+        .compression(None)
+        .profile(bag::PROFILE)
+        .library(format!("nerve-{}", env!("CARGO_PKG_VERSION")))
+        .chunk_size(Some(nerve_recording::CHUNK_SIZE))
+        .create(BufWriter::new(out_file))?;
+    let mut channels: BTreeMap<u16, RosChannel> = BTreeMap::new();
+    let mut schemas: BTreeMap<&'static str, u16> = BTreeMap::new();
+    let mut left_out: Vec<String> = Vec::new();
+    let (mut start, mut end) = (u64::MAX, 0u64);
+    while let Some(event) = reader.next_event()? {
+        let m = match event {
+            Event::Channel(ch) => {
+                let nerve_type = ch.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default();
+                let mapped = ch
+                    .schema
+                    .as_ref()
+                    .filter(|s| ch.message_encoding == MESSAGE_ENCODING && s.encoding == SCHEMA_ENCODING)
+                    .and_then(|_| bag::mapping_of(&nerve_type));
+                let Some((ros_type, map)) = mapped else {
+                    left_out.push(format!(
+                        "{} ({})",
+                        ch.topic,
+                        if nerve_type.is_empty() { "no schema" } else { &nerve_type }
+                    ));
+                    continue;
+                };
+                let schema = nerve_schema(&file, &ch)?;
+                let schema_id = match schemas.get(ros_type) {
+                    Some(id) => *id,
+                    None => {
+                        let def = bag::msg_definition(ros_type).ok_or_else(|| {
+                            anyhow!("{ros_type} is not among the vendored messages (agents/ros2/msg)")
+                        })?;
+                        let id = w.add_schema(ros_type, bag::SCHEMA_ENCODING, def.as_bytes())?;
+                        schemas.insert(ros_type, id);
+                        id
+                    }
+                };
+                let topic = bag::ros_topic(&ch.topic);
+                let qos = bag::offered_qos(10, false);
+                let metadata = BTreeMap::from([("offered_qos_profiles".to_string(), qos.clone())]);
+                let channel = w.add_channel(schema_id, &topic, bag::MESSAGE_ENCODING, &metadata)?;
+                let topic = bag::TopicCount { topic, ros_type: ros_type.to_string(), qos, count: 0 };
+                channels.insert(ch.id, RosChannel { channel, schema, map, topic });
+                continue;
+            }
+            Event::Message(m) => m,
+        };
+        let Some(c) = channels.get_mut(&m.channel.id) else { continue };
+        let value = c.schema.decode(m.data).map_err(|e| {
+            anyhow!("{file}: a message of {} does not decode ({e}); the file is damaged", m.channel.topic)
+        })?;
+        let cdr = bag::encode(c.map, &serde_json::to_value(&value)?, m.log_time)
+            .with_context(|| format!("{file}: a message of {} cannot be a {}", m.channel.topic, c.topic.ros_type))?;
+        let header = mcap::records::MessageHeader {
+            channel_id: c.channel,
+            sequence: m.sequence,
+            log_time: m.log_time,
+            publish_time: m.publish_time,
+        };
+        w.write_to_known_channel(&header, &cdr)?;
+        c.topic.count += 1;
+        start = start.min(m.log_time);
+        end = end.max(m.log_time);
+    }
+    if channels.is_empty() {
+        drop(w);
+        let _ = std::fs::remove_file(&output);
+        bail!(
+            "{file} has no port whose type a ROS 2 bag can carry (it has {}); the types that map: {}",
+            if left_out.is_empty() { "no ports".to_string() } else { left_out.join(", ") },
+            bag::BAG_MAPS.iter().map(|(n, r, _)| format!("{n} -> {r}")).collect::<Vec<_>>().join(", ")
+        );
+    }
+    if start > end {
+        start = end;
+    }
+    let name = output.file_name().and_then(|n| n.to_str()).unwrap_or("bag.mcap");
+    let topics: Vec<bag::TopicCount> = channels.values().map(|c| c.topic.clone()).collect();
+    let yaml = bag::metadata_yaml(name, start, end, &topics);
+    w.write_metadata(&mcap::records::Metadata {
+        name: "rosbag2".into(),
+        metadata: BTreeMap::from([
+            ("serialized_metadata".to_string(), yaml),
+            ("ROS_DISTRO".to_string(), "jazzy".to_string()),
+        ]),
+    })?;
+    w.finish().with_context(|| format!("cannot finish {}", output.display()))?;
+    if let Some(cut) = reader.cut() {
+        eprintln!("warning: {cut}");
+    }
+    let total: u64 = topics.iter().map(|t| t.count).sum();
+    println!(
+        "exported {} to {} (a ROS 2 bag): {total} messages on {} topics ({}){}",
+        a.file.display(),
+        output.display(),
+        topics.len(),
+        topics.iter().map(|t| format!("{} {} x{}", t.topic, t.ros_type, t.count)).collect::<Vec<_>>().join(", "),
+        if left_out.is_empty() { String::new() } else { format!("; left out, no ROS 2 type: {}", left_out.join(", ")) }
     );
     Ok(ExitCode::SUCCESS)
 }
