@@ -339,6 +339,53 @@ mod tests {
         (h, SampleBuf::copy_of("test", &seq.to_le_bytes(), 8).expect("a copy"))
     }
 
+    /// Real iceoryx2, one process: `sends` Ticks into an input of
+    /// `options`, the input's queues filled every 8 samples as the task's
+    /// wake-ups do; returns the seqs read afterwards and the counts.
+    fn burst(tag: &str, options: InputOptions, sends: u64) -> (Vec<u64>, HeldCounts) {
+        use crate::port::bytes::DynInput as _;
+        use crate::world::World;
+        use crate::world::test_support::Cleanup;
+        use shm_schemas::payloads::Tick;
+        let world = World::new(&format!("depth{tag}{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+        let out = crate::port::Output::<Tick>::create(&node, &robot.port_service("src", "out"), "src").expect("output");
+        let (input, inner) = crate::port::Input::<Tick>::new("in").expect("input");
+        inner.depth.set(options);
+        assert!(inner.connect(&node, &robot, "src", "out").expect("subscribes"));
+        for k in 1..=sends {
+            out.send(Tick { seq: k, stamp_ns: k }).expect("send");
+            if k % 8 == 0 {
+                inner.refill();
+            }
+        }
+        let seqs: Vec<u64> = std::iter::from_fn(|| input.recv()).take(1000).map(|(_, t)| t.seq).collect();
+        (seqs, input.queue_counts())
+    }
+
+    #[test]
+    fn a_depth_64_input_holds_the_last_64_and_counts_the_rest_overwritten() {
+        let (seqs, counts) = burst("d64", InputOptions::new(64, Keep::Latest).expect("depth 64"), 100);
+        assert_eq!(seqs, (37..=100).collect::<Vec<u64>>());
+        assert_eq!((counts.overwritten, counts.back_pressure, counts.high_water), (36, 0, 64));
+        // the default holds iceoryx2's 16
+        let (seqs, counts) = burst("d16", InputOptions::default(), 100);
+        assert_eq!(seqs, (85..=100).collect::<Vec<u64>>());
+        assert_eq!(counts, HeldCounts::default());
+    }
+
+    #[test]
+    fn a_keep_all_input_loses_nothing_of_a_burst_past_its_depth_and_counts_back_pressure() {
+        // 48 = its depth 32 and iceoryx2's 16 behind it
+        let (seqs, counts) = burst("all", InputOptions::new(32, Keep::All).expect("depth 32"), 48);
+        assert_eq!(seqs, (1..=48).collect::<Vec<u64>>(), "every sample, in order");
+        assert_eq!(counts.overwritten, 0);
+        assert!(counts.back_pressure > 0, "the full queue was counted: {counts:?}");
+        assert_eq!(counts.high_water, 32);
+    }
+
     #[test]
     fn the_default_is_iceoryx2s_buffer_of_16_latest_without_copies() {
         let o = InputOptions::default();
