@@ -63,6 +63,13 @@ fn sequences_of_any_length_are_echoed_counted_read_and_refused_past_their_maximu
     let rate: Value = serde_json::from_str(hz.trim()).expect("hz json");
     assert!(rate["samples"].as_u64().is_some_and(|n| n > 0), "{rate}");
 
+    // nerve pub lays out a sequence from JSON at its own length, into an input
+    let dets = r#"{"header": {"frame": 7, "count": 3}, "items": [
+        {"x": 0.0, "y": 7.0, "id": 0}, {"x": 1.0, "y": 7.0, "id": 1}, {"x": 2.0, "y": 7.0, "id": 2}]}"#;
+    r.ok(&["pub", "b/dets_in", dets, "--count", "1"]);
+    assert!(wait_until(Duration::from_secs(5), || r.figure_u64("b", "received") == 1), "b read the published sample");
+    assert_eq!((r.figure_u64("b", "largest"), r.figure_u64("b", "bad")), (3, 0), "3 detections as published");
+
     // an agent reads them in place through a connection the router checked
     r.ok(&["connect", "a/dets", "b/dets_in"]);
     assert!(

@@ -154,7 +154,7 @@ pub fn publish(world: &World, a: PubArgs) -> Result<ExitCode> {
 
     let result = (|| -> Result<u64> {
         let mut send = || -> Result<usize> {
-            let mut loan = out.loan(false)?;
+            let mut loan = out.loan_len(bytes.len(), false)?;
             let b = loan.bytes_mut();
             b.copy_from_slice(&bytes);
             if let Some(at) = stamp_at
