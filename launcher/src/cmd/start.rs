@@ -50,6 +50,10 @@ pub struct StartArgs {
     /// Keep the agent on these CPUs: 1, 0,1, 0-3.
     #[arg(long, value_name = "LIST")]
     pub cpus: Option<agent_sdk::rt::CpuList>,
+    /// Poll instead of sleeping, on the CPUs of --cpus (required): the
+    /// fastest hop, at the cost of those CPUs.
+    #[arg(long)]
+    pub poll: bool,
     /// Set a parameter before the task starts (repeatable): `--param gain=2`.
     /// `nerve param list NAME` shows an agent's parameters.
     #[arg(long = "param", value_name = "KEY=VALUE", value_parser = parse_param)]
@@ -132,6 +136,9 @@ pub fn start(world: &World, a: StartArgs) -> Result<ExitCode> {
     }
     if let Some(c) = &a.cpus {
         argv.extend(["--cpus".into(), c.to_string()]);
+    }
+    if a.poll {
+        argv.push("--poll".into());
     }
     for p in &a.params {
         argv.extend(["--param".into(), p.clone()]);
