@@ -180,6 +180,7 @@ impl Composed {
                 device: s.opt(&a.device),
                 args: a.args.iter().map(|v| s.string(v)).collect(),
                 params: a.params.iter().map(|(k, v)| (k.clone(), s.value(v))).collect(),
+                inputs: a.inputs.iter().map(|(k, v)| (k.clone(), s.value(v))).collect(),
                 restart: a.restart.clone(),
                 max_restarts: a.max_restarts,
                 restart_window: s.opt(&a.restart_window),

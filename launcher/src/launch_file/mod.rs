@@ -48,6 +48,7 @@ use std::time::Duration;
 use toml::Spanned;
 
 mod compose;
+mod inputs;
 use compose::Source;
 pub use compose::parse_cli_args;
 
@@ -98,6 +99,9 @@ struct RawAgent {
     args: Vec<Spanned<String>>,
     #[serde(default)]
     params: BTreeMap<String, Spanned<toml::Value>>,
+    /// each input's `{ depth = N, keep = "latest" | "all" }` (inputs.rs)
+    #[serde(default)]
+    inputs: BTreeMap<String, Spanned<toml::Value>>,
     restart: Option<Spanned<RestartPolicy>>,
     max_restarts: Option<u32>,
     restart_window: Option<Spanned<String>>,
@@ -141,6 +145,8 @@ pub struct AgentSpec {
     pub args: Vec<String>,
     /// `KEY=VALUE` parameter settings
     pub params: Vec<String>,
+    /// `NAME:depth=N,keep=WORD` input settings (`inputs`, docs/inputs.md)
+    pub inputs: Vec<String>,
     /// restart policy
     pub restart: RestartPolicy,
     /// restarts allowed within `restart_window`
@@ -196,6 +202,9 @@ impl AgentSpec {
         }
         for p in &self.params {
             v.extend(["--param".into(), p.clone()]);
+        }
+        for i in &self.inputs {
+            v.extend(["--input".into(), i.clone()]);
         }
         if !self.args.is_empty() {
             v.push("--".into());
@@ -614,6 +623,7 @@ pub fn load_with_args(
         {
             cx.err(p, format!("agent {name:?} ({kind}) is event-driven; remove `period`"));
         }
+        let inputs = inputs::inputs_of(&mut cx, &name, &a.inputs, &description);
         agents.push(AgentSpec {
             name,
             kind,
@@ -621,6 +631,7 @@ pub fn load_with_args(
             period: a.period.as_ref().map(|p| p.get_ref().clone()),
             args,
             params,
+            inputs,
             restart: a.restart.as_ref().map(|r| *r.get_ref()).unwrap_or(RestartPolicy::OnFailure),
             max_restarts: a.max_restarts.unwrap_or(5),
             restart_window,
