@@ -12,6 +12,61 @@
 #include <stdlib.h>
 
 /*
+ `nerve_field::primitive`: an unsigned 8-bit integer (`uint8_t`).
+ */
+#define NERVE_U8 1
+
+/*
+ `uint16_t`.
+ */
+#define NERVE_U16 2
+
+/*
+ `uint32_t`.
+ */
+#define NERVE_U32 3
+
+/*
+ `uint64_t`.
+ */
+#define NERVE_U64 4
+
+/*
+ `int8_t`.
+ */
+#define NERVE_I8 5
+
+/*
+ `int16_t`.
+ */
+#define NERVE_I16 6
+
+/*
+ `int32_t`.
+ */
+#define NERVE_I32 7
+
+/*
+ `int64_t`.
+ */
+#define NERVE_I64 8
+
+/*
+ `float`.
+ */
+#define NERVE_F32 9
+
+/*
+ `double`.
+ */
+#define NERVE_F64 10
+
+/*
+ `bool` (one byte, 0 or 1).
+ */
+#define NERVE_BOOL 11
+
+/*
  What a call of the C API ended with. `NERVE_OK` is 0; on anything
  else, `nerve_last_error()` says what went wrong and what to do.
  */
@@ -85,6 +140,56 @@ typedef struct nerve_setup nerve_setup;
  given where an output is expected is refused as an unknown port.
  */
 typedef uint32_t nerve_port;
+
+/*
+ One field of a C struct: its name, primitive type, offset and count.
+ */
+typedef struct nerve_field {
+  /*
+   The field's name, as the Rust or Python type names it.
+   */
+  const char *name;
+  /*
+   One of `NERVE_U8` ... `NERVE_BOOL`.
+   */
+  uint32_t primitive;
+  /*
+   `offsetof(struct, field)`.
+   */
+  size_t offset;
+  /*
+   0 for one value; N for an array `[N]` of them.
+   */
+  size_t count;
+} nerve_field;
+
+/*
+ A C struct's layout, for a port of a type of the agent's own
+ (`nerve_setup_input_type`). Read during the call only; nothing is kept.
+ */
+typedef struct nerve_type {
+  /*
+   The type's stable name (`"lab::Reading"`): ports connect only to
+   ports of the same name and layout.
+   */
+  const char *type_name;
+  /*
+   `sizeof(struct)`.
+   */
+  size_t size;
+  /*
+   `_Alignof(struct)`.
+   */
+  size_t align;
+  /*
+   Its fields, in declaration order.
+   */
+  const struct nerve_field *fields;
+  /*
+   How many `fields` there are.
+   */
+  size_t field_count;
+} nerve_type;
 
 /*
  A parameter handle, as `nerve_setup_param_f64` gives it: never 0.
@@ -186,6 +291,43 @@ enum nerve_status nerve_setup_output(struct nerve_setup *setup,
                                      size_t align,
                                      uint64_t fingerprint,
                                      nerve_port *port);
+
+/*
+ Declares input `name` of the agent's own payload type `*layout` (a C
+ struct described by its type name, size, alignment and fields; see
+ `NERVE_TYPE` in `nerve_types.h`). The layout is checked as nerve checks
+ any (`NERVE_INVALID_ARGUMENT` naming what is wrong), refused when a
+ built-in type of that name has another (`NERVE_LAYOUT_MISMATCH`), and
+ its fingerprint is a Rust type's of the same name and layout: the
+ router connects it only to ports of the same name and layout, and
+ refuses one whose layout drifted, naming both. Writes the port's handle
+ to `*port`.
+
+ Call it in `init` only, with the `setup` given to it, from that thread.
+ `layout` and its strings are read during the call and not kept.
+
+ # Safety
+ `setup` is null or the pointer given to `init`; `name` is null or a
+ NUL-terminated string; `layout` is null or a valid `nerve_type` (its
+ strings NUL-terminated, `fields` holding `field_count` fields); `port`
+ is null or writable.
+ */
+enum nerve_status nerve_setup_input_type(struct nerve_setup *setup,
+                                         const char *name,
+                                         const struct nerve_type *layout,
+                                         nerve_port *port);
+
+/*
+ Declares output `name` of the agent's own payload type `*layout`, as
+ [`nerve_setup_input_type`] declares an input.
+
+ # Safety
+ As for [`nerve_setup_input_type`].
+ */
+enum nerve_status nerve_setup_output_type(struct nerve_setup *setup,
+                                          const char *name,
+                                          const struct nerve_type *layout,
+                                          nerve_port *port);
 
 /*
  Declares parameter `key`, a number with `default`, and bounds `min` and

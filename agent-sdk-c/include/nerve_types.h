@@ -34,6 +34,16 @@
 #define NERVE_SETUP_OUTPUT(setup, name, T, port) \
   nerve_setup_output((setup), (name), T##_TYPE_NAME, sizeof(T), NERVE_ALIGNOF(T), T##_FINGERPRINT, (port))
 
+/* Your own payload struct S, for nerve_setup_input_type/nerve_setup_output_type:
+ *   static const nerve_field reading_fields[] = {
+ *       NERVE_FIELD(reading, value, NERVE_F64), NERVE_FIELD_ARRAY(reading, samples, NERVE_F32)};
+ *   static const nerve_type reading_type = NERVE_TYPE(reading, "lab::Reading", reading_fields);
+ * Field names, types and order as the Rust or Python type of that name has them. */
+#define NERVE_FIELD(S, field, primitive) {#field, (primitive), offsetof(S, field), 0}
+#define NERVE_FIELD_ARRAY(S, field, primitive) \
+  {#field, (primitive), offsetof(S, field), sizeof(((S *)0)->field) / sizeof(((S *)0)->field[0])}
+#define NERVE_TYPE(S, name, fields) {(name), sizeof(S), NERVE_ALIGNOF(S), (fields), sizeof(fields) / sizeof((fields)[0])}
+
 /* nerve::Tick */
 typedef struct nerve_Tick {
   uint64_t seq;

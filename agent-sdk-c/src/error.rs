@@ -70,6 +70,12 @@ pub(crate) enum Failure {
         their_align: usize,
         their_fingerprint: u64,
     },
+    #[error("the C struct described as {type_name} is not a layout nerve can carry: fix its NERVE_FIELD table")]
+    Schema {
+        type_name: String,
+        #[source]
+        source: shm_schemas::schema::SchemaInvalid,
+    },
     #[error("no sample waits on input {0}")]
     NoSample(u32),
     #[error("nothing is loaned on output {0}: call nerve_loan first")]
@@ -97,7 +103,9 @@ impl Failure {
         use nerve_status::*;
         match self {
             Failure::Null(_) => NERVE_NULL_POINTER,
-            Failure::NotUtf8(_) | Failure::Invalid(_) | Failure::TooManyPorts => NERVE_INVALID_ARGUMENT,
+            Failure::NotUtf8(_) | Failure::Invalid(_) | Failure::TooManyPorts | Failure::Schema { .. } => {
+                NERVE_INVALID_ARGUMENT
+            }
             Failure::Stale(_) => NERVE_STALE,
             Failure::UnknownPort { .. } => NERVE_UNKNOWN_PORT,
             Failure::UnknownType(_) => NERVE_UNKNOWN_TYPE,

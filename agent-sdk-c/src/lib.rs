@@ -24,6 +24,7 @@
 //! cbindgen from this file (`tests/header.rs` keeps it current).
 
 mod error;
+mod own_type;
 
 use agent_sdk::dynamic::{Loan, Received, SchemaInput, SchemaOutput};
 use agent_sdk::{Agent, AgentError, CommonArgs, Context, Param, Setup, Task};
@@ -34,6 +35,10 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 pub use error::nerve_status;
+pub use own_type::{
+    NERVE_BOOL, NERVE_F32, NERVE_F64, NERVE_I8, NERVE_I16, NERVE_I32, NERVE_I64, NERVE_U8, NERVE_U16, NERVE_U32,
+    NERVE_U64, nerve_field, nerve_type,
+};
 
 /// A port handle, as `nerve_setup_input`/`nerve_setup_output` give it:
 /// never 0; inputs and outputs are numbered apart, so an input's handle
@@ -305,29 +310,61 @@ struct PortDecl<'a> {
 }
 
 /// Checks a port declaration's arguments: no null pointer, UTF-8 names, a
-/// setup still in `new`, and a C struct matching the built-in type.
+/// setup still in `new`, and the port's schema (`schema`, given the port's
+/// name: a built-in type matching the C struct, or the agent's own type).
 ///
 /// # Safety
 /// As for [`nerve_setup_input`].
 unsafe fn port_decl<'a>(
     setup: *mut nerve_setup,
     name: *const c_char,
-    type_name: *const c_char,
-    size: usize,
-    align: usize,
-    fingerprint: u64,
     port: *mut nerve_port,
+    schema: impl FnOnce(&str) -> Result<Schema, Failure>,
 ) -> Result<PortDecl<'a>, Failure> {
     // SAFETY: the caller's contract
     let (setup, out) = unsafe { (setup.as_mut(), port.as_mut()) };
     let setup = setup.ok_or(Failure::Null("setup"))?;
     let out = out.ok_or(Failure::Null("port"))?;
     // SAFETY: the caller's contract
-    let (name, type_name) = unsafe { (text(name, "name")?, text(type_name, "type_name")?) };
+    let name = unsafe { text(name, "name") }?;
     // SAFETY: `sdk` is the SDK's setup during `new`, null after it
     let sdk = unsafe { setup.sdk.as_mut() }.ok_or(Failure::Stale("setup"))?;
-    let schema = port_schema(name, type_name, size, align, fingerprint)?;
+    let schema = schema(name)?;
     Ok(PortDecl { setup, out, name, sdk, schema })
+}
+
+/// The schema of a port of built-in type `type_name` declared with a C
+/// struct of `size`, `align` and `fingerprint`.
+///
+/// # Safety
+/// `type_name` is null or a NUL-terminated string.
+unsafe fn built_in_port(
+    type_name: *const c_char,
+    size: usize,
+    align: usize,
+    fingerprint: u64,
+) -> impl FnOnce(&str) -> Result<Schema, Failure> {
+    move |port| {
+        // SAFETY: the caller's contract
+        let type_name = unsafe { text(type_name, "type_name") }?;
+        port_schema(port, type_name, size, align, fingerprint)
+    }
+}
+
+/// Declares an input or output (`input`) on the checked `decl`.
+fn declare(decl: PortDecl<'_>, input: bool) -> Result<(), Failure> {
+    let PortDecl { setup, out, name, sdk, schema } = decl;
+    let sdk_err = |source| Failure::Sdk { port: name.to_owned(), source };
+    if input {
+        setup.inputs.push(sdk.input_of(name, schema).map_err(sdk_err)?);
+        *out = nerve_port::try_from(setup.inputs.len()).map_err(|_| Failure::TooManyPorts)?;
+    } else {
+        let output = sdk.output_of(name, schema).map_err(sdk_err)?;
+        let index = nerve_port::try_from(setup.outputs.len()).map_err(|_| Failure::TooManyPorts)?;
+        *out = OUTPUT_BASE.checked_add(index).ok_or(Failure::TooManyPorts)?;
+        setup.outputs.push(output);
+    }
+    Ok(())
 }
 
 /// Declares input `name` of built-in payload type `type_name`
@@ -352,13 +389,9 @@ pub unsafe extern "C" fn nerve_setup_input(
     port: *mut nerve_port,
 ) -> nerve_status {
     guard(|| {
-        // SAFETY: the caller's contract, which is `port_decl`'s
-        let PortDecl { setup, out, name, sdk, schema } =
-            unsafe { port_decl(setup, name, type_name, size, align, fingerprint, port) }?;
-        let input = sdk.input_of(name, schema).map_err(|source| Failure::Sdk { port: name.to_owned(), source })?;
-        setup.inputs.push(input);
-        *out = nerve_port::try_from(setup.inputs.len()).map_err(|_| Failure::TooManyPorts)?;
-        Ok(())
+        // SAFETY: the caller's contract, which is `port_decl`'s and `built_in_port`'s
+        let decl = unsafe { port_decl(setup, name, port, built_in_port(type_name, size, align, fingerprint)) }?;
+        declare(decl, true)
     })
 }
 
@@ -377,14 +410,60 @@ pub unsafe extern "C" fn nerve_setup_output(
     port: *mut nerve_port,
 ) -> nerve_status {
     guard(|| {
-        // SAFETY: the caller's contract, which is `port_decl`'s
-        let PortDecl { setup, out, name, sdk, schema } =
-            unsafe { port_decl(setup, name, type_name, size, align, fingerprint, port) }?;
-        let output = sdk.output_of(name, schema).map_err(|source| Failure::Sdk { port: name.to_owned(), source })?;
-        let index = nerve_port::try_from(setup.outputs.len()).map_err(|_| Failure::TooManyPorts)?;
-        *out = OUTPUT_BASE.checked_add(index).ok_or(Failure::TooManyPorts)?;
-        setup.outputs.push(output);
-        Ok(())
+        // SAFETY: the caller's contract, which is `port_decl`'s and `built_in_port`'s
+        let decl = unsafe { port_decl(setup, name, port, built_in_port(type_name, size, align, fingerprint)) }?;
+        declare(decl, false)
+    })
+}
+
+/// Declares input `name` of the agent's own payload type `*layout` (a C
+/// struct described by its type name, size, alignment and fields; see
+/// `NERVE_TYPE` in `nerve_types.h`). The layout is checked as nerve checks
+/// any (`NERVE_INVALID_ARGUMENT` naming what is wrong), refused when a
+/// built-in type of that name has another (`NERVE_LAYOUT_MISMATCH`), and
+/// its fingerprint is a Rust type's of the same name and layout: the
+/// router connects it only to ports of the same name and layout, and
+/// refuses one whose layout drifted, naming both. Writes the port's handle
+/// to `*port`.
+///
+/// Call it in `init` only, with the `setup` given to it, from that thread.
+/// `layout` and its strings are read during the call and not kept.
+///
+/// # Safety
+/// `setup` is null or the pointer given to `init`; `name` is null or a
+/// NUL-terminated string; `layout` is null or a valid `nerve_type` (its
+/// strings NUL-terminated, `fields` holding `field_count` fields); `port`
+/// is null or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn nerve_setup_input_type(
+    setup: *mut nerve_setup,
+    name: *const c_char,
+    layout: *const nerve_type,
+    port: *mut nerve_port,
+) -> nerve_status {
+    guard(|| {
+        // SAFETY: the caller's contract, which is `port_decl`'s and `schema_of`'s
+        let decl = unsafe { port_decl(setup, name, port, |p| own_type::schema_of(layout, p)) }?;
+        declare(decl, true)
+    })
+}
+
+/// Declares output `name` of the agent's own payload type `*layout`, as
+/// [`nerve_setup_input_type`] declares an input.
+///
+/// # Safety
+/// As for [`nerve_setup_input_type`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn nerve_setup_output_type(
+    setup: *mut nerve_setup,
+    name: *const c_char,
+    layout: *const nerve_type,
+    port: *mut nerve_port,
+) -> nerve_status {
+    guard(|| {
+        // SAFETY: the caller's contract, which is `port_decl`'s and `schema_of`'s
+        let decl = unsafe { port_decl(setup, name, port, |p| own_type::schema_of(layout, p)) }?;
+        declare(decl, false)
     })
 }
 

@@ -203,7 +203,16 @@ fn generate() -> String {
              nerve_setup_input((setup), (name), T##_TYPE_NAME, sizeof(T), NERVE_ALIGNOF(T), T##_FINGERPRINT, (port))\n\
              /* Declares output NAME of payload struct T on SETUP (in `init`), handle in *PORT. */\n\
              #define NERVE_SETUP_OUTPUT(setup, name, T, port) \\\n  \
-             nerve_setup_output((setup), (name), T##_TYPE_NAME, sizeof(T), NERVE_ALIGNOF(T), T##_FINGERPRINT, (port))\n\n",
+             nerve_setup_output((setup), (name), T##_TYPE_NAME, sizeof(T), NERVE_ALIGNOF(T), T##_FINGERPRINT, (port))\n\n\
+             /* Your own payload struct S, for nerve_setup_input_type/nerve_setup_output_type:\n \
+             *   static const nerve_field reading_fields[] = {\n \
+             *       NERVE_FIELD(reading, value, NERVE_F64), NERVE_FIELD_ARRAY(reading, samples, NERVE_F32)};\n \
+             *   static const nerve_type reading_type = NERVE_TYPE(reading, \"lab::Reading\", reading_fields);\n \
+             * Field names, types and order as the Rust or Python type of that name has them. */\n\
+             #define NERVE_FIELD(S, field, primitive) {#field, (primitive), offsetof(S, field), 0}\n\
+             #define NERVE_FIELD_ARRAY(S, field, primitive) \\\n  \
+             {#field, (primitive), offsetof(S, field), sizeof(((S *)0)->field) / sizeof(((S *)0)->field[0])}\n\
+             #define NERVE_TYPE(S, name, fields) {(name), sizeof(S), NERVE_ALIGNOF(S), (fields), sizeof(fields) / sizeof((fields)[0])}\n\n",
         ),
         done: BTreeSet::new(),
     };
