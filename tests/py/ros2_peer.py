@@ -10,6 +10,8 @@ hashes, CDR). Its one argument is a JSON object:
   twist       [linear.x, angular.z] to publish on /cmd_vel
   publish_s   for how long (10 Hz)
   settle_s    how long to wait after, for the robot to stop
+  range       (optional) a topic of sensor_msgs/Range: the sonar ring, one
+              message per direction, the latest of each frame is reported
   tf_static   (optional) [[parent, child, x, y, z], ...] the robot's static
               transforms, which this peer, joining after the robot sent them,
               must still get on /tf_static (transient local)
@@ -62,6 +64,8 @@ dom = A["domain"]
 want = {("NN", None), ("MP", "/odom"), ("MP", "/tf"), ("MP", "/scan"), ("MP", "/camera/image_raw"), ("MS", "/cmd_vel")}
 if A.get("tf_static"):
     want.add(("MP", "/tf_static"))
+if A.get("range"):
+    want.add(("MP", A["range"]))
 found = {}
 deadline = time.monotonic() + 15
 while time.monotonic() < deadline:
@@ -146,6 +150,17 @@ def on_image(sample):
                        "bytes": len(px), "red": red})
 
 
+ranges = {}
+
+
+def on_range(sample):
+    m = TS.deserialize_cdr(bytes(sample.payload.to_bytes()), "sensor_msgs/msg/Range")
+    with lock:
+        ranges[m.header.frame_id] = {"range": float(m.range) if m.range != float("inf") else None,
+                                     "type": int(m.radiation_type), "fov": float(m.field_of_view),
+                                     "min": float(m.min_range), "max": float(m.max_range)}
+
+
 subs = [session.declare_subscriber(key("/odom"), on_odom), session.declare_subscriber(key("/tf"), on_tf),
         session.declare_subscriber(key("/scan"), on_scan),
         session.declare_subscriber(key("/camera/image_raw"), on_image)]
@@ -184,6 +199,8 @@ if A.get("tf_static"):
         history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1)))
     wait_for(lambda: len(statics) >= 1, 10, "the static transforms on /tf_static (transient local)")
 
+if A.get("range"):
+    subs.append(session.declare_subscriber(key(A["range"]), on_range))
 wait_for(lambda: len(odoms) >= 5 and len(tfs) >= 1 and len(scans) >= 1 and len(images) >= 1, 15,
          "5 /odom, 1 /tf, 1 /scan and 1 /camera/image_raw messages")
 with lock:
@@ -217,7 +234,9 @@ pub.put(bytes(TS.serialize_cdr(side, "geometry_msgs/msg/Twist")),
 time.sleep(A["settle_s"])
 with lock:
     n0, s0 = len(odoms), len(scans)
-wait_for(lambda: len(odoms) >= n0 + 3 and len(scans) >= s0 + 2, 10,
+with lock:
+    ranges.clear()
+wait_for(lambda: len(odoms) >= n0 + 3 and len(scans) >= s0 + 2 and (not A.get("range") or len(ranges) == 12), 10,
          "3 more /odom and 2 more /scan messages after the robot stopped")
 with lock:
     last = dict(odoms[-1])
@@ -233,6 +252,7 @@ with lock:
     image_last = images[-1]
     image_count = len(images)
     statics_got = list(statics)
+    ranges_got = dict(ranges)
 
 for s in subs:
     s.undeclare()
@@ -254,4 +274,5 @@ print(json.dumps({
     "stamps_ok": stamps_ok,
     "sent": seq,
     "tf_static": statics_got,
+    "ranges": ranges_got,
 }))

@@ -86,6 +86,13 @@ type = "sensor_msgs/msg/LaserScan"
 frame_id = "base_link"
 reliability = "best_effort"
 [[publish]]
+input = "ranges"
+from = "nerve::SonarScan"
+topic = "/sonar/range"
+type = "sensor_msgs/msg/Range"
+frame_id = "sonar"
+reliability = "best_effort"
+[[publish]]
 input = "image"
 from = "nerve::RingNotice"
 topic = "/camera/image_raw"
@@ -145,6 +152,9 @@ to = "ros2/tf"
 from = "sonar/scan"
 to = "ros2/scan"
 [[connect]]
+from = "sonar/scan"
+to = "ros2/ranges"
+[[connect]]
 from = "camera/frames"
 to = "ros2/image"
 [[connect]]
@@ -167,7 +177,7 @@ to = "motor/cmd"
     let arg = serde_json::json!({
         "connect": endpoint, "domain": 0, "node": "nerve_robot",
         "twist": [0.15, 0.4], "publish_s": 2.5, "settle_s": 1.5,
-        "tf_static": [["base_link", "camera"], ["base_link", "sonar"]],
+        "tf_static": [["base_link", "camera"], ["base_link", "sonar"]], "range": "/sonar/range",
     });
     let out = Command::new(&python).arg(&peer).arg(arg.to_string()).output().expect("run the ROS 2 peer");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -268,6 +278,20 @@ to = "motor/cmd"
         }
     }
     assert!(echoes > 0, "the sonar hears some wall: {d}");
+    // and as sensor_msgs/Range, one message per direction, frame sonar_<i>:
+    // the same ranges, ultrasound, the beam's 25 degrees
+    let ranges = &got["ranges"];
+    for i in 0..12 {
+        let m = &ranges[format!("sonar_{i}")];
+        assert_eq!((m["type"].as_u64(), m["max"].as_f64()), (Some(0), Some(5.0)), "sonar_{i}: {ranges}");
+        assert!((f(m, "fov") - 25f64.to_radians()).abs() < 1e-6, "{m}");
+        if d["valid"][i] == 1 {
+            let want = d["ranges_m"][i].as_f64().unwrap_or(f64::NAN);
+            assert!((f(m, "range") - want).abs() < 1e-6, "Range {i}: ROS {m} / nerve {d}");
+        } else {
+            assert!(m["range"].is_null(), "Range {i} without echo: ROS {m} / nerve {d}");
+        }
+    }
 
     // camera frames from the short-term-memory ring as sensor_msgs/Image:
     // the test pattern's 320x240 rgb8 picture, its red disc of radius 30

@@ -49,6 +49,8 @@ pub enum PubMap {
     VelocityToTwist,
     /// `nerve::SonarScan` → `sensor_msgs/msg/LaserScan` (12 rays, 30° apart)
     SonarToLaserScan,
+    /// `nerve::SonarScan` → 12 `sensor_msgs/msg/Range`, frames `<frame_id>_<i>`
+    SonarToRange,
     /// `nerve::RingNotice` of an rgb8 or gray8 ring → `sensor_msgs/msg/Image`
     FramesToImage,
 }
@@ -60,6 +62,7 @@ pub const PUB_MAPS: &[(&str, &str, PubMap)] = &[
     ("nerve::GroundTruth", "nav_msgs/msg/Odometry", PubMap::TruthToOdometry),
     ("nerve::VelocityCommand", "geometry_msgs/msg/Twist", PubMap::VelocityToTwist),
     ("nerve::SonarScan", "sensor_msgs/msg/LaserScan", PubMap::SonarToLaserScan),
+    ("nerve::SonarScan", "sensor_msgs/msg/Range", PubMap::SonarToRange),
     ("nerve::RingNotice", "sensor_msgs/msg/Image", PubMap::FramesToImage),
 ];
 

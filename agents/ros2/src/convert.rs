@@ -8,10 +8,11 @@
 //! | `nerve::GroundTruth` | `nav_msgs/msg/Odometry`, as above |
 //! | `nerve::VelocityCommand` (v, ω) | `geometry_msgs/msg/Twist`: linear.x, angular.z |
 //! | `nerve::SonarScan` (12 directions, 30° apart) | `sensor_msgs/msg/LaserScan`, a direction without echo is +inf (REP-117) |
+//! | `nerve::SonarScan` | `sensor_msgs/msg/Range`, one per direction, frame `<frame>_<i>` (i = 0 ahead, counter-clockwise) |
 //! | `geometry_msgs/msg/Twist` | `nerve::VelocityCommand`: v = linear.x, ω = angular.z (the other four must be 0) |
 
 use crate::msgs::{
-    Header, LaserScan, Odometry, Quaternion, RosMessage as _, TfMessage, Time, TransformStamped, Twist, Vector3,
+    Header, LaserScan, Odometry, Quaternion, Range, RosMessage as _, TfMessage, Time, TransformStamped, Twist, Vector3,
 };
 use shm_schemas::payloads::motion::{GroundTruth, Odometry as NerveOdometry, VelocityCommand};
 use shm_schemas::payloads::sonar::{SONAR_DIRECTIONS, SonarScan};
@@ -108,6 +109,27 @@ pub const SONAR_RANGE_MAX: f32 = 5.0;
 
 /// `nerve::SonarScan` → `sensor_msgs/msg/LaserScan`: direction i at
 /// i·30°, a direction without echo +inf.
+/// The arc of one sonar transducer's beam: 25° (the H1's, as the simulator
+/// models it: a half beam of 12.5°).
+pub const SONAR_FIELD_OF_VIEW: f32 = 25.0 * std::f32::consts::PI / 180.0;
+
+/// `nerve::SonarScan` → one `sensor_msgs/msg/Range` per direction, the
+/// frame of direction `i` (`i` × 30° from ahead, counter-clockwise) named
+/// `<frame>_<i>`; a direction without echo is +inf (REP-117).
+pub fn sonar_to_ranges(s: &SonarScan, stamp: Time, frame: &str) -> Vec<Range> {
+    (0..SONAR_DIRECTIONS)
+        .map(|i| Range {
+            header: Header { stamp, frame_id: format!("{frame}_{i}") },
+            radiation_type: Range::ULTRASOUND,
+            field_of_view: SONAR_FIELD_OF_VIEW,
+            min_range: SONAR_RANGE_MIN,
+            max_range: SONAR_RANGE_MAX,
+            range: if s.valid[i] == 1 && s.ranges_m[i].is_finite() { s.ranges_m[i] } else { f32::INFINITY },
+            variance: 0.0,
+        })
+        .collect()
+}
+
 pub fn sonar_to_scan(s: &SonarScan, stamp: Time, frame: &str) -> LaserScan {
     LaserScan {
         header: Header { stamp, frame_id: frame.to_owned() },
@@ -276,6 +298,26 @@ mod tests {
         assert_eq!(m.transforms.len(), 2);
         assert_eq!((m.transforms[1].child_frame_id.as_str(), m.transforms[1].header.stamp.sec), ("sonar", 5));
         assert_eq!(m.transforms[0].translation, Vector3 { x: 1.0, y: 2.0, z: 3.0 });
+    }
+
+    /// A Range as `sensor_msgs/msg/Range` lays it out, worked out by hand:
+    /// header (stamp 8, frame "s_1" 4 + 4), radiation_type 1 byte, 3 bytes
+    /// of padding to the f32s, five f32.
+    #[test]
+    fn sonar_directions_are_ranges() {
+        let mut s = SonarScan::default();
+        s.ranges_m[1] = 1.5;
+        s.valid[1] = 1;
+        let r = sonar_to_ranges(&s, Time { sec: 2, nanosec: 3 }, "s");
+        assert_eq!(r.len(), 12);
+        assert!(r[0].range.is_infinite() && r[11].header.frame_id == "s_11");
+        let b = r[1].to_cdr().expect("cdr");
+        let mut want = vec![0, 1, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0, 4, 0, 0, 0, b's', b'_', b'1', 0, 0, 0, 0, 0];
+        for v in [SONAR_FIELD_OF_VIEW, SONAR_RANGE_MIN, SONAR_RANGE_MAX, 1.5, 0.0] {
+            want.extend_from_slice(&v.to_le_bytes());
+        }
+        assert_eq!(b, want);
+        assert_eq!(Range::from_cdr(&b).expect("reads back"), r[1]);
     }
 
     #[test]

@@ -112,7 +112,7 @@ impl Agent for Ros2 {
                 PubMap::OdometryToOdometry | PubMap::OdometryToTf => PubInput::Odometry(setup.input(&p.input)?),
                 PubMap::TruthToOdometry => PubInput::Truth(setup.input(&p.input)?),
                 PubMap::VelocityToTwist => PubInput::Velocity(setup.input(&p.input)?),
-                PubMap::SonarToLaserScan => PubInput::Sonar(setup.input(&p.input)?),
+                PubMap::SonarToLaserScan | PubMap::SonarToRange => PubInput::Sonar(setup.input(&p.input)?),
                 PubMap::FramesToImage => PubInput::Frames(agent_sdk::memory::MemorySetup::ring_input(setup, &p.input)?),
             });
         }
@@ -198,7 +198,13 @@ impl Agent for Ros2 {
                 PubInput::Sonar(inp) => {
                     inp.drain_up_to(BATCH, |_, s| {
                         let stamp = convert::ros_stamp(s.stamp_ns, now, epoch);
-                        push(convert::sonar_to_scan(s, stamp, frame).to_cdr())
+                        if spec.map == PubMap::SonarToRange {
+                            for r in convert::sonar_to_ranges(s, stamp, frame) {
+                                push(r.to_cdr());
+                            }
+                        } else {
+                            push(convert::sonar_to_scan(s, stamp, frame).to_cdr())
+                        }
                     });
                 }
                 PubInput::Frames(ring) => {

@@ -458,3 +458,53 @@ mod tests {
         );
     }
 }
+
+/// `sensor_msgs/msg/Range`: one reading of a ranger with a field of view
+/// (a sonar transducer, an IR ranger).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Range {
+    /// stamp and the ranger's frame (its axis is x)
+    pub header: Header,
+    /// [`Range::ULTRASOUND`] or [`Range::INFRARED`]
+    pub radiation_type: u8,
+    /// the arc the reading covers, rad
+    pub field_of_view: f32,
+    /// m
+    pub min_range: f32,
+    /// m
+    pub max_range: f32,
+    /// m; +inf: nothing within max_range (REP-117)
+    pub range: f32,
+    /// m², 0 when unknown
+    pub variance: f32,
+}
+
+impl Range {
+    /// `radiation_type` of a sonar
+    pub const ULTRASOUND: u8 = 0;
+    /// `radiation_type` of an IR ranger
+    pub const INFRARED: u8 = 1;
+}
+
+impl RosMessage for Range {
+    const TYPE: &'static str = "sensor_msgs/msg/Range";
+    fn write(&self, w: &mut Writer) -> Result<(), CdrError> {
+        self.header.write(w)?;
+        w.u8(self.radiation_type);
+        for v in [self.field_of_view, self.min_range, self.max_range, self.range, self.variance] {
+            w.f32(v);
+        }
+        Ok(())
+    }
+    fn read(r: &mut Reader<'_>) -> Result<Self, CdrError> {
+        Ok(Range {
+            header: Header::read(r)?,
+            radiation_type: r.u8()?,
+            field_of_view: r.f32()?,
+            min_range: r.f32()?,
+            max_range: r.f32()?,
+            range: r.f32()?,
+            variance: r.f32()?,
+        })
+    }
+}
