@@ -155,12 +155,15 @@ pub fn run_status<A: Agent>(args: CommonArgs) -> u8 {
     run_status_erased(args, AgentKind { kind: A::kind(), task: A::task(), make: &mut make })
 }
 
+/// Makes the agent on its setup: [`Agent::new`], its result behind a pointer.
+type MakeAgent<'a> = &'a mut dyn FnMut(&mut Setup) -> Result<Box<dyn Stepper>, AgentError>;
+
 /// What the start-up needs of an agent type, without being generic over it
 /// (see [`Stepper`]): its kind, its task, and how to make one.
 struct AgentKind<'a> {
     kind: &'static str,
     task: Task,
-    make: &'a mut dyn FnMut(&mut Setup) -> Result<Box<dyn Stepper>, AgentError>,
+    make: MakeAgent<'a>,
 }
 
 /// [`run_status`], compiled once here rather than in every agent program.
@@ -286,7 +289,7 @@ fn start_erased(
     began: Instant,
     kind: &'static str,
     task_kind: Task,
-    make: &mut dyn FnMut(&mut Setup) -> Result<Box<dyn Stepper>, AgentError>,
+    make: MakeAgent<'_>,
 ) -> Result<(), StartupError> {
     let agent_name = AgentName::new(name).map_err(StartupError::Name)?;
     let period = match (task_kind, &args.period) {
@@ -370,9 +373,9 @@ fn start_erased(
         figures: Mutex::new(TaskFigures { last_cycle_ns: now_ns(), ..TaskFigures::default() }),
         gate: SuspendGate::default(),
         wake,
+        polling,
     });
 
-        polling,
     // the task thread, before the registration: the agent's own `start`
     // (a device opened, a session up) runs on it while the router answers,
     // and the connections that come with the answer are made at most that
