@@ -2,7 +2,8 @@
 //! start agents and wired with `nerve connect`; a batch is a `nerve
 //! suspend` and a `nerve resume` of the ping agent, which writes its round
 //! trips to a file. Rows `nerve`, `nerve-pinned` (both ends on one CPU),
-//! `nerve-poll` (both sides polling), `nerve-python` (the ping against a
+//! `nerve-poll` (both sides in the SDK's polling mode, `--poll`, on CPUs 0
+//! and 1), `nerve-python` (the ping against a
 //! Python pong) and, with dora, `nerve-5ms` (dora's pattern, see
 //! [`super::dora_rows`]).
 
@@ -122,7 +123,7 @@ fn connect_size(robot: &Robot, size: usize, agents: &Agents<'_>) -> Result<()> {
         pair("pyping", "pypong", true)?;
     }
     pair("pin-ping", "pin-pong", true)?;
-    pair("poll-ping", "poll-pong", false)?;
+    pair("poll-ping", "poll-pong", true)?;
     if agents.periodic {
         for (src, sink, _, _) in PERIODIC_PAIRS {
             let (src, sink) = (agent_name(src, size), agent_name(sink, size));
@@ -168,6 +169,12 @@ pub(crate) fn spawn_bench_agent(
             None => (role, None),
         },
     };
+    // `poll-ping`, `poll-pong`: the event-driven agents in the SDK's polling
+    // mode (`--poll`, issue 42), each on a CPU of its own (0 and 1)
+    let (role, cpu, poll) = match role.strip_prefix("poll-") {
+        Some(r) => (r, Some(usize::from(r == "pong")), true),
+        None => (role, cpu, false),
+    };
     let mut cmd = self_command(&format!("__agent-{role}"))?;
     cmd.args(["--robot", &robot.name, "--name", name]);
     if let Some(cpu) = cpu {
@@ -176,14 +183,16 @@ pub(crate) fn spawn_bench_agent(
     if let Some(p) = priority {
         cmd.args(["--priority", &p.to_string()]);
     }
-    if role == "ping" || role.starts_with("poll-") {
+    if role == "ping" || poll {
         cmd.arg("--suspended");
     }
-    if role.starts_with("poll-") {
-        // two tasks waking at 100 kHz under SCHED_FIFO take both cores of a
-        // 2-core machine from the router (SCHED_OTHER), and the `nerve
-        // suspend` that ends the batch never gets an answer: a polling agent
-        // is a normal-priority task, as anyone polling would run it
+    if poll {
+        cmd.arg("--poll");
+        // two polling tasks under SCHED_FIFO take both cores of a 2-core
+        // machine from the router (SCHED_OTHER), and the `nerve suspend`
+        // that ends the batch never gets an answer: here a polling agent is
+        // a normal-priority task (on a machine with a core to give, it
+        // would be real-time on an isolated core)
         cmd.arg("--no-realtime");
     }
     cmd.args(["--", "--size", &size.to_string(), "--count", &count.to_string()]);
@@ -199,8 +208,8 @@ pub(crate) fn spawn_bench_agent(
     Ok(ChildGuard::spawn(&format!("agent {name}"), cmd)?)
 }
 
-/// The polling SDK agents: the pong is resumed for the batch only (it polls
-/// at 100 kHz while it runs), then the ping as [`NervePing`] does.
+/// The polling SDK agents: the pong is resumed for the batch only (it
+/// takes its CPU while it runs), then the ping as [`NervePing`] does.
 struct NervePollPing {
     ping: NervePing,
     pong: String,
