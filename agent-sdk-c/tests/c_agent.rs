@@ -2,60 +2,24 @@
 //! libnerve.so and run in a real robot: a ticker feeds it through the
 //! router, `nerve echo` reads what it republishes, `--describe` lists its
 //! ports, and `nerve stop` stops it cleanly. Needs the binaries `nerve`,
-//! `nerve-router` and `nerve-ticker` built beside the test (`cargo build
-//! --workspace --bins`) and gcc.
+//! `nerve-router` and `nerve-ticker` and libnerve.so built beside the test
+//! (`cargo build --workspace --lib --bins`, as CI's build step does) and gcc.
 
-use nerve_testkit::{Robot, bin_dir, wait_until};
+use nerve_testkit::{Robot, wait_until};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-/// Builds libnerve.so. Cargo builds only the rlib of a library its tests
-/// use, so without this the test would link a missing or stale libnerve.so.
-/// The package selection is CI's own build step's (`.ci/run`: `cargo build
-/// --workspace --lib --bins --tests`), so that there this is a check of
-/// seconds, not a second build: `-p nerve-agent-c` alone resolves features
-/// for this crate only and rebuilt it and part of its dependencies (35 s a
-/// test in CI). The build lock is free while tests run.
-fn build_libnerve() {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Command::new(cargo)
-        .args(["build", "--workspace", "--lib", "--bins", "--tests"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("run cargo build");
-    assert!(out.status.success(), "cargo build --workspace --lib failed: {}", String::from_utf8_lossy(&out.stderr));
-}
+mod common;
 
-/// Builds `examples/c/NAME.c` into `dir`, linked to a fresh libnerve.so
-/// beside the binaries; panics with gcc's message on a failure.
+/// Builds `examples/c/NAME.c` into `dir` with gcc (C11, `extra` flags),
+/// against the libnerve.so the workspace's build left beside the binaries
+/// (`tests/common`: no cargo run from a test); panics with gcc's message.
 fn build_c(name: &str, dir: &Path, extra: &[&str]) -> PathBuf {
-    let crate_dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let lib = bin_dir();
-    build_libnerve();
-    assert!(
-        lib.join("libnerve.so").exists(),
-        "{} is missing: build it with `cargo build -p nerve-agent-c`",
-        lib.join("libnerve.so").display()
-    );
-    let exe = dir.join(name);
-    let out = Command::new("gcc")
-        .args(["-std=c11", "-Wall", "-Wextra", "-Werror"])
-        .args(extra)
-        .arg("-I")
-        .arg(crate_dir.join("include"))
-        .arg(crate_dir.join("examples").join("c").join(format!("{name}.c")))
-        .arg("-L")
-        .arg(&lib)
-        .arg("-lnerve")
-        .arg(format!("-Wl,-rpath,{}", lib.display()))
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .expect("run gcc");
-    assert!(out.status.success(), "gcc failed on {name}.c: {}", String::from_utf8_lossy(&out.stderr));
-    exe
+    let source = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples").join("c").join(format!("{name}.c"));
+    let flags: Vec<&str> = ["-std=c11"].into_iter().chain(extra.iter().copied()).collect();
+    common::compile("gcc", &flags, &source, dir, name)
 }
 
 #[test]
