@@ -32,6 +32,16 @@ fn a_call_is_answered_and_the_wire_shows_in_the_graph() {
     assert!(r.figure_u64("s", "answered") >= 20, "{:?}", r.figures("s"));
     let graph = r.graph().to_string();
     assert!(graph.contains("c/planner") && graph.contains("s/plan"), "{graph}");
+    assert_eq!(r.edges(), ["s/plan -> c/planner"], "listed service to client");
+    // unwired (written client first too): the client's calls are refused, nothing sent
+    r.ok(&["disconnect", "c/planner", "s/plan"]);
+    assert!(r.edges().is_empty(), "{:?}", r.edges());
+    let refused = r.figure_u64("c", "not_wired");
+    assert!(
+        wait_until(Duration::from_secs(5), || r.figure_u64("c", "not_wired") >= refused + 3),
+        "an unwired client's calls were not refused: {:?}",
+        r.figures("c")
+    );
     r.down_and_check_clean();
 }
 
