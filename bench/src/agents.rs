@@ -78,8 +78,8 @@ pub fn read_values(path: &Path) -> anyhow::Result<Vec<u64>> {
 /// settled, takes 20 (BENCHMARKS.md §1, "A settled batch").
 const SETTLE_NS: u64 = 100_000_000;
 
-/// The round-trip bookkeeping of a ping agent, shared by the event-driven
-/// [`Ping`] and the polling [`PollPing`].
+/// The round-trip bookkeeping of a ping agent ([`Ping`], also in the SDK's
+/// polling mode, `--poll`).
 struct PingSide<P: BenchPayload> {
     input: Input<P>,
     out: Output<P>,
@@ -238,71 +238,6 @@ impl<P: BenchPayload> Agent for Pong<P> {
     }
 }
 
-/// The ping side of the polling round trip: a periodic task (started with
-/// `--period 10us`, the SDK's shortest) that checks its input every cycle
-/// with `Input::drain` instead of blocking on it. A `nerve resume` starts a
-/// batch of `count` round trips; when it is written the agent idles until
-/// the next resume (the benchmark suspends it in between).
-struct PollPing<P: BenchPayload> {
-    side: PingSide<P>,
-    /// a batch is under way
-    running: bool,
-    /// when the last cycle ran
-    last_step_ns: u64,
-}
-
-impl<P: BenchPayload> Agent for PollPing<P> {
-    const KIND: &'static str = "bench-poll-ping";
-
-    fn task() -> Task {
-        Task::Periodic(Duration::from_micros(10))
-    }
-
-    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        Ok(PollPing { side: PingSide::new(setup, "poll-ping")?, running: false, last_step_ns: 0 })
-    }
-
-    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
-        // a gap between two cycles means the agent was suspended: a resume starts a batch
-        if ctx.now_ns().saturating_sub(self.last_step_ns) > 50_000_000 {
-            self.running = true;
-            self.side.restart();
-        }
-        self.last_step_ns = ctx.now_ns();
-        if self.side.collect()?.batch_done {
-            self.running = false;
-        }
-        if self.running && (self.side.outstanding.is_none() || self.side.stalled()) {
-            self.side.send_next()?;
-        }
-        Ok(())
-    }
-}
-
-/// The pong side of the polling round trip: a periodic task that echoes
-/// whatever its input holds every cycle.
-struct PollPong<P: BenchPayload> {
-    input: Input<P>,
-    out: Output<P>,
-}
-
-impl<P: BenchPayload> Agent for PollPong<P> {
-    const KIND: &'static str = "bench-poll-pong";
-
-    fn task() -> Task {
-        Task::Periodic(Duration::from_micros(10))
-    }
-
-    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        agent_args(setup)?;
-        Ok(PollPong { input: setup.input("in")?, out: setup.output("out")? })
-    }
-
-    fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        echo_all(&self.input, &self.out)
-    }
-}
-
 /// A periodic agent that measures its own wake-up lateness: how long after
 /// the deadline the SDK slept to (`Context::deadline_ns`) the step began.
 /// (It used to reckon its deadlines from the end of `start`; once the
@@ -360,12 +295,6 @@ pub fn run_agent(which: &str, args: Vec<String>) -> ExitCode {
     match which {
         "__agent-ping" => with_payload!(size, P => agent_sdk::run_with_args::<Ping<P>>(common), _ => bad_size(size)),
         "__agent-pong" => with_payload!(size, P => agent_sdk::run_with_args::<Pong<P>>(common), _ => bad_size(size)),
-        "__agent-poll-ping" => {
-            with_payload!(size, P => agent_sdk::run_with_args::<PollPing<P>>(common), _ => bad_size(size))
-        }
-        "__agent-poll-pong" => {
-            with_payload!(size, P => agent_sdk::run_with_args::<PollPong<P>>(common), _ => bad_size(size))
-        }
         "__agent-jitter" => agent_sdk::run_with_args::<Jitter>(common),
         _ => {
             eprintln!("error: unknown agent subcommand {which}");

@@ -274,7 +274,7 @@ fn main() -> ExitCode {
     if let Some(first) = args.next() {
         let rest: Vec<String> = args.collect();
         match first.as_str() {
-            "__agent-ping" | "__agent-pong" | "__agent-poll-ping" | "__agent-poll-pong" | "__agent-jitter" => {
+            "__agent-ping" | "__agent-pong" | "__agent-jitter" => {
                 return agents::run_agent(&first, rest);
             }
             "__raw-pong" => return raw::pong_main(rest),
