@@ -122,6 +122,10 @@ pub(super) fn event_loop(agent: &mut dyn Stepper, sh: &Shared, inputs: &[Arc<dyn
                 got_input = true;
             }
         }
+        if got_input {
+            // deep and keep-all inputs take what waits into their own queues, as in the event loop
+            inputs.iter().for_each(|i| i.refill());
+        }
         let suspended = sh.suspended.load(Ordering::Acquire);
         if suspended {
             // held without spinning; what woke it counts for the step after resuming
