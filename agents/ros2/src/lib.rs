@@ -11,6 +11,8 @@
 //! * [`convert`]: nerve's payloads to and from the standard messages;
 //! * [`config`]: the agent's TOML configuration;
 //! * [`link`]: the Zenoh session, in a thread of its own (not real-time);
+//!   it and the agent are the `agent` feature (default): without it the
+//!   crate has no Zenoh, as the `nerve` command uses it;
 //! * [`bag`]: recorded samples as the CDR messages, definitions and
 //!   metadata of a rosbag2 MCAP file (`nerve export --ros2`).
 //!
@@ -18,11 +20,16 @@
 //! and hands the CDR bytes to the link thread, and delivers on the outputs
 //! what the link's subscribers received.
 
+#[cfg(feature = "agent")]
+mod agent;
 pub mod bag;
 pub mod cdr;
 pub mod config;
 pub mod convert;
 pub mod idl;
+#[cfg(feature = "agent")]
+pub use agent::Ros2;
+#[cfg(feature = "agent")]
 pub mod link;
 pub mod msgs;
 pub mod wire;
@@ -32,233 +39,6 @@ include!(concat!(env!("OUT_DIR"), "/type_hashes.rs"));
 /// The RIHS01 hash of a vendored message type (`pkg/msg/Name`).
 pub fn type_hash(ros_type: &str) -> Option<&'static str> {
     TYPE_HASHES.binary_search_by(|(n, _)| (*n).cmp(ros_type)).ok().map(|i| TYPE_HASHES[i].1)
-}
-
-use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
-use config::{Config, PubMap, SubMap};
-use link::{Inbox, Outgoing, Stats};
-use msgs::RosMessage;
-use shm_schemas::payloads::motion::{GroundTruth, Odometry, VelocityCommand};
-use shm_schemas::payloads::sonar::SonarScan;
-use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{SyncSender, TrySendError};
-use std::thread::JoinHandle;
-use std::time::Duration;
-
-/// How many samples per input one step converts at most.
-const BATCH: usize = 64;
-/// How many messages may wait for the link thread.
-const OUTGOING: usize = 256;
-
-/// The agent's own arguments (after `--`).
-#[derive(Debug, clap::Parser)]
-#[command(name = "nerve-ros2")]
-struct Ros2Args {
-    /// The agent's configuration (TOML; see docs/ros2.md).
-    #[arg(long, value_name = "FILE")]
-    config: Option<PathBuf>,
-}
-
-enum PubInput {
-    Odometry(Input<Odometry>),
-    Truth(Input<GroundTruth>),
-    Velocity(Input<VelocityCommand>),
-    Sonar(Input<SonarScan>),
-    Frames(agent_sdk::memory::RingInput),
-}
-
-struct SubOutput {
-    out: Output<VelocityCommand>,
-    inbox: Arc<Inbox>,
-}
-
-/// The `ros2` agent.
-pub struct Ros2 {
-    cfg: Config,
-    inputs: Vec<PubInput>,
-    outputs: Vec<SubOutput>,
-    stats: Arc<Stats>,
-    tx: Option<SyncSender<Outgoing>>,
-    stop: Arc<AtomicBool>,
-    link_thread: Option<JoinHandle<()>>,
-}
-
-impl std::fmt::Debug for Ros2 {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Ros2").field("node", &self.cfg.node).field("publish", &self.cfg.publish.len()).finish()
-    }
-}
-
-impl Agent for Ros2 {
-    const KIND: &'static str = "ros2";
-
-    fn task() -> Task {
-        Task::Periodic(Duration::from_millis(20))
-    }
-
-    fn new(setup: &mut Setup) -> Result<Self, AgentError> {
-        let path = setup.args::<Ros2Args>()?.config.ok_or_else(|| {
-            AgentError::Config(
-                "the ros2 agent needs its configuration: nerve start ros2 --name NAME -- --config FILE (see docs/ros2.md)"
-                    .into(),
-            )
-        })?;
-        let cfg = config::load(&path, setup.name()).map_err(|e| AgentError::Config(e.to_string()))?;
-        let mut inputs = Vec::new();
-        for p in &cfg.publish {
-            inputs.push(match p.map {
-                PubMap::OdometryToOdometry | PubMap::OdometryToTf => PubInput::Odometry(setup.input(&p.input)?),
-                PubMap::TruthToOdometry => PubInput::Truth(setup.input(&p.input)?),
-                PubMap::VelocityToTwist => PubInput::Velocity(setup.input(&p.input)?),
-                PubMap::SonarToLaserScan | PubMap::SonarToRange => PubInput::Sonar(setup.input(&p.input)?),
-                PubMap::FramesToImage => PubInput::Frames(agent_sdk::memory::MemorySetup::ring_input(setup, &p.input)?),
-            });
-        }
-        let mut outputs = Vec::new();
-        for s in &cfg.subscribe {
-            match s.map {
-                SubMap::TwistToVelocity => {
-                    outputs.push(SubOutput { out: setup.output(&s.output)?, inbox: Arc::new(Inbox::default()) })
-                }
-            }
-        }
-        let stats = Arc::new(Stats::new(cfg.publish.len()));
-        {
-            let stats = stats.clone();
-            let inboxes: Vec<Arc<Inbox>> = outputs.iter().map(|o| o.inbox.clone()).collect();
-            let topics: Vec<String> = cfg.publish.iter().map(|p| p.topic.clone()).collect();
-            let subs: Vec<String> = cfg.subscribe.iter().map(|s| s.topic.clone()).collect();
-            setup.figures(move || {
-                let mut v = stats.figures(&topics);
-                for (t, i) in subs.iter().zip(&inboxes) {
-                    v.extend(i.figures(t));
-                }
-                v
-            });
-        }
-        Ok(Ros2 { cfg, inputs, outputs, stats, tx: None, stop: Arc::new(AtomicBool::new(false)), link_thread: None })
-    }
-
-    fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        // a configuration zenoh refuses fails the start; a router that is
-        // not up yet does not: the link thread keeps trying
-        link::zenoh_config(&self.cfg).map_err(|e| AgentError::Config(e.to_string()))?;
-        let (tx, rx) = std::sync::mpsc::sync_channel::<Outgoing>(OUTGOING);
-        let cfg = self.cfg.clone();
-        let inboxes: Vec<Arc<Inbox>> = self.outputs.iter().map(|o| o.inbox.clone()).collect();
-        let (stats, stop) = (self.stats.clone(), self.stop.clone());
-        let handle = std::thread::Builder::new()
-            .name("ros2-link".into())
-            .spawn(move || {
-                agent_sdk::rt::drop_realtime();
-                if let Some(mut link) = link::Link::open_retrying(&cfg, &inboxes, &rx, &stats, &stop) {
-                    link.run(&rx, &stats, &stop);
-                    link.close();
-                }
-            })
-            .map_err(|e| AgentError::Other(format!("cannot start the ros2 link thread: {e}")))?;
-        self.link_thread = Some(handle);
-        self.tx = Some(tx);
-        Ok(())
-    }
-
-    fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
-        let now = ctx.now_ns();
-        let epoch = convert::epoch_now_ns();
-        for (i, (input, spec)) in self.inputs.iter_mut().zip(&self.cfg.publish).enumerate() {
-            let mut encoded: Vec<Vec<u8>> = Vec::new();
-            let mut failed = None;
-            let mut push = |r: Result<Vec<u8>, cdr::CdrError>| match r {
-                Ok(b) => encoded.push(b),
-                Err(e) => failed = Some(e),
-            };
-            let (frame, child) = (spec.frame_id.as_str(), spec.child_frame_id.as_str());
-            match input {
-                PubInput::Odometry(inp) => {
-                    inp.drain_up_to(BATCH, |_, o| {
-                        let stamp = convert::ros_stamp(o.stamp_ns, now, epoch);
-                        push(if spec.map == PubMap::OdometryToTf {
-                            convert::odometry_to_tf(o, stamp, frame, child).to_cdr()
-                        } else {
-                            convert::odometry_to_ros(o, stamp, frame, child).to_cdr()
-                        })
-                    });
-                }
-                PubInput::Truth(inp) => {
-                    inp.drain_up_to(BATCH, |_, t| {
-                        let stamp = convert::ros_stamp(t.stamp_ns, now, epoch);
-                        push(convert::truth_to_ros(t, stamp, frame, child).to_cdr())
-                    });
-                }
-                PubInput::Velocity(inp) => {
-                    inp.drain_up_to(BATCH, |_, c| push(convert::velocity_to_twist(c).to_cdr()));
-                }
-                PubInput::Sonar(inp) => {
-                    inp.drain_up_to(BATCH, |_, s| {
-                        let stamp = convert::ros_stamp(s.stamp_ns, now, epoch);
-                        if spec.map == PubMap::SonarToRange {
-                            for r in convert::sonar_to_ranges(s, stamp, frame) {
-                                push(r.to_cdr());
-                            }
-                        } else {
-                            push(convert::sonar_to_scan(s, stamp, frame).to_cdr())
-                        }
-                    });
-                }
-                PubInput::Frames(ring) => {
-                    // the newest frame only, read in place from the ring and
-                    // written into the message (older notices are skipped)
-                    let read = ring.latest_with(|meta, px| {
-                        let enc = convert::image_encoding(meta.format());
-                        let channels = if enc == Some("rgb8") { 3 } else { 1 };
-                        let stamp = convert::ros_stamp(meta.stamp_ns, now, epoch);
-                        enc.and_then(|e| convert::image_cdr(stamp, frame, meta.width, meta.height, e, channels, px))
-                    });
-                    match read {
-                        Ok(None) => {}
-                        Ok(Some(Some(r))) => push(r),
-                        Ok(Some(None)) => self.stats.refused_frame(i),
-                        // overwritten before it was read: the next one comes
-                        Err(agent_sdk::memory::MemoryError::Read(e)) => tracing::debug!(error = %e, "frame skipped"),
-                        Err(e) => return Err(e.into()),
-                    }
-                }
-            }
-            if let Some(e) = failed {
-                tracing::warn!(topic = %spec.topic, error = %e, "a sample could not be written as CDR");
-            }
-            if let Some(tx) = &self.tx {
-                for bytes in encoded {
-                    match tx.try_send(Outgoing { topic: i, bytes }) {
-                        Ok(()) => {}
-                        Err(TrySendError::Full(_)) => self.stats.dropped(i),
-                        Err(TrySendError::Disconnected(_)) => {
-                            return Err(AgentError::Other("the ros2 link thread ended".into()));
-                        }
-                    }
-                }
-            }
-        }
-        for o in &self.outputs {
-            for twist in o.inbox.take() {
-                match convert::twist_to_velocity(&twist, now) {
-                    Ok(cmd) => o.out.send(cmd)?,
-                    Err(e) => o.inbox.refuse(&e.to_string()),
-                }
-            }
-        }
-        Ok(())
-    }
-
-    fn stop(&mut self, _ctx: &mut Context) {
-        self.stop.store(true, Ordering::Release);
-        self.tx = None;
-        if let Some(h) = self.link_thread.take() {
-            let _ = h.join();
-        }
-    }
 }
 
 #[cfg(test)]
