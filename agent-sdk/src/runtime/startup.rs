@@ -230,8 +230,11 @@ fn describe(args: &CommonArgs, kind: &mut AgentKind<'_>) -> Result<String, Start
     let world = World::new(&format!("describe-{}", std::process::id()))?;
     let mut setup =
         Setup::new(world, AgentName::new(kind.kind).map_err(StartupError::Name)?, Binding::Nothing, args.args.clone());
-    let agent =
-        (kind.make)(&mut setup).map_err(|source| StartupError::Agent { kind: kind.kind, name: kind.kind.into(), source })?;
+    let agent = (kind.make)(&mut setup).map_err(|source| StartupError::Agent {
+        kind: kind.kind,
+        name: kind.kind.into(),
+        source,
+    })?;
     apply_params(&setup.params, &args.params)?;
     let (task, default_period_ns) = match kind.task {
         Task::Periodic(p) => (TaskKind::Periodic, Some(crate::clock::nanos(p))),
@@ -296,10 +299,7 @@ fn start_erased(
         (Task::Periodic(default), None) => Some(default),
         (Task::Periodic(_), Some(p)) => Some(parse_duration(p).map_err(|e| StartupError::Period(e.to_string()))?),
         (Task::EventDriven, Some(_)) => {
-            return Err(StartupError::Period(format!(
-                "agent kind {} is event-driven; it takes no --period",
-                kind
-            )));
+            return Err(StartupError::Period(format!("agent kind {} is event-driven; it takes no --period", kind)));
         }
         (Task::EventDriven, None) => None,
     };
@@ -360,8 +360,11 @@ fn start_erased(
     stage("agent and its ports created");
     let Setup { inputs, outputs, schemas, params, calls, .. } = setup;
     apply_params(&params, &args.params)?;
-    crate::port::depth::apply_settings(&inputs, &args.inputs)
-        .map_err(|source| StartupError::Agent { kind, name: name.into(), source })?;
+    crate::port::depth::apply_settings(&inputs, &args.inputs).map_err(|source| StartupError::Agent {
+        kind,
+        name: name.into(),
+        source,
+    })?;
 
     let shared = Arc::new(Shared {
         period_ns: AtomicU64::new(period.map(crate::clock::nanos).unwrap_or(0)),
