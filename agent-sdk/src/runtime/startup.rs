@@ -268,6 +268,9 @@ fn apply_params(table: &ParamTable, settings: &[String]) -> Result<(), StartupEr
     Ok(())
 }
 
+/// The whole start-up of an agent of kind `agent.kind`, made by
+/// `agent.make`: not generic over the agent, so compiled once here rather
+/// than in every agent program (see [`Stepper`]).
 fn start(
     args: &CommonArgs,
     name: &str,
@@ -277,23 +280,6 @@ fn start(
     agent: AgentKind<'_>,
 ) -> Result<(), StartupError> {
     let AgentKind { kind, task: task_kind, make } = agent;
-    start_erased(args, name, world, readiness, began, kind, task_kind, make)
-}
-
-/// The whole start-up of an agent of kind `kind`, made by `make`: not
-/// generic over the agent, so compiled once here rather than in every
-/// agent program (see [`Stepper`]).
-#[allow(clippy::too_many_arguments)]
-fn start_erased(
-    args: &CommonArgs,
-    name: &str,
-    world: World,
-    readiness: &mut Readiness,
-    began: Instant,
-    kind: &'static str,
-    task_kind: Task,
-    make: MakeAgent<'_>,
-) -> Result<(), StartupError> {
     let agent_name = AgentName::new(name).map_err(StartupError::Name)?;
     let period = match (task_kind, &args.period) {
         (Task::Periodic(default), None) => Some(default),
