@@ -71,20 +71,8 @@ to = "crelay/in"
     // an event-driven C agent has no period to change, as a Rust one
     let why = r.fails(&["rate", "crelay", "50ms"]);
     assert!(why.contains("event-driven"), "{why}");
-    let pid = r.pid("crelay");
-    r.ok(&["stop", "crelay"]);
-    assert!(wait_until(Duration::from_secs(10), || r.agent("crelay").is_none()), "crelay did not stop");
-    assert!(wait_until(Duration::from_secs(10), || !nerve_testkit::alive(pid)), "crelay's process {pid} lives on");
-    // its stop callback ran: it says so in its log
-    let logs = r.home.join(&r.name).join("logs");
-    let said = wait_until(Duration::from_secs(5), || {
-        std::fs::read_dir(&logs)
-            .into_iter()
-            .flatten()
-            .flatten()
-            .any(|e| std::fs::read_to_string(e.path()).is_ok_and(|t| t.contains("crelay: stopping after")))
-    });
-    assert!(said, "no log in {} says the C agent's stop ran", logs.display());
+    // it stops, and its stop callback ran: it says so in its log
+    common::stops_and_says(&r, "crelay", "crelay: stopping after");
     r.down_and_check_clean();
 }
 

@@ -77,20 +77,8 @@ to = "cpprelay/in"
         relayed(&r, 3)
     );
 
-    let pid = r.pid("cpprelay");
-    r.ok(&["stop", "cpprelay"]);
-    assert!(wait_until(Duration::from_secs(10), || r.agent("cpprelay").is_none()), "cpprelay did not stop");
-    assert!(wait_until(Duration::from_secs(10), || !nerve_testkit::alive(pid)), "its process {pid} lives on");
-    // its on_stop lambda ran: it says so in its log
-    let logs = r.home.join(&r.name).join("logs");
-    let said = wait_until(Duration::from_secs(5), || {
-        std::fs::read_dir(&logs)
-            .into_iter()
-            .flatten()
-            .flatten()
-            .any(|e| std::fs::read_to_string(e.path()).is_ok_and(|t| t.contains("cpprelay: stopping after")))
-    });
-    assert!(said, "no log in {} says the C++ agent's stop ran", logs.display());
+    // it stops, and its on_stop lambda ran: it says so in its log
+    common::stops_and_says(&r, "cpprelay", "cpprelay: stopping after");
     r.down_and_check_clean();
 }
 

@@ -5,9 +5,10 @@
 //! Each test binary uses a part of it.
 #![allow(dead_code)]
 
-use nerve_testkit::bin_dir;
+use nerve_testkit::{Robot, bin_dir, wait_until};
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::Duration;
 
 /// The folder of libnerve.so (the binaries' folder), checked to hold it.
 pub fn libnerve_dir() -> PathBuf {
@@ -51,4 +52,23 @@ pub fn compile(compiler: &str, flags: &[&str], source: &Path, dir: &Path, name: 
         String::from_utf8_lossy(&out.stderr)
     );
     exe
+}
+
+/// `nerve stop NAME`, then checks that the agent left the router, that its
+/// process ended, and that its stop callback ran: some log of the robot
+/// holds `said` (the C and C++ examples print `NAME: stopping after ...`).
+pub fn stops_and_says(r: &Robot, name: &str, said: &str) {
+    let pid = r.pid(name);
+    r.ok(&["stop", name]);
+    assert!(wait_until(Duration::from_secs(10), || r.agent(name).is_none()), "{name} did not stop");
+    assert!(wait_until(Duration::from_secs(10), || !nerve_testkit::alive(pid)), "{name}'s process {pid} lives on");
+    let logs = r.home.join(&r.name).join("logs");
+    let found = wait_until(Duration::from_secs(5), || {
+        std::fs::read_dir(&logs)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .any(|e| std::fs::read_to_string(e.path()).is_ok_and(|t| t.contains(said)))
+    });
+    assert!(found, "no log in {} says {said:?}: {name}'s stop callback did not run", logs.display());
 }
