@@ -616,6 +616,120 @@ NERVE_STATIC_ASSERT(offsetof(nerve_ArmGraspState, connected) == 31, "nerve::ArmG
 #define nerve_ArmGraspState_FINGERPRINT UINT64_C(0x53eab0fb2bc901fb)
 #define NERVE_ARM_GRASP_STATE_FINGERPRINT nerve_ArmGraspState_FINGERPRINT
 
+/* nerve::MapCell */
+typedef struct nerve_MapCell {
+  uint64_t last_seen_ns;
+  int32_t ix;
+  int32_t iy;
+  float x;
+  float y;
+  uint32_t visits;
+  uint8_t flags;
+} nerve_MapCell;
+NERVE_STATIC_ASSERT(sizeof(nerve_MapCell) == 32, "nerve::MapCell is 32 bytes");
+NERVE_STATIC_ASSERT(NERVE_ALIGNOF(nerve_MapCell) == 8, "nerve::MapCell is aligned to 8 bytes");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapCell, last_seen_ns) == 0, "nerve::MapCell.last_seen_ns is at byte 0");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapCell, ix) == 8, "nerve::MapCell.ix is at byte 8");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapCell, iy) == 12, "nerve::MapCell.iy is at byte 12");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapCell, x) == 16, "nerve::MapCell.x is at byte 16");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapCell, y) == 20, "nerve::MapCell.y is at byte 20");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapCell, visits) == 24, "nerve::MapCell.visits is at byte 24");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapCell, flags) == 28, "nerve::MapCell.flags is at byte 28");
+
+#define nerve_MapCell_TYPE_NAME "nerve::MapCell"
+#define nerve_MapCell_FINGERPRINT UINT64_C(0x0a696c4b8972882d)
+#define NERVE_MAP_CELL_FINGERPRINT nerve_MapCell_FINGERPRINT
+
+/* nerve::MapHeader */
+typedef struct nerve_MapHeader {
+  uint64_t stamp_ns;
+  double cell_m;
+  double origin_x;
+  double origin_y;
+  int32_t min_ix;
+  int32_t min_iy;
+  int32_t max_ix;
+  int32_t max_iy;
+  uint32_t count;
+  uint32_t revision;
+  uint32_t max_cells;
+  uint8_t full;
+} nerve_MapHeader;
+NERVE_STATIC_ASSERT(sizeof(nerve_MapHeader) == 64, "nerve::MapHeader is 64 bytes");
+NERVE_STATIC_ASSERT(NERVE_ALIGNOF(nerve_MapHeader) == 8, "nerve::MapHeader is aligned to 8 bytes");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, stamp_ns) == 0, "nerve::MapHeader.stamp_ns is at byte 0");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, cell_m) == 8, "nerve::MapHeader.cell_m is at byte 8");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, origin_x) == 16, "nerve::MapHeader.origin_x is at byte 16");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, origin_y) == 24, "nerve::MapHeader.origin_y is at byte 24");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, min_ix) == 32, "nerve::MapHeader.min_ix is at byte 32");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, min_iy) == 36, "nerve::MapHeader.min_iy is at byte 36");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, max_ix) == 40, "nerve::MapHeader.max_ix is at byte 40");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, max_iy) == 44, "nerve::MapHeader.max_iy is at byte 44");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, count) == 48, "nerve::MapHeader.count is at byte 48");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, revision) == 52, "nerve::MapHeader.revision is at byte 52");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, max_cells) == 56, "nerve::MapHeader.max_cells is at byte 56");
+NERVE_STATIC_ASSERT(offsetof(nerve_MapHeader, full) == 60, "nerve::MapHeader.full is at byte 60");
+
+#define nerve_MapHeader_TYPE_NAME "nerve::MapHeader"
+#define nerve_MapHeader_FINGERPRINT UINT64_C(0x8db3cac041cc2647)
+#define NERVE_MAP_HEADER_FINGERPRINT nerve_MapHeader_FINGERPRINT
+
+/* nerve::PlanRequest */
+typedef struct nerve_PlanRequest {
+  double x;
+  double y;
+  uint64_t stamp_ns;
+} nerve_PlanRequest;
+NERVE_STATIC_ASSERT(sizeof(nerve_PlanRequest) == 24, "nerve::PlanRequest is 24 bytes");
+NERVE_STATIC_ASSERT(NERVE_ALIGNOF(nerve_PlanRequest) == 8, "nerve::PlanRequest is aligned to 8 bytes");
+NERVE_STATIC_ASSERT(offsetof(nerve_PlanRequest, x) == 0, "nerve::PlanRequest.x is at byte 0");
+NERVE_STATIC_ASSERT(offsetof(nerve_PlanRequest, y) == 8, "nerve::PlanRequest.y is at byte 8");
+NERVE_STATIC_ASSERT(offsetof(nerve_PlanRequest, stamp_ns) == 16, "nerve::PlanRequest.stamp_ns is at byte 16");
+
+#define nerve_PlanRequest_TYPE_NAME "nerve::PlanRequest"
+#define nerve_PlanRequest_FINGERPRINT UINT64_C(0xaabd2787a438eed7)
+#define NERVE_PLAN_REQUEST_FINGERPRINT nerve_PlanRequest_FINGERPRINT
+
+/* nerve::PathPoint */
+typedef struct nerve_PathPoint {
+  double x;
+  double y;
+} nerve_PathPoint;
+NERVE_STATIC_ASSERT(sizeof(nerve_PathPoint) == 16, "nerve::PathPoint is 16 bytes");
+NERVE_STATIC_ASSERT(NERVE_ALIGNOF(nerve_PathPoint) == 8, "nerve::PathPoint is aligned to 8 bytes");
+NERVE_STATIC_ASSERT(offsetof(nerve_PathPoint, x) == 0, "nerve::PathPoint.x is at byte 0");
+NERVE_STATIC_ASSERT(offsetof(nerve_PathPoint, y) == 8, "nerve::PathPoint.y is at byte 8");
+
+#define nerve_PathPoint_TYPE_NAME "nerve::PathPoint"
+#define nerve_PathPoint_FINGERPRINT UINT64_C(0xe08a887050b19791)
+#define NERVE_PATH_POINT_FINGERPRINT nerve_PathPoint_FINGERPRINT
+
+/* nerve::PathHeader */
+typedef struct nerve_PathHeader {
+  uint64_t stamp_ns;
+  double goal_x;
+  double goal_y;
+  double start_x;
+  double start_y;
+  double length_m;
+  uint32_t cells;
+  uint8_t status;
+} nerve_PathHeader;
+NERVE_STATIC_ASSERT(sizeof(nerve_PathHeader) == 56, "nerve::PathHeader is 56 bytes");
+NERVE_STATIC_ASSERT(NERVE_ALIGNOF(nerve_PathHeader) == 8, "nerve::PathHeader is aligned to 8 bytes");
+NERVE_STATIC_ASSERT(offsetof(nerve_PathHeader, stamp_ns) == 0, "nerve::PathHeader.stamp_ns is at byte 0");
+NERVE_STATIC_ASSERT(offsetof(nerve_PathHeader, goal_x) == 8, "nerve::PathHeader.goal_x is at byte 8");
+NERVE_STATIC_ASSERT(offsetof(nerve_PathHeader, goal_y) == 16, "nerve::PathHeader.goal_y is at byte 16");
+NERVE_STATIC_ASSERT(offsetof(nerve_PathHeader, start_x) == 24, "nerve::PathHeader.start_x is at byte 24");
+NERVE_STATIC_ASSERT(offsetof(nerve_PathHeader, start_y) == 32, "nerve::PathHeader.start_y is at byte 32");
+NERVE_STATIC_ASSERT(offsetof(nerve_PathHeader, length_m) == 40, "nerve::PathHeader.length_m is at byte 40");
+NERVE_STATIC_ASSERT(offsetof(nerve_PathHeader, cells) == 48, "nerve::PathHeader.cells is at byte 48");
+NERVE_STATIC_ASSERT(offsetof(nerve_PathHeader, status) == 52, "nerve::PathHeader.status is at byte 52");
+
+#define nerve_PathHeader_TYPE_NAME "nerve::PathHeader"
+#define nerve_PathHeader_FINGERPRINT UINT64_C(0x19ed07a8512ba1ab)
+#define NERVE_PATH_HEADER_FINGERPRINT nerve_PathHeader_FINGERPRINT
+
 /* X(T) for every built-in payload type T. */
 #define NERVE_BUILTIN_PAYLOADS(X) \
   X(nerve_Tick) \
@@ -640,6 +754,11 @@ NERVE_STATIC_ASSERT(offsetof(nerve_ArmGraspState, connected) == 31, "nerve::ArmG
   X(nerve_ViaPath) \
   X(nerve_MissionCommand) \
   X(nerve_GraspRequest) \
-  X(nerve_ArmGraspState)
+  X(nerve_ArmGraspState) \
+  X(nerve_MapCell) \
+  X(nerve_MapHeader) \
+  X(nerve_PlanRequest) \
+  X(nerve_PathPoint) \
+  X(nerve_PathHeader)
 
 #endif /* NERVE_TYPES_H */

@@ -7,6 +7,7 @@
 
 pub mod head;
 pub mod ir;
+pub mod map;
 pub mod motion;
 pub mod navigation;
 pub mod resources;
@@ -18,6 +19,10 @@ pub mod tick;
 
 pub use head::{HeadCommand, HeadState};
 pub use ir::IrSighting;
+pub use map::{
+    MAP_CELL_HERE, MAP_CELL_VISITED, MapCell, MapCells, MapHeader, PathHeader, PathPoint, PlanRequest, PlanStatus,
+    PlannedPath,
+};
 pub use motion::{GroundTruth, LinguisticCommand, LinguisticTerm, Odometry, SafetyStop, VelocityCommand};
 pub use navigation::{ArmGraspState, GraspAction, GraspMiss, GraspPhase, GraspRequest, HELD_NOTHING};
 pub use navigation::{
@@ -89,6 +94,11 @@ macro_rules! for_each_payload {
         $m!($crate::payloads::MissionCommand);
         $m!($crate::payloads::GraspRequest);
         $m!($crate::payloads::ArmGraspState);
+        $m!($crate::payloads::MapCell);
+        $m!($crate::payloads::MapHeader);
+        $m!($crate::payloads::PlanRequest);
+        $m!($crate::payloads::PathPoint);
+        $m!($crate::payloads::PathHeader);
     };
 }
 
