@@ -45,6 +45,39 @@ fn schema_named(view: &AgentView, type_name: &str) -> Vec<Schema> {
     found
 }
 
+/// The request's and answer's schemas of a call of `req_name` answered by
+/// `resp_name` that agent `view` serves: the pair whose fingerprints make
+/// the service's `fingerprint` (any pair when the service does not say).
+/// Also `nerve foxglove`'s, which calls services for its clients.
+pub(crate) fn call_schemas(
+    view: &AgentView,
+    req_name: &str,
+    resp_name: &str,
+    fingerprint: Option<u64>,
+) -> Option<(Schema, Schema)> {
+    for req in schema_named(view, req_name) {
+        for resp in schema_named(view, resp_name) {
+            if fingerprint.is_none_or(|f| f == call_fingerprint(req.fingerprint(), resp.fingerprint())) {
+                return Some((req, resp));
+            }
+        }
+    }
+    None
+}
+
+/// A request's bytes: `json` laid out strictly by `req`'s schema, a
+/// top-level `stamp_ns` the JSON leaves out set to now.
+pub(crate) fn request_bytes(req: &Schema, json: &serde_json::Value) -> Result<Vec<u8>> {
+    let stamp_at = crate::cmd::publish::auto_stamp(req, json);
+    let mut bytes = encode_json(req, json, &|p| Some(p) == stamp_at.map(|_| "stamp_ns"))?;
+    if let Some(at) = stamp_at
+        && let Some(slot) = bytes.get_mut(at..at.saturating_add(8))
+    {
+        slot.copy_from_slice(&now_ns().to_le_bytes());
+    }
+    Ok(bytes)
+}
+
 pub fn call(world: &World, a: CallArgs) -> Result<ExitCode> {
     let port: PortRef = a.service.parse().context("SERVICE must be AGENT/SERVICE")?;
     let timeout = parse_duration(&a.timeout).map_err(|e| anyhow!("--timeout {:?}: {e}", a.timeout))?;
@@ -64,30 +97,13 @@ pub fn call(world: &World, a: CallArgs) -> Result<ExitCode> {
         .map_err(|e| anyhow!("agent {agent:?} offers no service {:?} that can be called: {e}", port.port))?;
     let (req_name, resp_name) = split_call_type_name(caller.type_name())
         .ok_or_else(|| anyhow!("{port} carries {}, not a call", caller.type_name()))?;
-    // the request's and answer's layouts: the pair whose fingerprints make the service's
-    let mut pair = None;
-    for req in schema_named(view, req_name) {
-        for resp in schema_named(view, resp_name) {
-            let fp = call_fingerprint(req.fingerprint(), resp.fingerprint());
-            if pair.is_none() && caller.fingerprint().is_none_or(|f| f == fp) {
-                pair = Some((req.clone(), resp));
-            }
-        }
-    }
-    let (req, resp) = pair.ok_or_else(|| {
+    let (req, resp) = call_schemas(view, req_name, resp_name, caller.fingerprint()).ok_or_else(|| {
         anyhow!(
             "{port} is a {}, whose layouts neither this build nor the agent's registration describes; rebuild nerve or the agent",
             caller.type_name()
         )
     })?;
-    let stamp_at = crate::cmd::publish::auto_stamp(&req, &json);
-    let mut bytes = encode_json(&req, &json, &|p| Some(p) == stamp_at.map(|_| "stamp_ns"))
-        .with_context(|| format!("{port} takes a {}", req.type_name))?;
-    if let Some(at) = stamp_at
-        && let Some(slot) = bytes.get_mut(at..at + 8)
-    {
-        slot.copy_from_slice(&now_ns().to_le_bytes());
-    }
+    let bytes = request_bytes(&req, &json).with_context(|| format!("{port} takes a {}", req.type_name))?;
     let answer = caller.call(&bytes, timeout).with_context(|| format!("calling {port}"))?;
     let value = resp.decode(&answer).with_context(|| format!("the answer of {port} as a {}", resp.type_name))?;
     println!("{}", serde_json::to_string_pretty(&value)?);
