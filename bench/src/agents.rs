@@ -28,22 +28,22 @@ use std::time::Duration;
 /// Arguments after `--` of the benchmark agents.
 #[derive(Debug, Parser)]
 #[command(no_binary_name = true)]
-struct BenchAgentArgs {
+pub(crate) struct BenchAgentArgs {
     /// payload size in bytes (8, 4096, 230400 or 6220800)
     #[arg(long, default_value_t = 8)]
-    size: usize,
+    pub(crate) size: usize,
     /// ping: round trips per batch
     #[arg(long, default_value_t = 1000)]
-    count: usize,
+    pub(crate) count: usize,
     /// ping: directory for batch files; jitter: the output file
     #[arg(long)]
-    out: Option<PathBuf>,
+    pub(crate) out: Option<PathBuf>,
     /// jitter: cycles to record
     #[arg(long, default_value_t = 1000)]
     cycles: usize,
 }
 
-fn agent_args(setup: &Setup) -> Result<BenchAgentArgs, AgentError> {
+pub(crate) fn agent_args(setup: &Setup) -> Result<BenchAgentArgs, AgentError> {
     BenchAgentArgs::try_parse_from(setup.raw_args()).map_err(|e| AgentError::Config(e.to_string()))
 }
 

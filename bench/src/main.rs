@@ -44,6 +44,7 @@ mod idle;
 mod images;
 mod jitter;
 mod machine;
+mod messages;
 mod observed;
 mod payloads;
 mod pipeline;
@@ -253,6 +254,17 @@ enum Scenario {
         #[arg(long)]
         client: Option<PathBuf>,
     },
+    /// Issue 42's messages: a sequence sample's hop beside a fixed payload's (8 B to 8 MB), a call's round trip.
+    Messages {
+        #[command(flatten)]
+        common: Common,
+        /// Sample sizes in bytes (8 to 8388608).
+        #[arg(long, value_delimiter = ',', default_values_t = messages::SIZES)]
+        payloads: Vec<usize>,
+        /// Measured rounds (each row one batch per round and size, interleaved).
+        #[arg(long)]
+        rounds: Option<usize>,
+    },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
         #[command(flatten)]
@@ -288,6 +300,9 @@ fn main() -> ExitCode {
             "__agent-img-writer" | "__agent-img-reader" => return images::run_agent(&first, rest),
             "__img-iox2-reader" => return images::iox2_reader_main(rest),
             "__img-uds-reader" => return images::uds_reader_main(rest),
+            "__agent-seqping" | "__agent-seqpong" | "__agent-callping" | "__agent-callserve" => {
+                return messages::run_agent(&first, rest);
+            }
             _ => {}
         }
     }
@@ -498,6 +513,17 @@ fn run(cli: Cli) -> Result<()> {
             };
             let report = removing_work(&opts.work, || bridge::run(&opts))?;
             publish(&common, "bridge", &report, report.seconds, |_| Ok(vec![]), bridge::print_tables)?;
+        }
+        Scenario::Messages { common, payloads, rounds } => {
+            let opts = messages::MessagesOpts {
+                quick: common.quick,
+                sizes: payloads,
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 5 }).max(1),
+                verbose: common.verbose,
+                work: messages::work_dir(&common.out),
+            };
+            let report = removing_work(&opts.work, || messages::run(&opts))?;
+            publish(&common, "messages", &report, report.seconds, |_| Ok(vec![]), messages::print_tables)?;
         }
         Scenario::Jitter { common, rates, seconds, rounds } => {
             let opts = jitter::JitterOpts {

@@ -1,6 +1,7 @@
 //! The payloads the benchmarks send: 8 bytes, one 320x240 RGB frame
 //! (230,400 B) and one 1920x1080 RGB frame (6,220,800 B) for `hop`, and a
-//! 4 KB message beside 8 B and 230 KB for `bridge`.
+//! 4 KB message beside 8 B and 230 KB for `bridge`, and a 1 MiB message
+//! for `messages` (beside a sequence sample of the same size).
 //!
 //! Each is `#[repr(C)]` with `#[derive(Payload)]` and a stable
 //! `nerve::bench::*` type name, so the same type
@@ -106,6 +107,13 @@ macro_rules! frame {
 
 frame!(Frame230k, "nerve::bench::Frame230k", 320 * 240 * 3, "230 KB", "One 320x240 RGB frame (230,400 B).");
 frame!(Frame4k, "nerve::bench::Frame4k", 4096, "4 KB", "A 4 KB message (4,096 B), between a command and a frame.");
+frame!(
+    Frame1M,
+    "nerve::bench::Frame1M",
+    1_048_576,
+    "1 MB",
+    "A 1 MiB message (1,048,576 B): the fixed payload beside a sequence sample of 1 MiB."
+);
 frame!(Frame1080p, "nerve::bench::Frame1080p", 1920 * 1080 * 3, "6.2 MB", "One 1920x1080 RGB frame (6,220,800 B).");
 
 /// The payload sizes the hop benchmark knows, in bytes.
@@ -117,6 +125,7 @@ pub fn label(size: usize) -> &'static str {
         8 => Small8::LABEL,
         4096 => Frame4k::LABEL,
         230_400 => Frame230k::LABEL,
+        1_048_576 => Frame1M::LABEL,
         6_220_800 => Frame1080p::LABEL,
         _ => "?",
     }
@@ -139,6 +148,10 @@ macro_rules! with_payload {
                 type $t = $crate::payloads::Frame230k;
                 $body
             }
+            1_048_576 => {
+                type $t = $crate::payloads::Frame1M;
+                $body
+            }
             6_220_800 => {
                 type $t = $crate::payloads::Frame1080p;
                 $body
@@ -158,6 +171,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<Frame4k>(), 4096);
         assert_eq!(std::mem::size_of::<Frame230k>(), 230_400);
         assert_eq!(std::mem::size_of::<Frame1080p>(), 6_220_800);
+        assert_eq!(std::mem::size_of::<Frame1M>(), 1_048_576);
         assert_eq!(Frame230k::stable_type_name(), "nerve::bench::Frame230k");
         assert_eq!(Small8::stable_type_name(), "nerve::bench::Small8");
     }

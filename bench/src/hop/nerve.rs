@@ -183,7 +183,7 @@ pub(crate) fn spawn_bench_agent(
     if let Some(p) = priority {
         cmd.args(["--priority", &p.to_string()]);
     }
-    if role == "ping" || poll {
+    if role.ends_with("ping") || poll {
         cmd.arg("--suspended");
     }
     if poll {
