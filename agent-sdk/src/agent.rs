@@ -288,7 +288,7 @@ impl Setup {
         self.check_port(port)?;
         let service = self.world.robot().port_service(self.name.as_str(), port);
         let (server, inner) = crate::port::Server::bind(&self.binding, port, &service)?;
-        self.calls.add_service::<Req, Resp>(port, &mut self.schemas);
+        self.calls.add_service::<Req, crate::port::call::Fixed<Resp>>(port, &mut self.schemas);
         self.inputs.push(inner);
         Ok(server)
     }
@@ -311,7 +311,46 @@ impl Setup {
     ) -> Result<crate::port::Client<Req, Resp>, AgentError> {
         self.check_port(port)?;
         let (client, inner) = crate::port::Client::bind(&self.binding, port, options)?;
-        self.calls.add_client::<Req, Resp>(port, &mut self.schemas);
+        self.calls.add_client::<Req, crate::port::call::Fixed<Resp>>(port, &mut self.schemas);
+        self.inputs.push(inner);
+        Ok(client)
+    }
+
+    /// Declares service `port` answered with sequences: requests `Req`,
+    /// answers of header `H` and at most `max_len` elements `T`
+    /// ([`crate::port::call_seq`]).
+    pub fn serve_seq<Req: Payload, T: SeqPart, H: SeqPart>(
+        &mut self,
+        port: &str,
+        max_len: usize,
+    ) -> Result<crate::port::SeqServer<Req, T, H>, AgentError> {
+        self.check_port(port)?;
+        let service = self.world.robot().port_service(self.name.as_str(), port);
+        let (server, inner) = crate::port::SeqServer::bind(&self.binding, port, &service, max_len)?;
+        self.calls.add_service::<Req, crate::port::call_seq::SeqAnswer<T, H>>(port, &mut self.schemas);
+        self.inputs.push(inner);
+        Ok(server)
+    }
+
+    /// Declares client `port` of a service answered with sequences (see
+    /// [`Setup::serve_seq`]), with the default timeout and bound of calls
+    /// in flight.
+    pub fn client_seq<Req: Payload, T: SeqPart, H: SeqPart>(
+        &mut self,
+        port: &str,
+    ) -> Result<crate::port::SeqClient<Req, T, H>, AgentError> {
+        self.client_seq_with(port, crate::port::CallOptions::default())
+    }
+
+    /// [`Setup::client_seq`] with its own timeout and bound of calls in flight.
+    pub fn client_seq_with<Req: Payload, T: SeqPart, H: SeqPart>(
+        &mut self,
+        port: &str,
+        options: crate::port::CallOptions,
+    ) -> Result<crate::port::SeqClient<Req, T, H>, AgentError> {
+        self.check_port(port)?;
+        let (client, inner) = crate::port::SeqClient::bind(&self.binding, port, options)?;
+        self.calls.add_client::<Req, crate::port::call_seq::SeqAnswer<T, H>>(port, &mut self.schemas);
         self.inputs.push(inner);
         Ok(client)
     }

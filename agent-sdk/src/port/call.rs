@@ -21,30 +21,33 @@
 //! Both sides take part in the task's wake-ups as inputs do: they are in
 //! the agent's input list (so [`crate::Context::woken_by`] names them), but
 //! are registered with the router as services and clients, never as inputs.
+//!
+//! One machinery carries both kinds of answer ([`Answer`]): a fixed-size
+//! `Resp` ([`Fixed`]: [`Server`], [`Client`]) and a sequence of any length
+//! (`call_seq`: [`super::SeqServer`], [`super::SeqClient`]). This file
+//! holds what they share (errors, settings, the services); the server is
+//! in `call_server`, the client in `call_client`, `nerve call`'s
+//! byte-level caller in `call_raw`.
 
-use super::bytes::{Binding, DynInput};
-use super::error::PortError;
-use super::memory::SampleBuf;
-use super::service::{MAX_SUBSCRIBERS, lock, port_attributes_of};
-use crate::clock::now_ns;
+use super::service::{MAX_SUBSCRIBERS, port_attributes_of};
 use crate::world::Ipc;
 use iceoryx2::pending_response::PendingResponse;
-use iceoryx2::port::client::Client as IoxClient;
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::server::Server as IoxServer;
 use iceoryx2::prelude::*;
-use iceoryx2::service::marker::{CustomHeaderMarker, CustomPayloadMarker};
+use iceoryx2::response::Response;
+use iceoryx2::service::attribute::AttributeVerifier;
+use iceoryx2::service::builder::request_response::RequestResponseOpenOrCreateError;
+use iceoryx2::service::port_factory::server::ServerCreateError;
 use iceoryx2::service::port_factory::{event, request_response};
 use shm_schemas::Payload;
 use shm_schemas::control::agent_to_router::PortSpec;
 pub use shm_schemas::control::call::call_spec;
-use shm_schemas::stats::InputStats;
-use std::collections::VecDeque;
 use std::marker::PhantomData;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
+
+pub use super::call_client::{CallClient, Client};
+pub use super::call_raw::RawCaller;
+pub use super::call_server::{CallServer, Server};
 
 /// The most calls one client may have in flight (the service is made for
 /// this many per client; [`CallOptions::max_in_flight`] may be lower).
@@ -61,16 +64,18 @@ pub const ANSWERED_SUFFIX: &str = "/answered";
 macro_rules! call_settings {
     ($builder:expr) => {
         $builder
-            .max_active_requests_per_client(MAX_IN_FLIGHT)
-            .max_clients(MAX_CLIENTS)
+            .max_active_requests_per_client($crate::port::call::MAX_IN_FLIGHT)
+            .max_clients($crate::port::call::MAX_CLIENTS)
             // a restarted server's port is made while its dead predecessor's may still count
             .max_servers(2)
-            .max_nodes(MAX_CLIENTS + 4)
+            .max_nodes($crate::port::call::MAX_CLIENTS + 4)
             .max_response_buffer_size(2)
             .enable_safe_overflow_for_requests(true)
             .enable_safe_overflow_for_responses(true)
     };
 }
+
+pub(crate) use call_settings;
 
 /// Why a call port could not be made, or a call could not be sent or
 /// answered. Each variant says which client or service, and what to do.
@@ -162,6 +167,60 @@ pub enum CallError {
         /// what went wrong, and what to do
         detail: String,
     },
+    /// A server's answer was longer than its service's declared maximum:
+    /// nothing was sent but a refusal, which its client takes as
+    /// [`CallError::RefusedTooLong`].
+    #[error(
+        "service {service}: an answer of {len} elements is longer than the {max} the service was declared with \
+         (`serve_seq(port, max_len)`); the client was told so and got no answer; declare a larger max_len or \
+         answer with fewer elements"
+    )]
+    AnswerTooLong {
+        /// the service
+        service: String,
+        /// the answer's length
+        len: usize,
+        /// the declared maximum
+        max: usize,
+    },
+    /// The server refused to answer: its answer was longer than the
+    /// service's declared maximum ([`CallError::AnswerTooLong`] on its side).
+    #[error(
+        "client {client}: the server of {service} refused its answer of {len} elements, longer than the {max} it \
+         was declared with; ask for less, or have the server declare a larger max_len"
+    )]
+    RefusedTooLong {
+        /// the client's name
+        client: String,
+        /// the service
+        service: String,
+        /// the refused answer's length
+        len: u64,
+        /// the declared maximum
+        max: u64,
+    },
+    /// iceoryx2 could not loan the memory of an answer.
+    #[error("service {service}: cannot loan the memory of an answer of {len} elements: {source:?}")]
+    Loan {
+        /// the service
+        service: String,
+        /// the answer's length
+        len: usize,
+        /// what iceoryx2 said
+        #[source]
+        source: iceoryx2::port::LoanError,
+    },
+    /// An answer that is not what its type says (a sequence answer whose
+    /// bytes are not a header and whole elements): a peer of another build.
+    #[error("client {client}: a malformed answer from {service}: {detail}; rebuild the older side and restart it")]
+    Malformed {
+        /// the client's name
+        client: String,
+        /// the service
+        service: String,
+        /// what is wrong
+        detail: String,
+    },
     /// Calls are not carried by this binding (the test harness).
     #[error("call port {port}: calls are not yet carried in the test harness; test calls with real agents")]
     NotInHarness {
@@ -178,7 +237,7 @@ impl CallError {
     }
 }
 
-fn open_err(service: &str, detail: impl std::fmt::Debug) -> CallError {
+pub(crate) fn open_err(service: &str, detail: impl std::fmt::Debug) -> CallError {
     CallError::Open { service: service.into(), detail: format!("{detail:?}") }
 }
 
@@ -207,14 +266,119 @@ impl Default for CallOptions {
     }
 }
 
-type Factory<Req, Resp> = request_response::PortFactory<Ipc, Req, (), Resp, ()>;
+/// The iceoryx2 service of a call of `Req` answered as `A` says.
+pub(crate) type Factory<Req, A> =
+    request_response::PortFactory<Ipc, Req, (), <A as Answer>::Payload, <A as Answer>::Header>;
+/// A server port of a call of `Req` answered as `A` says.
+pub(crate) type ServerPort<Req, A> = IoxServer<Ipc, Req, (), <A as Answer>::Payload, <A as Answer>::Header>;
 
-fn service_name(service: &str) -> Result<ServiceName, CallError> {
+/// A call in flight, as its client holds it.
+pub(crate) type Pending<Req, A> = PendingResponse<Ipc, Req, (), <A as Answer>::Payload, <A as Answer>::Header>;
+
+/// What a [`Pending`] call's `receive` gave: none yet, an answer made a
+/// value by `value`, or iceoryx2's error.
+pub(crate) fn received<P: ?Sized + std::fmt::Debug + IceoryxSend, H: std::fmt::Debug + ZeroCopySend, V>(
+    got: Result<Option<Response<Ipc, P, H>>, iceoryx2::port::ReceiveError>,
+    client: &str,
+    service: &str,
+    value: impl FnOnce(&Response<Ipc, P, H>) -> Result<V, CallError>,
+) -> Option<Result<V, CallError>> {
+    match got {
+        Ok(Some(r)) => Some(value(&r)),
+        Ok(None) => None,
+        Err(source) => Some(Err(CallError::Receive { port: client.into(), service: service.into(), source })),
+    }
+}
+
+/// How a call's answer travels: a fixed-size payload ([`Fixed`]) or a
+/// sequence (`call_seq::SeqAnswer`). It names the iceoryx2 response
+/// payload and user header, types the port for the router, and turns a
+/// received response into what the client's `take` hands out. Implemented
+/// by nerve only.
+pub trait Answer: Send + Sync + 'static {
+    /// The iceoryx2 response payload.
+    type Payload: ?Sized + std::fmt::Debug + IceoryxSend + 'static;
+    /// The iceoryx2 response user header.
+    type Header: std::fmt::Debug + ZeroCopySend + Default + 'static;
+    /// What the client's `take` hands out for an answer.
+    type Value: Send + 'static;
+    /// The spec of call port `port` of requests `Req` answered this way.
+    fn spec<Req: Payload>(port: &str) -> PortSpec;
+    /// Adds the schemas of the answer to an agent's registration.
+    fn add_schemas(schemas: &mut Vec<shm_schemas::Schema>);
+    /// The size and alignment of the answer (its fixed part).
+    fn layout() -> (usize, usize);
+    /// Opens (`create`: or creates) the call service `name` with `attributes`.
+    fn open<Req: Payload>(
+        node: &Node<Ipc>,
+        name: &ServiceName,
+        attributes: &AttributeVerifier,
+        create: bool,
+    ) -> Result<Factory<Req, Self>, RequestResponseOpenOrCreateError>;
+    /// A server port of `factory`.
+    fn server<Req: Payload>(factory: &Factory<Req, Self>) -> Result<ServerPort<Req, Self>, ServerCreateError>;
+    /// The answer `pending` received, if any: its value for client
+    /// `client` of `service`, or why it is none.
+    fn receive<Req: Payload>(
+        pending: &Pending<Req, Self>,
+        client: &str,
+        service: &str,
+    ) -> Option<Result<Self::Value, CallError>>;
+}
+
+/// A fixed-size answer `Resp`: the call of [`Server`] and [`Client`].
+pub struct Fixed<Resp>(PhantomData<fn() -> Resp>);
+
+impl<Resp: Payload> std::fmt::Debug for Fixed<Resp> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Fixed<{}>", Resp::stable_type_name())
+    }
+}
+
+impl<Resp: Payload> Answer for Fixed<Resp> {
+    type Payload = Resp;
+    type Header = ();
+    type Value = Resp;
+    fn spec<Req: Payload>(port: &str) -> PortSpec {
+        call_spec::<Req, Resp>(port)
+    }
+    fn add_schemas(schemas: &mut Vec<shm_schemas::Schema>) {
+        shm_schemas::control::agent_to_router::add_schema(schemas, Resp::schema());
+    }
+    fn layout() -> (usize, usize) {
+        (std::mem::size_of::<Resp>(), std::mem::align_of::<Resp>())
+    }
+    fn open<Req: Payload>(
+        node: &Node<Ipc>,
+        name: &ServiceName,
+        attributes: &AttributeVerifier,
+        create: bool,
+    ) -> Result<Factory<Req, Self>, RequestResponseOpenOrCreateError> {
+        let builder = call_settings!(node.service_builder(name).request_response::<Req, Resp>());
+        if create {
+            builder.open_or_create_with_attributes(attributes)
+        } else {
+            builder.open_with_attributes(attributes).map_err(RequestResponseOpenOrCreateError::RequestResponseOpenError)
+        }
+    }
+    fn server<Req: Payload>(factory: &Factory<Req, Self>) -> Result<ServerPort<Req, Self>, ServerCreateError> {
+        factory.server_builder().create()
+    }
+    fn receive<Req: Payload>(
+        pending: &Pending<Req, Self>,
+        client: &str,
+        service: &str,
+    ) -> Option<Result<Resp, CallError>> {
+        received(pending.receive(), client, service, |r| Ok(*r.payload()))
+    }
+}
+
+pub(crate) fn service_name(service: &str) -> Result<ServiceName, CallError> {
     service.try_into().map_err(|e| open_err(service, e))
 }
 
 /// Opens (`create` true: or creates) the event service `name`.
-fn event_service(node: &Node<Ipc>, name: &str, create: bool) -> Result<event::PortFactory<Ipc>, CallError> {
+pub(crate) fn event_service(node: &Node<Ipc>, name: &str, create: bool) -> Result<event::PortFactory<Ipc>, CallError> {
     let sn = service_name(name)?;
     let b = node
         .service_builder(&sn)
@@ -225,28 +389,22 @@ fn event_service(node: &Node<Ipc>, name: &str, create: bool) -> Result<event::Po
     if create { b.open_or_create().map_err(|e| open_err(name, e)) } else { b.open().map_err(|e| open_err(name, e)) }
 }
 
-/// The call service `service` of `Req` answered by `Resp`, with the
+/// The call service `service` of `Req` answered as `A` says, with the
 /// attributes of its call type; created only by the server (`create`).
-fn call_service<Req: Payload, Resp: Payload>(
+pub(crate) fn call_service<Req: Payload, A: Answer>(
     node: &Node<Ipc>,
     service: &str,
     create: bool,
-) -> Result<Factory<Req, Resp>, CallError> {
+) -> Result<Factory<Req, A>, CallError> {
     use iceoryx2::service::builder::request_response::{
         RequestResponseOpenError as Open, RequestResponseOpenOrCreateError as OpenOrCreate,
     };
-    let spec = call_spec::<Req, Resp>("");
+    let spec = A::spec::<Req>("");
     let attributes =
         port_attributes_of(service, &spec.type_name, spec.fingerprint).map_err(|e| open_err(service, e))?;
     let name = service_name(service)?;
     for _attempt in 0..50 {
-        let builder = call_settings!(node.service_builder(&name).request_response::<Req, Resp>());
-        let result = if create {
-            builder.open_or_create_with_attributes(&attributes)
-        } else {
-            builder.open_with_attributes(&attributes).map_err(OpenOrCreate::RequestResponseOpenError)
-        };
-        match result {
+        match A::open::<Req>(node, &name, &attributes, create) {
             Ok(f) => return Ok(f),
             Err(OpenOrCreate::RequestResponseOpenError(Open::DoesNotExist)) => {
                 return Err(CallError::Open {
@@ -275,458 +433,6 @@ fn call_service<Req: Payload, Resp: Payload>(
     Err(CallError::Open { service: service.into(), detail: "its last owner is still removing it; try again".into() })
 }
 
-// ---------------------------------------------------------------- server
-
-/// A service an agent answers: requests `Req`, answers `Resp`.
-pub struct Server<Req: Payload, Resp: Payload> {
-    side: Arc<ServerSide<Req, Resp>>,
-}
-
-impl<Req: Payload, Resp: Payload> std::fmt::Debug for Server<Req, Resp> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Server").field("service", &self.side.service).field("type", &self.side.spec.type_name).finish()
-    }
-}
-
-struct ServerLive<Req: Payload, Resp: Payload> {
-    port: Mutex<IoxServer<Ipc, Req, (), Resp, ()>>,
-    listener: Arc<Listener<Ipc>>,
-    answered: Mutex<Notifier<Ipc>>,
-    _factories: (Factory<Req, Resp>, event::PortFactory<Ipc>, event::PortFactory<Ipc>),
-}
-
-pub(crate) struct ServerSide<Req: Payload, Resp: Payload> {
-    spec: PortSpec,
-    service: String,
-    live: Option<ServerLive<Req, Resp>>,
-    answered: AtomicU64,
-}
-
-impl<Req: Payload, Resp: Payload> Server<Req, Resp> {
-    /// Service `port` (iceoryx2 service `service`), bound to `binding`.
-    pub(crate) fn bind(binding: &Binding, port: &str, service: &str) -> Result<(Self, Arc<dyn DynInput>), CallError> {
-        let live = match binding {
-            Binding::Nothing => None,
-            Binding::Memory(_) => return Err(CallError::NotInHarness { port: port.into() }),
-            Binding::Shm(node) => {
-                let factory = crate::world::retry_after_cleanup(
-                    node.config(),
-                    "serve",
-                    |e: &CallError| matches!(e, CallError::Open { .. }),
-                    || call_service::<Req, Resp>(node, service, true),
-                )?;
-                let server = crate::world::retry_after_cleanup(
-                    node.config(),
-                    "serve",
-                    |_| true,
-                    || factory.server_builder().create(),
-                )
-                .map_err(|e| open_err(service, e))?;
-                let requests = event_service(node, service, true)?;
-                let listener = requests.listener_builder().create().map_err(|e| open_err(service, e))?;
-                let answered_name = format!("{service}{ANSWERED_SUFFIX}");
-                let answered = event_service(node, &answered_name, true)?;
-                let notifier = answered.notifier_builder().create().map_err(|e| open_err(&answered_name, e))?;
-                Some(ServerLive {
-                    port: Mutex::new(server),
-                    listener: Arc::new(listener),
-                    answered: Mutex::new(notifier),
-                    _factories: (factory, requests, answered),
-                })
-            }
-        };
-        let side = Arc::new(ServerSide {
-            spec: call_spec::<Req, Resp>(port),
-            service: service.into(),
-            live,
-            answered: AtomicU64::new(0),
-        });
-        Ok((Server { side: side.clone() }, side))
-    }
-
-    /// Answers each waiting request with `answer` (at most `max` of them:
-    /// what arrives meanwhile is left for the next step, whose wake-up is
-    /// pending); returns how many were answered.
-    pub fn serve_up_to(&self, max: usize, mut answer: impl FnMut(&Req) -> Resp) -> Result<usize, CallError> {
-        let Some(live) = &self.side.live else { return Ok(0) };
-        let mut n = 0;
-        {
-            let port = lock(&live.port);
-            while n < max {
-                let request = match port.receive() {
-                    Ok(Some(r)) => r,
-                    Ok(None) => break,
-                    Err(source) => {
-                        return Err(CallError::Receive {
-                            port: self.side.spec.name.clone(),
-                            service: self.side.service.clone(),
-                            source,
-                        });
-                    }
-                };
-                let response = answer(request.payload());
-                if let Err(e) = request.send_copy(response) {
-                    // the client went away: nobody waits for this answer
-                    tracing::debug!(service = %self.side.service, "an answer found no client: {e:?}");
-                }
-                n += 1;
-            }
-        }
-        if n > 0 {
-            self.side.answered.fetch_add(n as u64, Ordering::Relaxed);
-            if let Err(e) = lock(&live.answered).notify() {
-                tracing::warn!(service = %self.side.service, "cannot wake the clients: {e:?}");
-            }
-        }
-        Ok(n)
-    }
-
-    /// Answers every waiting request with `answer` (at most
-    /// [`MAX_IN_FLIGHT`] per step); returns how many were answered.
-    pub fn serve(&self, answer: impl FnMut(&Req) -> Resp) -> Result<usize, CallError> {
-        self.serve_up_to(MAX_IN_FLIGHT, answer)
-    }
-
-    /// How many requests it answered so far.
-    pub fn answered(&self) -> u64 {
-        self.side.answered.load(Ordering::Relaxed)
-    }
-
-    /// The iceoryx2 service name.
-    pub fn service(&self) -> &str {
-        &self.side.service
-    }
-}
-
-fn not_an_input(port: &str) -> PortError {
-    PortError::Ipc {
-        service: port.into(),
-        detail: "a call port is wired to a service, never to an output: \
-                 `nerve connect CLIENT_AGENT/CLIENT SERVER_AGENT/SERVICE`"
-            .into(),
-    }
-}
-
-impl<Req: Payload, Resp: Payload> DynInput for ServerSide<Req, Resp> {
-    fn name(&self) -> &str {
-        &self.spec.name
-    }
-    fn type_name(&self) -> &str {
-        &self.spec.type_name
-    }
-    fn spec(&self) -> PortSpec {
-        self.spec.clone()
-    }
-    fn payload_layout(&self) -> (usize, usize) {
-        (std::mem::size_of::<Req>(), std::mem::align_of::<Req>())
-    }
-    fn connect(
-        &self,
-        _node: &Node<Ipc>,
-        _robot: &shm_schemas::RobotName,
-        _from_agent: &str,
-        _from_port: &str,
-    ) -> Result<bool, PortError> {
-        Err(not_an_input(&self.spec.name))
-    }
-    fn disconnect(&self, _from_agent: &str, _from_port: &str) -> bool {
-        false
-    }
-    fn listeners(&self) -> Vec<Arc<Listener<Ipc>>> {
-        self.live.iter().map(|l| l.listener.clone()).collect()
-    }
-    fn stats(&self, _now: u64) -> Vec<InputStats> {
-        Vec::new()
-    }
-    fn has_queued(&self) -> bool {
-        false
-    }
-    fn queue(&self, _sender: &str, _port: &str, _sample: SampleBuf, _stamp_ns: u64) -> Result<(), PortError> {
-        Err(not_an_input(&self.spec.name))
-    }
-}
-
-// ---------------------------------------------------------------- client
-
-/// A client: calls a service of requests `Req` answered by `Resp`, once
-/// the router wired it to one.
-pub struct Client<Req: Payload, Resp: Payload> {
-    side: Arc<ClientSide<Req, Resp>>,
-}
-
-impl<Req: Payload, Resp: Payload> std::fmt::Debug for Client<Req, Resp> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Client").field("name", &self.side.spec.name).field("type", &self.side.spec.type_name).finish()
-    }
-}
-
-/// The service a client is wired to.
-struct Target<Req: Payload, Resp: Payload> {
-    agent: String,
-    port: String,
-    service: String,
-    client: IoxClient<Ipc, Req, (), Resp, ()>,
-    requests: Notifier<Ipc>,
-    listener: Arc<Listener<Ipc>>,
-    _factories: (Factory<Req, Resp>, event::PortFactory<Ipc>, event::PortFactory<Ipc>),
-}
-
-struct InFlight<Req: Payload, Resp: Payload> {
-    id: CallId,
-    deadline_ns: u64,
-    service: String,
-    pending: PendingResponse<Ipc, Req, (), Resp, ()>,
-}
-
-struct ClientState<Req: Payload, Resp: Payload> {
-    target: Option<Target<Req, Resp>>,
-    in_flight: Vec<InFlight<Req, Resp>>,
-    done: VecDeque<(CallId, Result<Resp, CallError>)>,
-    next_id: u64,
-    answered: u64,
-    last_answer_ns: Option<u64>,
-}
-
-pub(crate) struct ClientSide<Req: Payload, Resp: Payload> {
-    spec: PortSpec,
-    options: CallOptions,
-    state: Mutex<ClientState<Req, Resp>>,
-    _types: PhantomData<fn(Req) -> Resp>,
-}
-
-impl<Req: Payload, Resp: Payload> Client<Req, Resp> {
-    /// Client `port` with `options`, bound to `binding` (it is wired later).
-    pub(crate) fn bind(
-        binding: &Binding,
-        port: &str,
-        options: CallOptions,
-    ) -> Result<(Self, Arc<dyn DynInput>), CallError> {
-        if matches!(binding, Binding::Memory(_)) {
-            return Err(CallError::NotInHarness { port: port.into() });
-        }
-        let options =
-            CallOptions { max_in_flight: options.max_in_flight.clamp(1, MAX_IN_FLIGHT), timeout: options.timeout };
-        let side = Arc::new(ClientSide {
-            spec: call_spec::<Req, Resp>(port),
-            options,
-            state: Mutex::new(ClientState {
-                target: None,
-                in_flight: Vec::new(),
-                done: VecDeque::new(),
-                next_id: 1,
-                answered: 0,
-                last_answer_ns: None,
-            }),
-            _types: PhantomData,
-        });
-        Ok((Client { side: side.clone() }, side))
-    }
-
-    /// Sends `request` to the service the client is wired to and returns
-    /// at once; the answer (or why there is none) comes from
-    /// [`Client::take`]. Refused, with nothing sent, when the client is not
-    /// wired, when no server answers the service, or past the bound of
-    /// calls in flight.
-    pub fn call(&self, request: &Req) -> Result<CallId, CallError> {
-        let name = &self.side.spec.name;
-        let mut st = lock(&self.side.state);
-        let st = &mut *st;
-        let Some(t) = &st.target else { return Err(CallError::NotWired { client: name.clone() }) };
-        if st.in_flight.len() >= self.side.options.max_in_flight {
-            return Err(CallError::TooManyInFlight { client: name.clone(), max: self.side.options.max_in_flight });
-        }
-        let pending = t.client.send_copy(*request).map_err(|source| CallError::Send {
-            client: name.clone(),
-            service: t.service.clone(),
-            source,
-        })?;
-        if pending.number_of_server_connections() == 0 {
-            return Err(CallError::NoServer { client: name.clone(), service: t.service.clone() });
-        }
-        if let Err(e) = t.requests.notify() {
-            tracing::warn!(client = %name, service = %t.service, "cannot wake the server: {e:?}");
-        }
-        let id = CallId(st.next_id);
-        st.next_id = st.next_id.saturating_add(1);
-        let deadline_ns = now_ns().saturating_add(crate::clock::nanos(self.side.options.timeout));
-        st.in_flight.push(InFlight { id, deadline_ns, service: t.service.clone(), pending });
-        Ok(id)
-    }
-
-    /// The next finished call, oldest first: its answer, or why there is
-    /// none (a timeout, the server gone mid-call, the client unwired).
-    /// `None` while no call has finished. Never blocks.
-    pub fn take(&self) -> Option<(CallId, Result<Resp, CallError>)> {
-        let mut st = lock(&self.side.state);
-        self.side.settle(&mut st, now_ns());
-        st.done.pop_front()
-    }
-
-    /// How many calls are in flight (sent, not yet finished).
-    pub fn in_flight(&self) -> usize {
-        lock(&self.side.state).in_flight.len()
-    }
-
-    /// Whether the client is wired to a service now.
-    pub fn is_wired(&self) -> bool {
-        lock(&self.side.state).target.is_some()
-    }
-
-    /// The client's settings.
-    pub fn options(&self) -> CallOptions {
-        self.side.options
-    }
-}
-
-impl<Req: Payload, Resp: Payload> ClientSide<Req, Resp> {
-    /// Moves every call that finished (answered, timed out, its server
-    /// gone) from in flight to done.
-    fn settle(&self, st: &mut ClientState<Req, Resp>, now: u64) {
-        let name = &self.spec.name;
-        let mut i = 0;
-        while i < st.in_flight.len() {
-            let f = &st.in_flight[i];
-            let answer = |f: &InFlight<Req, Resp>| match f.pending.receive() {
-                Ok(Some(r)) => Some(Ok(*r.payload())),
-                Ok(None) => None,
-                Err(source) => Some(Err(CallError::Receive { port: name.clone(), service: f.service.clone(), source })),
-            };
-            let outcome = match answer(f) {
-                Some(o) => Some(o),
-                // gone: look once more, the answer may have come just before the server let go
-                None if !f.pending.is_connected() => Some(answer(f).unwrap_or_else(|| {
-                    Err(CallError::ServerGone { client: name.clone(), service: f.service.clone() })
-                })),
-                None if now >= f.deadline_ns => Some(Err(CallError::TimedOut {
-                    client: name.clone(),
-                    service: f.service.clone(),
-                    timeout: self.options.timeout,
-                })),
-                None => None,
-            };
-            match outcome {
-                Some(o) => {
-                    let f = st.in_flight.remove(i);
-                    if o.is_ok() {
-                        st.answered = st.answered.saturating_add(1);
-                        st.last_answer_ns = Some(now);
-                    }
-                    st.done.push_back((f.id, o));
-                }
-                None => i += 1,
-            }
-        }
-    }
-}
-
-impl<Req: Payload, Resp: Payload> DynInput for ClientSide<Req, Resp> {
-    fn name(&self) -> &str {
-        &self.spec.name
-    }
-    fn type_name(&self) -> &str {
-        &self.spec.type_name
-    }
-    fn spec(&self) -> PortSpec {
-        self.spec.clone()
-    }
-    fn payload_layout(&self) -> (usize, usize) {
-        (std::mem::size_of::<Resp>(), std::mem::align_of::<Resp>())
-    }
-
-    /// Wires the client to service `from_port` of `from_agent`; one
-    /// service at a time (a wire to another replaces it, its calls in
-    /// flight finished as unwired).
-    fn connect(
-        &self,
-        node: &Node<Ipc>,
-        robot: &shm_schemas::RobotName,
-        from_agent: &str,
-        from_port: &str,
-    ) -> Result<bool, PortError> {
-        {
-            let st = lock(&self.state);
-            if st.target.as_ref().is_some_and(|t| t.agent == from_agent && t.port == from_port) {
-                return Ok(false);
-            }
-        }
-        let service = robot.port_service(from_agent, from_port);
-        let wire = || -> Result<Target<Req, Resp>, CallError> {
-            let factory = call_service::<Req, Resp>(node, &service, false)?;
-            let client = factory.client_builder().create().map_err(|e| open_err(&service, e))?;
-            let requests = event_service(node, &service, false)?;
-            let notifier = requests.notifier_builder().create().map_err(|e| open_err(&service, e))?;
-            let answered_name = format!("{service}{ANSWERED_SUFFIX}");
-            let answered = event_service(node, &answered_name, true)?;
-            let listener = answered.listener_builder().create().map_err(|e| open_err(&answered_name, e))?;
-            Ok(Target {
-                agent: from_agent.into(),
-                port: from_port.into(),
-                service: service.clone(),
-                client,
-                requests: notifier,
-                listener: Arc::new(listener),
-                _factories: (factory, requests, answered),
-            })
-        };
-        let target = wire().map_err(|e| PortError::Ipc { service: service.clone(), detail: e.to_string() })?;
-        let mut st = lock(&self.state);
-        self.unwire(&mut st);
-        st.target = Some(target);
-        tracing::info!(client = %self.spec.name, service = %service, "client wired");
-        Ok(true)
-    }
-
-    fn disconnect(&self, from_agent: &str, from_port: &str) -> bool {
-        let mut st = lock(&self.state);
-        if !st.target.as_ref().is_some_and(|t| t.agent == from_agent && t.port == from_port) {
-            return false;
-        }
-        self.unwire(&mut st);
-        true
-    }
-
-    fn listeners(&self) -> Vec<Arc<Listener<Ipc>>> {
-        lock(&self.state).target.iter().map(|t| t.listener.clone()).collect()
-    }
-
-    fn stats(&self, now: u64) -> Vec<InputStats> {
-        let st = lock(&self.state);
-        st.target
-            .iter()
-            .map(|t| InputStats {
-                input: self.spec.name.clone(),
-                from_agent: t.agent.clone(),
-                from_port: t.port.clone(),
-                received: st.answered,
-                rate_hz: 0.0,
-                last_age_ns: st.last_answer_ns.map(|t| now.saturating_sub(t)),
-                dropped: 0,
-            })
-            .collect()
-    }
-
-    fn has_queued(&self) -> bool {
-        false
-    }
-
-    fn queue(&self, _sender: &str, _port: &str, _sample: SampleBuf, _stamp_ns: u64) -> Result<(), PortError> {
-        Err(not_an_input(&self.spec.name))
-    }
-}
-
-impl<Req: Payload, Resp: Payload> ClientSide<Req, Resp> {
-    /// Drops the wire; the calls in flight finish as [`CallError::Unwired`].
-    fn unwire(&self, st: &mut ClientState<Req, Resp>) {
-        self.settle(st, now_ns());
-        for f in st.in_flight.drain(..) {
-            st.done.push_back((f.id, Err(CallError::Unwired { client: self.spec.name.clone(), service: f.service })));
-        }
-        if let Some(t) = st.target.take() {
-            tracing::info!(client = %self.spec.name, service = %t.service, "client unwired");
-        }
-    }
-}
-
 /// The call ports an agent declared, for its registration and description.
 #[derive(Debug, Default, Clone)]
 pub(crate) struct Declared {
@@ -735,22 +441,14 @@ pub(crate) struct Declared {
 }
 
 impl Declared {
-    pub(crate) fn add_service<Req: Payload, Resp: Payload>(
-        &mut self,
-        port: &str,
-        schemas: &mut Vec<shm_schemas::Schema>,
-    ) {
-        self.services.push(call_spec::<Req, Resp>(port));
-        add_schemas::<Req, Resp>(schemas);
+    pub(crate) fn add_service<Req: Payload, A: Answer>(&mut self, port: &str, schemas: &mut Vec<shm_schemas::Schema>) {
+        self.services.push(A::spec::<Req>(port));
+        add_schemas::<Req, A>(schemas);
     }
 
-    pub(crate) fn add_client<Req: Payload, Resp: Payload>(
-        &mut self,
-        port: &str,
-        schemas: &mut Vec<shm_schemas::Schema>,
-    ) {
-        self.clients.push(call_spec::<Req, Resp>(port));
-        add_schemas::<Req, Resp>(schemas);
+    pub(crate) fn add_client<Req: Payload, A: Answer>(&mut self, port: &str, schemas: &mut Vec<shm_schemas::Schema>) {
+        self.clients.push(A::spec::<Req>(port));
+        add_schemas::<Req, A>(schemas);
     }
 
     /// Whether `port` is a call port (so not an input).
@@ -759,196 +457,7 @@ impl Declared {
     }
 }
 
-fn add_schemas<Req: Payload, Resp: Payload>(schemas: &mut Vec<shm_schemas::Schema>) {
-    use shm_schemas::control::agent_to_router::add_schema;
-    add_schema(schemas, Req::schema());
-    add_schema(schemas, Resp::schema());
-}
-
-// ---------------------------------------------------------------- tools
-
-type RawClientPort =
-    IoxClient<Ipc, [CustomPayloadMarker], CustomHeaderMarker, [CustomPayloadMarker], CustomHeaderMarker>;
-type RawFactory = request_response::PortFactory<
-    Ipc,
-    [CustomPayloadMarker],
-    CustomHeaderMarker,
-    [CustomPayloadMarker],
-    CustomHeaderMarker,
->;
-
-/// A call made by a tool that was not built with the call's types
-/// (`nerve call`): requests and answers as bytes of the layouts the
-/// service itself says, one call at a time, waited for.
-pub struct RawCaller {
-    service: String,
-    type_name: String,
-    fingerprint: Option<u64>,
-    request_size: usize,
-    response_size: usize,
-    client: RawClientPort,
-    requests: Notifier<Ipc>,
-    answered: Listener<Ipc>,
-    _factories: (RawFactory, event::PortFactory<Ipc>, event::PortFactory<Ipc>),
-}
-
-impl std::fmt::Debug for RawCaller {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("RawCaller").field("service", &self.service).field("type", &self.type_name).finish()
-    }
-}
-
-/// Whether `detail` is a layout nerve makes (the bounds of a schema's).
-fn sane(detail: &iceoryx2::service::static_config::message_type_details::TypeDetail) -> bool {
-    let align = detail.alignment();
-    align.is_power_of_two() && align <= shm_schemas::schema::MAX_ALIGN && detail.size() <= shm_schemas::schema::MAX_SIZE
-}
-
-impl RawCaller {
-    /// Opens the existing call service `service` with the request and
-    /// response layouts it was made with (never creates it).
-    pub fn open(node: &Node<Ipc>, service: &str) -> Result<Self, CallError> {
-        use iceoryx2::service::attribute::AttributeKey;
-        use shm_schemas::services::port_attributes;
-        let name = service_name(service)?;
-        let details = <Ipc as iceoryx2::service::Service>::details(
-            &name,
-            node.config(),
-            iceoryx2::service::messaging_pattern::MessagingPattern::RequestResponse,
-        )
-        .map_err(|e| open_err(service, e))?
-        .ok_or_else(|| CallError::Open {
-            service: service.into(),
-            detail: "no agent offers it (is the server running, and is the name right? `nerve ps` lists the services)"
-                .into(),
-        })?;
-        let attrs = details.static_details.attributes();
-        let get = |key: &str| {
-            let key = AttributeKey::try_from(key).ok()?;
-            attrs.key_value(&key, 0).map(|v| v.to_string())
-        };
-        let type_name = get(port_attributes::TYPE).ok_or_else(|| CallError::Open {
-            service: service.into(),
-            detail: "it has no nerve type attribute: not a service of a nerve agent".into(),
-        })?;
-        let fingerprint = get(port_attributes::FINGERPRINT).and_then(|t| port_attributes::parse_fingerprint(&t));
-        let config = details.static_details.request_response();
-        let (req, resp) = (config.request_message_type_details(), config.response_message_type_details());
-        if !sane(&req.payload) || !sane(&resp.payload) || !sane(&req.user_header) || !sane(&resp.user_header) {
-            return Err(CallError::Open {
-                service: service.into(),
-                detail: "its layouts are not ones nerve makes; the process that created it is not a nerve agent".into(),
-            });
-        }
-        // SAFETY: the payloads' and user headers' type details are the
-        // service's own, read just above and bounded; requests are written
-        // and answers read as bytes of exactly those sizes.
-        let builder = unsafe {
-            node.service_builder(&name)
-                .request_response::<[CustomPayloadMarker], [CustomPayloadMarker]>()
-                .request_user_header::<CustomHeaderMarker>()
-                .response_user_header::<CustomHeaderMarker>()
-                .__internal_set_request_header_type_details(&req.user_header)
-                .__internal_set_response_header_type_details(&resp.user_header)
-                .__internal_set_request_payload_type_details(&req.payload)
-                .__internal_set_response_payload_type_details(&resp.payload)
-        };
-        let factory = call_settings!(builder).open().map_err(|e| open_err(service, e))?;
-        let client = factory.client_builder().create().map_err(|e| open_err(service, e))?;
-        let requests = event_service(node, service, false)?;
-        let notifier = requests.notifier_builder().create().map_err(|e| open_err(service, e))?;
-        let answered_name = format!("{service}{ANSWERED_SUFFIX}");
-        let answered = event_service(node, &answered_name, true)?;
-        let listener = answered.listener_builder().create().map_err(|e| open_err(&answered_name, e))?;
-        Ok(RawCaller {
-            service: service.into(),
-            type_name,
-            fingerprint,
-            request_size: req.payload.size(),
-            response_size: resp.payload.size(),
-            client,
-            requests: notifier,
-            answered: listener,
-            _factories: (factory, requests, answered),
-        })
-    }
-
-    /// The call's type name, `call(Req -> Resp)`, as the service says.
-    pub fn type_name(&self) -> &str {
-        &self.type_name
-    }
-
-    /// The call's fingerprint ([`shm_schemas::control::call::call_fingerprint`]), if the service says.
-    pub fn fingerprint(&self) -> Option<u64> {
-        self.fingerprint
-    }
-
-    /// Sends `request` (exactly the request's size) and waits at most
-    /// `timeout` for the answer, returned as bytes.
-    pub fn call(&self, request: &[u8], timeout: Duration) -> Result<Vec<u8>, CallError> {
-        let client = "nerve call".to_owned();
-        let service = self.service.clone();
-        if request.len() != self.request_size {
-            return Err(CallError::Open {
-                service,
-                detail: format!("a {}-byte request for a {}-byte request type", request.len(), self.request_size),
-            });
-        }
-        // SAFETY: one element of a FixedSize request type (set from the
-        // service's details in `open`): `request_size` bytes
-        let mut loan = unsafe { self.client.loan_custom_payload(1) }.map_err(|e| CallError::Open {
-            service: service.clone(),
-            detail: format!("cannot loan a request: {e:?}"),
-        })?;
-        let payload = loan.payload_mut();
-        if payload.len() != request.len() {
-            return Err(CallError::Open {
-                service,
-                detail: format!("loaned {} bytes for a {}-byte request", payload.len(), request.len()),
-            });
-        }
-        // SAFETY: `payload` is `request.len()` writable one-byte elements, not overlapping `request`
-        unsafe { std::ptr::copy_nonoverlapping(request.as_ptr(), payload.as_mut_ptr().cast::<u8>(), request.len()) };
-        // SAFETY: every byte of the payload was written just above
-        let pending = unsafe { loan.assume_init() }.send().map_err(|source| CallError::Send {
-            client: client.clone(),
-            service: service.clone(),
-            source,
-        })?;
-        if pending.number_of_server_connections() == 0 {
-            return Err(CallError::NoServer { client, service });
-        }
-        if let Err(e) = self.requests.notify() {
-            tracing::warn!(service = %self.service, "cannot wake the server: {e:?}");
-        }
-        let deadline = std::time::Instant::now() + timeout;
-        loop {
-            match pending.receive() {
-                Ok(Some(r)) => {
-                    let bytes = super::bytes::payload_bytes(r.payload());
-                    if bytes.len() != self.response_size {
-                        return Err(CallError::Open {
-                            service,
-                            detail: format!("a {}-byte answer of a {}-byte type", bytes.len(), self.response_size),
-                        });
-                    }
-                    return Ok(bytes.to_vec());
-                }
-                Ok(None) => {}
-                Err(source) => return Err(CallError::Receive { port: client, service, source }),
-            }
-            if !pending.is_connected() {
-                if let Ok(Some(r)) = pending.receive() {
-                    return Ok(super::bytes::payload_bytes(r.payload()).to_vec());
-                }
-                return Err(CallError::ServerGone { client, service });
-            }
-            let left = deadline.saturating_duration_since(std::time::Instant::now());
-            if left.is_zero() {
-                return Err(CallError::TimedOut { client, service, timeout });
-            }
-            // woken by the server's answer; at most 50 ms, to see a server gone
-            let _ = self.answered.timed_wait(|_| {}, left.min(Duration::from_millis(50)));
-        }
-    }
+fn add_schemas<Req: Payload, A: Answer>(schemas: &mut Vec<shm_schemas::Schema>) {
+    shm_schemas::control::agent_to_router::add_schema(schemas, Req::schema());
+    A::add_schemas(schemas);
 }

@@ -8,7 +8,8 @@
 //! * [`typed`]: [`Output<T>`] and [`Input<T>`], views of the byte port as a
 //!   Rust type, zero copy;
 //! * [`call`]: calls between agents, a [`Server`] and a [`Client`] on
-//!   iceoryx2 request-response;
+//!   iceoryx2 request-response (`call_server`, `call_client`, `call_raw`);
+//!   [`call_seq`]: calls answered with a sequence, [`SeqServer`], [`SeqClient`];
 //! * [`depth`]: an input's depth and policy ([`InputOptions`]), its own queue;
 //! * `memory`: the in-memory binding a test's ports use instead of iceoryx2.
 //!
@@ -17,6 +18,10 @@
 
 pub mod bytes;
 pub mod call;
+mod call_client;
+mod call_raw;
+pub mod call_seq;
+mod call_server;
 pub mod depth;
 pub mod error;
 pub(crate) mod memory;
@@ -25,7 +30,8 @@ pub mod service;
 pub mod typed;
 
 pub use bytes::{Loan, Meta, RawOutput, RawPort, Received, SchemaInput, SchemaOutput};
-pub use call::{CallError, CallId, CallOptions, Client, RawCaller, Server};
+pub use call::{CallClient, CallError, CallId, CallOptions, CallServer, Client, RawCaller, Server};
+pub use call_seq::{SeqClient, SeqServer};
 pub use depth::{InputOptions, Keep};
 pub use error::PortError;
 pub use seq::{SeqInput, SeqOutput};

@@ -29,7 +29,7 @@ use std::sync::Arc;
 
 /// The shape of `Seq<T, H>`'s samples, checked against the Rust types: the
 /// schema must place the elements where `T`'s alignment puts them after `H`.
-fn shape_of<T: SeqPart, H: SeqPart>(service: &str) -> Result<(Schema, SeqShape), PortError> {
+pub(crate) fn shape_of<T: SeqPart, H: SeqPart>(service: &str) -> Result<(Schema, SeqShape), PortError> {
     let schema = Seq::<T, H>::schema();
     let shape = schema
         .sequence_shape()
@@ -51,7 +51,7 @@ fn shape_of<T: SeqPart, H: SeqPart>(service: &str) -> Result<(Schema, SeqShape),
 
 /// `bytes` read in place as a `Seq<T, H>` sample: its header and its
 /// elements; `None` unless they are a header and whole elements, aligned.
-fn view<'a, T: SeqPart, H: SeqPart>(shape: &SeqShape, bytes: &'a [u8]) -> Option<(&'a H, &'a [T])> {
+pub(crate) fn view<'a, T: SeqPart, H: SeqPart>(shape: &SeqShape, bytes: &'a [u8]) -> Option<(&'a H, &'a [T])> {
     let n = shape.count_of(bytes.len())?;
     let at = bytes.as_ptr() as usize;
     if !at.is_multiple_of(align_of::<H>()) || !at.wrapping_add(shape.items_at).is_multiple_of(align_of::<T>()) {

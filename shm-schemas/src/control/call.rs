@@ -4,9 +4,21 @@
 //! mixes both layouts' fingerprints, so that the router's one rule for
 //! connections (the same type name, the same layout) checks both types of
 //! a call at once, and never wires a call port to a publish-subscribe port.
+//!
+//! A call may answer with a sequence (`Seq<T, H>`, [`crate::seq`]): its
+//! type name is `call(Req -> nerve::Seq<T, H>)` and its fingerprint mixes
+//! the request's with the sequence's (header and element), so a client of
+//! a fixed answer and a server of a sequence answer (or of another
+//! element) are refused as two different calls. On the wire the answer is
+//! an iceoryx2 slice of 8-byte words, the sequence sample's bytes, after a
+//! [`SeqAnswerHeader`] that says how many elements it holds, or why the
+//! server refused to answer.
 
 use super::agent_to_router::PortSpec;
 use crate::Payload;
+use crate::schema::Described;
+use crate::seq::{Seq, SeqPart};
+use iceoryx2::prelude::ZeroCopySend;
 
 /// The prefix of every call port's type name.
 pub const CALL_PREFIX: &str = "call(";
@@ -38,6 +50,40 @@ pub fn call_spec<Req: Payload, Resp: Payload>(name: &str) -> PortSpec {
     }
 }
 
+/// The spec of call port `name` of requests `Req` answered by a sequence
+/// of `T` after header `H` (`Seq<T, H>`).
+pub fn call_seq_spec<Req: Payload, T: SeqPart, H: SeqPart>(name: &str) -> PortSpec {
+    let answer = Seq::<T, H>::schema();
+    PortSpec {
+        name: name.into(),
+        type_name: call_type_name(Req::stable_type_name(), &answer.type_name),
+        fingerprint: call_fingerprint(Req::layout_fingerprint(), answer.fingerprint()),
+    }
+}
+
+/// A sequence answer's status: answered.
+pub const SEQ_ANSWERED: u32 = 0;
+/// A sequence answer's status: the server's answer was longer than the
+/// service's declared maximum, so it sent none ([`SeqAnswerHeader::items`]
+/// is the refused length, [`SeqAnswerHeader::max`] the maximum).
+pub const SEQ_TOO_LONG: u32 = 1;
+
+/// The iceoryx2 user header of a sequence answer: what the payload (the
+/// sample's bytes, `Seq<T, H>`'s layout, in 8-byte words) holds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("nerve::SeqAnswerHeader")]
+pub struct SeqAnswerHeader {
+    /// [`SEQ_ANSWERED`] or [`SEQ_TOO_LONG`]
+    pub status: u32,
+    /// reserved, 0
+    pub reserved: u32,
+    /// the elements in the answer (or, refused, in the answer that was too long)
+    pub items: u64,
+    /// the service's declared maximum of elements
+    pub max: u64,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -52,5 +98,18 @@ mod tests {
         assert_eq!(split_call_type_name("nerve::Tick"), None);
         assert_ne!(a.fingerprint, b.fingerprint, "a swapped call is another call");
         assert_ne!(a.fingerprint, Tick::layout_fingerprint());
+    }
+
+    #[test]
+    fn a_sequence_answer_is_another_call_than_a_fixed_one_or_another_element() {
+        let seq = call_seq_spec::<Tick, Scalar, Tick>("plan");
+        assert_eq!(seq.type_name, "call(nerve::Tick -> nerve::Seq<nerve::Scalar, nerve::Tick>)");
+        assert_eq!(
+            split_call_type_name(&seq.type_name),
+            Some(("nerve::Tick", "nerve::Seq<nerve::Scalar, nerve::Tick>"))
+        );
+        assert_ne!(seq.fingerprint, call_spec::<Tick, Scalar>("plan").fingerprint);
+        assert_ne!(seq.fingerprint, call_seq_spec::<Tick, Tick, Tick>("plan").fingerprint);
+        assert_ne!(seq.fingerprint, call_seq_spec::<Tick, Scalar, crate::NoHeader>("plan").fingerprint);
     }
 }

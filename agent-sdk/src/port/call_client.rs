@@ -1,0 +1,306 @@
+//! The client side of a call ([`CallClient`]): calls the service the
+//! router wired it to, never blocking its step. Generic over how the
+//! answer travels ([`Answer`]): [`Client`] takes fixed-size answers,
+//! [`super::SeqClient`] (`call_seq`) sequences.
+
+use super::bytes::{Binding, DynInput};
+use super::call::{
+    ANSWERED_SUFFIX, Answer, CallError, CallId, CallOptions, Factory, Fixed, MAX_IN_FLIGHT, call_service,
+    event_service, open_err,
+};
+use super::call_server::not_an_input;
+use super::error::PortError;
+use super::memory::SampleBuf;
+use super::service::lock;
+use crate::clock::now_ns;
+use crate::world::Ipc;
+use iceoryx2::pending_response::PendingResponse;
+use iceoryx2::port::client::Client as IoxClient;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::event;
+use shm_schemas::Payload;
+use shm_schemas::control::agent_to_router::PortSpec;
+use shm_schemas::stats::InputStats;
+use std::collections::VecDeque;
+use std::marker::PhantomData;
+use std::sync::{Arc, Mutex};
+
+/// A client of a service of requests `Req` answered by a fixed-size `Resp`.
+pub type Client<Req, Resp> = CallClient<Req, Fixed<Resp>>;
+
+/// A client: calls a service of requests `Req` answered as `A` says, once
+/// the router wired it to one.
+pub struct CallClient<Req: Payload, A: Answer> {
+    side: Arc<ClientSide<Req, A>>,
+}
+
+impl<Req: Payload, A: Answer> std::fmt::Debug for CallClient<Req, A> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Client").field("name", &self.side.spec.name).field("type", &self.side.spec.type_name).finish()
+    }
+}
+
+/// The service a client is wired to.
+struct Target<Req: Payload, A: Answer> {
+    agent: String,
+    port: String,
+    service: String,
+    client: IoxClient<Ipc, Req, (), A::Payload, A::Header>,
+    requests: Notifier<Ipc>,
+    listener: Arc<Listener<Ipc>>,
+    _factories: (Factory<Req, A>, event::PortFactory<Ipc>, event::PortFactory<Ipc>),
+}
+
+struct InFlight<Req: Payload, A: Answer> {
+    id: CallId,
+    deadline_ns: u64,
+    service: String,
+    pending: PendingResponse<Ipc, Req, (), A::Payload, A::Header>,
+}
+
+struct ClientState<Req: Payload, A: Answer> {
+    target: Option<Target<Req, A>>,
+    in_flight: Vec<InFlight<Req, A>>,
+    done: VecDeque<(CallId, Result<A::Value, CallError>)>,
+    next_id: u64,
+    answered: u64,
+    last_answer_ns: Option<u64>,
+}
+
+pub(crate) struct ClientSide<Req: Payload, A: Answer> {
+    spec: PortSpec,
+    options: CallOptions,
+    state: Mutex<ClientState<Req, A>>,
+    _types: PhantomData<fn(Req) -> A>,
+}
+
+impl<Req: Payload, A: Answer> CallClient<Req, A> {
+    /// Client `port` with `options`, bound to `binding` (it is wired later).
+    pub(crate) fn bind(
+        binding: &Binding,
+        port: &str,
+        options: CallOptions,
+    ) -> Result<(Self, Arc<dyn DynInput>), CallError> {
+        if matches!(binding, Binding::Memory(_)) {
+            return Err(CallError::NotInHarness { port: port.into() });
+        }
+        let options =
+            CallOptions { max_in_flight: options.max_in_flight.clamp(1, MAX_IN_FLIGHT), timeout: options.timeout };
+        let side = Arc::new(ClientSide {
+            spec: A::spec::<Req>(port),
+            options,
+            state: Mutex::new(ClientState {
+                target: None,
+                in_flight: Vec::new(),
+                done: VecDeque::new(),
+                next_id: 1,
+                answered: 0,
+                last_answer_ns: None,
+            }),
+            _types: PhantomData,
+        });
+        Ok((CallClient { side: side.clone() }, side))
+    }
+
+    /// Sends `request` to the service the client is wired to and returns
+    /// at once; the answer (or why there is none) comes from
+    /// [`Client::take`]. Refused, with nothing sent, when the client is not
+    /// wired, when no server answers the service, or past the bound of
+    /// calls in flight.
+    pub fn call(&self, request: &Req) -> Result<CallId, CallError> {
+        let name = &self.side.spec.name;
+        let mut st = lock(&self.side.state);
+        let st = &mut *st;
+        let Some(t) = &st.target else { return Err(CallError::NotWired { client: name.clone() }) };
+        if st.in_flight.len() >= self.side.options.max_in_flight {
+            return Err(CallError::TooManyInFlight { client: name.clone(), max: self.side.options.max_in_flight });
+        }
+        let pending = t.client.send_copy(*request).map_err(|source| CallError::Send {
+            client: name.clone(),
+            service: t.service.clone(),
+            source,
+        })?;
+        if pending.number_of_server_connections() == 0 {
+            return Err(CallError::NoServer { client: name.clone(), service: t.service.clone() });
+        }
+        if let Err(e) = t.requests.notify() {
+            tracing::warn!(client = %name, service = %t.service, "cannot wake the server: {e:?}");
+        }
+        let id = CallId(st.next_id);
+        st.next_id = st.next_id.saturating_add(1);
+        let deadline_ns = now_ns().saturating_add(crate::clock::nanos(self.side.options.timeout));
+        st.in_flight.push(InFlight { id, deadline_ns, service: t.service.clone(), pending });
+        Ok(id)
+    }
+
+    /// The next finished call, oldest first: its answer, or why there is
+    /// none (a timeout, the server gone mid-call, the client unwired).
+    /// `None` while no call has finished. Never blocks.
+    pub fn take(&self) -> Option<(CallId, Result<A::Value, CallError>)> {
+        let mut st = lock(&self.side.state);
+        self.side.settle(&mut st, now_ns());
+        st.done.pop_front()
+    }
+
+    /// How many calls are in flight (sent, not yet finished).
+    pub fn in_flight(&self) -> usize {
+        lock(&self.side.state).in_flight.len()
+    }
+
+    /// Whether the client is wired to a service now.
+    pub fn is_wired(&self) -> bool {
+        lock(&self.side.state).target.is_some()
+    }
+
+    /// The client's settings.
+    pub fn options(&self) -> CallOptions {
+        self.side.options
+    }
+}
+
+impl<Req: Payload, A: Answer> ClientSide<Req, A> {
+    /// Moves every call that finished (answered, timed out, its server
+    /// gone) from in flight to done.
+    fn settle(&self, st: &mut ClientState<Req, A>, now: u64) {
+        let name = &self.spec.name;
+        let mut i = 0;
+        while i < st.in_flight.len() {
+            let f = &st.in_flight[i];
+            let answer = |f: &InFlight<Req, A>| A::receive::<Req>(&f.pending, name, &f.service);
+            let outcome = match answer(f) {
+                Some(o) => Some(o),
+                // gone: look once more, the answer may have come just before the server let go
+                None if !f.pending.is_connected() => Some(answer(f).unwrap_or_else(|| {
+                    Err(CallError::ServerGone { client: name.clone(), service: f.service.clone() })
+                })),
+                None if now >= f.deadline_ns => Some(Err(CallError::TimedOut {
+                    client: name.clone(),
+                    service: f.service.clone(),
+                    timeout: self.options.timeout,
+                })),
+                None => None,
+            };
+            match outcome {
+                Some(o) => {
+                    let f = st.in_flight.remove(i);
+                    if o.is_ok() {
+                        st.answered = st.answered.saturating_add(1);
+                        st.last_answer_ns = Some(now);
+                    }
+                    st.done.push_back((f.id, o));
+                }
+                None => i += 1,
+            }
+        }
+    }
+}
+
+impl<Req: Payload, A: Answer> DynInput for ClientSide<Req, A> {
+    fn name(&self) -> &str {
+        &self.spec.name
+    }
+    fn type_name(&self) -> &str {
+        &self.spec.type_name
+    }
+    fn spec(&self) -> PortSpec {
+        self.spec.clone()
+    }
+    fn payload_layout(&self) -> (usize, usize) {
+        A::layout()
+    }
+
+    /// Wires the client to service `from_port` of `from_agent`; one
+    /// service at a time (a wire to another replaces it, its calls in
+    /// flight finished as unwired).
+    fn connect(
+        &self,
+        node: &Node<Ipc>,
+        robot: &shm_schemas::RobotName,
+        from_agent: &str,
+        from_port: &str,
+    ) -> Result<bool, PortError> {
+        {
+            let st = lock(&self.state);
+            if st.target.as_ref().is_some_and(|t| t.agent == from_agent && t.port == from_port) {
+                return Ok(false);
+            }
+        }
+        let service = robot.port_service(from_agent, from_port);
+        let wire = || -> Result<Target<Req, A>, CallError> {
+            let factory = call_service::<Req, A>(node, &service, false)?;
+            let client = factory.client_builder().create().map_err(|e| open_err(&service, e))?;
+            let requests = event_service(node, &service, false)?;
+            let notifier = requests.notifier_builder().create().map_err(|e| open_err(&service, e))?;
+            let answered_name = format!("{service}{ANSWERED_SUFFIX}");
+            let answered = event_service(node, &answered_name, true)?;
+            let listener = answered.listener_builder().create().map_err(|e| open_err(&answered_name, e))?;
+            Ok(Target {
+                agent: from_agent.into(),
+                port: from_port.into(),
+                service: service.clone(),
+                client,
+                requests: notifier,
+                listener: Arc::new(listener),
+                _factories: (factory, requests, answered),
+            })
+        };
+        let target = wire().map_err(|e| PortError::Ipc { service: service.clone(), detail: e.to_string() })?;
+        let mut st = lock(&self.state);
+        self.unwire(&mut st);
+        st.target = Some(target);
+        tracing::info!(client = %self.spec.name, service = %service, "client wired");
+        Ok(true)
+    }
+
+    fn disconnect(&self, from_agent: &str, from_port: &str) -> bool {
+        let mut st = lock(&self.state);
+        if !st.target.as_ref().is_some_and(|t| t.agent == from_agent && t.port == from_port) {
+            return false;
+        }
+        self.unwire(&mut st);
+        true
+    }
+
+    fn listeners(&self) -> Vec<Arc<Listener<Ipc>>> {
+        lock(&self.state).target.iter().map(|t| t.listener.clone()).collect()
+    }
+
+    fn stats(&self, now: u64) -> Vec<InputStats> {
+        let st = lock(&self.state);
+        st.target
+            .iter()
+            .map(|t| InputStats {
+                input: self.spec.name.clone(),
+                from_agent: t.agent.clone(),
+                from_port: t.port.clone(),
+                received: st.answered,
+                rate_hz: 0.0,
+                last_age_ns: st.last_answer_ns.map(|t| now.saturating_sub(t)),
+                dropped: 0,
+            })
+            .collect()
+    }
+
+    fn has_queued(&self) -> bool {
+        false
+    }
+
+    fn queue(&self, _sender: &str, _port: &str, _sample: SampleBuf, _stamp_ns: u64) -> Result<(), PortError> {
+        Err(not_an_input(&self.spec.name))
+    }
+}
+
+impl<Req: Payload, A: Answer> ClientSide<Req, A> {
+    /// Drops the wire; the calls in flight finish as [`CallError::Unwired`].
+    fn unwire(&self, st: &mut ClientState<Req, A>) {
+        self.settle(st, now_ns());
+        for f in st.in_flight.drain(..) {
+            st.done.push_back((f.id, Err(CallError::Unwired { client: self.spec.name.clone(), service: f.service })));
+        }
+        if let Some(t) = st.target.take() {
+            tracing::info!(client = %self.spec.name, service = %t.service, "client unwired");
+        }
+    }
+}

@@ -1,0 +1,392 @@
+//! Calls answered with a sequence: a [`SeqServer`] answers each request
+//! with a header `H` and any number of `T` (`Seq<T, H>`, the payload of
+//! sequence ports, [`super::seq`]), up to the maximum it was declared
+//! with; a [`SeqClient`] takes each answer as an owned `(H, Vec<T>)`.
+//!
+//! ```ignore
+//! // the server, in `Agent::new`: paths of at most 4096 points
+//! let plan = setup.serve_seq::<Goal, Point, PathHeader>("plan", 4096)?;
+//! // in `step`: each waiting request answered with a path of its own length
+//! plan.serve(|goal| (PathHeader { frame: 1 }, planner.path_to(goal)))?;
+//!
+//! // the client, in `Agent::new`, then in `step`
+//! let planner = setup.client_seq::<Goal, Point, PathHeader>("planner")?;
+//! planner.call(&Goal { x: 1.0, y: 2.6 })?;
+//! while let Some((id, answer)) = planner.take() { let (header, points) = answer?; }
+//! ```
+//!
+//! The same machinery as fixed calls carries them (`call_client`,
+//! `call_server`): the same timeout, bound of calls in flight, server-gone
+//! and unwired endings. On the wire an answer is an iceoryx2 slice of
+//! 8-byte words holding the sequence sample's bytes (`H`, padding, then
+//! the `T`s), after a [`SeqAnswerHeader`] that says how many elements it
+//! holds. The server's response memory starts at 4 kB and grows by powers
+//! of two (iceoryx2's allocation strategy) when an answer is larger than
+//! any before. An answer longer than the declared maximum is not sent: the
+//! server's `serve` returns [`CallError::AnswerTooLong`] (after answering
+//! the other requests) and the client's call ends with
+//! [`CallError::RefusedTooLong`].
+
+use super::bytes::{Binding, DynInput};
+use super::call::{Answer, CallError, Factory, MAX_IN_FLIGHT, Pending, ServerPort, call_settings, received};
+use super::call_client::CallClient;
+use super::call_server::CallServer;
+use super::seq::{shape_of, view};
+use crate::world::Ipc;
+use iceoryx2::prelude::*;
+use iceoryx2::response::Response;
+use iceoryx2::service::attribute::AttributeVerifier;
+use iceoryx2::service::builder::request_response::RequestResponseOpenOrCreateError;
+use iceoryx2::service::port_factory::server::ServerCreateError;
+use shm_schemas::control::agent_to_router::PortSpec;
+use shm_schemas::control::call::{SEQ_ANSWERED, SEQ_TOO_LONG, SeqAnswerHeader, call_seq_spec};
+use shm_schemas::{Described as _, Payload, Seq, SeqPart, SeqShape};
+use std::marker::PhantomData;
+use std::mem::{align_of, size_of};
+use std::sync::Arc;
+
+/// The bytes a server's response memory starts with (it grows past them).
+const INITIAL_ANSWER_BYTES: usize = 4096;
+/// One word of an answer's payload.
+const WORD: usize = size_of::<u64>();
+
+/// A sequence answer `Seq<T, H>`: the call of [`SeqServer`] and [`SeqClient`].
+pub struct SeqAnswer<T, H>(PhantomData<fn() -> (T, H)>);
+
+impl<T: SeqPart, H: SeqPart> std::fmt::Debug for SeqAnswer<T, H> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "SeqAnswer<{}>", Seq::<T, H>::schema().type_name)
+    }
+}
+
+/// Where `Seq<T, H>`'s parts lie, from the Rust types (the schema says the
+/// same: [`shape_of`] checks it when a port is declared).
+fn rust_shape<T: SeqPart, H: SeqPart>() -> SeqShape {
+    SeqShape {
+        items_at: size_of::<H>().next_multiple_of(align_of::<T>().max(1)),
+        element: size_of::<T>(),
+        align: align_of::<H>().max(align_of::<T>()),
+    }
+}
+
+/// `words` as the bytes they hold.
+fn word_bytes(words: &[u64]) -> &[u8] {
+    // SAFETY: u64s are plain bytes, any of them a valid u8, in one allocation
+    unsafe { std::slice::from_raw_parts(words.as_ptr().cast::<u8>(), std::mem::size_of_val(words)) }
+}
+
+impl<T: SeqPart, H: SeqPart> Answer for SeqAnswer<T, H> {
+    type Payload = [u64];
+    type Header = SeqAnswerHeader;
+    type Value = (H, Vec<T>);
+    fn spec<Req: Payload>(port: &str) -> PortSpec {
+        call_seq_spec::<Req, T, H>(port)
+    }
+    fn add_schemas(schemas: &mut Vec<shm_schemas::Schema>) {
+        shm_schemas::control::agent_to_router::add_schema(schemas, Seq::<T, H>::schema());
+    }
+    fn layout() -> (usize, usize) {
+        let shape = rust_shape::<T, H>();
+        (shape.items_at, shape.align)
+    }
+    fn open<Req: Payload>(
+        node: &Node<Ipc>,
+        name: &ServiceName,
+        attributes: &AttributeVerifier,
+        create: bool,
+    ) -> Result<Factory<Req, Self>, RequestResponseOpenOrCreateError> {
+        let builder = call_settings!(
+            node.service_builder(name).request_response::<Req, [u64]>().response_user_header::<SeqAnswerHeader>()
+        );
+        if create {
+            builder.open_or_create_with_attributes(attributes)
+        } else {
+            builder.open_with_attributes(attributes).map_err(RequestResponseOpenOrCreateError::RequestResponseOpenError)
+        }
+    }
+    fn server<Req: Payload>(factory: &Factory<Req, Self>) -> Result<ServerPort<Req, Self>, ServerCreateError> {
+        let shape = rust_shape::<T, H>();
+        factory
+            .server_builder()
+            .initial_max_slice_len(shape.items_at.max(INITIAL_ANSWER_BYTES).div_ceil(WORD))
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+    }
+    fn receive<Req: Payload>(
+        pending: &Pending<Req, Self>,
+        client: &str,
+        service: &str,
+    ) -> Option<Result<(H, Vec<T>), CallError>> {
+        received(pending.receive(), client, service, |r| Self::value(r, client, service))
+    }
+}
+
+impl<T: SeqPart, H: SeqPart> SeqAnswer<T, H> {
+    /// The header and elements of `response`, copied out, or why there are none.
+    fn value(
+        response: &Response<Ipc, [u64], SeqAnswerHeader>,
+        client: &str,
+        service: &str,
+    ) -> Result<(H, Vec<T>), CallError> {
+        let header = *response.user_header();
+        if header.status == SEQ_TOO_LONG {
+            return Err(CallError::RefusedTooLong {
+                client: client.into(),
+                service: service.into(),
+                len: header.items,
+                max: header.max,
+            });
+        }
+        let malformed =
+            |detail: String| CallError::Malformed { client: client.into(), service: service.into(), detail };
+        if header.status != SEQ_ANSWERED {
+            return Err(malformed(format!("an answer of unknown status {}", header.status)));
+        }
+        let shape = rust_shape::<T, H>();
+        let bytes = word_bytes(response.payload());
+        let len = usize::try_from(header.items).ok().and_then(|n| shape.len_of(n)).filter(|l| *l <= bytes.len());
+        let Some(len) = len else {
+            return Err(malformed(format!("{} elements said, in {} bytes", header.items, bytes.len())));
+        };
+        match view::<T, H>(&shape, &bytes[..len]) {
+            Some((h, items)) => Ok((*h, items.to_vec())),
+            None => Err(malformed(format!("{len} bytes that are not a header and whole elements, aligned"))),
+        }
+    }
+}
+
+/// A service an agent answers with sequences: requests `Req`, answers of
+/// header `H` and up to the declared maximum of `T`.
+pub struct SeqServer<Req: Payload, T: SeqPart, H: SeqPart = shm_schemas::NoHeader> {
+    server: CallServer<Req, SeqAnswer<T, H>>,
+    max_len: usize,
+    shape: SeqShape,
+}
+
+impl<Req: Payload, T: SeqPart, H: SeqPart> std::fmt::Debug for SeqServer<Req, T, H> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SeqServer").field("server", &self.server).field("max_len", &self.max_len).finish()
+    }
+}
+
+/// A client of a service answered with sequences of `T` after header `H`;
+/// its `take` hands out each answer as an owned `(H, Vec<T>)`.
+pub type SeqClient<Req, T, H = shm_schemas::NoHeader> = CallClient<Req, SeqAnswer<T, H>>;
+
+impl<Req: Payload, T: SeqPart, H: SeqPart> SeqServer<Req, T, H> {
+    /// Service `port` (iceoryx2 service `service`), bound to `binding`,
+    /// answering with at most `max_len` elements.
+    pub(crate) fn bind(
+        binding: &Binding,
+        port: &str,
+        service: &str,
+        max_len: usize,
+    ) -> Result<(Self, Arc<dyn DynInput>), CallError> {
+        let (schema, shape) = shape_of::<T, H>(service)
+            .map_err(|e| CallError::Open { service: service.into(), detail: e.to_string() })?;
+        if shape.len_of(max_len).is_none_or(|b| b > shm_schemas::schema::MAX_SIZE) {
+            return Err(CallError::Open {
+                service: service.into(),
+                detail: format!(
+                    "answers of {max_len} elements of {} would be larger than the {} bytes a payload may have; \
+                     declare a smaller max_len",
+                    schema.type_name,
+                    shm_schemas::schema::MAX_SIZE
+                ),
+            });
+        }
+        let (server, side) = CallServer::bind(binding, port, service)?;
+        Ok((SeqServer { server, max_len, shape }, side))
+    }
+
+    /// Answers each waiting request with the header and elements `answer`
+    /// returns (at most `max` requests: what arrives meanwhile is left for
+    /// the next step, whose wake-up is pending); returns how many were
+    /// answered. An answer longer than [`SeqServer::max_len`] is not sent:
+    /// its client's call ends with [`CallError::RefusedTooLong`], the other
+    /// requests are answered, then [`CallError::AnswerTooLong`] is returned.
+    pub fn serve_up_to(&self, max: usize, mut answer: impl FnMut(&Req) -> (H, Vec<T>)) -> Result<usize, CallError> {
+        let service = self.server.service();
+        self.server.each_request(max, |request| {
+            let (header, items) = answer(request.payload());
+            let n = items.len();
+            let refused = n > self.max_len;
+            let words = if refused { 0 } else { self.shape.len_of(n).unwrap_or(0).div_ceil(WORD) };
+            let loan = request.loan_slice_uninit(words).map_err(|source| CallError::Loan {
+                service: service.into(),
+                len: n,
+                source,
+            })?;
+            let mut response = loan.write_from_fn(|_| 0u64);
+            *response.user_header_mut() = SeqAnswerHeader {
+                status: if refused { SEQ_TOO_LONG } else { SEQ_ANSWERED },
+                reserved: 0,
+                items: n as u64,
+                max: self.max_len as u64,
+            };
+            if !refused {
+                let at = response.payload_mut().as_mut_ptr().cast::<u8>();
+                // SAFETY: the payload is `words` 8-byte words, at least
+                // `items_at + n * size_of::<T>()` bytes (`len_of`), 8-aligned
+                // (a u64 slice), so aligned for `H` and, at `items_at` (a
+                // multiple of T's alignment), for `T` (both at most 8:
+                // `SEQ_MAX_ALIGN`, checked by `shape_of`'s schema); the
+                // response is the only reference to it until sent.
+                unsafe {
+                    at.cast::<H>().write(header);
+                    std::ptr::copy_nonoverlapping(items.as_ptr(), at.add(self.shape.items_at).cast::<T>(), n);
+                }
+            }
+            if let Err(e) = response.send() {
+                // the client went away: nobody waits for this answer
+                tracing::debug!(service, "an answer found no client: {e:?}");
+            }
+            if refused {
+                tracing::warn!(service, len = n, max = self.max_len, "an answer longer than the maximum was refused");
+                return Err(CallError::AnswerTooLong { service: service.into(), len: n, max: self.max_len });
+            }
+            Ok(())
+        })
+    }
+
+    /// Answers every waiting request (at most [`MAX_IN_FLIGHT`] per step),
+    /// as [`SeqServer::serve_up_to`] does.
+    pub fn serve(&self, answer: impl FnMut(&Req) -> (H, Vec<T>)) -> Result<usize, CallError> {
+        self.serve_up_to(MAX_IN_FLIGHT, answer)
+    }
+
+    /// The most elements an answer may hold, as declared.
+    pub fn max_len(&self) -> usize {
+        self.max_len
+    }
+
+    /// How many requests it answered so far (refusals included).
+    pub fn answered(&self) -> u64 {
+        self.server.answered()
+    }
+
+    /// The iceoryx2 service name.
+    pub fn service(&self) -> &str {
+        self.server.service()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{SeqClient, SeqServer};
+    use crate::port::bytes::Binding;
+    use crate::port::call::{CallError, CallId, CallOptions, Client};
+    use crate::world::World;
+    use crate::world::test_support::Cleanup;
+    use shm_schemas::payloads::{Scalar, Tick};
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, shm_schemas::Payload)]
+    #[repr(C)]
+    #[payload(name = "test::Point")]
+    struct Point {
+        x: f64,
+        y: f64,
+        id: u32,
+        pad: u32,
+    }
+
+    fn point(i: usize) -> Point {
+        Point { x: i as f64, y: -(i as f64), id: i as u32, pad: 0 }
+    }
+
+    /// Takes the client's next finished call, waiting (bounded) for it.
+    fn next<R>(take: impl Fn() -> Option<(CallId, R)>) -> (CallId, R) {
+        for _ in 0..500 {
+            if let Some(done) = take() {
+                return done;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        panic!("no call finished within 1 s");
+    }
+
+    /// A server answers requests with sequences of the length each asks
+    /// for: 0, 1, one longer than its first memory (it grows) and the
+    /// maximum, each taken whole by the client; one past the maximum is
+    /// refused on both sides, and the next call is answered again. A
+    /// client of a fixed answer cannot open the sequence service.
+    #[test]
+    fn a_call_answers_with_a_sequence_of_any_length_up_to_the_maximum() {
+        let world = World::new(&format!("callseq{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = Arc::new(world.node("test").expect("node"));
+        let robot = world.robot().clone();
+        let service = robot.port_service("planner", "plan");
+        let max = 1000;
+        let (server, _) =
+            SeqServer::<Tick, Point, Scalar>::bind(&Binding::Shm(node.clone()), "plan", &service, max).expect("server");
+        assert_eq!(server.max_len(), max);
+        let options = CallOptions { timeout: Duration::from_secs(5), max_in_flight: 4 };
+        let (client, side) =
+            SeqClient::<Tick, Point, Scalar>::bind(&Binding::Shm(node.clone()), "planner", options).expect("client");
+        assert!(side.connect(&node, &robot, "planner", "plan").expect("wired"));
+        let answer = |req: &Tick| {
+            let n = req.seq as usize;
+            (Scalar { value: n as f64, stamp_ns: req.stamp_ns }, (0..n).map(point).collect::<Vec<_>>())
+        };
+        // 300 points are 7.2 kB, more than the 4 kB a server's answers start with
+        for n in [0usize, 1, 300, max] {
+            let id = client.call(&Tick { seq: n as u64, stamp_ns: 9 }).expect("call");
+            let mut served = 0;
+            for _ in 0..500 {
+                served += server.serve(answer).expect("served");
+                if served > 0 {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            assert_eq!(served, 1, "length {n}");
+            let (got, result) = next(|| client.take());
+            let (header, items) = result.expect("answered");
+            assert_eq!(got, id);
+            assert_eq!(header, Scalar { value: n as f64, stamp_ns: 9 }, "length {n}");
+            assert_eq!(items, (0..n).map(point).collect::<Vec<_>>(), "length {n}");
+        }
+        // past the maximum: refused, the client told so
+        let id = client.call(&Tick { seq: max as u64 + 1, stamp_ns: 9 }).expect("call");
+        let mut refused = None;
+        for _ in 0..500 {
+            match server.serve(answer) {
+                Ok(0) => std::thread::sleep(Duration::from_millis(2)),
+                other => {
+                    refused = Some(other);
+                    break;
+                }
+            }
+        }
+        match refused {
+            Some(Err(e @ CallError::AnswerTooLong { len, max: m, .. })) => {
+                assert_eq!((len, m), (max + 1, max));
+                assert!(e.to_string().contains("max_len"), "{e}");
+            }
+            other => panic!("an answer past the maximum: {other:?}"),
+        }
+        match next(|| client.take()) {
+            (got, Err(e @ CallError::RefusedTooLong { len, max: m, .. })) => {
+                assert_eq!((got, len, m), (id, max as u64 + 1, max as u64));
+                assert!(!e.maybe_carried_out() && e.to_string().contains("refused"), "{e}");
+            }
+            other => panic!("the client of a refused answer: {other:?}"),
+        }
+        let id = client.call(&Tick { seq: 2, stamp_ns: 9 }).expect("call");
+        for _ in 0..500 {
+            if server.serve(answer).expect("served") > 0 {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        let (got, result) = next(|| client.take());
+        assert_eq!((got, result.expect("answered").1.len()), (id, 2));
+        // a client of a fixed answer is refused by the sequence service
+        let (_, fixed) = Client::<Tick, Scalar>::bind(&Binding::Shm(node.clone()), "fixed", options).expect("client");
+        let e = fixed.connect(&node, &robot, "planner", "plan").expect_err("a fixed client of a sequence service");
+        assert!(e.to_string().contains("call(nerve::Tick -> nerve::Scalar)"), "{e}");
+    }
+}

@@ -1,0 +1,218 @@
+//! The server side of a call ([`CallServer`]): the service an agent
+//! answers, in its own task, which a request wakes like an input. Generic
+//! over how the answer travels ([`Answer`]): [`Server`] answers with a
+//! fixed-size payload, [`super::SeqServer`] (`call_seq`) with a sequence.
+
+use super::bytes::{Binding, DynInput};
+use super::call::{
+    ANSWERED_SUFFIX, Answer, CallError, Factory, Fixed, MAX_IN_FLIGHT, ServerPort, call_service, event_service,
+    open_err,
+};
+use super::error::PortError;
+use super::memory::SampleBuf;
+use super::service::lock;
+use crate::world::Ipc;
+use iceoryx2::active_request::ActiveRequest;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::event;
+use shm_schemas::Payload;
+use shm_schemas::control::agent_to_router::PortSpec;
+use shm_schemas::stats::InputStats;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+/// A request as the server holds it while it answers.
+pub(crate) type Request<Req, A> = ActiveRequest<Ipc, Req, (), <A as Answer>::Payload, <A as Answer>::Header>;
+
+/// A service an agent answers: requests `Req`, answers with a fixed-size `Resp`.
+pub type Server<Req, Resp> = CallServer<Req, Fixed<Resp>>;
+
+/// A service an agent answers: requests `Req`, answered as `A` says.
+pub struct CallServer<Req: Payload, A: Answer> {
+    side: Arc<ServerSide<Req, A>>,
+}
+
+impl<Req: Payload, A: Answer> std::fmt::Debug for CallServer<Req, A> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Server").field("service", &self.side.service).field("type", &self.side.spec.type_name).finish()
+    }
+}
+
+struct ServerLive<Req: Payload, A: Answer> {
+    port: Mutex<ServerPort<Req, A>>,
+    listener: Arc<Listener<Ipc>>,
+    answered: Mutex<Notifier<Ipc>>,
+    _factories: (Factory<Req, A>, event::PortFactory<Ipc>, event::PortFactory<Ipc>),
+}
+
+pub(crate) struct ServerSide<Req: Payload, A: Answer> {
+    spec: PortSpec,
+    service: String,
+    live: Option<ServerLive<Req, A>>,
+    answered: AtomicU64,
+}
+
+impl<Req: Payload, A: Answer> CallServer<Req, A> {
+    /// Service `port` (iceoryx2 service `service`), bound to `binding`.
+    pub(crate) fn bind(binding: &Binding, port: &str, service: &str) -> Result<(Self, Arc<dyn DynInput>), CallError> {
+        let live = match binding {
+            Binding::Nothing => None,
+            Binding::Memory(_) => return Err(CallError::NotInHarness { port: port.into() }),
+            Binding::Shm(node) => {
+                let factory = crate::world::retry_after_cleanup(
+                    node.config(),
+                    "serve",
+                    |e: &CallError| matches!(e, CallError::Open { .. }),
+                    || call_service::<Req, A>(node, service, true),
+                )?;
+                let server =
+                    crate::world::retry_after_cleanup(node.config(), "serve", |_| true, || A::server::<Req>(&factory))
+                        .map_err(|e| open_err(service, e))?;
+                let requests = event_service(node, service, true)?;
+                let listener = requests.listener_builder().create().map_err(|e| open_err(service, e))?;
+                let answered_name = format!("{service}{ANSWERED_SUFFIX}");
+                let answered = event_service(node, &answered_name, true)?;
+                let notifier = answered.notifier_builder().create().map_err(|e| open_err(&answered_name, e))?;
+                Some(ServerLive {
+                    port: Mutex::new(server),
+                    listener: Arc::new(listener),
+                    answered: Mutex::new(notifier),
+                    _factories: (factory, requests, answered),
+                })
+            }
+        };
+        let side = Arc::new(ServerSide {
+            spec: A::spec::<Req>(port),
+            service: service.into(),
+            live,
+            answered: AtomicU64::new(0),
+        });
+        Ok((CallServer { side: side.clone() }, side))
+    }
+
+    /// Hands each waiting request to `answer` (at most `max` of them: what
+    /// arrives meanwhile is left for the next step, whose wake-up is
+    /// pending), then wakes the clients; returns how many were handled.
+    /// An error of `answer` is remembered and the next request handled:
+    /// the first one is returned once all are.
+    pub(crate) fn each_request(
+        &self,
+        max: usize,
+        mut answer: impl FnMut(&Request<Req, A>) -> Result<(), CallError>,
+    ) -> Result<usize, CallError> {
+        let Some(live) = &self.side.live else { return Ok(0) };
+        let mut n = 0;
+        let mut first_error = None;
+        {
+            let port = lock(&live.port);
+            while n < max {
+                let request = match port.receive() {
+                    Ok(Some(r)) => r,
+                    Ok(None) => break,
+                    Err(source) => {
+                        return Err(CallError::Receive {
+                            port: self.side.spec.name.clone(),
+                            service: self.side.service.clone(),
+                            source,
+                        });
+                    }
+                };
+                if let Err(e) = answer(&request) {
+                    first_error.get_or_insert(e);
+                }
+                n += 1;
+            }
+        }
+        if n > 0 {
+            self.side.answered.fetch_add(n as u64, Ordering::Relaxed);
+            if let Err(e) = lock(&live.answered).notify() {
+                tracing::warn!(service = %self.side.service, "cannot wake the clients: {e:?}");
+            }
+        }
+        match first_error {
+            Some(e) => Err(e),
+            None => Ok(n),
+        }
+    }
+
+    /// How many requests it answered so far.
+    pub fn answered(&self) -> u64 {
+        self.side.answered.load(Ordering::Relaxed)
+    }
+
+    /// The iceoryx2 service name.
+    pub fn service(&self) -> &str {
+        &self.side.service
+    }
+}
+
+impl<Req: Payload, Resp: Payload> CallServer<Req, Fixed<Resp>> {
+    /// Answers each waiting request with `answer` (at most `max` of them:
+    /// what arrives meanwhile is left for the next step, whose wake-up is
+    /// pending); returns how many were answered.
+    pub fn serve_up_to(&self, max: usize, mut answer: impl FnMut(&Req) -> Resp) -> Result<usize, CallError> {
+        self.each_request(max, |request| {
+            if let Err(e) = request.send_copy(answer(request.payload())) {
+                // the client went away: nobody waits for this answer
+                tracing::debug!(service = %self.side.service, "an answer found no client: {e:?}");
+            }
+            Ok(())
+        })
+    }
+
+    /// Answers every waiting request with `answer` (at most
+    /// [`MAX_IN_FLIGHT`] per step); returns how many were answered.
+    pub fn serve(&self, answer: impl FnMut(&Req) -> Resp) -> Result<usize, CallError> {
+        self.serve_up_to(MAX_IN_FLIGHT, answer)
+    }
+}
+
+pub(crate) fn not_an_input(port: &str) -> PortError {
+    PortError::Ipc {
+        service: port.into(),
+        detail: "a call port is wired to a service, never to an output: \
+                 `nerve connect CLIENT_AGENT/CLIENT SERVER_AGENT/SERVICE`"
+            .into(),
+    }
+}
+
+impl<Req: Payload, A: Answer> DynInput for ServerSide<Req, A> {
+    fn name(&self) -> &str {
+        &self.spec.name
+    }
+    fn type_name(&self) -> &str {
+        &self.spec.type_name
+    }
+    fn spec(&self) -> PortSpec {
+        self.spec.clone()
+    }
+    fn payload_layout(&self) -> (usize, usize) {
+        (std::mem::size_of::<Req>(), std::mem::align_of::<Req>())
+    }
+    fn connect(
+        &self,
+        _node: &Node<Ipc>,
+        _robot: &shm_schemas::RobotName,
+        _from_agent: &str,
+        _from_port: &str,
+    ) -> Result<bool, PortError> {
+        Err(not_an_input(&self.spec.name))
+    }
+    fn disconnect(&self, _from_agent: &str, _from_port: &str) -> bool {
+        false
+    }
+    fn listeners(&self) -> Vec<Arc<Listener<Ipc>>> {
+        self.live.iter().map(|l| l.listener.clone()).collect()
+    }
+    fn stats(&self, _now: u64) -> Vec<InputStats> {
+        Vec::new()
+    }
+    fn has_queued(&self) -> bool {
+        false
+    }
+    fn queue(&self, _sender: &str, _port: &str, _sample: SampleBuf, _stamp_ns: u64) -> Result<(), PortError> {
+        Err(not_an_input(&self.spec.name))
+    }
+}
