@@ -8,10 +8,12 @@
 //! /camera/image_raw with rosbags, gets /tf_static although it joined after
 //! the robot sent it (transient local), and drives the robot with a CDR
 //! Twist on /cmd_vel; the test checks the decoded odometry and sonar ranges against
-//! `nerve echo`, and the camera's test pattern in the Image.
+//! `nerve echo`, and the camera's test pattern in the Image. On the robot
+//! of `launch/ros2.toml` (exploring), a ROS 2 teleop's Twist wins over
+//! exploration while it keeps coming (`tests/py/ros2_teleop.py`).
 //!
-//! Needs the binaries: `cargo build -p nerve -p nerve-sim -p nerve-motor -p
-//! nerve-sonar -p nerve-camera -p nerve-ros2 --bins`, and `target/nerve-py` with eclipse-zenoh and rosbags
+//! Needs the binaries: `cargo build --workspace --bins` (the teleop test
+//! starts the whole exploration robot), and `target/nerve-py` with eclipse-zenoh and rosbags
 //! (`.ci/run` installs them).
 
 use nerve_tests::{ChildGuard, Robot, bin_dir, free_port, write_file};
@@ -437,4 +439,96 @@ device = "{{state}}/dev/sonar"
 
 fn ros_odom_count(got: &Value) -> usize {
     got["messages"]["/motor/odom"].as_array().map_or(0, Vec::len)
+}
+
+/// The issue's "a ROS command wins over exploration while it keeps coming,
+/// through the motor's arbitration", on the robot of `launch/ros2.toml` as
+/// shipped (the exploration robot and its `ros2` agent; only the router's
+/// endpoint is the test's own): the robot explores on its own, a ROS 2
+/// teleop (`tests/py/ros2_teleop.py`, rmw_zenoh's wire) sends a CDR Twist
+/// turning in place on /cmd_vel for a few seconds, and the robot's /odom,
+/// decoded by rosbags, shows it turning at the commanded rate with the
+/// forward speed of exploration gone; once the Twists stop the motor drops
+/// them (`stale_ms`) and exploration drives again.
+#[test]
+fn a_ros2_command_wins_over_exploration_while_it_keeps_coming() {
+    let python = python_with_rosbags();
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let r = Robot::new("ros2cmd");
+    let shipped_cfg = std::fs::read_to_string(repo.join("agents/ros2/examples/explore.toml")).expect("ros2 config");
+    let default_router = "connect = [\"tcp/127.0.0.1:7447\"]";
+    assert!(shipped_cfg.contains(default_router), "the example's router line changed: update this test");
+    let cfg =
+        write_file(&r.home, "ros2.toml", &shipped_cfg.replace(default_router, &format!("connect = [\"{endpoint}\"]")));
+    let shipped = std::fs::read_to_string(repo.join("launch/ros2.toml")).expect("launch/ros2.toml");
+    let cfg_arg = "{dir}/../agents/ros2/examples/explore.toml";
+    assert!(shipped.contains(cfg_arg), "launch/ros2.toml's ros2 config line changed: update this test");
+    let file = write_file(&r.home, "ros2-launch.toml", &shipped.replace(cfg_arg, &cfg.display().to_string()));
+    let out = r.command("nerve").current_dir(&repo).arg("launch").arg(&file).output().expect("run nerve launch");
+    assert!(out.status.success(), "launch failed: {}", String::from_utf8_lossy(&out.stderr));
+    let mut router = Command::new(bin_dir().join("nerve-ros2-router"));
+    router.args(["--listen", &endpoint]).stdout(Stdio::piped());
+    let mut router = ChildGuard::spawn("nerve-ros2-router", router).expect("start nerve-ros2-router");
+    router.await_ready("nerve-ros2-router").expect("the router listens");
+
+    let (v_cmd, w_cmd) = (0.0, 0.8);
+    let arg = serde_json::json!({
+        "connect": endpoint, "domain": 0, "node": "nerve_explore",
+        "twist": [v_cmd, w_cmd], "moving": 0.05, "publish_s": 3.0, "after_s": 3.0,
+    });
+    let out = Command::new(&python)
+        .arg(repo.join("tests/py/ros2_teleop.py"))
+        .arg(arg.to_string())
+        .output()
+        .expect("run the ROS 2 teleop");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    if !out.status.success() {
+        r.dump_logs();
+        panic!("the ROS 2 teleop failed: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    }
+    let got: Value = serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("teleop output {stdout}: {e}"));
+    let odom = got["odom"].as_array().expect("odom");
+    let phase = |p: &str| odom.iter().filter(|o| o["phase"] == p).collect::<Vec<_>>();
+    let (before, during, after) = (phase("before"), phase("during"), phase("after"));
+    let mean = |s: &[&Value], k: &str| s.iter().map(|o| f(o, k)).sum::<f64>() / s.len().max(1) as f64;
+    // the second half of each phase: the motor's ramps and `stale_ms` are past
+    fn tail<'a>(s: &[&'a Value]) -> Vec<&'a Value> {
+        s[s.len() / 2..].to_vec()
+    }
+    eprintln!(
+        "v / omega: before {:.3} / {:.3}, during {:.3} / {:.3}, after {:.3} / {:.3} ({} /odom messages)",
+        mean(&tail(&before), "v"),
+        mean(&tail(&before), "omega"),
+        mean(&tail(&during), "v"),
+        mean(&tail(&during), "omega"),
+        mean(&tail(&after), "v"),
+        mean(&tail(&after), "omega"),
+        odom.len()
+    );
+    assert!(before.len() >= 5 && during.len() >= 20 && after.len() >= 20, "/odom kept coming: {got}");
+    // exploring on its own first (the teleop waited for it)
+    assert!(f(before[before.len() - 1], "v") >= 0.05, "{:?}", before.last());
+    // while the Twists come: turning at the commanded rate, in place (the
+    // fused command is ROS's by weight 10 against exploration's 3)
+    let (dv, dw) = (mean(&tail(&during), "v"), mean(&tail(&during), "omega"));
+    assert!(dw > 0.6 * w_cmd, "turning at {dw} rad/s while ROS asks {w_cmd}: {got}");
+    // (exploration cruises at about 0.25 m/s; ROS's weight leaves it a
+    // fraction of that)
+    assert!(dv.abs() < 0.15, "forward {dv} m/s while ROS asks to turn in place: {got}");
+    let yaw = |o: &Value| f(o, "yaw");
+    let turned: f64 = during
+        .windows(2)
+        .map(|w| {
+            (yaw(w[1]) - yaw(w[0]) + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+        })
+        .sum();
+    assert!(turned > 0.4 * w_cmd * 3.0, "turned {turned} rad in 3 s at {w_cmd} rad/s: {got}");
+    // the Twists stopped: exploration drives again
+    let av = mean(&tail(&after), "v");
+    assert!(av >= 0.05, "exploration took over again: {av} m/s: {got}");
+    assert!(r.figure_u64("ros2", "received/cmd_vel") >= 20, "{:?}", r.figures("ros2"));
+
+    r.down_and_check_clean();
+    router.stop(Duration::from_secs(2));
 }
