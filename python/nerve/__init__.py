@@ -52,7 +52,8 @@ import numpy as np
 
 from . import _native
 
-__all__ = ["Agent", "Payload", "payload", "builtin", "run", "Message", "Meta", "Input", "Output", "Setup"]
+__all__ = ["Agent", "Payload", "payload", "builtin", "run", "Message", "Meta", "Input", "Output", "Setup",
+           "Sequence", "sequence", "SeqMessage", "SeqInput", "SeqOutput"]
 
 _PRIMITIVES = {
     "u8": "<u1", "u16": "<u2", "u32": "<u4", "u64": "<u8",
@@ -323,6 +324,9 @@ class Output:
         return self._n.service
 
 
+from .seq import Sequence, sequence, SeqMessage, SeqInput, SeqOutput  # noqa: E402 (they use the above)
+
+
 class Setup:
     """What ``Agent.new`` declares ports and parameters on."""
 
@@ -346,18 +350,42 @@ class Setup:
         return self._n.args
 
     def input(self, port: str, type) -> Input:
-        """Declares input ``port`` of payload ``type`` (a name or a ``Payload``)."""
+        """Declares input ``port`` of payload ``type`` (a name, a ``Payload``
+        or a ``nerve.sequence``)."""
+        if isinstance(type, Sequence):
+            made = SeqInput(self._n.input(port, type.schema_json), type)
+            self.inputs[port] = type
+            return made
         p = _payload_of(type)
         made = Input(self._n.input(port, p.schema_json), p)
         self.inputs[port] = p
         return made
 
-    def output(self, port: str, type) -> Output:
-        """Declares output ``port`` of payload ``type`` (a name or a ``Payload``)."""
+    def output(self, port: str, type, *, max_len: int | None = None) -> Output:
+        """Declares output ``port`` of payload ``type`` (a name or a
+        ``Payload``; or a ``nerve.sequence``, which takes ``max_len``)."""
+        if isinstance(type, Sequence):
+            if max_len is None:
+                raise TypeError(f"output {port!r} of {type.type_name}: give max_len, the most elements a sample holds")
+            made = SeqOutput(_native.output_seq(self._n, port, type.schema_json, int(max_len)), type)
+            self.outputs[port] = type
+            return made
+        if max_len is not None:
+            raise TypeError(f"output {port!r}: max_len is for a sequence (nerve.sequence), not {type!r}")
         p = _payload_of(type)
         made = Output(self._n.output(port, p.schema_json), p)
         self.outputs[port] = p
         return made
+
+    def input_seq(self, port: str, element, header=None) -> "SeqInput":
+        """Declares input ``port`` of samples of ``header`` then any number
+        of ``element`` (as Rust's ``setup.input_seq::<T, H>(port)``)."""
+        return self.input(port, sequence(element, header))
+
+    def output_seq(self, port: str, element, header=None, *, max_len: int) -> "SeqOutput":
+        """Declares output ``port`` of samples of ``header`` then at most
+        ``max_len`` of ``element`` (as Rust's ``setup.output_seq::<T, H>(port, max_len)``)."""
+        return self.output(port, sequence(element, header), max_len=max_len)
 
     def param(self, key: str, default, *, min=None, max=None):
         """Declares parameter ``key`` (float, int, bool or str, as ``default``);

@@ -26,6 +26,7 @@ import json
 import numpy as np
 
 from . import Agent, Message, Meta, _kind_of, _native
+from . import seq as _seq
 
 __all__ = ["Harness"]
 
@@ -52,13 +53,21 @@ class Harness:
 
     def send(self, input: str, message=None, /, *, sender: str = "test", **fields) -> None:
         """Queues a message on ``input`` from agent ``sender``: ``fields``
-        (the rest zero), a dict, a ``Message`` or bytes of the layout."""
+        (the rest zero), a dict, a ``Message`` or bytes of the layout; for
+        a sequence input, ``header=`` (a dict or Message) and ``items=``,
+        or a ``SeqMessage``."""
         try:
             payload = self._inputs[input]
         except KeyError:
             raise ValueError(f"the agent has no input {input!r}; it has {sorted(self._inputs)}") from None
         if isinstance(message, (bytes, bytearray, memoryview)) and not fields:
             data = bytes(message)
+        elif isinstance(payload, _seq.Sequence):
+            # a sequence: a SeqMessage, or header= (dict or Message) and items=
+            unknown = set(fields) - {"header", "items"}
+            if unknown:
+                raise TypeError(f"a {payload.type_name} message takes header= and items=, not {sorted(unknown)}")
+            data = _seq.encoded(payload, message, fields.get("header"), fields.get("items"))
         else:
             a = np.zeros(1, dtype=payload.dtype)
             if isinstance(message, Message):
@@ -80,9 +89,12 @@ class Harness:
             payload = self._outputs[port]
         except KeyError:
             raise ValueError(f"the agent has no output {port!r}; it has {sorted(self._outputs)}") from None
+        sent = self._h.output_bytes(port)
+        if isinstance(payload, _seq.Sequence):
+            return [_seq.decoded(data, payload, Meta(sender, seq, stamp)) for sender, seq, stamp, data in sent]
         return [
             Message(np.frombuffer(data, dtype=payload.dtype, count=1).copy(), Meta(sender, seq, stamp))
-            for sender, seq, stamp, data in self._h.output_bytes(port)
+            for sender, seq, stamp, data in sent
         ]
 
     def step(self) -> None:

@@ -25,6 +25,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, OnceLock};
 use std::time::Duration;
 
+mod seq;
+
 /// The Python agent this process runs: set once by [`run`].
 struct Spec {
     kind: &'static str,
@@ -1005,5 +1007,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(struct_schema, m)?)?;
     m.add_function(wrap_pyfunction!(fingerprint, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
+    seq::register(m)?;
     Ok(())
 }

@@ -16,6 +16,7 @@ from nerve.testing import Harness
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "examples"))
 from scale import Scale  # noqa: E402
 from loaner import Loaner  # noqa: E402 (python/tests, the directory unittest runs in)
+from seq_detector import DETECTION, HEADER, SeqDetector  # noqa: E402
 
 
 class Layouts(unittest.TestCase):
@@ -285,6 +286,82 @@ class Bounds(unittest.TestCase):
         for decl, message in cases:
             with self.assertRaisesRegex(Exception, message, msg=str(decl)):
                 Harness(declaring(**decl))
+
+
+class Sequences(unittest.TestCase):
+    """Sequence ports (issue 42) under the harness; tests/tests/python_seq.rs
+    runs the same agent against a Rust one in shared memory."""
+
+    def test_a_sequence_type_is_the_rust_layout(self):
+        s = nerve.sequence(DETECTION, HEADER)
+        self.assertEqual(s.type_name, "nerve::Seq<acme::Detection, acme::DetectionsHeader>")
+        self.assertEqual((s.items_at, s.element_size, s.align), (16, 12, 8))
+        text = nerve.sequence("u8")
+        self.assertEqual((text.type_name, text.items_at, text.header), ("nerve::Seq<u8, nerve::NoHeader>", 0, None))
+        self.assertNotEqual(s.fingerprint, nerve.sequence(DETECTION).fingerprint, "the header is in the fingerprint")
+        with self.assertRaisesRegex(ValueError, "fixed-size types, not sequences"):
+            nerve.sequence(s)
+        with self.assertRaisesRegex(ValueError, "not a .* whole 12-byte elements"):
+            s.length_of(16 + 13)
+
+    def test_lengths_zero_one_and_growth_are_sent_at_their_length_and_read_back(self):
+        h = Harness(SeqDetector)
+        h.run_cycles(5)
+        sent = h.output("dets")
+        self.assertEqual([len(m) for m in sent], [0, 1, 400, 401, 0])
+        self.assertEqual([int(m.header.frame) for m in sent], [1, 2, 3, 4, 5])
+        self.assertEqual(sent[3].items["id"].tolist(), list(range(401)))
+        self.assertTrue(np.all(sent[3].items["y"] == 4.0))
+        self.assertEqual(sent[1].to_dict(), {"header": {"frame": 2, "count": 1}, "items": [{"x": 0.0, "y": 2.0, "id": 0}]})
+        for m in sent:
+            h.send("dets_in", m, sender="rust")
+        # fields, a list of tuples, and one that is not what its header says
+        h.send("dets_in", header={"frame": 9, "count": 2}, items=[(0.0, 9.0, 0), (1.0, 9.0, 1)])
+        h.send("dets_in", header={"frame": 9, "count": 3}, items=[(0.0, 9.0, 0)])
+        h.step()
+        report = h.output("report")[-1]
+        self.assertEqual((int(report.received), int(report.largest), int(report.bad)), (7, 401, 1))
+        # past its maximum: refused every step, nothing sent
+        self.assertEqual(int(report.refused), 6)
+
+    def test_a_loan_is_refused_past_its_maximum_and_spent_by_send(self):
+        class Text(nerve.Agent):
+            period = 0.1
+
+            def new(self, setup):
+                self.out = setup.output_seq("line", "u8", max_len=8)
+                self.outcomes = []
+
+            def step(self, ctx):
+                try:
+                    self.out.loan(9)
+                except ValueError as e:
+                    self.outcomes.append(str(e))
+                m = self.out.loan(5)
+                m.items[:] = np.frombuffer(b"hello", dtype=np.uint8)
+                kept = m.items
+                try:
+                    self.out.send(m)
+                except BufferError:
+                    self.outcomes.append("a live view kept it")
+                del kept
+                self.out.send(m)
+                try:
+                    m.items
+                except RuntimeError:
+                    self.outcomes.append("spent")
+                self.out.send(items=b"")
+                self.out.send(items=b"12345678")
+
+        h = Harness(Text)
+        h.step()
+        refusal, kept, spent = h.agent.outcomes
+        self.assertIn("a sample of 9 elements is longer than the 8 the port declared", refusal)
+        self.assertEqual((kept, spent), ("a live view kept it", "spent"))
+        self.assertEqual([m.items.tobytes() for m in h.output("line")], [b"hello", b"", b"12345678"])
+        with self.assertRaisesRegex(Exception, "give max_len"):
+            Harness(type("NoMax", (nerve.Agent,), {"period": 0.1, "new": lambda self, s: s.output("x", nerve.sequence("u8")),
+                                                   "step": lambda self, c: None}))
 
 
 if __name__ == "__main__":
