@@ -119,6 +119,11 @@ typedef enum nerve_status {
    A bug of nerve: it panicked; the call did nothing.
    */
   NERVE_PANIC = 11,
+  /*
+   The agent's own callback (`init`, `start`, `step`) returned an error
+   in a test harness; the message is the agent's.
+   */
+  NERVE_AGENT_FAILED = 12,
 } nerve_status;
 
 /*
@@ -128,6 +133,13 @@ typedef enum nerve_status {
  rather than read.
  */
 typedef struct nerve_ctx nerve_ctx;
+
+/*
+ A C agent running in a test, made by [`nerve_harness_new`] and freed by
+ [`nerve_harness_free`]. Opaque: use it through the `nerve_harness_*`
+ functions only.
+ */
+typedef struct nerve_harness nerve_harness;
 
 /*
  What `new` declares ports on. Valid during the `new` call only.
@@ -455,6 +467,132 @@ const char *nerve_last_error(void);
  signatures and whose `kind` is a NUL-terminated string.
  */
 int nerve_run(int argc, char *const *argv, const struct nerve_agent_vtable *agent, void *user);
+
+/*
+ Starts C agent `agent` in a test harness: runs its `init` (its ports
+ bound to in-memory queues, no router, no shared memory), applies the
+ `n_params` settings of `params` (`"KEY=VALUE"`, as `--param` is), runs
+ its `start`, and writes the harness to `*harness` (NULL on a failure).
+ The agent's name is its kind, its period `agent->period_ns` (0:
+ event-driven); its clock starts at 1 s and moves only when the test
+ moves it ([`nerve_harness_step`], [`nerve_harness_advance`]).
+
+ Ownership: `agent` and `params` are read during the call and not kept;
+ `user` is handed to every callback and never read by nerve; the
+ harness is the caller's, to free with [`nerve_harness_free`].
+
+ Threads: the callbacks run in the thread calling the `nerve_harness_*`
+ function that runs them; a harness may move between threads but is
+ used by one at a time. Several harnesses, of one or several agents, may
+ live at once. `NERVE_AGENT_FAILED` when `init` or `start` failed, with
+ the agent's message; `NERVE_INVALID_ARGUMENT` for a setting refused.
+
+ # Safety
+ `agent` is null or a vtable as [`crate::nerve_run`] takes; `params` is
+ null or holds `n_params` pointers, each null or a NUL-terminated
+ string; `harness` is null or writable.
+ */
+enum nerve_status nerve_harness_new(const struct nerve_agent_vtable *agent,
+                                    void *user,
+                                    const char *const *params,
+                                    size_t n_params,
+                                    struct nerve_harness **harness);
+
+/*
+ Runs the agent's `stop` and frees the harness; NULL does nothing.
+ The harness must not be used after.
+
+ # Safety
+ `h` is null or a harness from [`nerve_harness_new`] not yet freed.
+ */
+enum nerve_status nerve_harness_free(struct nerve_harness *h);
+
+/*
+ Queues a copy of the `len` bytes at `data` on input `input`, as a
+ sample from agent `test` stamped with the harness's clock. `len` must be
+ the input's payload size (`sizeof` its struct): another is refused with
+ `NERVE_LAYOUT_MISMATCH`. Past 16 waiting samples the oldest is
+ overwritten, as on a running agent's input.
+
+ # Safety
+ `h` is null or a live harness; `input` is null or a NUL-terminated
+ string; `data` is null or readable for `len` bytes.
+ */
+enum nerve_status nerve_harness_send(struct nerve_harness *h,
+                                     const char *input,
+                                     const void *data,
+                                     size_t len);
+
+/*
+ Runs one cycle: an event-driven agent steps now (woken by the inputs
+ that have samples); a periodic agent's clock moves to its next deadline
+ and it steps there. `NERVE_AGENT_FAILED` when the step returned an
+ error, with its message.
+
+ # Safety
+ `h` is null or a live harness.
+ */
+enum nerve_status nerve_harness_step(struct nerve_harness *h);
+
+/*
+ Moves the clock on by `ns` nanoseconds; a periodic agent steps at every
+ deadline passed. Writes how many steps ran to `*steps` (may be NULL).
+ The first failed step ends the advance (`NERVE_AGENT_FAILED`).
+
+ # Safety
+ `h` is null or a live harness; `steps` is null or writable.
+ */
+enum nerve_status nerve_harness_advance(struct nerve_harness *h, uint64_t ns, uint64_t *steps);
+
+/*
+ Copies the oldest sample output `output` sent that the test has not
+ read yet into `dst` (`size` bytes: the port's payload size, else
+ `NERVE_LAYOUT_MISMATCH`) and writes its size to `*len`.
+ `NERVE_NO_SAMPLE` when none is left (`*len` is then 0).
+
+ # Safety
+ `h` is null or a live harness; `output` is null or a NUL-terminated
+ string; `dst` is null or writable for `size` bytes; `len` is null or
+ writable.
+ */
+enum nerve_status nerve_harness_output(struct nerve_harness *h,
+                                       const char *output,
+                                       void *dst,
+                                       size_t size,
+                                       size_t *len);
+
+/*
+ Sets parameter `key` to `value` (text, as `nerve param set KEY VALUE`
+ gives it); a value the agent's bounds refuse is `NERVE_INVALID_ARGUMENT`
+ with the refusal `nerve` would print.
+
+ # Safety
+ `h` is null or a live harness; `key` and `value` are null or
+ NUL-terminated strings.
+ */
+enum nerve_status nerve_harness_set_param(struct nerve_harness *h,
+                                          const char *key,
+                                          const char *value);
+
+/*
+ Changes a periodic agent's period to `period_ns`, as `nerve rate` does:
+ the next step comes one new period after the last. Ignored for an
+ event-driven agent; 0 is refused.
+
+ # Safety
+ `h` is null or a live harness.
+ */
+enum nerve_status nerve_harness_set_period(struct nerve_harness *h, uint64_t period_ns);
+
+/*
+ Writes the harness's clock (what the agent reads as now, in ns; it
+ starts at 1 s) to `*now_ns` and how many steps ran to `*cycles`
+ (either may be NULL).
+
+ # Safety
+ `h` is null or a live harness; `now_ns` and `cycles` are null or writable.
+ */
+enum nerve_status nerve_harness_clock(struct nerve_harness *h, uint64_t *now_ns, uint64_t *cycles);
 
 #ifdef __cplusplus
 }  // extern "C"

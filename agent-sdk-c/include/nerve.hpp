@@ -40,10 +40,12 @@
 #include <cstdio>
 #include <exception>
 #include <functional>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
 #include <utility>
+#include <vector>
 
 namespace nerve {
 
@@ -285,6 +287,19 @@ class agent {
   /* Runs the agent with main's command line until it stops; call once,
    * from main's thread. Returns the exit status for main. */
   int run(int argc, char **argv) {
+    if (!init_ || !step_) {
+      std::fprintf(stderr, "%s: nerve::agent needs on_init and on_step before run\n", kind_.c_str());
+      return 2;
+    }
+    nerve_agent_vtable vt = vtable();
+    return nerve_run(argc, argv, &vt, this);
+  }
+
+ private:
+  friend class harness;
+
+  /* The C vtable of this agent; its `user` pointer is `this`. */
+  nerve_agent_vtable vtable() const noexcept {
     nerve_agent_vtable vt{};
     vt.kind = kind_.c_str();
     vt.period_ns = period_ns_;
@@ -292,14 +307,9 @@ class agent {
     vt.start = start_ ? &agent::start_cb : nullptr;
     vt.step = &agent::step_cb;
     vt.stop = stop_ ? &agent::stop_cb : nullptr;
-    if (!init_ || !step_) {
-      std::fprintf(stderr, "%s: nerve::agent needs on_init and on_step before run\n", kind_.c_str());
-      return 2;
-    }
-    return nerve_run(argc, argv, &vt, this);
+    return vt;
   }
 
- private:
   /* Calls `f`; an exception becomes a message and a failed call (1). */
   template <class F>
   int guarded(const char *what, F &&f) noexcept {
@@ -347,6 +357,96 @@ class agent {
   std::uint64_t period_ns_;
   std::function<void(setup &)> init_;
   std::function<void(context &)> start_, step_, stop_;
+};
+
+/* A C++ agent in a test (the C test harness, nerve_harness_*): its
+ * callbacks run in this process and thread, with no router and no shared
+ * memory, on a clock the test moves. RAII: the destructor runs the agent's
+ * stop and frees the harness. Every failure throws nerve::error (a step
+ * that threw or failed: NERVE_AGENT_FAILED, with the agent's message).
+ *
+ *   nerve::agent a("scale");
+ *   define(a);                               // the agent's on_init, on_step
+ *   nerve::harness h(a, {"gain=3"});
+ *   h.send("in", nerve_Tick{7, 0});
+ *   h.step();
+ *   std::optional<nerve_Tick> t = h.output<nerve_Tick>("out");  // seq 21
+ *
+ * The agent must outlive the harness; one thread at a time uses it. */
+class harness {
+ public:
+  /* Runs `a`'s init (with `params`, "KEY=VALUE" each) and start. */
+  explicit harness(agent &a, const std::vector<std::string> &params = {}) {
+    if (!a.init_ || !a.step_) {
+      throw error(NERVE_INVALID_ARGUMENT, "nerve::harness: the agent needs on_init and on_step");
+    }
+    std::vector<const char *> p;
+    for (const std::string &kv : params) {
+      p.push_back(kv.c_str());
+    }
+    nerve_agent_vtable vt = a.vtable();
+    detail::check(nerve_harness_new(&vt, &a, p.data(), p.size(), &h_), "nerve_harness_new");
+  }
+  harness(const harness &) = delete;
+  harness &operator=(const harness &) = delete;
+  ~harness() { nerve_harness_free(h_); }
+
+  /* Queues a copy of `value` on input `input`. */
+  template <class T>
+  void send(const char *input, const T &value) {
+    static_assert(std::is_trivially_copyable<T>::value, "a payload is a plain struct");
+    detail::check(nerve_harness_send(h_, input, &value, sizeof(T)), "nerve_harness_send");
+  }
+
+  /* One cycle (a periodic agent's clock moves to its next deadline). */
+  void step() { detail::check(nerve_harness_step(h_), "nerve_harness_step"); }
+
+  /* Moves the clock on by `ns`; returns how many steps ran. */
+  std::uint64_t advance(std::uint64_t ns) {
+    std::uint64_t steps = 0;
+    detail::check(nerve_harness_advance(h_, ns, &steps), "nerve_harness_advance");
+    return steps;
+  }
+
+  /* The oldest sample `output` sent that the test has not read; empty when none. */
+  template <class T>
+  std::optional<T> output(const char *output) {
+    T value{};
+    size_t len = 0;
+    nerve_status s = nerve_harness_output(h_, output, &value, sizeof(T), &len);
+    if (s == NERVE_NO_SAMPLE) {
+      return std::nullopt;
+    }
+    detail::check(s, "nerve_harness_output");
+    return value;
+  }
+
+  /* Sets a parameter as `nerve param set` does (refused out of its bounds). */
+  void set_param(const char *key, const std::string &value) {
+    detail::check(nerve_harness_set_param(h_, key, value.c_str()), "nerve_harness_set_param");
+  }
+
+  /* Changes a periodic agent's period, as `nerve rate` does. */
+  void set_period(std::uint64_t ns) { detail::check(nerve_harness_set_period(h_, ns), "nerve_harness_set_period"); }
+
+  /* The clock the agent reads (ns; starts at 1 s). */
+  std::uint64_t now_ns() {
+    std::uint64_t now = 0;
+    detail::check(nerve_harness_clock(h_, &now, nullptr), "nerve_harness_clock");
+    return now;
+  }
+
+  /* How many steps ran. */
+  std::uint64_t cycles() {
+    std::uint64_t n = 0;
+    detail::check(nerve_harness_clock(h_, nullptr, &n), "nerve_harness_clock");
+    return n;
+  }
+
+  nerve_harness *raw() const noexcept { return h_; }
+
+ private:
+  nerve_harness *h_ = nullptr;
 };
 
 }  // namespace nerve

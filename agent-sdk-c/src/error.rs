@@ -3,6 +3,7 @@
 //! [`nerve_status`] and keeps its message for `nerve_last_error`, per
 //! thread.
 
+use agent_sdk::testing::HarnessError;
 use agent_sdk::{AgentError, PortError};
 use std::cell::RefCell;
 use std::ffi::{CString, c_char};
@@ -38,6 +39,9 @@ pub enum nerve_status {
     NERVE_PORT_ERROR = 10,
     /// A bug of nerve: it panicked; the call did nothing.
     NERVE_PANIC = 11,
+    /// The agent's own callback (`init`, `start`, `step`) returned an error
+    /// in a test harness; the message is the agent's.
+    NERVE_AGENT_FAILED = 12,
 }
 
 /// Why a call failed, with its cause.
@@ -78,6 +82,8 @@ pub(crate) enum Failure {
     },
     #[error("no sample waits on input {0}")]
     NoSample(u32),
+    #[error("output {0:?} sent nothing the test has not read yet")]
+    NoOutput(String),
     #[error("nothing is loaned on output {0}: call nerve_loan first")]
     NoLoan(u32),
     #[error("output {0} has a loan not sent yet: send it (nerve_send) before loaning again")]
@@ -96,6 +102,24 @@ pub(crate) enum Failure {
         #[source]
         source: PortError,
     },
+    #[error("the agent has no {direction} named {port:?}; it has {known:?}")]
+    NoPortNamed { direction: &'static str, port: String, known: Vec<String> },
+    #[error(
+        "{direction} {port:?} carries {type_name} of {want} bytes, but {given} bytes were given: \
+         pass the port's own struct (sizeof)"
+    )]
+    Size { direction: &'static str, port: String, type_name: String, want: usize, given: usize },
+    #[error("the agent's {what} failed")]
+    Agent {
+        what: &'static str,
+        #[source]
+        source: AgentError,
+    },
+    #[error("the test harness could not start the agent")]
+    Harness {
+        #[source]
+        source: HarnessError,
+    },
 }
 
 impl Failure {
@@ -110,10 +134,19 @@ impl Failure {
             Failure::UnknownPort { .. } => NERVE_UNKNOWN_PORT,
             Failure::UnknownType(_) => NERVE_UNKNOWN_TYPE,
             Failure::Layout { .. } => NERVE_LAYOUT_MISMATCH,
-            Failure::NoSample(_) => NERVE_NO_SAMPLE,
+            Failure::NoSample(_) | Failure::NoOutput(_) => NERVE_NO_SAMPLE,
             Failure::NoLoan(_) => NERVE_NO_LOAN,
             Failure::LoanPending(_) => NERVE_LOAN_PENDING,
             Failure::Sdk { .. } | Failure::Port { .. } => NERVE_PORT_ERROR,
+            Failure::NoPortNamed { .. } => NERVE_UNKNOWN_PORT,
+            Failure::Size { .. } => NERVE_LAYOUT_MISMATCH,
+            Failure::Agent { .. } => NERVE_AGENT_FAILED,
+            Failure::Harness { source } => match source {
+                HarnessError::Agent { .. } => NERVE_AGENT_FAILED,
+                HarnessError::Param { .. } | HarnessError::Name { .. } => NERVE_INVALID_ARGUMENT,
+                HarnessError::NoSuchPort { .. } => NERVE_UNKNOWN_PORT,
+                _ => NERVE_PORT_ERROR,
+            },
         }
     }
 }

@@ -24,6 +24,7 @@
 //! cbindgen from this file (`tests/header.rs` keeps it current).
 
 mod error;
+mod harness;
 mod own_type;
 
 use agent_sdk::dynamic::{Loan, Received, SchemaInput, SchemaOutput};
@@ -35,6 +36,7 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 pub use error::nerve_status;
+pub use harness::nerve_harness;
 pub use own_type::{
     NERVE_BOOL, NERVE_F32, NERVE_F64, NERVE_I8, NERVE_I16, NERVE_I32, NERVE_I64, NERVE_U8, NERVE_U16, NERVE_U32,
     NERVE_U64, nerve_field, nerve_type,
@@ -110,6 +112,29 @@ struct Spec {
 
 static SPEC: OnceLock<Spec> = OnceLock::new();
 
+thread_local! {
+    /// The C agent a test harness of this thread is starting
+    /// (`nerve_harness_new`): it takes the place of [`SPEC`] while the
+    /// agent's `new` and `start` run, so a test process holds several.
+    static STARTING: std::cell::Cell<Option<Spec>> = const { std::cell::Cell::new(None) };
+}
+
+/// The kinds given to harnesses, kept once each for the process's life
+/// (the SDK wants a `'static` kind; a static holds them, so a leak checker
+/// sees them reachable).
+static KINDS: std::sync::Mutex<Vec<&'static str>> = std::sync::Mutex::new(Vec::new());
+
+/// `kind` as a `'static` string, made once per distinct kind.
+fn intern(kind: &str) -> &'static str {
+    let mut kinds = KINDS.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some(k) = kinds.iter().find(|k| **k == kind) {
+        return k;
+    }
+    let k: &'static str = Box::leak(kind.to_owned().into_boxed_str());
+    kinds.push(k);
+    k
+}
+
 /// What `new` declares ports on. Valid during the `new` call only.
 #[allow(non_camel_case_types)]
 #[derive(Debug)]
@@ -117,7 +142,17 @@ pub struct nerve_setup {
     sdk: *mut Setup,
     inputs: Vec<SchemaInput>,
     outputs: Vec<SchemaOutput>,
+    /// the ports' names, by handle order (inputs, then outputs)
+    names: PortNames,
     params: Vec<Param<f64>>,
+}
+
+/// The names of an agent's inputs and outputs, in the order of their
+/// handles (a test harness finds a port's layout by name).
+#[derive(Debug, Default)]
+struct PortNames {
+    inputs: Vec<String>,
+    outputs: Vec<String>,
 }
 
 /// A parameter handle, as `nerve_setup_param_f64` gives it: never 0.
@@ -140,12 +175,15 @@ pub struct nerve_ctx {
     /// one pending loan per output
     loans: Vec<Option<Loan>>,
     params: Vec<Param<f64>>,
+    names: PortNames,
 }
 
 /// An SDK agent whose algorithm is C functions.
 #[derive(Debug)]
 pub struct CAgent {
     ctx: Box<nerve_ctx>,
+    /// its callbacks and `user` pointer (the process's, or a harness's)
+    spec: Spec,
 }
 
 // SAFETY: the only field that is not `Send` is `nerve_ctx::sdk`, a raw
@@ -154,26 +192,37 @@ pub struct CAgent {
 // move between threads as a Rust agent's do.
 unsafe impl Send for CAgent {}
 
+/// The C agent being made: a harness's of this thread while it starts
+/// one, else the one given to `nerve_run`.
+fn current_spec() -> Option<Spec> {
+    STARTING.with(std::cell::Cell::get).or_else(|| SPEC.get().copied())
+}
+
 fn spec() -> Result<Spec, AgentError> {
-    SPEC.get().copied().ok_or_else(|| AgentError::Other("no C agent was given to nerve_run".into()))
+    current_spec().ok_or_else(|| AgentError::Other("no C agent was given to nerve_run".into()))
 }
 
 impl Agent for CAgent {
     const KIND: &'static str = "c";
 
     fn kind() -> &'static str {
-        SPEC.get().map_or(Self::KIND, |s| s.kind)
+        current_spec().map_or(Self::KIND, |s| s.kind)
     }
 
     fn task() -> Task {
-        SPEC.get().map_or(Task::EventDriven, |s| s.task)
+        current_spec().map_or(Task::EventDriven, |s| s.task)
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
         let spec = spec()?;
         let new = spec.new.ok_or_else(|| AgentError::Other("the C agent's vtable has no `init`".into()))?;
-        let mut s =
-            nerve_setup { sdk: setup as *mut Setup, inputs: Vec::new(), outputs: Vec::new(), params: Vec::new() };
+        let mut s = nerve_setup {
+            sdk: setup as *mut Setup,
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            names: PortNames::default(),
+            params: Vec::new(),
+        };
         // SAFETY: `new` is the C program's function of this signature
         // (nerve_run's contract); `s` outlives the call.
         let status = unsafe { new(&mut s, spec.user as *mut c_void) };
@@ -190,24 +239,26 @@ impl Agent for CAgent {
                 held: Vec::new(),
                 loans,
                 params: s.params,
+                names: s.names,
             }),
+            spec,
         })
     }
 
     fn start(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
-        match spec()?.start {
+        match self.spec.start {
             Some(f) => self.call("start", f, ctx),
             None => Ok(()),
         }
     }
 
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
-        let f = spec()?.step.ok_or_else(|| AgentError::Other("the C agent's vtable has no `step`".into()))?;
+        let f = self.spec.step.ok_or_else(|| AgentError::Other("the C agent's vtable has no `step`".into()))?;
         self.call("step", f, ctx)
     }
 
     fn stop(&mut self, ctx: &mut Context) {
-        let Ok(spec) = spec() else { return };
+        let spec = self.spec;
         if let Some(f) = spec.stop {
             self.ctx.sdk = ctx as *mut Context;
             // SAFETY: `f` is the C program's function of this signature;
@@ -226,7 +277,7 @@ impl CAgent {
         f: unsafe extern "C" fn(*mut nerve_ctx, *mut c_void) -> c_int,
         ctx: &mut Context,
     ) -> Result<(), AgentError> {
-        let user = spec()?.user;
+        let user = self.spec.user;
         self.ctx.sdk = ctx as *mut Context;
         // SAFETY: `f` is the C program's function of this signature
         // (nerve_run's contract); the context is valid for the call and
@@ -357,12 +408,14 @@ fn declare(decl: PortDecl<'_>, input: bool) -> Result<(), Failure> {
     let sdk_err = |source| Failure::Sdk { port: name.to_owned(), source };
     if input {
         setup.inputs.push(sdk.input_of(name, schema).map_err(sdk_err)?);
+        setup.names.inputs.push(name.to_owned());
         *out = nerve_port::try_from(setup.inputs.len()).map_err(|_| Failure::TooManyPorts)?;
     } else {
         let output = sdk.output_of(name, schema).map_err(sdk_err)?;
         let index = nerve_port::try_from(setup.outputs.len()).map_err(|_| Failure::TooManyPorts)?;
         *out = OUTPUT_BASE.checked_add(index).ok_or(Failure::TooManyPorts)?;
         setup.outputs.push(output);
+        setup.names.outputs.push(name.to_owned());
     }
     Ok(())
 }
@@ -733,6 +786,41 @@ pub extern "C" fn nerve_last_error() -> *const c_char {
     error::last_error_ptr()
 }
 
+/// The checked C agent `agent` (its kind a valid agent name, `init` and
+/// `step` given, a period nerve runs) with `user`.
+///
+/// # Safety
+/// `agent` is null or points at a vtable whose non-null functions have the
+/// declared signatures and whose `kind` is a NUL-terminated string.
+unsafe fn spec_of(agent: *const nerve_agent_vtable, user: *mut c_void) -> Result<Spec, Failure> {
+    // SAFETY: the caller's contract
+    let vt = unsafe { agent.as_ref() }.ok_or(Failure::Null("agent"))?;
+    // SAFETY: the caller's contract
+    let kind = unsafe { text(vt.kind, "agent->kind") }?;
+    shm_schemas::AgentName::new(kind).map_err(|e| Failure::Invalid(format!("kind {kind:?}: {e}")))?;
+    if vt.init.is_none() || vt.step.is_none() {
+        return Err(Failure::Invalid("the agent's vtable needs `init` and `step` (not NULL)".into()));
+    }
+    let task = match vt.period_ns {
+        0 => Task::EventDriven,
+        ns if Duration::from_nanos(ns) < MIN_PERIOD => {
+            return Err(Failure::Invalid(format!(
+                "period_ns {ns} is below nerve's shortest period, 10000 ns (give 0 for an event-driven agent)"
+            )));
+        }
+        ns => Task::Periodic(Duration::from_nanos(ns)),
+    };
+    Ok(Spec {
+        kind: intern(kind),
+        task,
+        new: vt.init,
+        start: vt.start,
+        step: vt.step,
+        stop: vt.stop,
+        user: user as usize,
+    })
+}
+
 /// Runs the C agent `agent` under the nerve runtime with the program's
 /// command line (`argc`, `argv` as `main` got them: `--name`, `--period`,
 /// `--describe`, `--daemon`, ...) and returns the exit status for `main`
@@ -758,22 +846,8 @@ pub unsafe extern "C" fn nerve_run(
     let mut args = Vec::new();
     let status = guard(|| {
         // SAFETY: the caller's contract
-        let vt = unsafe { agent.as_ref() }.ok_or(Failure::Null("agent"))?;
-        // SAFETY: the caller's contract
-        let kind = unsafe { text(vt.kind, "agent->kind") }?;
-        shm_schemas::AgentName::new(kind).map_err(|e| Failure::Invalid(format!("kind {kind:?}: {e}")))?;
-        if vt.init.is_none() || vt.step.is_none() {
-            return Err(Failure::Invalid("the agent's vtable needs `init` and `step` (not NULL)".into()));
-        }
-        let task = match vt.period_ns {
-            0 => Task::EventDriven,
-            ns if Duration::from_nanos(ns) < MIN_PERIOD => {
-                return Err(Failure::Invalid(format!(
-                    "period_ns {ns} is below nerve's shortest period, 10000 ns (give 0 for an event-driven agent)"
-                )));
-            }
-            ns => Task::Periodic(Duration::from_nanos(ns)),
-        };
+        let spec = unsafe { spec_of(agent, user) }?;
+        let kind = spec.kind;
         let n = usize::try_from(argc).map_err(|_| Failure::Invalid(format!("argc {argc} is negative")))?;
         if n > 0 && argv.is_null() {
             return Err(Failure::Null("argv"));
@@ -784,9 +858,6 @@ pub unsafe extern "C" fn nerve_run(
             let a = unsafe { text(*argv.add(i), "argv[i]") }?;
             args.push(a.to_owned());
         }
-        let kind: &'static str = Box::leak(kind.to_owned().into_boxed_str());
-        let spec =
-            Spec { kind, task, new: vt.init, start: vt.start, step: vt.step, stop: vt.stop, user: user as usize };
         SPEC.set(spec).map_err(|_| Failure::Invalid("nerve_run runs one agent per process, and it ran already".into()))
     });
     if status != nerve_status::NERVE_OK {

@@ -81,15 +81,22 @@ static void relay_stop(nerve_ctx *ctx, void *user) {
   fprintf(stderr, "crelay: stopping after %llu ticks\n", (unsigned long long)r->relayed);
 }
 
+/* The agent as nerve runs it; relay_test.c runs the same callbacks in a
+ * test harness. */
+static const nerve_agent_vtable relay_agent = {
+    .kind = "crelay",
+    .period_ns = RELAY_PERIOD_NS,
+    .init = relay_init,
+    .start = NULL,
+    .step = relay_step,
+    .stop = relay_stop,
+};
+
+/* relay_test.c includes this file with NERVE_NO_MAIN defined, to run the
+ * agent's callbacks in its own main. */
+#ifndef NERVE_NO_MAIN
 int main(int argc, char **argv) {
   static relay r;
-  nerve_agent_vtable agent = {
-      .kind = "crelay",
-      .period_ns = RELAY_PERIOD_NS,
-      .init = relay_init,
-      .start = NULL,
-      .step = relay_step,
-      .stop = relay_stop,
-  };
-  return nerve_run(argc, argv, &agent, &r);
+  return nerve_run(argc, argv, &relay_agent, &r);
 }
+#endif
