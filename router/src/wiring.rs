@@ -13,6 +13,9 @@ use shm_schemas::PortRef;
 use shm_schemas::control::cli_to_router::{AgentView, ConnectionView};
 use shm_schemas::control::router_to_agent::AgentCommand;
 
+/// An input's depth when its agent does not say (one that has not answered yet).
+const DEFAULT_DEPTH: u32 = agent_sdk::port::SUBSCRIBER_BUFFER as u32;
+
 /// `c` as an edge, agent to agent, that a loop may not run through; `None`
 /// when it is allowed to close one.
 pub fn loop_edge(c: &Connection) -> Option<(&str, &str)> {
@@ -117,6 +120,18 @@ pub fn view(c: &Connection, agents: &[AgentView], transient: bool) -> Connection
         .find(|a| a.name == ta)
         .and_then(|a| a.stats.as_ref())
         .and_then(|s| s.inputs.iter().find(|i| i.input == tp && i.from_agent == fa && i.from_port == fp));
+    // the input's depth and policy, and what its queue and the source's keep-all side counted (issue 46)
+    let queue = agents
+        .iter()
+        .find(|a| a.name == ta)
+        .and_then(|a| a.stats.as_ref())
+        .and_then(|s| s.queues.iter().find(|q| q.input == tp && q.from_agent == fa && q.from_port == fp));
+    let sent = agents
+        .iter()
+        .find(|a| a.name == fa)
+        .and_then(|a| a.stats.as_ref())
+        .and_then(|s| s.outputs.iter().find(|o| o.output == fp))
+        .filter(|_| queue.is_some_and(|q| q.lossless));
     // a tool is no agent: its edge is live while the input holds it
     let from_live = transient || agents.iter().any(|a| a.name == fa && a.pid != 0);
     ConnectionView {
@@ -129,6 +144,12 @@ pub fn view(c: &Connection, agents: &[AgentView], transient: bool) -> Connection
         received: input.map(|i| i.received).unwrap_or(0),
         dropped: input.map(|i| i.dropped).unwrap_or(0),
         transient,
+        depth: queue.map_or(DEFAULT_DEPTH, |q| q.depth),
+        keep: if queue.is_some_and(|q| q.keep_all) { "all" } else { "latest" }.into(),
+        lossless: queue.is_some_and(|q| q.lossless),
+        overwritten: queue.map_or(0, |q| q.overwritten),
+        back_pressure: queue.map_or(0, |q| q.back_pressure).saturating_add(sent.map_or(0, |o| o.back_pressure)),
+        lost: sent.map_or(0, |o| o.lost),
     }
 }
 

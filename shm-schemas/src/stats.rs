@@ -21,6 +21,44 @@ pub struct InputStats {
     pub dropped: u64,
 }
 
+/// The depth and policy of one source of an input (issue 46), and what its
+/// queue counted. Listed for every source of every data input.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct QueueStats {
+    /// the input port
+    pub input: String,
+    /// source agent
+    pub from_agent: String,
+    /// source port
+    pub from_port: String,
+    /// samples held per source
+    pub depth: u32,
+    /// `keep = "all"`: never overwrite (else the oldest is overwritten)
+    pub keep_all: bool,
+    /// the source publishes to this keep-all input losslessly: its sends
+    /// wait (bounded) while the input is full
+    pub lossless: bool,
+    /// samples overwritten in the input's own queue (a deep `latest` input)
+    pub overwritten: u64,
+    /// times the input's own queue was full with the sender's samples
+    /// waiting behind it (a keep-all input not yet read losslessly)
+    pub back_pressure: u64,
+}
+
+/// What an output counted of its keep-all readers (issue 46): listed for
+/// outputs that have had one.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct OutputStats {
+    /// the output port
+    pub output: String,
+    /// keep-all inputs it publishes to losslessly now
+    pub keep_all_readers: u64,
+    /// samples whose send waited for a full keep-all reader
+    pub back_pressure: u64,
+    /// samples given up for a keep-all reader after the bounded wait
+    pub lost: u64,
+}
+
 /// The wake-up latency bound an agent holds on the CPUs (PM QoS,
 /// `/dev/cpu_dma_latency`; see the SDK's `cpu_latency` module).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -73,6 +111,12 @@ pub struct AgentStats {
     pub cpu_latency: CpuLatency,
     /// per input subscription
     pub inputs: Vec<InputStats>,
+    /// per input subscription: its depth, policy and queue's counts
+    #[serde(default)]
+    pub queues: Vec<QueueStats>,
+    /// outputs with keep-all readers: their back-pressure
+    #[serde(default)]
+    pub outputs: Vec<OutputStats>,
     /// read-only figures the agent reports about its own work, (name, value)
     /// sorted by name: the bridge's peers and per-topic counters, say
     pub figures: Vec<(String, String)>,

@@ -29,10 +29,11 @@
 //! before, and its readers follow.
 
 use super::error::{PortError, perr, port_err};
+use super::keep_all::{KeepAllFeed, KeepAllFigures, KeepAllSender};
 use super::memory::{Bus, Collected, Queue, SampleBuf};
 use super::service::{
-    Carried, MAX_SOURCES, SUBSCRIBER_BUFFER, lock, output_service, port_event, raw_source_service, source_event,
-    source_service,
+    Carried, MAX_SOURCES, OutputFactory, SUBSCRIBER_BUFFER, lock, output_service, port_event, raw_source_service,
+    source_event, source_service,
 };
 use crate::clock::now_ns;
 use crate::meters::RateMeter;
@@ -47,7 +48,7 @@ use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::marker::{CustomHeaderMarker, CustomPayloadMarker};
 use shm_schemas::control::agent_to_router::PortSpec;
 use shm_schemas::services::port_attributes;
-use shm_schemas::stats::InputStats;
+use shm_schemas::stats::{InputStats, QueueStats};
 use shm_schemas::{FixedName, SampleHeader, Schema, SeqShape};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -123,8 +124,15 @@ const SEQ_INITIAL_BYTES: usize = 4096;
 // path; boxing it would add a pointer hop to every send.
 #[allow(clippy::large_enum_variant)]
 enum Sink {
-    /// a running agent: the port's iceoryx2 service and its wake-up event
-    Shm { publisher: Publisher<Ipc, [CustomPayloadMarker], CustomHeaderMarker>, notifier: Notifier<Ipc> },
+    /// a running agent: the port's iceoryx2 service and its wake-up event,
+    /// and its keep-all readers' service when it has some (`port::keep_all`;
+    /// `None` for a tool's output, whose keep-all readers read copies)
+    Shm {
+        publisher: Publisher<Ipc, [CustomPayloadMarker], CustomHeaderMarker>,
+        notifier: Notifier<Ipc>,
+        factory: OutputFactory,
+        keep_all: Option<KeepAllSender>,
+    },
     /// a test: the harness collects them
     Memory(Arc<Collected>),
     /// `--describe`: the agent never steps, nothing is sent
@@ -155,7 +163,7 @@ impl SchemaOutput {
         typed: bool,
     ) -> Result<Self, PortError> {
         let sink = match binding {
-            Binding::Shm(node) => return Self::shm(node, service, sender, schema, carried),
+            Binding::Shm(node) => return Self::shm_with(node, Some(node), service, sender, schema, carried),
             Binding::Nothing => Sink::Nothing,
             Binding::Memory(bus) => {
                 Sink::Memory(bus.add_output(port, &carried.type_name, typed.then_some(carried.fingerprint)))
@@ -164,7 +172,8 @@ impl SchemaOutput {
         Ok(Self::with_sink(service, sender, schema, carried, sink))
     }
 
-    /// Opens (or creates) output port `service` of agent `sender` as an iceoryx2 service.
+    /// Opens (or creates) output port `service` of agent `sender` as an
+    /// iceoryx2 service (a tool's: its keep-all readers read copies).
     pub(crate) fn shm(
         node: &Node<Ipc>,
         service: &str,
@@ -172,18 +181,35 @@ impl SchemaOutput {
         schema: Schema,
         carried: Carried,
     ) -> Result<Self, PortError> {
+        Self::shm_with(node, None, service, sender, schema, carried)
+    }
+
+    /// [`SchemaOutput::shm`]; with `shared` (the same node, shared), it
+    /// also publishes to keep-all readers losslessly (`port::keep_all`).
+    pub(crate) fn shm_with(
+        node: &Node<Ipc>,
+        shared: Option<&Arc<Node<Ipc>>>,
+        service: &str,
+        sender: &str,
+        schema: Schema,
+        carried: Carried,
+    ) -> Result<Self, PortError> {
         let ps = output_service(node, service, &carried)?;
         let builder = ps.publisher_builder();
-        let builder = match schema.sequence_shape() {
+        let initial = schema
+            .sequence_shape()
+            .filter(|_| carried.is_sequence())
+            .map(|shape| shape.items_at.max(SEQ_INITIAL_BYTES));
+        let builder = match initial {
             // a slice of bytes: as long as the first samples at most, then grown with the largest sent
-            Some(shape) if carried.is_sequence() => builder
-                .initial_max_slice_len(shape.items_at.max(SEQ_INITIAL_BYTES))
-                .allocation_strategy(AllocationStrategy::PowerOfTwo),
-            _ => builder,
+            Some(len) => builder.initial_max_slice_len(len).allocation_strategy(AllocationStrategy::PowerOfTwo),
+            None => builder,
         };
         let publisher = builder.create().map_err(port_err!(Publisher, service))?;
         let notifier = port_event(node, service)?.notifier_builder().create().map_err(port_err!(Notifier, service))?;
-        Ok(Self::with_sink(service, sender, schema, carried, Sink::Shm { publisher, notifier }))
+        let keep_all = shared.map(|node| KeepAllSender::new(node.clone(), service, carried.clone(), initial));
+        let sink = Sink::Shm { publisher, notifier, factory: ps, keep_all };
+        Ok(Self::with_sink(service, sender, schema, carried, sink))
     }
 
     /// Output `port` (service `service`) of agent `sender`, of the payload
@@ -205,6 +231,15 @@ impl SchemaOutput {
     pub(crate) fn create(node: &Node<Ipc>, service: &str, schema: Schema, sender: &str) -> Result<Self, PortError> {
         let carried = Carried::of_schema(service, &schema, schema.fingerprint())?;
         Self::shm(node, service, sender, schema, carried)
+    }
+
+    /// What it counted of its keep-all readers (`port::keep_all`); `None`
+    /// for a port that does not publish to them (a test's, a tool's).
+    pub fn keep_all_figures(&self) -> Option<&Arc<KeepAllFigures>> {
+        match &self.sink {
+            Sink::Shm { keep_all: Some(k), .. } => Some(k.figures()),
+            _ => None,
+        }
     }
 
     fn with_sink(service: &str, sender: &str, schema: Schema, carried: Carried, sink: Sink) -> Self {
@@ -385,11 +420,16 @@ impl SchemaOutput {
     /// it starts writing it) and wakes the readers.
     pub(crate) fn publish_as(&self, loan: Loan, header: SampleHeader) -> Result<usize, PortError> {
         match (&self.sink, loan.0) {
-            (Sink::Shm { notifier, .. }, LoanInner::Shm(mut sample)) => {
+            (Sink::Shm { notifier, factory, keep_all, .. }, LoanInner::Shm(mut sample)) => {
                 // SAFETY: the service's user header is a SampleHeader (set in
                 // `service::output_builder`); the marker is a zero-sized
                 // stand-in at its address, which is aligned for it
                 unsafe { (sample.user_header_mut() as *mut CustomHeaderMarker).cast::<SampleHeader>().write(header) };
+                if let Some(keep_all) = keep_all {
+                    // one atomic load and a comparison while no keep-all reader reads this port
+                    keep_all.before_send(factory.dynamic_config().number_of_subscribers());
+                    keep_all.send(&header, payload_bytes(sample.payload()));
+                }
                 let reached = sample.send().map_err(port_err!(Send, &self.service))?;
                 notifier.notify().map_err(port_err!(Notify, &self.service))?;
                 Ok(reached)
@@ -531,6 +571,8 @@ struct Source {
     tally: Tally,
     /// the input's own queue when it is deeper than iceoryx2's or keeps all ([`super::depth`])
     held: Option<super::depth::Held>,
+    /// a keep-all input's lossless subscription ([`super::keep_all`])
+    keep_all: Option<KeepAllFeed>,
 }
 
 /// Where a source's samples come from.
@@ -549,8 +591,42 @@ impl Source {
         }
     }
 
+    /// Whether this keep-all source's output publishes to its keep-all
+    /// service now (then the port's own service holds only duplicates).
+    fn lossless(&mut self) -> bool {
+        let Some(feed) = self.keep_all.as_mut() else { return false };
+        let delivered = (self.tally.received > 0).then_some(self.tally.last_seq);
+        feed.is_live(self.held.as_ref().and_then(|h| h.last_seq()).max(delivered))
+    }
+
+    /// A keep-all source read losslessly: what is left in its own queue,
+    /// then the next sample of the keep-all service, in place; the port's
+    /// own service emptied. `None` when the source is not read so.
+    fn take_lossless(&mut self, input: &str) -> Option<Result<Option<(SampleHeader, Received)>, PortError>> {
+        if !self.lossless() {
+            return None;
+        }
+        if let Feed::Shm { subscriber, .. } = &self.feed {
+            super::keep_all::discard(subscriber);
+        }
+        if let Some((h, b)) = self.held.as_mut().and_then(|held| held.pop()) {
+            return Some(Ok(Some((h, Received(ReceivedInner::Memory(h, b))))));
+        }
+        let got = self.keep_all.as_mut()?.receive();
+        Some(match got {
+            Ok(sample) => Ok(sample.map(|s| (*s.user_header(), Received(ReceivedInner::Shm(s))))),
+            Err(e) => Err(self.receive_error(input, e)),
+        })
+    }
+
     /// The next waiting sample of this source, if any, kept in place.
     fn take(&mut self, input: &str) -> Result<Option<Received>, PortError> {
+        if let Some(got) = self.take_lossless(input) {
+            return Ok(got?.map(|(h, r)| {
+                self.tally.account(&h, now_ns());
+                r
+            }));
+        }
         let got = match &mut self.feed {
             Feed::Shm { subscriber, .. } if self.held.is_some() => self
                 .held
@@ -572,6 +648,11 @@ impl Source {
     /// Hands this source's next waiting sample, in place, to `f`; `None`
     /// when none waits. The sample is released when `f` returns.
     fn take_with<R>(&mut self, input: &str, f: impl FnOnce(&SampleHeader, &[u8]) -> R) -> Result<Option<R>, PortError> {
+        if let Some(got) = self.take_lossless(input) {
+            let Some((h, r)) = got? else { return Ok(None) };
+            self.tally.account(&h, now_ns());
+            return Ok(Some(f(&h, r.bytes())));
+        }
         match &mut self.feed {
             Feed::Shm { subscriber, .. } if self.held.is_some() => {
                 let Some((h, b)) = self.held.as_mut().and_then(|held| held.take(subscriber, input)) else {
@@ -597,6 +678,10 @@ impl Source {
         }
     }
 }
+
+/// A subscription to a source: the port's own service, its wake-up
+/// listener, and a keep-all input's lossless subscription.
+type Subscribed = (ByteSubscriber, Listener<Ipc>, Option<KeepAllFeed>);
 
 /// The type-erased side of an input, used by the message checker, the
 /// runtime and the test harness.
@@ -632,6 +717,10 @@ pub(crate) trait DynInput: Send + Sync {
     }
     /// Moves what waits in iceoryx2 into the input's own queues, if it has any.
     fn refill(&self) {}
+    /// Each source's depth, policy and queue counts (issue 46); none for a call's side.
+    fn queue_stats(&self) -> Vec<QueueStats> {
+        Vec::new()
+    }
     /// Whether a sample waits, read in shared memory without a system call
     /// (a polling task's look, `runtime::poll`); `None` when the port cannot
     /// tell so (a call's side: its listeners are looked at instead).
@@ -705,8 +794,16 @@ impl InputInner {
 
     /// Hands each iceoryx2 source's own queue, if it has one, to `f` with
     /// its subscriber (the input's depth, [`super::depth`]).
+    /// A keep-all source read losslessly has nothing to move: what waits
+    /// on the port's own service is dropped (the keep-all service has it).
     pub(crate) fn each_held(&self, mut f: impl FnMut(&ByteSubscriber, &mut super::depth::Held)) {
         for sub in lock(&self.subs).iter_mut() {
+            if sub.lossless() {
+                if let Feed::Shm { subscriber, .. } = &sub.feed {
+                    super::keep_all::discard(subscriber);
+                }
+                continue;
+            }
             if let (Feed::Shm { subscriber, .. }, Some(held)) = (&sub.feed, sub.held.as_mut()) {
                 f(subscriber, held);
             }
@@ -721,19 +818,32 @@ impl InputInner {
         &self.name
     }
 
-    /// Subscribes to the existing output port `service`, with its wake-up listener.
-    fn subscribe(&self, node: &Node<Ipc>, service: &str) -> Result<(ByteSubscriber, Listener<Ipc>), PortError> {
+    /// Subscribes to the existing output port `service`, with its wake-up
+    /// listener; a keep-all input first to the port's keep-all service
+    /// (`port::keep_all`: so that the output, seeing its subscriber count
+    /// change, finds it).
+    fn subscribe(&self, node: &Node<Ipc>, service: &str) -> Result<Subscribed, PortError> {
         if self.check {
             Carried::of_schema(service, &self.schema, self.carried.fingerprint)?;
         }
-        let subscriber = source_service(node, service, &self.carried)?
+        let options = self.depth.options();
+        let factory = source_service(node, service, &self.carried)?;
+        let keep_all = (options.keep == super::depth::Keep::All)
+            .then(|| KeepAllFeed::subscribe(node, service, &self.carried, options.depth))
+            .and_then(|made| {
+                made.map_err(|e| {
+                    tracing::warn!(input = %self.name, error = %e, "no lossless subscription: the input keeps copies of what the port's own service holds");
+                })
+                .ok()
+            });
+        let subscriber = factory
             .subscriber_builder()
             .buffer_size(self.depth.options().buffer_size())
             .create()
             .map_err(port_err!(Subscriber, service))?;
         let listener =
             source_event(node, service)?.listener_builder().create().map_err(port_err!(Listener, service))?;
-        Ok((subscriber, listener))
+        Ok((subscriber, listener, keep_all))
     }
 }
 
@@ -787,7 +897,7 @@ impl DynInput for InputInner {
         }
         let service = robot.port_service(from_agent, from_port);
         // a killed reader's ports may hold the source's slots until the router's next sweep
-        let (subscriber, listener) =
+        let (subscriber, listener, keep_all) =
             crate::world::retry_after_cleanup(node.config(), "connect", PortError::blockable, || {
                 self.subscribe(node, &service)
             })?;
@@ -797,6 +907,7 @@ impl DynInput for InputInner {
             feed: Feed::Shm { subscriber, listener: Arc::new(listener) },
             tally: Tally::default(),
             held: super::depth::Held::of(self.depth.options(), self.payload_layout().1),
+            keep_all,
         });
         Ok(true)
     }
@@ -822,6 +933,26 @@ impl DynInput for InputInner {
         lock(&self.subs).iter().map(|s| s.tally.stats(&self.name, &s.from_agent, &s.from_port, now)).collect()
     }
 
+    fn queue_stats(&self) -> Vec<QueueStats> {
+        let options = self.depth.options();
+        lock(&self.subs)
+            .iter()
+            .map(|s| {
+                let counts = s.held.as_ref().map(|h| h.counts()).unwrap_or_default();
+                QueueStats {
+                    input: self.name.clone(),
+                    from_agent: s.from_agent.clone(),
+                    from_port: s.from_port.clone(),
+                    depth: u32::try_from(options.depth).unwrap_or(u32::MAX),
+                    keep_all: options.keep == super::depth::Keep::All,
+                    lossless: s.keep_all.as_ref().is_some_and(|k| k.was_live()),
+                    overwritten: counts.overwritten,
+                    back_pressure: counts.back_pressure,
+                }
+            })
+            .collect()
+    }
+
     fn has_queued(&self) -> bool {
         lock(&self.subs).iter().any(|s| matches!(&s.feed, Feed::Memory(q) if !q.is_empty()))
     }
@@ -829,7 +960,9 @@ impl DynInput for InputInner {
     fn waiting(&self) -> Option<bool> {
         Some(lock(&self.subs).iter().any(|s| match &s.feed {
             // a source that cannot be looked at has nothing to take either
-            Feed::Shm { subscriber, .. } => subscriber.has_samples().unwrap_or(false),
+            Feed::Shm { subscriber, .. } => {
+                subscriber.has_samples().unwrap_or(false) || s.keep_all.as_ref().is_some_and(|k| k.has_samples())
+            }
             Feed::Memory(q) => !q.is_empty(),
         }))
     }
@@ -865,6 +998,7 @@ impl DynInput for InputInner {
                     feed: Feed::Memory(Queue::default()),
                     tally: Tally::default(),
                     held: None,
+                    keep_all: None,
                 });
                 subs.len() - 1
             }

@@ -248,6 +248,11 @@ impl Held {
         self.queue.pop_front()
     }
 
+    /// The sequence number of the newest sample held.
+    pub(crate) fn last_seq(&self) -> Option<u64> {
+        self.queue.back().map(|(h, _)| h.seq)
+    }
+
     /// What it counted.
     pub(crate) fn counts(&self) -> HeldCounts {
         self.counts

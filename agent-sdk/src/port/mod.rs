@@ -11,6 +11,7 @@
 //!   iceoryx2 request-response (`call_server`, `call_client`, `call_raw`);
 //!   [`call_seq`]: calls answered with a sequence, [`SeqServer`], [`SeqClient`];
 //! * [`depth`]: an input's depth and policy ([`InputOptions`]), its own queue;
+//! * [`keep_all`]: a keep-all input's lossless service, the sender's bounded wait;
 //! * `memory`: the in-memory binding a test's ports use instead of iceoryx2.
 //!
 //! Each file uses only those above it in this list (`memory` only
@@ -24,6 +25,7 @@ pub mod call_seq;
 mod call_server;
 pub mod depth;
 pub mod error;
+pub mod keep_all;
 pub(crate) mod memory;
 pub mod seq;
 pub mod service;

@@ -53,6 +53,25 @@ macro_rules! port_settings {
     };
 }
 
+/// The settings of an output port's keep-all service (`port::keep_all`):
+/// a few readers, each with a buffer up to its depth, and no overwriting:
+/// a full reader makes the publisher wait (for a bounded time).
+macro_rules! keep_all_settings {
+    ($builder:expr) => {
+        $builder
+            .max_publishers($crate::port::service::MAX_PUBLISHERS)
+            .max_subscribers($crate::port::service::KEEP_ALL_READERS)
+            .max_nodes($crate::port::service::MAX_NODES)
+            .subscriber_max_buffer_size($crate::port::depth::MAX_DEPTH)
+            .history_size(0)
+            .enable_safe_overflow(false)
+    };
+}
+
+/// How many keep-all inputs may read one output losslessly; more read it
+/// through their own queue of copies (`port::depth`).
+pub(crate) const KEEP_ALL_READERS: usize = 4;
+
 /// The guard of `m`. A panic in another thread aborts the process
 /// (`abort_on_panic`), so a poisoned lock cannot be observed; the guard is
 /// recovered regardless.
@@ -166,15 +185,17 @@ fn header_details(service: &str) -> Result<TypeDetail, PortError> {
     .map_err(|e| perr(service, e))
 }
 
+type OutputBuilder =
+    iceoryx2::service::builder::publish_subscribe::Builder<[CustomPayloadMarker], CustomHeaderMarker, Ipc>;
+type SourceBuilder = iceoryx2::service::builder::publish_subscribe::Builder<[CustomPayloadMarker], SampleHeader, Ipc>;
+
 /// The builder of output port `service` carrying `carried`, for its publisher.
-fn output_builder(
-    node: &Node<Ipc>,
-    service: &str,
-    carried: &Carried,
-) -> Result<
-    iceoryx2::service::builder::publish_subscribe::Builder<[CustomPayloadMarker], CustomHeaderMarker, Ipc>,
-    PortError,
-> {
+fn output_builder(node: &Node<Ipc>, service: &str, carried: &Carried) -> Result<OutputBuilder, PortError> {
+    Ok(port_settings!(output_builder_raw(node, service, carried)?))
+}
+
+/// [`output_builder`] before the settings.
+fn output_builder_raw(node: &Node<Ipc>, service: &str, carried: &Carried) -> Result<OutputBuilder, PortError> {
     let name = service_name(service)?;
     let header = header_details(service)?;
     // SAFETY: the payload's details are `carried`'s (a Rust type's own, or
@@ -189,16 +210,16 @@ fn output_builder(
             .__internal_set_user_header_type_details(&header)
             .__internal_set_payload_type_details(&carried.details)
     };
-    Ok(port_settings!(builder))
+    Ok(builder)
 }
 
 /// The builder of output port `service` carrying `carried`, for a reader.
-fn source_builder(
-    node: &Node<Ipc>,
-    service: &str,
-    carried: &Carried,
-) -> Result<iceoryx2::service::builder::publish_subscribe::Builder<[CustomPayloadMarker], SampleHeader, Ipc>, PortError>
-{
+fn source_builder(node: &Node<Ipc>, service: &str, carried: &Carried) -> Result<SourceBuilder, PortError> {
+    Ok(port_settings!(source_builder_raw(node, service, carried)?))
+}
+
+/// [`source_builder`] before the settings.
+fn source_builder_raw(node: &Node<Ipc>, service: &str, carried: &Carried) -> Result<SourceBuilder, PortError> {
     let name = service_name(service)?;
     // SAFETY: the payload's details are `carried`'s (see `output_builder`);
     // samples are handed out as bytes of that size, and as a Rust type only
@@ -209,7 +230,44 @@ fn source_builder(
             .user_header::<SampleHeader>()
             .__internal_set_payload_type_details(&carried.details)
     };
-    Ok(port_settings!(builder))
+    Ok(builder)
+}
+
+/// Opens the keep-all service `service` (`port::keep_all`) beside an
+/// output port carrying `carried`, for the output's keep-all publisher;
+/// `None` when no keep-all reader made it.
+pub(crate) fn keep_all_output_service(
+    node: &Node<Ipc>,
+    service: &str,
+    carried: &Carried,
+) -> Result<Option<OutputFactory>, PortError> {
+    match keep_all_settings!(output_builder_raw(node, service, carried)?).open() {
+        Ok(f) => Ok(Some(f)),
+        Err(Open::DoesNotExist | Open::IsMarkedForDestruction) => Ok(None),
+        Err(source) => Err(PortError::OpenService { service: service.into(), source }),
+    }
+}
+
+/// Opens or creates the keep-all service `service` beside an output port
+/// carrying `carried`, for a keep-all input to subscribe to.
+pub(crate) fn keep_all_source_service(
+    node: &Node<Ipc>,
+    service: &str,
+    carried: &Carried,
+) -> Result<SourceFactory, PortError> {
+    let mut attempt = 0;
+    loop {
+        attempt += 1;
+        match keep_all_settings!(source_builder_raw(node, service, carried)?).open_or_create() {
+            Ok(f) => return Ok(f),
+            Err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(Open::IsMarkedForDestruction))
+                if attempt < MARKED_FOR_DESTRUCTION_ATTEMPTS =>
+            {
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
+            Err(source) => return Err(PortError::Service { service: service.into(), source }),
+        }
+    }
 }
 
 /// Opens (or creates) the publish-subscribe service of output port

@@ -103,6 +103,12 @@ impl<T: Payload> Output<T> {
         self.port.service()
     }
 
+    /// What this output counted of its keep-all readers (issue 46,
+    /// [`crate::port::keep_all`]): readers, waits, samples lost.
+    pub fn keep_all_counts(&self) -> crate::port::keep_all::KeepAllCounts {
+        self.port.keep_all_figures().map(|f| f.counts()).unwrap_or_default()
+    }
+
     /// Loans a slot and hands it to `write` as a `T` not yet written, then
     /// sends it.
     ///

@@ -424,6 +424,8 @@ impl Checker<'_> {
             realtime: self.shared.realtime.load(Ordering::Relaxed),
             cpu_latency: self.shared.cpu_latency,
             inputs: self.inputs.iter().flat_map(|i| i.stats(now)).collect(),
+            queues: self.inputs.iter().flat_map(|i| i.queue_stats()).collect(),
+            outputs: crate::port::keep_all::output_stats(),
             figures: super::poll::with_figure(self.shared, self.params.figures()),
         }
     }

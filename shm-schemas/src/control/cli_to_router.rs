@@ -399,6 +399,27 @@ pub struct ConnectionView {
     /// made by a tool with [`CliRequest::Attach`]: not saved, gone with the tool
     #[serde(default)]
     pub transient: bool,
+    /// the input's depth, samples per source (issue 46; 16 by default)
+    #[serde(default)]
+    pub depth: u32,
+    /// the input's policy past its depth: `latest` (overwrite the oldest,
+    /// the default) or `all` (lose nothing)
+    #[serde(default)]
+    pub keep: String,
+    /// a keep-all input the source publishes to losslessly (its sends wait)
+    #[serde(default)]
+    pub lossless: bool,
+    /// samples overwritten in the input's own queue (a deep `latest` input)
+    #[serde(default)]
+    pub overwritten: u64,
+    /// waits for this input: the source's sends that waited for its keep-all
+    /// readers (all of them, when it has several), and times the input's own
+    /// queue was full with samples waiting
+    #[serde(default)]
+    pub back_pressure: u64,
+    /// samples the source gave up for its keep-all readers after the bounded wait
+    #[serde(default)]
+    pub lost: u64,
 }
 
 /// The whole graph.
