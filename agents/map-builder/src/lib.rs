@@ -42,19 +42,28 @@
 //! `None` until then; with `clear_m` = 0 neither is asked), so that robot 1,
 //! which waits where it then stops, is not in robot 2's way.
 //!
-//! **Where the robot has been** ([`VisitedGrid`]): a coarse grid of cells
-//! with the times the robot entered and left them.
+//! **Where the robot has been** ([`VisitedGrid`], module [`grid`]): a
+//! coarse grid of cells with the times the robot entered and left them.
 //! [`VisitedGrid::visited_before`] says whether a place was passed before
 //! (left at least `revisit_after` ago and now reached again — the robot is
 //! going round in circles), [`VisitedGrid::visited_ahead`] how much of what
 //! lies ahead in a direction was visited, for exploration that prefers new
-//! space.
+//! space. [`VisitedGrid::write_map`] lays the grid out as the map the agent
+//! publishes (`map`: `nerve::MapCells`, any count of cells).
+//!
+//! **Paths over the cells seen** ([`plan::plan`], module [`plan`]): from
+//! the robot's cell to a goal's, A* over the cells the robot has been in
+//! (8-connected), simplified to way points whose legs stay on seen cells;
+//! the agent's `plan` service answers with it (`nerve::PlannedPath`).
 
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
+pub mod grid;
+pub mod plan;
+
+pub use grid::{Cell, VisitedGrid};
 pub use shm_schemas::geom::{Pose, wrap_angle};
 use shm_schemas::payloads::{CheckpointSighting, MAX_VIA_POINTS, ViaKind, ViaPath};
-use std::collections::HashMap;
 use std::f64::consts::FRAC_PI_2;
 
 /// Settings (the agent's parameters).
@@ -468,121 +477,6 @@ pub fn simplify(pts: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
     pts.iter().zip(keep).filter(|(_, k)| *k).map(|(p, _)| *p).collect()
 }
 
-/// A cell of the [`VisitedGrid`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Cell {
-    /// Times the robot entered it.
-    pub entries: u32,
-    /// When it last entered it, ns.
-    pub last_enter_ns: u64,
-    /// When it last left it, ns (`None` while it never left).
-    pub last_leave_ns: Option<u64>,
-}
-
-/// Where the robot has been: a coarse grid.
-#[derive(Debug, Clone)]
-pub struct VisitedGrid {
-    cell_m: f64,
-    revisit_after_ns: u64,
-    max_cells: usize,
-    cells: HashMap<(i64, i64), Cell>,
-    current: Option<(i64, i64)>,
-    full: bool,
-}
-
-impl VisitedGrid {
-    /// A grid of `cell_m` cells; a place left at least `revisit_after_ns`
-    /// ago counts as visited before. At most `max_cells` cells are kept.
-    pub fn new(cell_m: f64, revisit_after_ns: u64, max_cells: usize) -> Self {
-        VisitedGrid {
-            cell_m: if cell_m.is_finite() && cell_m > 0.01 { cell_m } else { 0.5 },
-            revisit_after_ns,
-            max_cells,
-            cells: HashMap::new(),
-            current: None,
-            full: false,
-        }
-    }
-
-    fn key(&self, x: f64, y: f64) -> Option<(i64, i64)> {
-        let (i, j) = ((x / self.cell_m).floor(), (y / self.cell_m).floor());
-        // beyond ±1e9 cells is nonsense (and would not fit an i64 exactly)
-        (i.abs() < 1e9 && j.abs() < 1e9).then_some((i as i64, j as i64))
-    }
-
-    /// The robot is at `(x, y)` at `now_ns`.
-    pub fn visit(&mut self, x: f64, y: f64, now_ns: u64) {
-        let Some(k) = self.key(x, y) else { return };
-        if self.current == Some(k) {
-            return;
-        }
-        if let Some(c) = self.current.and_then(|c| self.cells.get_mut(&c)) {
-            c.last_leave_ns = Some(now_ns);
-        }
-        if !self.cells.contains_key(&k) && self.cells.len() >= self.max_cells {
-            self.full = true;
-            self.current = None;
-            return;
-        }
-        let c = self.cells.entry(k).or_default();
-        c.entries = c.entries.saturating_add(1);
-        c.last_enter_ns = now_ns;
-        self.current = Some(k);
-    }
-
-    /// The cell at `(x, y)`, if the robot was ever there.
-    pub fn cell(&self, x: f64, y: f64) -> Option<&Cell> {
-        self.key(x, y).and_then(|k| self.cells.get(&k))
-    }
-
-    /// Whether the place `(x, y)` was already visited: a cell within
-    /// `radius_m` of it that the robot left at least `revisit_after` before
-    /// `now_ns` (so the cells just behind a robot passing for the first
-    /// time do not count).
-    pub fn visited_before(&self, x: f64, y: f64, radius_m: f64, now_ns: u64) -> bool {
-        let Some((ci, cj)) = self.key(x, y) else { return false };
-        let r = (radius_m.max(0.0) / self.cell_m).ceil() as i64;
-        for di in -r..=r {
-            for dj in -r..=r {
-                let Some(c) = self.cells.get(&(ci + di, cj + dj)) else { continue };
-                if c.last_leave_ns.is_some_and(|t| now_ns.saturating_sub(t) >= self.revisit_after_ns) {
-                    return true;
-                }
-            }
-        }
-        false
-    }
-
-    /// The fraction (0 … 1) of points along `distance_m` ahead of `pose`
-    /// in direction `pose.theta + angle` that fall in visited cells.
-    pub fn visited_ahead(&self, pose: &Pose, angle: f64, distance_m: f64) -> f64 {
-        let n = ((distance_m / self.cell_m).ceil() as usize).clamp(1, 1000);
-        let a = pose.theta + angle;
-        let hits = (1..=n)
-            .filter(|k| {
-                let d = distance_m * *k as f64 / n as f64;
-                self.key(pose.x + d * a.cos(), pose.y + d * a.sin()).is_some_and(|key| self.cells.contains_key(&key))
-            })
-            .count();
-        hits as f64 / n as f64
-    }
-
-    /// Cells visited.
-    pub fn len(&self) -> usize {
-        self.cells.len()
-    }
-
-    /// No cell visited yet.
-    pub fn is_empty(&self) -> bool {
-        self.cells.is_empty()
-    }
-
-    /// The grid reached `max_cells` (new places are no longer recorded).
-    pub fn is_full(&self) -> bool {
-        self.full
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -796,52 +690,5 @@ mod tests {
         assert!(m.target().is_none());
         let bad = CheckpointSighting { x: f64::NAN, ..cp(1, 0.0, 0.0, 1) };
         assert_eq!(m.on_sighting(&bad, None), SightingEvent::Ignored);
-    }
-
-    #[test]
-    fn the_grid_knows_a_place_passed_before() {
-        let s = 1_000_000_000u64;
-        let mut g = VisitedGrid::new(0.5, 20 * s, 10_000);
-        // a lap around a 4 x 4 m box at 0.5 m/s, one point per second
-        let mut t = 0;
-        let mut lap = Vec::new();
-        for k in 0..8 {
-            lap.push((k as f64 * 0.5, 0.0));
-        }
-        for k in 0..8 {
-            lap.push((4.0, k as f64 * 0.5));
-        }
-        for k in 0..8 {
-            lap.push((4.0 - k as f64 * 0.5, 4.0));
-        }
-        for k in 0..8 {
-            lap.push((0.0, 4.0 - k as f64 * 0.5));
-        }
-        for &(x, y) in &lap {
-            g.visit(x, y, t);
-            // during the first lap nothing was passed before, until the lap closes near the start
-            if x.hypot(y) > 1.0 {
-                assert!(!g.visited_before(x + 0.01, y + 0.01, 0.3, t), "({x}, {y}) at {t}");
-            }
-            t += s;
-        }
-        // back at the start after 32 s: passed before
-        g.visit(0.1, 0.1, t);
-        assert!(g.visited_before(0.1, 0.1, 0.3, t));
-        assert_eq!(g.cell(0.1, 0.1).map(|c| c.entries), Some(2));
-        // a place never visited
-        assert!(!g.visited_before(10.0, 10.0, 0.3, t));
-        // looking ahead along the box's side: visited; away from it: new
-        let at = Pose { x: 0.1, y: 0.1, theta: 0.0 };
-        assert!(g.visited_ahead(&at, 0.0, 3.0) > 0.9);
-        assert!(g.visited_ahead(&at, PI, 3.0) < 0.1);
-        // the grid is bounded
-        let mut small = VisitedGrid::new(0.5, s, 3);
-        for k in 0..10 {
-            small.visit(k as f64, 0.0, k);
-        }
-        assert_eq!(small.len(), 3);
-        assert!(small.is_full());
-        small.visit(f64::NAN, 0.0, 99);
     }
 }

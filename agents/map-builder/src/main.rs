@@ -15,19 +15,40 @@
 //!   with it; "resume" once robot 2 reports "arrived" (for robot 1's decision
 //!   maker: explore again);
 //! * `revisit` (`nerve::Scalar`): every cycle, 1 when the robot is at a
-//!   place it passed before (it is going round in circles), else 0.
+//!   place it passed before (it is going round in circles), else 0;
+//! * `map` (`nerve::MapCells`, a sequence of at most [`MAX_CELLS`] cells):
+//!   every cell of the visited grid, with its bounds; sent every `map_every`
+//!   cycles when the grid changed since the last one sent, and every
+//!   [`MAP_RESEND`] × `map_every` cycles regardless (for a viewer that
+//!   starts later).
+//!
+//! Service:
+//! * `plan` (`nerve::PlanRequest` → `nerve::PlannedPath`, a sequence of at
+//!   most [`MAX_PATH_POINTS`] way points): a path from the robot's position
+//!   (its last pose, if at most 1 s old) to the goal over the cells it has
+//!   seen (`nerve_map_builder::plan`), or no way points and the reason in
+//!   the header's `status`. `nerve call map-builder/plan '{"x": 1.0, "y": 2.6}'`.
+//!   Answered at the agent's next step. The SDK's test harness has no calls
+//!   yet: there the agent runs without the service.
 //!
 //! The algorithm is the library `nerve_map_builder`. Parameters:
 //! `via_distance_m` (1.6), `merge_m` (1.0), `min_sightings` (3),
 //! `detour_factor` (2.0), `target_range_m` (0: a target counts at any
 //! range), `clear_m` (0: robot 1 drives this far on after finding the target
 //! before the path is sent and it stops, to be out of robot 2's way), `republish_ms` (1000), `cell_m`
-//! (0.5; read at start), `revisit_after_s` (30; read at start), `revisit_radius_m` (0.5);
-//! read-only figures `landmarks`, `confirmed`, `cells`, `paths_sent`.
+//! (0.5; read at start), `revisit_after_s` (30; read at start), `revisit_radius_m` (0.5),
+//! `map_every` (5 cycles: 1 s; 0: no map), `goal_tolerance_m` (1.0: a goal,
+//! or the robot, this near a seen cell's centre is snapped to it);
+//! read-only figures `landmarks`, `confirmed`, `cells`, `paths_sent`,
+//! `maps_sent`, `plans`.
 
+use agent_sdk::port::{CallError, SeqOutput, SeqServer};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
-use nerve_map_builder::{MapBuilder, Pose, Settings, SightingEvent, VisitedGrid};
-use shm_schemas::payloads::{CheckpointSighting, MissionCode, MissionCommand, PoseEstimate, Scalar, ViaKind, ViaPath};
+use nerve_map_builder::{MapBuilder, Pose, Settings, SightingEvent, VisitedGrid, plan::plan};
+use shm_schemas::payloads::{
+    CheckpointSighting, MapCell, MapHeader, MissionCode, MissionCommand, PathHeader, PathPoint, PlanRequest,
+    PoseEstimate, Scalar, ViaKind, ViaPath,
+};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
@@ -36,6 +57,10 @@ use std::time::Duration;
 const POSE_FRESH_NS: u64 = 1_000_000_000;
 /// Most cells the visited grid keeps (0.5 m cells: a 100 m × 100 m area).
 const MAX_CELLS: usize = 40_000;
+/// Most way points a `plan` answer holds.
+const MAX_PATH_POINTS: usize = 4096;
+/// An unchanged map is sent again every this many times `map_every` cycles.
+const MAP_RESEND: u64 = 10;
 
 #[derive(Debug, Default)]
 struct Figures {
@@ -43,6 +68,8 @@ struct Figures {
     confirmed: AtomicU64,
     cells: AtomicU64,
     paths_sent: AtomicU64,
+    maps_sent: AtomicU64,
+    plans: AtomicU64,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -62,6 +89,9 @@ struct MapBuilderAgent {
     path_out: Output<ViaPath>,
     mission_out: Output<MissionCommand>,
     revisit_out: Output<Scalar>,
+    map_out: SeqOutput<MapCell, MapHeader>,
+    /// `None` in the SDK's test harness, which has no calls yet.
+    plan: Option<SeqServer<PlanRequest, PathPoint, PathHeader>>,
     via_distance_m: Param<f64>,
     merge_m: Param<f64>,
     min_sightings: Param<u32>,
@@ -70,6 +100,8 @@ struct MapBuilderAgent {
     clear_m: Param<f64>,
     republish_ms: Param<u64>,
     revisit_radius_m: Param<f64>,
+    map_every: Param<u32>,
+    goal_tolerance_m: Param<f64>,
     map: MapBuilder,
     grid: VisitedGrid,
     figures: Arc<Figures>,
@@ -77,6 +109,10 @@ struct MapBuilderAgent {
     mission: Mission,
     next_path_id: u32,
     was_revisiting: bool,
+    /// Steps so far.
+    cycle: u64,
+    /// The grid's revision and the cycle of the last map sent.
+    map_sent: Option<(u32, u64)>,
 }
 
 fn in_range(lo: f64, hi: f64) -> impl Fn(&f64) -> Result<(), String> + Send + Sync + 'static {
@@ -107,6 +143,57 @@ impl MapBuilderAgent {
     }
 }
 
+impl MapBuilderAgent {
+    /// Sends the map every `map_every` cycles when the grid changed since
+    /// the last one sent, and every [`MAP_RESEND`] times as long regardless.
+    fn send_map(&mut self, now: u64) -> Result<(), AgentError> {
+        let every = u64::from(self.map_every.get());
+        if every == 0 || !self.cycle.is_multiple_of(every) {
+            return Ok(());
+        }
+        let revision = self.grid.revision();
+        let due = match self.map_sent {
+            None => true,
+            Some((sent, at)) => sent != revision || self.cycle.saturating_sub(at) >= every.saturating_mul(MAP_RESEND),
+        };
+        if !due {
+            return Ok(());
+        }
+        let grid = &self.grid;
+        self.map_out.send_with(grid.len().min(MAX_CELLS), |header, cells| grid.write_map(now, header, cells))?;
+        self.map_sent = Some((revision, self.cycle));
+        self.figures.maps_sent.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Answers the `plan` calls waiting: paths from `pose` over the grid.
+    fn serve_plans(&self, pose: Option<Pose>, now: u64) {
+        let Some(server) = &self.plan else { return };
+        let (grid, tolerance) = (&self.grid, self.goal_tolerance_m.get());
+        let start = pose.map(|p| (p.x, p.y));
+        let served = server.serve(|goal| {
+            let p = plan(grid, start, (goal.x, goal.y), tolerance, MAX_PATH_POINTS, now);
+            let status = p.status().map_or("?", |s| s.name());
+            tracing::info!(
+                goal_x = goal.x,
+                goal_y = goal.y,
+                status,
+                points = p.points.len(),
+                length_m = p.header.length_m,
+                "plan asked"
+            );
+            (p.header, p.points)
+        });
+        match served {
+            Ok(n) => {
+                self.figures.plans.fetch_add(n as u64, Ordering::Relaxed);
+            }
+            // a call gone wrong is the caller's loss; the map builder steps on
+            Err(e) => tracing::warn!(error = %e, "plan: a call could not be answered"),
+        }
+    }
+}
+
 impl Agent for MapBuilderAgent {
     const KIND: &'static str = "map-builder";
 
@@ -127,8 +214,15 @@ impl Agent for MapBuilderAgent {
                 ("confirmed".into(), g(&f2.confirmed)),
                 ("cells".into(), g(&f2.cells)),
                 ("paths_sent".into(), g(&f2.paths_sent)),
+                ("maps_sent".into(), g(&f2.maps_sent)),
+                ("plans".into(), g(&f2.plans)),
             ]
         });
+        let plan = match setup.serve_seq("plan", MAX_PATH_POINTS) {
+            Ok(server) => Some(server),
+            Err(AgentError::Call(CallError::NotInHarness { .. })) => None,
+            Err(e) => return Err(e),
+        };
         Ok(MapBuilderAgent {
             pose: setup.input("pose")?,
             sighting: setup.input("sighting")?,
@@ -136,6 +230,8 @@ impl Agent for MapBuilderAgent {
             path_out: setup.output("path")?,
             mission_out: setup.output("mission")?,
             revisit_out: setup.output("revisit")?,
+            map_out: setup.output_seq("map", MAX_CELLS)?,
+            plan,
             via_distance_m: setup.param_checked("via_distance_m", d.via_distance_m, in_range(0.0, 10.0)),
             merge_m: setup.param_checked("merge_m", d.merge_m, in_range(0.01, 10.0)),
             min_sightings: setup.param_checked("min_sightings", d.min_sightings, |v| {
@@ -150,6 +246,10 @@ impl Agent for MapBuilderAgent {
                 if *v >= 50 { Ok(()) } else { Err("republish_ms is at least 50".into()) }
             }),
             revisit_radius_m: setup.param_checked("revisit_radius_m", 0.5, in_range(0.0, 10.0)),
+            map_every: setup.param_checked("map_every", 5u32, |v| {
+                if *v <= 10_000 { Ok(()) } else { Err("map_every is 0 (no map) … 10000 cycles".into()) }
+            }),
+            goal_tolerance_m: setup.param_checked("goal_tolerance_m", 1.0, in_range(0.0, 10.0)),
             map: MapBuilder::new(d),
             grid: VisitedGrid::new(cell_m.get(), (revisit_after_s.get() * 1e9) as u64, MAX_CELLS),
             figures,
@@ -157,6 +257,8 @@ impl Agent for MapBuilderAgent {
             mission: Mission::Exploring,
             next_path_id: 1,
             was_revisiting: false,
+            cycle: 0,
+            map_sent: None,
         })
     }
 
@@ -179,6 +281,9 @@ impl Agent for MapBuilderAgent {
             y: p.y,
             theta: p.theta,
         });
+        self.cycle = self.cycle.saturating_add(1);
+        self.send_map(now)?;
+        self.serve_plans(pose, now);
         // landmarks
         let mut sightings = Vec::new();
         self.sighting.drain(|_, s| sightings.push(*s));
@@ -340,6 +445,48 @@ mod tests {
         assert_eq!(codes(&mut h), [(MissionCode::Resume, p.path_id)]);
         h.advance(Duration::from_millis(1200)).expect("steps");
         assert!(h.output::<ViaPath>("path").expect("path").is_empty(), "done: no more paths");
+    }
+
+    /// The `map` output as (header.count, revision, elements) of each sample sent since the last look.
+    fn maps(h: &mut Harness<MapBuilderAgent>) -> Vec<(u64, u64, usize)> {
+        use shm_schemas::Described as _;
+        use shm_schemas::schema::Value;
+        let schema = shm_schemas::payloads::MapCells::schema();
+        let shape = schema.sequence_shape().expect("a sequence");
+        let n = |bytes: &[u8], path: &str| match schema.decode_path(path, bytes) {
+            Some(Value::Unsigned(v)) => v,
+            other => panic!("{path}: {other:?}"),
+        };
+        h.output_bytes("map")
+            .expect("map")
+            .iter()
+            .map(|(_, b)| {
+                (n(b, "header.count"), n(b, "header.revision"), shape.count_of(b.len()).expect("whole cells"))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_map_is_sent_when_the_grid_changed_and_again_now_and_then() {
+        let mut h = Harness::<MapBuilderAgent>::new().expect("the map builder starts");
+        h.set_param("map_every", "2").expect("map_every");
+        assert!(h.set_param("map_every", "20000").is_err(), "bounded");
+        // into three cells, a pose a step: a map every second step, when changed
+        for x in [0.1, 0.6, 1.1, 1.2] {
+            h.send("pose", pose(x, h.now_ns())).expect("pose");
+            h.step().expect("step");
+        }
+        assert_eq!(maps(&mut h), [(2, 2, 2), (3, 3, 3)], "at steps 2 and 4, with the cells so far");
+        // unchanged: nothing until 10 × 2 cycles after the last one sent (step 4)
+        h.run_cycles(18).expect("steps");
+        assert!(maps(&mut h).is_empty());
+        h.run_cycles(2).expect("steps");
+        assert_eq!(maps(&mut h), [(3, 3, 3)], "sent again, unchanged");
+        assert_eq!(h.param("maps_sent").as_deref(), Ok("3"));
+        h.set_param("map_every", "0").expect("off");
+        h.send("pose", pose(5.0, h.now_ns())).expect("pose");
+        h.run_cycles(30).expect("steps");
+        assert!(maps(&mut h).is_empty(), "map_every 0: no map");
     }
 
     #[test]
