@@ -22,6 +22,10 @@
 //! a client. Security is that of `nerve ui` (see `docs/foxglove.md`):
 //! loopback by default, `Origin` checked, a token for parameter changes and
 //! publishing, `--read-only`.
+//!
+//! Services that agents offer are advertised as Foxglove services (JSON,
+//! with the request's and answer's JSON Schemas) and called for clients
+//! that hold the token ([`Robot::call_service`]; `server/services.rs`).
 
 pub mod protocol;
 mod server;
@@ -53,6 +57,27 @@ pub struct GraphSpec {
     /// `(topic, subscribers)`: every connected output port and the agents it feeds
     pub subscribed: Vec<(String, Vec<String>)>,
 }
+
+/// A service an agent offers, as a Foxglove service.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ServiceSpec {
+    /// `/<agent>/<service>`
+    pub name: String,
+    /// the call's type, `call(Req -> Resp)`
+    pub type_name: String,
+    /// the request's type name
+    pub request_name: String,
+    /// the request's JSON Schema, as text
+    pub request_schema: String,
+    /// the answer's type name
+    pub response_name: String,
+    /// the answer's JSON Schema, as text
+    pub response_schema: String,
+}
+
+/// What is done with the end of a call: the answer as JSON, or why there
+/// is none (the text a client is shown). Called once, from any thread.
+pub type CallDone = Box<dyn FnOnce(Result<Vec<u8>, String>) + Send>;
 
 /// What the server asks of the robot. `nerve foxglove` implements it with a
 /// router session and port subscriptions.
@@ -89,4 +114,17 @@ pub trait Robot {
     /// Encodes the JSON `payload` through the input port's schema and sends
     /// it into the port; the error says what is wrong with it.
     fn publish(&mut self, topic: &str, payload: &[u8]) -> Result<(), String>;
+    /// Every service the robot's agents offer; by default none.
+    fn services(&mut self) -> Result<Vec<ServiceSpec>, String> {
+        Ok(Vec::new())
+    }
+    /// Calls service `name` (`/<agent>/<service>`) with the JSON
+    /// `request`, waiting at most `timeout` for the answer, and hands the
+    /// end to `done`: at once (a request refused before it is sent) or
+    /// later from another thread, so that the serving thread never waits
+    /// for a server.
+    fn call_service(&mut self, name: &str, request: &[u8], timeout: Duration, done: CallDone) {
+        let _ = (request, timeout);
+        done(Err(format!("{name}: this robot offers no services")));
+    }
 }

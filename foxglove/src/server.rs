@@ -14,8 +14,8 @@
 //! - The serving thread refreshes the channels (advertise/unadvertise) and
 //!   what clients watch (parameters, the graph: [`watched`]),
 //!   reads the subscribed ports only, fans samples out to the queues,
-//!   answers parameter, graph and publish requests, and never blocks on a
-//!   client.
+//!   answers parameter, graph and publish requests, hands service calls to
+//!   the robot ([`services`]), and never blocks on a client or a server.
 
 use crate::Robot;
 use crate::protocol::{self, Channel, ClientMessage, Level, Parameter, SUBPROTOCOLS};
@@ -36,6 +36,7 @@ use tungstenite::protocol::WebSocketConfig;
 use tungstenite::{Message, WebSocket};
 use watched::{GraphState, ParamState, graph_update};
 
+mod services;
 mod watched;
 
 /// How `nerve foxglove` serves.
@@ -63,6 +64,8 @@ pub struct Options {
     pub stall_timeout: Duration,
     /// how often channels and the graph are refreshed from the router
     pub refresh: Duration,
+    /// how long a service call a client makes waits for its answer
+    pub call_timeout: Duration,
 }
 
 impl Options {
@@ -79,6 +82,7 @@ impl Options {
             queue: 1024,
             stall_timeout: Duration::from_secs(10),
             refresh: Duration::from_millis(500),
+            call_timeout: Duration::from_secs(2),
         }
     }
 }
@@ -163,6 +167,8 @@ enum Request {
     Graph {
         client: Arc<Client>,
     },
+    /// a service call
+    Call(services::Call),
     /// a client subscribed to parameter updates: the values it is measured against are taken now,
     /// before any later request of it (the channel keeps their order)
     WatchParams,
@@ -177,7 +183,8 @@ struct Data {
 
 #[derive(Default)]
 struct Outbox {
-    control: VecDeque<String>,
+    /// text frames, and the binary answers of service calls
+    control: VecDeque<Message>,
     data: VecDeque<Data>,
     dropped: u64,
 }
@@ -210,6 +217,8 @@ struct Client {
     graph: AtomicBool,
     /// the parameters whose changes it is sent
     params: Mutex<BTreeSet<String>>,
+    /// its service calls in flight
+    calls: AtomicUsize,
     gone: AtomicBool,
     /// wakes its thread: something was queued for it, or the server stops
     wake: Wake,
@@ -217,12 +226,21 @@ struct Client {
 
 impl Client {
     fn say(&self, text: String) {
+        self.queue(Message::text(text));
+    }
+
+    fn say_binary(&self, frame: Vec<u8>) {
+        self.queue(Message::binary(frame));
+    }
+
+    /// Queues a control message (never dropped) and wakes the client's thread.
+    fn queue(&self, message: Message) {
         let mut out = lock(&self.out);
         if out.control.len() >= CONTROL_MAX {
             // a client that takes not even its control messages is going
             self.gone.store(true, Ordering::Relaxed);
         } else {
-            out.control.push_back(text);
+            out.control.push_back(message);
         }
         drop(out);
         self.wake.wake();
@@ -245,6 +263,7 @@ struct Channels {
 struct Hub {
     opts: Options,
     channels: Mutex<Channels>,
+    services: Mutex<services::Services>,
     clients: Mutex<BTreeMap<u64, Arc<Client>>>,
     stop: AtomicBool,
     live: AtomicUsize,
@@ -314,6 +333,7 @@ pub fn serve(
     let hub = Arc::new(Hub {
         opts: opts.clone(),
         channels: Mutex::default(),
+        services: Mutex::default(),
         clients: Mutex::default(),
         stop: AtomicBool::new(false),
         live: AtomicUsize::new(0),
@@ -327,6 +347,7 @@ pub fn serve(
     tracing::info!(%addr, read_only = opts.read_only, publish = opts.publish, "nerve foxglove listening");
     // the channels are known before the first client is told them
     refresh_channels(&hub, robot);
+    services::refresh(&hub, robot);
     listening(addr);
     let (tx, rx) = mpsc::channel();
     let mut threads: Vec<JoinHandle<()>> = Vec::new();
@@ -338,6 +359,7 @@ pub fn serve(
         if last_refresh.elapsed() >= opts.refresh {
             last_refresh = Instant::now();
             refresh_channels(&hub, robot);
+            services::refresh(&hub, robot);
             graph.refresh(&hub, robot);
             params.refresh(&hub, robot);
         }
@@ -486,6 +508,7 @@ fn serve_client(stream: TcpStream, peer: SocketAddr, hub: &Hub, tx: &Sender<Requ
         publishing: Mutex::default(),
         graph: AtomicBool::new(false),
         params: Mutex::default(),
+        calls: AtomicUsize::new(0),
         gone: AtomicBool::new(false),
         wake,
     });
@@ -504,7 +527,7 @@ fn serve_client(stream: TcpStream, peer: SocketAddr, hub: &Hub, tx: &Sender<Requ
 /// out to; under the channels' lock so that no change falls in between.
 fn register(hub: &Hub, client: &Arc<Client>) {
     let opts = &hub.opts;
-    let mut caps = vec!["parameters", "parametersSubscribe", "connectionGraph"];
+    let mut caps = vec!["parameters", "parametersSubscribe", "connectionGraph", "services"];
     if opts.publish && client.edit {
         caps.push("clientPublish");
     }
@@ -519,6 +542,8 @@ fn register(hub: &Hub, client: &Arc<Client>) {
     if !channels.by_topic.is_empty() {
         client.say(protocol::advertise(channels.by_topic.values()));
     }
+    let services = lock(&hub.services);
+    services::advertise_to(&services, client);
     lock(&hub.clients).insert(client.id, Arc::clone(client));
 }
 
@@ -595,7 +620,7 @@ fn client_loop(
         if !unflushed {
             let (control, data, dropped) = {
                 let mut out = lock(&client.out);
-                let control: Vec<String> = out.control.drain(..).collect();
+                let control: Vec<Message> = out.control.drain(..).collect();
                 let n = out.data.len().min(BATCH);
                 let data: Vec<Data> = out.data.drain(..n).collect();
                 (control, data, out.dropped)
@@ -612,7 +637,7 @@ fn client_loop(
                 frames.push(Message::text(protocol::status(Level::Warning, &msg)));
                 (reported, report_at) = (dropped, Instant::now());
             }
-            frames.extend(control.into_iter().map(Message::text));
+            frames.extend(control);
             frames.extend(
                 data.iter().map(|d| Message::binary(protocol::message_data(d.subscription, d.unix_ns, &d.payload))),
             );
@@ -765,8 +790,11 @@ fn edit_refused(hub: &Hub, client: &Client, what: &str) -> Option<String> {
     None
 }
 
-/// A client's binary frame: a message to publish.
+/// A client's binary frame: a message to publish, or a service call.
 fn publish(hub: &Hub, client: &Arc<Client>, tx: &Sender<Request>, frame: &[u8]) {
+    if frame.first() == Some(&services::OP_SERVICE_CALL_REQUEST) {
+        return services::request(hub, client, tx, frame);
+    }
     let Some((channel, payload)) = protocol::client_message_data(frame) else {
         client.error("a binary frame that is not a client message (opcode 1, channel id, payload) was ignored");
         return;
@@ -929,6 +957,7 @@ fn answer(hub: &Hub, robot: &mut dyn Robot, req: Request, params: &mut ParamStat
             Ok(g) => client.say(graph_update(&g, &[])),
             Err(e) => client.error(&format!("cannot read the connection graph: {e}")),
         },
+        Request::Call(call) => services::call(hub, robot, call),
         Request::WatchParams => params.refresh(hub, robot),
     }
 }

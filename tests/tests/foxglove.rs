@@ -14,7 +14,10 @@
 //! 100 subscribe/unsubscribe cycles leave the server's memory flat; an
 //! odometry agent's pose is also a `foxglove.FrameTransform` channel, and
 //! a camera's ring a `foxglove.RawImage` one; and Twists published as the
-//! Teleop panel does into the motor's `cmd` move the simulated robot.
+//! Teleop panel does into the motor's `cmd` move the simulated robot; an
+//! agent's service is advertised with its JSON Schemas and called (with
+//! the token, not without it nor under `--read-only`), and unadvertised
+//! when its agent stops.
 
 use nerve_tests::{Robot, wait_until};
 use serde_json::Value;
@@ -502,6 +505,68 @@ fn a_camera_ring_is_also_a_foxglove_raw_image() {
         let pad = data.bytes().rev().take_while(|b| *b == b'=').count() as u64;
         assert_eq!(data.len() as u64 / 4 * 3 - pad, step * h, "the pixels of a {w}x{h} frame");
     }
+}
+
+/// The calls test's server (`nerve-caller --serve`: service `plan`, a
+/// `nerve::Tick` answered with a `nerve::Scalar` of twice its `seq`) as a
+/// Foxglove service: advertised with both JSON Schemas; called with the
+/// token (an answer, an unknown field, text that is not JSON, each ended
+/// as it should), refused without it and under `--read-only`; a suspended
+/// server's call fails on the timeout; a stopped agent's service is
+/// unadvertised.
+#[test]
+fn an_agents_service_is_a_foxglove_service_called_with_the_token() {
+    let r = Robot::new("fxcall");
+    r.router();
+    r.ok(&["start", "caller", "--name", "s", "--", "--serve"]);
+    let fox = Fox::start(&r, &["--call-timeout", "0.5"]);
+    let with = format!("{}/?token={TOKEN}", fox.url);
+    let said = run_client(&["call", &with, "/s/plan", r#"{"seq": 21}"#, r#"{"seq": 1, "sequence": 2}"#, "seq 3"]);
+    assert!(said[0]["capabilities"].as_array().expect("caps").contains(&"services".into()), "{}", said[0]);
+    let service = &said[0]["service"];
+    assert_eq!(service["type"], "call(nerve::Tick -> nerve::Scalar)", "{service}");
+    assert_eq!(service["request"]["schemaName"], "nerve::Tick");
+    assert_eq!(service["response"]["schemaName"], "nerve::Scalar");
+    assert_eq!(service["request"]["encoding"], "json");
+    let schema: Value =
+        serde_json::from_str(service["request"]["schema"].as_str().expect("schema")).expect("schema JSON");
+    assert_eq!(schema["properties"]["seq"]["type"], "integer", "{schema}");
+    let schema: Value =
+        serde_json::from_str(service["response"]["schema"].as_str().expect("schema")).expect("schema JSON");
+    assert_eq!(schema["properties"]["value"]["type"], "number", "{schema}");
+    let calls = &said[1]["calls"];
+    assert_eq!(calls[0]["encoding"], "json", "{calls}");
+    assert_eq!(calls[0]["response"]["value"].as_f64(), Some(42.0), "{calls}");
+    assert!(calls[1]["failure"].as_str().is_some_and(|m| m.contains("sequence")), "an unknown field: {calls}");
+    assert!(calls[2]["failure"].as_str().is_some_and(|m| m.contains("not JSON")), "not JSON: {calls}");
+    // without the token: refused, nothing called
+    let answered = r.figure_u64("s", "answered");
+    let said = run_client(&["call", &fox.url, "/s/plan", r#"{"seq": 5}"#]);
+    let refusal = &said[1]["calls"][0];
+    assert!(refusal["failure"].as_str().is_some_and(|m| m.contains("edit token")), "{refusal}");
+    assert_eq!(r.figure_u64("s", "answered"), answered, "a call without the token reached the server");
+    // a server that does not answer: the call fails on the timeout, saying so
+    r.ok(&["suspend", "s"]);
+    let said = run_client(&["call", &with, "/s/plan", r#"{"seq": 6}"#]);
+    let end = &said[1]["calls"][0];
+    assert!(end["failure"].as_str().is_some_and(|m| m.contains("no answer within 500ms")), "{end}");
+    r.ok(&["resume", "s"]);
+    // a stopped agent takes its service with it
+    r.ok(&["stop", "s"]);
+    let mut listed = Value::Null;
+    let gone = wait_until(Duration::from_secs(10), || {
+        listed = run_client(&["services", &fox.url])[0]["services"].clone();
+        listed == serde_json::json!([])
+    });
+    assert!(gone, "/s/plan still advertised after s stopped: {listed}");
+    let stats = fox.stop();
+    assert!(stats.contains(" 0 refused"), "{stats}");
+    // --read-only: advertised, never called
+    r.ok(&["start", "caller", "--name", "s", "--", "--serve"]);
+    let fox = Fox::start(&r, &["--read-only"]);
+    let said = run_client(&["call", &fox.url, "/s/plan", r#"{"seq": 7}"#]);
+    let refusal = &said[1]["calls"][0];
+    assert!(refusal["failure"].as_str().is_some_and(|m| m.contains("read-only")), "{refusal}");
 }
 
 /// Every topic a panel of `docs/foxglove/explore.json` reads, without a

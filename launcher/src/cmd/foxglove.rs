@@ -11,7 +11,10 @@
 //! with the requests `nerve param`, `nerve graph` and `nerve pub` send, so
 //! its bounds and refusals are the same.
 //!
-//! The edit token (parameter changes, publishing) never comes from the
+//! Services agents offer are Foxglove services, found and called in
+//! [`services`] as `nerve call` calls them.
+//!
+//! The edit token (parameter changes, publishing, calls) never comes from the
 //! command line: from `NERVE_FOXGLOVE_TOKEN`, or made at random and printed
 //! on a terminal only; with neither, nobody may change the robot.
 
@@ -27,7 +30,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::FileDescriptorBased as _;
 use iceoryx2::prelude::Node;
 use nerve_foxglove::protocol::Parameter;
-use nerve_foxglove::{ChannelSpec, GraphSpec, Interest, Options, Robot, wait_fds};
+use nerve_foxglove::{CallDone, ChannelSpec, GraphSpec, Interest, Options, Robot, ServiceSpec, wait_fds};
 use nerve_recording::foxglove::{
     IMAGE_SUFFIX, RAW_IMAGE, RawImage, encoding_of, mapping_of, raw_image_json, raw_image_json_schema,
     velocity_from_twist,
@@ -43,6 +46,8 @@ use std::net::SocketAddr;
 use std::os::fd::RawFd;
 use std::process::ExitCode;
 use std::time::Duration;
+
+mod services;
 
 /// `nerve foxglove`
 #[derive(Debug, clap::Args)]
@@ -65,6 +70,9 @@ pub struct FoxgloveArgs {
     /// Seconds a client may take nothing while messages wait before it is disconnected.
     #[arg(long, default_value_t = 10.0, value_parser = agent_sdk::clock::parse_seconds)]
     pub stall_timeout: f64,
+    /// Seconds a service call a client makes waits for its answer.
+    #[arg(long, default_value_t = 2.0, value_parser = agent_sdk::clock::parse_seconds)]
+    pub call_timeout: f64,
 }
 
 /// How long the first message into an input waits for the agent to take the new port.
@@ -101,6 +109,9 @@ pub fn foxglove(world: &World, a: FoxgloveArgs) -> Result<ExitCode> {
     if !(0.1..=3600.0).contains(&a.stall_timeout) {
         anyhow::bail!("--stall-timeout {} is out of range: give 0.1 to 3600 seconds", a.stall_timeout);
     }
+    if !(0.01..=600.0).contains(&a.call_timeout) {
+        anyhow::bail!("--call-timeout {} is out of range: give 0.01 to 600 seconds", a.call_timeout);
+    }
     let token = token(a.read_only)?;
     if !a.bind.ip().is_loopback() {
         tracing::warn!(bind = %a.bind, "nerve foxglove serves a non-loopback address without TLS");
@@ -118,6 +129,7 @@ pub fn foxglove(world: &World, a: FoxgloveArgs) -> Result<ExitCode> {
     opts.allowed_origins = a.allow_origin.clone();
     opts.queue = a.queue;
     opts.stall_timeout = Duration::from_secs_f64(a.stall_timeout);
+    opts.call_timeout = Duration::from_secs_f64(a.call_timeout);
     let node = cli_node(world)?;
     let mut robot = FoxRobot {
         world: world.clone(),
@@ -127,6 +139,8 @@ pub fn foxglove(world: &World, a: FoxgloveArgs) -> Result<ExitCode> {
         outputs: BTreeMap::new(),
         warned: BTreeSet::new(),
         rings: BTreeMap::new(),
+        services: services::Services::new(world),
+        agents_seen: None,
     };
     interrupt::catch();
     let say = |text: String| {
@@ -138,10 +152,13 @@ pub fn foxglove(world: &World, a: FoxgloveArgs) -> Result<ExitCode> {
         let mode = if a.read_only { " (read-only)" } else { "" };
         say(format!("nerve foxglove of robot {robot_name}{mode}: ws://{addr} (open it in Foxglove or Lichtblick)"));
         match &token {
-            Some((t, true)) => {
-                say(format!("to set parameters{}: ws://{addr}/?token={t}", if a.publish { " and publish" } else { "" }))
+            Some((t, true)) => say(format!(
+                "to set parameters, call services{}: ws://{addr}/?token={t}",
+                if a.publish { " and publish" } else { "" }
+            )),
+            Some((_, false)) => {
+                say(format!("to set parameters and call services: ws://{addr}/?token= and the token in {TOKEN_ENV}"))
             }
-            Some((_, false)) => say(format!("to set parameters: ws://{addr}/?token= and the token in {TOKEN_ENV}")),
             None if !a.read_only => say(format!("no token: nobody may change the robot (give one in {TOKEN_ENV})")),
             None => {}
         }
@@ -190,6 +207,9 @@ struct FoxRobot {
     warned: BTreeSet<String>,
     /// the short-term-memory rings of image channels, by name
     rings: BTreeMap<String, nerve_stm::RingReader>,
+    services: services::Services,
+    /// the agents [`Robot::channels`] was told, for the [`Robot::services`] that follows it
+    agents_seen: Option<Vec<AgentView>>,
 }
 
 /// The frame a ring notice announces, as a `foxglove.RawImage` in JSON;
@@ -351,8 +371,9 @@ impl FoxRobot {
 impl Robot for FoxRobot {
     fn channels(&mut self) -> Result<Vec<ChannelSpec>, String> {
         let agents = self.agents()?;
+        let agents = &*self.agents_seen.insert(agents);
         let mut out = Vec::new();
-        for a in &agents {
+        for a in agents {
             for o in &a.outputs {
                 let topic = format!("/{}/{}", a.name, o.name);
                 match a.schema_for(o.fingerprint) {
@@ -572,6 +593,19 @@ impl Robot for FoxRobot {
             o.delivered = true;
         }
         Ok(())
+    }
+
+    fn services(&mut self) -> Result<Vec<ServiceSpec>, String> {
+        // the server asks for the services right after the channels: the same answer of the router
+        let agents = match self.agents_seen.take() {
+            Some(a) => a,
+            None => self.agents()?,
+        };
+        Ok(self.services.specs(&self.node, &agents))
+    }
+
+    fn call_service(&mut self, name: &str, request: &[u8], timeout: Duration, done: CallDone) {
+        self.services.call(name, request, timeout, done);
     }
 }
 

@@ -14,6 +14,8 @@
 //   node client.js drive URL PUB_TOPIC JSON SUB_TOPIC
 //   node client.js teleop URL PUB_TOPIC LINEAR ANGULAR SECONDS SUB_TOPIC
 //   node client.js idle URL MS
+//   node client.js services URL
+//   node client.js call URL SERVICE JSON...   (each JSON a request, sent at once, in order)
 //   node client.js all URL MS          (nerve-bench foxglove: every channel, read until killed or MS)
 //   node client.js camera URL NOTICE_TOPIC MS   (nerve-bench foxglove: NOTICE_TOPIC and its /image)
 "use strict";
@@ -44,6 +46,11 @@ function connect(url, subprotocol) {
     for (const [t, c] of state.channels) if (ids.includes(c.id)) state.channels.delete(t);
   });
   client.on("status", (s) => state.statuses.push(s));
+  state.services = new Map();
+  client.on("advertiseServices", (list) => list.forEach((v) => state.services.set(v.name, v)));
+  client.on("unadvertiseServices", (ids) => {
+    for (const [n, v] of state.services) if (ids.includes(v.id)) state.services.delete(n);
+  });
   client.on("error", (e) => fail(`client error: ${e && e.message}`));
   return state;
 }
@@ -353,6 +360,41 @@ async function camera(url, notice, ms) {
   process.exit(0);
 }
 
+// The services advertised once connected (the server sends them with its
+// serverInfo, in the same batch: a moment after it they are all known).
+async function services(url) {
+  const s = connect(url);
+  await until(() => s.serverInfo, 10000, "serverInfo");
+  await new Promise((r) => setTimeout(r, 100));
+  say({ capabilities: s.serverInfo.capabilities, services: [...s.services.keys()].sort() });
+  s.client.close();
+  process.exit(0);
+}
+
+// Calls SERVICE with each request (JSON text, sent as is: a bad one too),
+// all at once, and prints the advertisement and then each call's end: the
+// answer (decoded) or the failure's message.
+async function call(url, name, requests) {
+  const s = connect(url);
+  const service = await until(() => s.serverInfo && s.services.get(name), 10000, `service ${name}`);
+  say({ capabilities: s.serverInfo.capabilities, service });
+  const ends = new Map();
+  s.client.on("serviceCallResponse", (r) => {
+    if (r.serviceId === service.id) ends.set(r.callId, { encoding: r.encoding, response: decode(r.data) });
+  });
+  s.client.on("serviceCallFailure", (f) => {
+    if (f.serviceId === service.id) ends.set(f.callId, { failure: f.message });
+  });
+  requests.forEach((text, i) => {
+    const data = new TextEncoder().encode(text);
+    s.client.sendServiceCallRequest({ serviceId: service.id, callId: i + 1, encoding: "json", data });
+  });
+  await until(() => ends.size >= requests.length, 15000, `the ends of ${requests.length} calls`);
+  say({ calls: requests.map((_, i) => ends.get(i + 1)), statuses: s.statuses });
+  s.client.close();
+  process.exit(0);
+}
+
 const [scenario, ...args] = process.argv.slice(2);
 const run = {
   watch: () => watch(args[0], args[1], args[2], Number(args[3])),
@@ -367,6 +409,8 @@ const run = {
   idle: () => idle(args[0], Number(args[1])),
   all: () => all(args[0], Number(args[1])),
   camera: () => camera(args[0], args[1], Number(args[2])),
+  services: () => services(args[0]),
+  call: () => call(args[0], args[1], args.slice(2)),
 }[scenario];
 if (!run) fail(`unknown scenario ${scenario}`);
 Promise.resolve(run()).catch(fail);
