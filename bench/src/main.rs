@@ -518,7 +518,7 @@ fn run(cli: Cli) -> Result<()> {
             let opts = messages::MessagesOpts {
                 quick: common.quick,
                 sizes: payloads,
-                rounds: rounds.unwrap_or(if common.quick { 1 } else { 5 }).max(1),
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 9 }).max(1),
                 verbose: common.verbose,
                 work: messages::work_dir(&common.out),
             };
