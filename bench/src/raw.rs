@@ -295,6 +295,16 @@ struct PongArgs {
     size: usize,
 }
 
+/// The CPU a polling pong runs on (raw iceoryx2's and nerve's); the ping's is [`crate::hop::PINNED_CPU`].
+pub(crate) const POLL_PONG_CPU: usize = 1;
+
+/// Keeps the calling thread on `cpu`; says so when refused (a machine without it).
+fn pin_to(cpu: usize) {
+    if let Err(e) = agent_sdk::rt::set_affinity(&agent_sdk::rt::CpuList(vec![cpu])) {
+        eprintln!("warning: cannot keep the polling pong on CPU {cpu}: {e}");
+    }
+}
+
 /// Entry of `nerve-bench __raw-pong`: prints `ready` once its ports exist.
 pub fn pong_main(args: Vec<String>) -> ExitCode {
     let a: PongArgs = match parse_sub("__raw-pong", args) {
@@ -308,7 +318,12 @@ pub fn pong_main(args: Vec<String>) -> ExitCode {
 }
 
 fn pong<P: BenchPayload>(a: &PongArgs) -> Result<()> {
-    realtime_like_an_agent(20);
+    if a.mode == Mode::Poll {
+        // as nerve's polling pong (`nerve-poll`): SCHED_OTHER, on CPU 1
+        pin_to(POLL_PONG_CPU);
+    } else {
+        realtime_like_an_agent(20);
+    }
     let side = Side::<P>::open(&a.robot, a.mode, "pong", "ping", "raw-pong")?;
     println!("ready");
     std::io::stdout().flush().context("stdout")?;

@@ -7,7 +7,7 @@ use super::pinger::{Pinger, Pingers, Pinned};
 use super::{HopOpts, PINNED_CPU};
 use crate::futex::FutexPing;
 use crate::payloads::BenchPayload;
-use crate::procs::{ChildGuard, Robot, self_command};
+use crate::procs::{ChildGuard, Robot, normal_priority, realtime_like_an_agent, self_command};
 use crate::raw::{Mode, Side};
 use crate::uds::UdsPing;
 use crate::with_payload;
@@ -63,9 +63,26 @@ pub(super) fn push_iox2(pingers: &mut Pingers, size: usize, robot: &Robot) -> Re
         (Mode::Poll, "iox2-poll"),
     ] {
         let p: Box<dyn Pinger> = with_payload!(size, P => Box::new(Side::<P>::open(&robot.name, mode, "ping", "pong", "raw-ping")?), _ => bail!("size"));
+        let p = if mode == Mode::Poll { Box::new(AsPolledAgents(Box::new(Pinned(p)))) } else { p };
         pingers.push((size, t, p));
     }
     Ok(())
+}
+
+/// A raw polling batch run as nerve's polling agents run (`nerve-poll`):
+/// SCHED_OTHER (`--no-realtime`, which they need on two CPUs), the ping on
+/// CPU 0 ([`Pinned`]) and the pong on CPU 1. Real-time raw pollers against
+/// normal-priority nerve ones measured the scheduler as much as the code:
+/// on a loaded machine only nerve's were preempted.
+struct AsPolledAgents(Box<dyn Pinger>);
+
+impl Pinger for AsPolledAgents {
+    fn batch(&mut self, robot: &Robot, count: usize) -> Result<Vec<u64>> {
+        normal_priority();
+        let r = self.0.batch(robot, count);
+        realtime_like_an_agent(20);
+        r
+    }
 }
 
 impl Pinger for FutexPing {

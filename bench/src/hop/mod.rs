@@ -15,6 +15,12 @@
 //! * `futex`: two processes ping-ponging a sequence number through a futex
 //!   in shared memory ([`crate::futex`]): the floor of any wake-up, with the
 //!   share of round trips whose two ends ran on one CPU (placement);
+//! * `nerve-poll` and `iox2-poll`: both sides busy-polling instead of
+//!   sleeping (the SDK's polling mode, `--poll`, issue 42; raw iceoryx2
+//!   spinning on `Subscriber::receive`), both at SCHED_OTHER with the ping
+//!   on CPU 0 and the pong on CPU 1 (nerve's pollers cannot be real-time
+//!   on two CPUs, see [`nerve`]; until 2026-11-29 the raw pair ran at
+//!   SCHED_FIFO and only nerve's was preempted on a loaded machine);
 //! * `ddsperf`: Cyclone DDS's own ping-pong, when installed ([`crate::dds`]);
 //! * `dora`: two dora-rs nodes on dora's Rust node API, one `dora run` per
 //!   batch, when `scripts/setup.sh --bench` has built them ([`crate::dora`]);
