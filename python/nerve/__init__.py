@@ -53,7 +53,8 @@ import numpy as np
 from . import _native
 
 __all__ = ["Agent", "Payload", "payload", "builtin", "run", "Message", "Meta", "Input", "Output", "Setup",
-           "Sequence", "sequence", "SeqMessage", "SeqInput", "SeqOutput"]
+           "Sequence", "sequence", "SeqMessage", "SeqInput", "SeqOutput",
+           "Server", "Client", "CallError", "CallRefused", "Finished"]
 
 _PRIMITIVES = {
     "u8": "<u1", "u16": "<u2", "u32": "<u4", "u64": "<u8",
@@ -325,6 +326,7 @@ class Output:
 
 
 from .seq import Sequence, sequence, SeqMessage, SeqInput, SeqOutput  # noqa: E402 (they use the above)
+from .call import CallError, CallRefused, Client, Finished, Server  # noqa: E402
 
 
 class Setup:
@@ -335,6 +337,8 @@ class Setup:
         # what was declared, by port: the test harness reads them
         self.inputs: dict = {}
         self.outputs: dict = {}
+        self.services: dict = {}
+        self.clients: dict = {}
 
     @property
     def name(self) -> str:
@@ -386,6 +390,26 @@ class Setup:
         """Declares output ``port`` of samples of ``header`` then at most
         ``max_len`` of ``element`` (as Rust's ``setup.output_seq::<T, H>(port, max_len)``)."""
         return self.output(port, sequence(element, header), max_len=max_len)
+
+    def serve(self, port: str, request, response) -> "Server":
+        """Declares service ``port``: requests of payload ``request``
+        answered with ``response`` (names or ``Payload``s), in this agent's
+        task, which a request wakes like an input (as Rust's
+        ``setup.serve::<Req, Resp>(port)``)."""
+        req, resp = _payload_of(request), _payload_of(response)
+        made = Server(_native.serve(self._n, port, req.schema_json, resp.schema_json), req, resp)
+        self.services[port] = (req, resp)
+        return made
+
+    def client(self, port: str, request, response, *, timeout: float = 1.0, max_in_flight: int = 16) -> "Client":
+        """Declares client ``port`` of a service of ``request`` answered with
+        ``response``; the router wires it (``nerve connect AGENT/PORT
+        SERVER/SERVICE``). Each call waits at most ``timeout`` seconds for
+        its answer; at most ``max_in_flight`` (1 to 64) are in flight."""
+        req, resp = _payload_of(request), _payload_of(response)
+        native = _native.client(self._n, port, req.schema_json, resp.schema_json, float(timeout), int(max_in_flight))
+        self.clients[port] = (req, resp)
+        return Client(native, req, resp)
 
     def param(self, key: str, default, *, min=None, max=None):
         """Declares parameter ``key`` (float, int, bool or str, as ``default``);

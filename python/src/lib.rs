@@ -25,6 +25,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, OnceLock};
 use std::time::Duration;
 
+mod call;
 mod seq;
 
 /// The Python agent this process runs: set once by [`run`].
@@ -1008,5 +1009,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fingerprint, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     seq::register(m)?;
+    call::register(m)?;
     Ok(())
 }

@@ -364,5 +364,22 @@ class Sequences(unittest.TestCase):
                                                    "step": lambda self, c: None}))
 
 
+class Calls(unittest.TestCase):
+    """Calls (issue 42) run on real agents only (tests/tests/python_calls.rs):
+    the harness, like Rust's, refuses them saying so."""
+
+    def test_a_call_port_in_the_harness_is_refused_saying_where_to_test_it(self):
+        for declare in (lambda s: s.serve("plan", "nerve::Tick", "nerve::Scalar"),
+                        lambda s: s.client("planner", "nerve::Tick", "nerve::Scalar")):
+            agent = type("Calling", (nerve.Agent,), {"period": 0.1, "new": lambda self, s, d=declare: d(s),
+                                                     "step": lambda self, c: None})
+            with self.assertRaisesRegex(Exception, "not yet carried in the test harness; test calls with real agents"):
+                Harness(agent)
+        with self.assertRaisesRegex(RuntimeError, "max_in_flight 65: give 1 to 64"):
+            Harness(type("TooMany", (nerve.Agent,), {
+                "period": 0.1, "step": lambda self, c: None,
+                "new": lambda self, s: s.client("p", "nerve::Tick", "nerve::Tick", max_in_flight=65)}))
+
+
 if __name__ == "__main__":
     unittest.main()

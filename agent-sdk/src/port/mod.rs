@@ -27,6 +27,7 @@ pub mod depth;
 pub mod error;
 pub mod keep_all;
 pub(crate) mod memory;
+pub mod schema_call;
 pub mod seq;
 pub mod service;
 pub mod typed;
