@@ -3,6 +3,8 @@
 //! headers and libnerve.so, its `ctest` passes, and its own launch file
 //! runs it under a real router behind a ticker, its output the ticks'
 //! sequence numbers times the parameter `gain` (2 in the launch file).
+//! Its ctest runs `--describe` and the project's own test of the agent on
+//! the C test harness (`test_NAME.c`, `test_NAME.cpp`).
 //! Needs `cargo build --workspace --lib --bins` first, gcc, g++ and cmake
 //! (`scripts/setup.sh --test`).
 
@@ -12,8 +14,8 @@ use nerve_testkit::Robot;
 use std::path::Path;
 use std::process::Command;
 
-/// Runs `program args` in `dir`; panics with its output on a failure.
-fn run(dir: &Path, program: &str, args: &[&str]) {
+/// Runs `program args` in `dir` and returns its output; panics with it on a failure.
+fn run(dir: &Path, program: &str, args: &[&str]) -> String {
     let out = Command::new(program)
         .args(args)
         .current_dir(dir)
@@ -26,6 +28,7 @@ fn run(dir: &Path, program: &str, args: &[&str]) {
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
+    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 /// Makes, builds, tests and launches agent `name` in language `lang`.
@@ -39,7 +42,11 @@ fn new_build_and_launch(lang: &str, name: &str, extra: &[&str]) {
     let root = r.home.join(name);
     run(&root, "cmake", &["-S", ".", "-B", "build"]);
     run(&root, "cmake", &["--build", "build"]);
-    run(&root.join("build"), "ctest", &["--output-on-failure"]);
+    let tests = run(&root.join("build"), "ctest", &["--output-on-failure"]);
+    // both: what it declares, and its own init and step in the C test harness
+    for test in ["describe", "harness"] {
+        assert!(tests.lines().any(|l| l.contains(test) && l.contains("Passed")), "ctest ran no {test}:\n{tests}");
+    }
 
     r.ok(&["launch", root.join("launch.toml").to_str().expect("utf-8 path")]);
     let got = r.echo(&format!("{name}/out"), 3);

@@ -16,6 +16,8 @@ use std::process::ExitCode;
 const CMAKE: &str = include_str!("native/CMakeLists.txt.in");
 const AGENT_C: &str = include_str!("native/agent.c.in");
 const AGENT_CPP: &str = include_str!("native/agent.cpp.in");
+const TEST_C: &str = include_str!("native/test.c.in");
+const TEST_CPP: &str = include_str!("native/test.cpp.in");
 const LAUNCH_TOML: &str = include_str!("native/launch.toml.in");
 const README_MD: &str = include_str!("native/README.md.in");
 const GITIGNORE: &str = include_str!("native/gitignore.in");
@@ -84,18 +86,13 @@ pub(super) fn new_native(
 /// The project's files, by path in it.
 pub(super) fn render(name: &str, drive: &Drive, lang: Native, nerve: &Path, found: &Found) -> Vec<(String, String)> {
     let cname = module_name(name);
-    let (lang_flag, cmake_lang, source, std_line, template) = match lang {
-        Native::C => {
-            ("c", "C", format!("{cname}.c"), format!("set_property(TARGET {name} PROPERTY C_STANDARD 11)"), AGENT_C)
-        }
-        Native::Cpp => (
-            "cpp",
-            "CXX",
-            format!("{cname}.cpp"),
-            format!("set_property(TARGET {name} PROPERTY CXX_STANDARD 17)"),
-            AGENT_CPP,
-        ),
+    let (lang_flag, cmake_lang, ext, std_prop, template, test_template) = match lang {
+        Native::C => ("c", "C", "c", "C_STANDARD 11", AGENT_C, TEST_C),
+        Native::Cpp => ("cpp", "CXX", "cpp", "CXX_STANDARD 17", AGENT_CPP, TEST_CPP),
     };
+    let source = format!("{cname}.{ext}");
+    let test_source = format!("test_{cname}.{ext}");
+    let std_line = format!("set_property(TARGET {name} test_{cname} PROPERTY {std_prop})");
     let (what, period_ns, period_words, c_step, cpp_step, period_line, task_words) = match drive {
         Drive::Event => (
             "an event-driven agent that sends every tick arriving on `in` on `out`, its sequence number multiplied by the parameter `gain`.".to_owned(),
@@ -131,6 +128,7 @@ pub(super) fn render(name: &str, drive: &Drive, lang: Native, nerve: &Path, foun
             .replace("{{lang}}", lang_flag)
             .replace("{{cmake_lang}}", cmake_lang)
             .replace("{{source}}", &source)
+            .replace("{{test_source}}", &test_source)
             .replace("{{std_line}}", &std_line)
             .replace("{{include}}", &cmake_path(&found.include))
             .replace("{{libdir}}", &cmake_path(&found.lib))
@@ -140,6 +138,7 @@ pub(super) fn render(name: &str, drive: &Drive, lang: Native, nerve: &Path, foun
     };
     vec![
         (source.clone(), fill(template)),
+        (test_source.clone(), fill(test_template)),
         ("CMakeLists.txt".into(), fill(CMAKE)),
         ("launch.toml".into(), fill(LAUNCH_TOML)),
         ("README.md".into(), fill(README_MD)),
