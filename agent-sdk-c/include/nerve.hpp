@@ -27,8 +27,8 @@
  * loan, are valid until the callback returns.
  *
  * Ports are typed by their payload struct: any struct T with a
- * nerve::payload<T> specialisation (type_name, fingerprint); every type of
- * nerve_types.h has one. */
+ * nerve::payload<T> specialisation (type_name, fingerprint), which every
+ * type of nerve_types.h has, or an own type given by NERVE_HPP_OWN_TYPE. */
 #ifndef NERVE_HPP
 #define NERVE_HPP
 
@@ -61,6 +61,49 @@ struct payload;
   };
 NERVE_BUILTIN_PAYLOADS(NERVE_HPP_PAYLOAD)
 #undef NERVE_HPP_PAYLOAD
+
+/* A payload struct of the agent's own (a type not in nerve_types.h),
+ * described as in C (NERVE_TYPE and NERVE_FIELD of nerve_types.h) and
+ * given to nerve once, at global scope, with NERVE_HPP_OWN_TYPE:
+ *
+ *   struct reading { double value; std::uint32_t id; float samples[3]; };
+ *   static const nerve_field reading_fields[] = {
+ *       NERVE_FIELD(reading, value, NERVE_F64), NERVE_FIELD(reading, id, NERVE_U32),
+ *       NERVE_FIELD_ARRAY(reading, samples, NERVE_F32)};
+ *   static const nerve_type reading_type = NERVE_TYPE(reading, "lab::Reading", reading_fields);
+ *   NERVE_HPP_OWN_TYPE(reading, reading_type)
+ *
+ * Then s.input<reading>("in"), c.take(in), c.loan(out), h.output<reading>
+ * work as for a built-in type; nerve checks the layout when the port is
+ * declared and the router against any other agent's type of that name. */
+template <class T>
+struct own_type;
+
+#define NERVE_HPP_OWN_TYPE(T, layout)                                 \
+  namespace nerve {                                                   \
+  template <>                                                         \
+  struct own_type<T> {                                                \
+    static const nerve_type *get() noexcept { return &(layout); }     \
+  };                                                                  \
+  }
+
+namespace detail {
+/* Whether T is an own type (NERVE_HPP_OWN_TYPE) rather than a built-in one. */
+template <class T, class = void>
+struct is_own : std::false_type {};
+template <class T>
+struct is_own<T, std::void_t<decltype(own_type<T>::get())>> : std::true_type {};
+
+/* The type name nerve knows T by. */
+template <class T>
+const char *type_name() noexcept {
+  if constexpr (is_own<T>::value) {
+    return own_type<T>::get()->type_name;
+  } else {
+    return payload<T>::type_name;
+  }
+}
+}  // namespace detail
 
 /* A failed nerve call: its status and nerve's message. */
 class error : public std::runtime_error {
@@ -131,8 +174,13 @@ class setup {
   nerve::input<T> input(const char *name) {
     static_assert(std::is_trivially_copyable<T>::value, "a payload is a plain struct");
     nerve_port p = 0;
-    detail::check(nerve_setup_input(s_, name, payload<T>::type_name, sizeof(T), alignof(T), payload<T>::fingerprint, &p),
-                  "nerve_setup_input");
+    if constexpr (detail::is_own<T>::value) {
+      detail::check(nerve_setup_input_type(s_, name, own_layout<T>(), &p), "nerve_setup_input_type");
+    } else {
+      detail::check(
+          nerve_setup_input(s_, name, payload<T>::type_name, sizeof(T), alignof(T), payload<T>::fingerprint, &p),
+          "nerve_setup_input");
+    }
     return nerve::input<T>(p);
   }
 
@@ -141,9 +189,13 @@ class setup {
   nerve::output<T> output(const char *name) {
     static_assert(std::is_trivially_copyable<T>::value, "a payload is a plain struct");
     nerve_port p = 0;
-    detail::check(
-        nerve_setup_output(s_, name, payload<T>::type_name, sizeof(T), alignof(T), payload<T>::fingerprint, &p),
-        "nerve_setup_output");
+    if constexpr (detail::is_own<T>::value) {
+      detail::check(nerve_setup_output_type(s_, name, own_layout<T>(), &p), "nerve_setup_output_type");
+    } else {
+      detail::check(
+          nerve_setup_output(s_, name, payload<T>::type_name, sizeof(T), alignof(T), payload<T>::fingerprint, &p),
+          "nerve_setup_output");
+    }
     return nerve::output<T>(p);
   }
 
@@ -158,6 +210,18 @@ class setup {
   nerve_setup *raw() const noexcept { return s_; }
 
  private:
+  /* Own type T's layout, checked to describe T (not another struct). */
+  template <class T>
+  static const nerve_type *own_layout() {
+    const nerve_type *l = own_type<T>::get();
+    if (l->size != sizeof(T) || l->align != alignof(T)) {
+      throw error(NERVE_LAYOUT_MISMATCH, std::string("NERVE_HPP_OWN_TYPE: the layout given for ") + l->type_name +
+                                             " has size " + std::to_string(l->size) + ", but the C++ struct " +
+                                             std::to_string(sizeof(T)) + ": give NERVE_TYPE the struct itself");
+    }
+    return l;
+  }
+
   nerve_setup *s_;
 };
 
@@ -248,7 +312,7 @@ class context {
     detail::check(s, call);
     if (len != sizeof(T)) {
       throw error(NERVE_LAYOUT_MISMATCH, std::string(call) + ": a sample of " + std::to_string(len) +
-                                             " bytes on a port of " + payload<T>::type_name + " (" +
+                                             " bytes on a port of " + detail::type_name<T>() + " (" +
                                              std::to_string(sizeof(T)) + " bytes)");
     }
     return static_cast<const T *>(d);

@@ -4,7 +4,8 @@
 //! echo` reads what it republishes, `nerve param set` changes its parameter
 //! within its bounds and is refused outside them, and `nerve stop` stops it
 //! cleanly. An exception thrown in its `init` is a failed start with
-//! nerve's message, not a crash. Needs `cargo build --workspace --lib
+//! nerve's message, not a crash. Killed, it is restarted with its run-time
+//! connection back. Needs `cargo build --workspace --lib
 //! --bins` first, and g++.
 
 mod common;
@@ -99,4 +100,78 @@ fn a_cpp_exception_in_init_is_a_failed_start_not_a_crash() {
     );
     assert!(stderr.contains("cpprelay: init: nerve_setup_param_f64:"), "the wrapper names the call: {stderr}");
     assert!(stderr.contains("out of its bounds"), "nerve's message is kept: {stderr}");
+}
+
+/// Whether what the relay republishes now comes from t2 (whose seq grows
+/// by a million a tick; t1's by one), checked on a few fresh ticks.
+fn follows_t2(r: &Robot) -> bool {
+    let seqs = relayed(r, 3);
+    seqs.len() == 3 && seqs.iter().all(|s| *s >= 1_000_000 && s % 1_000_000 == 0)
+}
+
+/// The C++ relay rewired at run time to another ticker, then killed with
+/// SIGKILL: the supervisor restarts it (`restart = "on-failure"`) and it
+/// gets its run-time connection back, not the launch file's; stopped, it
+/// stays stopped.
+#[test]
+fn the_cpp_relay_killed_is_restarted_with_its_connections_back() {
+    let r = Robot::new("cppkill");
+    let exe = build_relay(&r.home, &[]);
+    let file = r.launch_file(
+        "cpp.toml",
+        &format!(
+            r#"robot = "x"
+[[agent]]
+name = "t1"
+kind = "ticker"
+period = "10ms"
+
+[[agent]]
+name = "t2"
+kind = "ticker"
+period = "10ms"
+params = {{ step = 1000000 }}
+
+[[agent]]
+name = "cpprelay"
+exe = "{}"
+restart = "on-failure"
+backoff = "100ms"
+
+[[connect]]
+from = "t1/tick"
+to = "cpprelay/in"
+"#,
+            exe.display()
+        ),
+    );
+    r.ok(&["launch", file.to_str().expect("utf-8 path")]);
+    let seqs = relayed(&r, 3);
+    assert!(seqs.len() == 3 && seqs.iter().all(|s| *s < 1_000_000), "t1's ticks first: {seqs:?}");
+
+    r.ok(&["disconnect", "t1/tick", "cpprelay/in"]);
+    r.ok(&["connect", "t2/tick", "cpprelay/in"]);
+    assert!(wait_until(Duration::from_secs(5), || follows_t2(&r)), "cpprelay does not follow t2: {:?}", relayed(&r, 3));
+
+    let old = r.pid("cpprelay");
+    nerve_testkit::sigkill(old);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.agent("cpprelay").is_some_and(|a| {
+            let pid = a["pid"].as_u64().unwrap_or(0);
+            pid != 0 && pid != u64::from(old)
+        })),
+        "cpprelay was not restarted: {:?}",
+        r.ps()
+    );
+    assert!(
+        wait_until(Duration::from_secs(5), || follows_t2(&r)),
+        "the restarted cpprelay does not relay t2: {:?}",
+        relayed(&r, 3)
+    );
+
+    let pid = r.pid("cpprelay");
+    r.ok(&["stop", "cpprelay"]);
+    assert!(wait_until(Duration::from_secs(10), || r.agent("cpprelay").is_none()), "cpprelay did not stop");
+    assert!(wait_until(Duration::from_secs(10), || !nerve_testkit::alive(pid)), "cpprelay's process {pid} lives on");
+    r.down_and_check_clean();
 }

@@ -7,7 +7,8 @@
  * many Readings it has taken from `in` so far). Built with
  * -DREADING_DRIFT it lays lab::Reading out otherwise (a field renamed and
  * retyped, as an old copy of the struct would): the router then refuses to
- * connect it to the first layout, naming both. */
+ * connect it to the first layout, naming both. READING_TYPE_NAME renames
+ * the type (below). */
 #include "nerve.h"
 #include "nerve_types.h"
 
@@ -42,7 +43,13 @@ static const nerve_field reading_fields[] = {
 };
 #endif
 
-static const nerve_type reading_type = NERVE_TYPE(reading, "lab::Reading", reading_fields);
+/* The type's name; -DREADING_TYPE_NAME='"acme::Gripper"' gives this layout
+ * the name of a Rust agent's type (tests/src/bin/gripper.rs), which the
+ * router must then refuse to connect to that agent, naming both. */
+#ifndef READING_TYPE_NAME
+#define READING_TYPE_NAME "lab::Reading"
+#endif
+static const nerve_type reading_type = NERVE_TYPE(reading, READING_TYPE_NAME, reading_fields);
 
 typedef struct {
   nerve_port in;
