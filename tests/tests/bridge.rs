@@ -3,10 +3,10 @@
 //! over loopback, and across a veth pair between two network namespaces
 //! that the test creates, cuts and removes.
 
-use nerve_tests::{Robot, alive, bin_dir, free_port, reap, sigkill, wait_until, write_file};
+use nerve_tests::{ChildGuard, Robot, alive, bin_dir, free_port, reap, sigkill, wait_until, write_file};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
 /// `nerve launch FILE` for `r`, optionally inside network namespace `netns`.
@@ -436,6 +436,50 @@ fn a_cut_link_loses_nothing_reliable_and_streams_resume() {
     a.down_and_check_clean();
     b.down_and_check_clean();
     drop(netns);
+}
+
+/// A fleet's star (issue 44): two robots' bridges in `mode = "client"` meet
+/// through one Zenoh router (zenoh's own router mode, `nerve-ros2-router`)
+/// instead of linking to each other: A's ticks reach B's agent, B's status
+/// names A's bridge as a peer, and neither bridge listens on anything.
+#[test]
+fn bridges_in_client_mode_meet_through_a_router() {
+    let (a, b) = (Robot::new("bca"), Robot::new("bcb"));
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut router = Command::new(bin_dir().join("nerve-ros2-router"));
+    router.args(["--listen", &endpoint]).stdout(Stdio::piped());
+    let mut router = ChildGuard::spawn("nerve-ros2-router", router).expect("start the zenoh router");
+    router.await_ready("nerve-ros2-router").expect("the router listens");
+    let bridge = |r: &Robot, body: &str| {
+        let cfg = write_file(
+            &r.home,
+            "bridge.toml",
+            &format!("mode = \"client\"\nconnect = [\"{endpoint}\"]\nlease = \"1s\"\n{body}"),
+        );
+        r.launch_file(
+            "fleet.toml",
+            &format!(
+                "robot = \"x\"\n[[agent]]\nname = \"t1\"\nkind = \"ticker\"\nperiod = \"20ms\"\n\
+                 [[agent]]\nname = \"bridge\"\nkind = \"bridge\"\nargs = [\"--config\", {:?}]\n\
+                 [[agent]]\nname = \"r1\"\nkind = \"relay\"\n",
+                cfg.display().to_string()
+            ),
+        )
+    };
+    let a_launch = bridge(&a, "[[export]]\nport = \"t1/tick\"\ntype = \"nerve::Tick\"\n");
+    let b_launch =
+        bridge(&b, &format!("[[import]]\nport = \"{}/t1/tick\"\ntype = \"nerve::Tick\"\nas = \"t1\"\n", a.name));
+    launch(&a, &a_launch, None);
+    launch(&b, &b_launch, None);
+    b.ok(&["connect", "bridge/t1", "r1/in"]);
+    assert_eq!(b.echo("r1/out", 3).len(), 3, "robot A's ticks reach robot B through the router");
+    let json: Value = serde_json::from_str(&b.ok(&["bridge", "status", "--json"])).expect("status json");
+    assert_eq!(json[0]["peers"][0], format!("{}/bridge", a.name), "{json}");
+    assert_eq!(a.figure("bridge", "mode"), "client");
+    assert_eq!(b.figure("bridge", "mode"), "client");
+    a.down_and_check_clean();
+    b.down_and_check_clean();
+    drop(router);
 }
 
 /// The example of the README (launch/bridge-a.toml, launch/bridge-b.toml and

@@ -2,8 +2,10 @@
 //! files): the Zenoh endpoints and the two lists of what crosses.
 //!
 //! ```toml
-//! listen = ["tls/10.0.0.1:7447"]       # endpoints this bridge accepts peers on
-//! connect = ["tls/10.0.0.2:7447"]      # peers it dials (and re-dials after a cut)
+//! mode = "peer"                        # "peer" (default): robots link directly;
+//!                                      # "client": through Zenoh routers (a fleet)
+//! listen = ["tls/10.0.0.1:7447"]       # endpoints this bridge accepts peers on (peer mode only)
+//! connect = ["tls/10.0.0.2:7447"]      # peers it dials (and re-dials after a cut); the routers in client mode
 //! multicast_scouting = false           # find peers on the LAN by multicast (off by default)
 //! queue = 256                          # default queue of a reliable export, messages
 //! lease = "2s"                         # a silent link is declared lost after this
@@ -97,6 +99,8 @@ pub enum ConfigError {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
+    #[serde(default)]
+    mode: Option<Spanned<String>>,
     #[serde(default)]
     listen: Vec<Spanned<String>>,
     #[serde(default)]
@@ -269,9 +273,32 @@ impl Import {
     }
 }
 
+/// How the bridge's Zenoh session meets the others (`mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// Robots link to each other directly (`listen` and `connect` name peers).
+    #[default]
+    Peer,
+    /// Robots meet through one or more Zenoh routers (`connect` names them),
+    /// so that a fleet is a star instead of a full mesh.
+    Client,
+}
+
+impl Mode {
+    /// Zenoh's name of the mode.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Peer => "peer",
+            Mode::Client => "client",
+        }
+    }
+}
+
 /// A checked bridge configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Config {
+    /// peer-to-peer or through routers
+    pub mode: Mode,
     /// endpoints to listen on
     pub listen: Vec<String>,
     /// endpoints to connect to
@@ -365,6 +392,35 @@ pub fn parse(src: &str, file: &str, known_type: &dyn Fn(&str) -> bool) -> Result
             );
         }
     }
+    let mode = match raw.mode.as_ref().map(|m| (m.get_ref().as_str(), m.span())) {
+        None | Some(("peer", _)) => Mode::Peer,
+        Some(("client", span)) => {
+            if raw.connect.is_empty() {
+                at(
+                    span.clone(),
+                    "mode = \"client\" meets the fleet through Zenoh routers: name them in connect = [\"tcp/HOST:7447\"]".into(),
+                );
+            }
+            if let Some(l) = raw.listen.first() {
+                at(
+                    l.span(),
+                    "a bridge in client mode listens on nothing (the router does); remove listen, or use mode = \"peer\""
+                        .into(),
+                );
+            }
+            if raw.tls.is_some() {
+                at(
+                    span,
+                    "mode = \"client\" with [tls] is not supported yet: through a router every message arrives on the router's TLS link, so this bridge cannot tell robots apart by certificate (access control would have to be the router's); use mode = \"peer\" for mutual TLS, or a protected network (WireGuard, a VLAN) with insecure = true".into(),
+                );
+            }
+            Mode::Client
+        }
+        Some((other, span)) => {
+            at(span, format!("mode {other:?}: write \"peer\" (robots link directly) or \"client\" (through routers)"));
+            Mode::Peer
+        }
+    };
     let mut peers: Vec<String> = Vec::new();
     for p in &raw.peers {
         match RobotName::new(p.get_ref()) {
@@ -562,6 +618,7 @@ pub fn parse(src: &str, file: &str, known_type: &dyn Fn(&str) -> bool) -> Result
         }
     }
     Ok(Config {
+        mode,
         peers,
         importer_ttl,
         insecure: raw.insecure,
@@ -657,6 +714,7 @@ as = "cmd"
         )
         .expect("valid");
         assert_eq!(c.listen, vec!["tcp/127.0.0.1:7447"]);
+        assert_eq!(c.mode, Mode::Peer, "peer mode unless asked for");
         assert!(!c.multicast_scouting, "scouting is off unless asked for");
         assert_eq!(c.lease, Duration::from_secs(3));
         assert_eq!(c.exports[0].input_name(), "t1.tick");
@@ -765,5 +823,22 @@ as = "r1.t1.tick"
         assert!(p[0].contains("no [tls] section"), "{p:?}");
         let p = problems(&format!("importer_ttl = \"0s\"\npeers = [\"a/b\"]\n{ONE}"));
         assert_eq!(p.len(), 2, "{p:?}");
+    }
+
+    #[test]
+    fn client_mode_needs_a_router_and_listens_on_nothing() {
+        let c = parse(&format!("mode = \"client\"\nconnect = [\"tcp/127.0.0.1:7447\"]\n{ONE}"), "b.toml", &known)
+            .expect("client");
+        assert_eq!(c.mode, Mode::Client);
+        let p = problems(&format!("mode = \"client\"\n{ONE}"));
+        assert!(p.len() == 1 && p[0].starts_with("b.toml:1:") && p[0].contains("connect"), "{p:?}");
+        let p = problems(&format!(
+            "mode = \"client\"\nconnect = [\"tcp/127.0.0.1:7447\"]\nlisten = [\"tcp/127.0.0.1:7448\"]\n{ONE}"
+        ));
+        assert!(p.len() == 1 && p[0].starts_with("b.toml:3:") && p[0].contains("listens on nothing"), "{p:?}");
+        let p = problems(&format!("mode = \"client\"\nconnect = [\"tls/127.0.0.1:7447\"]\n{ONE}[tls]\n"));
+        assert!(p.iter().any(|l| l.starts_with("b.toml:1:") && l.contains("not supported yet")), "{p:?}");
+        let p = problems(&format!("mode = \"router\"\n{ONE}"));
+        assert!(p.len() == 1 && p[0].contains("\"peer\"") && p[0].contains("\"client\""), "{p:?}");
     }
 }

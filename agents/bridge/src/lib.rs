@@ -1,6 +1,8 @@
 //! `bridge`: carries chosen ports between robots over Zenoh, in peer mode
 //! with no server (thesis 2.2.3, 2.3.3.2: "the transmitter and receiver are
-//! treated as sensors and actuators"). Each robot keeps its own router and
+//! treated as sensors and actuators"), or, for a fleet, as a client of
+//! Zenoh routers (`mode = "client"`: the robots meet through the routers
+//! instead of a full mesh). Each robot keeps its own router and
 //! real-time system; only the ports named in the bridge's configuration
 //! cross, and Zenoh stays inside this agent.
 //!
@@ -164,6 +166,7 @@ impl Agent for Bridge {
         } else {
             "loopback"
         };
+        let mode = cfg.mode.as_str();
         {
             let (exports, imports, peers) = (exports.clone(), imports.clone(), peers.clone());
             setup.figures(move || {
@@ -173,6 +176,7 @@ impl Agent for Bridge {
                     ("peers".to_string(), names.len().to_string()),
                     ("peer_names".to_string(), names.join(",")),
                     ("security".to_string(), security.to_string()),
+                    ("mode".to_string(), mode.to_string()),
                 ];
                 for t in &exports {
                     t.figures(&mut v);

@@ -1,4 +1,5 @@
-//! The Zenoh side of the bridge: one peer-mode session (no Zenoh router),
+//! The Zenoh side of the bridge: one session, in peer mode (no Zenoh router)
+//! or as a client of the fleet's routers (`mode = "client"`),
 //! the publishers and subscribers of the topics, the liveliness tokens that
 //! tell who is there, and the acknowledgements of reliable topics.
 //!
@@ -24,7 +25,7 @@
 //! first drops real-time scheduling, so that Zenoh's runtime never competes
 //! with the robot's real-time tasks.
 
-use crate::config::{Config, TlsFiles};
+use crate::config::{Config, Mode, TlsFiles};
 use crate::topics::{ExportTopic, ImportTopic, Reply, Transmit};
 use crate::wire;
 use std::collections::BTreeSet;
@@ -49,6 +50,16 @@ pub enum LinkError {
     Open {
         /// the listen endpoints
         listen: Vec<String>,
+        /// what zenoh said
+        detail: String,
+    },
+    /// A client's session reached none of its routers.
+    #[error(
+        "no Zenoh router answered at {routers:?} within 10 s: {detail}; start the fleet's router there first (e.g. `nerve-ros2-router --listen ENDPOINT`)"
+    )]
+    NoRouter {
+        /// the `connect` endpoints
+        routers: Vec<String>,
         /// what zenoh said
         detail: String,
     },
@@ -186,17 +197,20 @@ pub fn session_config(
     let mut z = zenoh::Config::default();
     let lease_ms = link_lease_ms(cfg.lease, agent_sdk::simclock::scale());
     let mut settings: Vec<(&'static str, String)> = vec![
-        ("mode", "\"peer\"".into()),
+        ("mode", format!("{:?}", cfg.mode.as_str())),
         ("listen/endpoints", json_list(&cfg.listen)),
         ("connect/endpoints", json_list(&cfg.connect)),
         ("scouting/multicast/enabled", cfg.multicast_scouting.to_string()),
         ("scouting/gossip/enabled", "true".into()),
-        // dial in the background for ever (a peer that is not up yet, or
-        // comes back after a cut), retrying every 0.2 s growing to 1 s
-        ("connect/timeout_ms", "-1".into()),
-        ("connect/exit_on_failure", "false".into()),
+        // a peer dials in the background for ever (a peer that is not up
+        // yet, or comes back after a cut), retrying every 0.2 s growing to 1 s
         ("connect/retry", "{period_init_ms: 200, period_max_ms: 1000, period_increase_factor: 2}".into()),
         ("listen/exit_on_failure", "true".into()),
+        // a client's session opens once it reaches a router: give up after
+        // 10 s with an error that names the routers (the agent's start
+        // fails loudly); once up, it re-dials a lost router by itself
+        ("connect/timeout_ms", if cfg.mode == Mode::Client { "10000" } else { "-1" }.into()),
+        ("connect/exit_on_failure", (cfg.mode == Mode::Client).to_string()),
         ("transport/link/tx/lease", lease_ms.to_string()),
         ("transport/link/tx/keep_alive", "4".into()),
         ("transport/link/rx/max_message_size", max_message_size(max_payload).to_string()),
@@ -301,9 +315,12 @@ impl Link {
         let tls = cfg.tls.as_ref().map(|t| t.files(&me.robot));
         let max_payload =
             exports.iter().map(|t| t.info.size).chain(imports.iter().map(|t| t.info.size)).max().unwrap_or(0);
-        let session = zenoh::open(session_config(cfg, &me.robot, tls.as_ref(), max_payload)?)
-            .wait()
-            .map_err(|e| LinkError::Open { listen: cfg.listen.clone(), detail: e.to_string() })?;
+        let session = zenoh::open(session_config(cfg, &me.robot, tls.as_ref(), max_payload)?).wait().map_err(|e| {
+            match cfg.mode {
+                Mode::Peer => LinkError::Open { listen: cfg.listen.clone(), detail: e.to_string() },
+                Mode::Client => LinkError::NoRouter { routers: cfg.connect.clone(), detail: e.to_string() },
+            }
+        })?;
         let mut subscribers = Vec::new();
         let mut tokens = Vec::new();
 
@@ -416,7 +433,7 @@ impl Link {
             .wait()
             .map_err(|e| declare_err("liveliness subscriber", "nerve-bridge/**", e))?;
         subscribers.push(sub);
-        tracing::info!(zid = %session.zid(), listen = ?cfg.listen, connect = ?cfg.connect, "zenoh session open (peer mode)");
+        tracing::info!(zid = %session.zid(), listen = ?cfg.listen, connect = ?cfg.connect, mode = cfg.mode.as_str(), "zenoh session open");
         Ok(Link { session, _subscribers: subscribers, _tokens: tokens })
     }
 
