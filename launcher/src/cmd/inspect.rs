@@ -195,6 +195,30 @@ fn graph_table(g: &GraphView) -> String {
             c.dropped
         );
     }
+    let queues = input_queues(g);
+    if !queues.is_empty() {
+        let _ = write!(out, "\ninputs that are not the default (16, latest):\n{queues}");
+    }
+    out
+}
+
+/// One line per connection into an input that is not the default (depth
+/// 16, keep latest, issue 46): its depth and policy, whether the source
+/// sends to it losslessly, and what was overwritten, waited for and lost.
+fn input_queues(g: &GraphView) -> String {
+    let mut out = String::new();
+    for c in g.connections.iter().filter(|c| c.depth != 16 || c.keep != "latest") {
+        let how = match (c.keep.as_str(), c.lossless) {
+            ("all", true) => " (lossless: the sender waits)",
+            ("all", false) => " (copies: the sender does not wait)",
+            _ => "",
+        };
+        let _ = writeln!(
+            out,
+            "  {} <- {}: depth {}, keep {}{how}; overwritten {}, back-pressure {}, lost {}",
+            c.to, c.from, c.depth, c.keep, c.overwritten, c.back_pressure, c.lost
+        );
+    }
     out
 }
 
@@ -278,5 +302,24 @@ mod tests {
         assert!(lines[2].starts_with("b "), "{text}");
         assert_eq!(lines[3], "b: peers=2", "empty figures are left out");
         assert!(text.ends_with('\n'));
+    }
+
+    #[test]
+    fn the_graph_names_inputs_that_are_not_the_default_with_their_counts() {
+        let edge = |to: &str, depth: u32, keep: &str| -> shm_schemas::control::cli_to_router::ConnectionView {
+            serde_json::from_value(serde_json::json!({
+                "from": "b/out", "to": to, "type_name": "nerve::Tick", "active": true, "rate_hz": 1.0,
+                "last_age_ms": null, "received": 1000, "dropped": 0, "depth": depth, "keep": keep,
+                "lossless": keep == "all", "overwritten": 0, "back_pressure": 12, "lost": 0
+            }))
+            .expect("an edge")
+        };
+        let g = GraphView { agents: vec![], connections: vec![edge("r1/in", 32, "all"), edge("r2/in", 16, "latest")] };
+        let text = graph_table(&g);
+        assert!(
+            text.contains("  r1/in <- b/out: depth 32, keep all (lossless: the sender waits); overwritten 0, back-pressure 12, lost 0"),
+            "{text}"
+        );
+        assert!(!text.contains("r2/in <-"), "the default is not repeated: {text}");
     }
 }

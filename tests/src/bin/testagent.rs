@@ -20,11 +20,17 @@
 //! * `gone-start`: its `new` fails when the agent really starts, though it
 //!   worked when a launch file's check described the agent (a device there
 //!   when the file was checked and gone a moment later): the agent exits
-//!   before it registers, and the router never hears of it.
+//!   before it registers, and the router never hears of it;
+//! * `burst`: as `scalar`, but once its output has a keep-all reader
+//!   (issue 46) it sends 1,000 samples in one step, as fast as the reader
+//!   lets it.
 
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
 use shm_schemas::payloads::Scalar;
 use std::time::Duration;
+
+/// Samples a `burst` agent sends at once.
+const BURST: u32 = 1000;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Mode {
@@ -38,6 +44,7 @@ enum Mode {
     PanicStart,
     SegvStart,
     GoneStart,
+    Burst,
 }
 
 struct TestAgent {
@@ -72,10 +79,11 @@ impl Agent for TestAgent {
                     return Err(AgentError::Device("/dev/ttyGONE: it was there when the file was checked".into()));
                 }
                 "gone-start" => Mode::GoneStart,
+                "burst" => Mode::Burst,
                 other => {
                     return Err(AgentError::Config(format!(
                         "unknown mode {other:?}; use scalar, crash, panic, stubborn, hang, burn, fail-start, \
-                         panic-start, segv-start or gone-start"
+                         panic-start, segv-start, gone-start or burst"
                     )));
                 }
             },
@@ -104,6 +112,15 @@ impl Agent for TestAgent {
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
         match self.mode {
             Mode::Scalar | Mode::FailStart | Mode::PanicStart | Mode::SegvStart | Mode::GoneStart => {}
+            Mode::Burst => {
+                if self.out.keep_all_counts().readers > 0 {
+                    for _ in 0..BURST {
+                        self.n += 1.0;
+                        self.out.send(Scalar { value: self.n, stamp_ns: ctx.now_ns() })?;
+                    }
+                    self.mode = Mode::Scalar;
+                }
+            }
             Mode::Crash => std::process::abort(),
             Mode::Panic => panic!("testagent: a bug in the step, on purpose"),
             Mode::Stubborn => {
