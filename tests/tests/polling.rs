@@ -124,3 +124,28 @@ fn a_launch_file_with_poll_and_cpus_starts_a_poller() {
     assert!(wait_until(WITHIN, || !alive(pid)), "the poller did not stop");
     r.down_and_check_clean();
 }
+
+/// A poller refills the queues of its deep and keep-all inputs as the
+/// event loop does (and only theirs: `runtime::poll`): a relay polling with
+/// `--input in:depth=64,keep=all` (a queue of its own past iceoryx2's
+/// buffer) relays a ticker's samples, and stops promptly.
+#[test]
+fn a_polling_relay_with_a_deep_keep_all_input_relays() {
+    let r = Robot::new("polldeep");
+    r.router();
+    r.ok(&["start", "ticker", "--name", "t", "--period", "10ms"]);
+    let mut cmd = r.command("nerve-relay");
+    cmd.args(["--name", "p", "--poll", "--cpus", "1", "--no-realtime", "--input", "in:depth=64,keep=all"]);
+    let poller = ChildGuard::spawn("polling relay", cmd).expect("start the polling relay");
+    assert!(wait_until(WITHIN, || r.agent("p").is_some()), "the polling relay did not register");
+    assert_eq!(r.figure("p", "poll"), "cpus 1");
+    r.ok(&["connect", "t/tick", "p/in"]);
+    let out = r.echo("p/out", 3);
+    assert_eq!(out.len(), 3, "relayed through the deep keep-all input while polling: {out:?}");
+    assert!(wait_until(WITHIN, || received_from(&r, "p", "t") >= 3));
+    let pid = poller.id();
+    r.ok(&["stop", "p"]);
+    assert!(wait_until(WITHIN, || !alive(pid)), "the poller did not stop");
+    drop(poller);
+    r.down_and_check_clean();
+}

@@ -88,14 +88,28 @@ pub(super) fn task_main(
 }
 
 pub(super) fn run_step(agent: &mut dyn Stepper, sh: &Shared, ctx: &mut Context) {
+    run_step_then(agent, sh, ctx, |_| {});
+}
+
+/// [`run_step`], then `after` on the task's figures under the same lock
+/// that ends the step (a polling task's bookkeeping: one lock a step less).
+pub(super) fn run_step_then(
+    agent: &mut dyn Stepper,
+    sh: &Shared,
+    ctx: &mut Context,
+    after: impl FnOnce(&mut super::TaskFigures),
+) {
     sh.figures().in_step_since_ns = ctx.now_ns.max(1);
     let result = agent.step(ctx);
-    sh.figures().in_step_since_ns = 0;
-    if let Err(e) = result {
+    {
         let mut f = sh.figures();
-        f.errors += 1;
-        if f.errors.is_power_of_two() {
-            tracing::warn!("step failed ({} failures so far): {e}", f.errors);
+        f.in_step_since_ns = 0;
+        after(&mut f);
+        if let Err(e) = result {
+            f.errors += 1;
+            if f.errors.is_power_of_two() {
+                tracing::warn!("step failed ({} failures so far): {e}", f.errors);
+            }
         }
     }
     ctx.cycle += 1;
