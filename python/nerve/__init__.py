@@ -113,13 +113,28 @@ def _field_schema(t) -> str:
                     "(type, length) for an array, or a nerve.Payload")
 
 
-def payload(type_name: str, fields) -> Payload:
+def payload(type_name: str, fields):
     """A payload type laid out as the ``#[repr(C)]`` Rust struct of ``fields``
     (``[(name, type), ...]`` in order; a type is ``"u8"`` ... ``"f64"``,
     ``"bool"``, ``(type, length)`` for an array, a built-in type's name or
     another ``Payload``). Give it the Rust type's stable name
     (``#[payload(name = ...)]``) to talk to agents built with it.
+
+    The last field may be a sequence of any length, ``("items", [element])``:
+    the result is then the ``nerve.sequence`` of ``element`` after a header
+    named ``type_name`` of the other fields (Rust's ``Seq<Element, TypeName>``).
     """
+    fields = list(fields)
+    if fields and isinstance(fields[-1][1], list):
+        name, trailing = fields[-1]
+        if name != "items" or len(trailing) != 1:
+            raise TypeError(f"{type_name}: a trailing sequence is written (\"items\", [element]), "
+                            f"not ({name!r}, {trailing!r})")
+        header = payload(type_name, fields[:-1]) if len(fields) > 1 else None
+        return sequence(trailing[0], header)
+    for name, t in fields:
+        if isinstance(t, list):
+            raise TypeError(f"{type_name}.{name}: only the last field may be a sequence ((\"items\", [element]))")
     return Payload(_native.struct_schema(type_name, [(n, _field_schema(t)) for n, t in fields]))
 
 

@@ -304,6 +304,16 @@ class Sequences(unittest.TestCase):
         with self.assertRaisesRegex(ValueError, "not a .* whole 12-byte elements"):
             s.length_of(16 + 13)
 
+    def test_a_payload_ending_in_a_sequence_is_the_sequence_after_a_header_of_the_other_fields(self):
+        dets = nerve.payload("acme::DetectionsHeader", [("frame", "u64"), ("count", "u32"), ("items", [DETECTION])])
+        s = nerve.sequence(DETECTION, HEADER)
+        self.assertEqual((dets.type_name, dets.fingerprint), (s.type_name, s.fingerprint))
+        self.assertEqual(nerve.payload("x::Text", [("items", ["u8"])]).type_name, "nerve::Seq<u8, nerve::NoHeader>")
+        with self.assertRaisesRegex(TypeError, "only the last field"):
+            nerve.payload("x::Bad", [("items", ["u8"]), ("n", "u32")])
+        with self.assertRaisesRegex(TypeError, "written"):
+            nerve.payload("x::Bad", [("n", "u32"), ("rows", ["u8"])])
+
     def test_lengths_zero_one_and_growth_are_sent_at_their_length_and_read_back(self):
         h = Harness(SeqDetector)
         h.run_cycles(5)

@@ -212,7 +212,7 @@ fn the_packages_tests_pass_in_the_tests_own_process() {
     let out = Command::new(python).args(["-m", "unittest", "-v"]).current_dir(&dir).output().expect("unittest");
     let text = String::from_utf8_lossy(&out.stderr);
     eprintln!("{text}");
-    assert!(out.status.success() && text.contains("Ran 16 tests") && text.contains("OK"), "{text}");
+    assert!(out.status.success() && text.contains("Ran 17 tests") && text.contains("OK"), "{text}");
     assert!(text.contains("1000 cycles of a Python agent in"), "{text}");
 }
 
