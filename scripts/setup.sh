@@ -36,6 +36,7 @@ if [ $test = 1 ]; then
     python3 -c 'import ensurepip' 2>/dev/null || need+=(python3-venv)  # the virtual environment of the MCAP reader (tests/tests/record.rs)
     command -v g++ >/dev/null || need+=(g++)                           # the C++ agents of agent-sdk-c (nerve.hpp) and `nerve new --lang cpp`
     command -v cmake >/dev/null || need+=(cmake)                       # the projects of `nerve new --lang c|cpp` (agent-sdk-c/tests/new_project.rs)
+    command -v pkg-config >/dev/null || need+=(pkg-config)             # libnerve's nerve.pc (agent-sdk-c/tests/c_harness.rs)
 fi
 if [ $test = 1 ] || [ $bench = 1 ]; then
     command -v chromium >/dev/null || need+=(chromium)                 # headless: `nerve ui`'s tests, and `nerve bench ui`'s page load

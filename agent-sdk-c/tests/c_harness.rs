@@ -114,3 +114,35 @@ fn a_sample_pointer_kept_past_its_step_is_a_use_after_free_asan_reports() {
         "the stale read was not reported:\n{stdout}\n{stderr}"
     );
 }
+
+/// The `nerve.pc` the build of libnerve writes beside it: the relay's test
+/// built with gcc and nothing but `pkg-config --cflags --libs nerve`'s
+/// flags (no -I or -L of its own) passes.
+#[test]
+fn the_c_relay_test_builds_with_pkg_config_alone() {
+    let r = Robot::new("chpkg");
+    let lib = common::libnerve_dir();
+    let flags = std::process::Command::new("pkg-config")
+        .args(["--cflags", "--libs", "nerve"])
+        .env("PKG_CONFIG_PATH", &lib)
+        .output()
+        .unwrap_or_else(|e| panic!("run pkg-config (scripts/setup.sh --test installs it): {e}"));
+    assert!(
+        flags.status.success(),
+        "pkg-config finds no nerve.pc in {} (agent-sdk-c/build.rs writes it): {}",
+        lib.display(),
+        String::from_utf8_lossy(&flags.stderr)
+    );
+    let flags = String::from_utf8(flags.stdout).expect("UTF-8 flags");
+    let exe = r.home.join("relay_test_pc");
+    let out = std::process::Command::new("gcc")
+        .args(["-std=c11", "-Wall", "-Wextra", "-Werror"])
+        .arg(relay_test())
+        .args(flags.split_whitespace())
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .expect("run gcc");
+    assert!(out.status.success(), "gcc with {flags:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    passes(&run(&r, &exe));
+}

@@ -1,9 +1,12 @@
 //! `nerve new NAME --lang c` and `--lang cpp`: a CMake project of an agent
 //! on nerve's C API (libnerve, `agent-sdk-c/`): the agent (`NAME.c` on
-//! `nerve.h` and `nerve_types.h`, or `NAME.cpp` on `nerve.hpp`), a
-//! `CMakeLists.txt` that finds the headers and libnerve.so of the nerve
-//! tree this `nerve` was built from and adds a `ctest` of what the agent
-//! declares, a launch file that wires it to a ticker, and a README.
+//! `nerve.h` and `nerve_types.h`, or `NAME.cpp` on `nerve.hpp`), its test
+//! on the C test harness (`test_NAME.c`, `test_NAME.cpp`), a
+//! `CMakeLists.txt` that finds nerve with `find_package(nerve)` (the
+//! `nerveConfig.cmake` the build of libnerve writes beside it, in the
+//! nerve tree this `nerve` was built from) and adds `ctest`s of what the
+//! agent declares and of its test, a launch file that wires it to a
+//! ticker, and a README.
 //! `cmake -S . -B build && cmake --build build` then `nerve launch
 //! launch.toml` work on it as made. The templates are `new/native/*.in`,
 //! built into the `nerve` program.
@@ -69,9 +72,9 @@ pub(super) fn new_native(
     for (path, _) in &files {
         println!("  {path}");
     }
-    if !found.lib.join("libnerve.so").is_file() {
+    if !found.lib.join("libnerve.so").is_file() || !found.lib.join("nerveConfig.cmake").is_file() {
         println!(
-            "note: {} has no libnerve.so yet: build nerve's C API first (cargo build -p nerve-agent-c in {})",
+            "note: {} has no libnerve.so or nerveConfig.cmake yet: build nerve's C API first (cargo build -p nerve-agent-c in {})",
             found.lib.display(),
             nerve.display()
         );
