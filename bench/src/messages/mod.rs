@@ -149,7 +149,6 @@ fn count_of(size: usize, quick: bool) -> usize {
 fn tag(size: usize) -> String {
     match size {
         s if s >= 1 << 20 && s % (1 << 20) == 0 => format!("{}m", s >> 20),
-        s if s >= 1024 && s % 1024 == 0 => format!("{}k", s >> 10),
         s if s >= 1000 => format!("{}k", s / 1000),
         s => s.to_string(),
     }
