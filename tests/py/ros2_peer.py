@@ -12,6 +12,8 @@ hashes, CDR). Its one argument is a JSON object:
   settle_s    how long to wait after, for the robot to stop
   range       (optional) a topic of sensor_msgs/Range: the sonar ring, one
               message per direction, the latest of each frame is reported
+  vector3     (optional) a topic of geometry_msgs/Vector3 (a mapping of the
+              agent's configuration): the latest is reported
   tf_static   (optional) [[parent, child, x, y, z], ...] the robot's static
               transforms, which this peer, joining after the robot sent them,
               must still get on /tf_static (transient local)
@@ -66,6 +68,8 @@ if A.get("tf_static"):
     want.add(("MP", "/tf_static"))
 if A.get("range"):
     want.add(("MP", A["range"]))
+if A.get("vector3"):
+    want.add(("MP", A["vector3"]))
 found = {}
 deadline = time.monotonic() + 15
 while time.monotonic() < deadline:
@@ -201,6 +205,20 @@ if A.get("tf_static"):
 
 if A.get("range"):
     subs.append(session.declare_subscriber(key(A["range"]), on_range))
+vectors = []
+
+
+def on_vector3(sample):
+    m = TS.deserialize_cdr(bytes(sample.payload.to_bytes()), "geometry_msgs/msg/Vector3")
+    with lock:
+        vectors.append([m.x, m.y, m.z])
+
+
+if A.get("vector3"):
+    t = tokens[A["vector3"]]
+    if t["type"] != dds("geometry_msgs/msg/Vector3") or t["hash"] != TS.hash_rihs01("geometry_msgs/msg/Vector3"):
+        fail(f"{A['vector3']}: token type {t['type']} hash {t['hash']}")
+    subs.append(session.declare_subscriber(key(A["vector3"]), on_vector3))
 wait_for(lambda: len(odoms) >= 5 and len(tfs) >= 1 and len(scans) >= 1 and len(images) >= 1, 15,
          "5 /odom, 1 /tf, 1 /scan and 1 /camera/image_raw messages")
 with lock:
@@ -253,6 +271,7 @@ with lock:
     image_count = len(images)
     statics_got = list(statics)
     ranges_got = dict(ranges)
+    vector3_last = vectors[-1] if vectors else None
 
 for s in subs:
     s.undeclare()
@@ -275,4 +294,5 @@ print(json.dumps({
     "sent": seq,
     "tf_static": statics_got,
     "ranges": ranges_got,
+    "vector3_last": vector3_last,
 }))

@@ -101,6 +101,12 @@ topic = "/camera/image_raw"
 type = "sensor_msgs/msg/Image"
 frame_id = "camera"
 reliability = "best_effort"
+[[publish]]
+input = "pose2d"
+from = "nerve::Odometry"
+topic = "/pose2d"
+type = "geometry_msgs/msg/Vector3"
+fields = {{ x = "x", y = "y", z = "theta" }}
 [[subscribe]]
 topic = "/cmd_vel"
 type = "geometry_msgs/msg/Twist"
@@ -157,6 +163,9 @@ to = "ros2/scan"
 from = "sonar/scan"
 to = "ros2/ranges"
 [[connect]]
+from = "motor/odom"
+to = "ros2/pose2d"
+[[connect]]
 from = "camera/frames"
 to = "ros2/image"
 [[connect]]
@@ -180,6 +189,7 @@ to = "motor/cmd"
         "connect": endpoint, "domain": 0, "node": "nerve_robot",
         "twist": [0.15, 0.4], "publish_s": 2.5, "settle_s": 1.5,
         "tf_static": [["base_link", "camera"], ["base_link", "sonar"]], "range": "/sonar/range",
+        "vector3": "/pose2d",
     });
     let out = Command::new(&python).arg(&peer).arg(arg.to_string()).output().expect("run the ROS 2 peer");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -256,6 +266,11 @@ to = "motor/cmd"
     let dyaw =
         (yaw(last) - f(d, "theta") + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
     assert!(dyaw.abs() < 1e-9, "heading: ROS {last} / nerve {d}");
+    // the odometry mapped field by field (`fields`) as a Vector3: x, y, θ
+    let v3 = &got["vector3_last"];
+    for (i, k) in ["x", "y", "theta"].into_iter().enumerate() {
+        assert!((v3[i].as_f64().unwrap_or(f64::NAN) - f(d, k)).abs() < 1e-9, "/pose2d {v3} / nerve {d}");
+    }
     let tf = &got["tf_last"][0];
     assert_eq!((tf[0].as_str(), tf[1].as_str()), (Some("odom"), Some("base_link")), "{tf}");
     assert!((tf[2].as_f64().unwrap_or(f64::NAN) - f(d, "x")).abs() < 1e-9, "/tf x {tf} / nerve {d}");

@@ -38,6 +38,8 @@ enum PubInput {
     Velocity(Input<VelocityCommand>),
     Sonar(Input<SonarScan>),
     Frames(agent_sdk::memory::RingInput),
+    /// any layout, mapped field by field (`Publish::user`)
+    User(agent_sdk::dynamic::SchemaInput),
 }
 
 struct SubOutput {
@@ -85,6 +87,10 @@ impl Agent for Ros2 {
                 PubMap::VelocityToTwist => PubInput::Velocity(setup.input(&p.input)?),
                 PubMap::SonarToLaserScan | PubMap::SonarToRange => PubInput::Sonar(setup.input(&p.input)?),
                 PubMap::FramesToImage => PubInput::Frames(agent_sdk::memory::MemorySetup::ring_input(setup, &p.input)?),
+                PubMap::User => match &p.user {
+                    Some(m) => PubInput::User(setup.input_of(&p.input, m.schema.clone())?),
+                    None => return Err(AgentError::Config(format!("{}: a mapping without its plan", p.topic))),
+                },
             });
         }
         let mut outputs = Vec::new();
@@ -177,6 +183,11 @@ impl Agent for Ros2 {
                             push(convert::sonar_to_scan(s, stamp, frame).to_cdr())
                         }
                     });
+                }
+                PubInput::User(inp) => {
+                    if let Some(m) = &spec.user {
+                        inp.drain(|meta, b| push(m.encode(b, convert::ros_stamp(meta.stamp_ns, now, epoch), frame)));
+                    }
                 }
                 PubInput::Frames(ring) => {
                     // the newest frame only, read in place from the ring and

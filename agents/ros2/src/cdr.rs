@@ -60,6 +60,14 @@ pub enum CdrError {
         /// its length
         len: usize,
     },
+    /// A nerve sample shorter than its layout (a mapped type, `usermap`).
+    #[error("a sample of {have} byte(s) is shorter than its layout's {need}: sent with another layout?")]
+    Short {
+        /// the layout's size
+        need: usize,
+        /// the sample's length
+        have: usize,
+    },
     /// Bytes were left after the last field.
     #[error("{extra} byte(s) left after the last field (a different message type?)")]
     Trailing {
@@ -106,6 +114,20 @@ impl Writer {
     /// `bool`: one byte, 0 or 1
     pub fn bool(&mut self, v: bool) {
         self.buf.push(u8::from(v));
+    }
+    /// `int8`
+    pub fn i8(&mut self, v: i8) {
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+    /// `uint16`
+    pub fn u16(&mut self, v: u16) {
+        self.align(2);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+    /// `int16`
+    pub fn i16(&mut self, v: i16) {
+        self.align(2);
+        self.buf.extend_from_slice(&v.to_le_bytes());
     }
     /// `uint32`
     pub fn u32(&mut self, v: u32) {

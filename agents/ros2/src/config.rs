@@ -26,6 +26,17 @@
 //! output = "cmd_vel"                  # the agent's output (wire it: ros2/cmd_vel -> motor/cmd)
 //! to = "nerve::VelocityCommand"
 //!
+//! [[type]]                            # a payload of your own (its #[repr(C)] fields in order)
+//! name = "lab::Gripper"
+//! fields = [["width_m", "f32"], ["force_n", "f32"], ["closed", "u8"]]
+//!
+//! [[publish]]                         # any payload as a vendored ROS message, field by field
+//! input = "gripper"
+//! from = "lab::Gripper"
+//! topic = "/gripper"
+//! type = "geometry_msgs/msg/Vector3"
+//! fields = { "x" = "width_m", "y" = "force_n", "z" = "closed" }   # "ROS field" = "nerve field"
+//!
 //! [[static_transform]]                # on /tf_static, transient local (late joiners get it)
 //! frame_id = "base_link"
 //! child_frame_id = "camera"
@@ -33,8 +44,11 @@
 //! rotation = [0.0, 0.0, 0.0]          # roll, pitch, yaw in rad (default 0)
 //! ```
 
+use crate::usermap::UserMap;
 use crate::wire::Distro;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use toml::Spanned;
 
 /// A nerve payload → ROS message conversion the agent knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -53,6 +67,8 @@ pub enum PubMap {
     SonarToRange,
     /// `nerve::RingNotice` of an rgb8 or gray8 ring → `sensor_msgs/msg/Image`
     FramesToImage,
+    /// any payload → any vendored message, field by field ([`Publish::user`])
+    User,
 }
 
 /// The conversions of `[[publish]]`: (nerve type, ROS type, conversion).
@@ -129,7 +145,7 @@ fn default_child() -> String {
 #[serde(deny_unknown_fields)]
 struct RawPublish {
     input: String,
-    from: String,
+    from: Spanned<String>,
     topic: String,
     #[serde(rename = "type")]
     ros_type: String,
@@ -143,6 +159,16 @@ struct RawPublish {
     durability: Durability,
     #[serde(default = "default_depth")]
     depth: u32,
+    /// `"ROS field" = "nerve field"` (a user's mapping)
+    fields: Option<BTreeMap<String, Spanned<String>>>,
+}
+
+/// `[[type]]` as written: a payload's fields in order, `[name, type]`.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawType {
+    name: Spanned<String>,
+    fields: Vec<Spanned<(String, String)>>,
 }
 
 /// `[[static_transform]]` as written.
@@ -194,6 +220,8 @@ struct RawConfig {
     subscribe: Vec<RawSubscribe>,
     #[serde(default)]
     static_transform: Vec<RawStatic>,
+    #[serde(default, rename = "type")]
+    types: Vec<RawType>,
 }
 
 /// One nerve input published as a ROS topic.
@@ -213,6 +241,8 @@ pub struct Publish {
     pub child_frame_id: String,
     /// the QoS in its token
     pub qos: crate::wire::Qos,
+    /// [`PubMap::User`]: the payload's layout and its field-by-field plan
+    pub user: Option<UserMap>,
 }
 
 /// One ROS topic delivered on a nerve output.
@@ -306,6 +336,16 @@ pub enum ConfigError {
         #[source]
         source: toml::de::Error,
     },
+    /// A value that cannot be used, at a line of the file.
+    #[error("{path}:{line}: {what}")]
+    At {
+        /// the file
+        path: PathBuf,
+        /// 1-based line
+        line: usize,
+        /// what is wrong and what to write instead
+        what: String,
+    },
     /// A value that cannot be used.
     #[error("{path}: {what}")]
     Invalid {
@@ -352,6 +392,26 @@ pub fn parse(path: &Path, text: &str, agent: &str) -> Result<Config, ConfigError
     if raw.connect.is_empty() && raw.mode == Mode::Client {
         return Err(invalid("mode = \"client\" needs a router in connect = [\"tcp/HOST:7447\"]".into()));
     }
+    let line = |at: usize| text.get(..at).map_or(1, |t| t.matches('\n').count() + 1);
+    let at = |span: std::ops::Range<usize>, what: String| ConfigError::At {
+        path: path.to_owned(),
+        line: line(span.start),
+        what,
+    };
+    let mut types: BTreeMap<String, (BTreeMap<String, usize>, shm_schemas::Schema)> = BTreeMap::new();
+    for t in &raw.types {
+        let name = t.name.get_ref();
+        let fields: Vec<(String, String)> = t.fields.iter().map(|f| f.get_ref().clone()).collect();
+        let known: BTreeMap<String, shm_schemas::Schema> =
+            types.iter().map(|(k, v)| (k.clone(), v.1.clone())).collect();
+        if types.contains_key(name) || shm_schemas::schema::built_in_named(name).is_some() {
+            return Err(at(t.name.span(), format!("[[type]] {name} is declared twice (or is a built-in payload)")));
+        }
+        let schema = crate::usermap::struct_layout(name, &fields, &known)
+            .map_err(|e| at(t.name.span(), format!("[[type]] {name}: {e}")))?;
+        let lines = t.fields.iter().map(|f| (f.get_ref().0.clone(), f.span().start)).collect();
+        types.insert(name.clone(), (lines, schema));
+    }
     let mut inputs = std::collections::BTreeSet::new();
     let mut publish = Vec::new();
     for p in raw.publish {
@@ -361,17 +421,50 @@ pub fn parse(path: &Path, text: &str, agent: &str) -> Result<Config, ConfigError
         if !ros_name_ok(&p.input) || !inputs.insert(p.input.clone()) {
             return Err(invalid(format!("[[publish]] input = {:?}: a port name, once per agent", p.input)));
         }
-        let map = PUB_MAPS.iter().find(|(from, to, _)| *from == p.from && *to == p.ros_type).map(|m| m.2).ok_or_else(
-            || {
-                invalid(format!(
-                    "[[publish]] {}: no conversion from {} to {}; the agent knows {}",
-                    p.topic,
-                    p.from,
-                    p.ros_type,
-                    list(PUB_MAPS.iter().map(|(a, b, _)| format!("{a} -> {b}")))
-                ))
-            },
-        )?;
+        let from = p.from.get_ref();
+        let built = PUB_MAPS.iter().find(|(f, to, _)| f == from && *to == p.ros_type).map(|m| m.2);
+        let declared = types.get(from);
+        let (map, user) = match (&p.fields, built, declared) {
+            (None, Some(m), _) => (m, None),
+            (fields, _, _) if fields.is_some() || declared.is_some() => {
+                let schema = match declared.map(|d| d.1.clone()).or_else(|| shm_schemas::schema::built_in_named(from)) {
+                    Some(s) => s,
+                    None => {
+                        return Err(at(
+                            p.from.span(),
+                            format!(
+                                "[[publish]] {}: from = {from:?} is neither a built-in payload nor a [[type]] of this file",
+                                p.topic
+                            ),
+                        ));
+                    }
+                };
+                let pairs: Option<Vec<(String, String)>> =
+                    p.fields.as_ref().map(|f| f.iter().map(|(k, v)| (k.clone(), v.get_ref().clone())).collect());
+                let m = UserMap::new(schema, &p.ros_type, pairs.as_deref()).map_err(|e| {
+                    let start = match (&e.key, &p.fields, declared) {
+                        (Some(k), Some(f), _) => f.get(k).map(|v| v.span().start),
+                        (Some(k), None, Some((lines, _))) => lines.get(k).copied(),
+                        _ => None,
+                    };
+                    let start = start.unwrap_or(p.from.span().start);
+                    at(start..start, format!("[[publish]] {}: {}", p.topic, e.what))
+                })?;
+                (PubMap::User, Some(m))
+            }
+            _ => {
+                return Err(at(
+                    p.from.span(),
+                    format!(
+                        "[[publish]] {}: no conversion from {from} to {}; the agent knows {}; or map the fields \
+                         yourself: fields = {{ \"ROS field\" = \"nerve field\", ... }}",
+                        p.topic,
+                        p.ros_type,
+                        list(PUB_MAPS.iter().map(|(a, b, _)| format!("{a} -> {b}")))
+                    ),
+                ));
+            }
+        };
         publish.push(Publish {
             input: p.input,
             topic: crate::wire::qualified_topic(&namespace, &p.topic),
@@ -384,6 +477,7 @@ pub fn parse(path: &Path, text: &str, agent: &str) -> Result<Config, ConfigError
                 transient_local: p.durability == Durability::TransientLocal,
                 depth: p.depth,
             },
+            user,
         });
     }
     let mut outputs = std::collections::BTreeSet::new();
@@ -567,5 +661,60 @@ translation = [0.1, 0.0, 0.3]
         assert!(e.contains("finite"), "{e}");
         let e = p("[[static_transform]]\nframe_id = \"a\"\nchild = \"b\"\n").expect_err("unknown key");
         assert!(e.contains("unknown field"), "{e}");
+    }
+
+    /// A user's own type (`[[type]]`) and a built-in one, published as
+    /// vendored ROS messages field by field; a field without counterpart or
+    /// of a type the other side cannot take is refused at its line.
+    #[test]
+    fn a_users_type_mapped_field_by_field_and_its_mistakes_at_their_line() {
+        let head = r#"[[type]]
+name = "lab::Gripper"
+fields = [
+  ["width_m", "f32"],
+  ["force_n", "f32"],
+  ["closed", "u8"],
+]
+[[publish]]
+input = "gripper"
+from = "lab::Gripper"
+topic = "/gripper"
+"#;
+        let c = p(&format!(
+            "{head}type = \"geometry_msgs/msg/Vector3\"\n[publish.fields]\n\"x\" = \"width_m\"\nz = \"closed\"\n"
+        ))
+        .expect("valid");
+        let m = c.publish[0].user.as_ref().expect("a user mapping");
+        assert_eq!((c.publish[0].map, m.schema.type_name.as_str(), m.schema.size), (PubMap::User, "lab::Gripper", 12));
+        // a ROS field that does not exist: line 15 (its entry)
+        let e = p(&format!(
+            "{head}type = \"geometry_msgs/msg/Vector3\"\n[publish.fields]\nx = \"width_m\"\nw = \"closed\"\n"
+        ))
+        .expect_err("no ROS field w");
+        assert!(e.starts_with("r.toml:15: [[publish]] /gripper: geometry_msgs/msg/Vector3 has no field \"w\""), "{e}");
+        // a nerve field that does not exist, and a float into an integer
+        let e = p(&format!("{head}type = \"std_msgs/msg/Int32\"\nfields = {{ data = \"width\" }}\n"))
+            .expect_err("no width");
+        assert!(e.starts_with("r.toml:13:") && e.contains("lab::Gripper has no field \"width\""), "{e}");
+        let e =
+            p(&format!("{head}type = \"std_msgs/msg/Int32\"\nfields = {{ data = \"force_n\" }}\n")).expect_err("float");
+        assert!(e.contains("data (int32) cannot take lab::Gripper field force_n (f32)"), "{e}");
+        // no `fields`: by name, and the first nerve field without a ROS
+        // field of its name is refused at its line in [[type]]
+        let e = p(&format!("{head}type = \"geometry_msgs/msg/Vector3\"\n")).expect_err("by name");
+        assert!(e.starts_with("r.toml:4:") && e.contains("\"width_m\" has no counterpart"), "{e}");
+        // a type neither built in nor declared
+        let e = p("[[publish]]\ninput = \"g\"\nfrom = \"lab::Nope\"\ntopic = \"/g\"\ntype = \"std_msgs/msg/Float32\"\nfields = { data = \"x\" }\n")
+            .expect_err("unknown type");
+        assert!(e.starts_with("r.toml:3:") && e.contains("neither a built-in payload nor a [[type]]"), "{e}");
+        // a built-in payload mapped to another message
+        let c = p("[[publish]]\ninput = \"o\"\nfrom = \"nerve::Odometry\"\ntopic = \"/pose2d\"\ntype = \"geometry_msgs/msg/Vector3\"\nfields = { x = \"x\", y = \"y\", z = \"theta\" }\n")
+            .expect("built-in mapped");
+        assert_eq!(c.publish[0].user.as_ref().map(|m| m.schema.type_name.as_str()), Some("nerve::Odometry"));
+        // [[type]] mistakes at the type's line
+        let e = p("x = 1\n[[type]]\nname = \"lab::T\"\nfields = [[\"a\", \"float\"]]\n").expect_err("bad field type");
+        assert!(e.contains("unknown field") || e.starts_with("r.toml:"), "{e}");
+        let e = p("[[type]]\nname = \"lab::T\"\nfields = [[\"a\", \"float\"]]\n").expect_err("bad field type");
+        assert!(e.starts_with("r.toml:2: [[type]] lab::T: field \"a\""), "{e}");
     }
 }

@@ -10,6 +10,8 @@
 //! * [`wire`]: rmw_zenoh's keys, liveliness tokens, QoS text and attachment;
 //! * [`convert`]: nerve's payloads to and from the standard messages;
 //! * [`config`]: the agent's TOML configuration;
+//! * [`usermap`]: any payload (a user's own type) as a vendored ROS
+//!   message, field by field as the configuration says;
 //! * [`link`]: the Zenoh session, in a thread of its own (not real-time);
 //!   it and the agent are the `agent` feature (default): without it the
 //!   crate has no Zenoh, as the `nerve` command uses it;
@@ -32,6 +34,7 @@ pub use agent::Ros2;
 #[cfg(feature = "agent")]
 pub mod link;
 pub mod msgs;
+pub mod usermap;
 pub mod wire;
 
 include!(concat!(env!("OUT_DIR"), "/type_hashes.rs"));
