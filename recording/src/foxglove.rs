@@ -18,10 +18,13 @@
 //! ```
 //!
 //! And the mapping of nerve's pose and sonar types to Foxglove's
-//! `FrameTransform` and `LaserScan` in JSON ([`mapping_of`]), which
-//! `nerve foxglove` offers beside each such port's own JSON.
+//! `FrameTransform` and `LaserScan` in JSON ([`mapping_of`]), and of the
+//! map builder's map to a `Grid` ([`grid`]), which `nerve foxglove` offers
+//! beside each such port's own JSON.
 
 use nerve_stm::PixelFormat;
+
+pub mod grid;
 
 /// The schema name Foxglove knows.
 pub const RAW_IMAGE: &str = "foxglove.RawImage";
@@ -266,12 +269,14 @@ enum MappingKind {
     Transform,
     /// H1's sonar ring (`ranges_m`, `valid`) as a laser scan
     SonarScan,
+    /// the map builder's map as a dense grid ([`grid`])
+    Grid,
 }
 
 /// The robot's frame, which the pose moves and the sonar is fixed to.
 pub const ROBOT_FRAME: &str = "base_link";
 
-const MAPPINGS: [(&str, Mapping); 4] = [
+const MAPPINGS: [(&str, Mapping); 5] = [
     (
         "nerve::PoseEstimate",
         Mapping {
@@ -312,6 +317,16 @@ const MAPPINGS: [(&str, Mapping); 4] = [
             kind: MappingKind::SonarScan,
         },
     ),
+    (
+        grid::MAP_TYPE,
+        Mapping {
+            schema_name: grid::GRID,
+            suffix: "grid",
+            parent: grid::MAP_FRAME,
+            child: grid::MAP_FRAME,
+            kind: MappingKind::Grid,
+        },
+    ),
 ];
 
 /// The Foxglove schema nerve's type `type_name` is also shown as, if any.
@@ -345,6 +360,7 @@ impl Mapping {
     /// The JSON Schema of the Foxglove message (schema encoding `jsonschema`).
     pub fn json_schema(&self) -> serde_json::Value {
         let mut s = match self.kind {
+            MappingKind::Grid => grid::grid_json_schema(),
             MappingKind::Transform => serde_json::json!({
                 "type": "object",
                 "properties": {
@@ -386,6 +402,7 @@ impl Mapping {
     pub fn convert(&self, sample: &serde_json::Value, unix_ns: u64) -> Option<serde_json::Value> {
         let num = |k: &str| sample.get(k).and_then(serde_json::Value::as_f64);
         match self.kind {
+            MappingKind::Grid => grid::map_to_grid(sample, unix_ns),
             MappingKind::Transform => Some(serde_json::json!({
                 "timestamp": time_of(unix_ns),
                 "parent_frame_id": self.parent,

@@ -17,9 +17,10 @@
 //! Teleop panel does into the motor's `cmd` move the simulated robot; an
 //! agent's service is advertised with its JSON Schemas and called (with
 //! the token, not without it nor under `--read-only`), and unadvertised
-//! when its agent stops.
+//! when its agent stops; the map builder's map is also a `foxglove.Grid`
+//! channel whose grid holds the cell of a pose published into it.
 
-use nerve_tests::{Robot, wait_until};
+use nerve_tests::{Robot, bin_dir, wait_until};
 use serde_json::Value;
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
@@ -569,6 +570,36 @@ fn an_agents_service_is_a_foxglove_service_called_with_the_token() {
     assert!(refusal["failure"].as_str().is_some_and(|m| m.contains("read-only")), "{refusal}");
 }
 
+/// The map builder's map (`nerve::MapCells`) as a `foxglove.Grid` on
+/// `/mb/map/grid`: a map builder alone, fed poses published from the
+/// client into its `pose` input, sends a map whose grid is the one cell
+/// the pose is in, marked seen and entered once.
+#[test]
+fn the_map_builders_map_is_also_a_foxglove_grid() {
+    let r = Robot::new("fxgrid");
+    r.router();
+    r.ok(&["start", "map-builder", "--name", "mb"]);
+    let fox = Fox::start(&r, &["--publish"]);
+    let pose = r#"{"x": 1.3, "y": -0.7, "theta": 0, "v": 0, "omega": 0, "corrections": 0, "source": 3,
+        "last_checkpoint": 0, "reserved": [0, 0]}"#;
+    let said = run_client(&["drive", &format!("{}/?token={TOKEN}", fox.url), "/mb/pose", pose, "/mb/map/grid"]);
+    let d = &said[0];
+    assert_eq!(d["channel"]["schemaName"], "foxglove.Grid", "{d}");
+    assert!(d["statuses"].as_array().is_some_and(Vec::is_empty), "{d}");
+    let g = &d["message"]["data"];
+    assert_eq!(g["frame_id"], "world");
+    assert_eq!(
+        (g["column_count"].as_u64(), g["cell_stride"].as_u64(), g["row_stride"].as_u64()),
+        (Some(1), Some(2), Some(2))
+    );
+    let cell = num(&g["cell_size"], "x");
+    assert!(cell > 0.0 && cell == num(&g["cell_size"], "y"), "{g}");
+    let (x0, y0) = (num(&g["pose"]["position"], "x"), num(&g["pose"]["position"], "y"));
+    assert!((x0..x0 + cell).contains(&1.3) && (y0..y0 + cell).contains(&-0.7), "the cell of (1.3, -0.7)? {g}");
+    // one cell, seen and entered once: the bytes 1, 1 in base64
+    assert_eq!(g["data"], "AQE=", "the one cell is not marked seen, entered once: {g}");
+}
+
 /// Every topic a panel of `docs/foxglove/explore.json` reads, without a
 /// plot's field path, and every topic one publishes on.
 fn layout_topics(v: &Value, out: &mut Vec<String>, publish: &mut Vec<String>) {
@@ -598,10 +629,24 @@ fn the_explore_layout_names_only_ports_of_the_explore_robot() {
     let layout: Value =
         serde_json::from_str(&std::fs::read_to_string(root.join("docs/foxglove/explore.json")).expect("layout"))
             .expect("the layout is JSON");
-    // the output ports of launch/explore.toml: those its connections start from
+    // the output ports of launch/explore.toml: those its connections start from, and those its
+    // agents' kinds declare (the map builder's map, which no agent reads but a viewer)
     let launch = std::fs::read_to_string(root.join("launch/explore.toml")).expect("launch file");
-    let outputs: Vec<&str> =
-        launch.lines().filter_map(|l| l.trim().strip_prefix("from = \"")).filter_map(|l| l.strip_suffix('"')).collect();
+    let mut outputs: Vec<String> = launch
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("from = \""))
+        .filter_map(|l| l.strip_suffix('"'))
+        .map(str::to_owned)
+        .collect();
+    let declared = |agent: &str| -> Vec<String> {
+        let described = Command::new(bin_dir().join(format!("nerve-{agent}"))).arg("--describe").output();
+        let described = described.unwrap_or_else(|e| panic!("nerve-{agent} --describe: {e}"));
+        let d: Value = serde_json::from_slice(&described.stdout).expect("a description");
+        let names = d["outputs"].as_array().into_iter().flatten().filter_map(|o| o["name"].as_str());
+        names.map(|o| format!("{agent}/{o}")).collect()
+    };
+    assert!(launch.contains("kind = \"map-builder\""), "the explore robot has a map builder");
+    outputs.extend(declared("map-builder"));
     let inputs: Vec<&str> =
         launch.lines().filter_map(|l| l.trim().strip_prefix("to = \"")).filter_map(|l| l.strip_suffix('"')).collect();
     let (mut topics, mut publish) = (Vec::new(), Vec::new());
@@ -614,9 +659,12 @@ fn the_explore_layout_names_only_ports_of_the_explore_robot() {
     for t in &topics {
         let parts: Vec<&str> = t.trim_start_matches('/').split('/').collect();
         let port = parts[..2.min(parts.len())].join("/");
-        assert!(outputs.contains(&port.as_str()), "{t}: {port} is no output port of launch/explore.toml");
+        assert!(outputs.contains(&port), "{t}: {port} is no output port of launch/explore.toml");
         if let Some(suffix) = parts.get(2) {
-            assert!(["tf", "scan", "image"].contains(suffix), "{t}: no channel of nerve foxglove ends in {suffix}");
+            assert!(
+                ["tf", "scan", "image", "grid"].contains(suffix),
+                "{t}: no channel of nerve foxglove ends in {suffix}"
+            );
         }
     }
 }
