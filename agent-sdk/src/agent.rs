@@ -287,7 +287,7 @@ impl Setup {
     ) -> Result<crate::port::Server<Req, Resp>, AgentError> {
         self.check_port(port)?;
         let service = self.world.robot().port_service(self.name.as_str(), port);
-        let (server, inner) = crate::port::Server::bind(&self.binding, port, &service)?;
+        let (server, inner) = crate::port::Server::bind(&self.binding, port, &service, 1)?;
         self.calls.add_service::<Req, crate::port::call::Fixed<Resp>>(port, &mut self.schemas);
         self.inputs.push(inner);
         Ok(server)

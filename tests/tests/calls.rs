@@ -172,3 +172,94 @@ fn nerve_call_prints_the_answer_and_says_why_when_there_is_none() {
     assert!(err.contains("no answer") && err.contains("300ms"), "a server that does not answer: {err}");
     r.down_and_check_clean();
 }
+
+/// A robot with a router and a server `s` answering `plan` with sequences
+/// (`Seq<Scalar, Tick>`) of at most `max_len` scalars.
+fn seq_server(tag: &str, max_len: &str) -> Robot {
+    let r = Robot::new(tag);
+    r.router();
+    r.ok(&["start", "caller", "--name", "s", "--", "--serve", "--seq", "--max-len", max_len]);
+    r
+}
+
+/// `nerve call` against a server answering with sequences: answers of
+/// length 0, 1 and 600 (the maximum, 9.6 kB) printed as JSON arrays, whole,
+/// each call by a new client (a new `nerve call` process); one past the maximum refused,
+/// saying so on both sides; the next call answered again.
+#[test]
+fn a_sequence_answer_of_any_length_is_printed_and_one_past_the_maximum_refused() {
+    let r = seq_server("call-seq-cli", "600");
+    for n in [0u64, 1, 600] {
+        let out = r.ok(&["call", "s/plan", &format!(r#"{{"seq": {n}, "stamp_ns": 5}}"#)]);
+        let answer: serde_json::Value = serde_json::from_str(&out).expect("the answer as JSON");
+        assert_eq!(answer["header"]["seq"].as_u64(), Some(n), "{out}");
+        let items = answer["items"].as_array().unwrap_or_else(|| panic!("no array of items: {out}"));
+        assert_eq!(items.len() as u64, n, "{out}");
+        for (i, item) in items.iter().enumerate() {
+            assert_eq!((item["value"].as_f64(), item["stamp_ns"].as_u64()), (Some(i as f64), Some(5)), "{out}");
+        }
+    }
+    let err = r.fails(&["call", "s/plan", r#"{"seq": 601}"#]);
+    assert!(err.contains("refused") && err.contains("601") && err.contains("600"), "past the maximum: {err}");
+    assert!(
+        wait_until(Duration::from_secs(5), || r.figure_u64("s", "too_long") == 1),
+        "the server did not count its refusal: {:?}",
+        r.figures("s")
+    );
+    let out = r.ok(&["call", "s/plan", r#"{"seq": 2}"#]);
+    assert!(out.contains("items"), "{out}");
+    // the refusal is counted apart (`serve` returned it), the four answers as answered
+    assert!(wait_until(Duration::from_secs(5), || r.figure_u64("s", "answered") == 4), "{:?}", r.figures("s"));
+    r.down_and_check_clean();
+}
+
+/// An agent calls a sequence server through the router: answers of
+/// lengths 0 to 399 taken whole, the wire and its type in the graph; a
+/// client of a fixed answer wired to it is refused, naming both types; the
+/// server killed with calls in flight ends them as failed, the client runs on.
+#[test]
+fn an_agent_takes_sequence_answers_and_a_killed_server_ends_its_calls() {
+    let r = seq_server("call-seq", "1000");
+    r.ok(&["start", "caller", "--name", "c", "--", "--seq", "--timeout-ms", "400"]);
+    r.ok(&["connect", "c/planner", "s/plan"]);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("c", "answered") >= 20),
+        "the client had no 20 answers: {:?}",
+        r.figures("c")
+    );
+    let c = r.figures("c");
+    assert_eq!(
+        (c.get("wrong").map(String::as_str), c.get("other").map(String::as_str)),
+        (Some("0"), Some("0")),
+        "{c:?}"
+    );
+    assert_eq!(r.edges(), ["s/plan -> c/planner"]);
+    let graph = r.graph().to_string();
+    assert!(graph.contains("call(nerve::Tick -> nerve::Seq<nerve::Scalar, nerve::Tick>)"), "{graph}");
+    // a fixed client of the same request: another call, refused
+    r.ok(&["start", "caller", "--name", "f"]);
+    let err = r.fails(&["connect", "f/planner", "s/plan"]);
+    assert!(
+        err.contains("call(nerve::Tick -> nerve::Scalar)")
+            && err.contains("call(nerve::Tick -> nerve::Seq<nerve::Scalar, nerve::Tick>)"),
+        "a fixed client wired to a sequence server: {err}"
+    );
+    let count = |keys: &[&str]| {
+        let c = r.figures("c");
+        keys.iter().map(|k| c.get(*k).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0)).sum::<u64>()
+    };
+    let failed = count(&["timed_out", "gone", "no_server"]);
+    nerve_tests::sigkill(r.pid("s"));
+    assert!(
+        wait_until(Duration::from_secs(10), || count(&["timed_out", "gone", "no_server"]) >= failed + 2),
+        "calls to a killed sequence server did not fail: {:?}",
+        r.figures("c")
+    );
+    let steps = r.figure_u64("c", "steps");
+    assert!(
+        wait_until(Duration::from_secs(5), || r.figure_u64("c", "steps") > steps + 10),
+        "the client stopped stepping: {:?}",
+        r.figures("c")
+    );
+    r.down_and_check_clean();
+}

@@ -315,8 +315,11 @@ pub trait Answer: Send + Sync + 'static {
         attributes: &AttributeVerifier,
         create: bool,
     ) -> Result<Factory<Req, Self>, RequestResponseOpenOrCreateError>;
-    /// A server port of `factory`.
-    fn server<Req: Payload>(factory: &Factory<Req, Self>) -> Result<ServerPort<Req, Self>, ServerCreateError>;
+    /// A server port of `factory`, whose answers hold at most `max_len` elements.
+    fn server<Req: Payload>(
+        factory: &Factory<Req, Self>,
+        max_len: usize,
+    ) -> Result<ServerPort<Req, Self>, ServerCreateError>;
     /// The answer `pending` received, if any: its value for client
     /// `client` of `service`, or why it is none.
     fn receive<Req: Payload>(
@@ -361,7 +364,10 @@ impl<Resp: Payload> Answer for Fixed<Resp> {
             builder.open_with_attributes(attributes).map_err(RequestResponseOpenOrCreateError::RequestResponseOpenError)
         }
     }
-    fn server<Req: Payload>(factory: &Factory<Req, Self>) -> Result<ServerPort<Req, Self>, ServerCreateError> {
+    fn server<Req: Payload>(
+        factory: &Factory<Req, Self>,
+        _max_len: usize,
+    ) -> Result<ServerPort<Req, Self>, ServerCreateError> {
         factory.server_builder().create()
     }
     fn receive<Req: Payload>(

@@ -1,5 +1,8 @@
 //! `nerve call`'s caller ([`RawCaller`]): a client built from the layouts
 //! the service records, not from Rust types, one call at a time, waited for.
+//! A sequence answer (`call_seq`) is handed out as the bytes of its
+//! `Seq<T, H>` sample, at their own length, which the sequence's schema
+//! decodes.
 
 use super::call::{ANSWERED_SUFFIX, CallError, call_settings, event_service, open_err, service_name};
 use crate::world::Ipc;
@@ -9,6 +12,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::service::marker::{CustomHeaderMarker, CustomPayloadMarker};
 use iceoryx2::service::port_factory::{event, request_response};
+use shm_schemas::control::call::{SEQ_ANSWERED, SEQ_TOO_LONG, SeqAnswerHeader};
 use std::time::Duration;
 
 type RawClientPort =
@@ -30,6 +34,8 @@ pub struct RawCaller {
     fingerprint: Option<u64>,
     request_size: usize,
     response_size: usize,
+    /// whether answers are sequences (a [`SeqAnswerHeader`] before them)
+    sequence: bool,
     client: RawClientPort,
     requests: Notifier<Ipc>,
     answered: Listener<Ipc>,
@@ -97,6 +103,19 @@ impl RawCaller {
                 .__internal_set_request_payload_type_details(&req.payload)
                 .__internal_set_response_payload_type_details(&resp.payload)
         };
+        // SAFETY: reading the name has no precondition
+        let seq_header = unsafe { <SeqAnswerHeader as ZeroCopySend>::type_name() };
+        let sequence = *resp.user_header.type_name() == seq_header;
+        if sequence && resp.user_header.size() != std::mem::size_of::<SeqAnswerHeader>() {
+            return Err(CallError::Open {
+                service: service.into(),
+                detail: format!(
+                    "its answers' header is a {}-byte {seq_header}, not this build's {} bytes; rebuild the older side",
+                    resp.user_header.size(),
+                    std::mem::size_of::<SeqAnswerHeader>()
+                ),
+            });
+        }
         let factory = call_settings!(builder).open().map_err(|e| open_err(service, e))?;
         let client = factory.client_builder().create().map_err(|e| open_err(service, e))?;
         let requests = event_service(node, service, false)?;
@@ -110,6 +129,7 @@ impl RawCaller {
             fingerprint,
             request_size: req.payload.size(),
             response_size: resp.payload.size(),
+            sequence,
             client,
             requests: notifier,
             answered: listener,
@@ -168,6 +188,14 @@ impl RawCaller {
         let deadline = std::time::Instant::now() + timeout;
         loop {
             match pending.receive() {
+                Ok(Some(r)) if self.sequence => {
+                    // SAFETY: the service's answers carry a SeqAnswerHeader
+                    // (its type name and size, checked in `open`) as their
+                    // user header; read unaligned, by value
+                    let header =
+                        unsafe { std::ptr::from_ref(r.user_header()).cast::<SeqAnswerHeader>().read_unaligned() };
+                    return self.sequence_bytes(&header, super::bytes::payload_bytes(r.payload()));
+                }
                 Ok(Some(r)) => {
                     let bytes = super::bytes::payload_bytes(r.payload());
                     if bytes.len() != self.response_size {
@@ -182,8 +210,9 @@ impl RawCaller {
                 Err(source) => return Err(CallError::Receive { port: client, service, source }),
             }
             if !pending.is_connected() {
-                if let Ok(Some(r)) = pending.receive() {
-                    return Ok(super::bytes::payload_bytes(r.payload()).to_vec());
+                // an answer that came just before the server let go is read on the next turn
+                if pending.has_response() {
+                    continue;
                 }
                 return Err(CallError::ServerGone { client, service });
             }
@@ -193,6 +222,29 @@ impl RawCaller {
             }
             // woken by the server's answer; at most 50 ms, to see a server gone
             let _ = self.answered.timed_wait(|_| {}, left.min(Duration::from_millis(50)));
+        }
+    }
+
+    /// The sample bytes of a sequence answer of header `header` in `payload`,
+    /// or why there are none.
+    fn sequence_bytes(&self, header: &SeqAnswerHeader, payload: &[u8]) -> Result<Vec<u8>, CallError> {
+        let (client, service) = ("nerve call".to_owned(), self.service.clone());
+        match header.status {
+            SEQ_ANSWERED => {}
+            SEQ_TOO_LONG => {
+                return Err(CallError::RefusedTooLong { client, service, len: header.items, max: header.max });
+            }
+            other => {
+                return Err(CallError::Malformed { client, service, detail: format!("an answer of status {other}") });
+            }
+        }
+        match usize::try_from(header.bytes).ok().and_then(|n| payload.get(..n)) {
+            Some(bytes) => Ok(bytes.to_vec()),
+            None => Err(CallError::Malformed {
+                client,
+                service,
+                detail: format!("{} bytes said, {} sent", header.bytes, payload.len()),
+            }),
         }
     }
 }

@@ -20,9 +20,11 @@
 //! and unwired endings. On the wire an answer is an iceoryx2 slice of
 //! 8-byte words holding the sequence sample's bytes (`H`, padding, then
 //! the `T`s), after a [`SeqAnswerHeader`] that says how many elements it
-//! holds. The server's response memory starts at 4 kB and grows by powers
-//! of two (iceoryx2's allocation strategy) when an answer is larger than
-//! any before. An answer longer than the declared maximum is not sent: the
+//! holds and how many bytes. Each of the server's answer slots holds the
+//! longest answer it was declared with (iceoryx2's static allocation; its
+//! growing one made every new client wait about 1.5 s with iceoryx2 0.10),
+//! at most 64 MiB of them: shared memory is touched only as answers are
+//! written. An answer longer than the declared maximum is not sent: the
 //! server's `serve` returns [`CallError::AnswerTooLong`] (after answering
 //! the other requests) and the client's call ends with
 //! [`CallError::RefusedTooLong`].
@@ -45,8 +47,9 @@ use std::marker::PhantomData;
 use std::mem::{align_of, size_of};
 use std::sync::Arc;
 
-/// The bytes a server's response memory starts with (it grows past them).
-const INITIAL_ANSWER_BYTES: usize = 4096;
+/// The most bytes of answer slots a sequence server makes (shared memory
+/// is touched only as answers are written into it).
+const MEMORY_BUDGET: usize = 64 << 20;
 /// One word of an answer's payload.
 const WORD: usize = size_of::<u64>();
 
@@ -104,12 +107,21 @@ impl<T: SeqPart, H: SeqPart> Answer for SeqAnswer<T, H> {
             builder.open_with_attributes(attributes).map_err(RequestResponseOpenOrCreateError::RequestResponseOpenError)
         }
     }
-    fn server<Req: Payload>(factory: &Factory<Req, Self>) -> Result<ServerPort<Req, Self>, ServerCreateError> {
-        let shape = rust_shape::<T, H>();
+    fn server<Req: Payload>(
+        factory: &Factory<Req, Self>,
+        max_len: usize,
+    ) -> Result<ServerPort<Req, Self>, ServerCreateError> {
+        // every answer slot holds the longest answer: iceoryx2 0.10's
+        // growing (dynamic) response memory made each new client take
+        // about 1.5 s to open and to be answered, and the server spin
+        let slot = rust_shape::<T, H>().len_of(max_len).unwrap_or(usize::MAX).max(WORD);
         factory
             .server_builder()
-            .initial_max_slice_len(shape.items_at.max(INITIAL_ANSWER_BYTES).div_ceil(WORD))
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .initial_max_slice_len(slot.div_ceil(WORD))
+            .allocation_strategy(AllocationStrategy::Static)
+            // the slots iceoryx2 would make for every client's every call in
+            // flight, at most MEMORY_BUDGET bytes of them (at least 16)
+            .override_response_preallocation(move |n| n.min((MEMORY_BUDGET / slot).max(16)))
             .create()
     }
     fn receive<Req: Payload>(
@@ -144,9 +156,17 @@ impl<T: SeqPart, H: SeqPart> SeqAnswer<T, H> {
         }
         let shape = rust_shape::<T, H>();
         let bytes = word_bytes(response.payload());
-        let len = usize::try_from(header.items).ok().and_then(|n| shape.len_of(n)).filter(|l| *l <= bytes.len());
+        let len = usize::try_from(header.items)
+            .ok()
+            .and_then(|n| shape.len_of(n))
+            .filter(|l| *l <= bytes.len() && *l as u64 == header.bytes);
         let Some(len) = len else {
-            return Err(malformed(format!("{} elements said, in {} bytes", header.items, bytes.len())));
+            return Err(malformed(format!(
+                "{} elements in {} bytes said, in {} bytes",
+                header.items,
+                header.bytes,
+                bytes.len()
+            )));
         };
         match view::<T, H>(&shape, &bytes[..len]) {
             Some((h, items)) => Ok((*h, items.to_vec())),
@@ -195,7 +215,7 @@ impl<Req: Payload, T: SeqPart, H: SeqPart> SeqServer<Req, T, H> {
                 ),
             });
         }
-        let (server, side) = CallServer::bind(binding, port, service)?;
+        let (server, side) = CallServer::bind(binding, port, service, max_len)?;
         Ok((SeqServer { server, max_len, shape }, side))
     }
 
@@ -211,7 +231,8 @@ impl<Req: Payload, T: SeqPart, H: SeqPart> SeqServer<Req, T, H> {
             let (header, items) = answer(request.payload());
             let n = items.len();
             let refused = n > self.max_len;
-            let words = if refused { 0 } else { self.shape.len_of(n).unwrap_or(0).div_ceil(WORD) };
+            let len = if refused { 0 } else { self.shape.len_of(n).unwrap_or(0) };
+            let words = len.div_ceil(WORD);
             let loan = request.loan_slice_uninit(words).map_err(|source| CallError::Loan {
                 service: service.into(),
                 len: n,
@@ -223,6 +244,7 @@ impl<Req: Payload, T: SeqPart, H: SeqPart> SeqServer<Req, T, H> {
                 reserved: 0,
                 items: n as u64,
                 max: self.max_len as u64,
+                bytes: len as u64,
             };
             if !refused {
                 let at = response.payload_mut().as_mut_ptr().cast::<u8>();
@@ -308,8 +330,8 @@ mod tests {
     }
 
     /// A server answers requests with sequences of the length each asks
-    /// for: 0, 1, one longer than its first memory (it grows) and the
-    /// maximum, each taken whole by the client; one past the maximum is
+    /// for: 0, 1, 300 (7.2 kB, more than a memory page) and the maximum,
+    /// each taken whole by the client; one past the maximum is
     /// refused on both sides, and the next call is answered again. A
     /// client of a fixed answer cannot open the sequence service.
     #[test]
@@ -331,7 +353,6 @@ mod tests {
             let n = req.seq as usize;
             (Scalar { value: n as f64, stamp_ns: req.stamp_ns }, (0..n).map(point).collect::<Vec<_>>())
         };
-        // 300 points are 7.2 kB, more than the 4 kB a server's answers start with
         for n in [0usize, 1, 300, max] {
             let id = client.call(&Tick { seq: n as u64, stamp_ns: 9 }).expect("call");
             let mut served = 0;
@@ -388,5 +409,72 @@ mod tests {
         let (_, fixed) = Client::<Tick, Scalar>::bind(&Binding::Shm(node.clone()), "fixed", options).expect("client");
         let e = fixed.connect(&node, &robot, "planner", "plan").expect_err("a fixed client of a sequence service");
         assert!(e.to_string().contains("call(nerve::Tick -> nerve::Scalar)"), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod raw_tests {
+    use super::SeqServer;
+    use crate::port::RawCaller;
+    use crate::port::bytes::Binding;
+    use crate::port::call::CallError;
+    use crate::world::World;
+    use crate::world::test_support::Cleanup;
+    use shm_schemas::payloads::{Scalar, Tick};
+    use shm_schemas::{Described as _, Seq};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::Duration;
+
+    fn tick_bytes(t: &Tick) -> Vec<u8> {
+        [t.seq.to_le_bytes(), t.stamp_ns.to_le_bytes()].concat()
+    }
+
+    /// A tool's caller (`nerve call`), one process after another: each
+    /// sequence answer comes as the bytes of its `Seq<Scalar, Tick>`
+    /// sample at its own length, decoded by the sequence's schema; one past
+    /// the maximum is refused.
+    #[test]
+    fn a_raw_caller_takes_a_sequence_answer_as_its_sample_bytes() {
+        let world = World::new(&format!("callseqraw{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = Arc::new(world.node("test").expect("node"));
+        let service = world.robot().port_service("planner", "plan");
+        let max = 600;
+        let (server, _) =
+            SeqServer::<Tick, Scalar, Tick>::bind(&Binding::Shm(node.clone()), "plan", &service, max).expect("server");
+        let stop = Arc::new(AtomicBool::new(false));
+        let serving = {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    let _ =
+                        server.serve(|t| (*t, (0..t.seq).map(|i| Scalar { value: i as f64, stamp_ns: 5 }).collect()));
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            })
+        };
+        let schema = Seq::<Scalar, Tick>::schema();
+        for n in [0u64, 1, 600, 1, 300] {
+            let t0 = std::time::Instant::now();
+            let tool = world.node("tool").expect("node");
+            let t1 = t0.elapsed();
+            let caller = RawCaller::open(&tool, &service).expect("caller");
+            let t2 = t0.elapsed();
+            let bytes =
+                caller.call(&tick_bytes(&Tick { seq: n, stamp_ns: 5 }), Duration::from_secs(2)).expect("answer");
+            eprintln!("DEBUG {n}: node {t1:?} open {t2:?} call {:?}", t0.elapsed());
+            let value = serde_json::to_value(schema.decode(&bytes).expect("decoded")).expect("json");
+            assert_eq!(value["items"].as_array().map(Vec::len), Some(n as usize), "{value}");
+            assert_eq!(value["header"]["seq"].as_u64(), Some(n), "{value}");
+        }
+        let tool = world.node("tool").expect("node");
+        let caller = RawCaller::open(&tool, &service).expect("caller");
+        match caller.call(&tick_bytes(&Tick { seq: 601, stamp_ns: 5 }), Duration::from_secs(2)) {
+            Err(CallError::RefusedTooLong { len: 601, max: 600, .. }) => {}
+            other => panic!("past the maximum: {other:?}"),
+        }
+        stop.store(true, Ordering::Relaxed);
+        serving.join().expect("server thread");
     }
 }

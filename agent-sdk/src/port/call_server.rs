@@ -55,8 +55,14 @@ pub(crate) struct ServerSide<Req: Payload, A: Answer> {
 }
 
 impl<Req: Payload, A: Answer> CallServer<Req, A> {
-    /// Service `port` (iceoryx2 service `service`), bound to `binding`.
-    pub(crate) fn bind(binding: &Binding, port: &str, service: &str) -> Result<(Self, Arc<dyn DynInput>), CallError> {
+    /// Service `port` (iceoryx2 service `service`), bound to `binding`,
+    /// answering with at most `max_len` elements (1 for a fixed answer).
+    pub(crate) fn bind(
+        binding: &Binding,
+        port: &str,
+        service: &str,
+        max_len: usize,
+    ) -> Result<(Self, Arc<dyn DynInput>), CallError> {
         let live = match binding {
             Binding::Nothing => None,
             Binding::Memory(_) => return Err(CallError::NotInHarness { port: port.into() }),
@@ -67,9 +73,13 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
                     |e: &CallError| matches!(e, CallError::Open { .. }),
                     || call_service::<Req, A>(node, service, true),
                 )?;
-                let server =
-                    crate::world::retry_after_cleanup(node.config(), "serve", |_| true, || A::server::<Req>(&factory))
-                        .map_err(|e| open_err(service, e))?;
+                let server = crate::world::retry_after_cleanup(
+                    node.config(),
+                    "serve",
+                    |_| true,
+                    || A::server::<Req>(&factory, max_len),
+                )
+                .map_err(|e| open_err(service, e))?;
                 let requests = event_service(node, service, true)?;
                 let listener = requests.listener_builder().create().map_err(|e| open_err(service, e))?;
                 let answered_name = format!("{service}{ANSWERED_SUFFIX}");

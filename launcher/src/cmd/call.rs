@@ -9,7 +9,10 @@
 //! number out of range is refused with the field's path before anything is
 //! sent). A `stamp_ns` the JSON leaves out is the time of the call. The
 //! answer is printed as JSON; no answer within the timeout, the server gone
-//! or not running, is an error that says so.
+//! or not running, is an error that says so. A sequence answer
+//! (`serve_seq`) comes as its sample's bytes, printed as `{"header": …,
+//! "items": [...]}` with as many items as it has; one the server refused
+//! (longer than its maximum) is an error that says so.
 
 use crate::client::RouterSession;
 use agent_sdk::World;

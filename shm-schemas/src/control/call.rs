@@ -82,6 +82,9 @@ pub struct SeqAnswerHeader {
     pub items: u64,
     /// the service's declared maximum of elements
     pub max: u64,
+    /// the answer's bytes in the payload (`Seq<T, H>`'s header, padding
+    /// and elements), so that a tool without the Rust types reads it whole
+    pub bytes: u64,
 }
 
 #[cfg(test)]
