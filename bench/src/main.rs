@@ -37,6 +37,7 @@ mod bridge_agents;
 mod control;
 mod dds;
 mod dora;
+mod fleet;
 mod foxglove_cost;
 mod futex;
 mod hop;
@@ -264,6 +265,23 @@ enum Scenario {
         /// Measured rounds (each row one batch per round and size, interleaved).
         #[arg(long)]
         rounds: Option<usize>,
+    },
+    /// Robots meeting through one Zenoh router (issue 44): join time, latency and the router's CPU for 2 to 16 robots, each in its own network namespace.
+    Fleet {
+        #[command(flatten)]
+        common: Common,
+        /// Fleet sizes (2 to 64 robots).
+        #[arg(long, value_delimiter = ',', default_values_t = fleet::ROBOTS)]
+        robots: Vec<usize>,
+        /// Measured window per fleet size, in seconds (default 5; 2 with --quick).
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// Period of every robot's ticker, in ms.
+        #[arg(long, default_value_t = 20)]
+        period_ms: u64,
+        /// All robots on loopback instead of a network namespace each (no root needed).
+        #[arg(long)]
+        no_netns: bool,
     },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
@@ -524,6 +542,17 @@ fn run(cli: Cli) -> Result<()> {
             };
             let report = removing_work(&opts.work, || messages::run(&opts))?;
             publish(&common, "messages", &report, report.seconds, |_| Ok(vec![]), messages::print_tables)?;
+        }
+        Scenario::Fleet { common, robots, seconds, period_ms, no_netns } => {
+            let opts = fleet::FleetOpts {
+                robots: if common.quick { vec![2, 4] } else { robots },
+                seconds: seconds.unwrap_or(if common.quick { 2.0 } else { 5.0 }).clamp(0.5, 600.0),
+                period_ms: period_ms.clamp(1, 10_000),
+                netns: !no_netns,
+                verbose: common.verbose,
+            };
+            let report = fleet::run(&opts)?;
+            publish(&common, "fleet", &report, report.seconds, |_| Ok(vec![]), fleet::print_tables)?;
         }
         Scenario::Jitter { common, rates, seconds, rounds } => {
             let opts = jitter::JitterOpts {

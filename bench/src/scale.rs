@@ -107,7 +107,7 @@ pub struct ScaleResults {
 }
 
 /// utime + stime of a process, in clock ticks; None when it is gone.
-fn proc_ticks(pid: u32) -> Option<u64> {
+pub(crate) fn proc_ticks(pid: u32) -> Option<u64> {
     let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // the command name may hold spaces: fields start after the last ')'
     let rest = &s[s.rfind(')')? + 1..];

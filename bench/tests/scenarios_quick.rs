@@ -5,7 +5,8 @@
 //! targets (no timed assertions); only that they were measured.
 //!
 //! Needs the `nerve`, `nerve-ticker` and `nerve-relay` executables built into
-//! the same target dir (`cargo build --workspace --bins`).
+//! the same target dir (`cargo build --workspace --bins`); `fleet` also
+//! `nerve-bridge` and `nerve-ros2-router`, and root for its namespaces.
 
 use serde_json::Value;
 use std::path::PathBuf;
@@ -229,4 +230,22 @@ fn foxglove_quick_measures_the_hop_beside_a_client_and_the_camera() {
     assert_eq!((cam["width"].as_u64(), cam["height"].as_u64()), (Some(640), Some(480)), "{cam}");
     assert!(cam["delivered"].as_u64().unwrap_or(0) > 0, "no frame delivered: {cam}");
     assert!(cam["server_cpu_ms_per_frame"].as_f64().is_some_and(|v| v > 0.0), "{cam}");
+}
+
+/// A fleet of two robots, each in its own network namespace, meeting
+/// through a Zenoh router: the join time, the latency, what was delivered
+/// and the router's CPU are measured, and no namespace is left.
+#[test]
+fn fleet_quick_joins_two_robots_through_a_router() {
+    let r = run("fleet", &["--robots", "2", "--seconds", "1"]);
+    let row = &r["rows"][0];
+    assert_eq!(row["robots"].as_u64(), Some(2), "{r}");
+    for k in ["join_ms_median", "latency_us_median", "delivered"] {
+        assert!(row[k].as_f64().is_some_and(|v| v > 0.0), "{k} not measured: {row}");
+    }
+    assert!(row["router_cpu_pct"].as_f64().is_some_and(|v| v >= 0.0), "{row}");
+    assert_eq!(r["netns"].as_bool(), Some(true), "{r}");
+    let ns = Command::new("ip").args(["netns", "list"]).output().expect("ip netns list");
+    let left = String::from_utf8_lossy(&ns.stdout).into_owned();
+    assert!(!left.contains("nerve-fleet-"), "a namespace of the run was left: {left}");
 }

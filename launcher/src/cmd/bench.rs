@@ -42,6 +42,12 @@ pub enum Scenario {
     Record,
     /// What watching costs: one hop while `nerve ui` serves a browser showing the page vs without.
     Ui,
+    /// What `nerve foxglove` costs: one hop with a client on every channel vs without; a camera to one client.
+    Foxglove,
+    /// Issue 42's messages: a sequence sample's hop beside a fixed payload's (8 B to 8 MB), a call's round trip.
+    Messages,
+    /// Robots meeting through one Zenoh router, 2 to 16, each in its own network namespace: join time, latency, router CPU.
+    Fleet,
 }
 
 /// `nerve bench`
