@@ -23,8 +23,9 @@
 //! holds and how many bytes. Each of the server's answer slots holds the
 //! longest answer it was declared with (iceoryx2's static allocation; its
 //! growing one made every new client wait about 1.5 s with iceoryx2 0.10),
-//! at most 64 MiB of them: shared memory is touched only as answers are
-//! written. An answer longer than the declared maximum is not sent: the
+//! at most 8 MiB of them (iceoryx2 zeroes them at start, so they are
+//! resident) and at least 16: the answers that can wait for their clients
+//! at once. An answer longer than the declared maximum is not sent: the
 //! server's `serve` returns [`CallError::AnswerTooLong`] (after answering
 //! the other requests) and the client's call ends with
 //! [`CallError::RefusedTooLong`].
@@ -47,9 +48,14 @@ use std::marker::PhantomData;
 use std::mem::{align_of, size_of};
 use std::sync::Arc;
 
-/// The most bytes of answer slots a sequence server makes (shared memory
-/// is touched only as answers are written into it).
-const MEMORY_BUDGET: usize = 64 << 20;
+/// The most bytes of answer slots a sequence server makes (iceoryx2 zeroes
+/// them when the server starts, so they are all resident), at least
+/// [`MIN_SLOTS`] slots: answers waiting for their clients at once. Past
+/// them an answer cannot be loaned ([`CallError::Loan`]) and its call
+/// times out.
+const MEMORY_BUDGET: usize = 8 << 20;
+/// The fewest answer slots a sequence server makes.
+const MIN_SLOTS: usize = 16;
 /// One word of an answer's payload.
 const WORD: usize = size_of::<u64>();
 
@@ -120,8 +126,8 @@ impl<T: SeqPart, H: SeqPart> Answer for SeqAnswer<T, H> {
             .initial_max_slice_len(slot.div_ceil(WORD))
             .allocation_strategy(AllocationStrategy::Static)
             // the slots iceoryx2 would make for every client's every call in
-            // flight, at most MEMORY_BUDGET bytes of them (at least 16)
-            .override_response_preallocation(move |n| n.min((MEMORY_BUDGET / slot).max(16)))
+            // flight, at most MEMORY_BUDGET bytes of them (at least MIN_SLOTS)
+            .override_response_preallocation(move |n| n.min((MEMORY_BUDGET / slot).max(MIN_SLOTS)))
             .create()
     }
     fn receive<Req: Payload>(
