@@ -49,6 +49,13 @@ with AnyReader([path], default_typestore=store) as reader:
                  "ranges": [float(r) if math.isfinite(r) else None for r in m.ranges]}
         elif conn.msgtype == "geometry_msgs/msg/Twist":
             v = {"v": m.linear.x, "omega": m.angular.z}
+        elif conn.msgtype == "sensor_msgs/msg/Image":
+            px = bytes(m.data)
+            v = {"frame": m.header.frame_id, "width": int(m.width), "height": int(m.height),
+                 "encoding": m.encoding, "step": int(m.step), "bytes": len(px)}
+            if conn.topic not in out["messages"] and m.encoding == "rgb8":
+                # the first frame's strong red pixels (a test pattern's disc)
+                v["red"] = sum(1 for r, g, b in zip(px[0::3], px[1::3], px[2::3]) if r > 180 and g < 70 and b < 70)
         else:
             v = {}
         v["stamp_ns"] = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec if hasattr(m, "header") else None

@@ -358,6 +358,10 @@ args = ["--robot-model", "h1"]
 name = "sonar"
 kind = "sonar"
 device = "{{state}}/dev/sonar"
+[[agent]]
+name = "camera"
+kind = "camera"
+args = ["--source", "test-pattern"]
 "#,
             world.display()
         ),
@@ -371,6 +375,7 @@ device = "{{state}}/dev/sonar"
         "motor/odom",
         "motor/applied",
         "sonar/scan",
+        "camera/frames",
         "-o",
         &run_s,
         "--duration",
@@ -415,6 +420,25 @@ device = "{{state}}/dev/sonar"
         assert_eq!(got["messages"][topic].as_array().map(Vec::len), Some(n), "{topic}: every message decodes");
         total += n as u64;
     }
+    // camera frames, kept in the recording as foxglove.RawImage, as
+    // sensor_msgs/Image: the test pattern's 320x240 rgb8 picture with its
+    // red disc of radius 30, each stamped with its frame's time
+    let t = &got["topics"]["/camera/frames/image"];
+    assert_eq!(t["type"], "sensor_msgs/msg/Image", "{}", got["topics"]);
+    let frames = got["messages"]["/camera/frames/image"].as_array().expect("frames");
+    assert!(!frames.is_empty() && t["count"].as_u64() == Some(frames.len() as u64), "{t}");
+    for img in frames {
+        assert_eq!(
+            (img["width"].as_u64(), img["height"].as_u64(), img["encoding"].as_str(), img["step"].as_u64()),
+            (Some(320), Some(240), Some("rgb8"), Some(960)),
+            "{img}"
+        );
+        assert_eq!(img["bytes"].as_u64(), Some(230_400), "{img}");
+        assert!(img["stamp_ns"].as_u64().is_some_and(|s| s > 0), "{img}");
+    }
+    let area = std::f64::consts::PI * 30.0 * 30.0;
+    assert!((f(&frames[0], "red") - area).abs() < area * 0.15, "red pixels {} for a disc of {area}", frames[0]["red"]);
+    total += frames.len() as u64;
     assert_eq!(got["message_count"].as_u64(), Some(total), "{}", got["topics"]);
 
     // values: each message is its recorded sample, stamped with its log time

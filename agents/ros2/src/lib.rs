@@ -16,7 +16,8 @@
 //!   it and the agent are the `agent` feature (default): without it the
 //!   crate has no Zenoh, as the `nerve` command uses it;
 //! * [`bag`]: recorded samples as the CDR messages, definitions and
-//!   metadata of a rosbag2 MCAP file (`nerve export --ros2`).
+//!   metadata of a rosbag2 MCAP file (`nerve export --ros2`), and
+//!   [`bag_image`]: recorded camera frames as `sensor_msgs/Image`.
 //!
 //! The task is periodic: each step it converts what arrived on the inputs
 //! and hands the CDR bytes to the link thread, and delivers on the outputs
@@ -25,6 +26,7 @@
 #[cfg(feature = "agent")]
 mod agent;
 pub mod bag;
+pub mod bag_image;
 pub mod cdr;
 pub mod config;
 pub mod convert;

@@ -17,7 +17,8 @@
 //! `--ros2` writes a rosbag2 MCAP instead (`FILE-ros2.mcap`): profile
 //! `ros2`, the ports whose types map to standard ROS 2 messages
 //! ([`nerve_ros2::bag`]: odometry, ground truth, velocity commands, the
-//! sonar ring) as CDR messages with `ros2msg` schemas, each channel's
+//! sonar ring; camera frames as `sensor_msgs/Image`,
+//! [`nerve_ros2::bag_image`]) as CDR messages with `ros2msg` schemas, each channel's
 //! `offered_qos_profiles`, and the `rosbag2` metadata record rosbag2
 //! writes; `ros2 bag info/play` and the `rosbags` library read it. Ports of
 //! other types are left out, and named.
@@ -139,8 +140,9 @@ pub fn export(a: ExportArgs) -> Result<ExitCode> {
 /// A channel of the recording that goes into the bag.
 struct RosChannel {
     channel: u16,
-    schema: Schema,
-    map: nerve_ros2::bag::BagMap,
+    /// a sample's layout and conversion; `None`: a camera frame
+    /// (`foxglove.RawImage`) to `sensor_msgs/Image` (`nerve_ros2::bag_image`)
+    sample: Option<(Schema, nerve_ros2::bag::BagMap)>,
     topic: nerve_ros2::bag::TopicCount,
 }
 
@@ -168,11 +170,15 @@ fn export_ros2(a: ExportArgs) -> Result<ExitCode> {
         let m = match event {
             Event::Channel(ch) => {
                 let nerve_type = ch.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default();
+                let image = nerve_type == nerve_ros2::bag_image::RAW_IMAGE
+                    && ch.message_encoding == nerve_ros2::bag_image::RAW_IMAGE_ENCODING;
                 let mapped = ch
                     .schema
                     .as_ref()
                     .filter(|s| ch.message_encoding == MESSAGE_ENCODING && s.encoding == SCHEMA_ENCODING)
-                    .and_then(|_| bag::mapping_of(&nerve_type));
+                    .and_then(|_| bag::mapping_of(&nerve_type))
+                    .map(|(r, m)| (r, Some(m)))
+                    .or(image.then_some((nerve_ros2::bag_image::ROS_IMAGE, None)));
                 let Some((ros_type, map)) = mapped else {
                     left_out.push(format!(
                         "{} ({})",
@@ -181,7 +187,10 @@ fn export_ros2(a: ExportArgs) -> Result<ExitCode> {
                     ));
                     continue;
                 };
-                let schema = nerve_schema(&file, &ch)?;
+                let sample = match map {
+                    Some(map) => Some((nerve_schema(&file, &ch)?, map)),
+                    None => None,
+                };
                 let schema_id = match schemas.get(ros_type) {
                     Some(id) => *id,
                     None => {
@@ -198,17 +207,24 @@ fn export_ros2(a: ExportArgs) -> Result<ExitCode> {
                 let metadata = BTreeMap::from([("offered_qos_profiles".to_string(), qos.clone())]);
                 let channel = w.add_channel(schema_id, &topic, bag::MESSAGE_ENCODING, &metadata)?;
                 let topic = bag::TopicCount { topic, ros_type: ros_type.to_string(), qos, count: 0 };
-                channels.insert(ch.id, RosChannel { channel, schema, map, topic });
+                channels.insert(ch.id, RosChannel { channel, sample, topic });
                 continue;
             }
             Event::Message(m) => m,
         };
         let Some(c) = channels.get_mut(&m.channel.id) else { continue };
-        let value = c.schema.decode(m.data).map_err(|e| {
-            anyhow!("{file}: a message of {} does not decode ({e}); the file is damaged", m.channel.topic)
-        })?;
-        let cdr = bag::encode(c.map, &serde_json::to_value(&value)?, m.log_time)
-            .with_context(|| format!("{file}: a message of {} cannot be a {}", m.channel.topic, c.topic.ros_type))?;
+        let cdr = match &c.sample {
+            Some((schema, map)) => {
+                let value = schema.decode(m.data).map_err(|e| {
+                    anyhow!("{file}: a message of {} does not decode ({e}); the file is damaged", m.channel.topic)
+                })?;
+                bag::encode(*map, &serde_json::to_value(&value)?, m.log_time).with_context(|| {
+                    format!("{file}: a message of {} cannot be a {}", m.channel.topic, c.topic.ros_type)
+                })?
+            }
+            None => nerve_ros2::bag_image::raw_image_to_ros(m.data, m.log_time)
+                .with_context(|| format!("{file}: a frame of {} cannot be a {}", m.channel.topic, c.topic.ros_type))?,
+        };
         let header = mcap::records::MessageHeader {
             channel_id: c.channel,
             sequence: m.sequence,
