@@ -13,6 +13,8 @@
 //! clock; the same assertions as in real time). The two run at the same
 //! time (their own robots, simulators and bridge ports), which halves the
 //! test's share of CI's serial `demo-runs` group (`.config/nextest.toml`).
+//! Seeds 2 and 3 run likewise side by side in a second test (issue 46:
+//! the same outcomes at 4x for seeds 1 to 3).
 
 use nerve_tests::{Robot, free_port, sigkill, wait_until};
 use serde_json::Value;
@@ -41,10 +43,22 @@ impl Drop for Demo {
 /// are printed (tagged with robot 1's name, as two runs print at once) and
 /// sent to the returned receiver.
 fn start(r1: &Robot, r2: &Robot, out: &Path, extra: &[&str]) -> (Demo, std::sync::mpsc::Receiver<String>) {
+    start_seed(r1, r2, out, 1, extra)
+}
+
+/// [`start`] with the simulator's seed `seed`.
+fn start_seed(
+    r1: &Robot,
+    r2: &Robot,
+    out: &Path,
+    seed: u32,
+    extra: &[&str],
+) -> (Demo, std::sync::mpsc::Receiver<String>) {
     let port = free_port().to_string();
     let robots = format!("{},{}", r1.name, r2.name);
+    let seed = seed.to_string();
     let mut cmd = r1.command("nerve");
-    cmd.args(["demo", "cooperate", "--seed", "1", "--robots", &robots, "--port", &port, "--out"])
+    cmd.args(["demo", "cooperate", "--seed", &seed, "--robots", &robots, "--port", &port, "--out"])
         .arg(out)
         .args(["--sim-time", "--time-scale", &SCALE.to_string()])
         .args(extra)
@@ -184,4 +198,41 @@ fn demo_cooperate_robot_2_reaches_the_target_through_bridge_restarts_and_misses_
         distance(&with),
         distance(&without)
     );
+}
+
+/// Seeds 2 and 3 on simulated time at 4x (issue 46: both demos reach the
+/// same outcomes at 4x as in real time, seeds 1 to 3; seed 1 is the run
+/// above): the two runs side by side, each robot 2 within 0.5 m of the
+/// target with no collision, nothing left behind.
+#[test]
+fn demo_cooperate_seeds_2_and_3_reach_the_target_at_4x() {
+    let runs: Vec<(u32, Robot, Robot)> = [2, 3]
+        .into_iter()
+        .map(|seed| {
+            let r1 = Robot::new(&format!("cs{seed}a"));
+            let r2 = r1.sibling(&format!("cs{seed}b"));
+            (seed, r1, r2)
+        })
+        .collect();
+    let demos: Vec<_> = runs
+        .iter()
+        .map(|(seed, r1, r2)| {
+            let out = r1.home.join("run");
+            let (demo, lines) = start_seed(r1, r2, &out, *seed, &[]);
+            drop(lines);
+            (demo, out)
+        })
+        .collect();
+    for ((demo, out), (seed, r1, r2)) in demos.into_iter().zip(&runs) {
+        let s = finish(demo, &out, Duration::from_secs(480));
+        assert_eq!(s["time_scale"].as_f64(), Some(SCALE), "seed {seed}: {s:#}");
+        assert_eq!(s["end_reason"], "robot 2 arrived and robot 1 resumed", "seed {seed}: {s:#}");
+        assert!(distance(&s) <= 0.5, "seed {seed}: robot 2 ended {} m from the target: {s:#}", distance(&s));
+        for (robot, n) in s["collisions"].as_object().expect("collisions per robot") {
+            assert_eq!(n.as_u64(), Some(0), "seed {seed}: robot {robot} collided: {s:#}");
+        }
+        for r in [r1, r2] {
+            assert!(r.shm_files().is_empty(), "left in /dev/shm by robot {}: {:?}", r.name, r.shm_files());
+        }
+    }
 }
