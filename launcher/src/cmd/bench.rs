@@ -48,6 +48,8 @@ pub enum Scenario {
     Messages,
     /// Robots meeting through one Zenoh router, 2 to 16, each in its own network namespace: join time, latency, router CPU.
     Fleet,
+    /// C and C++ agents: their one-hop round trip beside a Rust agent's, 8 B to 1080p (issue 43).
+    C,
 }
 
 /// `nerve bench`
