@@ -594,6 +594,20 @@ enum nerve_status nerve_harness_set_period(struct nerve_harness *h, uint64_t per
  */
 enum nerve_status nerve_harness_clock(struct nerve_harness *h, uint64_t *now_ns, uint64_t *cycles);
 
+/*
+ As `nerve_loan`, but the slot is not zeroed: `*data` points
+ at whatever bytes an earlier sample of this output left in it (zeros
+ in a slot never used). Write every byte your readers read. Nothing is
+ written for you, so a large payload of which only a part changes (a
+ frame's header, a sequence number) costs what is written, not its size.
+ Send it with `nerve_send`; one loan per output at a time.
+
+ # Safety
+ `ctx` is null or the pointer given to the running callback; `data` is
+ null or writable.
+ */
+enum nerve_status nerve_loan_uninit(struct nerve_ctx *ctx, nerve_port port, void **data);
+
 #ifdef __cplusplus
 }  // extern "C"
 #endif  // __cplusplus

@@ -272,6 +272,16 @@ class context {
     return nerve::loan<T>(c_, out.handle(), static_cast<T *>(d));
   }
 
+  /* A slot of `out` as it is (not zeroed: what an earlier sample left in
+   * it) to write in place, then loan::send(): write every field readers read.
+   * A large payload of which only a part is written costs that part. */
+  template <class T>
+  nerve::loan<T> loan_uninit(const output<T> &out) {
+    void *d = nullptr;
+    detail::check(nerve_loan_uninit(c_, out.handle(), &d), "nerve_loan_uninit");
+    return nerve::loan<T>(c_, out.handle(), static_cast<T *>(d));
+  }
+
   /* Sends a copy of `value` on `out` (a loan, one struct copy, a send). */
   template <class T>
   void send(const output<T> &out, const T &value) {

@@ -25,6 +25,7 @@
 
 mod error;
 mod harness;
+mod loan;
 mod own_type;
 
 use agent_sdk::dynamic::{Loan, Received, SchemaInput, SchemaOutput};
@@ -704,25 +705,8 @@ pub unsafe extern "C" fn nerve_latest(
 /// null or writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn nerve_loan(ctx: *mut nerve_ctx, port: nerve_port, data: *mut *mut c_void) -> nerve_status {
-    guard(|| {
-        // SAFETY: the caller's contract
-        let data = unsafe { data.as_mut() }.ok_or(Failure::Null("data"))?;
-        *data = std::ptr::null_mut();
-        // SAFETY: the caller's contract
-        let ctx = unsafe { live(ctx) }?;
-        let i = ctx.output_index(port)?;
-        let slot = ctx.loans.get_mut(i).ok_or(Failure::UnknownPort { port, what: "output" })?;
-        if slot.is_some() {
-            return Err(Failure::LoanPending(port));
-        }
-        let output = ctx.outputs.get(i).ok_or(Failure::UnknownPort { port, what: "output" })?;
-        let mut loan = output.loan(true).map_err(|source| Failure::Port { port, source })?;
-        // the bytes are a slot of shared memory (or a heap box in a test):
-        // they do not move with the `Loan`
-        *data = loan.bytes_mut().as_mut_ptr().cast();
-        *slot = Some(loan);
-        Ok(())
-    })
+    // SAFETY: the caller's contract, which is `loan_on`'s
+    guard(|| unsafe { loan::loan_on(ctx, port, data, true) })
 }
 
 /// Sends the sample loaned on output `port` and wakes its readers; the
