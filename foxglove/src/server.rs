@@ -34,7 +34,7 @@ use std::time::{Duration, Instant};
 use tungstenite::handshake::server::{ErrorResponse, Request as HttpRequest, Response};
 use tungstenite::protocol::WebSocketConfig;
 use tungstenite::{Message, WebSocket};
-use watched::{GraphState, ParamState, graph_update};
+use watched::{Graph, GraphState, ParamState, graph_update};
 
 mod services;
 mod watched;
@@ -952,9 +952,9 @@ fn answer(hub: &Hub, robot: &mut dyn Robot, req: Request, params: &mut ParamStat
                 client.error(&format!("a message for {topic} was refused: {e}"));
             }
         }
-        Request::Graph { client } => match robot.graph() {
+        Request::Graph { client } => match Graph::read(hub, robot) {
             // the whole graph to the new watcher; the others hear of changes only
-            Ok(g) => client.say(graph_update(&g, &[])),
+            Ok(g) => client.say(graph_update(&g, &[], &[])),
             Err(e) => client.error(&format!("cannot read the connection graph: {e}")),
         },
         Request::Call(call) => services::call(hub, robot, call),

@@ -164,6 +164,18 @@ pub(super) fn refresh(hub: &Hub, robot: &mut dyn Robot) {
     }
 }
 
+/// The agent that provides service `name` (`/<agent>/<service>`).
+fn provider(name: &str) -> &str {
+    let bare = name.strip_prefix('/').unwrap_or(name);
+    bare.split_once('/').map_or(bare, |(agent, _)| agent)
+}
+
+/// Every service advertised with its provider, for the connection graph
+/// (`advertisedServices`: the ids are agent names, as its topics' are).
+pub(super) fn providers(services: &Services) -> Vec<(String, Vec<String>)> {
+    services.by_name.keys().map(|name| (name.clone(), vec![provider(name).to_owned()])).collect()
+}
+
 /// Tells a new client every service; the caller holds the lock of the
 /// clients' list, or has not added it yet, so that no change falls between.
 pub(super) fn advertise_to(services: &Services, client: &Client) {
@@ -254,6 +266,13 @@ mod tests {
         let mut huge = f.clone();
         huge[9..13].copy_from_slice(&u32::MAX.to_le_bytes());
         assert_eq!(parse_call(&huge), None);
+    }
+
+    #[test]
+    fn a_services_provider_is_the_agent_of_its_name() {
+        assert_eq!(provider("/map-builder/plan"), "map-builder");
+        assert_eq!(provider("/s/a/b"), "s");
+        assert_eq!(provider("bare"), "bare");
     }
 
     #[test]

@@ -3,8 +3,13 @@
 //! client watches them, and only what changed is sent: [`ParamState`] to
 //! the clients subscribed to those parameters, [`GraphState`] to the
 //! clients subscribed to the graph (Foxglove's Topic Graph panel).
+//!
+//! The graph is the robot's topics (who publishes, who is fed) and the
+//! services advertised (`advertisedServices`, each with the agent that
+//! provides it): an agent that comes or goes changes both, and a service
+//! that went is named in `removedServices`.
 
-use super::{Client, Hub, lock};
+use super::{Client, Hub, lock, services};
 use crate::protocol::{self, Parameter};
 use crate::{GraphSpec, Robot};
 use serde_json::{Value, json};
@@ -54,10 +59,26 @@ impl ParamState {
     }
 }
 
+/// The connection graph as told to clients: the robot's topics, and every
+/// service advertised with its providers (`(/<agent>/<service>, [agent])`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub(super) struct Graph {
+    topics: GraphSpec,
+    services: Vec<(String, Vec<String>)>,
+}
+
+impl Graph {
+    /// The robot's graph now, with the services the server advertises.
+    pub(super) fn read(hub: &Hub, robot: &mut dyn Robot) -> Result<Graph, String> {
+        let topics = robot.graph()?;
+        Ok(Graph { topics, services: services::providers(&lock(&hub.services)) })
+    }
+}
+
 /// The connection graph last sent.
 #[derive(Default)]
 pub(super) struct GraphState {
-    last: Option<GraphSpec>,
+    last: Option<Graph>,
 }
 
 impl GraphState {
@@ -69,7 +90,7 @@ impl GraphState {
             self.last = None;
             return;
         }
-        let g = match robot.graph() {
+        let g = match Graph::read(hub, robot) {
             Ok(g) => g,
             Err(e) => {
                 tracing::debug!("no graph now: {e}");
@@ -79,11 +100,15 @@ impl GraphState {
         if self.last.as_ref() == Some(&g) {
             return;
         }
-        let old: BTreeSet<&str> =
-            self.last.iter().flat_map(|l| l.published.iter().chain(&l.subscribed).map(|(t, _)| t.as_str())).collect();
-        let now: BTreeSet<&str> = g.published.iter().chain(&g.subscribed).map(|(t, _)| t.as_str()).collect();
-        let removed: Vec<&str> = old.difference(&now).copied().collect();
-        let msg = graph_update(&g, &removed);
+        let topics = |g: &Graph| -> BTreeSet<String> {
+            g.topics.published.iter().chain(&g.topics.subscribed).map(|(t, _)| t.clone()).collect()
+        };
+        let names = |g: &Graph| -> BTreeSet<String> { g.services.iter().map(|(s, _)| s.clone()).collect() };
+        let (old_topics, old_services) = self.last.as_ref().map(|l| (topics(l), names(l))).unwrap_or_default();
+        let (now_topics, now_services) = (topics(&g), names(&g));
+        let removed_topics: Vec<&str> = old_topics.difference(&now_topics).map(String::as_str).collect();
+        let removed_services: Vec<&str> = old_services.difference(&now_services).map(String::as_str).collect();
+        let msg = graph_update(&g, &removed_topics, &removed_services);
         for c in &watchers {
             c.say(msg.clone());
         }
@@ -91,17 +116,22 @@ impl GraphState {
     }
 }
 
-pub(super) fn graph_update(g: &GraphSpec, removed: &[&str]) -> String {
-    let published: Vec<Value> = g.published.iter().map(|(t, ids)| json!({ "name": t, "publisherIds": ids })).collect();
+/// `connectionGraphUpdate`: the whole graph `g` (each list replaces what a
+/// client knew of its names), and the topics and services gone since the
+/// last one.
+pub(super) fn graph_update(g: &Graph, removed_topics: &[&str], removed_services: &[&str]) -> String {
+    let t = &g.topics;
+    let published: Vec<Value> = t.published.iter().map(|(t, ids)| json!({ "name": t, "publisherIds": ids })).collect();
     let subscribed: Vec<Value> =
-        g.subscribed.iter().map(|(t, ids)| json!({ "name": t, "subscriberIds": ids })).collect();
+        t.subscribed.iter().map(|(t, ids)| json!({ "name": t, "subscriberIds": ids })).collect();
+    let services: Vec<Value> = g.services.iter().map(|(s, ids)| json!({ "name": s, "providerIds": ids })).collect();
     json!({
         "op": "connectionGraphUpdate",
         "publishedTopics": published,
         "subscribedTopics": subscribed,
-        "advertisedServices": [],
-        "removedTopics": removed,
-        "removedServices": [],
+        "advertisedServices": services,
+        "removedTopics": removed_topics,
+        "removedServices": removed_services,
     })
     .to_string()
 }
@@ -111,15 +141,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_graph_update_names_what_left() {
-        let g = GraphSpec {
-            published: vec![("/t/tick".into(), vec!["t".into()])],
-            subscribed: vec![("/t/tick".into(), vec!["r".into()])],
+    fn a_graph_update_names_services_their_providers_and_what_left() {
+        let g = Graph {
+            topics: GraphSpec {
+                published: vec![("/t/tick".into(), vec!["t".into()])],
+                subscribed: vec![("/t/tick".into(), vec!["r".into()])],
+            },
+            services: vec![("/s/plan".into(), vec!["s".into()])],
         };
-        let v: Value = serde_json::from_str(&graph_update(&g, &["/x/y"])).expect("json");
+        let v: Value = serde_json::from_str(&graph_update(&g, &["/x/y"], &["/x/go"])).expect("json");
         assert_eq!(v["op"], "connectionGraphUpdate");
         assert_eq!(v["publishedTopics"][0]["publisherIds"][0], "t");
         assert_eq!(v["subscribedTopics"][0]["subscriberIds"][0], "r");
+        assert_eq!(v["advertisedServices"][0]["name"], "/s/plan");
+        assert_eq!(v["advertisedServices"][0]["providerIds"], json!(["s"]));
         assert_eq!(v["removedTopics"][0], "/x/y");
+        assert_eq!(v["removedServices"], json!(["/x/go"]));
     }
 }
