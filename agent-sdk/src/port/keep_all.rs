@@ -36,6 +36,7 @@
 use super::bytes::ByteSubscriber;
 use super::depth::MAX_DEPTH;
 use super::error::{PortError, port_err};
+use super::input::{Feed, Received, Source};
 use super::service::{Carried, OutputFactory, SourceFactory, keep_all_output_service, keep_all_source_service, lock};
 use crate::world::Ipc;
 use iceoryx2::port::publisher::Publisher;
@@ -409,6 +410,40 @@ pub(crate) fn discard(subscriber: &ByteSubscriber) {
             Ok(Some(_)) => {}
             _ => return,
         }
+    }
+}
+
+// ---------------------------------------------------------------- the reader's side of an input
+
+/// A keep-all input's source ([`super::input`]), read from its keep-all
+/// service while its output publishes there.
+impl Source {
+    /// Whether this keep-all source's output publishes to its keep-all
+    /// service now (then the port's own service holds only duplicates).
+    pub(super) fn lossless(&mut self) -> bool {
+        let Some(feed) = self.keep_all.as_mut() else { return false };
+        let delivered = self.tally.last_delivered();
+        feed.is_live(self.held.as_ref().and_then(|h| h.last_seq()).max(delivered))
+    }
+
+    /// A keep-all source read losslessly: what is left in its own queue,
+    /// then the next sample of the keep-all service, in place; the port's
+    /// own service emptied. `None` when the source is not read so.
+    pub(super) fn take_lossless(&mut self, input: &str) -> Option<Result<Option<(SampleHeader, Received)>, PortError>> {
+        if !self.lossless() {
+            return None;
+        }
+        if let Feed::Shm { subscriber, .. } = &self.feed {
+            discard(subscriber);
+        }
+        if let Some((h, b)) = self.held.as_mut().and_then(|held| held.pop()) {
+            return Some(Ok(Some((h, Received::copied(h, b)))));
+        }
+        let got = self.keep_all.as_mut()?.receive();
+        Some(match got {
+            Ok(sample) => Ok(sample.map(|s| (*s.user_header(), Received::in_place(s)))),
+            Err(e) => Err(self.receive_error(input, e)),
+        })
     }
 }
 

@@ -4,7 +4,8 @@
 //! * [`service`]: the services behind a port (settings, attributes, the
 //!   layout check, the wake-up event), the same for every port;
 //! * [`bytes`]: THE port, samples of a layout a schema describes, read and
-//!   written in place as bytes; with the tools' [`RawPort`] and [`RawOutput`];
+//!   written in place as bytes; with the tools' [`RawPort`] and [`RawOutput`]
+//!   (its files: `tally`, `output`, `input`, `raw`);
 //! * [`typed`]: [`Output<T>`] and [`Input<T>`], views of the byte port as a
 //!   Rust type, zero copy;
 //! * [`call`]: calls between agents, a [`Server`] and a [`Client`] on
@@ -25,11 +26,15 @@ pub mod call_seq;
 mod call_server;
 pub mod depth;
 pub mod error;
+mod input;
 pub mod keep_all;
 pub(crate) mod memory;
+mod output;
+mod raw;
 pub mod schema_call;
 pub mod seq;
 pub mod service;
+mod tally;
 pub mod typed;
 
 pub use bytes::{Loan, Meta, RawOutput, RawPort, Received, SchemaInput, SchemaOutput};
