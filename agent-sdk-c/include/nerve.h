@@ -124,6 +124,22 @@ typedef enum nerve_status {
    in a test harness; the message is the agent's.
    */
   NERVE_AGENT_FAILED = 12,
+  /*
+   A sequence loan of more elements than the output's `max_len`:
+   nothing was loaned.
+   */
+  NERVE_TOO_LONG = 13,
+  /*
+   A call ended without an answer (timed out, its server gone, the
+   client unwired or not wired, no server, too many in flight); the
+   message says which.
+   */
+  NERVE_CALL_FAILED = 14,
+  /*
+   A call port used in the test harness, which does not carry calls
+   (as the Rust harness does not): test calls with real agents.
+   */
+  NERVE_NOT_IN_HARNESS = 15,
 } nerve_status;
 
 /*
@@ -264,6 +280,56 @@ typedef struct nerve_agent_vtable {
    */
   nerve_stop_fn stop;
 } nerve_agent_vtable;
+
+/*
+ Answers one request: reads the request (`request`, the request
+ struct) and writes the answer in place (`answer`, the answer struct,
+ zeroed first). Returns 0 to send it; anything else drops the request
+ unanswered (its caller's call ends as the server gone).
+ */
+typedef int (*nerve_answer_fn)(const void *request, void *answer, void *user);
+
+/*
+ A received sequence sample, read in place: its header (`header`, NULL
+ for a sequence without one), its `len` elements at `items` (NULL when
+ `len` is 0). Both point into shared memory, read-only, valid until the
+ callback that got them returns.
+ */
+typedef struct nerve_seq {
+  /*
+   The sample's header (the header struct), or NULL if it has none.
+   */
+  const void *header;
+  /*
+   Its first element (an array of `len` element structs), or NULL if `len` is 0.
+   */
+  const void *items;
+  /*
+   How many elements it holds.
+   */
+  size_t len;
+} nerve_seq;
+
+/*
+ A loaned sequence sample to write in place before `nerve_send`: its
+ header (zeroed; NULL for a sequence without one) and room for `len`
+ elements at `items` (NULL when `len` is 0), which hold what the slot
+ last held until written: write every element.
+ */
+typedef struct nerve_seq_loan {
+  /*
+   The sample's header to fill in, or NULL if it has none.
+   */
+  void *header;
+  /*
+   Its first element slot (an array of `len` element structs), or NULL if `len` is 0.
+   */
+  void *items;
+  /*
+   How many elements it holds (the `n` asked for).
+   */
+  size_t len;
+} nerve_seq_loan;
 
 #ifdef __cplusplus
 extern "C" {
@@ -469,6 +535,124 @@ const char *nerve_last_error(void);
 int nerve_run(int argc, char *const *argv, const struct nerve_agent_vtable *agent, void *user);
 
 /*
+ Declares service `name`: requests of layout `request` answered with
+ layout `answer` (both fixed-size `nerve_type`s: the agent's own struct,
+ `NERVE_TYPE`, or a built-in one by name, `NERVE_BUILTIN(nerve_Tick)`).
+ It is the service a Rust agent's `setup.serve::<Req, Resp>(name)` of
+ those layouts makes: `nerve call AGENT/NAME '<json>'` and any client of
+ those layouts call it. A request wakes the agent's task like an input;
+ answer in `step` with [`nerve_serve`]. Writes its handle to `*port`.
+
+ Call it in `init` only, with the `setup` given to it, from that thread.
+ The layouts and strings are read during the call and not kept.
+
+ # Safety
+ `setup` is null or the pointer given to `init`; `name` is null or a
+ NUL-terminated string; `request` and `answer` are null or valid
+ `nerve_type`s; `port` is null or writable.
+ */
+enum nerve_status nerve_setup_serve(struct nerve_setup *setup,
+                                    const char *name,
+                                    const struct nerve_type *request,
+                                    const struct nerve_type *answer,
+                                    nerve_port *port);
+
+/*
+ Declares client `name` of a service of layouts `request` and `answer`
+ (as [`nerve_setup_serve`] takes them), each call waiting at most
+ `timeout_ns` for its answer (0: the SDK's default, 2 s), at most 16
+ calls in flight. It calls the service it is wired to (`nerve connect
+ AGENT/NAME SERVER/SERVICE`, or `[[connect]]` in a launch file). Writes
+ its handle to `*port`.
+
+ # Safety
+ As for [`nerve_setup_serve`].
+ */
+enum nerve_status nerve_setup_client(struct nerve_setup *setup,
+                                     const char *name,
+                                     const struct nerve_type *request,
+                                     const struct nerve_type *answer,
+                                     uint64_t timeout_ns,
+                                     nerve_port *port);
+
+/*
+ Answers the requests waiting on service `port` (at most 64; the rest
+ wait for the next step, which they wake): `answer` is called once per
+ request, in this thread, before this returns, with the request, an
+ answer zeroed to fill in, and `user`. Writes how many were answered to
+ `*answered` (may be NULL). When `answer` returns non-zero, that
+ request is dropped unanswered (its caller sees the server gone), the
+ others are kept for the next call, and the status is
+ `NERVE_AGENT_FAILED`.
+
+ Call it from inside a `start`, `step` or `stop` callback, in its thread.
+ The pointers `answer` gets are valid during its call only.
+
+ # Safety
+ `ctx` is null or the pointer given to the running callback; `answer`
+ is null or a function of this signature, safe to call with `user`;
+ `answered` is null or writable.
+ */
+enum nerve_status nerve_serve(struct nerve_ctx *ctx,
+                              nerve_port port,
+                              nerve_answer_fn answer,
+                              void *user,
+                              size_t *answered);
+
+/*
+ Sends a copy of `request` (`len` bytes: the request struct) on client
+ `port` and returns at once, writing the call's id to `*call` (may be
+ NULL); its answer comes from [`nerve_call_take`] in this or a later
+ step. `NERVE_CALL_FAILED`, with nothing sent, when the client is not
+ wired, no server answers, or 16 calls are in flight already.
+
+ # Safety
+ `ctx` is null or the pointer given to the running callback; `request`
+ is null or readable for `len` bytes; `call` is null or writable.
+ */
+enum nerve_status nerve_call(struct nerve_ctx *ctx,
+                             nerve_port port,
+                             const void *request,
+                             size_t len,
+                             uint64_t *call);
+
+/*
+ Takes the oldest finished call of client `port`: writes its id to
+ `*call` (may be NULL) and copies its answer into `answer` (`size`
+ bytes: the answer struct). `NERVE_NO_SAMPLE` while none has finished;
+ `NERVE_CALL_FAILED` for a call that ended without an answer (timed
+ out, its server gone, the client unwired), `*call` naming it and the
+ message saying why. Never blocks.
+
+ # Safety
+ `ctx` is null or the pointer given to the running callback; `answer`
+ is null or writable for `size` bytes; `call` is null or writable.
+ */
+enum nerve_status nerve_call_take(struct nerve_ctx *ctx,
+                                  nerve_port port,
+                                  uint64_t *call,
+                                  void *answer,
+                                  size_t size);
+
+/*
+ Calls and waits: sends a copy of `request` (`len` bytes) on client
+ `port`, then blocks this step until its answer comes, copied into
+ `answer` (`size` bytes), or until the client's timeout
+ (`NERVE_CALL_FAILED`, saying why). The agent does nothing else
+ meanwhile: its step takes that long. Calls of [`nerve_call`] that
+ finish meanwhile are kept for [`nerve_call_take`].
+
+ # Safety
+ As for [`nerve_call`] and [`nerve_call_take`].
+ */
+enum nerve_status nerve_call_wait(struct nerve_ctx *ctx,
+                                  nerve_port port,
+                                  const void *request,
+                                  size_t len,
+                                  void *answer,
+                                  size_t size);
+
+/*
  Starts C agent `agent` in a test harness: runs its `init` (its ports
  bound to in-memory queues, no router, no shared memory), applies the
  `n_params` settings of `params` (`"KEY=VALUE"`, as `--param` is), runs
@@ -607,6 +791,87 @@ enum nerve_status nerve_harness_clock(struct nerve_harness *h, uint64_t *now_ns,
  null or writable.
  */
 enum nerve_status nerve_loan_uninit(struct nerve_ctx *ctx, nerve_port port, void **data);
+
+/*
+ Declares input `name` of sequences of `element` structs after a
+ `header` struct (NULL: no header, `nerve::NoHeader`), as a Rust agent's
+ `setup.input_seq::<T, H>(name)` does: the router connects it to any
+ output of that sequence type (element and header named and laid out
+ alike). Each is a `nerve_type`: the agent's own struct (`NERVE_TYPE`),
+ or a built-in payload or primitive by name (`NERVE_BUILTIN(nerve_Tick)`,
+ `NERVE_BUILTIN_PRIMITIVE(uint8_t, "u8")`). Writes its handle to `*port`;
+ read it with [`nerve_take_seq`] or [`nerve_latest_seq`].
+
+ Call it in `init` only, with the `setup` given to it, from that thread.
+ `element`, `header` and their strings are read during the call, not kept.
+
+ # Safety
+ `setup` is null or the pointer given to `init`; `name` is null or a
+ NUL-terminated string; `element` and `header` are null or valid
+ `nerve_type`s; `port` is null or writable.
+ */
+enum nerve_status nerve_setup_input_seq(struct nerve_setup *setup,
+                                        const char *name,
+                                        const struct nerve_type *element,
+                                        const struct nerve_type *header,
+                                        nerve_port *port);
+
+/*
+ Declares output `name` of sequences of `element` structs after a
+ `header` struct (NULL: none), at most `max_len` elements a sample (and
+ at most the 64 MiB every sample is bounded to), as a Rust agent's
+ `setup.output_seq::<T, H>(name, max_len)` does. The types are given as
+ for [`nerve_setup_input_seq`]. Writes its handle to `*port`; send on it
+ with [`nerve_loan_seq`] then `nerve_send`.
+
+ # Safety
+ As for [`nerve_setup_input_seq`].
+ */
+enum nerve_status nerve_setup_output_seq(struct nerve_setup *setup,
+                                         const char *name,
+                                         const struct nerve_type *element,
+                                         const struct nerve_type *header,
+                                         size_t max_len,
+                                         nerve_port *port);
+
+/*
+ Takes the next sample waiting on sequence input `port` and writes its
+ header, elements and length to `*seq`, in place in shared memory (zero
+ copy), read-only and valid until the callback that got `ctx` returns.
+ `NERVE_NO_SAMPLE` when none waits (`*seq` is then NULLs and 0);
+ `NERVE_INVALID_ARGUMENT` for an input that is not a sequence.
+
+ # Safety
+ `ctx` is null or the pointer given to the running callback; `seq` is
+ null or writable.
+ */
+enum nerve_status nerve_take_seq(struct nerve_ctx *ctx, nerve_port port, struct nerve_seq *seq);
+
+/*
+ As [`nerve_take_seq`], but the newest sample waiting: the older ones
+ are dropped. `NERVE_NO_SAMPLE` when none waits.
+
+ # Safety
+ As for [`nerve_take_seq`].
+ */
+enum nerve_status nerve_latest_seq(struct nerve_ctx *ctx, nerve_port port, struct nerve_seq *seq);
+
+/*
+ Loans a sample of `n` elements on sequence output `port` to write in
+ place in shared memory: `*loan` gets its header (zeroed) and room for
+ `n` elements (holding what the slot last held: write every one). Send
+ it with `nerve_send` before the callback returns; a loan not sent is
+ given back then. One loan per output at a time (`NERVE_LOAN_PENDING`).
+ Past the output's `max_len`, `NERVE_TOO_LONG` and nothing is loaned.
+
+ # Safety
+ `ctx` is null or the pointer given to the running callback; `loan` is
+ null or writable.
+ */
+enum nerve_status nerve_loan_seq(struct nerve_ctx *ctx,
+                                 nerve_port port,
+                                 size_t n,
+                                 struct nerve_seq_loan *loan);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -44,6 +44,13 @@
   {#field, (primitive), offsetof(S, field), sizeof(((S *)0)->field) / sizeof(((S *)0)->field[0])}
 #define NERVE_TYPE(S, name, fields) {(name), sizeof(S), NERVE_ALIGNOF(S), (fields), sizeof(fields) / sizeof((fields)[0])}
 
+/* A built-in payload struct T of this header as a nerve_type, for the parts of a
+ * sequence or a call (nerve_setup_output_seq, nerve_setup_serve):
+ *   static const nerve_type tick_type = NERVE_BUILTIN(nerve_Tick);
+ * and a primitive by its Rust name: NERVE_BUILTIN_PRIMITIVE(uint8_t, "u8"). */
+#define NERVE_BUILTIN(T) {T##_TYPE_NAME, sizeof(T), NERVE_ALIGNOF(T), NULL, 0}
+#define NERVE_BUILTIN_PRIMITIVE(C, name) {(name), sizeof(C), NERVE_ALIGNOF(C), NULL, 0}
+
 /* nerve::Tick */
 typedef struct nerve_Tick {
   uint64_t seq;

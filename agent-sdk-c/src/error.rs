@@ -42,6 +42,16 @@ pub enum nerve_status {
     /// The agent's own callback (`init`, `start`, `step`) returned an error
     /// in a test harness; the message is the agent's.
     NERVE_AGENT_FAILED = 12,
+    /// A sequence loan of more elements than the output's `max_len`:
+    /// nothing was loaned.
+    NERVE_TOO_LONG = 13,
+    /// A call ended without an answer (timed out, its server gone, the
+    /// client unwired or not wired, no server, too many in flight); the
+    /// message says which.
+    NERVE_CALL_FAILED = 14,
+    /// A call port used in the test harness, which does not carry calls
+    /// (as the Rust harness does not): test calls with real agents.
+    NERVE_NOT_IN_HARNESS = 15,
 }
 
 /// Why a call failed, with its cause.
@@ -88,6 +98,21 @@ pub(crate) enum Failure {
     NoLoan(u32),
     #[error("output {0} has a loan not sent yet: send it (nerve_send) before loaning again")]
     LoanPending(u32),
+    #[error("{port}: {len} elements are more than its max_len of {max_len}; nothing was loaned (loan at most max_len)")]
+    TooLong { port: String, len: usize, max_len: usize },
+    #[error("the call failed")]
+    Call {
+        #[source]
+        source: agent_sdk::port::CallError,
+    },
+    #[error(
+        "call port {0}: calls are not carried in the test harness (as in the Rust harness); test them with real agents"
+    )]
+    NotInHarness(u32),
+    #[error(
+        "service {port}: the answer function returned {code}; that request was dropped unanswered (its caller sees the server gone)"
+    )]
+    AnswerFailed { port: u32, code: i32 },
     #[error("too many ports")]
     TooManyPorts,
     #[error("port {port:?} cannot be declared")]
@@ -140,7 +165,10 @@ impl Failure {
             Failure::Sdk { .. } | Failure::Port { .. } => NERVE_PORT_ERROR,
             Failure::NoPortNamed { .. } => NERVE_UNKNOWN_PORT,
             Failure::Size { .. } => NERVE_LAYOUT_MISMATCH,
-            Failure::Agent { .. } => NERVE_AGENT_FAILED,
+            Failure::Agent { .. } | Failure::AnswerFailed { .. } => NERVE_AGENT_FAILED,
+            Failure::TooLong { .. } => NERVE_TOO_LONG,
+            Failure::Call { .. } => NERVE_CALL_FAILED,
+            Failure::NotInHarness(_) => NERVE_NOT_IN_HARNESS,
             Failure::Harness { source } => match source {
                 HarnessError::Agent { .. } => NERVE_AGENT_FAILED,
                 HarnessError::Param { .. } | HarnessError::Name { .. } => NERVE_INVALID_ARGUMENT,

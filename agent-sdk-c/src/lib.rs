@@ -23,10 +23,12 @@
 //! runs inside `catch_unwind`). The header is `include/nerve.h`, made by
 //! cbindgen from this file (`tests/header.rs` keeps it current).
 
+mod call;
 mod error;
 mod harness;
 mod loan;
 mod own_type;
+mod seq;
 
 use agent_sdk::dynamic::{Loan, Received, SchemaInput, SchemaOutput};
 use agent_sdk::{Agent, AgentError, CommonArgs, Context, Param, Setup, Task};
@@ -36,12 +38,14 @@ use std::ffi::{CStr, c_char, c_int, c_void};
 use std::sync::OnceLock;
 use std::time::Duration;
 
+pub use call::nerve_answer_fn;
 pub use error::nerve_status;
 pub use harness::nerve_harness;
 pub use own_type::{
     NERVE_BOOL, NERVE_F32, NERVE_F64, NERVE_I8, NERVE_I16, NERVE_I32, NERVE_I64, NERVE_U8, NERVE_U16, NERVE_U32,
     NERVE_U64, nerve_field, nerve_type,
 };
+pub use seq::{nerve_seq, nerve_seq_loan};
 
 /// A port handle, as `nerve_setup_input`/`nerve_setup_output` give it:
 /// never 0; inputs and outputs are numbered apart, so an input's handle
@@ -146,6 +150,10 @@ pub struct nerve_setup {
     /// the ports' names, by handle order (inputs, then outputs)
     names: PortNames,
     params: Vec<Param<f64>>,
+    /// the `max_len` of each sequence output, by output index
+    seq_max: std::collections::HashMap<usize, usize>,
+    /// its services and clients
+    calls: call::Calls,
 }
 
 /// The names of an agent's inputs and outputs, in the order of their
@@ -177,6 +185,10 @@ pub struct nerve_ctx {
     loans: Vec<Option<Loan>>,
     params: Vec<Param<f64>>,
     names: PortNames,
+    /// the `max_len` of each sequence output, by output index
+    seq_max: std::collections::HashMap<usize, usize>,
+    /// its services and clients
+    calls: call::Calls,
 }
 
 /// An SDK agent whose algorithm is C functions.
@@ -223,6 +235,8 @@ impl Agent for CAgent {
             outputs: Vec::new(),
             names: PortNames::default(),
             params: Vec::new(),
+            seq_max: std::collections::HashMap::new(),
+            calls: call::Calls::default(),
         };
         // SAFETY: `new` is the C program's function of this signature
         // (nerve_run's contract); `s` outlives the call.
@@ -241,6 +255,8 @@ impl Agent for CAgent {
                 loans,
                 params: s.params,
                 names: s.names,
+                seq_max: s.seq_max,
+                calls: s.calls,
             }),
             spec,
         })

@@ -169,6 +169,61 @@ pub(crate) unsafe fn schema_of(t: *const nerve_type, port: &str) -> Result<Schem
     Ok(schema)
 }
 
+/// The schema of one part of a sequence or a call (an element, a header,
+/// a request, an answer) that `t` names: with no fields (`fields` NULL,
+/// `field_count` 0), the built-in payload type or the primitive (`"u8"`,
+/// `"f32"`, ...) of its name, checked against its size and alignment
+/// (`NERVE_BUILTIN` of `nerve_types.h` fills it so); with fields, the
+/// agent's own type, as [`schema_of`] makes it.
+///
+/// # Safety
+/// As for [`schema_of`].
+pub(crate) unsafe fn part_schema(t: *const nerve_type, port: &str, what: &'static str) -> Result<Schema, Failure> {
+    // SAFETY: the caller's contract
+    let d = unsafe { t.as_ref() }.ok_or(Failure::Null(what))?;
+    if !d.fields.is_null() || d.field_count > 0 {
+        // SAFETY: the caller's contract
+        return unsafe { schema_of(t, port) };
+    }
+    // SAFETY: the caller's contract
+    let type_name = unsafe { text(d.type_name, "type->type_name") }?;
+    let schema = shm_schemas::schema::built_in_named(&type_name)
+        .or_else(|| primitive_named(&type_name))
+        .ok_or_else(|| Failure::UnknownType(type_name.clone()))?;
+    if schema.size != d.size || schema.align != d.align {
+        return Err(Failure::Layout {
+            port: port.to_owned(),
+            type_name,
+            size: d.size,
+            align: d.align,
+            fingerprint: 0,
+            their_size: schema.size,
+            their_align: schema.align,
+            their_fingerprint: schema.fingerprint(),
+        });
+    }
+    Ok(schema)
+}
+
+/// The schema of the primitive named as Rust names it (`"u8"`, `"f64"`, `"bool"`).
+fn primitive_named(name: &str) -> Option<Schema> {
+    let code = match name {
+        "u8" => NERVE_U8,
+        "u16" => NERVE_U16,
+        "u32" => NERVE_U32,
+        "u64" => NERVE_U64,
+        "i8" => NERVE_I8,
+        "i16" => NERVE_I16,
+        "i32" => NERVE_I32,
+        "i64" => NERVE_I64,
+        "f32" => NERVE_F32,
+        "f64" => NERVE_F64,
+        "bool" => NERVE_BOOL,
+        _ => return None,
+    };
+    primitive(code, name).ok()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

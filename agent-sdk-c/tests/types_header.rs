@@ -212,7 +212,13 @@ fn generate() -> String {
              #define NERVE_FIELD(S, field, primitive) {#field, (primitive), offsetof(S, field), 0}\n\
              #define NERVE_FIELD_ARRAY(S, field, primitive) \\\n  \
              {#field, (primitive), offsetof(S, field), sizeof(((S *)0)->field) / sizeof(((S *)0)->field[0])}\n\
-             #define NERVE_TYPE(S, name, fields) {(name), sizeof(S), NERVE_ALIGNOF(S), (fields), sizeof(fields) / sizeof((fields)[0])}\n\n",
+             #define NERVE_TYPE(S, name, fields) {(name), sizeof(S), NERVE_ALIGNOF(S), (fields), sizeof(fields) / sizeof((fields)[0])}\n\n\
+             /* A built-in payload struct T of this header as a nerve_type, for the parts of a\n \
+             * sequence or a call (nerve_setup_output_seq, nerve_setup_serve):\n \
+             *   static const nerve_type tick_type = NERVE_BUILTIN(nerve_Tick);\n \
+             * and a primitive by its Rust name: NERVE_BUILTIN_PRIMITIVE(uint8_t, \"u8\"). */\n\
+             #define NERVE_BUILTIN(T) {T##_TYPE_NAME, sizeof(T), NERVE_ALIGNOF(T), NULL, 0}\n\
+             #define NERVE_BUILTIN_PRIMITIVE(C, name) {(name), sizeof(C), NERVE_ALIGNOF(C), NULL, 0}\n\n",
         ),
         done: BTreeSet::new(),
     };
