@@ -289,6 +289,7 @@ impl Setup {
         let service = self.world.robot().port_service(self.name.as_str(), port);
         let (server, inner) = crate::port::Server::bind(&self.binding, port, &service, 1)?;
         self.calls.add_service::<Req, crate::port::call::Fixed<Resp>>(port, &mut self.schemas);
+        self.calls.add_memory(server.memory_port());
         self.inputs.push(inner);
         Ok(server)
     }
@@ -312,6 +313,7 @@ impl Setup {
         self.check_port(port)?;
         let (client, inner) = crate::port::Client::bind(&self.binding, port, options)?;
         self.calls.add_client::<Req, crate::port::call::Fixed<Resp>>(port, &mut self.schemas);
+        self.calls.add_memory(client.memory_port());
         self.inputs.push(inner);
         Ok(client)
     }
@@ -328,6 +330,7 @@ impl Setup {
         let service = self.world.robot().port_service(self.name.as_str(), port);
         let (server, inner) = crate::port::SeqServer::bind(&self.binding, port, &service, max_len)?;
         self.calls.add_service::<Req, crate::port::call_seq::SeqAnswer<T, H>>(port, &mut self.schemas);
+        self.calls.add_memory(server.memory_port());
         self.inputs.push(inner);
         Ok(server)
     }
@@ -351,6 +354,7 @@ impl Setup {
         self.check_port(port)?;
         let (client, inner) = crate::port::SeqClient::bind(&self.binding, port, options)?;
         self.calls.add_client::<Req, crate::port::call_seq::SeqAnswer<T, H>>(port, &mut self.schemas);
+        self.calls.add_memory(client.memory_port());
         self.inputs.push(inner);
         Ok(client)
     }

@@ -50,6 +50,12 @@
 //! finds them in a private robot (`test-PID-N`, [`Harness::world`]), whose
 //! files the harness removes when dropped.
 //!
+//! Calls work as on a running agent: the test calls a service the agent
+//! serves ([`Harness::call`], [`Harness::ask`]) and its own handler answers
+//! at its next step; the calls the agent makes through a client come to
+//! the test ([`Harness::requests`]), which answers them
+//! ([`Harness::answer`]), or, in a [`Wiring`], to another agent's service.
+//!
 //! Several agents wired together run in a [`Wiring`]: a harness per agent
 //! on one fake clock, outputs connected to inputs as the router connects
 //! them (and refused with the router's messages), periodic agents stepping
@@ -69,6 +75,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
+mod calls;
 pub mod wiring;
 pub use wiring::Wiring;
 
@@ -177,6 +184,34 @@ pub enum HarnessError {
         /// why an input refused it
         reason: String,
     },
+    /// A call the test made was not answered at the agent's step.
+    #[error(
+        "service {port:?}: {id} was not answered at the agent's step; does its step serve the port \
+         (`serve`/`serve_up_to` with a large enough max)?"
+    )]
+    NotAnswered {
+        /// the service
+        port: String,
+        /// the call
+        id: crate::port::CallId,
+    },
+    /// The test answered a call that is not in flight.
+    #[error("client {port:?}: {id} is not in flight (never made, answered already, timed out or unwired)")]
+    NotInFlight {
+        /// the client
+        port: String,
+        /// the call
+        id: crate::port::CallId,
+    },
+    /// A call the test made was answered with an error.
+    #[error("service {port:?}: {source}")]
+    Call {
+        /// the service
+        port: String,
+        /// what the call ended with
+        #[source]
+        source: crate::port::CallError,
+    },
     /// Event-driven agents kept waking each other at one instant.
     #[error(
         "the agents stepped {steps} times at {at_ns} ns without settling: a loop of connections \
@@ -277,7 +312,7 @@ impl<A: Agent> HarnessBuilder<A> {
         let cleanup = WorldCleanup(world);
         let agent =
             A::new(&mut setup).map_err(|source| HarnessError::Agent { kind: A::kind(), stage: "new", source })?;
-        let Setup { inputs, params, .. } = setup;
+        let Setup { inputs, params, calls, .. } = setup;
         for (key, value) in self.params {
             params.set(&key, &value).map_err(|reason| HarnessError::Param { key, value, reason })?;
         }
@@ -307,6 +342,7 @@ impl<A: Agent> HarnessBuilder<A> {
             last_ns: START_NS,
             suspended: self.suspended,
             errors: 0,
+            calls: calls.memory,
             _cleanup: cleanup,
         })
     }
@@ -339,6 +375,8 @@ pub struct Harness<A: Agent> {
     last_ns: u64,
     suspended: bool,
     errors: u64,
+    /// the call ports' in-memory queues
+    calls: Vec<crate::port::call::memory::MemCallPort>,
     // dropped last: the agent's own services are gone by then
     _cleanup: WorldCleanup,
 }

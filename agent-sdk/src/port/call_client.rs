@@ -4,6 +4,7 @@
 //! [`super::SeqClient`] (`call_seq`) sequences.
 
 use super::bytes::{Binding, DynInput};
+use super::call::memory::{MemCallPort, MemClient};
 use super::call::{
     ANSWERED_SUFFIX, Answer, CallError, CallId, CallOptions, Factory, Fixed, MAX_IN_FLIGHT, call_service,
     event_service, open_err,
@@ -73,6 +74,8 @@ pub(crate) struct ClientSide<Req: Payload, A: Answer> {
     spec: PortSpec,
     options: CallOptions,
     state: Mutex<ClientState<Req, A>>,
+    /// in the test harness: the calls, answered by the test or another agent
+    mem: Option<Arc<MemClient<Req, A::Value>>>,
     _types: PhantomData<fn(Req) -> A>,
 }
 
@@ -83,12 +86,14 @@ impl<Req: Payload, A: Answer> CallClient<Req, A> {
         port: &str,
         options: CallOptions,
     ) -> Result<(Self, Arc<dyn DynInput>), CallError> {
-        if matches!(binding, Binding::Memory(_)) {
-            return Err(CallError::NotInHarness { port: port.into() });
-        }
         let options =
             CallOptions { max_in_flight: options.max_in_flight.clamp(1, MAX_IN_FLIGHT), timeout: options.timeout };
+        let mem = match binding {
+            Binding::Memory(bus) => Some(MemClient::new(A::spec::<Req>(port), options, bus.clone())),
+            _ => None,
+        };
         let side = Arc::new(ClientSide {
+            mem,
             spec: A::spec::<Req>(port),
             options,
             state: Mutex::new(ClientState {
@@ -110,6 +115,9 @@ impl<Req: Payload, A: Answer> CallClient<Req, A> {
     /// wired, when no server answers the service, or past the bound of
     /// calls in flight.
     pub fn call(&self, request: &Req) -> Result<CallId, CallError> {
+        if let Some(mem) = &self.side.mem {
+            return mem.call(*request);
+        }
         let name = &self.side.spec.name;
         let mut st = lock(&self.side.state);
         let st = &mut *st;
@@ -139,6 +147,9 @@ impl<Req: Payload, A: Answer> CallClient<Req, A> {
     /// none (a timeout, the server gone mid-call, the client unwired).
     /// `None` while no call has finished. Never blocks.
     pub fn take(&self) -> Option<(CallId, Result<A::Value, CallError>)> {
+        if let Some(mem) = &self.side.mem {
+            return mem.take();
+        }
         let mut st = lock(&self.side.state);
         self.side.settle(&mut st, now_ns());
         st.done.pop_front()
@@ -146,12 +157,24 @@ impl<Req: Payload, A: Answer> CallClient<Req, A> {
 
     /// How many calls are in flight (sent, not yet finished).
     pub fn in_flight(&self) -> usize {
+        if let Some(mem) = &self.side.mem {
+            return mem.in_flight();
+        }
         lock(&self.side.state).in_flight.len()
     }
 
-    /// Whether the client is wired to a service now.
+    /// Whether the client is wired to a service now (in the test harness:
+    /// to the test, until a wiring wires it to another agent's service).
     pub fn is_wired(&self) -> bool {
+        if let Some(mem) = &self.side.mem {
+            return mem.is_wired();
+        }
         lock(&self.side.state).target.is_some()
+    }
+
+    /// In the test harness: the port as the harness reaches it.
+    pub(crate) fn memory_port(&self) -> Option<MemCallPort> {
+        self.side.mem.clone().map(|m| MemCallPort::Client(m))
     }
 
     /// The client's settings.
@@ -284,7 +307,7 @@ impl<Req: Payload, A: Answer> DynInput for ClientSide<Req, A> {
     }
 
     fn has_queued(&self) -> bool {
-        false
+        self.mem.as_ref().is_some_and(|m| m.has_answers())
     }
 
     fn queue(&self, _sender: &str, _port: &str, _sample: SampleBuf, _stamp_ns: u64) -> Result<(), PortError> {

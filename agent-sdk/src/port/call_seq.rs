@@ -31,6 +31,7 @@
 //! [`CallError::RefusedTooLong`].
 
 use super::bytes::{Binding, DynInput};
+use super::call::memory::{MemCallPort, Unanswered};
 use super::call::{Answer, CallError, Factory, MAX_IN_FLIGHT, Pending, ServerPort, call_settings, received};
 use super::call_client::CallClient;
 use super::call_server::CallServer;
@@ -233,6 +234,23 @@ impl<Req: Payload, T: SeqPart, H: SeqPart> SeqServer<Req, T, H> {
     /// requests are answered, then [`CallError::AnswerTooLong`] is returned.
     pub fn serve_up_to(&self, max: usize, mut answer: impl FnMut(&Req) -> (H, Vec<T>)) -> Result<usize, CallError> {
         let service = self.server.service();
+        if let Some(mem) = self.server.memory() {
+            let (n, first) = mem.serve::<std::convert::Infallible>(max, |request| {
+                let (header, items) = answer(request);
+                if items.len() > self.max_len {
+                    return Err(Unanswered::TooLong { len: items.len(), max: self.max_len });
+                }
+                Ok((header, items))
+            });
+            self.server.count_answered(n);
+            return match first {
+                Some(Unanswered::TooLong { len, max }) => {
+                    tracing::warn!(service, len, max, "an answer longer than the maximum was refused");
+                    Err(CallError::AnswerTooLong { service: service.into(), len, max })
+                }
+                _ => Ok(n),
+            };
+        }
         self.server.each_request(max, |request| {
             let (header, items) = answer(request.payload());
             let n = items.len();
@@ -296,6 +314,11 @@ impl<Req: Payload, T: SeqPart, H: SeqPart> SeqServer<Req, T, H> {
     /// The iceoryx2 service name.
     pub fn service(&self) -> &str {
         self.server.service()
+    }
+
+    /// In the test harness: the port as the harness reaches it.
+    pub(crate) fn memory_port(&self) -> Option<MemCallPort> {
+        self.server.memory_port()
     }
 }
 

@@ -4,6 +4,7 @@
 //! fixed-size payload, [`super::SeqServer`] (`call_seq`) with a sequence.
 
 use super::bytes::{Binding, DynInput};
+use super::call::memory::{MemCallPort, MemServer};
 use super::call::{
     ANSWERED_SUFFIX, Answer, CallError, Factory, Fixed, MAX_IN_FLIGHT, ServerPort, call_service, event_service,
     open_err,
@@ -51,6 +52,8 @@ pub(crate) struct ServerSide<Req: Payload, A: Answer> {
     spec: PortSpec,
     service: String,
     live: Option<ServerLive<Req, A>>,
+    /// in the test harness: the requests waiting for the step
+    mem: Option<Arc<MemServer<Req, A::Value>>>,
     answered: AtomicU64,
 }
 
@@ -63,9 +66,13 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
         service: &str,
         max_len: usize,
     ) -> Result<(Self, Arc<dyn DynInput>), CallError> {
+        let mut mem = None;
         let live = match binding {
             Binding::Nothing => None,
-            Binding::Memory(_) => return Err(CallError::NotInHarness { port: port.into() }),
+            Binding::Memory(_) => {
+                mem = Some(MemServer::new(A::spec::<Req>(port), service));
+                None
+            }
             Binding::Shm(node) => {
                 let factory = crate::world::retry_after_cleanup(
                     node.config(),
@@ -97,6 +104,7 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
             spec: A::spec::<Req>(port),
             service: service.into(),
             live,
+            mem,
             answered: AtomicU64::new(0),
         });
         Ok((CallServer { side: side.clone() }, side))
@@ -152,6 +160,21 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
         self.side.answered.load(Ordering::Relaxed)
     }
 
+    /// In the test harness: the requests waiting for the step.
+    pub(crate) fn memory(&self) -> Option<&Arc<MemServer<Req, A::Value>>> {
+        self.side.mem.as_ref()
+    }
+
+    /// In the test harness: the port as the harness reaches it.
+    pub(crate) fn memory_port(&self) -> Option<MemCallPort> {
+        self.side.mem.clone().map(|m| MemCallPort::Service(m))
+    }
+
+    /// Counts `n` more requests answered (in the harness).
+    pub(crate) fn count_answered(&self, n: usize) {
+        self.side.answered.fetch_add(n as u64, Ordering::Relaxed);
+    }
+
     /// The iceoryx2 service name.
     pub fn service(&self) -> &str {
         &self.side.service
@@ -163,6 +186,11 @@ impl<Req: Payload, Resp: Payload> CallServer<Req, Fixed<Resp>> {
     /// what arrives meanwhile is left for the next step, whose wake-up is
     /// pending); returns how many were answered.
     pub fn serve_up_to(&self, max: usize, mut answer: impl FnMut(&Req) -> Resp) -> Result<usize, CallError> {
+        if let Some(mem) = &self.side.mem {
+            let (n, _) = mem.serve::<std::convert::Infallible>(max, |request| Ok(answer(request)));
+            self.count_answered(n);
+            return Ok(n);
+        }
         self.each_request(max, |request| {
             if let Err(e) = request.send_copy(answer(request.payload())) {
                 // the client went away: nobody waits for this answer
@@ -220,7 +248,7 @@ impl<Req: Payload, A: Answer> DynInput for ServerSide<Req, A> {
         Vec::new()
     }
     fn has_queued(&self) -> bool {
-        false
+        self.mem.as_ref().is_some_and(|m| m.has_requests())
     }
     fn queue(&self, _sender: &str, _port: &str, _sample: SampleBuf, _stamp_ns: u64) -> Result<(), PortError> {
         Err(not_an_input(&self.spec.name))

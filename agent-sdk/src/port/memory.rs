@@ -164,6 +164,11 @@ impl Bus {
         self.clock.store(now_ns, Ordering::Release);
     }
 
+    /// The test's clock.
+    pub(crate) fn now_ns(&self) -> u64 {
+        self.clock.load(Ordering::Acquire)
+    }
+
     /// A new output `port` carrying `type_name`: where its samples go.
     pub(crate) fn add_output(&self, port: &str, type_name: &str, fingerprint: Option<u64>) -> Arc<Collected> {
         let samples = Arc::new(Collected { samples: Mutex::new(Vec::new()), clock: self.clock.clone() });

@@ -15,6 +15,7 @@
 //! of calls in flight a call is refused with nothing sent.
 
 use super::bytes::{Binding, DynInput, payload_bytes};
+use super::call::memory::{MemCallPort, MemClient, MemServer, Unanswered};
 use super::call::{
     ANSWERED_SUFFIX, CallError, CallId, CallOptions, MAX_IN_FLIGHT, call_settings, event_service, open_err,
     service_name,
@@ -186,6 +187,8 @@ struct ServerSide {
     layouts: Layouts,
     service: String,
     live: Option<ServerLive>,
+    /// in the test harness: the requests (bytes) waiting for the step
+    mem: Option<Arc<MemServer<Vec<u8>, Vec<u8>>>>,
     answered: AtomicU64,
 }
 
@@ -200,15 +203,14 @@ pub enum ServeError<E> {
 }
 
 impl SchemaServer {
-    fn bind(
-        binding: &Binding,
-        port: &str,
-        service: &str,
-        layouts: Layouts,
-    ) -> Result<(Self, Arc<ServerSide>), CallError> {
+    fn bind(binding: &Binding, service: &str, layouts: Layouts) -> Result<(Self, Arc<ServerSide>), CallError> {
+        let mut mem = None;
         let live = match binding {
             Binding::Nothing => None,
-            Binding::Memory(_) => return Err(CallError::NotInHarness { port: port.into() }),
+            Binding::Memory(_) => {
+                mem = Some(MemServer::new(layouts.spec.clone(), service));
+                None
+            }
             Binding::Shm(node) => {
                 let factory = crate::world::retry_after_cleanup(
                     node.config(),
@@ -236,7 +238,7 @@ impl SchemaServer {
                 })
             }
         };
-        let side = Arc::new(ServerSide { layouts, service: service.into(), live, answered: AtomicU64::new(0) });
+        let side = Arc::new(ServerSide { layouts, service: service.into(), live, mem, answered: AtomicU64::new(0) });
         Ok((SchemaServer { side: side.clone() }, side))
     }
 
@@ -250,6 +252,19 @@ impl SchemaServer {
         max: usize,
         mut answer: impl FnMut(&[u8], &mut [u8]) -> Result<(), E>,
     ) -> Result<usize, ServeError<E>> {
+        if let Some(mem) = &self.side.mem {
+            let size = self.side.layouts.response.size;
+            let (n, first) = mem.serve(max, |request| {
+                let mut out = vec![0u8; size];
+                answer(request, &mut out).map_err(Unanswered::Failed)?;
+                Ok(out)
+            });
+            self.side.answered.fetch_add(n as u64, Ordering::Relaxed);
+            return match first {
+                Some(Unanswered::Failed(e)) => Err(ServeError::Answer(e)),
+                _ => Ok(n),
+            };
+        }
         let Some(live) = &self.side.live else { return Ok(0) };
         let service = &self.side.service;
         let size = self.side.layouts.response.size;
@@ -369,7 +384,7 @@ impl DynInput for ServerSide {
         Vec::new()
     }
     fn has_queued(&self) -> bool {
-        false
+        self.mem.as_ref().is_some_and(|m| m.has_requests())
     }
     fn queue(&self, _sender: &str, _port: &str, _sample: SampleBuf, _stamp_ns: u64) -> Result<(), PortError> {
         Err(not_an_input(&self.layouts.spec.name))
@@ -425,21 +440,20 @@ struct ClientSide {
     layouts: Layouts,
     options: CallOptions,
     state: Mutex<ClientState>,
+    /// in the test harness: the calls (bytes), answered by the test or another agent
+    mem: Option<Arc<MemClient<Vec<u8>, Vec<u8>>>>,
 }
 
 impl SchemaClient {
-    fn bind(
-        binding: &Binding,
-        port: &str,
-        layouts: Layouts,
-        options: CallOptions,
-    ) -> Result<(Self, Arc<ClientSide>), CallError> {
-        if matches!(binding, Binding::Memory(_)) {
-            return Err(CallError::NotInHarness { port: port.into() });
-        }
+    fn bind(binding: &Binding, layouts: Layouts, options: CallOptions) -> Result<(Self, Arc<ClientSide>), CallError> {
         let options =
             CallOptions { max_in_flight: options.max_in_flight.clamp(1, MAX_IN_FLIGHT), timeout: options.timeout };
+        let mem = match binding {
+            Binding::Memory(bus) => Some(MemClient::new(layouts.spec.clone(), options, bus.clone())),
+            _ => None,
+        };
         let side = Arc::new(ClientSide {
+            mem,
             layouts,
             options,
             state: Mutex::new(ClientState {
@@ -462,6 +476,19 @@ impl SchemaClient {
     pub fn call(&self, request: &[u8]) -> Result<CallId, CallError> {
         let name = &self.side.layouts.spec.name;
         let size = self.side.layouts.request.size;
+        if let Some(mem) = &self.side.mem {
+            if request.len() != size {
+                return Err(CallError::Open {
+                    service: name.clone(),
+                    detail: format!(
+                        "a {}-byte request for the {size}-byte {}",
+                        request.len(),
+                        self.side.layouts.request.type_name
+                    ),
+                });
+            }
+            return mem.call(request.to_vec());
+        }
         let mut st = lock(&self.side.state);
         let st = &mut *st;
         let Some(t) = &st.target else { return Err(CallError::NotWired { client: name.clone() }) };
@@ -514,6 +541,9 @@ impl SchemaClient {
     /// The next finished call, oldest first: its answer's bytes, or why
     /// there is none. `None` while no call has finished. Never blocks.
     pub fn take(&self) -> Option<Finished> {
+        if let Some(mem) = &self.side.mem {
+            return mem.take();
+        }
         let mut st = lock(&self.side.state);
         self.side.settle(&mut st, now_ns());
         st.done.pop_front()
@@ -521,11 +551,17 @@ impl SchemaClient {
 
     /// How many calls are in flight.
     pub fn in_flight(&self) -> usize {
+        if let Some(mem) = &self.side.mem {
+            return mem.in_flight();
+        }
         lock(&self.side.state).in_flight.len()
     }
 
     /// Whether the client is wired to a service now.
     pub fn is_wired(&self) -> bool {
+        if let Some(mem) = &self.side.mem {
+            return mem.is_wired();
+        }
         lock(&self.side.state).target.is_some()
     }
 
@@ -701,7 +737,7 @@ impl DynInput for ClientSide {
     }
 
     fn has_queued(&self) -> bool {
-        false
+        self.mem.as_ref().is_some_and(|m| m.has_answers())
     }
 
     fn queue(&self, _sender: &str, _port: &str, _sample: SampleBuf, _stamp_ns: u64) -> Result<(), PortError> {
@@ -720,8 +756,9 @@ impl Setup {
         self.check_call_port(port)?;
         let layouts = Layouts::of(port, request, response)?;
         let service = self.world.robot().port_service(self.name.as_str(), port);
-        let (server, side) = SchemaServer::bind(&self.binding, port, &service, layouts.clone())?;
+        let (server, side) = SchemaServer::bind(&self.binding, &service, layouts.clone())?;
         self.declare_call(&layouts, true);
+        self.calls.add_memory(side.mem.clone().map(|m| MemCallPort::Service(m)));
         self.inputs.push(side);
         Ok(server)
     }
@@ -737,8 +774,9 @@ impl Setup {
     ) -> Result<SchemaClient, AgentError> {
         self.check_call_port(port)?;
         let layouts = Layouts::of(port, request, response)?;
-        let (client, side) = SchemaClient::bind(&self.binding, port, layouts.clone(), options)?;
+        let (client, side) = SchemaClient::bind(&self.binding, layouts.clone(), options)?;
         self.declare_call(&layouts, false);
+        self.calls.add_memory(side.mem.clone().map(|m| MemCallPort::Client(m)));
         self.inputs.push(side);
         Ok(client)
     }

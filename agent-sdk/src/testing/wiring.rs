@@ -19,11 +19,18 @@
 //!   a chain of event-driven agents settles at the instant the sample that
 //!   started it was sent;
 //! - an output connected to an input gives its samples to the inputs; one
-//!   connected to none keeps them for [`Wiring::output`].
+//!   connected to none keeps them for [`Wiring::output`];
+//! - a client connected to a service (`connect("a/planner", "b/plan")`)
+//!   sends its calls there: a request wakes the server's agent, if
+//!   event-driven, and its answer the client's, at the same instant; a
+//!   client connected to none calls the test ([`Harness::requests`]), and
+//!   one disconnected from its service is not wired (its calls refused).
 
+use super::calls::{client_of, service_of};
 use super::{Bus, Harness, HarnessBuilder, HarnessError, START_NS, sample_of, typed_input, typed_output};
 use crate::agent::{Agent, AgentError};
 use crate::port::bytes::DynInput;
+use crate::port::call::memory::MemCallPort;
 use shm_schemas::Payload;
 use shm_schemas::control::cli_to_router::RouterError;
 use std::any::Any;
@@ -54,6 +61,7 @@ trait Member: Any {
     fn forward(&self, port: &str, targets: &[Arc<dyn DynInput>]) -> Result<usize, String>;
     fn set_suspended(&mut self, suspended: bool);
     fn bus(&self) -> &Bus;
+    fn calls(&self) -> &[MemCallPort];
     fn as_any(&self) -> &dyn Any;
     fn as_any_mut(&mut self) -> &mut dyn Any;
 }
@@ -106,6 +114,9 @@ impl<A: Agent> Member for Harness<A> {
     }
     fn bus(&self) -> &Bus {
         &self.bus
+    }
+    fn calls(&self) -> &[MemCallPort] {
+        self.call_ports()
     }
     fn as_any(&self) -> &dyn Any {
         self
@@ -181,6 +192,8 @@ struct Link {
 pub struct Wiring {
     members: Vec<Box<dyn Member>>,
     links: Vec<Link>,
+    /// clients (`from`) wired to services (`to`)
+    call_links: Vec<Link>,
     /// per agent: a sample came since its last step
     notified: Vec<bool>,
     now_ns: u64,
@@ -205,7 +218,13 @@ impl Default for Wiring {
 impl Wiring {
     /// No agents yet; the clock at 1 s, as a [`Harness`]'s.
     pub fn new() -> Self {
-        Wiring { members: Vec::new(), links: Vec::new(), notified: Vec::new(), now_ns: START_NS }
+        Wiring {
+            members: Vec::new(),
+            links: Vec::new(),
+            call_links: Vec::new(),
+            notified: Vec::new(),
+            now_ns: START_NS,
+        }
     }
 
     /// Starts agent `A` named `name` with its own defaults and adds it.
@@ -322,6 +341,9 @@ impl Wiring {
     /// type, or one type name of two layouts.
     pub fn connect(&mut self, from: &str, to: &str) -> Result<(), HarnessError> {
         let link = self.link(from, to)?;
+        if self.is_client(&link) {
+            return self.connect_call(from, to, link);
+        }
         let (type_name, fingerprint) = self.output_spec(link.from, &link.from_port)?;
         let spec = self.input(link.to, &link.to_port)?.spec();
         if type_name != spec.type_name {
@@ -356,11 +378,76 @@ impl Wiring {
     /// does. Samples already queued on the input stay there.
     pub fn disconnect(&mut self, from: &str, to: &str) -> Result<(), HarnessError> {
         let link = self.link(from, to)?;
+        if let Some(at) = self.call_links.iter().position(|l| *l == link) {
+            let client = client_of(self.members[link.from].calls(), &link.from_port)?;
+            client.unwire(self.members[link.to].name(), &link.to_port);
+            self.call_links.remove(at);
+            tracing::debug!(from, to, "wiring: client unwired");
+            return Ok(());
+        }
         let Some(at) = self.links.iter().position(|l| *l == link) else {
             return Err(RouterError::NotConnected { from: from.into(), to: to.into() }.into());
         };
         self.links.remove(at);
         tracing::debug!(from, to, "wiring: disconnected");
+        Ok(())
+    }
+
+    /// Whether `link` starts at a client port.
+    fn is_client(&self, link: &Link) -> bool {
+        self.members[link.from]
+            .calls()
+            .iter()
+            .any(|c| matches!(c, MemCallPort::Client(_)) && c.name() == link.from_port)
+    }
+
+    /// Wires client `from` to service `to`, typed as the router types them.
+    fn connect_call(&mut self, from: &str, to: &str, link: Link) -> Result<(), HarnessError> {
+        let client = client_of(self.members[link.from].calls(), &link.from_port)?;
+        let server_calls = self.members[link.to].calls();
+        let service = service_of(server_calls, &link.to_port).map_err(|_| RouterError::UnknownPort {
+            agent: self.members[link.to].name().into(),
+            port: link.to_port.clone(),
+            direction: "service".into(),
+            available: server_calls
+                .iter()
+                .filter(|c| matches!(c, MemCallPort::Service(_)))
+                .map(|c| c.name().to_owned())
+                .collect(),
+        })?;
+        let (c, s) = (client.spec(), service.spec());
+        if c.type_name != s.type_name {
+            return Err(RouterError::TypeMismatch {
+                from: from.into(),
+                from_type: c.type_name.clone(),
+                to: to.into(),
+                to_type: s.type_name.clone(),
+            }
+            .into());
+        }
+        if c.fingerprint != 0 && s.fingerprint != 0 && c.fingerprint != s.fingerprint {
+            return Err(RouterError::LayoutMismatch {
+                from: from.into(),
+                to: to.into(),
+                type_name: c.type_name.clone(),
+                from_fingerprint: c.fingerprint,
+                to_fingerprint: s.fingerprint,
+                rebuild: "both are built into this test: declare the port with the payload type's own definition"
+                    .into(),
+            }
+            .into());
+        }
+        if !client.wire(self.members[link.to].name(), &link.to_port, service.clone().as_any()) {
+            return Err(HarnessError::WrongType {
+                port: to.into(),
+                carries: format!("{} ({})", s.type_name, service.value_type().1),
+                asked: client.value_type().1,
+            });
+        }
+        // one service per client, as the router wires it
+        self.call_links.retain(|l| !(l.from == link.from && l.from_port == link.from_port));
+        tracing::debug!(from, to, "wiring: client wired");
+        self.call_links.push(link);
         Ok(())
     }
 
@@ -429,6 +516,11 @@ impl Wiring {
         let mut steps = 0;
         loop {
             self.deliver()?;
+            for (m, notified) in self.members.iter().zip(&mut self.notified) {
+                // every port looked at: each one's flag is cleared
+                let woken = m.calls().iter().fold(false, |w, c| c.take_woken() | w);
+                *notified |= woken;
+            }
             let next = self
                 .members
                 .iter()

@@ -42,7 +42,7 @@
 //! read-only figures `landmarks`, `confirmed`, `cells`, `paths_sent`,
 //! `maps_sent`, `plans`.
 
-use agent_sdk::port::{CallError, SeqOutput, SeqServer};
+use agent_sdk::port::{SeqOutput, SeqServer};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_map_builder::{MapBuilder, Pose, Settings, SightingEvent, VisitedGrid, plan::plan};
 use shm_schemas::payloads::{
@@ -90,8 +90,7 @@ struct MapBuilderAgent {
     mission_out: Output<MissionCommand>,
     revisit_out: Output<Scalar>,
     map_out: SeqOutput<MapCell, MapHeader>,
-    /// `None` in the SDK's test harness, which has no calls yet.
-    plan: Option<SeqServer<PlanRequest, PathPoint, PathHeader>>,
+    plan: SeqServer<PlanRequest, PathPoint, PathHeader>,
     via_distance_m: Param<f64>,
     merge_m: Param<f64>,
     min_sightings: Param<u32>,
@@ -168,7 +167,7 @@ impl MapBuilderAgent {
 
     /// Answers the `plan` calls waiting: paths from `pose` over the grid.
     fn serve_plans(&self, pose: Option<Pose>, now: u64) {
-        let Some(server) = &self.plan else { return };
+        let server = &self.plan;
         let (grid, tolerance) = (&self.grid, self.goal_tolerance_m.get());
         let start = pose.map(|p| (p.x, p.y));
         let served = server.serve(|goal| {
@@ -218,11 +217,7 @@ impl Agent for MapBuilderAgent {
                 ("plans".into(), g(&f2.plans)),
             ]
         });
-        let plan = match setup.serve_seq("plan", MAX_PATH_POINTS) {
-            Ok(server) => Some(server),
-            Err(AgentError::Call(CallError::NotInHarness { .. })) => None,
-            Err(e) => return Err(e),
-        };
+        let plan = setup.serve_seq("plan", MAX_PATH_POINTS)?;
         Ok(MapBuilderAgent {
             pose: setup.input("pose")?,
             sighting: setup.input("sighting")?,
@@ -394,6 +389,7 @@ mod tests {
 
     use super::*;
     use agent_sdk::testing::Harness;
+    use shm_schemas::payloads::PlanStatus;
 
     fn pose(x: f64, stamp_ns: u64) -> PoseEstimate {
         PoseEstimate { x, stamp_ns, ..Default::default() }
@@ -487,6 +483,29 @@ mod tests {
         h.send("pose", pose(5.0, h.now_ns())).expect("pose");
         h.run_cycles(30).expect("steps");
         assert!(maps(&mut h).is_empty(), "map_every 0: no map");
+    }
+
+    /// `plan` answered at the agent's step, as `nerve call` gets it: along
+    /// the cells driven, and a goal far from them refused with no points.
+    #[test]
+    fn plan_is_answered_over_the_cells_driven() {
+        let mut h = Harness::<MapBuilderAgent>::new().expect("the map builder starts");
+        for x in [0.1, 0.6, 1.1, 1.6] {
+            h.send("pose", pose(x, h.now_ns())).expect("pose");
+            h.step().expect("step");
+        }
+        let ask = |h: &mut Harness<MapBuilderAgent>, x: f64| {
+            h.ask::<PlanRequest, (PathHeader, Vec<PathPoint>)>("plan", PlanRequest { x, y: 0.0, stamp_ns: 0 })
+                .expect("answered")
+        };
+        let (header, points) = ask(&mut h, 0.1);
+        assert_eq!(header.status(), Some(PlanStatus::Found), "{header:?}");
+        assert!((header.start_x - 1.6).abs() < 0.5 && header.length_m > 1.0, "{header:?}");
+        let end = points.last().expect("way points");
+        assert!(end.x < 0.5 && end.y.abs() < 0.5, "{points:?}");
+        let (header, points) = ask(&mut h, 9.0);
+        assert_eq!((header.status(), points.len()), (Some(PlanStatus::GoalUnseen), 0));
+        assert_eq!(h.param("plans").as_deref(), Ok("2"));
     }
 
     #[test]
