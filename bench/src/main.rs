@@ -34,6 +34,7 @@
 mod agents;
 mod bridge;
 mod bridge_agents;
+mod c_hop;
 mod control;
 mod dds;
 mod dora;
@@ -282,6 +283,21 @@ enum Scenario {
         /// All robots on loopback instead of a network namespace each (no root needed).
         #[arg(long)]
         no_netns: bool,
+    },
+    /// C and C++ agents (issue 43): their one-hop round trip beside a Rust agent's, 8 B to 1080p.
+    C {
+        #[command(flatten)]
+        common: Common,
+        /// Payload sizes in bytes (8, 4096, 230400, 6220800).
+        #[arg(long, value_delimiter = ',', default_values_t = payloads::SIZES)]
+        payloads: Vec<usize>,
+        /// Measured rounds (each row one batch per round and size, interleaved).
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// Build the C and C++ pongs with the zeroing loan (`nerve_loan`, the C API's only one
+        /// before `nerve_loan_uninit`): what writing the whole slot costs.
+        #[arg(long)]
+        loan_zeroed: bool,
     },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
@@ -553,6 +569,18 @@ fn run(cli: Cli) -> Result<()> {
             };
             let report = fleet::run(&opts)?;
             publish(&common, "fleet", &report, report.seconds, |_| Ok(vec![]), fleet::print_tables)?;
+        }
+        Scenario::C { common, payloads, rounds, loan_zeroed } => {
+            let opts = c_hop::COpts {
+                quick: common.quick,
+                sizes: payloads,
+                loan_zeroed,
+                rounds: rounds.unwrap_or(if common.quick { 1 } else { 7 }).max(1),
+                verbose: common.verbose,
+                work: c_hop::work_dir(&common.out),
+            };
+            let report = removing_work(&opts.work, || c_hop::run(&opts))?;
+            publish(&common, "c", &report, report.seconds, |_| Ok(vec![]), c_hop::print_tables)?;
         }
         Scenario::Jitter { common, rates, seconds, rounds } => {
             let opts = jitter::JitterOpts {
