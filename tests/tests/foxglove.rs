@@ -9,7 +9,8 @@
 //! a wrong token are refused; a client that stops reading is disconnected
 //! while the robot and the other clients go on; parameters are read and
 //! set through the router (a refused value refused, no token no change);
-//! the connection graph follows `nerve connect`; a message published into
+//! the connection graph follows `nerve connect` and lists an agent's
+//! service with its provider while it runs; a message published into
 //! an input comes out of the relay, one of the wrong shape is refused;
 //! 100 subscribe/unsubscribe cycles leave the server's memory flat; an
 //! odometry agent's pose is also a `foxglove.FrameTransform` channel, and
@@ -327,11 +328,14 @@ fn parameters_and_publishing_need_the_token_and_go_through_the_router() {
     );
 }
 
+/// The Topic Graph panel's graph: who feeds whom, following `nerve
+/// connect`; then an agent serving `plan` comes (its service advertised with
+/// it as provider) and goes (the service named removed).
 #[test]
 fn the_connection_graph_follows_nerve_connect() {
     let r = robot("fxgraph");
     let fox = Fox::start(&r, &[]);
-    let mut watcher = client(&["graph", &fox.url, "/r1/out"]);
+    let mut watcher = client(&["graph", &fox.url, "/r1/out", "/s/plan"]);
     let lines = lines_of(&mut watcher);
     let first = next_line(&lines);
     let t1 = first["first"]["subscribedTopics"]
@@ -346,6 +350,18 @@ fn the_connection_graph_follows_nerve_connect() {
         .and_then(|t| t.iter().find(|t| t["name"] == "/r1/out"))
         .map(|t| t["subscriberIds"].clone());
     assert_eq!(r1, Some(serde_json::json!(["r2"])), "{changed}");
+    assert_eq!(changed["changed"]["advertisedServices"], serde_json::json!([]), "the pipeline serves nothing");
+    r.ok(&["start", "caller", "--name", "s", "--", "--serve"]);
+    let served = next_line(&lines);
+    let plan = served["served"]["advertisedServices"]
+        .as_array()
+        .and_then(|s| s.iter().find(|s| s["name"] == "/s/plan"))
+        .map(|s| s["providerIds"].clone());
+    assert_eq!(plan, Some(serde_json::json!(["s"])), "{served}");
+    r.ok(&["stop", "s"]);
+    let removed = next_line(&lines);
+    let still = removed["removed"]["advertisedServices"].as_array().is_some_and(|s| s.iter().any(|s| s["name"] == "/s/plan"));
+    assert!(!still, "/s/plan both advertised and removed: {removed}");
     assert!(watcher.wait().expect("client").success());
 }
 

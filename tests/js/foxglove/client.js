@@ -8,7 +8,7 @@
 //   node client.js refused URL SUBPROTOCOL [ORIGIN]
 //   node client.js stall URL TOPIC PAUSE_MS
 //   node client.js params URL NAME GOOD BAD
-//   node client.js graph URL TOPIC
+//   node client.js graph URL TOPIC [SERVICE]
 //   node client.js publish URL TOPIC JSON COUNT
 //   node client.js cycles URL TOPIC N
 //   node client.js drive URL PUB_TOPIC JSON SUB_TOPIC
@@ -158,8 +158,9 @@ async function params(url, name, good, bad) {
 }
 
 // Prints the first connection graph, then the first one that shows `topic`
-// feeding an agent it did not feed before.
-async function graph(url, topic) {
+// feeding an agent it did not feed before; with `service`, then the first
+// one that advertises it and the first after that which names it removed.
+async function graph(url, topic, service) {
   const s = connect(url);
   await until(() => s.serverInfo, 10000, "serverInfo");
   const updates = [];
@@ -175,6 +176,21 @@ async function graph(url, topic) {
     `a new subscriber of ${topic}`,
   );
   say({ changed });
+  if (service) {
+    const served = await until(
+      () => updates.find((u) => (u.advertisedServices || []).some((v) => v.name === service)),
+      15000,
+      `${service} in advertisedServices`,
+    );
+    say({ served });
+    const after = updates.indexOf(served);
+    const removed = await until(
+      () => updates.slice(after).find((u) => (u.removedServices || []).includes(service)),
+      15000,
+      `${service} in removedServices`,
+    );
+    say({ removed });
+  }
   s.client.close();
 }
 
@@ -401,7 +417,7 @@ const run = {
   refused: () => refused(args[0], args[1], args[2]),
   stall: () => stall(args[0], args[1], Number(args[2])),
   params: () => params(args[0], args[1], args[2], args[3]),
-  graph: () => graph(args[0], args[1]),
+  graph: () => graph(args[0], args[1], args[2]),
   publish: () => publish(args[0], args[1], args[2], Number(args[3])),
   cycles: () => cycles(args[0], args[1], Number(args[2])),
   drive: () => drive(args[0], args[1], args[2], args[3]),
