@@ -360,7 +360,8 @@ fn the_connection_graph_follows_nerve_connect() {
     assert_eq!(plan, Some(serde_json::json!(["s"])), "{served}");
     r.ok(&["stop", "s"]);
     let removed = next_line(&lines);
-    let still = removed["removed"]["advertisedServices"].as_array().is_some_and(|s| s.iter().any(|s| s["name"] == "/s/plan"));
+    let still =
+        removed["removed"]["advertisedServices"].as_array().is_some_and(|s| s.iter().any(|s| s["name"] == "/s/plan"));
     assert!(!still, "/s/plan both advertised and removed: {removed}");
     assert!(watcher.wait().expect("client").success());
 }
