@@ -7,7 +7,7 @@
 use crate::{cdr, config, convert, link, msgs};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
 use config::{Config, PubMap, SubMap};
-use link::{Inbox, Outgoing, Stats};
+use link::{Arrived, Inbox, Outgoing, Stats};
 use msgs::RosMessage;
 use shm_schemas::payloads::motion::{GroundTruth, Odometry, VelocityCommand};
 use shm_schemas::payloads::sonar::SonarScan;
@@ -42,8 +42,14 @@ enum PubInput {
     User(agent_sdk::dynamic::SchemaInput),
 }
 
+enum SubPort {
+    Velocity(Output<VelocityCommand>),
+    /// any layout, mapped field by field (`Subscribe::user`)
+    User(agent_sdk::dynamic::SchemaOutput),
+}
+
 struct SubOutput {
-    out: Output<VelocityCommand>,
+    out: SubPort,
     inbox: Arc<Inbox>,
 }
 
@@ -95,11 +101,14 @@ impl Agent for Ros2 {
         }
         let mut outputs = Vec::new();
         for s in &cfg.subscribe {
-            match s.map {
-                SubMap::TwistToVelocity => {
-                    outputs.push(SubOutput { out: setup.output(&s.output)?, inbox: Arc::new(Inbox::default()) })
+            let out = match (s.map, &s.user) {
+                (SubMap::TwistToVelocity, _) => SubPort::Velocity(setup.output(&s.output)?),
+                (SubMap::User, Some(m)) => SubPort::User(setup.output_of(&s.output, m.schema.clone())?),
+                (SubMap::User, None) => {
+                    return Err(AgentError::Config(format!("{}: a mapping without its plan", s.topic)));
                 }
-            }
+            };
+            outputs.push(SubOutput { out, inbox: Arc::new(Inbox::default()) });
         }
         let stats = Arc::new(Stats::new(cfg.publish.len()));
         {
@@ -223,11 +232,16 @@ impl Agent for Ros2 {
                 }
             }
         }
-        for o in &self.outputs {
-            for twist in o.inbox.take() {
-                match convert::twist_to_velocity(&twist, now) {
-                    Ok(cmd) => o.out.send(cmd)?,
-                    Err(e) => o.inbox.refuse(&e.to_string()),
+        for o in &mut self.outputs {
+            for arrived in o.inbox.take() {
+                match (arrived, &mut o.out) {
+                    (Arrived::Twist(twist), SubPort::Velocity(out)) => match convert::twist_to_velocity(&twist, now) {
+                        Ok(cmd) => out.send(cmd)?,
+                        Err(e) => o.inbox.refuse(&e.to_string()),
+                    },
+                    (Arrived::Sample(bytes), SubPort::User(out)) => out.send_bytes(&bytes)?,
+                    // the link decodes by the same configuration: never
+                    _ => o.inbox.refuse("a message of another mapping"),
                 }
             }
         }

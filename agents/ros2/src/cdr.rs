@@ -249,6 +249,23 @@ impl<'a> Reader<'a> {
     pub fn bool(&mut self) -> Result<bool, CdrError> {
         Ok(self.take("bool", 1, 1)?[0] != 0)
     }
+    /// `int8`
+    pub fn i8(&mut self) -> Result<i8, CdrError> {
+        Ok(i8::from_le_bytes(self.array("int8")?))
+    }
+    /// `uint16`
+    pub fn u16(&mut self) -> Result<u16, CdrError> {
+        Ok(u16::from_le_bytes(self.array("uint16")?))
+    }
+    /// `int16`
+    pub fn i16(&mut self) -> Result<i16, CdrError> {
+        Ok(i16::from_le_bytes(self.array("int16")?))
+    }
+    /// How many bytes are left to read (a count from the wire is checked
+    /// against it before anything is done that many times).
+    pub fn remaining(&self) -> usize {
+        self.body.len().saturating_sub(self.pos)
+    }
     /// `uint32`
     pub fn u32(&mut self) -> Result<u32, CdrError> {
         Ok(u32::from_le_bytes(self.array("uint32")?))

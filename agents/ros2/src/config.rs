@@ -37,6 +37,13 @@
 //! type = "geometry_msgs/msg/Vector3"
 //! fields = { "x" = "width_m", "y" = "force_n", "z" = "closed" }   # "ROS field" = "nerve field"
 //!
+//! [[subscribe]]                       # any vendored ROS message as a payload, field by field
+//! topic = "/gripper_cmd"
+//! type = "geometry_msgs/msg/Vector3"
+//! output = "gripper_cmd"
+//! to = "lab::Gripper"
+//! fields = { "width_m" = "x", "force_n" = "y" }   # "nerve field" = "ROS field" (the key is filled)
+//!
 //! [[static_transform]]                # on /tf_static, transient local (late joiners get it)
 //! frame_id = "base_link"
 //! child_frame_id = "camera"
@@ -45,6 +52,7 @@
 //! ```
 
 use crate::usermap::UserMap;
+use crate::usersub::UserSub;
 use crate::wire::Distro;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -87,6 +95,8 @@ pub const PUB_MAPS: &[(&str, &str, PubMap)] = &[
 pub enum SubMap {
     /// `geometry_msgs/msg/Twist` → `nerve::VelocityCommand` (linear.x, angular.z)
     TwistToVelocity,
+    /// any vendored message → any payload, field by field ([`Subscribe::user`])
+    User,
 }
 
 /// The conversions of `[[subscribe]]`: (ROS type, nerve type, conversion).
@@ -191,11 +201,13 @@ struct RawSubscribe {
     #[serde(rename = "type")]
     ros_type: String,
     output: String,
-    to: String,
+    to: Spanned<String>,
     #[serde(default)]
     reliability: Reliability,
     #[serde(default = "default_depth")]
     depth: u32,
+    /// `"nerve field" = "ROS field"` (a user's mapping)
+    fields: Option<BTreeMap<String, Spanned<String>>>,
 }
 
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -258,6 +270,8 @@ pub struct Subscribe {
     pub map: SubMap,
     /// the QoS in its token
     pub qos: crate::wire::Qos,
+    /// [`SubMap::User`]: the payload's layout and its field-by-field plan
+    pub user: Option<UserSub>,
 }
 
 /// The topic static transforms go on, as tf2's static broadcaster's.
@@ -489,16 +503,50 @@ pub fn parse(path: &Path, text: &str, agent: &str) -> Result<Config, ConfigError
         if !ros_name_ok(&s.output) || !outputs.insert(s.output.clone()) {
             return Err(invalid(format!("[[subscribe]] output = {:?}: a port name, once per agent", s.output)));
         }
-        let map =
-            SUB_MAPS.iter().find(|(from, to, _)| *from == s.ros_type && *to == s.to).map(|m| m.2).ok_or_else(|| {
-                invalid(format!(
-                    "[[subscribe]] {}: no conversion from {} to {}; the agent knows {}",
-                    s.topic,
-                    s.ros_type,
-                    s.to,
-                    list(SUB_MAPS.iter().map(|(a, b, _)| format!("{a} -> {b}")))
-                ))
-            })?;
+        let to = s.to.get_ref();
+        let built = SUB_MAPS.iter().find(|(from, t, _)| *from == s.ros_type && t == to).map(|m| m.2);
+        let declared = types.get(to);
+        let (map, user) = match (&s.fields, built, declared) {
+            (None, Some(m), _) => (m, None),
+            (fields, _, _) if fields.is_some() || declared.is_some() => {
+                let Some(schema) = declared.map(|d| d.1.clone()).or_else(|| shm_schemas::schema::built_in_named(to))
+                else {
+                    return Err(at(
+                        s.to.span(),
+                        format!(
+                            "[[subscribe]] {}: to = {to:?} is neither a built-in payload nor a [[type]] of this file",
+                            s.topic
+                        ),
+                    ));
+                };
+                let pairs: Option<Vec<(String, String)>> =
+                    s.fields.as_ref().map(|f| f.iter().map(|(k, v)| (k.clone(), v.get_ref().clone())).collect());
+                let m = UserSub::new(schema, &s.ros_type, pairs.as_deref()).map_err(|e| {
+                    // an entry's line; by name, the line of the nerve
+                    // field's first part in [[type]]
+                    let start = match (&e.key, &s.fields, declared) {
+                        (Some(k), Some(f), _) => f.get(k).map(|v| v.span().start),
+                        (Some(k), None, Some((lines, _))) => lines.get(k.split('.').next().unwrap_or(k)).copied(),
+                        _ => None,
+                    };
+                    let start = start.unwrap_or(s.to.span().start);
+                    at(start..start, format!("[[subscribe]] {}: {}", s.topic, e.what))
+                })?;
+                (SubMap::User, Some(m))
+            }
+            _ => {
+                return Err(at(
+                    s.to.span(),
+                    format!(
+                        "[[subscribe]] {}: no conversion from {} to {to}; the agent knows {}; or map the fields \
+                         yourself: fields = {{ \"nerve field\" = \"ROS field\", ... }}",
+                        s.topic,
+                        s.ros_type,
+                        list(SUB_MAPS.iter().map(|(a, b, _)| format!("{a} -> {b}")))
+                    ),
+                ));
+            }
+        };
         subscribe.push(Subscribe {
             topic: crate::wire::qualified_topic(&namespace, &s.topic),
             ros_type: s.ros_type,
@@ -509,6 +557,7 @@ pub fn parse(path: &Path, text: &str, agent: &str) -> Result<Config, ConfigError
                 transient_local: false,
                 depth: s.depth,
             },
+            user,
         });
     }
     let mut static_transforms = Vec::new();
@@ -716,5 +765,67 @@ topic = "/gripper"
         assert!(e.contains("unknown field") || e.starts_with("r.toml:"), "{e}");
         let e = p("[[type]]\nname = \"lab::T\"\nfields = [[\"a\", \"float\"]]\n").expect_err("bad field type");
         assert!(e.starts_with("r.toml:2: [[type]] lab::T: field \"a\""), "{e}");
+    }
+
+    /// A ROS message received as a user's own type (`[[subscribe]]` with
+    /// `fields`, "nerve field" = "ROS field"), by name without `fields`, and
+    /// its mistakes at their lines.
+    #[test]
+    fn a_ros_message_subscribed_as_a_users_type_and_its_mistakes_at_their_line() {
+        let head = r#"[[type]]
+name = "lab::Pose2D"
+fields = [
+  ["x", "f64"],
+  ["y", "f32"],
+  ["sec", "i64"],
+]
+[[subscribe]]
+topic = "/odom_in"
+output = "odom_in"
+to = "lab::Pose2D"
+"#;
+        let c = p(&format!(
+            "{head}type = \"nav_msgs/msg/Odometry\"\n[subscribe.fields]\nx = \"pose.pose.position.x\"\nsec = \"header.stamp.sec\"\n"
+        ))
+        .expect("valid");
+        let m = c.subscribe[0].user.as_ref().expect("a user mapping");
+        assert_eq!((c.subscribe[0].map, m.schema.type_name.as_str(), m.schema.size), (SubMap::User, "lab::Pose2D", 24));
+        // a ROS field that does not exist: line 15 (its entry)
+        let e = p(&format!(
+            "{head}type = \"nav_msgs/msg/Odometry\"\n[subscribe.fields]\nx = \"pose.pose.position.x\"\ny = \"pose.position.y\"\n"
+        ))
+        .expect_err("no such ROS field");
+        assert!(
+            e.starts_with("r.toml:15: [[subscribe]] /odom_in: nav_msgs/msg/Odometry has no field \"pose.position.y\""),
+            "{e}"
+        );
+        // a float into an integer, at its entry's line
+        let e = p(&format!("{head}type = \"geometry_msgs/msg/Vector3\"\nfields = {{ sec = \"x\" }}\n"))
+            .expect_err("float into i64");
+        assert!(
+            e.starts_with("r.toml:13:") && e.contains("sec (i64) cannot take geometry_msgs/msg/Vector3 field x"),
+            "{e}"
+        );
+        // by name: the first nerve field without a ROS field of its path,
+        // at its line in [[type]]
+        let e = p(&format!("{head}type = \"geometry_msgs/msg/Vector3\"\n")).expect_err("by name");
+        assert!(e.starts_with("r.toml:6:") && e.contains("\"sec\" has no counterpart"), "{e}");
+        // neither built in nor declared; no conversion and no fields
+        let e = p("[[subscribe]]\ntopic = \"/a\"\ntype = \"std_msgs/msg/Int32\"\noutput = \"a\"\nto = \"lab::Nope\"\nfields = { n = \"data\" }\n")
+            .expect_err("unknown type");
+        assert!(e.starts_with("r.toml:5:") && e.contains("neither a built-in payload nor a [[type]]"), "{e}");
+        let e = p(
+            "[[subscribe]]\ntopic = \"/a\"\ntype = \"std_msgs/msg/Int32\"\noutput = \"a\"\nto = \"nerve::Odometry\"\n",
+        )
+        .expect_err("no conversion");
+        assert!(
+            e.contains("no conversion from std_msgs/msg/Int32 to nerve::Odometry")
+                && e.contains("\"nerve field\" = \"ROS field\""),
+            "{e}"
+        );
+        // a built-in payload filled from another message
+        let c = p("[[subscribe]]\ntopic = \"/v\"\ntype = \"geometry_msgs/msg/Vector3\"\noutput = \"v\"\nto = \"nerve::VelocityCommand\"\nfields = { v = \"x\", omega = \"z\" }\n")
+            .expect("built-in filled");
+        assert_eq!(c.subscribe[0].user.as_ref().map(|m| m.schema.type_name.as_str()), Some("nerve::VelocityCommand"));
     }
 }

@@ -11,7 +11,8 @@
 //! * [`convert`]: nerve's payloads to and from the standard messages;
 //! * [`config`]: the agent's TOML configuration;
 //! * [`usermap`]: any payload (a user's own type) as a vendored ROS
-//!   message, field by field as the configuration says;
+//!   message, field by field as the configuration says, and [`usersub`]:
+//!   a vendored ROS message received as any payload, the other way;
 //! * [`link`]: the Zenoh session, in a thread of its own (not real-time);
 //!   it and the agent are the `agent` feature (default): without it the
 //!   crate has no Zenoh, as the `nerve` command uses it;
@@ -37,6 +38,7 @@ pub use agent::Ros2;
 pub mod link;
 pub mod msgs;
 pub mod usermap;
+pub mod usersub;
 pub mod wire;
 
 include!(concat!(env!("OUT_DIR"), "/type_hashes.rs"));

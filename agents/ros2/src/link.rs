@@ -101,10 +101,19 @@ pub struct Outgoing {
     pub bytes: Vec<u8>,
 }
 
+/// A message one subscription received, decoded as its mapping says.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Arrived {
+    /// a `geometry_msgs/msg/Twist` (`SubMap::TwistToVelocity`)
+    Twist(Twist),
+    /// a sample of the subscription's nerve layout (`SubMap::User`)
+    Sample(Vec<u8>),
+}
+
 /// What one subscription received, for the task; and its counters.
 #[derive(Debug, Default)]
 pub struct Inbox {
-    queue: Mutex<VecDeque<Twist>>,
+    queue: Mutex<VecDeque<Arrived>>,
     received: AtomicU64,
     refused: AtomicU64,
     overflow: AtomicU64,
@@ -113,7 +122,7 @@ pub struct Inbox {
 
 impl Inbox {
     /// Keeps a decoded message (dropping the oldest when full).
-    pub fn put(&self, t: Twist) {
+    pub fn put(&self, t: Arrived) {
         self.received.fetch_add(1, Ordering::Relaxed);
         let mut q = lock(&self.queue);
         if q.len() >= INBOX {
@@ -124,7 +133,7 @@ impl Inbox {
     }
 
     /// Everything waiting, oldest first.
-    pub fn take(&self) -> Vec<Twist> {
+    pub fn take(&self) -> Vec<Arrived> {
         lock(&self.queue).drain(..).collect()
     }
 
@@ -418,6 +427,7 @@ impl Link {
             let (dds, hash) = type_of(cfg, &s.ros_type)?;
             let key = wire::topic_key(cfg.domain, &s.topic, &dds, hash);
             let topic = s.topic.clone();
+            let user = s.user.clone();
             let sub = session
                 .declare_subscriber(key.clone())
                 .callback(move |sample| {
@@ -426,9 +436,16 @@ impl Link {
                     {
                         tracing::debug!(topic = %topic, error = %e, "a message with a malformed attachment (taken all the same)");
                     }
-                    match Twist::from_cdr(&sample.payload().to_bytes()) {
-                        Ok(t) => inbox.put(t),
-                        Err(e) => inbox.refuse(&format!("{topic}: {e}")),
+                    let bytes = sample.payload().to_bytes();
+                    match &user {
+                        Some(m) => match m.decode(&bytes) {
+                            Ok(b) => inbox.put(Arrived::Sample(b)),
+                            Err(e) => inbox.refuse(&format!("{topic}: {e}")),
+                        },
+                        None => match Twist::from_cdr(&bytes) {
+                            Ok(t) => inbox.put(Arrived::Twist(t)),
+                            Err(e) => inbox.refuse(&format!("{topic}: {e}")),
+                        },
                     }
                 })
                 .wait()

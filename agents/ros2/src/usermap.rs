@@ -160,9 +160,9 @@ enum StrSrc {
 /// A leaf of a ROS message a nerve field may be mapped to: a number, a
 /// bool, a string, or an array or sequence of numbers.
 #[derive(Debug, Clone)]
-struct Leaf {
-    base: Base,
-    arity: Arity,
+pub(crate) struct Leaf {
+    pub(crate) base: Base,
+    pub(crate) arity: Arity,
 }
 
 fn base_name(b: &Base) -> String {
@@ -186,7 +186,7 @@ fn base_name(b: &Base) -> String {
     }
 }
 
-fn leaf_name(l: &Leaf) -> String {
+pub(crate) fn leaf_name(l: &Leaf) -> String {
     let b = base_name(&l.base);
     match l.arity {
         Arity::Single => b,
@@ -197,7 +197,7 @@ fn leaf_name(l: &Leaf) -> String {
 }
 
 /// Every leaf of `ty` by its dotted path.
-fn leaves(ty: &str, defs: &BTreeMap<String, MsgDef>, prefix: &str, out: &mut BTreeMap<String, Leaf>) {
+pub(crate) fn leaves(ty: &str, defs: &BTreeMap<String, MsgDef>, prefix: &str, out: &mut BTreeMap<String, Leaf>) {
     let Some(def) = defs.get(ty) else { return };
     for f in &def.fields {
         let path = if prefix.is_empty() { f.name.clone() } else { format!("{prefix}.{}", f.name) };
@@ -216,7 +216,7 @@ fn leaves(ty: &str, defs: &BTreeMap<String, MsgDef>, prefix: &str, out: &mut BTr
 }
 
 /// The range of values of a ROS integer: (min, max), as i128.
-fn int_range(b: &Base) -> Option<(i128, i128)> {
+pub(crate) fn int_range(b: &Base) -> Option<(i128, i128)> {
     Some(match b {
         Base::Int8 => (i8::MIN.into(), i8::MAX.into()),
         Base::Uint8 | Base::Byte | Base::Char => (0, u8::MAX.into()),
@@ -230,7 +230,7 @@ fn int_range(b: &Base) -> Option<(i128, i128)> {
     })
 }
 
-fn prim_range(p: Primitive) -> Option<(i128, i128)> {
+pub(crate) fn prim_range(p: Primitive) -> Option<(i128, i128)> {
     Some(match p {
         Primitive::U8 | Primitive::Bool => (0, u8::MAX.into()),
         Primitive::U16 => (0, u16::MAX.into()),
@@ -259,7 +259,7 @@ fn fits(p: Primitive, b: &Base) -> Result<(), String> {
     }
 }
 
-fn prim_of(s: &Schema) -> Option<Primitive> {
+pub(crate) fn prim_of(s: &Schema) -> Option<Primitive> {
     match s.kind {
         Kind::Primitive { primitive } => Some(primitive),
         _ => None,
