@@ -173,13 +173,13 @@ impl Drop for Netns {
 }
 
 /// A free TCP port on all addresses of this namespace.
-fn free_port() -> Result<u16> {
+pub(crate) fn free_port() -> Result<u16> {
     let l = std::net::TcpListener::bind("0.0.0.0:0").context("cannot find a free port")?;
     Ok(l.local_addr().context("cannot read the free port")?.port())
 }
 
 /// `nerve-ros2-router`, beside this benchmark's `nerve`.
-fn start_router(robot: &Robot, listen: &str, verbose: bool) -> Result<ChildGuard> {
+pub(crate) fn start_router(robot: &Robot, listen: &str, verbose: bool) -> Result<ChildGuard> {
     let exe = robot.nerve_path().with_file_name("nerve-ros2-router");
     if !exe.exists() {
         bail!(

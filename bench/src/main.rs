@@ -56,6 +56,7 @@ mod procs;
 mod raw;
 mod recording;
 mod report;
+mod ros2;
 mod scale;
 mod shared_page;
 mod soak;
@@ -299,6 +300,17 @@ enum Scenario {
         #[arg(long)]
         loan_zeroed: bool,
     },
+    /// Issue 44's ROS 2 measures: a 640x480 Image from the ring onto rmw_zenoh's wire, Twist through the ros2 agent vs a raw Zenoh put.
+    Ros2 {
+        #[command(flatten)]
+        common: Common,
+        /// Image events, as many Twist events, and as many raw puts of each (default 300; 40 with --quick).
+        #[arg(long)]
+        count: Option<usize>,
+        /// The ros2 agent's period, ms (default: its own, 20 ms).
+        #[arg(long)]
+        period_ms: Option<u64>,
+    },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
         #[command(flatten)]
@@ -337,6 +349,7 @@ fn main() -> ExitCode {
             "__agent-seqping" | "__agent-seqpong" | "__agent-callping" | "__agent-callserve" => {
                 return messages::run_agent(&first, rest);
             }
+            "__agent-ros2-src" => return ros2::run_agent(rest),
             _ => {}
         }
     }
@@ -581,6 +594,16 @@ fn run(cli: Cli) -> Result<()> {
             };
             let report = removing_work(&opts.work, || c_hop::run(&opts))?;
             publish(&common, "c", &report, report.seconds, |_| Ok(vec![]), c_hop::print_tables)?;
+        }
+        Scenario::Ros2 { common, count, period_ms } => {
+            let opts = ros2::Ros2Opts {
+                count: count.unwrap_or(if common.quick { 40 } else { 300 }),
+                period_ms,
+                verbose: common.verbose,
+                work: ros2::work_dir(&common.out),
+            };
+            let report = removing_work(&opts.work, || ros2::run(&opts))?;
+            publish(&common, "ros2", &report, report.seconds, |_| Ok(vec![]), ros2::print_tables)?;
         }
         Scenario::Jitter { common, rates, seconds, rounds } => {
             let opts = jitter::JitterOpts {

@@ -50,6 +50,8 @@ pub enum Scenario {
     Fleet,
     /// C and C++ agents: their one-hop round trip beside a Rust agent's, 8 B to 1080p (issue 43).
     C,
+    /// Issue 44's ROS 2 measures: a 640x480 Image from the ring onto the wire; Twist through the ros2 agent vs a raw Zenoh put.
+    Ros2,
 }
 
 /// `nerve bench`
