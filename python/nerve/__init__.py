@@ -468,6 +468,7 @@ class Agent:
         setup = Setup(native)
         self.new(setup)
         self._nerve_ports = (setup.inputs, setup.outputs)
+        self._nerve_calls = (setup.services, setup.clients)
 
     def _nerve_start(self, ctx):
         self.start(ctx)

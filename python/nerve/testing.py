@@ -17,6 +17,17 @@ its next deadline) or moves its clock on, and reads what it sent::
 Parameters (``set_param``, ``param``), the period (``set_period``),
 ``suspend``/``resume``, ``input_stats`` and ``stop`` behave as their
 ``nerve`` commands do on a running agent.
+
+Calls work as on a running agent. The test calls a service the agent
+serves, and the agent's own ``serve`` answers it at its next step; the
+calls the agent makes through a client come to the test, which answers
+them, and the agent takes the answer at its next step::
+
+    answer = h.ask("double", value=21.0)       # call, step, the answer
+    [(id, req)] = h.requests("sensor")         # what the agent asked
+    h.answer("sensor", id, value=7.0)          # its answer, taken at the next step
+
+A call's timeout counts on the harness's clock (``advance``).
 """
 
 from __future__ import annotations
@@ -27,6 +38,7 @@ import numpy as np
 
 from . import Agent, Message, Meta, _kind_of, _native
 from . import seq as _seq
+from .call import CallError, Finished, _bytes_of
 
 __all__ = ["Harness"]
 
@@ -50,6 +62,7 @@ class Harness:
         )
         self.agent = self._h.agent
         self._inputs, self._outputs = self.agent._nerve_ports
+        self._services, self._clients = self.agent._nerve_calls
 
     def send(self, input: str, message=None, /, *, sender: str = "test", **fields) -> None:
         """Queues a message on ``input`` from agent ``sender``: ``fields``
@@ -96,6 +109,74 @@ class Harness:
             Message(np.frombuffer(data, dtype=payload.dtype, count=1).copy(), Meta(sender, seq, stamp))
             for sender, seq, stamp, data in sent
         ]
+
+    def _call_port(self, kind: str, port: str):
+        ports = self._services if kind == "service" else self._clients
+        try:
+            return ports[port]
+        except KeyError:
+            raise ValueError(f"the agent has no {kind} {port!r}; it has {sorted(ports)}") from None
+
+    def call(self, service: str, message=None, /, **fields) -> int:
+        """Calls service ``service`` of the agent with a request (a Message,
+        a dict, bytes or ``fields``, the rest zero); the agent's next step
+        answers it (``answers``). Returns the call's id."""
+        req, _ = self._call_port("service", service)
+        if message is None:
+            message = fields
+        elif fields:
+            raise TypeError("call takes a message or fields, not both")
+        return self._h.call_bytes(service, _bytes_of(req, message, "a request"))
+
+    def answers(self, service: str) -> list:
+        """The answers service ``service`` gave the test's calls since the
+        last look, oldest first, as ``Finished(id, answer, error)``."""
+        _, resp = self._call_port("service", service)
+        out = []
+        for id, data, kind, message in self._h.answers_bytes(service):
+            if data is None:
+                out.append(Finished(id, None, CallError(kind, message)))
+            else:
+                out.append(Finished(id, Message(np.frombuffer(data, dtype=resp.dtype, count=1).copy()), None))
+        return out
+
+    def ask(self, service: str, message=None, /, **fields):
+        """Calls ``service``, runs one step and returns the answer (a
+        Message). Raises the call's ``CallError``, or RuntimeError if the
+        step did not answer it."""
+        id = self.call(service, message, **fields)
+        self.step()
+        mine = [f for f in self.answers(service) if f.id == id]
+        if not mine:
+            raise RuntimeError(f"service {service!r}: call {id} was not answered at the agent's step "
+                               "(does its step serve the port?)")
+        if mine[0].error is not None:
+            raise mine[0].error
+        return mine[0].answer
+
+    def requests(self, client: str) -> list:
+        """The calls the agent made through ``client`` since the last look,
+        oldest first: ``(id, request)``, the request a Message."""
+        req, _ = self._call_port("client", client)
+        return [(id, Message(np.frombuffer(data, dtype=req.dtype, count=1).copy()))
+                for id, data in self._h.requests_bytes(client)]
+
+    def answer(self, client: str, id: int, message=None, /, *, error: str | None = None, **fields) -> None:
+        """Answers the agent's call ``id`` through ``client`` (a Message, a
+        dict, bytes or ``fields``), or ends it with ``error``
+        (``"server_gone"``, ``"timed_out"``); the agent takes it at its next
+        step. RuntimeError if the call is not in flight (it timed out)."""
+        _, resp = self._call_port("client", client)
+        if error is not None:
+            if message is not None or fields:
+                raise TypeError("answer takes an answer or an error, not both")
+            self._h.answer_bytes(client, int(id), None, error)
+            return
+        if message is None:
+            message = fields
+        elif fields:
+            raise TypeError("answer takes a message or fields, not both")
+        self._h.answer_bytes(client, int(id), _bytes_of(resp, message, "an answer"))
 
     def step(self) -> None:
         """Runs one step; a step's exception is raised here."""

@@ -110,10 +110,10 @@ fn type_name_of(v: &Bound<'_, PyAny>) -> String {
 
 /// What a finished call hands Python: (id, answer bytes or None, error kind
 /// or None, error message or None).
-type Taken<'py> = (u64, Option<Bound<'py, PyBytes>>, Option<&'static str>, Option<String>);
+pub(crate) type Taken<'py> = (u64, Option<Bound<'py, PyBytes>>, Option<&'static str>, Option<String>);
 
 /// The kind of a call's error, as Python names it.
-fn kind_of(e: &CallError) -> &'static str {
+pub(crate) fn kind_of(e: &CallError) -> &'static str {
     match e {
         CallError::TimedOut { .. } => "timed_out",
         CallError::ServerGone { .. } => "server_gone",
@@ -122,6 +122,7 @@ fn kind_of(e: &CallError) -> &'static str {
         CallError::TooManyInFlight { .. } => "too_many_in_flight",
         CallError::NoServer { .. } => "no_server",
         CallError::Malformed { .. } => "malformed",
+        CallError::RefusedTooLong { .. } => "refused_too_long",
         _ => "failed",
     }
 }

@@ -26,6 +26,7 @@ use std::sync::{Mutex, OnceLock};
 use std::time::Duration;
 
 mod call;
+mod harness;
 mod seq;
 
 /// The Python agent this process runs: set once by [`run`].
@@ -799,172 +800,6 @@ fn period(s: f64) -> PyResult<Duration> {
     })
 }
 
-fn harness_err(e: impl std::fmt::Display) -> PyErr {
-    PyRuntimeError::new_err(e.to_string())
-}
-
-/// A sample an output sent in a test: sender, sequence number, stamp, bytes.
-type Sent<'py> = (String, u64, u64, Bound<'py, pyo3::types::PyBytes>);
-
-/// An agent run in the test's own process (the SDK's
-/// `agent_sdk::testing::Harness`): ports bound to in-memory queues, a
-/// clock the test moves, no router and no shared memory.
-#[pyclass(unsendable, module = "nerve._native")]
-struct Harness {
-    /// None once stopped
-    h: Option<agent_sdk::testing::Harness<PyAgent>>,
-}
-
-impl Harness {
-    fn get(&mut self) -> PyResult<&mut agent_sdk::testing::Harness<PyAgent>> {
-        self.h.as_mut().ok_or_else(|| PyRuntimeError::new_err("the harness's agent was stopped"))
-    }
-}
-
-#[pymethods]
-impl Harness {
-    #[new]
-    #[pyo3(signature = (class, kind, period_s, name, args, params, period_override_s, suspended))]
-    #[allow(clippy::too_many_arguments)]
-    fn py_new(
-        py: Python<'_>,
-        class: Py<PyAny>,
-        kind: String,
-        period_s: Option<f64>,
-        name: Option<String>,
-        args: Vec<String>,
-        params: Vec<(String, String)>,
-        period_override_s: Option<f64>,
-        suspended: bool,
-    ) -> PyResult<Self> {
-        let (kind, task) = kind_and_task(kind, period_s)?;
-        let mut b = agent_sdk::testing::Harness::<PyAgent>::builder().args(args);
-        if let Some(n) = &name {
-            b = b.name(n);
-        }
-        for (k, v) in &params {
-            b = b.param(k, v);
-        }
-        if let Some(p) = period_override_s {
-            b = b.period(period(p)?);
-        }
-        if suspended {
-            b = b.suspended();
-        }
-        MAKING.with(|m| *m.borrow_mut() = Some((kind, task, class.clone_ref(py))));
-        let made = b.start();
-        MAKING.with(|m| *m.borrow_mut() = None);
-        Ok(Harness { h: Some(made.map_err(harness_err)?) })
-    }
-
-    /// The Python agent object.
-    #[getter]
-    fn agent(&mut self, py: Python<'_>) -> PyResult<Py<PyAny>> {
-        Ok(self.get()?.agent().obj.clone_ref(py))
-    }
-
-    /// Queues `data` (the layout's bytes) on input `input` from `sender`.
-    fn send_bytes(&mut self, input: &str, sender: &str, data: &[u8]) -> PyResult<()> {
-        self.get()?.send_bytes_from(input, sender, data).map_err(harness_err)
-    }
-
-    /// What output `port` sent since the last call: (sender, seq, stamp_ns, bytes).
-    fn output_bytes<'py>(&mut self, py: Python<'py>, port: &str) -> PyResult<Vec<Sent<'py>>> {
-        let got = self.get()?.output_bytes(port).map_err(harness_err)?;
-        Ok(got
-            .into_iter()
-            .map(|(m, b)| (m.sender.as_str().to_owned(), m.seq, m.stamp_ns, pyo3::types::PyBytes::new(py, &b)))
-            .collect())
-    }
-
-    /// Runs one step (a periodic agent's clock jumps to its next deadline).
-    fn step(&mut self) -> PyResult<()> {
-        self.get()?.step().map_err(harness_err)
-    }
-
-    /// Moves the clock on by `s` seconds, running every step due; returns how many ran.
-    fn advance(&mut self, s: f64) -> PyResult<u64> {
-        let d = seconds(s)?;
-        self.get()?.advance(d).map_err(harness_err)
-    }
-
-    /// Runs `n` steps.
-    fn run_cycles(&mut self, n: u64) -> PyResult<()> {
-        self.get()?.run_cycles(n).map_err(harness_err)
-    }
-
-    /// Sets a parameter as `nerve param set` does (ValueError: its refusal).
-    fn set_param(&mut self, key: &str, value: &str) -> PyResult<()> {
-        self.get()?.set_param(key, value).map_err(PyValueError::new_err)
-    }
-
-    /// A parameter's value as `nerve param get` shows it.
-    fn param(&mut self, key: &str) -> PyResult<String> {
-        self.get()?.param(key).map_err(PyValueError::new_err)
-    }
-
-    /// Changes the period, as `nerve rate` does.
-    fn set_period(&mut self, s: f64) -> PyResult<()> {
-        let d = period(s)?;
-        self.get()?.set_period(d);
-        Ok(())
-    }
-
-    /// Suspends the agent, as `nerve suspend` does.
-    fn suspend(&mut self) -> PyResult<()> {
-        self.get()?.suspend();
-        Ok(())
-    }
-
-    /// Resumes it, as `nerve resume` does.
-    fn resume(&mut self) -> PyResult<()> {
-        self.get()?.resume().map_err(harness_err)
-    }
-
-    /// The clock the agent sees, ns.
-    #[getter]
-    fn now_ns(&mut self) -> PyResult<u64> {
-        Ok(self.get()?.now_ns())
-    }
-
-    /// How many steps ran.
-    #[getter]
-    fn cycles(&mut self) -> PyResult<u64> {
-        Ok(self.get()?.cycles())
-    }
-
-    /// How many steps failed.
-    #[getter]
-    fn errors(&mut self) -> PyResult<u64> {
-        Ok(self.get()?.errors())
-    }
-
-    /// Whether a step asked to stop.
-    #[getter]
-    fn stop_requested(&mut self) -> PyResult<bool> {
-        Ok(self.get()?.stop_requested())
-    }
-
-    /// The period in seconds; None for an event-driven agent.
-    #[getter]
-    fn period(&mut self) -> PyResult<Option<f64>> {
-        Ok(self.get()?.period().map(|p| p.as_secs_f64()))
-    }
-
-    /// What each input counts about each source, as JSON (`nerve ps --json`'s `inputs`).
-    fn input_stats(&mut self) -> PyResult<String> {
-        serde_json::to_string(&self.get()?.input_stats()).map_err(to_py_err)
-    }
-
-    /// Runs the agent's `stop`; the harness is spent.
-    fn stop(&mut self) -> PyResult<()> {
-        if let Some(h) = self.h.take() {
-            drop(h.stop());
-        }
-        Ok(())
-    }
-}
-
 /// Runs the agent made by `class()` under the SDK with command line `argv`
 /// (without the program name): `kind` as `nerve ps` shows it, `period_s`
 /// for a periodic agent, None for an event-driven one. Returns the exit
@@ -1000,7 +835,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Received>()?;
     m.add_class::<Loan>()?;
     m.add_class::<ParamHandle>()?;
-    m.add_class::<Harness>()?;
+    m.add_class::<harness::Harness>()?;
     m.add_function(wrap_pyfunction!(builtin_schema, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_types, m)?)?;
     m.add_function(wrap_pyfunction!(primitive_schema, m)?)?;

@@ -375,16 +375,18 @@ class Sequences(unittest.TestCase):
 
 
 class Calls(unittest.TestCase):
-    """Calls (issue 42) run on real agents only (tests/tests/python_calls.rs):
-    the harness, like Rust's, refuses them saying so."""
+    """Calls (issue 42) under the harness: a wrong declaration is refused
+    at start; python/tests/harness_calls.py (run by
+    tests/tests/python_calls.rs) calls and answers them."""
 
-    def test_a_call_port_in_the_harness_is_refused_saying_where_to_test_it(self):
-        for declare in (lambda s: s.serve("plan", "nerve::Tick", "nerve::Scalar"),
-                        lambda s: s.client("planner", "nerve::Tick", "nerve::Scalar")):
+    def test_call_ports_in_the_harness_are_wired_to_the_test_and_checked(self):
+        for declare, kind, port in ((lambda s: s.serve("plan", "nerve::Tick", "nerve::Scalar"), "service", "plan"),
+                                    (lambda s: s.client("planner", "nerve::Tick", "nerve::Scalar"), "client", "planner")):
             agent = type("Calling", (nerve.Agent,), {"period": 0.1, "new": lambda self, s, d=declare: d(s),
                                                      "step": lambda self, c: None})
-            with self.assertRaisesRegex(Exception, "not yet carried in the test harness; test calls with real agents"):
-                Harness(agent)
+            h = Harness(agent)
+            with self.assertRaisesRegex(ValueError, f"has no {kind} 'x'; it has \\['{port}'\\]"):
+                (h.call if kind == "service" else h.requests)("x")
         with self.assertRaisesRegex(RuntimeError, "max_in_flight 65: give 1 to 64"):
             Harness(type("TooMany", (nerve.Agent,), {
                 "period": 0.1, "step": lambda self, c: None,

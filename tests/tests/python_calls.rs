@@ -4,12 +4,14 @@
 //! `nerve call` and a Rust client call a Python server; a Python client
 //! calls a Rust server, is refused while unwired, sees its calls fail in
 //! bounded time when the server is killed and steps on, and is rewired to
-//! the restarted server.
+//! the restarted server. The same agents under the Python test harness
+//! (`python/tests/harness_calls.py`): the test calls and answers them.
 
 use nerve_tests::py::python_with_nerve;
 use nerve_tests::{Robot, wait_until};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
+use std::process::Command;
 use std::time::Duration;
 
 fn py_caller() -> String {
@@ -120,4 +122,22 @@ fn a_python_client_calls_a_rust_server_and_outlives_it() {
     );
     assert_eq!(report(&r, "pc")["wrong"], 0);
     r.down_and_check_clean();
+}
+
+/// The Python harness (`nerve.testing.Harness`) carries calls, in the
+/// test's own process (`python/tests/harness_calls.py`): the test calls
+/// the Python server's service and its step answers; the Python client's
+/// calls come to the test, which answers one, answers one wrongly, ends
+/// one as the server gone and lets one time out on the harness clock.
+#[test]
+fn the_python_harness_carries_calls_both_ways() {
+    let (python, _bin) = python_with_nerve();
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("python").join("tests");
+    let out = Command::new(python)
+        .args(["-m", "unittest", "-v", "harness_calls"])
+        .current_dir(&dir)
+        .output()
+        .expect("unittest");
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && text.contains("Ran 2 tests") && text.contains("OK"), "{text}");
 }
