@@ -71,8 +71,9 @@ pub(super) fn refresh_channels(hub: &Hub, robot: &mut dyn Robot) {
     }
 }
 
-/// Reads the subscribed ports and queues each sample for its subscribers.
-pub(super) fn read_ports(hub: &Hub, robot: &mut dyn Robot) {
+/// Reads the subscribed ports and queues each sample for its subscribers;
+/// whether a sample was queued for someone.
+pub(super) fn read_ports(hub: &Hub, robot: &mut dyn Robot) -> bool {
     // channel id -> [(client, subscription)]
     let mut fan: HashMap<u32, Vec<(Arc<Client>, u32)>> = HashMap::new();
     for c in lock(&hub.clients).values() {
@@ -102,4 +103,5 @@ pub(super) fn read_ports(hub: &Hub, robot: &mut dyn Robot) {
     for c in fed.values() {
         c.wake.wake();
     }
+    !fed.is_empty()
 }
