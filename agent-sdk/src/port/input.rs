@@ -35,7 +35,7 @@ pub struct Received(ReceivedInner);
 
 enum ReceivedInner {
     /// a slot of the source port's shared memory
-    Shm(Sample<Ipc, [CustomPayloadMarker], SampleHeader>),
+    Shm(ShmSample),
     /// a test's sample ([`crate::testing`])
     Memory(SampleHeader, SampleBuf),
 }
@@ -64,7 +64,7 @@ impl Received {
     }
 
     /// A sample of a source port's shared memory, kept in place.
-    pub(super) fn in_place(sample: Sample<Ipc, [CustomPayloadMarker], SampleHeader>) -> Self {
+    pub(super) fn in_place(sample: ShmSample) -> Self {
         Received(ReceivedInner::Shm(sample))
     }
 
@@ -84,7 +84,12 @@ pub(super) struct Source {
     pub(super) held: Option<super::depth::Held>,
     /// a keep-all input's lossless subscription ([`super::keep_all`])
     pub(super) keep_all: Option<KeepAllFeed>,
+    /// the sample the polling task received when it looked ([`Source::look`])
+    pub(super) peeked: Option<ShmSample>,
 }
+
+/// A sample in place in a source port's shared memory.
+pub(super) type ShmSample = Sample<Ipc, [CustomPayloadMarker], SampleHeader>;
 
 /// Where a source's samples come from.
 pub(super) enum Feed {
@@ -102,62 +107,73 @@ impl Source {
         }
     }
 
+    /// The next waiting sample of this source, if any, kept in place, with
+    /// its header; counted. A sample the polling task already received
+    /// ([`Source::look`]) comes first: it is the oldest.
+    fn next(&mut self, input: &str) -> Result<Option<(SampleHeader, Received)>, PortError> {
+        let got = match self.take_lossless(input) {
+            Some(got) => got?,
+            None => match &mut self.feed {
+                Feed::Shm { subscriber, .. } if self.held.is_some() => self
+                    .held
+                    .as_mut()
+                    .and_then(|held| held.take(subscriber, input))
+                    .map(|(h, b)| (h, Received::copied(h, b))),
+                Feed::Shm { subscriber, .. } => match self.peeked.take() {
+                    Some(sample) => Some((*sample.user_header(), Received::in_place(sample))),
+                    None => match subscriber.receive() {
+                        Ok(sample) => sample.map(|s| (*s.user_header(), Received::in_place(s))),
+                        Err(e) => return Err(self.receive_error(input, e)),
+                    },
+                },
+                Feed::Memory(queue) => queue.pop().map(|(h, b)| (h, Received::copied(h, b))),
+            },
+        };
+        if let Some((h, _)) = &got {
+            self.tally.account(h, now_ns());
+        }
+        Ok(got)
+    }
+
     /// The next waiting sample of this source, if any, kept in place.
     fn take(&mut self, input: &str) -> Result<Option<Received>, PortError> {
-        if let Some(got) = self.take_lossless(input) {
-            return Ok(got?.map(|(h, r)| {
-                self.tally.account(&h, now_ns());
-                r
-            }));
-        }
-        let got = match &mut self.feed {
-            Feed::Shm { subscriber, .. } if self.held.is_some() => self
-                .held
-                .as_mut()
-                .and_then(|held| held.take(subscriber, input))
-                .map(|(h, b)| (h, Received(ReceivedInner::Memory(h, b)))),
-            Feed::Shm { subscriber, .. } => match subscriber.receive() {
-                Ok(sample) => sample.map(|s| (*s.user_header(), Received(ReceivedInner::Shm(s)))),
-                Err(e) => return Err(self.receive_error(input, e)),
-            },
-            Feed::Memory(queue) => queue.pop().map(|(h, b)| (h, Received(ReceivedInner::Memory(h, b)))),
-        };
-        Ok(got.map(|(h, r)| {
-            self.tally.account(&h, now_ns());
-            r
-        }))
+        Ok(self.next(input)?.map(|(_, r)| r))
     }
 
     /// Hands this source's next waiting sample, in place, to `f`; `None`
     /// when none waits. The sample is released when `f` returns.
     fn take_with<R>(&mut self, input: &str, f: impl FnOnce(&SampleHeader, &[u8]) -> R) -> Result<Option<R>, PortError> {
-        if let Some(got) = self.take_lossless(input) {
-            let Some((h, r)) = got? else { return Ok(None) };
-            self.tally.account(&h, now_ns());
-            return Ok(Some(f(&h, r.bytes())));
-        }
-        match &mut self.feed {
-            Feed::Shm { subscriber, .. } if self.held.is_some() => {
-                let Some((h, b)) = self.held.as_mut().and_then(|held| held.take(subscriber, input)) else {
-                    return Ok(None);
-                };
-                self.tally.account(&h, now_ns());
-                Ok(Some(f(&h, b.bytes())))
-            }
-            Feed::Shm { subscriber, .. } => match subscriber.receive() {
-                Ok(Some(sample)) => {
-                    let h = *sample.user_header();
-                    self.tally.account(&h, now_ns());
-                    Ok(Some(f(&h, payload_bytes(sample.payload()))))
+        Ok(self.next(input)?.map(|(h, r)| f(&h, r.bytes())))
+    }
+
+    /// Whether a sample waits, looked at in shared memory without a system
+    /// call (the polling task's look, `runtime::poll`). A source read
+    /// straight from iceoryx2 receives the sample at once and keeps it for
+    /// the step's [`Source::next`]: one look at iceoryx2's queue per sample,
+    /// as a raw busy-polling subscriber makes, instead of a look and then a
+    /// receive. A source with a queue of its own (deep, keep-all) is only
+    /// looked at: its refill takes what waits, in order.
+    fn look(&mut self) -> bool {
+        match &self.feed {
+            Feed::Shm { subscriber, .. } if self.held.is_none() && self.keep_all.is_none() => {
+                if self.peeked.is_some() {
+                    return true;
                 }
-                Ok(None) => Ok(None),
-                Err(e) => Err(self.receive_error(input, e)),
-            },
-            Feed::Memory(queue) => {
-                let Some((h, bytes)) = queue.pop() else { return Ok(None) };
-                self.tally.account(&h, now_ns());
-                Ok(Some(f(&h, bytes.bytes())))
+                match subscriber.receive() {
+                    Ok(Some(sample)) => {
+                        self.peeked = Some(sample);
+                        true
+                    }
+                    Ok(None) => false,
+                    // the reader holds as many samples as iceoryx2 lends: the step's take says so
+                    Err(_) => subscriber.has_samples().unwrap_or(false),
+                }
             }
+            // a source that cannot be looked at has nothing to take either
+            Feed::Shm { subscriber, .. } => {
+                subscriber.has_samples().unwrap_or(false) || self.keep_all.as_ref().is_some_and(|k| k.has_samples())
+            }
+            Feed::Memory(q) => !q.is_empty(),
         }
     }
 }
@@ -205,8 +221,10 @@ pub(crate) trait DynInput: Send + Sync {
         Vec::new()
     }
     /// Whether a sample waits, read in shared memory without a system call
-    /// (a polling task's look, `runtime::poll`); `None` when the port cannot
-    /// tell so (a call's side: its listeners are looked at instead).
+    /// (a polling task's look, `runtime::poll`; a byte input receives the
+    /// sample then and keeps it for the step, see `Source::look`); `None`
+    /// when the port cannot tell so (a call's side: its listeners are
+    /// looked at instead).
     fn waiting(&self) -> Option<bool> {
         None
     }
@@ -391,6 +409,7 @@ impl DynInput for InputInner {
             tally: Tally::default(),
             held: super::depth::Held::of(self.depth.options(), self.payload_layout().1),
             keep_all,
+            peeked: None,
         });
         Ok(true)
     }
@@ -441,13 +460,7 @@ impl DynInput for InputInner {
     }
 
     fn waiting(&self) -> Option<bool> {
-        Some(lock(&self.subs).iter().any(|s| match &s.feed {
-            // a source that cannot be looked at has nothing to take either
-            Feed::Shm { subscriber, .. } => {
-                subscriber.has_samples().unwrap_or(false) || s.keep_all.as_ref().is_some_and(|k| k.has_samples())
-            }
-            Feed::Memory(q) => !q.is_empty(),
-        }))
+        Some(lock(&self.subs).iter_mut().any(Source::look))
     }
 
     fn queue(&self, sender: &str, port: &str, sample: SampleBuf, stamp_ns: u64) -> Result<(), PortError> {
@@ -482,6 +495,7 @@ impl DynInput for InputInner {
                     tally: Tally::default(),
                     held: None,
                     keep_all: None,
+                    peeked: None,
                 });
                 subs.len() - 1
             }
@@ -580,5 +594,73 @@ impl SchemaInput {
     /// How many sources feed this input now.
     pub fn sources(&self) -> usize {
         lock(&self.inner.subs).len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::DynInput as _;
+    use crate::clock::now_ns;
+    use crate::port::{Input, Output, SchemaInput};
+    use crate::world::World;
+    use crate::world::test_support::Cleanup;
+    use shm_schemas::Described as _;
+    use shm_schemas::payloads::Scalar;
+
+    /// The polling task's look (`waiting`, issue 42) receives the sample it
+    /// finds, and the step's take hands that one out first: every sample
+    /// once, in order, counted once, whether it was looked at or not; one
+    /// looked at and then unwired is released; a reader holding all that
+    /// iceoryx2 lends still sees that more waits, and is told to drop some.
+    #[test]
+    fn a_polled_look_keeps_the_sample_for_the_step_in_order_and_counted_once() {
+        let world = World::new(&format!("look{}", std::process::id())).expect("world");
+        let _cleanup = Cleanup(world.clone());
+        let node = world.node("test").expect("node");
+        let robot = world.robot().clone();
+        let out = Output::<Scalar>::create(&node, &robot.port_service("a", "v"), "a").expect("output");
+        let send = |i: u32| out.send(Scalar { value: f64::from(i), stamp_ns: 1 }).expect("send");
+        let (input, inner) = Input::<Scalar>::new("in").expect("input");
+        assert!(inner.connect(&node, &robot, "a", "v").expect("connects"));
+        assert_eq!(inner.waiting(), Some(false), "nothing sent");
+
+        (1..=3).for_each(send);
+        assert_eq!(inner.waiting(), Some(true));
+        assert_eq!(inner.waiting(), Some(true), "looked at twice: the same sample, still waiting");
+        let mut seen = Vec::new();
+        assert_eq!(input.drain(|m, v| seen.push((m.seq, v.value))), 3);
+        assert_eq!(seen, [(1, 1.0), (2, 2.0), (3, 3.0)], "the looked-at sample first, then the rest");
+        assert_eq!(inner.waiting(), Some(false), "all taken");
+        send(4);
+        assert_eq!(input.recv().map(|(m, v)| (m.seq, v.value)), Some((4, 4.0)), "not looked at: taken as before");
+        let stats = inner.stats(now_ns());
+        assert_eq!((stats[0].received, stats[0].dropped), (4, 0), "each counted once");
+
+        // looked at, then unwired: the sample goes with the subscription, and a new one reads on
+        send(5);
+        assert_eq!(inner.waiting(), Some(true));
+        assert!(inner.disconnect("a", "v"));
+        assert_eq!((inner.waiting(), input.recv().map(|(m, _)| m.seq)), (Some(false), None), "gone with its source");
+        assert!(inner.connect(&node, &robot, "a", "v").expect("wired again"));
+        send(6);
+        assert_eq!(inner.waiting(), Some(true));
+        assert_eq!(input.recv().map(|(m, _)| m.seq), Some(6));
+
+        // a reader by layout holding the two samples iceoryx2 lends per source
+        let (by_layout, layout_inner) = SchemaInput::new("raw", Scalar::schema()).expect("input");
+        assert!(layout_inner.connect(&node, &robot, "a", "v").expect("connects"));
+        (7..=9).for_each(send);
+        assert_eq!(layout_inner.waiting(), Some(true));
+        let held = (by_layout.take().expect("take"), by_layout.take().expect("take"));
+        assert_eq!(held.0.as_ref().map(|r| r.meta().seq), Some(7), "the looked-at sample first");
+        assert_eq!(held.1.as_ref().map(|r| r.meta().seq), Some(8));
+        assert_eq!(layout_inner.waiting(), Some(true), "the third waits, though it cannot be lent yet");
+        match by_layout.take() {
+            Err(e) => assert!(e.to_string().contains("drop the ones held"), "{e}"),
+            Ok(s) => panic!("a third sample lent: {s:?}"),
+        }
+        drop(held);
+        assert_eq!(layout_inner.waiting(), Some(true));
+        assert_eq!(by_layout.take().expect("take").map(|r| r.meta().seq), Some(9));
     }
 }
