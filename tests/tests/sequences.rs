@@ -3,7 +3,8 @@
 //! 401 on a sequence port (the third grows the port's memory, the fourth
 //! is the largest seen plus one) and is refused past its maximum; `nerve
 //! echo` prints each sample at its own length (JSON arrays, `--field
-//! items[3].x`, `header.frame`), `nerve hz` counts them, and a second agent,
+//! items[3].x`, `header.frame`), `nerve plot` draws the last element's field,
+//! `nerve hz` counts them, and a second agent,
 //! connected through the router (its check of header and element), reads
 //! them all in place, the grown ones included.
 
@@ -57,6 +58,28 @@ fn sequences_of_any_length_are_echoed_counted_read_and_refused_past_their_maximu
     assert!(human.contains("header.frame: "), "{human}");
     let e = r.fails(&["echo", "a/dets", "--field", "items[1].z", "--count", "1", "--timeout", "5"]);
     assert!(e.contains("no field \"items[1].z\"") && e.contains("items.<i>.x"), "{e}");
+
+    // plot: the last element's field and the fourth's, live; samples
+    // without that element have no point (not an error)
+    let svg = r.home.join("dets.svg");
+    let out = r.ok(&[
+        "plot",
+        "a/dets",
+        "--field",
+        "items[-1].x",
+        "--field",
+        "items[3].x",
+        "--duration",
+        "1.5",
+        "--quiet",
+        "-o",
+        &svg.display().to_string(),
+    ]);
+    let n: u64 =
+        out.strip_prefix("plotted ").and_then(|o| o.split(' ').next()).and_then(|n| n.parse().ok()).unwrap_or(0);
+    assert!(n >= 2, "{out}");
+    let drawn = std::fs::read_to_string(&svg).expect("the figure");
+    assert!(drawn.contains("a/dets items[-1].x") && drawn.contains("a/dets items[3].x"), "the legend: {out}");
 
     // hz reads a sequence port by its bytes, as any port
     let hz = r.ok(&["hz", "a/dets", "--count", "1", "--json", "--window", "0.5"]);

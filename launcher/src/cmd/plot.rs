@@ -10,6 +10,12 @@
 //! 1), so a string, an array or a struct is refused with the list of the
 //! type's numeric fields. Each port and field is one line of the figure.
 //!
+//! A sequence port's samples (`Seq<T, H>`) are as long as their elements:
+//! `--field header.x` plots a field of the header, `items[3].x` one of the
+//! fourth element, and `items[-1].x` one of the last element, whichever
+//! index that is in each sample. A sample without that element (fewer than
+//! four, or none) has no point on that line; it is not an error.
+//!
 //! Time axis: seconds since the first plotted sample, by the samples' own
 //! stamps (the sender's CLOCK_MONOTONIC; in a recording, the messages'
 //! publish time), so a recording and a live run of the same port plot
@@ -123,22 +129,43 @@ pub fn numeric_paths(schema: &Schema) -> Vec<String> {
     out
 }
 
-/// Where field `path` of `schema` lies in a sample (offset, schema), if it
-/// is a number; else an error that lists the numeric fields.
-pub fn numeric_field(schema: &Schema, port: &PortRef, path: &str) -> Result<(usize, Schema)> {
+/// Where field `path` of `schema` lies in a sample, if it is a number;
+/// else an error that lists the numeric fields.
+pub fn numeric_field(schema: &Schema, port: &PortRef, path: &str) -> Result<Field> {
     let list = || {
         let paths = numeric_paths(schema);
         if paths.is_empty() { "none".to_string() } else { paths.join(", ") }
     };
-    match schema.field(path) {
-        Some((offset, s)) if matches!(s.kind, Kind::Primitive { .. }) => Ok((offset, s.clone())),
-        Some((_, s)) => bail!(
+    let not_a_number = |s: &Schema| {
+        anyhow!(
             "field {path:?} of {port} ({}) is a {}, not a number; the numeric fields of {}: {}",
             schema.type_name,
             s.type_name,
             schema.type_name,
             list()
-        ),
+        )
+    };
+    // the last element of a sequence: where it lies depends on the sample
+    if let (Kind::Sequence { element, .. }, Some(rest)) = (&schema.kind, last_element_path(path)) {
+        let found = if rest.is_empty() { Some((0, element.as_ref())) } else { element.field(rest) };
+        return match found {
+            Some((offset, s)) if matches!(s.kind, Kind::Primitive { .. }) => {
+                Ok(Field::LastItem { offset, schema: s.clone(), items_at: schema.size, element: element.size })
+            }
+            Some((_, s)) => Err(not_a_number(s)),
+            None => bail!(
+                "{port} ({}) has no field {path:?}; the numeric fields of {}: {}",
+                schema.type_name,
+                schema.type_name,
+                list()
+            ),
+        };
+    }
+    match schema.field(path) {
+        Some((offset, s)) if matches!(s.kind, Kind::Primitive { .. }) => {
+            Ok(Field::At { offset, schema: s.clone(), sequence: schema.sequence_shape().is_some() })
+        }
+        Some((_, s)) => Err(not_a_number(s)),
         None => bail!(
             "{port} ({}) has no field {path:?}; the numeric fields of {}: {}",
             schema.type_name,
@@ -148,9 +175,58 @@ pub fn numeric_field(schema: &Schema, port: &PortRef, path: &str) -> Result<(usi
     }
 }
 
-/// The plotted fields of a type: each one's offset and schema, in the order of `--field`.
+/// `items[-1].x` (or `items.-1.x`): the rest of the path inside the last
+/// element (`x`; empty for a sequence of numbers), else `None`.
+fn last_element_path(path: &str) -> Option<&str> {
+    let rest = path.strip_prefix(shm_schemas::seq::ITEMS_FIELD)?;
+    let rest = rest.strip_prefix("[-1]").or_else(|| rest.strip_prefix(".-1"))?;
+    if rest.is_empty() {
+        return Some(rest);
+    }
+    rest.strip_prefix('.')
+}
+
+/// One plotted field of a type.
 #[derive(Debug, Clone)]
-pub struct Fields(Vec<(usize, Schema)>);
+pub enum Field {
+    /// At `offset` in every sample; in a sequence's sample (`sequence`),
+    /// past the end of a short one, which then has no value.
+    At { offset: usize, schema: Schema, sequence: bool },
+    /// At `offset` inside a sequence's last element (elements of `element`
+    /// bytes from `items_at`); a sample without elements has no value.
+    LastItem { offset: usize, schema: Schema, items_at: usize, element: usize },
+}
+
+impl Field {
+    /// The value in the sample `bytes`: `None` when a sequence's sample has
+    /// no such element.
+    fn value(&self, bytes: &[u8]) -> Result<Option<f64>, String> {
+        let (at, schema) = match self {
+            Field::At { offset, schema, sequence } => {
+                if *sequence && offset.checked_add(schema.size).is_none_or(|end| end > bytes.len()) {
+                    return Ok(None);
+                }
+                (*offset, schema)
+            }
+            Field::LastItem { offset, schema, items_at, element } => {
+                let n = bytes.len().saturating_sub(*items_at).checked_div(*element).unwrap_or(0);
+                let Some(last) = n.checked_sub(1) else { return Ok(None) };
+                let at = last
+                    .checked_mul(*element)
+                    .and_then(|b| b.checked_add(*items_at))
+                    .and_then(|b| b.checked_add(*offset));
+                (at.ok_or_else(|| format!("a {}-byte sample is too long to index", bytes.len()))?, schema)
+            }
+        };
+        let b = bytes.get(at..).ok_or_else(|| format!("a {}-byte sample is shorter than its schema", bytes.len()))?;
+        let v = schema.decode(b).map_err(|e| e.to_string())?;
+        numeric(&v).map(Some).ok_or_else(|| format!("{} is not a number", schema.type_name))
+    }
+}
+
+/// The plotted fields of a type, in the order of `--field`.
+#[derive(Debug, Clone)]
+pub struct Fields(Vec<Field>);
 
 impl Fields {
     /// The fields `paths` of `schema` (each must be a number).
@@ -158,18 +234,10 @@ impl Fields {
         paths.iter().map(|p| numeric_field(schema, port, p)).collect::<Result<_>>().map(Fields)
     }
 
-    /// The values of the fields in the sample `bytes`.
-    pub fn values(&self, bytes: &[u8]) -> Result<Vec<f64>, String> {
-        self.0
-            .iter()
-            .map(|(offset, s)| {
-                let b = bytes
-                    .get(*offset..)
-                    .ok_or_else(|| format!("a {}-byte sample is shorter than its schema", bytes.len()))?;
-                let v = s.decode(b).map_err(|e| e.to_string())?;
-                numeric(&v).ok_or_else(|| format!("{} is not a number", s.type_name))
-            })
-            .collect()
+    /// The values of the fields in the sample `bytes` (`None`: a
+    /// sequence's sample without that element).
+    pub fn values(&self, bytes: &[u8]) -> Result<Vec<Option<f64>>, String> {
+        self.0.iter().map(|f| f.value(bytes)).collect()
     }
 }
 
@@ -178,8 +246,8 @@ impl Fields {
 struct Samples {
     port: PortRef,
     stamps: Vec<u64>,
-    /// per field, in the order of `--field`
-    values: Vec<Vec<f64>>,
+    /// per field, in the order of `--field` (`None`: that sample has no such element)
+    values: Vec<Vec<Option<f64>>>,
 }
 
 impl Samples {
@@ -187,7 +255,7 @@ impl Samples {
         Samples { port: port.clone(), stamps: Vec::new(), values: vec![Vec::new(); fields] }
     }
 
-    fn push(&mut self, stamp_ns: u64, values: Vec<f64>) {
+    fn push(&mut self, stamp_ns: u64, values: Vec<Option<f64>>) {
         self.stamps.push(stamp_ns);
         for (line, v) in self.values.iter_mut().zip(values) {
             line.push(v);
@@ -210,8 +278,12 @@ fn lines(samples: &[Samples], fields: &[String]) -> Vec<Line> {
     let mut out = Vec::new();
     for s in samples.iter().filter(|s| !s.stamps.is_empty()) {
         for (field, values) in fields.iter().zip(&s.values) {
-            let mut points: Vec<(f64, f64)> =
-                s.stamps.iter().zip(values).map(|(t, v)| (t.saturating_sub(t0) as f64 / 1e9, *v)).collect();
+            let mut points: Vec<(f64, f64)> = s
+                .stamps
+                .iter()
+                .zip(values)
+                .filter_map(|(t, v)| v.map(|v| (t.saturating_sub(t0) as f64 / 1e9, v)))
+                .collect();
             points.sort_by(|a, b| a.0.total_cmp(&b.0));
             out.push(Line { label: format!("{} {field}", s.port), points: thin(&points, MAX_POINTS) });
         }
@@ -565,14 +637,54 @@ mod tests {
     fn fields_are_read_from_the_sample_bytes() {
         let paths: Vec<String> = ["x", "ok", "n", "ranges.1", "ranges.0"].map(String::from).to_vec();
         let f = Fields::of(&schema(), &port(), &paths).expect("numeric fields");
-        assert_eq!(f.values(&bytes()), Ok(vec![2.5, 1.0, -7.0, 300.0, 0.0]));
+        assert_eq!(f.values(&bytes()), Ok(vec![Some(2.5), Some(1.0), Some(-7.0), Some(300.0), Some(0.0)]));
         assert!(f.values(&bytes()[..10]).is_err(), "a short sample is an error, not a zero");
 
         let tick = Tick::schema();
         let f = Fields::of(&tick, &port(), &["stamp_ns".into(), "seq".into()]).expect("tick fields");
         let mut b = 42u64.to_le_bytes().to_vec();
         b.extend(7u64.to_le_bytes());
-        assert_eq!(f.values(&b), Ok(vec![7.0, 42.0]));
+        assert_eq!(f.values(&b), Ok(vec![Some(7.0), Some(42.0)]));
+    }
+
+    /// `Seq<Tick, Tick>` with `n` elements: header `{seq: 9, stamp_ns: 8}`,
+    /// element `i` `{seq: i, stamp_ns: 10 * i}`.
+    fn sequence_sample(n: u64) -> Vec<u8> {
+        let mut b = [9u64, 8].map(u64::to_le_bytes).concat();
+        for i in 0..n {
+            b.extend(i.to_le_bytes());
+            b.extend((10 * i).to_le_bytes());
+        }
+        b
+    }
+
+    #[test]
+    fn a_sequence_plots_its_header_one_element_and_the_last_one() {
+        let schema = shm_schemas::seq::Seq::<Tick, Tick>::schema();
+        let paths: Vec<String> =
+            ["header.seq", "items[2].stamp_ns", "items[-1].seq", "items.-1.stamp_ns"].map(String::from).to_vec();
+        let f = Fields::of(&schema, &port(), &paths).expect("numeric fields of a sequence");
+        assert_eq!(f.values(&sequence_sample(4)), Ok(vec![Some(9.0), Some(20.0), Some(3.0), Some(30.0)]));
+        // a sample without the third element, or without any, has no point there
+        assert_eq!(f.values(&sequence_sample(1)), Ok(vec![Some(9.0), None, Some(0.0), Some(0.0)]));
+        assert_eq!(f.values(&sequence_sample(0)), Ok(vec![Some(9.0), None, None, None]));
+        // the last element of a sequence of numbers
+        let bytes = shm_schemas::seq::Seq::<f32>::schema();
+        let f = Fields::of(&bytes, &port(), &["items[-1]".into()]).expect("the last number");
+        assert_eq!(f.values(&[1f32, 2.5].map(f32::to_le_bytes).concat()), Ok(vec![Some(2.5)]));
+        for (path, says) in
+            [("items[-1]", "not a number"), ("items[-1].nope", "has no field"), ("items[-2].seq", "has no field")]
+        {
+            let e = numeric_field(&schema, &port(), path).map(|_| ()).expect_err(path).to_string();
+            assert!(e.contains(says) && e.contains("items.<i>.seq"), "{path}: {e}");
+        }
+        // points of samples without the element are left out of the line
+        let samples = Samples {
+            port: port(),
+            stamps: vec![0, 1_000_000_000, 2_000_000_000],
+            values: vec![vec![Some(1.0), None, Some(3.0)]],
+        };
+        assert_eq!(lines(&[samples], &["items[5].seq".into()])[0].points, vec![(0.0, 1.0), (2.0, 3.0)]);
     }
 
     #[test]
