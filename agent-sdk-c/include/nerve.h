@@ -136,8 +136,8 @@ typedef enum nerve_status {
    */
   NERVE_CALL_FAILED = 14,
   /*
-   A call port used in the test harness, which does not carry calls
-   (as the Rust harness does not): test calls with real agents.
+   A call port used in a test harness that does not carry calls:
+   test calls with real agents.
    */
   NERVE_NOT_IN_HARNESS = 15,
 } nerve_status;
@@ -601,8 +601,8 @@ enum nerve_status nerve_serve(struct nerve_ctx *ctx,
 
 /*
  Sends a copy of `request` (`len` bytes: the request struct) on client
- `port` and returns at once, writing the call's id to `*call` (may be
- NULL); its answer comes from [`nerve_call_take`] in this or a later
+ `port` and returns at once, writing the call's id (never 0; 0 on a
+ failure) to `*call` (may be NULL); its answer comes from [`nerve_call_take`] in this or a later
  step. `NERVE_CALL_FAILED`, with nothing sent, when the client is not
  wired, no server answers, or 16 calls are in flight already.
 
@@ -640,7 +640,11 @@ enum nerve_status nerve_call_take(struct nerve_ctx *ctx,
  `answer` (`size` bytes), or until the client's timeout
  (`NERVE_CALL_FAILED`, saying why). The agent does nothing else
  meanwhile: its step takes that long. Calls of [`nerve_call`] that
- finish meanwhile are kept for [`nerve_call_take`].
+ finish meanwhile are kept for [`nerve_call_take`]. In the test
+ harness, whose clock moves only when the test moves it and which
+ answers nothing while the step runs, a call cannot be waited for:
+ `NERVE_CALL_FAILED` after the timeout in real time (use `nerve_call`
+ and `nerve_call_take` there).
 
  # Safety
  As for [`nerve_call`] and [`nerve_call_take`].

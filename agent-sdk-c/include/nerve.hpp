@@ -163,6 +163,62 @@ class param_f64 {
   nerve_param param_ = 0;
 };
 
+/* The header of a sequence that has none (nerve::NoHeader). */
+struct no_header {};
+
+/* A sequence input: samples of a Header and any number of Elem (as a
+ * Rust agent's SeqInput<Elem, Header>); a handle, cheap to copy. */
+template <class Elem, class Header = no_header>
+class seq_input {
+ public:
+  seq_input() = default;
+  nerve_port handle() const noexcept { return port_; }
+
+ private:
+  friend class setup;
+  explicit seq_input(nerve_port p) : port_(p) {}
+  nerve_port port_ = 0;
+};
+
+/* A sequence output of at most the max_len it was declared with. */
+template <class Elem, class Header = no_header>
+class seq_output {
+ public:
+  seq_output() = default;
+  nerve_port handle() const noexcept { return port_; }
+
+ private:
+  friend class setup;
+  explicit seq_output(nerve_port p) : port_(p) {}
+  nerve_port port_ = 0;
+};
+
+/* A service this agent answers: requests Req, answers Resp. */
+template <class Req, class Resp>
+class server {
+ public:
+  server() = default;
+  nerve_port handle() const noexcept { return port_; }
+
+ private:
+  friend class setup;
+  explicit server(nerve_port p) : port_(p) {}
+  nerve_port port_ = 0;
+};
+
+/* A client of another agent's service of Req and Resp. */
+template <class Req, class Resp>
+class client {
+ public:
+  client() = default;
+  nerve_port handle() const noexcept { return port_; }
+
+ private:
+  friend class setup;
+  explicit client(nerve_port p) : port_(p) {}
+  nerve_port port_ = 0;
+};
+
 /* What init declares ports and parameters on; valid during init only. */
 class setup {
  public:
@@ -207,9 +263,68 @@ class setup {
     return param_f64(p);
   }
 
+  /* Declares sequence input `name`: a Header (no_header: none) and any
+   * number of Elem, each a built-in payload struct or an own type. */
+  template <class Elem, class Header = no_header>
+  nerve::seq_input<Elem, Header> input_seq(const char *name) {
+    nerve_port p = 0;
+    nerve_type e = part<Elem>(), h = part<Header>();
+    detail::check(nerve_setup_input_seq(s_, name, &e, header_or_null<Header>(h), &p), "nerve_setup_input_seq");
+    return nerve::seq_input<Elem, Header>(p);
+  }
+
+  /* Declares sequence output `name` of at most `max_len` elements a sample. */
+  template <class Elem, class Header = no_header>
+  nerve::seq_output<Elem, Header> output_seq(const char *name, std::size_t max_len) {
+    nerve_port p = 0;
+    nerve_type e = part<Elem>(), h = part<Header>();
+    detail::check(nerve_setup_output_seq(s_, name, &e, header_or_null<Header>(h), max_len, &p),
+                  "nerve_setup_output_seq");
+    return nerve::seq_output<Elem, Header>(p);
+  }
+
+  /* Declares service `name`, answered in a step with context::serve. */
+  template <class Req, class Resp>
+  nerve::server<Req, Resp> serve(const char *name) {
+    nerve_port p = 0;
+    nerve_type q = part<Req>(), a = part<Resp>();
+    detail::check(nerve_setup_serve(s_, name, &q, &a, &p), "nerve_setup_serve");
+    return nerve::server<Req, Resp>(p);
+  }
+
+  /* Declares client `name` of a service of Req and Resp; each call waits
+   * at most `timeout_ns` (0: 2 s) for its answer. */
+  template <class Req, class Resp>
+  nerve::client<Req, Resp> client(const char *name, std::uint64_t timeout_ns = 0) {
+    nerve_port p = 0;
+    nerve_type q = part<Req>(), a = part<Resp>();
+    detail::check(nerve_setup_client(s_, name, &q, &a, timeout_ns, &p), "nerve_setup_client");
+    return nerve::client<Req, Resp>(p);
+  }
+
   nerve_setup *raw() const noexcept { return s_; }
 
  private:
+  /* T as one part of a sequence or a call: an own type's layout, or a
+   * built-in payload by name (no_header: nothing, see header_or_null). */
+  template <class T>
+  static nerve_type part() {
+    if constexpr (std::is_same<T, no_header>::value) {
+      return nerve_type{"", 0, 1, nullptr, 0};
+    } else if constexpr (detail::is_own<T>::value) {
+      static_assert(std::is_trivially_copyable<T>::value, "a payload is a plain struct");
+      return *own_layout<T>();
+    } else {
+      static_assert(std::is_trivially_copyable<T>::value, "a payload is a plain struct");
+      return nerve_type{payload<T>::type_name, sizeof(T), alignof(T), nullptr, 0};
+    }
+  }
+
+  template <class Header>
+  static const nerve_type *header_or_null(const nerve_type &h) noexcept {
+    return std::is_same<Header, no_header>::value ? nullptr : &h;
+  }
+
   /* Own type T's layout, checked to describe T (not another struct). */
   template <class T>
   static const nerve_type *own_layout() {
@@ -244,6 +359,65 @@ class loan {
   nerve_ctx *ctx_;
   nerve_port port_;
   T *data_;
+};
+
+/* A received sequence sample, read in place in shared memory until the
+ * callback returns: header() and the elements (begin/end, size, []). */
+template <class Elem, class Header = no_header>
+class seq_view {
+ public:
+  const Header &header() const noexcept { return *h_; }
+  const Elem *begin() const noexcept { return items_; }
+  const Elem *end() const noexcept { return items_ + n_; }
+  const Elem &operator[](std::size_t i) const noexcept { return items_[i]; }
+  std::size_t size() const noexcept { return n_; }
+  bool empty() const noexcept { return n_ == 0; }
+
+ private:
+  friend class context;
+  seq_view(const nerve_seq &s) noexcept
+      : h_(static_cast<const Header *>(s.header)), items_(static_cast<const Elem *>(s.items)), n_(s.len) {}
+  const Header *h_;
+  const Elem *items_;
+  std::size_t n_;
+};
+
+/* A loaned sequence sample of size() elements to write in place, then
+ * send(): the header zeroed, the elements as the slot last held them
+ * (write every one). Not sent, it is given back when the callback returns. */
+template <class Elem, class Header = no_header>
+class seq_loan {
+ public:
+  Header &header() const noexcept { return *h_; }
+  Elem *begin() const noexcept { return items_; }
+  Elem *end() const noexcept { return items_ + n_; }
+  Elem &operator[](std::size_t i) const noexcept { return items_[i]; }
+  std::size_t size() const noexcept { return n_; }
+  /* Publishes the sample; the loan is spent. */
+  void send() {
+    detail::check(nerve_send(ctx_, port_), "nerve_send");
+    items_ = nullptr;
+    n_ = 0;
+  }
+
+ private:
+  friend class context;
+  seq_loan(nerve_ctx *c, nerve_port p, const nerve_seq_loan &l) noexcept
+      : ctx_(c), port_(p), h_(static_cast<Header *>(l.header)), items_(static_cast<Elem *>(l.items)), n_(l.len) {}
+  nerve_ctx *ctx_;
+  nerve_port port_;
+  Header *h_;
+  Elem *items_;
+  std::size_t n_;
+};
+
+/* A finished call of a client: its id, and its answer or why none came. */
+template <class Resp>
+struct finished {
+  std::uint64_t id = 0;
+  std::optional<Resp> answer;
+  /* why there is no answer (timed out, server gone, unwired); "" with one */
+  std::string error;
 };
 
 /* What start, step and stop get; valid during the callback only. */
@@ -307,9 +481,109 @@ class context {
   /* Stops the agent after this callback. */
   void request_stop() { detail::check(nerve_request_stop(c_), "nerve_request_stop"); }
 
+  /* The next sequence waiting on `in`, in place; empty optional when none waits. */
+  template <class Elem, class Header>
+  std::optional<seq_view<Elem, Header>> take(const seq_input<Elem, Header> &in) {
+    return seq(nerve_take_seq, in, "nerve_take_seq");
+  }
+
+  /* The newest sequence waiting on `in` (older ones dropped); empty optional when none. */
+  template <class Elem, class Header>
+  std::optional<seq_view<Elem, Header>> latest(const seq_input<Elem, Header> &in) {
+    return seq(nerve_latest_seq, in, "nerve_latest_seq");
+  }
+
+  /* A sample of `n` elements of `out` to write in place, then seq_loan::send();
+   * throws nerve::error (NERVE_TOO_LONG) past its max_len, nothing loaned. */
+  template <class Elem, class Header>
+  seq_loan<Elem, Header> loan(const seq_output<Elem, Header> &out, std::size_t n) {
+    nerve_seq_loan l{};
+    detail::check(nerve_loan_seq(c_, out.handle(), n, &l), "nerve_loan_seq");
+    return seq_loan<Elem, Header>(c_, out.handle(), l);
+  }
+
+  /* Answers the requests waiting on `srv` with `f(const Req &) -> Resp`,
+   * called here once per request; returns how many. An exception from
+   * `f` drops that request unanswered and is thrown on from here. */
+  template <class Req, class Resp, class F>
+  std::size_t serve(const server<Req, Resp> &srv, F &&f) {
+    struct answering {
+      F *f;
+      std::exception_ptr thrown;
+    } c{&f, nullptr};
+    auto answer = [](const void *req, void *ans, void *user) -> int {
+      answering *k = static_cast<answering *>(user);
+      try {
+        *static_cast<Resp *>(ans) = (*k->f)(*static_cast<const Req *>(req));
+        return 0;
+      } catch (...) {
+        k->thrown = std::current_exception();
+        return 1;
+      }
+    };
+    std::size_t n = 0;
+    nerve_status s = nerve_serve(c_, srv.handle(), answer, &c, &n);
+    if (c.thrown) {
+      std::rethrow_exception(c.thrown);
+    }
+    detail::check(s, "nerve_serve");
+    return n;
+  }
+
+  /* Sends `req` on `cl` and returns its call id at once; the answer comes
+   * from take_answer in this or a later step. Throws nerve::error
+   * (NERVE_CALL_FAILED) when nothing could be sent (not wired, no server,
+   * too many in flight). */
+  template <class Req, class Resp>
+  std::uint64_t call(const client<Req, Resp> &cl, const Req &req) {
+    std::uint64_t id = 0;
+    detail::check(nerve_call(c_, cl.handle(), &req, sizeof req, &id), "nerve_call");
+    return id;
+  }
+
+  /* The oldest finished call of `cl` (answered, or why not); empty
+   * optional while none has finished. Never blocks. */
+  template <class Req, class Resp>
+  std::optional<finished<Resp>> take_answer(const client<Req, Resp> &cl) {
+    finished<Resp> f;
+    Resp r{};
+    nerve_status s = nerve_call_take(c_, cl.handle(), &f.id, &r, sizeof r);
+    if (s == NERVE_NO_SAMPLE) {
+      return std::nullopt;
+    }
+    if (s == NERVE_CALL_FAILED) {
+      f.error = nerve_last_error();
+      return f;
+    }
+    detail::check(s, "nerve_call_take");
+    f.answer = r;
+    return f;
+  }
+
+  /* Calls and waits in the step for the answer, at most the client's
+   * timeout; throws nerve::error (NERVE_CALL_FAILED) without one. */
+  template <class Req, class Resp>
+  Resp call_wait(const client<Req, Resp> &cl, const Req &req) {
+    Resp r{};
+    detail::check(nerve_call_wait(c_, cl.handle(), &req, sizeof req, &r, sizeof r), "nerve_call_wait");
+    return r;
+  }
+
   nerve_ctx *raw() const noexcept { return c_; }
 
  private:
+  template <class Elem, class Header>
+  std::optional<seq_view<Elem, Header>> seq(nerve_status (*f)(nerve_ctx *, nerve_port, nerve_seq *),
+                                            const seq_input<Elem, Header> &in, const char *call) {
+    nerve_seq s{};
+    nerve_status st = f(c_, in.handle(), &s);
+    if (st == NERVE_NO_SAMPLE) {
+      return std::nullopt;
+    }
+    detail::check(st, call);
+    return seq_view<Elem, Header>(s);
+  }
+
   template <class T>
   const T *sample(nerve_status (*f)(nerve_ctx *, nerve_port, const void **, size_t *), const input<T> &in,
                   const char *call) {

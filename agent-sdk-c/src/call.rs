@@ -16,9 +16,9 @@
 //! step; [`nerve_call_wait`] sends and waits in the step, at most the
 //! client's timeout. Requests and answers are copied (calls are small).
 //!
-//! The test harness does not carry calls (as the Rust harness does not
-//! yet): a call port declared there is kept, and each use of it is
-//! `NERVE_NOT_IN_HARNESS`.
+//! In the test harness the ports are the SDK harness's: where it does not
+//! carry calls, a call port declared there is kept (the agent's `init`
+//! succeeds) and each use of it is `NERVE_NOT_IN_HARNESS`.
 
 use crate::error::{Failure, guard, nerve_status};
 use crate::own_type::{nerve_type, part_schema};
@@ -247,15 +247,20 @@ unsafe fn client<'a>(ctx: *mut nerve_ctx, port: nerve_port) -> Result<&'a mut Cl
 ///
 /// # Safety
 /// `request` is null or readable for `len` bytes, for `'a`.
-unsafe fn request_bytes<'a>(c: &ClientPort, request: *const c_void, len: usize) -> Result<&'a [u8], Failure> {
+unsafe fn request_bytes<'a>(
+    c: &ClientPort,
+    port: nerve_port,
+    request: *const c_void,
+    len: usize,
+) -> Result<&'a [u8], Failure> {
     if request.is_null() {
         return Err(Failure::Null("request"));
     }
     let schema = c.client.request_schema();
     if len != schema.size {
-        return Err(Failure::Size {
-            direction: "request of client",
-            port: String::new(),
+        return Err(Failure::CallSize {
+            port,
+            what: "request",
             type_name: schema.type_name.clone(),
             want: schema.size,
             given: len,
@@ -271,15 +276,16 @@ unsafe fn request_bytes<'a>(c: &ClientPort, request: *const c_void, len: usize) 
 /// `answer` is writable for `size` bytes (checked not null).
 unsafe fn give(
     c: &ClientPort,
+    port: nerve_port,
     result: Result<Vec<u8>, CallError>,
     answer: *mut c_void,
     size: usize,
 ) -> Result<(), Failure> {
     let bytes = result.map_err(|source| Failure::Call { source })?;
     if bytes.len() != size {
-        return Err(Failure::Size {
-            direction: "answer of client",
-            port: String::new(),
+        return Err(Failure::CallSize {
+            port,
+            what: "answer",
             type_name: c.client.response_schema().type_name.clone(),
             want: bytes.len(),
             given: size,
@@ -291,15 +297,15 @@ unsafe fn give(
 }
 
 /// Checks that `answer` is not null and `size` is the answer layout's.
-fn check_answer(c: &ClientPort, answer: *mut c_void, size: usize) -> Result<(), Failure> {
+fn check_answer(c: &ClientPort, port: nerve_port, answer: *mut c_void, size: usize) -> Result<(), Failure> {
     if answer.is_null() {
         return Err(Failure::Null("answer"));
     }
     let schema = c.client.response_schema();
     if size != schema.size {
-        return Err(Failure::Size {
-            direction: "answer of client",
-            port: String::new(),
+        return Err(Failure::CallSize {
+            port,
+            what: "answer",
             type_name: schema.type_name.clone(),
             want: schema.size,
             given: size,
@@ -309,8 +315,8 @@ fn check_answer(c: &ClientPort, answer: *mut c_void, size: usize) -> Result<(), 
 }
 
 /// Sends a copy of `request` (`len` bytes: the request struct) on client
-/// `port` and returns at once, writing the call's id to `*call` (may be
-/// NULL); its answer comes from [`nerve_call_take`] in this or a later
+/// `port` and returns at once, writing the call's id (never 0; 0 on a
+/// failure) to `*call` (may be NULL); its answer comes from [`nerve_call_take`] in this or a later
 /// step. `NERVE_CALL_FAILED`, with nothing sent, when the client is not
 /// wired, no server answers, or 16 calls are in flight already.
 ///
@@ -327,13 +333,17 @@ pub unsafe extern "C" fn nerve_call(
 ) -> nerve_status {
     guard(|| {
         // SAFETY: the caller's contract
+        let mut id_out = unsafe { call.as_mut() };
+        if let Some(o) = id_out.as_deref_mut() {
+            *o = 0;
+        }
+        // SAFETY: the caller's contract
         let c = unsafe { client(ctx, port) }?;
         // SAFETY: the caller's contract
-        let bytes = unsafe { request_bytes(c, request, len) }?;
+        let bytes = unsafe { request_bytes(c, port, request, len) }?;
         let id = c.client.call(bytes).map_err(|source| Failure::Call { source })?;
-        // SAFETY: the caller's contract
-        if let Some(out) = unsafe { call.as_mut() } {
-            *out = id.0;
+        if let Some(o) = id_out {
+            *o = id.0;
         }
         Ok(())
     })
@@ -365,7 +375,7 @@ pub unsafe extern "C" fn nerve_call_take(
         }
         // SAFETY: the caller's contract
         let c = unsafe { client(ctx, port) }?;
-        check_answer(c, answer, size)?;
+        check_answer(c, port, answer, size)?;
         let (id, result) = match c.stash.pop_front() {
             Some(f) => f,
             None => c.client.take().ok_or(Failure::NoSample(port))?,
@@ -374,7 +384,7 @@ pub unsafe extern "C" fn nerve_call_take(
             *o = id.0;
         }
         // SAFETY: `answer` is writable for `size` bytes by the caller's contract
-        unsafe { give(c, result, answer, size) }
+        unsafe { give(c, port, result, answer, size) }
     })
 }
 
@@ -383,7 +393,11 @@ pub unsafe extern "C" fn nerve_call_take(
 /// `answer` (`size` bytes), or until the client's timeout
 /// (`NERVE_CALL_FAILED`, saying why). The agent does nothing else
 /// meanwhile: its step takes that long. Calls of [`nerve_call`] that
-/// finish meanwhile are kept for [`nerve_call_take`].
+/// finish meanwhile are kept for [`nerve_call_take`]. In the test
+/// harness, whose clock moves only when the test moves it and which
+/// answers nothing while the step runs, a call cannot be waited for:
+/// `NERVE_CALL_FAILED` after the timeout in real time (use `nerve_call`
+/// and `nerve_call_take` there).
 ///
 /// # Safety
 /// As for [`nerve_call`] and [`nerve_call_take`].
@@ -399,9 +413,9 @@ pub unsafe extern "C" fn nerve_call_wait(
     guard(|| {
         // SAFETY: the caller's contract
         let c = unsafe { client(ctx, port) }?;
-        check_answer(c, answer, size)?;
+        check_answer(c, port, answer, size)?;
         // SAFETY: the caller's contract
-        let bytes = unsafe { request_bytes(c, request, len) }?;
+        let bytes = unsafe { request_bytes(c, port, request, len) }?;
         let id = c.client.call(bytes).map_err(|source| Failure::Call { source })?;
         // the SDK ends the call at its timeout; past that (and a margin) this stops looking
         let give_up = Instant::now() + c.client.options().timeout + Duration::from_secs(1);
@@ -410,15 +424,13 @@ pub unsafe extern "C" fn nerve_call_wait(
             while let Some((done, result)) = c.client.take() {
                 if done == id {
                     // SAFETY: `answer` is writable for `size` bytes by the caller's contract
-                    return unsafe { give(c, result, answer, size) };
+                    return unsafe { give(c, port, result, answer, size) };
                 }
                 c.stash.push_back((done, result));
             }
             if Instant::now() >= give_up {
-                return Err(Failure::Invalid(format!(
-                    "client {port}: call {} did not end within its timeout: a bug of nerve, please report it",
-                    id.0
-                )));
+                // the call stays in flight: nerve_call_take gives its end later
+                return Err(Failure::NoAnswer { port, call: id.0 });
             }
             std::thread::sleep(pause);
             pause = (pause * 2).min(Duration::from_millis(1));

@@ -49,8 +49,8 @@ pub enum nerve_status {
     /// client unwired or not wired, no server, too many in flight); the
     /// message says which.
     NERVE_CALL_FAILED = 14,
-    /// A call port used in the test harness, which does not carry calls
-    /// (as the Rust harness does not): test calls with real agents.
+    /// A call port used in a test harness that does not carry calls:
+    /// test calls with real agents.
     NERVE_NOT_IN_HARNESS = 15,
 }
 
@@ -110,6 +110,15 @@ pub(crate) enum Failure {
     )]
     NotInHarness(u32),
     #[error(
+        "client {port}: call {call} had no answer within the client's timeout (in the test harness, whose clock moves \
+         only when the test moves it, wait with nerve_call and nerve_call_take instead); it ends later, for nerve_call_take"
+    )]
+    NoAnswer { port: u32, call: u64 },
+    #[error(
+        "client {port}: the {what} is {type_name} of {want} bytes, but {given} bytes were given: pass its struct (sizeof)"
+    )]
+    CallSize { port: u32, what: &'static str, type_name: String, want: usize, given: usize },
+    #[error(
         "service {port}: the answer function returned {code}; that request was dropped unanswered (its caller sees the server gone)"
     )]
     AnswerFailed { port: u32, code: i32 },
@@ -164,10 +173,10 @@ impl Failure {
             Failure::LoanPending(_) => NERVE_LOAN_PENDING,
             Failure::Sdk { .. } | Failure::Port { .. } => NERVE_PORT_ERROR,
             Failure::NoPortNamed { .. } => NERVE_UNKNOWN_PORT,
-            Failure::Size { .. } => NERVE_LAYOUT_MISMATCH,
+            Failure::Size { .. } | Failure::CallSize { .. } => NERVE_LAYOUT_MISMATCH,
             Failure::Agent { .. } | Failure::AnswerFailed { .. } => NERVE_AGENT_FAILED,
             Failure::TooLong { .. } => NERVE_TOO_LONG,
-            Failure::Call { .. } => NERVE_CALL_FAILED,
+            Failure::Call { .. } | Failure::NoAnswer { .. } => NERVE_CALL_FAILED,
             Failure::NotInHarness(_) => NERVE_NOT_IN_HARNESS,
             Failure::Harness { source } => match source {
                 HarnessError::Agent { .. } => NERVE_AGENT_FAILED,

@@ -16,6 +16,11 @@
 //! [`nerve_loan`] a slot to write in place, both valid until the callback
 //! returns.
 //!
+//! Sequences (a header and any number of an element, [`seq`]) and calls
+//! (a service the agent answers in its step and a client, [`call`]) are
+//! declared by layout too, on the same SDK ports a Rust agent's
+//! `output_seq`, `serve` and `client` make.
+//!
 //! Every exported function returns a [`nerve_status`]; on an error,
 //! [`nerve_last_error`] says what went wrong and what to do. Null pointers,
 //! unknown ports and a context used after its callback returned are

@@ -22,10 +22,114 @@ fn build_c(name: &str, dir: &Path, extra: &[&str]) -> PathBuf {
     common::compile("gcc", &flags, &source, dir, name)
 }
 
+/// The lengths the Rust `detector` and `examples/c/seq_call.c` send in turn.
+const LENGTHS: [usize; 4] = [0, 1, 400, 401];
+
+/// The agents of the sequence and call checks (`seq_call_cross`), for the
+/// relay's launch file: the C agent `cseq` (`examples/c/seq_call.c`, built
+/// at `exe`), the Rust `detector` of its sequence type wired to it both
+/// ways, a Rust server (`nerve-caller --serve`) its client calls and a Rust
+/// client (`nerve-caller`) that calls its service.
+fn seq_call_agents(exe: &Path) -> String {
+    format!(
+        r#"
+[[agent]]
+name = "d"
+kind = "detector"
+
+[[agent]]
+name = "s"
+kind = "caller"
+args = ["--serve"]
+
+[[agent]]
+name = "k"
+kind = "caller"
+
+[[agent]]
+name = "cseq"
+exe = "{}"
+
+[[connect]]
+from = "d/dets"
+to = "cseq/dets_in"
+
+[[connect]]
+from = "cseq/dets"
+to = "d/dets_in"
+
+[[connect]]
+from = "cseq/planner"
+to = "s/plan"
+
+[[connect]]
+from = "k/planner"
+to = "cseq/plan"
+"#,
+        exe.display()
+    )
+}
+
+/// Sequences and calls between a C agent and Rust agents (issue 43 over
+/// issue 42): the C agent's sequences (lengths 0, 1, 400, 401, read in
+/// place by the Rust detector element by element, and decoded by `nerve
+/// echo` at their own length), the Rust detector's read in place by the C
+/// agent, and its loans past `max_len` refused; its service answers `nerve
+/// call` and a Rust client, and its client (one call in flight, and one
+/// that waits in the step now and then) is answered by a Rust server.
+fn seq_call_cross(r: &Robot) {
+    let want = Value::from("nerve::Seq<acme::Detection, acme::DetectionsHeader>");
+    let dets_type = r.agent("cseq").and_then(|a| {
+        a["outputs"].as_array().and_then(|o| o.iter().find(|o| o["name"] == "dets")).map(|o| o["type_name"].clone())
+    });
+    assert_eq!(dets_type, Some(want), "the C sequence is the Rust one's type");
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("d", "received") >= 8
+            && r.figure_u64("d", "largest") == 401),
+        "the Rust detector read {} samples of the C agent, the largest of {} elements",
+        r.figure("d", "received"),
+        r.figure("d", "largest")
+    );
+    assert_eq!(r.figure_u64("d", "bad"), 0, "every element the C agent wrote, as written");
+
+    let report = |r: &Robot| r.echo("cseq/report", 1).pop().map(|v| v["data"].clone()).unwrap_or_default();
+    let done = |d: &Value| {
+        d["received"].as_u64() >= Some(8)
+            && d["largest"] == 401
+            && d["answered"].as_u64() >= Some(3)
+            && d["replies"].as_u64() >= Some(3)
+            && d["waited"].as_u64() >= Some(1)
+    };
+    assert!(wait_until(Duration::from_secs(10), || done(&report(r))), "the C agent reports {}", report(r));
+    let d = report(r);
+    assert_eq!((d["bad"].as_u64(), d["wrong"].as_u64()), (Some(0), Some(0)), "{d}");
+    assert!(d["refused"].as_u64() > Some(0), "a loan past max_len was refused: {d}");
+
+    // the C service, to a Rust client and to `nerve call`
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("k", "answered") >= 3),
+        "the Rust client got no answers from the C service: {:?}",
+        r.figures("k")
+    );
+    assert_eq!(r.figure("k", "wrong"), "0", "{:?}", r.figures("k"));
+    let out = r.ok(&["call", "cseq/plan", r#"{"seq": 21}"#]);
+    let answer: Value = serde_json::from_str(&out).expect("the answer as JSON");
+    assert_eq!(answer["value"].as_f64(), Some(42.0), "{out}");
+
+    // each C sample at its own length, as nerve echo decodes it by the registered schema
+    for s in r.echo("cseq/dets", 4) {
+        let frame = s["data"]["header"]["frame"].as_u64().expect("frame");
+        let items = s["data"]["items"].as_array().expect("items");
+        assert_eq!(items.len(), LENGTHS[(frame as usize - 1) % LENGTHS.len()], "frame {frame}");
+        assert_eq!(s["data"]["header"]["count"].as_u64(), Some(items.len() as u64));
+    }
+}
+
 #[test]
 fn the_c_relay_runs_under_the_router_and_stops_cleanly() {
     let r = Robot::new("crelay");
     let exe = build_c("relay", &r.home, &[]);
+    let cseq = build_c("seq_call", &r.home, &[]);
 
     // described without a robot's shared memory
     let out = r.command(exe.to_str().expect("utf-8 path")).arg("--describe").output().expect("describe");
@@ -52,8 +156,9 @@ exe = "{}"
 [[connect]]
 from = "t/tick"
 to = "crelay/in"
-"#,
-            exe.display()
+{}"#,
+            exe.display(),
+            seq_call_agents(&cseq)
         ),
     );
     r.ok(&["launch", file.to_str().expect("utf-8 path")]);
@@ -73,6 +178,8 @@ to = "crelay/in"
     assert!(why.contains("event-driven"), "{why}");
     // it stops, and its stop callback ran: it says so in its log
     common::stops_and_says(&r, "crelay", "crelay: stopping after");
+
+    seq_call_cross(&r);
     r.down_and_check_clean();
 }
 
@@ -82,18 +189,6 @@ fn cycles(r: &Robot, name: &str) -> u64 {
 
 fn rate_of(r: &Robot, name: &str) -> f64 {
     r.agent(name).and_then(|a| a["stats"]["rate_hz"].as_f64()).unwrap_or(0.0)
-}
-
-/// The seqs of the next `n` ticks the relay republishes.
-fn relayed(r: &Robot, n: u32) -> Vec<u64> {
-    r.echo("crelay/out", n).iter().filter_map(|v| v["data"]["seq"].as_u64()).collect()
-}
-
-/// Whether what the relay republishes now comes from t2 (whose seq grows
-/// by a million a tick; t1's by one), checked on a few fresh ticks.
-fn follows_t2(r: &Robot) -> bool {
-    let seqs = relayed(r, 3);
-    seqs.len() == 3 && seqs.iter().all(|s| *s >= 1_000_000 && s % 1_000_000 == 0)
 }
 
 /// What a Rust agent gets from the runtime, for a C agent under a real
@@ -135,17 +230,8 @@ to = "crelay/in"
         ),
     );
     r.ok(&["launch", file.to_str().expect("utf-8 path")]);
-    let seqs = relayed(&r, 3);
-    assert!(seqs.len() == 3 && seqs.iter().all(|s| *s < 1_000_000), "t1's ticks first: {seqs:?}");
-
     // rewired: its output follows t2
-    r.ok(&["disconnect", "t1/tick", "crelay/in"]);
-    r.ok(&["connect", "t2/tick", "crelay/in"]);
-    assert!(
-        wait_until(Duration::from_secs(5), || follows_t2(&r)),
-        "crelay's output does not follow t2: {:?}",
-        relayed(&r, 3)
-    );
+    common::rewired_to_t2(&r, "crelay");
 
     // rate: from 20 ms (50 Hz) to 100 ms (10 Hz)
     assert!(
@@ -183,25 +269,11 @@ to = "crelay/in"
         "{:?}",
         r.agent("crelay")
     );
-    assert!(follows_t2(&r), "a resumed crelay relays t2's ticks");
+    assert!(common::follows_t2(&r, "crelay"), "a resumed crelay relays t2's ticks");
     assert!(wait_until(Duration::from_secs(5), || cycles(&r, "crelay") > before + 1), "a resumed crelay steps");
 
     // SIGKILL: the supervisor restarts it, with its connection to t2 and its period
-    let old = r.pid("crelay");
-    nerve_testkit::sigkill(old);
-    assert!(
-        wait_until(Duration::from_secs(10), || r.agent("crelay").is_some_and(|a| {
-            let pid = a["pid"].as_u64().unwrap_or(0);
-            pid != 0 && pid != u64::from(old)
-        })),
-        "crelay was not restarted: {:?}",
-        r.ps()
-    );
-    assert!(
-        wait_until(Duration::from_secs(5), || follows_t2(&r)),
-        "the restarted crelay does not relay t2: {:?}",
-        relayed(&r, 3)
-    );
+    common::killed_and_restarted_with_t2(&r, "crelay");
     assert!(
         wait_until(Duration::from_secs(8), || (5.0..15.0).contains(&rate_of(&r, "crelay"))),
         "the restarted crelay runs at {} Hz, not 10",
@@ -236,6 +308,6 @@ fn c_calls_with_null_pointers_are_statuses_not_crashes() {
     let out = Command::new(&exe).output().expect("run misuse");
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
-    assert_eq!(stdout.lines().filter(|l| l.starts_with("ok ")).count(), 13, "{stdout}");
+    assert_eq!(stdout.lines().filter(|l| l.starts_with("ok ")).count(), 25, "{stdout}");
     assert!(!stdout.contains("FAIL"), "{stdout}");
 }

@@ -60,6 +60,42 @@ fn the_c_relay_passes_its_harness_test() {
     }
 }
 
+/// The sequence-and-call agent's harness test (`examples/c/seq_call_test.c`):
+/// sequences of 0, 1 and 401 elements in, 0, 1 and 400 out at their own
+/// length, loans past `max_len` refused, and the misuse of every sequence
+/// and call function a status with a message; plain, then under ASan and
+/// UBSan with nothing reported.
+#[test]
+fn the_c_sequence_agent_passes_its_harness_test_clean_under_asan() {
+    let r = Robot::new("chseq");
+    let source = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples").join("c").join("seq_call_test.c");
+    for (flags, name) in [(&["-std=c11", "-pedantic"][..], "seq_call_test"), (SANITIZE, "seq_call_test_asan")] {
+        let exe = common::compile("gcc", flags, &source, &r.home, name);
+        let out = run(&r, &exe);
+        let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(!sanitizer_reports(&stderr), "{name}: a sanitizer reported:\n{stderr}");
+        assert!(out.status.success() && stdout.contains("PASSED: 0 failure(s)"), "{name} failed:\n{stdout}\n{stderr}");
+        for said in ["1001 elements are more than its max_len of 1000", "not a sequence", "was used after"] {
+            assert!(stdout.contains(said), "no {said:?} in:\n{stdout}");
+        }
+    }
+}
+
+/// Sequences and calls through `nerve.hpp` (`examples/cpp/seq_test.cpp`):
+/// typed sequence ports of own element and header types, read with a
+/// range-for in place, written in place, a loan past `max_len` thrown as
+/// `nerve::error(NERVE_TOO_LONG)`; a service and a client declared by
+/// their payload structs, served with a lambda.
+#[test]
+fn the_cpp_sequence_agent_passes_its_harness_test() {
+    let r = Robot::new("chcppseq");
+    let source = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples").join("cpp").join("seq_test.cpp");
+    let exe = common::compile("g++", &["-std=c++17", "-pedantic"], &source, &r.home, "seq_test");
+    let out = run(&r, &exe);
+    let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success() && stdout.contains("PASSED: 0 failure(s)"), "seq_test failed:\n{stdout}\n{stderr}");
+}
+
 #[test]
 fn the_c_relay_harness_test_runs_clean_under_asan_and_ubsan() {
     let r = Robot::new("chasan");

@@ -22,11 +22,6 @@ fn build_relay(dir: &Path, extra: &[&str]) -> PathBuf {
     common::compile("g++", &flags, &source, dir, "cpprelay")
 }
 
-/// The seqs of the next `n` ticks the relay republishes.
-fn relayed(r: &Robot, n: u32) -> Vec<u64> {
-    r.echo("cpprelay/out", n).iter().filter_map(|v| v["data"]["seq"].as_u64()).collect()
-}
-
 #[test]
 fn the_cpp_relay_runs_under_the_router_takes_its_parameter_and_stops_cleanly() {
     let r = Robot::new("cpprelay");
@@ -62,7 +57,7 @@ to = "cpprelay/in"
     r.ok(&["launch", file.to_str().expect("utf-8 path")]);
     assert_eq!(r.agent("cpprelay").expect("the C++ agent is listed")["kind"], "cpprelay");
 
-    let seqs = relayed(&r, 3);
+    let seqs = common::relayed(&r, "cpprelay", 3);
     assert_eq!(seqs.len(), 3, "three ticks: {seqs:?}");
     assert!(seqs.windows(2).all(|w| w[1] > w[0]), "in order: {seqs:?}");
 
@@ -73,9 +68,9 @@ to = "cpprelay/in"
     r.ok(&["param", "set", "cpprelay", "every", "3"]);
     let thirds = |s: &[u64]| s.len() == 3 && s.windows(2).all(|w| w[1] == w[0] + 3);
     assert!(
-        wait_until(Duration::from_secs(5), || thirds(&relayed(&r, 3))),
+        wait_until(Duration::from_secs(5), || thirds(&common::relayed(&r, "cpprelay", 3))),
         "every = 3 does not relay one tick in three: {:?}",
-        relayed(&r, 3)
+        common::relayed(&r, "cpprelay", 3)
     );
 
     // it stops, and its on_stop lambda ran: it says so in its log
@@ -100,13 +95,6 @@ fn a_cpp_exception_in_init_is_a_failed_start_not_a_crash() {
     );
     assert!(stderr.contains("cpprelay: init: nerve_setup_param_f64:"), "the wrapper names the call: {stderr}");
     assert!(stderr.contains("out of its bounds"), "nerve's message is kept: {stderr}");
-}
-
-/// Whether what the relay republishes now comes from t2 (whose seq grows
-/// by a million a tick; t1's by one), checked on a few fresh ticks.
-fn follows_t2(r: &Robot) -> bool {
-    let seqs = relayed(r, 3);
-    seqs.len() == 3 && seqs.iter().all(|s| *s >= 1_000_000 && s % 1_000_000 == 0)
 }
 
 /// The C++ relay rewired at run time to another ticker, then killed with
@@ -146,28 +134,8 @@ to = "cpprelay/in"
         ),
     );
     r.ok(&["launch", file.to_str().expect("utf-8 path")]);
-    let seqs = relayed(&r, 3);
-    assert!(seqs.len() == 3 && seqs.iter().all(|s| *s < 1_000_000), "t1's ticks first: {seqs:?}");
-
-    r.ok(&["disconnect", "t1/tick", "cpprelay/in"]);
-    r.ok(&["connect", "t2/tick", "cpprelay/in"]);
-    assert!(wait_until(Duration::from_secs(5), || follows_t2(&r)), "cpprelay does not follow t2: {:?}", relayed(&r, 3));
-
-    let old = r.pid("cpprelay");
-    nerve_testkit::sigkill(old);
-    assert!(
-        wait_until(Duration::from_secs(10), || r.agent("cpprelay").is_some_and(|a| {
-            let pid = a["pid"].as_u64().unwrap_or(0);
-            pid != 0 && pid != u64::from(old)
-        })),
-        "cpprelay was not restarted: {:?}",
-        r.ps()
-    );
-    assert!(
-        wait_until(Duration::from_secs(5), || follows_t2(&r)),
-        "the restarted cpprelay does not relay t2: {:?}",
-        relayed(&r, 3)
-    );
+    common::rewired_to_t2(&r, "cpprelay");
+    common::killed_and_restarted_with_t2(&r, "cpprelay");
 
     let pid = r.pid("cpprelay");
     r.ok(&["stop", "cpprelay"]);

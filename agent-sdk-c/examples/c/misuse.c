@@ -42,6 +42,27 @@ int main(void) {
   bad += check("cycle(NULL ctx)", nerve_cycle(NULL, &cycle), NERVE_NULL_POINTER);
   bad += check("request_stop(NULL ctx)", nerve_request_stop(NULL), NERVE_NULL_POINTER);
   bad += check("param_f64(NULL ctx)", nerve_param_f64(NULL, 1, &value), NERVE_NULL_POINTER);
+  /* sequences and calls */
+  nerve_seq seq = {&seq, &seq, 1};
+  nerve_seq_loan sl = {&sl, &sl, 1};
+  uint64_t call = 1;
+  char buf[16] = {0};
+  bad += check("setup_input_seq(NULL setup)", nerve_setup_input_seq(NULL, "in", NULL, NULL, &port), NERVE_NULL_POINTER);
+  bad += check("setup_output_seq(NULL setup)", nerve_setup_output_seq(NULL, "out", NULL, NULL, 8, &port), NERVE_NULL_POINTER);
+  bad += check("take_seq(NULL ctx)", nerve_take_seq(NULL, 1, &seq), NERVE_NULL_POINTER);
+  bad += check("latest_seq(NULL ctx)", nerve_latest_seq(NULL, 1, &seq), NERVE_NULL_POINTER);
+  bad += check("loan_seq(NULL ctx)", nerve_loan_seq(NULL, 65536, 1, &sl), NERVE_NULL_POINTER);
+  bad += check("loan_seq(NULL loan)", nerve_loan_seq(NULL, 65536, 1, NULL), NERVE_NULL_POINTER);
+  bad += check("setup_serve(NULL setup)", nerve_setup_serve(NULL, "plan", NULL, NULL, &port), NERVE_NULL_POINTER);
+  bad += check("setup_client(NULL setup)", nerve_setup_client(NULL, "planner", NULL, NULL, 0, &port), NERVE_NULL_POINTER);
+  bad += check("serve(NULL answer function)", nerve_serve(NULL, 131072, NULL, NULL, NULL), NERVE_NULL_POINTER);
+  bad += check("call(NULL ctx)", nerve_call(NULL, 196608, buf, 16, &call), NERVE_NULL_POINTER);
+  bad += check("call_take(NULL ctx)", nerve_call_take(NULL, 196608, &call, buf, 16), NERVE_NULL_POINTER);
+  bad += check("call_wait(NULL ctx)", nerve_call_wait(NULL, 196608, buf, 16, buf, 16), NERVE_NULL_POINTER);
+  if (seq.header != NULL || seq.items != NULL || seq.len != 0 || sl.header != NULL || call != 0) {
+    printf("FAIL a sequence or call out-pointer was set by a failed call\n");
+    bad++;
+  }
   if (data != NULL || len != 0 || slot != NULL) {
     printf("FAIL an out-pointer was set by a failed call\n");
     bad++;

@@ -72,3 +72,50 @@ pub fn stops_and_says(r: &Robot, name: &str, said: &str) {
     });
     assert!(found, "no log in {} says {said:?}: {name}'s stop callback did not run", logs.display());
 }
+
+/// The seqs of the next `n` ticks relay `name` republishes on `name/out`.
+pub fn relayed(r: &Robot, name: &str, n: u32) -> Vec<u64> {
+    r.echo(&format!("{name}/out"), n).iter().filter_map(|v| v["data"]["seq"].as_u64()).collect()
+}
+
+/// Whether what relay `name` republishes now comes from t2 (whose seq
+/// grows by a million a tick; t1's by one), checked on a few fresh ticks.
+pub fn follows_t2(r: &Robot, name: &str) -> bool {
+    let seqs = relayed(r, name, 3);
+    seqs.len() == 3 && seqs.iter().all(|s| *s >= 1_000_000 && s % 1_000_000 == 0)
+}
+
+/// Relay `name`, launched fed by ticker t1, relays t1's ticks; rewired at
+/// run time (`nerve disconnect`/`connect`) to ticker t2, it relays t2's.
+pub fn rewired_to_t2(r: &Robot, name: &str) {
+    let seqs = relayed(r, name, 3);
+    assert!(seqs.len() == 3 && seqs.iter().all(|s| *s < 1_000_000), "t1's ticks first: {seqs:?}");
+    r.ok(&["disconnect", "t1/tick", &format!("{name}/in")]);
+    r.ok(&["connect", "t2/tick", &format!("{name}/in")]);
+    assert!(
+        wait_until(Duration::from_secs(5), || follows_t2(r, name)),
+        "{name}'s output does not follow t2: {:?}",
+        relayed(r, name, 3)
+    );
+}
+
+/// Relay `name` killed with SIGKILL is restarted by the supervisor
+/// (`restart = "on-failure"`: a new pid) with its run-time connection to
+/// t2 back, not the launch file's.
+pub fn killed_and_restarted_with_t2(r: &Robot, name: &str) {
+    let old = r.pid(name);
+    nerve_testkit::sigkill(old);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.agent(name).is_some_and(|a| {
+            let pid = a["pid"].as_u64().unwrap_or(0);
+            pid != 0 && pid != u64::from(old)
+        })),
+        "{name} was not restarted: {:?}",
+        r.ps()
+    );
+    assert!(
+        wait_until(Duration::from_secs(5), || follows_t2(r, name)),
+        "the restarted {name} does not relay t2: {:?}",
+        relayed(r, name, 3)
+    );
+}
