@@ -61,3 +61,99 @@ pub unsafe extern "C" fn nerve_loan_uninit(
     // SAFETY: the caller's contract, which is `loan_on`'s
     guard(|| unsafe { loan_on(ctx, port, data, false) })
 }
+
+#[cfg(test)]
+mod tests {
+    //! `nerve_loan_uninit` called as a C agent calls it, in the C test
+    //! harness: a relay that answers each tick through it, and its misuse.
+
+    use super::nerve_loan_uninit;
+    use crate::harness::{
+        nerve_harness_free, nerve_harness_new, nerve_harness_output, nerve_harness_send, nerve_harness_step,
+    };
+    use crate::*;
+    use shm_schemas::payloads::Tick;
+    use std::ffi::CStr;
+    use std::sync::Mutex;
+
+    /// What the step found wrong (a panic must not unwind into C).
+    static WRONG: Mutex<Vec<String>> = Mutex::new(Vec::new());
+
+    fn expect(what: &str, got: nerve_status, want: nerve_status) {
+        if got != want {
+            WRONG.lock().expect("lock").push(format!("{what}: {got:?}, not {want:?}"));
+        }
+    }
+
+    const TICK: &CStr = c"nerve::Tick";
+    const SIZE: usize = std::mem::size_of::<Tick>();
+    const ALIGN: usize = std::mem::align_of::<Tick>();
+
+    /// Ports: the input's handle at 0, the output's at 1.
+    unsafe extern "C" fn init(setup: *mut nerve_setup, user: *mut c_void) -> c_int {
+        // SAFETY: `user` is the test's two handles; the strings are C literals
+        unsafe {
+            let ports = user.cast::<[nerve_port; 2]>();
+            let a = nerve_setup_input(setup, c"in".as_ptr(), TICK.as_ptr(), SIZE, ALIGN, 0, &mut (*ports)[0]);
+            let b = nerve_setup_output(setup, c"out".as_ptr(), TICK.as_ptr(), SIZE, ALIGN, 0, &mut (*ports)[1]);
+            c_int::from(a != nerve_status::NERVE_OK || b != nerve_status::NERVE_OK)
+        }
+    }
+
+    /// Answers each tick with `seq + 1` in an uninitialised loan, checking its misuse on the way.
+    unsafe extern "C" fn step(ctx: *mut nerve_ctx, user: *mut c_void) -> c_int {
+        use nerve_status::*;
+        // SAFETY: `user` is the test's handles, `ctx` this step's context; out-pointers are locals
+        unsafe {
+            let [input, output] = *user.cast::<[nerve_port; 2]>();
+            let (mut data, mut len) = (std::ptr::null::<c_void>(), 0usize);
+            while nerve_take(ctx, input, &mut data, &mut len) == NERVE_OK {
+                let seq = data.cast::<Tick>().read_unaligned().seq;
+                let mut slot = std::ptr::null_mut::<c_void>();
+                expect("null data", nerve_loan_uninit(ctx, output, std::ptr::null_mut()), NERVE_NULL_POINTER);
+                expect("an input's handle", nerve_loan_uninit(ctx, input, &mut slot), NERVE_UNKNOWN_PORT);
+                expect("loan", nerve_loan_uninit(ctx, output, &mut slot), NERVE_OK);
+                let mut again = slot;
+                expect("second loan", nerve_loan_uninit(ctx, output, &mut again), NERVE_LOAN_PENDING);
+                if !again.is_null() {
+                    WRONG.lock().expect("lock").push("a refused loan left its pointer set".into());
+                }
+                // only the sequence number is written: the stamp is what the slot held (zero here)
+                slot.cast::<u64>().write(seq + 1);
+                expect("send", nerve_send(ctx, output), NERVE_OK);
+            }
+            0
+        }
+    }
+
+    #[test]
+    fn an_uninitialised_loan_is_written_in_place_and_sent() {
+        let mut ports: [nerve_port; 2] = [0, 0];
+        let vt = nerve_agent_vtable {
+            kind: c"uninit-relay".as_ptr(),
+            period_ns: 0,
+            init: Some(init),
+            start: None,
+            step: Some(step),
+            stop: None,
+        };
+        let mut h = std::ptr::null_mut();
+        let user = (&raw mut ports).cast::<c_void>();
+        // SAFETY: a valid vtable, no parameters, `h` writable; `ports` outlives the harness
+        unsafe {
+            assert_eq!(nerve_harness_new(&vt, user, std::ptr::null(), 0, &mut h), nerve_status::NERVE_OK);
+            let tick = Tick { seq: 41, stamp_ns: 7 };
+            let sent = nerve_harness_send(h, c"in".as_ptr(), (&raw const tick).cast(), SIZE);
+            assert_eq!(sent, nerve_status::NERVE_OK);
+            assert_eq!(nerve_harness_step(h), nerve_status::NERVE_OK);
+            let mut out = Tick { seq: 0, stamp_ns: 99 };
+            let mut len = 0;
+            let got = nerve_harness_output(h, c"out".as_ptr(), (&raw mut out).cast(), SIZE, &mut len);
+            assert_eq!(got, nerve_status::NERVE_OK);
+            assert_eq!((out.seq, out.stamp_ns, len), (42, 0, SIZE), "the seq written, the rest as the slot held");
+            assert_eq!(nerve_harness_free(h), nerve_status::NERVE_OK);
+        }
+        let wrong = WRONG.lock().expect("lock");
+        assert!(wrong.is_empty(), "{wrong:?}");
+    }
+}
