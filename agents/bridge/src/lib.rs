@@ -23,6 +23,7 @@
 //! real-time) owns the Zenoh session, paces and retransmits, and wires the
 //! exports through the router.
 
+pub mod cipher;
 pub mod config;
 pub mod link;
 pub mod reliable;

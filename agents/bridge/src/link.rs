@@ -313,6 +313,10 @@ impl Link {
         now_mono: fn() -> u64,
     ) -> Result<Link, LinkError> {
         let tls = cfg.tls.as_ref().map(|t| t.files(&me.robot));
+        if tls.is_some() {
+            // before Zenoh builds its rustls configs on the process's provider
+            crate::cipher::prefer_aes_128();
+        }
         let max_payload =
             exports.iter().map(|t| t.info.size).chain(imports.iter().map(|t| t.info.size)).max().unwrap_or(0);
         let session = zenoh::open(session_config(cfg, &me.robot, tls.as_ref(), max_payload)?).wait().map_err(|e| {
