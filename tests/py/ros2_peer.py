@@ -17,6 +17,10 @@ hashes, CDR). Its one argument is a JSON object:
   tf_static   (optional) [[parent, child, x, y, z], ...] the robot's static
               transforms, which this peer, joining after the robot sent them,
               must still get on /tf_static (transient local)
+  odom_in     (optional) {"topic", "x", "y", "v", "sec", "bad_y"}: a topic the
+              robot subscribes to as nav_msgs/Odometry (into a user's type,
+              field by field); published at 10 Hz with the Twists, then once
+              with position.y = bad_y, which the robot must refuse
 
 It finds the node and its topics in the liveliness tokens (`@ros2_lv/...`),
 subscribes to /odom, /tf, /scan and /camera/image_raw by the keys the tokens give, decodes
@@ -70,6 +74,8 @@ if A.get("range"):
     want.add(("MP", A["range"]))
 if A.get("vector3"):
     want.add(("MP", A["vector3"]))
+if A.get("odom_in"):
+    want.add(("MS", A["odom_in"]["topic"]))
 found = {}
 deadline = time.monotonic() + 15
 while time.monotonic() < deadline:
@@ -234,13 +240,51 @@ token = session.liveliness().declare_token(
     f"@ros2_lv/{dom}/{me}/0/1/MP/%/%/teleop/%cmd_vel/{dds('geometry_msgs/msg/Twist')}/"
     f"{TS.hash_rihs01('geometry_msgs/msg/Twist')}/::,10:,:,:,,")
 pub = session.declare_publisher(key("/cmd_vel"))
+
+
+def odom_cdr(o, y):
+    # nav_msgs/Odometry as a ROS node would send it, built by rosbags
+    import numpy as np
+    T = TS.types
+    Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
+    Point, Quat = T["geometry_msgs/msg/Point"], T["geometry_msgs/msg/Quaternion"]
+    Pose, PoseC = T["geometry_msgs/msg/Pose"], T["geometry_msgs/msg/PoseWithCovariance"]
+    TwistC = T["geometry_msgs/msg/TwistWithCovariance"]
+    m = T["nav_msgs/msg/Odometry"](
+        header=Header(stamp=Time(sec=o["sec"], nanosec=0), frame_id="map"), child_frame_id="base_link",
+        pose=PoseC(pose=Pose(position=Point(x=o["x"], y=y, z=0.0), orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0)),
+                   covariance=np.zeros(36)),
+        twist=TwistC(twist=Twist(linear=Vector3(x=o["v"], y=0.0, z=0.0), angular=Vector3(x=0.0, y=0.0, z=0.0)),
+                     covariance=np.zeros(36)))
+    return bytes(TS.serialize_cdr(m, "nav_msgs/msg/Odometry"))
+
+
+odom_pub, odom_token, odom_seq = None, None, 0
+if A.get("odom_in"):
+    o = A["odom_in"]
+    t = tokens[o["topic"]]
+    if t["type"] != dds("nav_msgs/msg/Odometry") or t["hash"] != TS.hash_rihs01("nav_msgs/msg/Odometry"):
+        fail(f"{o['topic']}: subscription token type {t['type']} hash {t['hash']}")
+    odom_token = session.liveliness().declare_token(
+        f"@ros2_lv/{dom}/{me}/0/2/MP/%/%/teleop/{o['topic'].lstrip('/').replace('/', '%')}/"
+        f"{t['type']}/{t['hash']}/::,10:,:,:,,")
+    odom_pub = session.declare_publisher(key(o["topic"]))
+    odom_good = odom_cdr(o, o["y"])
 seq = 0
 end = time.monotonic() + A["publish_s"]
 while time.monotonic() < end:
     seq += 1
     att = struct.pack("<qqB", seq, time.time_ns(), 16) + gid
     pub.put(cdr, attachment=att)
+    if odom_pub is not None:
+        odom_seq += 1
+        odom_pub.put(odom_good, attachment=struct.pack("<qqB", odom_seq, time.time_ns(), 16) + bytes(range(1, 17)))
     time.sleep(0.1)
+if odom_pub is not None:
+    # a value the user's f32 cannot hold: refused and counted, not wrapped
+    odom_seq += 1
+    odom_pub.put(odom_cdr(A["odom_in"], A["odom_in"]["bad_y"]),
+                 attachment=struct.pack("<qqB", odom_seq, time.time_ns(), 16) + bytes(range(1, 17)))
 # two messages the robot must refuse: bytes that are not a Twist, and a
 # Twist asking for sideways motion
 seq += 1
@@ -277,6 +321,9 @@ for s in subs:
     s.undeclare()
 pub.undeclare()
 token.undeclare()
+if odom_pub is not None:
+    odom_pub.undeclare()
+    odom_token.undeclare()
 session.close()
 print(json.dumps({
     "tokens": tokens,
@@ -295,4 +342,5 @@ print(json.dumps({
     "tf_static": statics_got,
     "ranges": ranges_got,
     "vector3_last": vector3_last,
+    "odom_in_sent": odom_seq,
 }))

@@ -8,7 +8,9 @@
 //! /camera/image_raw with rosbags, gets /tf_static although it joined after
 //! the robot sent it (transient local), and drives the robot with a CDR
 //! Twist on /cmd_vel; the test checks the decoded odometry and sonar ranges against
-//! `nerve echo`, and the camera's test pattern in the Image. On the robot
+//! `nerve echo`, and the camera's test pattern in the Image; a
+//! nav_msgs/Odometry the peer sends arrives as a user's own `[[type]]`,
+//! field by field, as `nerve echo` shows. On the robot
 //! of `launch/ros2.toml` (exploring), a ROS 2 teleop's Twist wins over
 //! exploration while it keeps coming (`tests/py/ros2_teleop.py`).
 //!
@@ -112,6 +114,15 @@ topic = "/cmd_vel"
 type = "geometry_msgs/msg/Twist"
 output = "cmd_vel"
 to = "nerve::VelocityCommand"
+[[type]]
+name = "lab::Pose2D"
+fields = [["x", "f64"], ["y", "f32"], ["v", "f32"], ["sec", "i64"]]
+[[subscribe]]
+topic = "/odom_in"
+type = "nav_msgs/msg/Odometry"
+output = "odom_in"
+to = "lab::Pose2D"
+fields = {{ x = "pose.pose.position.x", y = "pose.pose.position.y", v = "twist.twist.linear.x", sec = "header.stamp.sec" }}
 [[static_transform]]
 frame_id = "base_link"
 child_frame_id = "camera"
@@ -184,12 +195,21 @@ to = "motor/cmd"
     let mut router = ChildGuard::spawn("nerve-ros2-router", router).expect("start nerve-ros2-router");
     router.await_ready("nerve-ros2-router").expect("the router listens");
 
+    // a ROS nav_msgs/Odometry on /odom_in arrives as the user's own
+    // lab::Pose2D on ros2/odom_in: `nerve echo` listens before the peer sends
+    let mut cmd = r.command("nerve");
+    cmd.args(["echo", "ros2/odom_in", "--count", "1", "--json", "--timeout", "20"]).stdout(Stdio::piped());
+    let mut echo_child = ChildGuard::spawn("nerve echo ros2/odom_in", cmd).expect("start nerve echo");
+    let echo_out = echo_child.stdout().expect("echo's stdout");
+    let echo_read = std::thread::spawn(move || std::io::read_to_string(echo_out).unwrap_or_default());
+
     let peer = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("py").join("ros2_peer.py");
     let arg = serde_json::json!({
         "connect": endpoint, "domain": 0, "node": "nerve_robot",
         "twist": [0.15, 0.4], "publish_s": 2.5, "settle_s": 1.5,
         "tf_static": [["base_link", "camera"], ["base_link", "sonar"]], "range": "/sonar/range",
         "vector3": "/pose2d",
+        "odom_in": {"topic": "/odom_in", "x": 1.25, "y": -0.5, "v": 0.3, "sec": 1_700_000_000, "bad_y": 1e300},
     });
     let out = Command::new(&python).arg(&peer).arg(arg.to_string()).output().expect("run the ROS 2 peer");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -271,6 +291,39 @@ to = "motor/cmd"
     for (i, k) in ["x", "y", "theta"].into_iter().enumerate() {
         assert!((v3[i].as_f64().unwrap_or(f64::NAN) - f(d, k)).abs() < 1e-9, "/pose2d {v3} / nerve {d}");
     }
+    // the ROS odometry on /odom_in as the user's lab::Pose2D, field by
+    // field (nested ROS paths; a float64 into an f32, an int32 into an i64),
+    // the layout a Rust agent's #[derive(Payload)] of the type has
+    let echoed = echo_read.join().expect("echo reader");
+    let line: Value = serde_json::from_str(echoed.lines().next().unwrap_or_default())
+        .unwrap_or_else(|e| panic!("nerve echo ros2/odom_in printed {echoed:?}: {e}"));
+    assert_eq!(line["type"], "lab::Pose2D", "{line}");
+    let p = &line["data"];
+    assert_eq!((f(p, "x"), f(p, "y"), p["sec"].as_i64()), (1.25, -0.5, Some(1_700_000_000)), "{line}");
+    assert!((f(p, "v") - 0.3).abs() < 1e-6, "{line}");
+    #[derive(Debug, Clone, Copy, Default, shm_schemas::Payload, serde::Serialize)]
+    #[repr(C)]
+    #[payload(name = "lab::Pose2D")]
+    struct Pose2D {
+        x: f64,
+        y: f32,
+        v: f32,
+        sec: i64,
+    }
+    let types: Value = serde_json::from_str(&r.ok(&["types", "lab::Pose2D", "--json"])).expect("types json");
+    let want = format!("{:#018x}", <Pose2D as shm_schemas::Payload>::layout_fingerprint());
+    assert_eq!(types[0]["fingerprint"].as_str(), Some(want.as_str()), "{types}");
+    // the message whose position.y (1e300) no f32 holds: refused, counted
+    let sent = got["odom_in_sent"].as_u64().unwrap_or(0);
+    assert!(
+        nerve_tests::wait_until(Duration::from_secs(5), || r.figure_u64("ros2", "refused/odom_in") == 1),
+        "one refusal of {sent}: {:?}",
+        r.figures("ros2")
+    );
+    assert!(r.figure_u64("ros2", "received/odom_in") >= 10, "of {sent}: {:?}", r.figures("ros2"));
+    drop(echo_child);
+    let _ = Pose2D::default();
+
     let tf = &got["tf_last"][0];
     assert_eq!((tf[0].as_str(), tf[1].as_str()), (Some("odom"), Some("base_link")), "{tf}");
     assert!((tf[2].as_f64().unwrap_or(f64::NAN) - f(d, "x")).abs() < 1e-9, "/tf x {tf} / nerve {d}");
