@@ -6,10 +6,11 @@
 //! items[3].x`, `header.frame`), `nerve plot` draws the last element's field,
 //! `nerve hz` counts them, and a second agent,
 //! connected through the router (its check of header and element), reads
-//! them all in place, the grown ones included.
+//! them all in place, the grown ones included; the black box keeps them at
+//! their lengths.
 
 use nerve_tests::py::{messages, read_mcap};
-use nerve_tests::{Robot, wait_until};
+use nerve_tests::{Robot, wait_until, write_file};
 use serde_json::Value;
 use std::time::Duration;
 
@@ -26,6 +27,9 @@ fn sequences_of_any_length_are_echoed_counted_read_and_refused_past_their_maximu
     r.router();
     r.ok(&["start", "detector", "--name", "a"]);
     r.ok(&["start", "detector", "--name", "b"]);
+    // a black box keeping a/dets: snapshotted at the end, each sample at its length
+    let config = write_file(&r.home, "bb.toml", "seconds = 2\nports = [\"a/dets\"]\ndir = \"snaps\"\n");
+    r.ok(&["start", "blackbox", "--name", "blackbox", "--", "--config", &config.display().to_string()]);
     let a = r.agent("a").expect("a in ps");
     let dets = a["outputs"].as_array().expect("outputs").iter().find(|o| o["name"] == "dets").expect("dets").clone();
     assert_eq!(dets["type_name"], "nerve::Seq<acme::Detection, acme::DetectionsHeader>", "{dets}");
@@ -126,6 +130,16 @@ fn sequences_of_any_length_are_echoed_counted_read_and_refused_past_their_maximu
     for (raw, j) in recorded.iter().zip(js) {
         assert_eq!(raw["data"]["items"].as_array().map(Vec::len), j["data"]["items"].as_array().map(Vec::len));
         assert_eq!(raw["data"]["header"], j["data"]["header"]);
+    }
+
+    // the black box's last seconds, as the recorder's
+    let snap = r.home.join("snap.mcap");
+    r.ok(&["snapshot", "-o", &snap.display().to_string()]);
+    let kept = messages(&read_mcap(&snap), "a/dets").to_vec();
+    assert!(kept.len() >= 8, "2 s of a 20 ms agent: {}", kept.len());
+    for m in &kept {
+        let frame = m["data"]["header"]["frame"].as_u64().expect("frame");
+        assert_eq!(m["data"]["items"].as_array().map(Vec::len), Some(length_of(frame)), "kept frame {frame}");
     }
 
     // past the maximum: refused every step, saying what to do, and never sent
