@@ -196,6 +196,30 @@ pub(crate) fn leaf_name(l: &Leaf) -> String {
     }
 }
 
+/// Every leaf field of ROS type `ty` (nested paths `a.b`), by path.
+pub(crate) fn ros_leaves(ty: &str, defs: &BTreeMap<String, MsgDef>) -> BTreeMap<String, Leaf> {
+    let mut all = BTreeMap::new();
+    leaves(ty, defs, "", &mut all);
+    all
+}
+
+/// `path (type), ...` of `leaves`: what a mapping error lists on the ROS side.
+pub(crate) fn leaf_list(leaves: &BTreeMap<String, Leaf>) -> String {
+    leaves.iter().map(|(p, l)| format!("{p} ({})", leaf_name(l))).collect::<Vec<_>>().join(", ")
+}
+
+/// `path (type), ...` of a nerve type's fields outside arrays: what a
+/// mapping error lists on the nerve side.
+pub(crate) fn nerve_fields(schema: &Schema) -> String {
+    let mut out = Vec::new();
+    schema.visit_fields(|p, s, _| {
+        if !p.contains("<i>") {
+            out.push(format!("{p} ({})", s.type_name));
+        }
+    });
+    out.join(", ")
+}
+
 /// Every leaf of `ty` by its dotted path.
 pub(crate) fn leaves(ty: &str, defs: &BTreeMap<String, MsgDef>, prefix: &str, out: &mut BTreeMap<String, Leaf>) {
     let Some(def) = defs.get(ty) else { return };
@@ -293,16 +317,9 @@ impl UserMap {
     pub fn new(schema: Schema, ros_type: &str, fields: Option<&[(String, String)]>) -> Result<UserMap, MapError> {
         let whole = |what: String| MapError { key: None, what };
         let defs = ros_definitions(ros_type).map_err(whole)?;
-        let mut all = BTreeMap::new();
-        leaves(ros_type, &defs, "", &mut all);
-        let ros_list = || all.iter().map(|(p, l)| format!("{p} ({})", leaf_name(l))).collect::<Vec<_>>().join(", ");
-        let mut nerve_list = Vec::new();
-        schema.visit_fields(|p, s, _| {
-            if !p.contains("<i>") {
-                nerve_list.push(format!("{p} ({})", s.type_name));
-            }
-        });
-        let nerve_list = nerve_list.join(", ");
+        let all = ros_leaves(ros_type, &defs);
+        let ros_list = || leaf_list(&all);
+        let nerve_list = nerve_fields(&schema);
         let pairs: Vec<(String, String)> = match fields {
             Some(f) => f.to_vec(),
             None => match &schema.kind {

@@ -30,7 +30,9 @@
 
 use crate::cdr::{CdrError, Reader};
 use crate::idl::{Arity, Base, MsgDef};
-use crate::usermap::{Leaf, MapError, int_range, leaf_name, leaves, prim_of, prim_range, ros_definitions};
+use crate::usermap::{
+    Leaf, MapError, int_range, leaf_list, leaf_name, nerve_fields, prim_of, prim_range, ros_definitions, ros_leaves,
+};
 use shm_schemas::schema::{Kind, Primitive, Schema};
 use std::collections::BTreeMap;
 
@@ -226,16 +228,9 @@ impl UserSub {
         if let Some(w) = defs.values().find(|d| d.fields.iter().any(|f| matches!(f.base, Base::WString(_)))) {
             return Err(whole(format!("{ros_type} uses {}, which has a wstring: not supported", w.type_name)));
         }
-        let mut all = BTreeMap::new();
-        leaves(ros_type, &defs, "", &mut all);
-        let ros_list = || all.iter().map(|(p, l)| format!("{p} ({})", leaf_name(l))).collect::<Vec<_>>().join(", ");
-        let mut nerve_list = Vec::new();
-        schema.visit_fields(|p, s, _| {
-            if !p.contains("<i>") {
-                nerve_list.push(format!("{p} ({})", s.type_name));
-            }
-        });
-        let nerve_list = nerve_list.join(", ");
+        let all = ros_leaves(ros_type, &defs);
+        let ros_list = || leaf_list(&all);
+        let nerve_list = nerve_fields(&schema);
         let entries: Vec<(String, String)> = match fields {
             Some(f) => f.to_vec(),
             None if matches!(schema.kind, Kind::Struct { .. }) => {
