@@ -46,8 +46,8 @@ use crate::hop::{NervePing, default_count, spawn_bench_agent};
 use crate::machine::Machine;
 use crate::payloads::{SIZES, label};
 use crate::procs::{ChildGuard, Robot};
-use crate::report::Report;
-use crate::stats::{Rounds, Summary, median_f64, ratio, ratio_cell, us, verdict};
+use crate::report::{Pair, PairRow, Plan, Report, interleaved_rows, round_median};
+use crate::stats::{ratio, ratio_cell, verdict};
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -80,20 +80,8 @@ pub struct COpts {
     pub work: PathBuf,
 }
 
-/// One row at one size.
-#[derive(Debug, Clone, Serialize)]
-pub struct RowResult {
-    /// `rust`, `c` or `cpp`: the pong's language
-    pub row: &'static str,
-    /// payload bytes
-    pub size: usize,
-    /// round trips per batch
-    pub batch: usize,
-    /// the round trips of every measured round, pooled, ns
-    pub round_trip: Summary,
-    /// the median of each measured round, ns
-    pub round_p50_ns: Vec<u64>,
-}
+/// One row at one size (the row is the pong's language: `rust`, `c` or `cpp`).
+pub type RowResult = PairRow;
 
 /// A row's ratio to `rust` at one size.
 #[derive(Debug, Clone, Serialize)]
@@ -252,13 +240,6 @@ fn tag(size: usize) -> &'static str {
     crate::hop::size_tag(size)
 }
 
-/// A row's pair at one size, started and waiting for its batches.
-struct Pair {
-    row: &'static str,
-    size: usize,
-    ping: NervePing,
-}
-
 /// Starts every pair, waits until they are registered, wires them.
 fn start(robot: &Robot, opts: &COpts, pongs: &Pongs) -> Result<(Vec<ChildGuard>, Vec<Pair>)> {
     let (mut children, mut pairs, mut names) = (Vec::new(), Vec::new(), Vec::new());
@@ -274,17 +255,14 @@ fn start(robot: &Robot, opts: &COpts, pongs: &Pongs) -> Result<(Vec<ChildGuard>,
                 "c" => spawn_native_pong(robot, &pongs.c, &pong, size)?,
                 _ => spawn_native_pong(robot, &pongs.cpp, &pong, size)?,
             });
-            names.extend([ping.clone(), pong]);
-            pairs.push(Pair { row, size, ping: NervePing::new(ping, dir) });
+            names.extend([ping.clone(), pong.clone()]);
+            pairs.push(Pair { row, size, ping: NervePing::new(ping, dir), pong });
         }
     }
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
     robot.wait_registered(&refs, Duration::from_secs(20))?;
     for p in &pairs {
-        let ping = &p.ping.name;
-        let pong = format!("pong-{}-{}", p.row, tag(p.size));
-        robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
-        robot.run(&["connect", "--allow-cycle", &format!("{pong}/out"), &format!("{ping}/in")])?;
+        p.wire_echo(robot)?;
     }
     Ok((children, pairs))
 }
@@ -308,35 +286,11 @@ pub fn run(opts: &COpts) -> Result<CReport> {
     let router = robot.start_router()?;
     let (children, mut pairs) = start(&robot, opts, &pongs)?;
     eprintln!("c: {} pairs running and wired", pairs.len());
-    let mut rounds = Rounds::new(pairs.len(), DISCARD);
-    for round in usize::from(opts.quick)..=opts.rounds {
-        let t0 = Instant::now();
-        for &size in &opts.sizes {
-            let idx: Vec<usize> = (0..pairs.len()).filter(|&i| pairs[i].size == size).collect();
-            for i in Rounds::order(&idx, round) {
-                let p = &mut pairs[i];
-                let v =
-                    p.ping.run_batch(&robot).with_context(|| format!("{} at {} B, round {round}", p.row, p.size))?;
-                rounds.keep(i, round, &v);
-            }
-        }
-        let what = if round == 0 { "warm-up".to_owned() } else { format!("round {round}/{}", opts.rounds) };
-        eprintln!("c: {what} done in {:.1} s", t0.elapsed().as_secs_f64());
-    }
+    let plan = Plan { scenario: "c", sizes: &opts.sizes, rounds: opts.rounds, quick: opts.quick, discard: DISCARD };
+    let rows = interleaved_rows(plan, &robot, &mut pairs, |size| default_count(size, opts.quick))?;
     drop(children);
     drop(router);
     drop(robot);
-    let rows: Vec<RowResult> = pairs
-        .iter()
-        .enumerate()
-        .map(|(i, p)| RowResult {
-            row: p.row,
-            size: p.size,
-            batch: default_count(p.size, opts.quick),
-            round_trip: Summary::of(&rounds.samples[i]),
-            round_p50_ns: rounds.round_p50[i].clone(),
-        })
-        .collect();
     Ok(Report::new(
         "c",
         machine,
@@ -353,12 +307,6 @@ pub fn run(opts: &COpts) -> Result<CReport> {
             seconds: started.elapsed().as_secs_f64(),
         },
     ))
-}
-
-/// The median of the per-round ratios `a[k] / b[k]`.
-fn round_median(a: &[u64], b: &[u64]) -> f64 {
-    let v: Vec<f64> = a.iter().zip(b).map(|(x, y)| ratio(*x, *y)).collect();
-    median_f64(&v)
 }
 
 /// `c` and `cpp` against `rust`, at each size where both ran.
@@ -397,13 +345,7 @@ fn flatness(rows: &[RowResult]) -> Vec<Flatness> {
 
 /// Prints the tables (markdown).
 pub fn print_tables(r: &CReport) {
-    let cell = |row: &str, size: usize| {
-        r.rows
-            .iter()
-            .find(|x| x.row == row && x.size == size)
-            .map(|x| format!("{} | {}", us(x.round_trip.p50_ns), us(x.round_trip.p99_ns)))
-            .unwrap_or_else(|| "- | -".into())
-    };
+    let cell = |row: &str, size: usize| PairRow::cells(&r.rows, row, size);
     let vs = |row: &str, size: usize| {
         r.ratios.iter().find(|x| x.row == row && x.size == size).map(|x| (x.vs_rust_p50, x.vs_rust_round_median))
     };
@@ -454,6 +396,7 @@ pub fn work_dir(out: &Path) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stats::Summary;
 
     /// The pongs' sources compile against the tree's nerve.h and nerve.hpp
     /// (syntax and types only: no libnerve is needed, nothing is linked),

@@ -36,8 +36,8 @@ pub use agents::run_agent;
 use crate::hop::{NervePing, spawn_bench_agent};
 use crate::machine::Machine;
 use crate::procs::{ChildGuard, Robot};
-use crate::report::Report;
-use crate::stats::{Rounds, Summary, median_f64, ratio, ratio_cell, us, verdict};
+use crate::report::{Pair, PairRow, Plan, Report, interleaved_rows, round_median};
+use crate::stats::{ratio, ratio_cell, verdict};
 use crate::with_payload;
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
@@ -76,20 +76,8 @@ pub struct MessagesOpts {
     pub work: PathBuf,
 }
 
-/// One row at one size: its pooled round trips and the median of each round.
-#[derive(Debug, Clone, Serialize)]
-pub struct RowResult {
-    /// `fixed`, `seq` or `call`
-    pub row: &'static str,
-    /// sample bytes
-    pub size: usize,
-    /// round trips per batch
-    pub batch: usize,
-    /// the round trips of every measured round, pooled, ns
-    pub round_trip: Summary,
-    /// the median of each measured round, ns
-    pub round_p50_ns: Vec<u64>,
-}
+/// One row at one size (`fixed`, `seq` or `call`).
+pub type RowResult = PairRow;
 
 /// The ratios of one size (pooled medians), and the median of the per-round ratios.
 #[derive(Debug, Clone, Serialize)]
@@ -182,14 +170,6 @@ fn roles(row: &str) -> (&'static str, &'static str) {
     }
 }
 
-/// A row's pair at one size, started and waiting for its batches.
-struct Pair {
-    row: &'static str,
-    size: usize,
-    ping: NervePing,
-    pong: String,
-}
-
 /// Starts every pair, waits until they are registered, wires them.
 fn start(robot: &Robot, opts: &MessagesOpts) -> Result<(Vec<ChildGuard>, Vec<Pair>)> {
     let (mut children, mut pairs, mut names) = (Vec::new(), Vec::new(), Vec::new());
@@ -210,12 +190,10 @@ fn start(robot: &Robot, opts: &MessagesOpts) -> Result<(Vec<ChildGuard>, Vec<Pai
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
     robot.wait_registered(&refs, Duration::from_secs(20))?;
     for p in &pairs {
-        let (ping, pong) = (&p.ping.name, &p.pong);
         if p.row == "call" {
-            robot.run(&["connect", &format!("{ping}/call"), &format!("{pong}/serve")])?;
+            robot.run(&["connect", &format!("{}/call", p.ping.name), &format!("{}/serve", p.pong)])?;
         } else {
-            robot.run(&["connect", &format!("{ping}/out"), &format!("{pong}/in")])?;
-            robot.run(&["connect", "--allow-cycle", &format!("{pong}/out"), &format!("{ping}/in")])?;
+            p.wire_echo(robot)?;
         }
     }
     Ok((children, pairs))
@@ -238,41 +216,21 @@ pub fn run(opts: &MessagesOpts) -> Result<MessagesReport> {
     let router = robot.start_router()?;
     let (children, mut pairs) = start(&robot, opts)?;
     eprintln!("messages: {} pairs running and wired", pairs.len());
-    let mut rounds = Rounds::new(pairs.len(), DISCARD);
-    for round in usize::from(opts.quick)..=opts.rounds {
-        let t0 = Instant::now();
-        for &size in &opts.sizes {
-            let idx: Vec<usize> = (0..pairs.len()).filter(|&i| pairs[i].size == size).collect();
-            for i in Rounds::order(&idx, round) {
-                let p = &mut pairs[i];
-                let v =
-                    p.ping.run_batch(&robot).with_context(|| format!("{} at {} B, round {round}", p.row, p.size))?;
-                rounds.keep(i, round, &v);
-            }
-        }
-        let what = if round == 0 { "warm-up".to_owned() } else { format!("round {round}/{}", opts.rounds) };
-        eprintln!("messages: {what} done in {:.1} s", t0.elapsed().as_secs_f64());
-    }
+    let plan =
+        Plan { scenario: "messages", sizes: &opts.sizes, rounds: opts.rounds, quick: opts.quick, discard: DISCARD };
+    let rows = interleaved_rows(plan, &robot, &mut pairs, |size| count_of(size, opts.quick))?;
     drop(children);
     drop(router);
     drop(robot);
-    let rows: Vec<RowResult> = pairs
-        .iter()
-        .enumerate()
-        .map(|(i, p)| RowResult {
-            row: p.row,
-            size: p.size,
-            batch: count_of(p.size, opts.quick),
-            round_trip: Summary::of(&rounds.samples[i]),
-            round_p50_ns: rounds.round_p50[i].clone(),
-        })
-        .collect();
     let ratios = opts.sizes.iter().map(|&s| size_ratios(&rows, s)).collect();
     let seq: Vec<&RowResult> = rows.iter().filter(|r| r.row == "seq").collect();
     let (lo, hi) = (seq.iter().min_by_key(|r| r.size), seq.iter().max_by_key(|r| r.size));
     let flat = lo.zip(hi).filter(|(a, b)| a.size < b.size).map(|(a, b)| {
-        let per_round: Vec<f64> = b.round_p50_ns.iter().zip(&a.round_p50_ns).map(|(x, y)| ratio(*x, *y)).collect();
-        (ratio(b.round_trip.p50_ns, a.round_trip.p50_ns), median_f64(&per_round), (a.size, b.size))
+        (
+            ratio(b.round_trip.p50_ns, a.round_trip.p50_ns),
+            round_median(&b.round_p50_ns, &a.round_p50_ns),
+            (a.size, b.size),
+        )
     });
     Ok(Report::new(
         "messages",
@@ -297,12 +255,7 @@ fn size_ratios(rows: &[RowResult], size: usize) -> SizeRatios {
     let find = |row: &str| rows.iter().find(|r| r.row == row && r.size == size);
     let fixed = find("fixed");
     let pooled = |row: &str| find(row).zip(fixed).map(|(r, f)| ratio(r.round_trip.p50_ns, f.round_trip.p50_ns));
-    let per_round = |row: &str| {
-        find(row).zip(fixed).map(|(r, f)| {
-            let v: Vec<f64> = r.round_p50_ns.iter().zip(&f.round_p50_ns).map(|(a, b)| ratio(*a, *b)).collect();
-            median_f64(&v)
-        })
-    };
+    let per_round = |row: &str| find(row).zip(fixed).map(|(r, f)| round_median(&r.round_p50_ns, &f.round_p50_ns));
     SizeRatios {
         size,
         seq_vs_fixed_p50: pooled("seq"),
@@ -314,13 +267,7 @@ fn size_ratios(rows: &[RowResult], size: usize) -> SizeRatios {
 
 /// Prints the tables (markdown).
 pub fn print_tables(r: &MessagesReport) {
-    let cell = |row: &str, size: usize| {
-        r.rows
-            .iter()
-            .find(|x| x.row == row && x.size == size)
-            .map(|x| format!("{} | {}", us(x.round_trip.p50_ns), us(x.round_trip.p99_ns)))
-            .unwrap_or_else(|| "- | -".into())
-    };
+    let cell = |row: &str, size: usize| PairRow::cells(&r.rows, row, size);
     println!(
         "### Sequences and calls beside fixed payloads (one-hop round trip, µs; load {:.2})\n",
         r.head.machine.loadavg_1m
