@@ -36,7 +36,9 @@ pub trait Robot {
     /// refusal as the command line would print it.
     fn act(&mut self, action: Action) -> Result<serde_json::Value, String>;
     /// The latest samples of output port `port` (`agent/port`), decoded,
-    /// with sequence numbers above `after`.
+    /// with sequence numbers above `after`. A sequence port's samples carry
+    /// their length, their last element and only their first elements, so
+    /// that the answer stays bounded however long they are (`docs/ui.md`).
     fn samples(&mut self, port: &str, after: u64) -> Result<serde_json::Value, String>;
     /// The image of the latest ring notice on `port`, as PNG.
     fn image(&mut self, port: &str) -> Result<Vec<u8>, String>;

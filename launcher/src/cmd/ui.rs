@@ -169,6 +169,11 @@ fn is_loopback(addr: &SocketAddr) -> bool {
 const TAP_IDLE: Duration = Duration::from_secs(10);
 /// Samples kept per inspected port.
 const KEPT: usize = 100;
+/// Elements of a sequence sample kept and sent to the page, at most: its
+/// first ones (and its last, for `items[-1].x`). A 40,000-cell map stays a
+/// table a browser draws at once, and one `/api/samples` answer holds at
+/// most [`KEPT`] × (this + 1) elements.
+const SEQ_ROWS: usize = 50;
 
 pub fn ui(world: &World, a: UiArgs) -> Result<ExitCode> {
     if !(0.05..=10.0).contains(&a.interval) {
@@ -265,6 +270,8 @@ struct Tap {
     type_name: String,
     schema: Option<Schema>,
     kept: VecDeque<Value>,
+    /// the most elements a sample of this (sequence) port had since the page looked
+    longest: usize,
     /// the bytes of the latest sample (a ring notice's, for the image)
     latest: Vec<u8>,
     asked: Instant,
@@ -355,6 +362,7 @@ impl UiRobot {
                 type_name: info.type_name,
                 schema: info.schema,
                 kept: VecDeque::new(),
+                longest: 0,
                 latest: Vec::new(),
                 asked: Instant::now(),
             };
@@ -362,15 +370,18 @@ impl UiRobot {
         }
         let tap = self.taps.get_mut(port).ok_or("the subscription is gone")?;
         tap.asked = Instant::now();
-        let (kept, latest, schema) = (&mut tap.kept, &mut tap.latest, &tap.schema);
+        let (kept, latest, longest, schema) = (&mut tap.kept, &mut tap.latest, &mut tap.longest, &tap.schema);
         tap.raw
             .receive(|h, bytes| {
-                let value = match schema.as_ref().map(|s| s.decode(bytes)) {
-                    Some(Ok(v)) => serde_json::to_value(v).unwrap_or(Value::Null),
-                    Some(Err(e)) => json!({ "undecodable": e.to_string() }),
-                    None => json!({ "bytes": bytes.len() }),
-                };
-                kept.push_back(json!({ "seq": h.seq, "stamp_ns": h.stamp_ns, "value": value }));
+                let mut sample = json!({ "seq": h.seq, "stamp_ns": h.stamp_ns });
+                match schema.as_ref() {
+                    Some(s) => {
+                        let shown = page_sample(s, bytes, &mut sample);
+                        *longest = (*longest).max(shown.unwrap_or(0));
+                    }
+                    None => sample["value"] = json!({ "bytes": bytes.len() }),
+                }
+                kept.push_back(sample);
                 if kept.len() > KEPT {
                     kept.pop_front();
                 }
@@ -381,6 +392,37 @@ impl UiRobot {
             .map_err(|e| format!("cannot read {port}: {e}"))?;
         Ok(tap)
     }
+}
+
+/// Fills `sample` with what the page shows of a sample's `bytes`, decoded
+/// with the port's schema as `nerve echo` does: its `value`; for a sequence
+/// also its `len` (elements) and `last` element (`null` when empty), with
+/// `value.items` cut to the first [`SEQ_ROWS`]. Returns the sequence's length.
+fn page_sample(schema: &Schema, bytes: &[u8], sample: &mut Value) -> Option<usize> {
+    let Some(shape) = schema.sequence_shape() else {
+        sample["value"] = match schema.decode(bytes) {
+            Ok(v) => serde_json::to_value(v).unwrap_or(Value::Null),
+            Err(e) => json!({ "undecodable": e.to_string() }),
+        };
+        return None;
+    };
+    let Some(len) = shape.count_of(bytes.len()) else {
+        sample["value"] = json!({ "undecodable": format!(
+            "a {}-byte sample is not a {}-byte header and whole {}-byte elements of {}",
+            bytes.len(), shape.items_at, shape.element, schema.type_name
+        ) });
+        return None;
+    };
+    // the decoder of echo, over the header and the first elements only
+    let first = shape.len_of(len.min(SEQ_ROWS)).and_then(|end| bytes.get(..end)).unwrap_or_default();
+    sample["value"] = match schema.decode(first) {
+        Ok(v) => serde_json::to_value(v).unwrap_or(Value::Null),
+        Err(e) => json!({ "undecodable": e.to_string() }),
+    };
+    let last = len.checked_sub(1).and_then(|i| schema.decode_path(&format!("items[{i}]"), bytes));
+    sample["len"] = json!(len);
+    sample["last"] = serde_json::to_value(last).unwrap_or(Value::Null);
+    Some(len)
 }
 
 impl Robot for UiRobot {
@@ -433,10 +475,17 @@ impl Robot for UiRobot {
         let tap = self.tap(port)?;
         let samples: Vec<&Value> =
             tap.kept.iter().filter(|s| s["seq"].as_u64().is_some_and(|seq| seq > after)).collect();
+        // a sequence port: how many of its elements a sample shows, and its longest yet
+        let sequence = tap
+            .schema
+            .as_ref()
+            .and_then(Schema::sequence_shape)
+            .map(|_| json!({ "rows": SEQ_ROWS, "longest": tap.longest }));
         Ok(json!({
             "port": port,
             "type_name": tap.type_name,
             "image": tap.type_name == <RingNotice as shm_schemas::Payload>::stable_type_name(),
+            "sequence": sequence,
             "samples": samples,
         }))
     }
@@ -458,5 +507,50 @@ impl Robot for UiRobot {
 
     fn tick(&mut self) {
         self.taps.retain(|_, t| t.asked.elapsed() < TAP_IDLE);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use shm_schemas::payloads::Tick;
+    use shm_schemas::{Described as _, Seq};
+
+    /// A `Seq<Tick, Tick>` sample: header `{seq: 7}`, element `i` `{seq: i, stamp_ns: 2i}`.
+    fn ticks(n: u64) -> Vec<u8> {
+        let mut b = [7u64, 0].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>();
+        for i in 0..n {
+            b.extend(i.to_le_bytes());
+            b.extend((2 * i).to_le_bytes());
+        }
+        b
+    }
+
+    #[test]
+    fn a_sequence_sample_is_its_header_length_first_rows_and_last() {
+        let s = Seq::<Tick, Tick>::schema();
+        for n in [0u64, 1, 50, 51, 40_000] {
+            let mut sample = json!({});
+            assert_eq!(page_sample(&s, &ticks(n), &mut sample), Some(n as usize));
+            assert_eq!(sample["len"], json!(n));
+            assert_eq!(sample["value"]["header"]["seq"], json!(7), "{sample}");
+            let items = sample["value"]["items"].as_array().expect("items");
+            assert_eq!(items.len(), (n as usize).min(SEQ_ROWS), "{n}");
+            match n.checked_sub(1) {
+                Some(i) => assert_eq!(sample["last"], json!({ "seq": i, "stamp_ns": 2 * i })),
+                None => assert_eq!(sample["last"], Value::Null),
+            }
+        }
+        // bytes that are not a header and whole elements: said, not shown
+        let mut sample = json!({});
+        let mut odd = ticks(2);
+        odd.pop();
+        assert_eq!(page_sample(&s, &odd, &mut sample), None);
+        assert!(sample["value"]["undecodable"].as_str().is_some_and(|e| e.contains("whole 16-byte elements")));
+        // a fixed type: decoded whole, no length
+        let mut sample = json!({});
+        assert_eq!(page_sample(&Tick::schema(), &ticks(0), &mut sample), None);
+        assert_eq!(sample["value"], json!({ "seq": 7, "stamp_ns": 0 }));
+        assert!(sample.get("len").is_none());
     }
 }
