@@ -14,6 +14,7 @@ use super::bytes::{ByteSubscriber, Meta, payload_bytes};
 use super::error::{PortError, perr, port_err};
 use super::keep_all::KeepAllFeed;
 use super::memory::{Queue, SampleBuf};
+use super::output::PayloadAt;
 use super::service::{Carried, MAX_SOURCES, SUBSCRIBER_BUFFER, lock, source_event, source_service};
 use super::tally::Tally;
 use crate::clock::now_ns;
@@ -34,8 +35,8 @@ use std::sync::{Arc, Mutex};
 pub struct Received(ReceivedInner);
 
 enum ReceivedInner {
-    /// a slot of the source port's shared memory
-    Shm(ShmSample),
+    /// a slot of the source port's shared memory, and where its payload lies
+    Shm(ShmSample, PayloadAt),
     /// a test's sample ([`crate::testing`])
     Memory(SampleHeader, SampleBuf),
 }
@@ -50,7 +51,7 @@ impl Received {
     /// Who sent it, its number and stamp.
     pub fn meta(&self) -> Meta {
         match &self.0 {
-            ReceivedInner::Shm(sample) => Meta::of(sample.user_header()),
+            ReceivedInner::Shm(sample, _) => Meta::of(sample.user_header()),
             ReceivedInner::Memory(h, _) => Meta::of(h),
         }
     }
@@ -58,14 +59,18 @@ impl Received {
     /// The payload's bytes, as the sender wrote them (the schema's layout).
     pub fn bytes(&self) -> &[u8] {
         match &self.0 {
-            ReceivedInner::Shm(sample) => payload_bytes(sample.payload()),
+            // SAFETY: `at` is the payload of the sample this owns, kept until it is dropped
+            ReceivedInner::Shm(_, at) => unsafe { at.bytes() },
             ReceivedInner::Memory(_, bytes) => bytes.bytes(),
         }
     }
 
     /// A sample of a source port's shared memory, kept in place.
     pub(super) fn in_place(sample: ShmSample) -> Self {
-        Received(ReceivedInner::Shm(sample))
+        // the one look at the payload's place (iceoryx2 takes a lock for it, `PayloadAt`)
+        let bytes = payload_bytes(sample.payload());
+        let at = PayloadAt::of(bytes.as_ptr().cast_mut(), bytes.len());
+        Received(ReceivedInner::Shm(sample, at))
     }
 
     /// A sample copied out of shared memory (an input's own queue, a test's).

@@ -7,7 +7,7 @@
 //! (`port::memory`), a loan is bytes of its own. The module doc of
 //! `port::bytes` has the whole port.
 
-use super::bytes::{Binding, payload_bytes};
+use super::bytes::Binding;
 use super::error::{PortError, port_err};
 use super::keep_all::{KeepAllFigures, KeepAllSender};
 use super::memory::{Collected, SampleBuf};
@@ -285,6 +285,8 @@ impl SchemaOutput {
                 // (`Carried::of_sequence`), the count iceoryx2 sets to `len`
                 let mut sample =
                     unsafe { publisher.loan_custom_payload(units) }.map_err(port_err!(Loan, &self.service))?;
+                // the one look at the payload's place: iceoryx2 takes the
+                // port's locks for a custom payload's length on every look
                 let payload = sample.payload_mut();
                 if payload.len() != len {
                     return Err(PortError::Ipc {
@@ -292,15 +294,16 @@ impl SchemaOutput {
                         detail: format!("loaned {} bytes for a {len}-byte sample", payload.len()),
                     });
                 }
+                let at = PayloadAt::of(payload.as_mut_ptr().cast::<u8>(), len);
                 if zeroed {
                     // SAFETY: `payload` is `len` one-byte elements, writable
-                    unsafe { std::ptr::write_bytes(payload.as_mut_ptr().cast::<u8>(), 0, len) };
+                    unsafe { std::ptr::write_bytes(at.ptr.as_ptr(), 0, len) };
                 }
                 // SAFETY: the payload lies in the service's shared memory,
                 // which is zero when mapped and holds earlier samples' bytes
                 // after: every byte is initialised (zeroed above, or as the
                 // slot was last written), and any bytes are valid for a byte buffer.
-                Ok(Loan(LoanInner::Shm(unsafe { sample.assume_init() })))
+                Ok(Loan(LoanInner::Shm(unsafe { sample.assume_init() }, at)))
             }
             Sink::Memory(_) | Sink::Nothing => {
                 Ok(Loan(LoanInner::Detached(SampleBuf::zeroed(&self.service, len, self.carried.align())?)))
@@ -349,7 +352,7 @@ impl SchemaOutput {
     /// it starts writing it) and wakes the readers.
     pub(crate) fn publish_as(&self, loan: Loan, header: SampleHeader) -> Result<usize, PortError> {
         match (&self.sink, loan.0) {
-            (Sink::Shm { notifier, factory, keep_all, .. }, LoanInner::Shm(mut sample)) => {
+            (Sink::Shm { notifier, factory, keep_all, .. }, LoanInner::Shm(mut sample, at)) => {
                 // SAFETY: the service's user header is a SampleHeader (set in
                 // `service::output_builder`); the marker is a zero-sized
                 // stand-in at its address, which is aligned for it
@@ -357,7 +360,8 @@ impl SchemaOutput {
                 if let Some(keep_all) = keep_all {
                     // one atomic load and a comparison while no keep-all reader reads this port
                     keep_all.before_send(factory.dynamic_config().number_of_subscribers());
-                    keep_all.send(&header, payload_bytes(sample.payload()));
+                    // SAFETY: `at` is `sample`'s payload, lent until it is sent below
+                    keep_all.send(&header, unsafe { at.bytes() });
                 }
                 let reached = sample.send().map_err(port_err!(Send, &self.service))?;
                 notifier.notify().map_err(port_err!(Notify, &self.service))?;
@@ -380,8 +384,8 @@ impl SchemaOutput {
 pub struct Loan(LoanInner);
 
 enum LoanInner {
-    /// a slot of the port's shared memory
-    Shm(SampleMut<Ipc, [CustomPayloadMarker], CustomHeaderMarker>),
+    /// a slot of the port's shared memory, and where its payload lies
+    Shm(SampleMut<Ipc, [CustomPayloadMarker], CustomHeaderMarker>, PayloadAt),
     /// a port bound to memory or to nothing: bytes of its own
     Detached(SampleBuf),
 }
@@ -396,7 +400,8 @@ impl Loan {
     /// The payload's bytes.
     pub fn bytes(&self) -> &[u8] {
         match &self.0 {
-            LoanInner::Shm(sample) => payload_bytes(sample.payload()),
+            // SAFETY: `at` is the payload of the sample this loan owns, lent to it until it is sent or dropped
+            LoanInner::Shm(_, at) => unsafe { at.bytes() },
             LoanInner::Detached(b) => b.bytes(),
         }
     }
@@ -404,12 +409,49 @@ impl Loan {
     /// The payload's bytes, to write.
     pub fn bytes_mut(&mut self) -> &mut [u8] {
         match &mut self.0 {
-            LoanInner::Shm(sample) => {
-                let payload = sample.payload_mut();
-                // SAFETY: as in `payload_bytes`, and the loan is the only writer
-                unsafe { std::slice::from_raw_parts_mut(payload.as_mut_ptr().cast::<u8>(), payload.len()) }
-            }
+            // SAFETY: as in `bytes`, borrowed mutably through the loan: the only writer
+            LoanInner::Shm(_, at) => unsafe { std::slice::from_raw_parts_mut(at.ptr.as_ptr(), at.len) },
             LoanInner::Detached(b) => b.bytes_mut(),
         }
+    }
+}
+
+/// Where a sample's payload lies in shared memory, taken once when the
+/// sample is loaned or received. A port's payload is iceoryx2's custom
+/// payload (a slice of bytes), whose length iceoryx2 computes under the
+/// port's locks on every look (two pthread mutexes for a loan, one for a
+/// received sample, on the thread-safe service type); a typed iceoryx2
+/// sample is a pointer cast. Looked at once, a hop's send takes those
+/// locks once instead of three times (the loan's check, the writer's
+/// bytes, the keep-all glue's bytes).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PayloadAt {
+    pub(crate) ptr: std::ptr::NonNull<u8>,
+    pub(crate) len: usize,
+}
+
+// SAFETY: a `PayloadAt` is an address, used only beside the iceoryx2 sample
+// that owns the memory (the same `LoanInner::Shm` or `Received`), through
+// `&self` for reading and `&mut self` for writing: it moves and is shared
+// between threads exactly as that sample is, under the same borrow rules
+// as the sample's own payload accessors.
+unsafe impl Send for PayloadAt {}
+// SAFETY: see `Send`
+unsafe impl Sync for PayloadAt {}
+
+impl PayloadAt {
+    /// The payload at `ptr`, `len` bytes (a sample's payload pointer is never null).
+    pub(crate) fn of(ptr: *mut u8, len: usize) -> Self {
+        PayloadAt { ptr: std::ptr::NonNull::new(ptr).unwrap_or(std::ptr::NonNull::dangling()), len }
+    }
+
+    /// The payload's bytes.
+    ///
+    /// # Safety
+    /// The sample whose payload this is must be alive (neither sent nor
+    /// dropped) for the returned lifetime, and not written meanwhile.
+    pub(crate) unsafe fn bytes<'a>(self) -> &'a [u8] {
+        // SAFETY: `len` initialised bytes at `ptr` (the caller's promise)
+        unsafe { std::slice::from_raw_parts(self.ptr.as_ptr(), self.len) }
     }
 }
