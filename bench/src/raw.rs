@@ -3,6 +3,14 @@
 //! header, paired with an event service, the reader blocked either on a
 //! WaitSet (what the SDK uses) or directly on the event listener.
 //!
+//! One pair, [`Mode::PollThreadsafe`], polls as [`Mode::Poll`] does but on
+//! `ipc_threadsafe::Service`, the service type nerve's ports are on (a
+//! port is made on the message checker's thread and used on the task's):
+//! iceoryx2 then guards every port's state with a pthread mutex and makes a
+//! new one per loan. Beside `iox2-poll` it measures what that type costs
+//! raw iceoryx2 itself, so `nerve-poll`'s gap splits into the type's share
+//! and the SDK's own.
+//!
 //! The services are sized like the SDK's ports (subscribers, buffer, history,
 //! safe overflow), so the comparison isolates the SDK's code path. They live
 //! in the benchmark robot's iceoryx2 world, so `nerve down` removes them.
@@ -28,6 +36,7 @@ use std::io::Write as _;
 use std::process::ExitCode;
 use std::time::Duration;
 
+/// The service type of the raw pairs (the thread-safe pair's is `ipc_threadsafe::Service`).
 type Raw = ipc::Service;
 
 /// How the reader blocks.
@@ -45,6 +54,8 @@ pub enum Mode {
     /// blocks on its listener after 20 ms without a sample, so that it does
     /// not hold a core between batches)
     Poll,
+    /// as `Poll`, on `ipc_threadsafe::Service` (nerve's ports' service type)
+    PollThreadsafe,
 }
 
 impl Mode {
@@ -54,24 +65,30 @@ impl Mode {
             Mode::Listener => "listener",
             Mode::WaitsetFill => "waitset-fill",
             Mode::Poll => "poll",
+            Mode::PollThreadsafe => "poll-threadsafe",
         }
+    }
+
+    /// Whether both sides spin on `receive` instead of sleeping.
+    pub(crate) fn polls(self) -> bool {
+        matches!(self, Mode::Poll | Mode::PollThreadsafe)
     }
 }
 
-/// The ports of one side of a raw round trip.
-pub struct Side<P: BenchPayload> {
-    node: Node<Raw>,
-    publisher: Publisher<Raw, P, SampleHeader>,
-    subscriber: Subscriber<Raw, P, SampleHeader>,
-    notifier: Notifier<Raw>,
-    listener: Listener<Raw>,
-    waitset: WaitSet<Raw>,
+/// The ports of one side of a raw round trip, on service type `S`.
+pub struct Side<P: BenchPayload, S: Service = Raw> {
+    node: Node<S>,
+    publisher: Publisher<S, P, SampleHeader>,
+    subscriber: Subscriber<S, P, SampleHeader>,
+    notifier: Notifier<S>,
+    listener: Listener<S>,
+    waitset: WaitSet<S>,
     sender: FixedName,
     seq: u64,
     mode: Mode,
 }
 
-impl<P: BenchPayload> std::fmt::Debug for Side<P> {
+impl<P: BenchPayload, S: Service> std::fmt::Debug for Side<P, S> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Side").field("mode", &self.mode).field("size", &P::SIZE).finish()
     }
@@ -81,7 +98,10 @@ fn service_name(mode: Mode, size: usize, which: &str) -> String {
     format!("bench/raw/{}/{size}/{which}", mode.as_str())
 }
 
-impl<P: BenchPayload> Side<P> {
+impl<P: BenchPayload, S: Service> Side<P, S>
+where
+    Listener<S>: SynchronousMultiplexing,
+{
     /// Opens the ports: publishes on `bench/raw/<mode>/<size>/<tx>`, reads `.../<rx>`.
     pub fn open(robot: &str, mode: Mode, tx: &str, rx: &str, node_name: &str) -> Result<Self> {
         let world = World::new(robot).context("robot world")?;
@@ -90,7 +110,7 @@ impl<P: BenchPayload> Side<P> {
             .name(&node_name.try_into().map_err(|e| anyhow!("node name: {e:?}"))?)
             .config(world.config())
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<Raw>()
+            .create::<S>()
             .map_err(|e| anyhow!("cannot create iceoryx2 node: {e:?}"))?;
         let name = |which: &str| service_name(mode, P::SIZE, which);
         let ps = |which: &str| -> Result<_> {
@@ -129,7 +149,7 @@ impl<P: BenchPayload> Side<P> {
         let listener = ev(rx)?.listener_builder().create().map_err(|e| anyhow!("listener: {e:?}"))?;
         let waitset = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<Raw>()
+            .create::<S>()
             .map_err(|e| anyhow!("waitset: {e:?}"))?;
         Ok(Side {
             node,
@@ -164,7 +184,7 @@ impl<P: BenchPayload> Side<P> {
             s.assume_init()
         };
         s.send().map_err(|e| anyhow!("send: {e:?}"))?;
-        if self.mode != Mode::Poll {
+        if !self.mode.polls() {
             self.notifier.notify().map_err(|e| anyhow!("notify: {e:?}"))?;
         }
         Ok(())
@@ -172,7 +192,7 @@ impl<P: BenchPayload> Side<P> {
 
     /// Blocks until woken or `timeout`; false on a termination request.
     /// `guard` is the listener's WaitSet attachment (WaitSet mode).
-    fn wait(&self, guard: Option<&WaitSetGuard<'_, '_, Raw>>, timeout: Duration) -> Result<bool> {
+    fn wait(&self, guard: Option<&WaitSetGuard<'_, '_, S>>, timeout: Duration) -> Result<bool> {
         match guard {
             Some(guard) => {
                 let r = self
@@ -196,12 +216,12 @@ impl<P: BenchPayload> Side<P> {
         }
     }
 
-    fn attach(&self) -> Result<Option<WaitSetGuard<'_, '_, Raw>>> {
+    fn attach(&self) -> Result<Option<WaitSetGuard<'_, '_, S>>> {
         match self.mode {
             Mode::Waitset | Mode::WaitsetFill => {
                 Ok(Some(self.waitset.attach_notification(&self.listener).map_err(|e| anyhow!("attach: {e:?}"))?))
             }
-            Mode::Listener | Mode::Poll => Ok(None),
+            Mode::Listener | Mode::Poll | Mode::PollThreadsafe => Ok(None),
         }
     }
 
@@ -216,7 +236,7 @@ impl<P: BenchPayload> Side<P> {
                 seq += 1;
                 let t0 = now_ns();
                 self.send(seq)?;
-                if self.mode == Mode::Poll && rtts.is_empty() {
+                if self.mode.polls() && rtts.is_empty() {
                     // wake the pong from its idle wait; the rest of the batch is pure polling
                     self.notifier.notify().map_err(|e| anyhow!("notify: {e:?}"))?;
                 }
@@ -234,7 +254,7 @@ impl<P: BenchPayload> Side<P> {
                     if now_ns().saturating_sub(t0) > 2_000_000_000 {
                         bail!("no echo for 2 s from the raw iceoryx2 pong ({:?}, {} B)", self.mode, P::SIZE);
                     }
-                    if self.mode == Mode::Poll {
+                    if self.mode.polls() {
                         std::hint::spin_loop();
                         continue;
                     }
@@ -264,7 +284,7 @@ impl<P: BenchPayload> Side<P> {
             for &s in &seqs[..n] {
                 self.send(s)?;
             }
-            if self.mode == Mode::Poll {
+            if self.mode.polls() {
                 if n > 0 {
                     last_rx = now_ns();
                 }
@@ -318,14 +338,24 @@ pub fn pong_main(args: Vec<String>) -> ExitCode {
 }
 
 fn pong<P: BenchPayload>(a: &PongArgs) -> Result<()> {
-    if a.mode == Mode::Poll {
+    if a.mode.polls() {
         // as nerve's polling pong (`nerve-poll`): SCHED_OTHER, on CPU 1
         pin_to(POLL_PONG_CPU);
     } else {
         realtime_like_an_agent(20);
     }
+    if a.mode == Mode::PollThreadsafe {
+        let side = Side::<P, ipc_threadsafe::Service>::open(&a.robot, a.mode, "pong", "ping", "raw-pong")?;
+        ready()?;
+        return side.pong_loop();
+    }
     let side = Side::<P>::open(&a.robot, a.mode, "pong", "ping", "raw-pong")?;
-    println!("ready");
-    std::io::stdout().flush().context("stdout")?;
+    ready()?;
     side.pong_loop()
+}
+
+/// Tells the benchmark that the pong's ports exist.
+fn ready() -> Result<()> {
+    println!("ready");
+    std::io::stdout().flush().context("stdout")
 }

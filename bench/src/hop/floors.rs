@@ -12,6 +12,7 @@ use crate::raw::{Mode, Side};
 use crate::uds::UdsPing;
 use crate::with_payload;
 use anyhow::{Result, bail};
+use iceoryx2::prelude::ipc_threadsafe;
 use std::process::Stdio;
 
 /// The socket and futex pings, per size in the order of the sizes: (uds,
@@ -23,7 +24,7 @@ pub(super) type Pings = std::vec::IntoIter<(UdsPing, FutexPing, FutexPing)>;
 pub(super) fn start_pongs(robot: &Robot, opts: &HopOpts) -> Result<(Vec<ChildGuard>, Pings)> {
     let (mut children, mut pings) = (Vec::new(), Vec::new());
     for &size in &opts.sizes {
-        for mode in ["waitset", "listener", "waitset-fill", "poll"] {
+        for mode in ["waitset", "listener", "waitset-fill", "poll", "poll-threadsafe"] {
             let mut cmd = self_command("__raw-pong")?;
             cmd.args(["--robot", &robot.name, "--mode", mode, "--size", &size.to_string()]);
             cmd.env("NERVE_HOME", &robot.home).stdout(Stdio::piped());
@@ -66,6 +67,10 @@ pub(super) fn push_iox2(pingers: &mut Pingers, size: usize, robot: &Robot) -> Re
         let p = if mode == Mode::Poll { Box::new(AsPolledAgents(Box::new(Pinned(p)))) } else { p };
         pingers.push((size, t, p));
     }
+    // the polling pair on nerve's ports' service type (`crate::raw`'s module doc)
+    let ts = Mode::PollThreadsafe;
+    let p: Box<dyn Pinger> = with_payload!(size, P => Box::new(Side::<P, ipc_threadsafe::Service>::open(&robot.name, ts, "ping", "pong", "raw-ping")?), _ => bail!("size"));
+    pingers.push((size, "iox2-poll-ts", Box::new(AsPolledAgents(Box::new(Pinned(p))))));
     Ok(())
 }
 
@@ -95,7 +100,10 @@ impl Pinger for FutexPing {
     }
 }
 
-impl<P: BenchPayload> Pinger for Side<P> {
+impl<P: BenchPayload, S: iceoryx2::service::Service> Pinger for Side<P, S>
+where
+    iceoryx2::port::listener::Listener<S>: iceoryx2::prelude::SynchronousMultiplexing,
+{
     fn batch(&mut self, _robot: &Robot, count: usize) -> Result<Vec<u64>> {
         self.ping_batch(count)
     }

@@ -21,6 +21,8 @@
 //!   on CPU 0 and the pong on CPU 1 (nerve's pollers cannot be real-time
 //!   on two CPUs, see [`nerve`]; until 2026-11-29 the raw pair ran at
 //!   SCHED_FIFO and only nerve's was preempted on a loaded machine);
+//!   `iox2-poll-ts`: the raw polling pair on `ipc_threadsafe::Service`,
+//!   the service type of nerve's ports (see [`crate::raw`]);
 //! * `ddsperf`: Cyclone DDS's own ping-pong, when installed ([`crate::dds`]);
 //! * `dora`: two dora-rs nodes on dora's Rust node API, one `dora run` per
 //!   batch, when `scripts/setup.sh --bench` has built them ([`crate::dora`]);
@@ -114,7 +116,7 @@ use std::time::{Duration, Instant};
 /// Samples dropped at the start of every batch.
 const DISCARD: usize = 5;
 /// The transports, in the order of the tables.
-pub const TRANSPORTS: [&str; 19] = [
+pub const TRANSPORTS: [&str; 20] = [
     "nerve",
     "nerve-python",
     "nerve-python-pmqos",
@@ -134,6 +136,7 @@ pub const TRANSPORTS: [&str; 19] = [
     "dora-pmqos",
     "nerve-poll",
     "iox2-poll",
+    "iox2-poll-ts",
 ];
 /// The CPU the `-pinned` rows keep both ends on.
 pub(crate) const PINNED_CPU: usize = 0;
