@@ -393,8 +393,12 @@ NERVE_STATIC_ASSERT(offsetof(nerve_AgentLoad, importance) == 48, "nerve::AgentLo
 NERVE_STATIC_ASSERT(offsetof(nerve_AgentLoad, action) == 49, "nerve::AgentLoad.action is at byte 49");
 NERVE_STATIC_ASSERT(offsetof(nerve_AgentLoad, reserved) == 50, "nerve::AgentLoad.reserved is at byte 50");
 
-/* nerve::ResourceReport */
-typedef struct nerve_ResourceReport {
+#define nerve_AgentLoad_TYPE_NAME "nerve::AgentLoad"
+#define nerve_AgentLoad_FINGERPRINT UINT64_C(0x10ff88a02d147f6c)
+#define NERVE_AGENT_LOAD_FINGERPRINT nerve_AgentLoad_FINGERPRINT
+
+/* nerve::ResourceHeader */
+typedef struct nerve_ResourceHeader {
   uint64_t stamp_ns;
   float machine_cpu_percent;
   float agents_cpu_percent;
@@ -402,30 +406,28 @@ typedef struct nerve_ResourceReport {
   uint64_t mem_used_bytes;
   uint64_t agents_rss_bytes;
   uint32_t cpus;
+  uint32_t agents;
+  uint16_t slowed;
+  uint16_t suspended;
   uint8_t level;
-  uint8_t agent_count;
-  uint8_t slowed;
-  uint8_t suspended;
-  nerve_AgentLoad agents[16];
-} nerve_ResourceReport;
-NERVE_STATIC_ASSERT(sizeof(nerve_ResourceReport) == 944, "nerve::ResourceReport is 944 bytes");
-NERVE_STATIC_ASSERT(NERVE_ALIGNOF(nerve_ResourceReport) == 8, "nerve::ResourceReport is aligned to 8 bytes");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, stamp_ns) == 0, "nerve::ResourceReport.stamp_ns is at byte 0");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, machine_cpu_percent) == 8, "nerve::ResourceReport.machine_cpu_percent is at byte 8");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, agents_cpu_percent) == 12, "nerve::ResourceReport.agents_cpu_percent is at byte 12");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, mem_total_bytes) == 16, "nerve::ResourceReport.mem_total_bytes is at byte 16");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, mem_used_bytes) == 24, "nerve::ResourceReport.mem_used_bytes is at byte 24");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, agents_rss_bytes) == 32, "nerve::ResourceReport.agents_rss_bytes is at byte 32");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, cpus) == 40, "nerve::ResourceReport.cpus is at byte 40");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, level) == 44, "nerve::ResourceReport.level is at byte 44");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, agent_count) == 45, "nerve::ResourceReport.agent_count is at byte 45");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, slowed) == 46, "nerve::ResourceReport.slowed is at byte 46");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, suspended) == 47, "nerve::ResourceReport.suspended is at byte 47");
-NERVE_STATIC_ASSERT(offsetof(nerve_ResourceReport, agents) == 48, "nerve::ResourceReport.agents is at byte 48");
+} nerve_ResourceHeader;
+NERVE_STATIC_ASSERT(sizeof(nerve_ResourceHeader) == 56, "nerve::ResourceHeader is 56 bytes");
+NERVE_STATIC_ASSERT(NERVE_ALIGNOF(nerve_ResourceHeader) == 8, "nerve::ResourceHeader is aligned to 8 bytes");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, stamp_ns) == 0, "nerve::ResourceHeader.stamp_ns is at byte 0");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, machine_cpu_percent) == 8, "nerve::ResourceHeader.machine_cpu_percent is at byte 8");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, agents_cpu_percent) == 12, "nerve::ResourceHeader.agents_cpu_percent is at byte 12");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, mem_total_bytes) == 16, "nerve::ResourceHeader.mem_total_bytes is at byte 16");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, mem_used_bytes) == 24, "nerve::ResourceHeader.mem_used_bytes is at byte 24");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, agents_rss_bytes) == 32, "nerve::ResourceHeader.agents_rss_bytes is at byte 32");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, cpus) == 40, "nerve::ResourceHeader.cpus is at byte 40");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, agents) == 44, "nerve::ResourceHeader.agents is at byte 44");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, slowed) == 48, "nerve::ResourceHeader.slowed is at byte 48");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, suspended) == 50, "nerve::ResourceHeader.suspended is at byte 50");
+NERVE_STATIC_ASSERT(offsetof(nerve_ResourceHeader, level) == 52, "nerve::ResourceHeader.level is at byte 52");
 
-#define nerve_ResourceReport_TYPE_NAME "nerve::ResourceReport"
-#define nerve_ResourceReport_FINGERPRINT UINT64_C(0x64ab698dab165e93)
-#define NERVE_RESOURCE_REPORT_FINGERPRINT nerve_ResourceReport_FINGERPRINT
+#define nerve_ResourceHeader_TYPE_NAME "nerve::ResourceHeader"
+#define nerve_ResourceHeader_FINGERPRINT UINT64_C(0xb36e474be964c7ff)
+#define NERVE_RESOURCE_HEADER_FINGERPRINT nerve_ResourceHeader_FINGERPRINT
 
 /* nerve::PoseEstimate */
 typedef struct nerve_PoseEstimate {
@@ -754,7 +756,8 @@ NERVE_STATIC_ASSERT(offsetof(nerve_PathHeader, status) == 52, "nerve::PathHeader
   X(nerve_HeadState) \
   X(nerve_Situation) \
   X(nerve_Mode) \
-  X(nerve_ResourceReport) \
+  X(nerve_AgentLoad) \
+  X(nerve_ResourceHeader) \
   X(nerve_PoseEstimate) \
   X(nerve_PoseCorrection) \
   X(nerve_CheckpointSighting) \

@@ -696,7 +696,7 @@ impl Fnv {
 mod tests {
     use super::*;
     use crate::FixedName;
-    use crate::payloads::{AgentLoad, ResourceReport, SonarScan, Tick};
+    use crate::payloads::{AgentLoad, ResourceHeader, ResourceReport, SonarScan, Tick, resources::report_bytes};
 
     fn bytes_of<T: Copy>(v: &T) -> Vec<u8> {
         // SAFETY: reading the bytes of a Copy #[repr(C)] value; its padding
@@ -729,15 +729,23 @@ mod tests {
             Value::Struct(vec![("seq".into(), Value::Unsigned(7)), ("stamp_ns".into(), Value::Unsigned(123_456_789))])
         );
         // nested structs, arrays of structs and fixed strings
-        let mut report = ResourceReport { cpus: 2, agent_count: 2, ..Default::default() };
-        report.agents[1] = AgentLoad { name: FixedName::new("motor"), cpu_percent: 12.5, ..Default::default() };
-        let schema = ResourceReport::schema();
-        let v = schema.decode(&bytes_of(&report)).expect("decodes");
+        #[derive(Debug, Clone, Copy, Default, PartialEq, crate::Payload, serde::Serialize)]
+        #[repr(C)]
+        #[payload(name = "test::Loads")]
+        struct Loads {
+            cpus: u32,
+            _pad: [u8; 4],
+            agents: [AgentLoad; 2],
+        }
+        let mut loads = Loads { cpus: 2, ..Default::default() };
+        loads.agents[1] = AgentLoad { name: FixedName::new("motor"), cpu_percent: 12.5, ..Default::default() };
+        let schema = Loads::schema();
+        let v = schema.decode(&bytes_of(&loads)).expect("decodes");
         let json = serde_json_like(&v);
         assert!(json.contains(r#""cpus":2"#) && json.contains(r#""name":"motor""#) && json.contains("12.5"), "{json}");
         let (offset, s) = schema.field("agents.1.cpu_percent").expect("a nested field");
         assert_eq!(s.kind, Kind::Primitive { primitive: Primitive::F32 });
-        assert_eq!(s.decode(&bytes_of(&report)[offset..]).expect("the field"), Value::F32(12.5));
+        assert_eq!(s.decode(&bytes_of(&loads)[offset..]).expect("the field"), Value::F32(12.5));
         assert!(schema.field("agents.99.name").is_none(), "out of the array");
         assert!(schema.field("nothing").is_none());
         let scan = SonarScan::schema();
@@ -775,10 +783,18 @@ mod tests {
             serde_json::to_string(&Tick::schema().decode(&bytes_of(&tick)).expect("decodes")).expect("json"),
             r#"{"seq":3,"stamp_ns":9}"#
         );
-        let mut report = ResourceReport { cpus: 2, agent_count: 1, ..Default::default() };
-        report.agents[0] = AgentLoad { name: FixedName::new("motor"), cpu_percent: 0.1, ..Default::default() };
-        let decoded = ResourceReport::schema().decode(&bytes_of(&report)).expect("decodes");
-        assert_eq!(serde_json::to_string(&decoded).expect("json"), serde_json::to_string(&report).expect("serde"));
+        // a sequence: the header and the elements, as serde gives them
+        let header = ResourceHeader { cpus: 2, agents: 1, ..Default::default() };
+        let load = AgentLoad { name: FixedName::new("motor"), cpu_percent: 0.1, ..Default::default() };
+        let decoded = ResourceReport::schema().decode(&report_bytes(&header, &[load])).expect("decodes");
+        assert_eq!(
+            serde_json::to_string(&decoded).expect("json"),
+            format!(
+                r#"{{"header":{},"items":[{}]}}"#,
+                serde_json::to_string(&header).expect("serde"),
+                serde_json::to_string(&load).expect("serde")
+            )
+        );
         assert!(decoded.to_string().contains(r#"name: "motor", cpu_percent: 0.1"#), "{decoded}");
     }
 

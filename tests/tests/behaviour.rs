@@ -2,7 +2,8 @@
 //! the decision maker switching modes as danger and target compete (driven
 //! by the hand-driven `situation` source), and the resource manager slowing
 //! down the least important agent when a CPU-hungry agent loads the machine,
-//! then giving the period back once the load is gone.
+//! then giving the period back once the load is gone; its report lists
+//! every agent of a robot of more than 16 (a sequence since issue 42).
 //!
 //! No assertion is on speed: every wait is a generous `wait_until`.
 
@@ -156,7 +157,9 @@ importance = { low = 1, hog = 5, keep = 9 }
 
 /// A CPU-hungry agent loads the machine: the resource manager lengthens the
 /// period of the least important agent (not of the protected one), reports
-/// the load, and gives the period back once the hungry agent is gone.
+/// the load, and gives the period back once the hungry agent is gone. Then
+/// the robot grows to 17 agents, more than the 16 loads the report's fixed
+/// array held before issue 42: `nerve echo` shows every one.
 #[test]
 fn resource_manager_slows_the_least_important_agent_under_load() {
     let r = Robot::new("rm");
@@ -167,8 +170,8 @@ fn resource_manager_slows_the_least_important_agent_under_load() {
     r.ok(&["start", "resource", "--name", "rm", "--period", "500ms", "--", "--kb", kb.to_str().expect("utf-8 path")]);
     // the machine report comes before any load
     let report = r.echo("rm/load", 1);
-    assert_eq!(report[0]["type"], "nerve::ResourceReport");
-    assert!(report[0]["data"]["cpus"].as_u64().unwrap_or(0) >= 1, "{report:?}");
+    assert_eq!(report[0]["type"], "nerve::Seq<nerve::AgentLoad, nerve::ResourceHeader>");
+    assert!(report[0]["data"]["header"]["cpus"].as_u64().unwrap_or(0) >= 1, "{report:?}");
     assert_eq!(period_ns(&r, "low"), 10_000_000);
 
     r.ok(&["start", "testagent", "--name", "hog", "--", "--mode", "burn"]);
@@ -180,8 +183,8 @@ fn resource_manager_slows_the_least_important_agent_under_load() {
     // the report names the hungry agent and the load level
     let busy = wait_until(Duration::from_secs(10), || {
         r.echo("rm/load", 1).first().is_some_and(|s| {
-            s["data"]["level"].as_u64().unwrap_or(0) >= 1
-                && s["data"]["agents"].as_array().is_some_and(|a| a.iter().any(|x| x["name"] == "hog"))
+            s["data"]["header"]["level"].as_u64().unwrap_or(0) >= 1
+                && s["data"]["items"].as_array().is_some_and(|a| a.iter().any(|x| x["name"] == "hog"))
         })
     });
     assert!(busy, "the report shows the load and the hog");
@@ -191,5 +194,27 @@ fn resource_manager_slows_the_least_important_agent_under_load() {
     let restored = wait_until(Duration::from_secs(40), || period_ns(&r, "low") == 10_000_000);
     assert!(restored, "the period was not given back; the resource manager's log:\n{}", log_of(&r, "rm"));
     assert!(log_of(&r, "rm").contains("resource: restore low"), "{}", log_of(&r, "rm"));
+
+    // 14 more (idle tickers): 17 agents, every one in the report, whose
+    // length the header's count agrees with
+    let extras: Vec<String> = (0..14).map(|i| format!("extra{i:02}")).collect();
+    for name in &extras {
+        r.ok(&["start", "ticker", "--name", name, "--period", "1s"]);
+    }
+    let mut want: Vec<String> = ["low", "keep", "rm"].iter().map(|s| s.to_string()).chain(extras).collect();
+    want.sort();
+    let mut last = Vec::new();
+    let whole = wait_until(Duration::from_secs(15), || {
+        last = r.echo("rm/load", 1);
+        last.first().is_some_and(|s| {
+            let mut names: Vec<String> = s["data"]["items"]
+                .as_array()
+                .map(|a| a.iter().filter_map(|x| x["name"].as_str().map(str::to_owned)).collect())
+                .unwrap_or_default();
+            names.sort();
+            names == want && s["data"]["header"]["agents"] == 17
+        })
+    });
+    assert!(whole, "the report should list all 17 agents {want:?}: {last:?}");
     r.down_and_check_clean();
 }

@@ -3,7 +3,9 @@
 //! flickering, and the actions a mode asks for.
 //!
 //! * [`Reports`] keeps the newest [`Situation`] of every sender and the newest
-//!   [`ResourceReport`]; [`Reports::facts`] folds the fresh ones into
+//!   resource manager's report's [`ResourceHeader`] (`nerve::ResourceReport`'s
+//!   header; the decision needs its load level, not each agent's load);
+//!   [`Reports::facts`] folds the fresh ones into
 //!   [`Facts`]: the worst danger any fresh report gives, the best target
 //!   state, the load level. A variable no fresh report speaks about is
 //!   *unknown*, and the rules say what unknown means (a silent safety monitor
@@ -17,7 +19,7 @@
 //!   then resumes, periods and suspends.
 
 use crate::kb::{Condition, KnowledgeBase, ModeSpec, UNKNOWN, Variable};
-use shm_schemas::payloads::{DangerLevel, LoadLevel, ResourceReport, Situation, TargetState};
+use shm_schemas::payloads::{DangerLevel, LoadLevel, ResourceHeader, Situation, TargetState};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -83,7 +85,7 @@ pub const MAX_SENDERS: usize = 256;
 #[derive(Debug, Clone, Default)]
 pub struct Reports {
     situations: BTreeMap<String, (u64, Situation)>,
-    load: Option<(u64, ResourceReport)>,
+    load: Option<(u64, ResourceHeader)>,
 }
 
 impl Reports {
@@ -110,8 +112,8 @@ impl Reports {
         self.situations.len()
     }
 
-    /// Keeps the resource manager's report, received at `now_ns`.
-    pub fn load(&mut self, r: ResourceReport, now_ns: u64) {
+    /// Keeps the header of the resource manager's report, received at `now_ns`.
+    pub fn load(&mut self, r: ResourceHeader, now_ns: u64) {
         self.load = Some((now_ns, r));
     }
 
@@ -300,7 +302,7 @@ resume = ["wall-follow"]
         r.situation("safety", Situation::danger(DangerLevel::Low, 0.3, 0), 1_000);
         r.situation("safety2", Situation::danger(DangerLevel::High, 0.6, 0), 1_000);
         r.situation("tracker", Situation::target(TargetState::Seen, 0.1, 0.0, 0), 500_000_000);
-        r.load(ResourceReport { level: LoadLevel::High as u8, ..Default::default() }, 1_000);
+        r.load(ResourceHeader { level: LoadLevel::High as u8, ..Default::default() }, 1_000);
         let f = r.facts(900_000_000, s);
         assert_eq!(
             (f.danger, f.target, f.load),

@@ -3,7 +3,8 @@
 //!
 //! * reads the functional agents' reports on input `situation`
 //!   (`nerve::Situation`, any number of senders) and the resource manager's
-//!   on input `load` (`nerve::ResourceReport`);
+//!   on input `load` (`nerve::ResourceReport`, a header and every agent's
+//!   load: the decision reads the header's load level);
 //! * looks the situation up in its knowledge base (`-- --kb FILE`, see
 //!   `docs/decision.md`): the first matching rule names the mode;
 //! * on a mode change logs `mode change: FROM -> TO (target .., danger ..,
@@ -22,13 +23,13 @@
 //! nerve connect resource/load decision/load
 //! ```
 
-use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task, World};
+use agent_sdk::{Agent, AgentError, Context, Input, Output, SeqInput, Setup, Task, World};
 use clap::Parser;
 use nerve_decision::apply::Applier;
 use nerve_decision::{Arbiter, Facts, KnowledgeBase, Reports, actions, lookup};
 use shm_schemas::FixedName;
 use shm_schemas::payloads::situation::UNKNOWN_LEVEL;
-use shm_schemas::payloads::{Mode, ResourceReport, Situation};
+use shm_schemas::payloads::{AgentLoad, Mode, ResourceHeader, Situation};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -45,7 +46,7 @@ struct Decision {
     kb: KnowledgeBase,
     world: World,
     situation: Input<Situation>,
-    load: Input<ResourceReport>,
+    load: SeqInput<AgentLoad, ResourceHeader>,
     out: Output<Mode>,
     reports: Reports,
     arbiter: Arbiter,
@@ -70,7 +71,7 @@ impl Agent for Decision {
         Ok(Decision {
             world: setup.world().clone(),
             situation: setup.input("situation")?,
-            load: setup.input("load")?,
+            load: setup.input_seq("load")?,
             out: setup.output("mode")?,
             reports: Reports::default(),
             arbiter,
@@ -98,8 +99,15 @@ impl Agent for Decision {
         let now = ctx.now_ns();
         let reports = &mut self.reports;
         self.situation.drain(|m, s| reports.situation(m.sender.as_str(), *s, now));
-        if let Some((_, r)) = self.load.latest() {
-            self.reports.load(r, now);
+        // the newest report (by stamp) of those waiting: its header says the level
+        let mut newest: Option<(u64, ResourceHeader)> = None;
+        self.load.drain(|m, header, _| {
+            if newest.is_none_or(|(t, _)| m.stamp_ns >= t) {
+                newest = Some((m.stamp_ns, *header));
+            }
+        });
+        if let Some((_, header)) = newest {
+            self.reports.load(header, now);
         }
         self.reports.forget_stale(now, self.kb.decision.report_timeout);
         let facts = self.reports.facts(now, self.kb.decision.report_timeout);
@@ -198,6 +206,44 @@ mod tests {
         let last = modes.last().expect("a mode");
         assert_eq!(last.name.as_str(), "avoid");
         assert_eq!(last.danger_level, UNKNOWN_LEVEL, "the silent monitor's danger is unknown");
+    }
+
+    /// The resource manager's report of a robot of 40 agents (more than the
+    /// 16 its fixed array held before issue 42), on the sequence input
+    /// `load`: read whole, its header's level counts — kb/explore.toml's
+    /// `load = "critical"` rule selects `lean`, and the mode says the level —
+    /// and a report without agents is read as well.
+    #[test]
+    fn a_resource_report_of_forty_agents_sets_the_load_level() {
+        use shm_schemas::payloads::resources::report_bytes;
+        use shm_schemas::payloads::{AgentLoad, LoadLevel, ResourceHeader};
+        let mut h = decision();
+        let loads: Vec<AgentLoad> = (0..40)
+            .map(|i| AgentLoad { name: FixedName::new(&format!("agent{i}")), cpu_percent: 2.5, ..Default::default() })
+            .collect();
+        let header =
+            |level: LoadLevel| ResourceHeader { cpus: 2, agents: 40, level: level as u8, ..Default::default() };
+        let mut mode = String::new();
+        for _ in 0..20 {
+            let now = h.now_ns();
+            h.send_from("situation", "safety", Situation::danger(DangerLevel::None, 2.0, now)).expect("danger");
+            h.send_bytes_from("load", "rm", &report_bytes(&header(LoadLevel::Critical), &loads)).expect("40 loads");
+            h.step().expect("step");
+            mode =
+                h.output::<Mode>("mode").expect("mode").last().map(|m| m.name.as_str().to_owned()).unwrap_or_default();
+            if mode == "lean" {
+                break;
+            }
+        }
+        assert_eq!(mode, "lean", "a critical load selects lean");
+        // an empty report (no agents yet) is read too: back to normal
+        let now = h.now_ns();
+        h.send_from("situation", "safety", Situation::danger(DangerLevel::None, 2.0, now)).expect("danger");
+        h.send_bytes_from("load", "rm", &report_bytes(&header(LoadLevel::Normal), &[])).expect("no loads");
+        h.step().expect("step");
+        let last = h.output::<Mode>("mode").expect("mode").pop().expect("a mode");
+        assert_eq!(last.load_level, LoadLevel::Normal as u8, "the newest report's level");
+        assert_eq!(h.errors(), 0);
     }
 
     /// A knowledge base that does not load fails `new`, naming the file.

@@ -15,7 +15,10 @@
 //!   important agent, then suspends extras, and gives everything back in
 //!   reverse order once the load is normal (see `plan`); every action is
 //!   logged as `resource: ACTION (load LEVEL ...)`;
-//! * publishes `nerve::ResourceReport` on output `load` for the decision maker.
+//! * publishes `nerve::ResourceReport` on output `load` for the decision maker:
+//!   the machine's figures in its header, then every agent's load, busiest
+//!   first, as many as the robot has (a sequence, `Seq<AgentLoad,
+//!   ResourceHeader>`, of at most `MAX_AGENT_LOADS`).
 //!
 //! ```text
 //! nerve start resource --name resource -- --kb kb/explore.toml
@@ -24,15 +27,14 @@
 
 use agent_sdk::control::{ControlClient, router_client};
 use agent_sdk::world::Ipc;
-use agent_sdk::{Agent, AgentError, Context, Output, Setup, Task, World};
+use agent_sdk::{Agent, AgentError, Context, SeqOutput, Setup, Task, World};
 use clap::Parser;
 use iceoryx2::prelude::Node;
 use nerve_decision::{KnowledgeBase, ResourcePolicy};
-use nerve_resource::{Action, AgentObs, Measures, Planner, level};
-use shm_schemas::FixedName;
+use nerve_resource::{Action, AgentObs, Machine, Measures, Planner, level, report};
 use shm_schemas::control::agent_to_router::TaskKind;
 use shm_schemas::control::cli_to_router::{AgentState, AgentView, CliRequest, RouterReply, RouterRequest};
-use shm_schemas::payloads::{AgentLoad, LoadLevel, MAX_AGENT_LOADS, ResourceReport};
+use shm_schemas::payloads::{AgentLoad, LoadLevel, MAX_AGENT_LOADS, ResourceHeader};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use sysinfo::{MINIMUM_CPU_UPDATE_INTERVAL, Pid, ProcessRefreshKind, ProcessesToUpdate, System};
@@ -55,7 +57,7 @@ struct Resource {
     planner: Planner,
     world: World,
     node_name: String,
-    out: Output<ResourceReport>,
+    out: SeqOutput<AgentLoad, ResourceHeader>,
     sys: Option<System>,
     router: Option<(RouterClient, Node<Ipc>)>,
     level: LoadLevel,
@@ -155,7 +157,7 @@ impl Agent for Resource {
             planner: Planner::new(policy, setup.name()),
             world: setup.world().clone(),
             node_name: format!("{}-rm", setup.name()),
-            out: setup.output("load")?,
+            out: setup.output_seq("load", MAX_AGENT_LOADS)?,
             sys: None,
             router: None,
             level: LoadLevel::Normal,
@@ -205,7 +207,7 @@ impl Agent for Resource {
             self.last_refresh = Some(Instant::now());
         }
         let policy = self.planner.policy().clone();
-        let mut obs: Vec<(AgentObs, u64)> = views
+        let obs: Vec<(AgentObs, u64)> = views
             .iter()
             .map(|v| {
                 let p = sys.process(Pid::from_u32(v.pid));
@@ -266,32 +268,9 @@ impl Agent for Resource {
             self.planner.done(&action, ok, now);
         }
 
-        obs.sort_by(|a, b| b.0.cpu_percent.total_cmp(&a.0.cpu_percent));
-        let mut report = ResourceReport {
-            stamp_ns: now,
-            machine_cpu_percent: m.machine_cpu as f32,
-            agents_cpu_percent: m.agents_cpu as f32,
-            mem_total_bytes: mem_total,
-            mem_used_bytes: mem_used,
-            agents_rss_bytes: obs.iter().map(|(_, rss)| rss).sum(),
-            cpus,
-            level: new_level as u8,
-            agent_count: obs.len().min(MAX_AGENT_LOADS) as u8,
-            slowed: self.planner.slowed().len().min(255) as u8,
-            suspended: self.planner.suspended().len().min(255) as u8,
-            ..Default::default()
-        };
-        for (slot, (o, rss)) in report.agents.iter_mut().zip(&obs) {
-            *slot = AgentLoad {
-                name: FixedName::new(&o.name),
-                cpu_percent: o.cpu_percent as f32,
-                rss_bytes: *rss,
-                importance: o.importance,
-                action: self.planner.action_of(&o.name),
-                reserved: [0; 6],
-            };
-        }
-        self.out.send(report)?;
+        let machine = Machine { stamp_ns: now, cpus, mem_total_bytes: mem_total, mem_used_bytes: mem_used };
+        let (header, loads) = report(machine, &m, new_level, &self.planner, &obs);
+        self.out.send(&header, &loads)?;
         Ok(())
     }
 }

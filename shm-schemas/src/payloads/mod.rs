@@ -29,7 +29,7 @@ pub use navigation::{
     CheckpointSighting, MAX_VIA_POINTS, MissionCode, MissionCommand, PoseCorrection, PoseEstimate, PoseSource, ViaKind,
     ViaPath,
 };
-pub use resources::{AgentLoad, LoadLevel, MAX_AGENT_LOADS, ResourceReport};
+pub use resources::{AgentLoad, LoadLevel, MAX_AGENT_LOADS, ResourceHeader, ResourceReport};
 pub use router::RouterEpoch;
 pub use scalar::Scalar;
 pub use situation::{DangerLevel, Mode, Situation, TargetState};
@@ -86,7 +86,8 @@ macro_rules! for_each_payload {
         $m!($crate::payloads::HeadState);
         $m!($crate::payloads::Situation);
         $m!($crate::payloads::Mode);
-        $m!($crate::payloads::ResourceReport);
+        $m!($crate::payloads::AgentLoad);
+        $m!($crate::payloads::ResourceHeader);
         $m!($crate::payloads::PoseEstimate);
         $m!($crate::payloads::PoseCorrection);
         $m!($crate::payloads::CheckpointSighting);

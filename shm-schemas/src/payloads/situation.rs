@@ -166,7 +166,7 @@ pub struct Mode {
     pub danger_level: u8,
     /// The target state that selected the mode; 255 when unknown.
     pub target: u8,
-    /// The load level (`nerve::ResourceReport::level`) that selected the mode; 255 when unknown.
+    /// The load level (`nerve::ResourceHeader::level` of the resource manager's report) that selected the mode; 255 when unknown.
     pub load_level: u8,
     /// Padding, zero.
     pub reserved: [u8; 5],
