@@ -38,6 +38,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 pub mod args;
+mod waker;
+
+pub use waker::{Waker, WakerError};
 
 /// How the task is driven.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -69,6 +72,9 @@ pub enum AgentError {
         #[source]
         source: crate::port::depth::OptionsError,
     },
+    /// The agent's waker could not be made (`setup.waker()`).
+    #[error(transparent)]
+    Waker(#[from] WakerError),
     /// A device failed.
     #[error("device: {0}")]
     Device(String),
@@ -130,6 +136,8 @@ pub struct Setup {
     pub(crate) params: ParamTable,
     /// the services it answers and the clients it calls through (also in `inputs`, for wake-ups)
     pub(crate) calls: crate::port::call::Declared,
+    /// the task's waker, once asked for ([`Setup::waker`])
+    pub(crate) waker: Option<Waker>,
 }
 
 impl std::fmt::Debug for Setup {
@@ -151,6 +159,7 @@ impl Setup {
             schemas: Vec::new(),
             params: ParamTable::default(),
             calls: Default::default(),
+            waker: None,
         }
     }
 
@@ -389,6 +398,21 @@ impl Setup {
         self.params.set_figures(Box::new(source));
     }
 
+    /// The agent's [`Waker`]: another thread of the agent (a network
+    /// session's callbacks, a device thread) calls [`Waker::wake`] and the
+    /// event-driven task steps, with [`Context::woken_by_waker`] true, as
+    /// it does when an input gets a sample. Every call returns the same
+    /// waker (clone it for each thread). See [`Waker`]
+    /// for what it promises and an example.
+    pub fn waker(&mut self) -> Result<Waker, AgentError> {
+        if let Some(w) = &self.waker {
+            return Ok(w.clone());
+        }
+        let w = Waker::new()?;
+        self.waker = Some(w.clone());
+        Ok(w)
+    }
+
     fn check_port(&self, port: &str) -> Result<(), AgentError> {
         validate_port_name(port).map_err(|e| AgentError::Config(e.to_string()))?;
         if self.outputs.iter().any(|p| p.name == port) || self.inputs.iter().any(|p| p.name() == port) {
@@ -422,6 +446,8 @@ pub struct Context {
     pub(crate) inputs: Vec<String>,
     /// per input (same order): whether it woke the task for this step
     pub(crate) woken: Vec<bool>,
+    /// the agent's waker was woken since the last step ([`Setup::waker`])
+    pub(crate) waker: bool,
 }
 
 impl Context {
@@ -467,6 +493,13 @@ impl Context {
         self.inputs.iter().zip(&self.woken).any(|(n, w)| *w && n == input)
     }
 
+    /// Whether the agent's [`Waker`] was woken since the last step (by
+    /// another thread of the agent; see [`Setup::waker`]). Any number of
+    /// wakes since then count as one. False for an agent without a waker.
+    pub fn woken_by_waker(&self) -> bool {
+        self.waker
+    }
+
     /// Asks the SDK to stop the agent after this cycle.
     pub fn request_stop(&mut self) {
         self.stop = true;
@@ -487,6 +520,7 @@ mod tests {
             stop: false,
             inputs: inputs.iter().map(|s| s.to_string()).collect(),
             woken: vec![false; inputs.len()],
+            waker: false,
         }
     }
 

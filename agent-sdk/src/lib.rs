@@ -49,7 +49,7 @@ pub mod termination;
 pub mod testing;
 pub mod world;
 
-pub use agent::{Agent, AgentError, Context, Setup, Task};
+pub use agent::{Agent, AgentError, Context, Setup, Task, Waker};
 pub use cli::CommonArgs;
 pub use params::Param;
 pub use port::{SeqInput, SeqOutput};

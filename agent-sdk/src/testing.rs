@@ -312,7 +312,7 @@ impl<A: Agent> HarnessBuilder<A> {
         let cleanup = WorldCleanup(world);
         let agent =
             A::new(&mut setup).map_err(|source| HarnessError::Agent { kind: A::kind(), stage: "new", source })?;
-        let Setup { inputs, params, calls, .. } = setup;
+        let Setup { inputs, params, calls, waker, .. } = setup;
         for (key, value) in self.params {
             params.set(&key, &value).map_err(|reason| HarnessError::Param { key, value, reason })?;
         }
@@ -329,6 +329,7 @@ impl<A: Agent> HarnessBuilder<A> {
             stop: false,
             inputs: inputs.iter().map(|i| i.name().to_owned()).collect(),
             woken: vec![false; inputs.len()],
+            waker: false,
         };
         let mut agent = agent;
         agent.start(&mut ctx).map_err(|source| HarnessError::Agent { kind: A::kind(), stage: "start", source })?;
@@ -343,6 +344,7 @@ impl<A: Agent> HarnessBuilder<A> {
             suspended: self.suspended,
             errors: 0,
             calls: calls.memory,
+            waker,
             _cleanup: cleanup,
         })
     }
@@ -377,6 +379,8 @@ pub struct Harness<A: Agent> {
     errors: u64,
     /// the call ports' in-memory queues
     calls: Vec<crate::port::call::memory::MemCallPort>,
+    /// the agent's waker, if it asked for one ([`Setup::waker`])
+    waker: Option<crate::agent::Waker>,
     // dropped last: the agent's own services are gone by then
     _cleanup: WorldCleanup,
 }
@@ -599,6 +603,26 @@ impl<A: Agent> Harness<A> {
         Ok(self.ctx.cycle - before)
     }
 
+    /// Whether the agent's waker ([`Setup::waker`]) was woken since the
+    /// last step: a running event-driven agent would step now. The harness
+    /// never steps on its own; [`Harness::step`] takes the wake (the step
+    /// sees [`Context::woken_by_waker`]), [`Harness::step_if_woken`] steps
+    /// only if one waits.
+    pub fn wake_pending(&self) -> bool {
+        self.waker.as_ref().is_some_and(crate::agent::Waker::pending)
+    }
+
+    /// Steps as a running event-driven agent would for its waker: when a
+    /// wake waits ([`Harness::wake_pending`]) and the agent is not
+    /// suspended. Returns whether it stepped.
+    pub fn step_if_woken(&mut self) -> Result<bool, AgentError> {
+        if self.suspended || !self.wake_pending() {
+            return Ok(false);
+        }
+        self.step()?;
+        Ok(true)
+    }
+
     /// Runs `n` cycles: [`Harness::step`] `n` times.
     pub fn run_cycles(&mut self, n: u64) -> Result<(), AgentError> {
         for _ in 0..n {
@@ -617,10 +641,12 @@ impl<A: Agent> Harness<A> {
             *woken = self.period_ns == 0 && input.has_queued();
         }
         self.ctx.period = self.period();
+        self.ctx.waker = self.waker.as_ref().is_some_and(crate::agent::Waker::take);
         let agent = self.agent.as_mut().expect("the harness holds its agent until it is stopped");
         let result = agent.step(&mut self.ctx);
         self.ctx.cycle += 1;
         self.ctx.woken.fill(false);
+        self.ctx.waker = false;
         if result.is_err() {
             self.errors += 1;
         }

@@ -10,7 +10,8 @@
 //!   task's request. An idle agent wakes once per tick and not otherwise.
 //! * **task**: periodic (absolute deadlines, run-time period, lateness and
 //!   overruns measured) or event-driven (blocked on a WaitSet of its inputs'
-//!   listeners plus a private wake-up event; never re-entered). A suspended
+//!   listeners, a private wake-up event and, when the agent asked for one,
+//!   its waker's eventfd ([`crate::Waker`]); never re-entered). A suspended
 //!   periodic task waits at a gate until resumed, without polling.
 //!
 //! The modules, one per seam:
@@ -30,6 +31,8 @@ mod router_link;
 mod runaway;
 mod startup;
 mod task;
+#[cfg(test)]
+mod waker_tests;
 
 pub use poll::PollError;
 pub use router_link::epoch_service;

@@ -14,6 +14,9 @@
 //! is what it was asked to do). `nerve ps` shows its CPU (about 100 %) and
 //! the figure `poll` (the CPUs it polls on).
 //!
+//! The agent's waker ([`crate::Waker`]) is looked at the same way: its
+//! flag, without a system call.
+//!
 //! Inputs whose port can tell from shared memory that a sample waits
 //! ([`crate::ports::DynInput::waiting`]: every data input) are looked at
 //! without a system call, and their wake-up events are left as they are: an
@@ -24,7 +27,7 @@
 
 use super::Shared;
 use super::task::{Stepper, run_step_then, wait_while_suspended};
-use crate::agent::Context;
+use crate::agent::{Context, Waker};
 use crate::clock::now_ns;
 use crate::ports::DynInput;
 use crate::world::Ipc;
@@ -87,7 +90,13 @@ const SPINS_BETWEEN_LOOKS: u32 = 256;
 
 /// The polling event loop: steps whenever an input has something waiting,
 /// never sleeps but while suspended.
-pub(super) fn event_loop(agent: &mut dyn Stepper, sh: &Shared, inputs: &[Arc<dyn DynInput>], ctx: &mut Context) {
+pub(super) fn event_loop(
+    agent: &mut dyn Stepper,
+    sh: &Shared,
+    inputs: &[Arc<dyn DynInput>],
+    waker: Option<&Waker>,
+    ctx: &mut Context,
+) {
     let mut generation = u64::MAX;
     // the inputs that cannot tell from shared memory, with their listeners
     let mut by_listener: Vec<(usize, Arc<Listener<Ipc>>)> = Vec::new();
@@ -129,6 +138,12 @@ pub(super) fn event_loop(agent: &mut dyn Stepper, sh: &Shared, inputs: &[Arc<dyn
             // deep and keep-all inputs take what waits into their own queues, as in the event loop
             to_refill.iter().for_each(|i| i.refill());
         }
+        // the agent's waker: its flag, seen without a system call
+        if let Some(w) = waker
+            && w.pending()
+        {
+            ctx.waker |= w.take();
+        }
         let suspended = sh.suspended.load(Ordering::Acquire);
         if suspended {
             // held without spinning; what woke it counts for the step after resuming
@@ -137,7 +152,7 @@ pub(super) fn event_loop(agent: &mut dyn Stepper, sh: &Shared, inputs: &[Arc<dyn
             continue;
         }
         let resumed = std::mem::replace(&mut was_suspended, false);
-        if got_input || resumed {
+        if got_input || ctx.waker || resumed {
             let t = now_ns();
             ctx.now_ns = t;
             run_step_then(agent, sh, ctx, |f| {
@@ -146,6 +161,7 @@ pub(super) fn event_loop(agent: &mut dyn Stepper, sh: &Shared, inputs: &[Arc<dyn
                 f.last_cycle_ns = t;
             });
             ctx.woken.fill(false);
+            ctx.waker = false;
         } else {
             std::hint::spin_loop();
         }

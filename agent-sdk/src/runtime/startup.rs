@@ -7,7 +7,7 @@
 use super::checker::Checker;
 use super::router_link::{RegisterError, RouterLink};
 use super::runaway;
-use super::task::{Stepper, SuspendGate, task_main};
+use super::task::{Stepper, SuspendGate, Wakes, task_main};
 use super::{Shared, TaskFigures};
 use crate::agent::{Agent, AgentError, Binding, Setup, Task};
 use crate::cli::CommonArgs;
@@ -344,7 +344,7 @@ fn start(
     let mut setup = Setup::new(world.clone(), agent_name.clone(), Binding::Shm(node.clone()), args.args.clone());
     let agent = make(&mut setup).map_err(|source| StartupError::Agent { kind, name: name.into(), source })?;
     stage("agent and its ports created");
-    let Setup { inputs, outputs, schemas, params, calls, .. } = setup;
+    let Setup { inputs, outputs, schemas, params, calls, waker, .. } = setup;
     apply_params(&params, &args.params)?;
     crate::port::depth::apply_settings(&inputs, &args.inputs).map_err(|source| StartupError::Agent {
         kind,
@@ -388,7 +388,8 @@ fn start(
                     ),
                 }
             }
-            task_main(agent, &name_owned, &task_shared, &task_inputs, wake_listener, task_kind, started_tx)
+            let wakes = Wakes { listener: wake_listener, waker };
+            task_main(agent, &name_owned, &task_shared, &task_inputs, wakes, task_kind, started_tx)
         })
         .map_err(StartupError::Thread)?;
     if want_rt {

@@ -6,7 +6,7 @@
 //! publishes how far the clock may run ([`crate::simclock`]).
 
 use super::Shared;
-use crate::agent::{Agent, AgentError, Context, Task};
+use crate::agent::{Agent, AgentError, Context, Task, Waker};
 use crate::clock::{now_ns, sleep_toward_ns};
 use crate::ports::DynInput;
 use crate::world::Ipc;
@@ -43,12 +43,20 @@ impl<A: Agent> Stepper for A {
     }
 }
 
+/// What wakes the task besides its inputs: the private wake-up event (the
+/// message checker's changes) and the agent's own waker, if it asked for
+/// one ([`crate::Setup::waker`]).
+pub(super) struct Wakes {
+    pub(super) listener: Listener<Ipc>,
+    pub(super) waker: Option<Waker>,
+}
+
 pub(super) fn task_main(
     mut agent: Box<dyn Stepper>,
     name: &str,
     sh: &Shared,
     inputs: &[Arc<dyn DynInput>],
-    wake: Listener<Ipc>,
+    Wakes { listener: wake, waker }: Wakes,
     kind: Task,
     started: std::sync::mpsc::Sender<Result<(), AgentError>>,
 ) {
@@ -61,6 +69,7 @@ pub(super) fn task_main(
         stop: false,
         inputs: inputs.iter().map(|i| i.name().to_owned()).collect(),
         woken: vec![false; inputs.len()],
+        waker: false,
     };
     match crate::simclock::check() {
         Ok(None) => {}
@@ -80,9 +89,11 @@ pub(super) fn task_main(
     }
     let _ = started.send(Ok(()));
     match kind {
-        Task::Periodic(_) => periodic_loop(agent.as_mut(), sh, &mut ctx),
-        Task::EventDriven if sh.polling.is_some() => super::poll::event_loop(agent.as_mut(), sh, inputs, &mut ctx),
-        Task::EventDriven => event_loop(agent.as_mut(), sh, inputs, &wake, &mut ctx),
+        Task::Periodic(_) => periodic_loop(agent.as_mut(), sh, waker.as_ref(), &mut ctx),
+        Task::EventDriven if sh.polling.is_some() => {
+            super::poll::event_loop(agent.as_mut(), sh, inputs, waker.as_ref(), &mut ctx)
+        }
+        Task::EventDriven => event_loop(agent.as_mut(), sh, inputs, &wake, waker.as_ref(), &mut ctx),
     }
     agent.stop(&mut ctx);
 }
@@ -152,7 +163,7 @@ impl SuspendGate {
 /// Longest single sleep, so that stop and suspend are seen promptly even with long periods.
 const SLEEP_CHUNK_NS: u64 = 50_000_000;
 
-fn periodic_loop(agent: &mut dyn Stepper, sh: &Shared, ctx: &mut Context) {
+fn periodic_loop(agent: &mut dyn Stepper, sh: &Shared, waker: Option<&Waker>, ctx: &mut Context) {
     let mut period = sh.period_ns.load(Ordering::Acquire).max(1);
     let mut last = now_ns();
     let mut next = last.saturating_add(period);
@@ -205,6 +216,8 @@ fn periodic_loop(agent: &mut dyn Stepper, sh: &Shared, ctx: &mut Context) {
                 c.publish_horizon(next.saturating_add(period));
             }
         }
+        // not woken early by its waker: the step only hears of the wakes
+        ctx.waker = waker.is_some_and(|w| w.pending() && w.take());
         run_step(agent, sh, ctx);
         let done = now_ns();
         {
@@ -240,8 +253,10 @@ fn event_loop(
     sh: &Shared,
     inputs: &[Arc<dyn DynInput>],
     wake: &Listener<Ipc>,
+    waker: Option<&Waker>,
     ctx: &mut Context,
 ) {
+    let waker_fd = waker.map(Waker::listener);
     loop {
         if sh.stopping() {
             return;
@@ -263,14 +278,27 @@ fn event_loop(
             sh.request_stop();
             return;
         };
+        let waker_guard = match waker_fd.as_ref().map(|fd| ws.attach_notification(fd)) {
+            None => None,
+            Some(Ok(g)) => Some(g),
+            Some(Err(e)) => {
+                tracing::error!("cannot attach the agent's waker to the task's WaitSet: {e:?}; stopping");
+                sh.request_stop();
+                return;
+            }
+        };
         let guards: Vec<_> =
             listeners.iter().filter_map(|(k, l)| ws.attach_notification(l.as_ref()).ok().map(|g| (g, *k, l))).collect();
         let mut was_suspended = sh.suspended.load(Ordering::Acquire);
         loop {
             let mut got_input = false;
+            let mut got_wake = false;
             let result = ws.wait_and_process_once(|id| {
                 if id.has_event_from(&wake_guard) {
                     drain_listener(wake);
+                }
+                if waker_guard.as_ref().is_some_and(|g| id.has_event_from(g)) {
+                    got_wake = true;
                 }
                 for (g, k, l) in &guards {
                     if id.has_event_from(g) {
@@ -290,17 +318,24 @@ fn event_loop(
                 // deep and keep-all inputs take what waits into their own queues (port::depth)
                 inputs.iter().for_each(|i| i.refill());
             }
+            if got_wake && let Some(w) = waker {
+                // kept while suspended, as the inputs' wake-ups are; a wake
+                // whose eventfd write came after an earlier take finds
+                // nothing new (no step for it)
+                ctx.waker |= w.take();
+            }
             if sh.stopping() {
                 return;
             }
             let suspended = sh.suspended.load(Ordering::Acquire);
             let resumed = was_suspended && !suspended;
             was_suspended = suspended;
-            if !suspended && (got_input || resumed) {
+            if !suspended && (got_input || ctx.waker || resumed) {
                 let t = now_ns();
                 ctx.now_ns = t;
                 run_step(agent, sh, ctx);
                 ctx.woken.fill(false);
+                ctx.waker = false;
                 let mut f = sh.figures();
                 f.cycles += 1;
                 f.rate.record(t);

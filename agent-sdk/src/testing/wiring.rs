@@ -62,6 +62,8 @@ trait Member: Any {
     fn set_suspended(&mut self, suspended: bool);
     fn bus(&self) -> &Bus;
     fn calls(&self) -> &[MemCallPort];
+    /// the agent's waker was woken ([`Harness::wake_pending`])
+    fn wake_pending(&self) -> bool;
     fn as_any(&self) -> &dyn Any;
     fn as_any_mut(&mut self) -> &mut dyn Any;
 }
@@ -117,6 +119,9 @@ impl<A: Agent> Member for Harness<A> {
     }
     fn calls(&self) -> &[MemCallPort] {
         self.call_ports()
+    }
+    fn wake_pending(&self) -> bool {
+        Harness::wake_pending(self)
     }
     fn as_any(&self) -> &dyn Any {
         self
@@ -510,8 +515,9 @@ impl Wiring {
         Ok(())
     }
 
-    /// Carries samples and steps the event-driven agents that got some,
-    /// the first added first, until none did. Returns how many steps ran.
+    /// Carries samples and steps the event-driven agents that got some (or
+    /// whose waker was woken, [`Harness::wake_pending`]), the first added
+    /// first, until none did. Returns how many steps ran.
     pub fn settle(&mut self) -> Result<u64, HarnessError> {
         let mut steps = 0;
         loop {
@@ -519,7 +525,8 @@ impl Wiring {
             for (m, notified) in self.members.iter().zip(&mut self.notified) {
                 // every port looked at: each one's flag is cleared
                 let woken = m.calls().iter().fold(false, |w, c| c.take_woken() | w);
-                *notified |= woken;
+                // a wake of the agent's waker steps it as a sample does
+                *notified |= woken || m.wake_pending();
             }
             let next = self
                 .members
