@@ -27,10 +27,15 @@ fn launch(r: &Robot, file: &Path, netns: Option<&str>) {
     assert!(out.status.success(), "launch of {} failed: {}", r.name, String::from_utf8_lossy(&out.stderr));
 }
 
+/// The sequence type that crosses in `two_robots`: a header and any number of ticks.
+const SEQ: &str = "nerve::Seq<nerve::Tick, nerve::Tick>";
+
 /// Robots A and B on loopback: A exports its ticker t1 (best effort) and t3
 /// (imported by B with the wrong type), B exports its command ticker
 /// (reliable). A's t2 is not listed anywhere; B imports it anyway to show
 /// that nothing arrives. A's t5 is exported but starts only later (hot add).
+/// A exports a sequence port `seq/ticks` (up to 2000 elements, fed by `nerve
+/// pub` into the bridge's input), which B imports as `ticks` (up to 1024).
 fn two_robots() -> (Robot, Robot) {
     let (a, b) = (Robot::new("bra"), Robot::new("brb"));
     let port = free_port();
@@ -49,6 +54,10 @@ type = "nerve::Tick"
 [[export]]
 port = "t5/tick"
 type = "nerve::Tick"
+[[export]]
+port = "seq/ticks"
+type = "{SEQ}"
+max_len = 2000
 [[import]]
 port = "{b}/cmd/tick"
 type = "nerve::Tick"
@@ -84,6 +93,11 @@ as = "t3"
 port = "{a}/t5/tick"
 type = "nerve::Tick"
 as = "t5"
+[[import]]
+port = "{a}/seq/ticks"
+type = "{SEQ}"
+as = "ticks"
+max_len = 1024
 "#,
             a = a.name
         ),
@@ -179,6 +193,8 @@ fn bridged_robots_exchange_only_what_is_listed() {
     assert!(err.contains("nerve::Tick") && err.contains("nerve::Scalar"), "{err}");
     assert_eq!(b.figure_u64("bridge", &format!("{key}.msgs_in")), 0);
 
+    sequences_cross_at_their_length(&a, &b);
+
     // rewiring on B while the bridge runs: a hot-added relay takes A's ticks
     b.ok(&["start", "relay", "--name", "r2"]);
     b.ok(&["connect", "bridge/t1", "r2/in"]);
@@ -197,6 +213,50 @@ fn bridged_robots_exchange_only_what_is_listed() {
     assert_eq!(json[0]["peers"][0], format!("{}/bridge", a.name));
     a.down_and_check_clean();
     b.down_and_check_clean();
+}
+
+/// A sample of `n` ticks after a header numbered `n`, as `nerve pub` takes it.
+fn ticks_json(n: u64) -> String {
+    let items: Vec<Value> = (0..n).map(|i| serde_json::json!({"seq": i, "stamp_ns": 0})).collect();
+    serde_json::json!({"header": {"seq": n, "stamp_ns": 0}, "items": items}).to_string()
+}
+
+/// Sequence samples of 0, 1 and 1000 elements cross from A to B each at its
+/// own length, and `nerve echo` on B decodes them; one of 1025, past B's
+/// `max_len` (1024), is refused whole and counted, never cut.
+fn sequences_cross_at_their_length(a: &Robot, b: &Robot) {
+    let out_path = b.home.join("echo-ticks.jsonl");
+    let out = std::fs::File::create(&out_path).expect("echo output file");
+    let mut echo = b.command("nerve");
+    echo.args(["echo", "bridge/ticks", "--json", "--count", "9", "--timeout", "20"]).stdout(out);
+    let mut echo = ChildGuard::spawn("nerve echo", echo).expect("nerve echo");
+    // sent in rounds until echo, subscribed some time after it started, has its 9
+    for _ in 0..20 {
+        if echo.check_alive().is_err() {
+            break;
+        }
+        for n in [0, 1, 1000] {
+            a.ok(&["pub", "bridge/seq.ticks", &ticks_json(n)]);
+        }
+    }
+    echo.stop(Duration::from_secs(1));
+    let text = std::fs::read_to_string(&out_path).expect("echo output");
+    let mut lens = std::collections::BTreeSet::new();
+    for line in text.lines() {
+        let v: Value = serde_json::from_str(line).expect("echo json line");
+        assert_eq!(v["type"], SEQ);
+        let items = v["data"]["items"].as_array().expect("items");
+        assert_eq!(v["data"]["header"]["seq"].as_u64(), Some(items.len() as u64), "{line:.200}");
+        assert!(items.iter().enumerate().all(|(i, t)| t["seq"].as_u64() == Some(i as u64)), "{line:.200}");
+        lens.insert(items.len());
+    }
+    assert_eq!(lens.into_iter().collect::<Vec<_>>(), [0, 1, 1000], "every length crossed as it was: {text:.300}");
+    let key = format!("import.{}/seq/ticks", a.name);
+    assert_eq!(b.figure_u64("bridge", &format!("{key}.refused")), 0);
+    a.ok(&["pub", "bridge/seq.ticks", &ticks_json(1025)]);
+    assert!(wait_until(Duration::from_secs(10), || b.figure_u64("bridge", &format!("{key}.refused")) == 1));
+    let err = b.figures("bridge").get(&format!("{key}.error")).cloned().unwrap_or_default();
+    assert!(err.contains("1025 elements") && err.contains("max_len"), "{err}");
 }
 
 /// SIGKILL of a bridge: its robot runs on, the supervisor restarts it, the

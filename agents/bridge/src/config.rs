@@ -56,6 +56,9 @@ pub const MAX_QUEUE: usize = 100_000;
 pub const DEFAULT_QUEUE: usize = 256;
 /// Largest rate limit accepted (messages per second).
 pub const MAX_HZ: f64 = 100_000.0;
+/// The most elements of a sequence sample a topic carries when its entry
+/// gives no `max_len`.
+pub const DEFAULT_MAX_LEN: usize = 1024;
 /// Default lease: a link silent for this long is declared lost.
 pub const DEFAULT_LEASE: Duration = Duration::from_secs(2);
 /// Default time after which an importer that left is forgotten.
@@ -210,6 +213,8 @@ struct RawExport {
     max_hz: Option<Spanned<f64>>,
     #[serde(default)]
     queue: Option<Spanned<i64>>,
+    #[serde(default)]
+    max_len: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -220,6 +225,8 @@ struct RawImport {
     type_name: Spanned<String>,
     #[serde(default, rename = "as")]
     local: Option<Spanned<String>>,
+    #[serde(default)]
+    max_len: Option<Spanned<i64>>,
 }
 
 /// A local output port sent to the peers.
@@ -237,6 +244,9 @@ pub struct Export {
     pub max_hz: Option<f64>,
     /// messages a reliable export keeps while no peer has acknowledged them
     pub queue: usize,
+    /// a sequence type's most elements a sample sent may hold (`max_len`;
+    /// `None`: [`DEFAULT_MAX_LEN`]); a longer sample is not sent, and counted
+    pub max_len: Option<usize>,
 }
 
 impl Export {
@@ -264,6 +274,9 @@ pub struct Import {
     pub type_name: String,
     /// the local output port name
     pub local: String,
+    /// a sequence type's most elements a sample received may hold
+    /// (`max_len`; `None`: [`DEFAULT_MAX_LEN`]); a longer one is refused
+    pub max_len: Option<usize>,
 }
 
 impl Import {
@@ -526,6 +539,7 @@ pub fn parse(src: &str, file: &str, known_type: &dyn Fn(&str) -> bool) -> Result
             reliable: e.reliable,
             max_hz,
             queue,
+            max_len: check_max_len(&e.max_len, e.type_name.get_ref(), &mut at),
         };
         if let Err(err) = validate_port_name(&export.input_name()) {
             at(
@@ -589,6 +603,7 @@ pub fn parse(src: &str, file: &str, known_type: &dyn Fn(&str) -> bool) -> Result
             port: port.into(),
             type_name: i.type_name.get_ref().clone(),
             local,
+            max_len: check_max_len(&i.max_len, i.type_name.get_ref(), &mut at),
         };
         if imports.iter().any(|x| x.origin() == import.origin()) {
             at(i.port.span(), format!("import {} is listed twice", i.port.get_ref()));
@@ -631,6 +646,32 @@ pub fn parse(src: &str, file: &str, known_type: &dyn Fn(&str) -> bool) -> Result
         imports,
     })
 }
+
+/// An entry's `max_len`: for a sequence type only, at least 1.
+fn check_max_len(
+    raw: &Option<Spanned<i64>>,
+    type_name: &str,
+    at: &mut impl FnMut(std::ops::Range<usize>, String),
+) -> Option<usize> {
+    let m = raw.as_ref()?;
+    if !type_name.starts_with(SEQ_PREFIX) {
+        at(
+            m.span(),
+            format!(
+                "max_len applies to sequence types ({SEQ_PREFIX}...) only; {type_name} has a fixed size: remove it"
+            ),
+        );
+        return None;
+    }
+    let n = usize::try_from(*m.get_ref()).ok().filter(|n| *n >= 1);
+    if n.is_none() {
+        at(m.span(), "max_len must be a number of elements of at least 1".into());
+    }
+    n
+}
+
+/// How the name of every sequence type starts (`shm_schemas::Schema::sequence`).
+pub const SEQ_PREFIX: &str = "nerve::Seq<";
 
 fn check_queue(q: i64) -> Result<usize, String> {
     usize::try_from(q)
@@ -751,6 +792,26 @@ as = "r1.t1.tick"
         assert!(p.iter().any(|l| l.starts_with("b.toml:8: ") && l.contains("max_hz")), "{p:?}");
         assert!(p.iter().any(|l| l.starts_with("b.toml:15: ") && l.contains("same local port")), "{p:?}");
         assert_eq!(p.len(), 5, "{p:?}");
+    }
+
+    #[test]
+    fn max_len_is_for_sequences_only() {
+        let seq = "nerve::Seq<nerve::MapCell, nerve::MapHeader>";
+        let src = format!(
+            "[[export]]\nport = \"a/map\"\ntype = \"{seq}\"\nmax_len = 5000\n\
+             [[import]]\nport = \"r1/a/map\"\ntype = \"{seq}\"\n"
+        );
+        let cfg = parse(&src, "b.toml", &|_| true).expect("valid");
+        assert_eq!((cfg.exports[0].max_len, cfg.imports[0].max_len), (Some(5000), None));
+        let src = format!(
+            "[[export]]\nport = \"a/t\"\ntype = \"nerve::Tick\"\nmax_len = 3\n\
+             [[import]]\nport = \"r1/a/map\"\ntype = \"{seq}\"\nmax_len = 0\n"
+        );
+        let Err(ConfigError::Invalid { problems: p, .. }) = parse(&src, "b.toml", &|_| true) else {
+            panic!("max_len on a fixed type accepted")
+        };
+        assert!(p[0].contains("b.toml:4") && p[0].contains("nerve::Tick has a fixed size"), "{p:?}");
+        assert!(p[1].contains("b.toml:8") && p[1].contains("at least 1"), "{p:?}");
     }
 
     #[test]

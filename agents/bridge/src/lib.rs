@@ -139,9 +139,10 @@ impl Agent for Bridge {
         let instance = instance_id();
         let mut exports = Vec::new();
         for e in &cfg.exports {
-            let c =
-                types.get(&e.type_name).ok_or_else(|| AgentError::Config(format!("unknown type {}", e.type_name)))?;
-            let tap = (c.export)(setup, &e.input_name())?;
+            let c = types
+                .carrier(&e.type_name, e.max_len)
+                .ok_or_else(|| AgentError::Config(format!("unknown type {}", e.type_name)))?;
+            let tap = c.export(setup, &e.input_name())?;
             exports.push(Arc::new(
                 ExportTopic::new(e.clone(), c.info, &robot, instance, tap).with_importer_ttl(cfg.importer_ttl),
             ));
@@ -154,9 +155,10 @@ impl Agent for Bridge {
                     i.origin()
                 )));
             }
-            let c =
-                types.get(&i.type_name).ok_or_else(|| AgentError::Config(format!("unknown type {}", i.type_name)))?;
-            let sink = (c.import)(setup, &i.local)?;
+            let c = types
+                .carrier(&i.type_name, i.max_len)
+                .ok_or_else(|| AgentError::Config(format!("unknown type {}", i.type_name)))?;
+            let sink = c.import(setup, &i.local)?;
             imports.push(Arc::new(ImportTopic::new(i.clone(), c.info, sink)));
         }
         let peers = Arc::new(Peers::default());

@@ -18,8 +18,9 @@
 //! by its certificate's common name) put only its own data frames that this
 //! robot imports, and its own acknowledgements and importer tokens of this
 //! robot's exports; anything else, and any other peer, is denied (see
-//! [`acl_json`]). Frames larger than the largest carried type are refused at
-//! the link (`transport/link/rx/max_message_size`).
+//! [`acl_json`]). Frames larger than the largest carried sample (a
+//! sequence's: its header and `max_len` elements) are refused at the link
+//! (`transport/link/rx/max_message_size`).
 //!
 //! Zenoh runs its own threads. They are started from the link thread, which
 //! first drops real-time scheduling, so that Zenoh's runtime never competes
@@ -317,8 +318,12 @@ impl Link {
             // before Zenoh builds its rustls configs on the process's provider
             crate::cipher::prefer_aes_128();
         }
-        let max_payload =
-            exports.iter().map(|t| t.info.size).chain(imports.iter().map(|t| t.info.size)).max().unwrap_or(0);
+        let max_payload = exports
+            .iter()
+            .map(|t| t.info.max_payload())
+            .chain(imports.iter().map(|t| t.info.max_payload()))
+            .max()
+            .unwrap_or(0);
         let session = zenoh::open(session_config(cfg, &me.robot, tls.as_ref(), max_payload)?).wait().map_err(|e| {
             match cfg.mode {
                 Mode::Peer => LinkError::Open { listen: cfg.listen.clone(), detail: e.to_string() },

@@ -80,6 +80,7 @@ struct ExportState {
     outbox: Option<Outbox>,
     overflow_warn: RateLimited,
     refused_warn: RateLimited,
+    too_long_warn: RateLimited,
     pending: Option<Pending>,
     last_sent_ns: u64,
     seq: u64,
@@ -129,6 +130,7 @@ impl ExportTopic {
                 outbox,
                 overflow_warn: RateLimited::default(),
                 refused_warn: RateLimited::default(),
+                too_long_warn: RateLimited::default(),
                 pending: None,
                 last_sent_ns: 0,
                 seq: 0,
@@ -172,6 +174,16 @@ impl ExportTopic {
         let mut st = lock(&self.state);
         let st = &mut *st;
         let n = self.tap.drain(&mut |sender, origin_seq, payload| {
+            if let Err(e) = self.info.check_len(payload.len()) {
+                // a sequence longer than this topic carries: never sent (the
+                // peer's link would refuse the frame), counted as dropped
+                self.dropped.add(1);
+                let n = st.too_long_warn.hit(now_mono_ns);
+                if n > 0 {
+                    tracing::warn!(topic = %self.spec.origin(), sender, origin_seq, dropped = n, "{n} sample(s) not sent: {e}");
+                }
+                return;
+            }
             let stamp = unix_now_ns();
             match st.outbox.as_mut() {
                 Some(outbox) => {
@@ -243,7 +255,7 @@ impl ExportTopic {
             for q in &due {
                 let frame = Frame {
                     reliable: true,
-                    type_name: self.info.name,
+                    type_name: &self.info.name,
                     fingerprint: self.info.fingerprint,
                     instance: self.instance,
                     seq: q.seq,
@@ -274,7 +286,7 @@ impl ExportTopic {
         st.seq += 1;
         let frame = Frame {
             reliable: false,
-            type_name: self.info.name,
+            type_name: &self.info.name,
             fingerprint: self.info.fingerprint,
             instance: self.instance,
             seq: st.seq,
@@ -500,7 +512,8 @@ impl ImportTopic {
             );
             return Reply::None;
         }
-        if f.fingerprint != self.info.fingerprint || f.payload.len() != self.info.size {
+        let fixed_size_differs = self.info.seq.is_none() && f.payload.len() != self.info.size;
+        if f.fingerprint != self.info.fingerprint || fixed_size_differs {
             self.refuse(
                 &mut st,
                 format!(
@@ -543,6 +556,12 @@ impl ImportTopic {
     }
 
     fn deliver(&self, st: &mut ImportState, f: &Frame<'_>, now_mono_ns: u64) {
+        if let Err(e) = self.info.check_len(f.payload.len()) {
+            // a sequence sample this port cannot hold: refused whole, never
+            // cut (a reliable one counts as delivered: it is refused for good)
+            self.refuse(st, format!("a sample of {} was refused: {e}", self.spec.origin()));
+            return;
+        }
         if let Err(e) = self.sink.publish(f.payload) {
             self.refuse(st, format!("cannot publish {} on {}: {e}", self.spec.origin(), self.spec.local));
             return;
@@ -618,13 +637,22 @@ mod tests {
         }
     }
 
-    const INFO: TypeInfo = TypeInfo { name: "nerve::Tick", size: 8, fingerprint: 5 };
+    fn info() -> TypeInfo {
+        TypeInfo { name: "nerve::Tick".into(), size: 8, fingerprint: 5, seq: None }
+    }
 
     fn export(reliable: bool, max_hz: Option<f64>, queue: usize) -> (ExportTopic, Samples, Arc<Mutex<Vec<Vec<u8>>>>) {
-        let spec =
-            Export { agent: "t1".into(), port: "tick".into(), type_name: INFO.name.into(), reliable, max_hz, queue };
+        let spec = Export {
+            agent: "t1".into(),
+            port: "tick".into(),
+            type_name: "nerve::Tick".into(),
+            reliable,
+            max_hz,
+            queue,
+            max_len: None,
+        };
         let samples = Samples::default();
-        let t = ExportTopic::new(spec, INFO, "r1", 77, Box::new(Script(samples.clone())));
+        let t = ExportTopic::new(spec, info(), "r1", 77, Box::new(Script(samples.clone())));
         let sent = Arc::new(Mutex::new(Vec::new()));
         t.attach(Box::new(Wire(sent.clone())));
         (t, samples, sent)
@@ -637,15 +665,20 @@ mod tests {
     }
 
     fn import() -> (ImportTopic, Arc<Collect>) {
+        import_of(info())
+    }
+
+    fn import_of(info: TypeInfo) -> (ImportTopic, Arc<Collect>) {
         let spec = Import {
             robot: "r1".into(),
             agent: "t1".into(),
             port: "tick".into(),
-            type_name: INFO.name.into(),
+            type_name: info.name.clone(),
             local: "r1.t1.tick".into(),
+            max_len: None,
         };
         let sink = Arc::new(Collect(Mutex::new(Vec::new())));
-        (ImportTopic::new(spec, INFO, sink.clone()), sink)
+        (ImportTopic::new(spec, info, sink.clone()), sink)
     }
 
     fn figure(v: &[(String, String)], key: &str) -> String {
@@ -737,5 +770,74 @@ mod tests {
         assert_eq!(figure(&v, ".refused"), "2");
         let err = figure(&v, ".error");
         assert!(err.contains("fingerprint") && err.contains("0000000000000006"), "{err}");
+    }
+
+    /// A sequence topic (a 16-byte header, 12-byte elements, at most 3):
+    /// samples of 0, 1 and 3 elements cross at their own length; 4
+    /// elements, or bytes that are not whole elements, are refused and
+    /// counted on the import, and never sent by the export.
+    #[test]
+    fn sequence_frames_cross_at_their_length_and_longer_ones_are_refused() {
+        let shape = shm_schemas::SeqShape { items_at: 16, element: 12, align: 8 };
+        let seq = TypeInfo {
+            name: "nerve::Seq<test::Det, nerve::Tick>".into(),
+            size: 16,
+            fingerprint: 9,
+            seq: Some(crate::types::SeqLimit { shape, max_len: 3 }),
+        };
+        assert_eq!(seq.max_payload(), 16 + 3 * 12, "the link's bound accounts for max_len");
+        let (imp, got) = import_of(seq.clone());
+        let frame_of = |n: u64, len: usize, buf: &mut Vec<u8>| {
+            let payload = vec![n as u8; len];
+            let f = Frame {
+                reliable: false,
+                type_name: "nerve::Seq<test::Det, nerve::Tick>",
+                fingerprint: 9,
+                instance: 1,
+                seq: n,
+                oldest: n,
+                stamp_unix_ns: 0,
+                origin_seq: n,
+                sender: "t1",
+                payload: &payload,
+            };
+            wire::encode_frame(buf, &f);
+        };
+        let mut buf = Vec::new();
+        for (n, len) in [(1, 16), (2, 28), (3, 52), (4, 64), (5, 17), (6, 8)] {
+            frame_of(n, len, &mut buf);
+            imp.receive(&buf, 0);
+        }
+        let lens: Vec<usize> = lock(&got.0).iter().map(Vec::len).collect();
+        assert_eq!(lens, [16, 28, 52], "0, 1 and 3 elements, each at its length");
+        let mut v = Vec::new();
+        imp.figures(0, &mut v);
+        assert_eq!(figure(&v, ".refused"), "3", "4 elements, 17 bytes, 8 bytes");
+        assert_eq!(figure(&v, ".msgs_in"), "3");
+        // the export side: a sample longer than its max_len is not sent
+        let spec = Export {
+            agent: "t1".into(),
+            port: "dets".into(),
+            type_name: seq.name.clone(),
+            reliable: false,
+            max_hz: None,
+            queue: 0,
+            max_len: Some(3),
+        };
+        let samples = Samples::default();
+        let t = ExportTopic::new(spec, seq, "r1", 77, Box::new(Script(samples.clone())));
+        let sent = Arc::new(Mutex::new(Vec::new()));
+        t.attach(Box::new(Wire(sent.clone())));
+        lock(&samples).push(("t1".into(), 1, vec![0; 64]));
+        t.pump(0);
+        assert!(lock(&sent).is_empty(), "4 elements are not sent");
+        lock(&samples).push(("t1".into(), 2, vec![0; 40]));
+        t.pump(1);
+        let frames = lock(&sent).clone();
+        assert_eq!(frames.len(), 1);
+        assert_eq!(wire::decode_frame(&frames[0]).expect("frame").payload.len(), 40, "2 elements, not max_len");
+        let mut v = Vec::new();
+        t.figures(&mut v);
+        assert_eq!(figure(&v, ".dropped"), "1");
     }
 }
