@@ -7,4 +7,4 @@
 //! on the service a typed call of those layouts makes.
 
 pub use crate::port::bytes::{Loan, Received, SchemaInput, SchemaOutput};
-pub use crate::port::schema_call::{SchemaClient, SchemaServer, ServeError};
+pub use crate::port::schema_call::{Layout, SchemaClient, SchemaServer, SeqAnswerLoan, ServeError};

@@ -22,9 +22,12 @@
 //! the agent's input list (so [`crate::Context::woken_by`] names them), but
 //! are registered with the router as services and clients, never as inputs.
 //!
-//! One machinery carries both kinds of answer ([`Answer`]): a fixed-size
-//! `Resp` ([`Fixed`]: [`Server`], [`Client`]) and a sequence of any length
-//! (`call_seq`: [`super::SeqServer`], [`super::SeqClient`]). This file
+//! One machinery carries every kind of call ([`Kind`]): Rust types
+//! ([`Typed`]) answered with a fixed-size `Resp` ([`Fixed`]: [`Server`],
+//! [`Client`]) or a sequence of any length (`call_seq`:
+//! [`super::SeqServer`], [`super::SeqClient`]), and calls declared by
+//! layout at run time, answered either way (`schema_call`: the Python and
+//! C agents' [`super::schema_call::SchemaServer`]). This file
 //! holds what they share (errors, settings, the services); the server is
 //! in `call_server`, the client in `call_client`, `nerve call`'s
 //! byte-level caller in `call_raw`.
@@ -32,6 +35,8 @@
 use super::service::{MAX_SUBSCRIBERS, port_attributes_of};
 use crate::world::Ipc;
 use iceoryx2::pending_response::PendingResponse;
+use iceoryx2::port::ReceiveError;
+use iceoryx2::port::client::Client as IoxClient;
 use iceoryx2::port::server::Server as IoxServer;
 use iceoryx2::prelude::*;
 use iceoryx2::response::Response;
@@ -272,14 +277,31 @@ impl Default for CallOptions {
     }
 }
 
-/// The iceoryx2 service of a call of `Req` answered as `A` says.
-pub(crate) type Factory<Req, A> =
-    request_response::PortFactory<Ipc, Req, (), <A as Answer>::Payload, <A as Answer>::Header>;
-/// A server port of a call of `Req` answered as `A` says.
-pub(crate) type ServerPort<Req, A> = IoxServer<Ipc, Req, (), <A as Answer>::Payload, <A as Answer>::Header>;
-
+/// The iceoryx2 service of a call of kind `K`.
+pub(crate) type Factory<K> = request_response::PortFactory<
+    Ipc,
+    <K as Kind>::ReqPayload,
+    <K as Kind>::ReqHeader,
+    <K as Kind>::Payload,
+    <K as Kind>::Header,
+>;
+/// A server port of a call of kind `K`.
+pub(crate) type ServerPort<K> =
+    IoxServer<Ipc, <K as Kind>::ReqPayload, <K as Kind>::ReqHeader, <K as Kind>::Payload, <K as Kind>::Header>;
+/// A client port of a call of kind `K`.
+pub(crate) type ClientPort<K> =
+    IoxClient<Ipc, <K as Kind>::ReqPayload, <K as Kind>::ReqHeader, <K as Kind>::Payload, <K as Kind>::Header>;
+/// A request as the server holds it while it answers.
+pub(crate) type ActiveRequest<K> = iceoryx2::active_request::ActiveRequest<
+    Ipc,
+    <K as Kind>::ReqPayload,
+    <K as Kind>::ReqHeader,
+    <K as Kind>::Payload,
+    <K as Kind>::Header,
+>;
 /// A call in flight, as its client holds it.
-pub(crate) type Pending<Req, A> = PendingResponse<Ipc, Req, (), <A as Answer>::Payload, <A as Answer>::Header>;
+pub(crate) type Pending<K> =
+    PendingResponse<Ipc, <K as Kind>::ReqPayload, <K as Kind>::ReqHeader, <K as Kind>::Payload, <K as Kind>::Header>;
 
 /// What a [`Pending`] call's `receive` gave: none yet, an answer made a
 /// value by `value`, or iceoryx2's error.
@@ -296,12 +318,141 @@ pub(crate) fn received<P: ?Sized + std::fmt::Debug + IceoryxSend, H: std::fmt::D
     }
 }
 
+/// The kind of a call: its request and how its answer travels, as the
+/// generic server ([`CallServer`]) and client ([`CallClient`]) need them.
+/// Either Rust types ([`Typed`]: a request `Req` and an [`Answer`]) or
+/// layouts learnt at run time (`schema_call::Layout`: calls declared by
+/// layout, for Python and C agents), which is why it is a value: a
+/// layout's kind carries its schemas. Implemented by nerve only.
+pub trait Kind: Send + Sync + 'static {
+    /// The iceoryx2 request payload.
+    type ReqPayload: ?Sized + std::fmt::Debug + IceoryxSend + 'static;
+    /// The iceoryx2 request user header.
+    type ReqHeader: std::fmt::Debug + ZeroCopySend + 'static;
+    /// The iceoryx2 response payload.
+    type Payload: ?Sized + std::fmt::Debug + IceoryxSend + 'static;
+    /// The iceoryx2 response user header.
+    type Header: std::fmt::Debug + ZeroCopySend + 'static;
+    /// What a client's `call` sends.
+    type Request: ?Sized;
+    /// A request as the test harness queues it.
+    type Queued: Send + 'static;
+    /// What the client's `take` hands out for an answer.
+    type Value: Send + 'static;
+    /// The spec of call port `port` of this kind (its call type and fingerprint).
+    fn spec(&self, port: &str) -> PortSpec;
+    /// Adds the schemas of the request and the answer to an agent's registration.
+    fn add_schemas(&self, schemas: &mut Vec<shm_schemas::Schema>);
+    /// The size and alignment of the request.
+    fn request_layout(&self) -> (usize, usize);
+    /// The size and alignment of the answer (its fixed part).
+    fn answer_layout(&self) -> (usize, usize);
+    /// Opens (`create`: or creates) the call service `name` with `attributes`.
+    fn open(
+        &self,
+        node: &Node<Ipc>,
+        name: &ServiceName,
+        attributes: &AttributeVerifier,
+        create: bool,
+    ) -> Result<Factory<Self>, RequestResponseOpenOrCreateError>;
+    /// A server port of `factory`, whose answers hold at most `max_len` elements.
+    fn server(&self, factory: &Factory<Self>, max_len: usize) -> Result<ServerPort<Self>, ServerCreateError>;
+    /// The next request waiting at `port`, if any.
+    fn next_request(&self, port: &ServerPort<Self>) -> Result<Option<ActiveRequest<Self>>, ReceiveError>;
+    /// Sends `request` through `port`, for client `client` of `service`.
+    fn send(
+        &self,
+        port: &ClientPort<Self>,
+        request: &Self::Request,
+        client: &str,
+        service: &str,
+    ) -> Result<Pending<Self>, CallError>;
+    /// `request` as the test harness queues it, or why it is not one (for `client`).
+    fn queued(&self, request: &Self::Request, client: &str) -> Result<Self::Queued, CallError>;
+    /// The answer `pending` received, if any: its value for client
+    /// `client` of `service`, or why it is none.
+    fn receive(&self, pending: &Pending<Self>, client: &str, service: &str) -> Option<Result<Self::Value, CallError>>;
+}
+
+/// A call of Rust types: requests `Req` answered as `A` says
+/// ([`Fixed`], `call_seq::SeqAnswer`).
+pub struct Typed<Req, A>(PhantomData<fn() -> (Req, A)>);
+
+impl<Req: Payload, A> std::fmt::Debug for Typed<Req, A> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Typed<{}>", Req::stable_type_name())
+    }
+}
+
+impl<Req, A> Default for Typed<Req, A> {
+    fn default() -> Self {
+        Typed(PhantomData)
+    }
+}
+
+impl<Req: Payload, A: Answer> Kind for Typed<Req, A> {
+    type ReqPayload = Req;
+    type ReqHeader = ();
+    type Payload = A::Payload;
+    type Header = A::Header;
+    type Request = Req;
+    type Queued = Req;
+    type Value = A::Value;
+    fn spec(&self, port: &str) -> PortSpec {
+        A::spec::<Req>(port)
+    }
+    fn add_schemas(&self, schemas: &mut Vec<shm_schemas::Schema>) {
+        shm_schemas::control::agent_to_router::add_schema(schemas, Req::schema());
+        A::add_schemas(schemas);
+    }
+    fn request_layout(&self) -> (usize, usize) {
+        (std::mem::size_of::<Req>(), std::mem::align_of::<Req>())
+    }
+    fn answer_layout(&self) -> (usize, usize) {
+        A::layout()
+    }
+    fn open(
+        &self,
+        node: &Node<Ipc>,
+        name: &ServiceName,
+        attributes: &AttributeVerifier,
+        create: bool,
+    ) -> Result<Factory<Self>, RequestResponseOpenOrCreateError> {
+        A::open::<Req>(node, name, attributes, create)
+    }
+    fn server(&self, factory: &Factory<Self>, max_len: usize) -> Result<ServerPort<Self>, ServerCreateError> {
+        A::server::<Req>(factory, max_len)
+    }
+    fn next_request(&self, port: &ServerPort<Self>) -> Result<Option<ActiveRequest<Self>>, ReceiveError> {
+        port.receive()
+    }
+    fn send(
+        &self,
+        port: &ClientPort<Self>,
+        request: &Req,
+        client: &str,
+        service: &str,
+    ) -> Result<Pending<Self>, CallError> {
+        port.send_copy(*request).map_err(|source| CallError::Send {
+            client: client.into(),
+            service: service.into(),
+            source,
+        })
+    }
+    fn queued(&self, request: &Req, _client: &str) -> Result<Req, CallError> {
+        Ok(*request)
+    }
+    fn receive(&self, pending: &Pending<Self>, client: &str, service: &str) -> Option<Result<A::Value, CallError>> {
+        A::receive::<Req>(pending, client, service)
+    }
+}
+
 /// How a call's answer travels: a fixed-size payload ([`Fixed`]) or a
 /// sequence (`call_seq::SeqAnswer`). It names the iceoryx2 response
 /// payload and user header, types the port for the router, and turns a
 /// received response into what the client's `take` hands out. Implemented
 /// by nerve only.
-pub trait Answer: Send + Sync + 'static {
+pub trait Answer: Sized + Send + Sync + 'static {
     /// The iceoryx2 response payload.
     type Payload: ?Sized + std::fmt::Debug + IceoryxSend + 'static;
     /// The iceoryx2 response user header.
@@ -320,16 +471,16 @@ pub trait Answer: Send + Sync + 'static {
         name: &ServiceName,
         attributes: &AttributeVerifier,
         create: bool,
-    ) -> Result<Factory<Req, Self>, RequestResponseOpenOrCreateError>;
+    ) -> Result<Factory<Typed<Req, Self>>, RequestResponseOpenOrCreateError>;
     /// A server port of `factory`, whose answers hold at most `max_len` elements.
     fn server<Req: Payload>(
-        factory: &Factory<Req, Self>,
+        factory: &Factory<Typed<Req, Self>>,
         max_len: usize,
-    ) -> Result<ServerPort<Req, Self>, ServerCreateError>;
+    ) -> Result<ServerPort<Typed<Req, Self>>, ServerCreateError>;
     /// The answer `pending` received, if any: its value for client
     /// `client` of `service`, or why it is none.
     fn receive<Req: Payload>(
-        pending: &Pending<Req, Self>,
+        pending: &Pending<Typed<Req, Self>>,
         client: &str,
         service: &str,
     ) -> Option<Result<Self::Value, CallError>>;
@@ -362,7 +513,7 @@ impl<Resp: Payload> Answer for Fixed<Resp> {
         name: &ServiceName,
         attributes: &AttributeVerifier,
         create: bool,
-    ) -> Result<Factory<Req, Self>, RequestResponseOpenOrCreateError> {
+    ) -> Result<Factory<Typed<Req, Self>>, RequestResponseOpenOrCreateError> {
         let builder = call_settings!(node.service_builder(name).request_response::<Req, Resp>());
         if create {
             builder.open_or_create_with_attributes(attributes)
@@ -371,13 +522,13 @@ impl<Resp: Payload> Answer for Fixed<Resp> {
         }
     }
     fn server<Req: Payload>(
-        factory: &Factory<Req, Self>,
+        factory: &Factory<Typed<Req, Self>>,
         _max_len: usize,
-    ) -> Result<ServerPort<Req, Self>, ServerCreateError> {
+    ) -> Result<ServerPort<Typed<Req, Self>>, ServerCreateError> {
         factory.server_builder().create()
     }
     fn receive<Req: Payload>(
-        pending: &Pending<Req, Self>,
+        pending: &Pending<Typed<Req, Self>>,
         client: &str,
         service: &str,
     ) -> Option<Result<Resp, CallError>> {
@@ -401,22 +552,23 @@ pub(crate) fn event_service(node: &Node<Ipc>, name: &str, create: bool) -> Resul
     if create { b.open_or_create().map_err(|e| open_err(name, e)) } else { b.open().map_err(|e| open_err(name, e)) }
 }
 
-/// The call service `service` of `Req` answered as `A` says, with the
-/// attributes of its call type; created only by the server (`create`).
-pub(crate) fn call_service<Req: Payload, A: Answer>(
+/// The call service `service` of kind `kind`, with the attributes of its
+/// call type; created only by the server (`create`).
+pub(crate) fn call_service<K: Kind>(
     node: &Node<Ipc>,
+    kind: &K,
     service: &str,
     create: bool,
-) -> Result<Factory<Req, A>, CallError> {
+) -> Result<Factory<K>, CallError> {
     use iceoryx2::service::builder::request_response::{
         RequestResponseOpenError as Open, RequestResponseOpenOrCreateError as OpenOrCreate,
     };
-    let spec = A::spec::<Req>("");
+    let spec = kind.spec("");
     let attributes =
         port_attributes_of(service, &spec.type_name, spec.fingerprint).map_err(|e| open_err(service, e))?;
     let name = service_name(service)?;
     for _attempt in 0..50 {
-        match A::open::<Req>(node, &name, &attributes, create) {
+        match kind.open(node, &name, &attributes, create) {
             Ok(f) => return Ok(f),
             Err(OpenOrCreate::RequestResponseOpenError(Open::DoesNotExist)) => {
                 return Err(CallError::Open {
@@ -430,8 +582,8 @@ pub(crate) fn call_service<Req: Payload, A: Answer>(
                 return Err(CallError::Open {
                     service: service.into(),
                     detail: format!(
-                        "it is not a call of {} (another request or response type, or another build of them); \
-                         rebuild the older side and restart it",
+                        "it is not a call of {} (another request or answer type or layout, or another build \
+                         of them); declare the same types on both sides, rebuild the older side and restart it",
                         spec.type_name
                     ),
                 });
@@ -456,13 +608,18 @@ pub(crate) struct Declared {
 
 impl Declared {
     pub(crate) fn add_service<Req: Payload, A: Answer>(&mut self, port: &str, schemas: &mut Vec<shm_schemas::Schema>) {
-        self.services.push(A::spec::<Req>(port));
-        add_schemas::<Req, A>(schemas);
+        self.add(&Typed::<Req, A>::default(), port, true, schemas);
     }
 
     pub(crate) fn add_client<Req: Payload, A: Answer>(&mut self, port: &str, schemas: &mut Vec<shm_schemas::Schema>) {
-        self.clients.push(A::spec::<Req>(port));
-        add_schemas::<Req, A>(schemas);
+        self.add(&Typed::<Req, A>::default(), port, false, schemas);
+    }
+
+    /// Declares call port `port` of `kind`: a service (`service`) or a client.
+    pub(crate) fn add<K: Kind>(&mut self, kind: &K, port: &str, service: bool, schemas: &mut Vec<shm_schemas::Schema>) {
+        let list = if service { &mut self.services } else { &mut self.clients };
+        list.push(kind.spec(port));
+        kind.add_schemas(schemas);
     }
 
     /// Remembers the in-memory queues of a call port bound in the harness.
@@ -474,9 +631,4 @@ impl Declared {
     pub(crate) fn is_call(&self, port: &str) -> bool {
         self.services.iter().chain(&self.clients).any(|p| p.name == port)
     }
-}
-
-fn add_schemas<Req: Payload, A: Answer>(schemas: &mut Vec<shm_schemas::Schema>) {
-    shm_schemas::control::agent_to_router::add_schema(schemas, Req::schema());
-    A::add_schemas(schemas);
 }

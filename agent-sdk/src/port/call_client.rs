@@ -1,13 +1,14 @@
 //! The client side of a call ([`CallClient`]): calls the service the
-//! router wired it to, never blocking its step. Generic over how the
-//! answer travels ([`Answer`]): [`Client`] takes fixed-size answers,
-//! [`super::SeqClient`] (`call_seq`) sequences.
+//! router wired it to, never blocking its step. Generic over the call's
+//! [`Kind`]: [`Client`] takes fixed-size answers, [`super::SeqClient`]
+//! (`call_seq`) sequences, `schema_call`'s client requests and answers of
+//! layouts learnt at run time (Python and C agents).
 
 use super::bytes::{Binding, DynInput};
 use super::call::memory::{MemCallPort, MemClient};
 use super::call::{
-    ANSWERED_SUFFIX, Answer, CallError, CallId, CallOptions, Factory, Fixed, MAX_IN_FLIGHT, call_service,
-    event_service, open_err,
+    ANSWERED_SUFFIX, Answer, CallError, CallId, CallOptions, ClientPort, Factory, Fixed, Kind, MAX_IN_FLIGHT, Pending,
+    Typed, call_service, event_service, open_err,
 };
 use super::call_server::not_an_input;
 use super::error::PortError;
@@ -15,8 +16,6 @@ use super::memory::SampleBuf;
 use super::service::lock;
 use crate::clock::now_ns;
 use crate::world::Ipc;
-use iceoryx2::pending_response::PendingResponse;
-use iceoryx2::port::client::Client as IoxClient;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
@@ -25,76 +24,89 @@ use shm_schemas::Payload;
 use shm_schemas::control::agent_to_router::PortSpec;
 use shm_schemas::stats::InputStats;
 use std::collections::VecDeque;
-use std::marker::PhantomData;
 use std::sync::{Arc, Mutex};
 
 /// A client of a service of requests `Req` answered by a fixed-size `Resp`.
-pub type Client<Req, Resp> = CallClient<Req, Fixed<Resp>>;
+pub type Client<Req, Resp> = CallClient<Typed<Req, Fixed<Resp>>>;
 
-/// A client: calls a service of requests `Req` answered as `A` says, once
-/// the router wired it to one.
-pub struct CallClient<Req: Payload, A: Answer> {
-    side: Arc<ClientSide<Req, A>>,
+/// A client: calls a service of the call kind `K` (its request and
+/// answer), once the router wired it to one.
+pub struct CallClient<K: Kind> {
+    side: Arc<ClientSide<K>>,
 }
 
-impl<Req: Payload, A: Answer> std::fmt::Debug for CallClient<Req, A> {
+impl<K: Kind> std::fmt::Debug for CallClient<K> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Client").field("name", &self.side.spec.name).field("type", &self.side.spec.type_name).finish()
     }
 }
 
 /// The service a client is wired to.
-struct Target<Req: Payload, A: Answer> {
+struct Target<K: Kind> {
     agent: String,
     port: String,
     service: String,
-    client: IoxClient<Ipc, Req, (), A::Payload, A::Header>,
+    client: ClientPort<K>,
     requests: Notifier<Ipc>,
     listener: Arc<Listener<Ipc>>,
-    _factories: (Factory<Req, A>, event::PortFactory<Ipc>, event::PortFactory<Ipc>),
+    _factories: (Factory<K>, event::PortFactory<Ipc>, event::PortFactory<Ipc>),
 }
 
-struct InFlight<Req: Payload, A: Answer> {
+struct InFlight<K: Kind> {
     id: CallId,
     deadline_ns: u64,
     service: String,
-    pending: PendingResponse<Ipc, Req, (), A::Payload, A::Header>,
+    pending: Pending<K>,
 }
 
-struct ClientState<Req: Payload, A: Answer> {
-    target: Option<Target<Req, A>>,
-    in_flight: Vec<InFlight<Req, A>>,
-    done: VecDeque<(CallId, Result<A::Value, CallError>)>,
+struct ClientState<K: Kind> {
+    target: Option<Target<K>>,
+    in_flight: Vec<InFlight<K>>,
+    done: VecDeque<(CallId, Result<K::Value, CallError>)>,
     next_id: u64,
     answered: u64,
     last_answer_ns: Option<u64>,
 }
 
-pub(crate) struct ClientSide<Req: Payload, A: Answer> {
+pub(crate) struct ClientSide<K: Kind> {
+    kind: K,
     spec: PortSpec,
     options: CallOptions,
-    state: Mutex<ClientState<Req, A>>,
+    state: Mutex<ClientState<K>>,
     /// in the test harness: the calls, answered by the test or another agent
-    mem: Option<Arc<MemClient<Req, A::Value>>>,
-    _types: PhantomData<fn(Req) -> A>,
+    mem: Option<Arc<MemClient<K::Queued, K::Value>>>,
 }
 
-impl<Req: Payload, A: Answer> CallClient<Req, A> {
+impl<Req: Payload, A: Answer> CallClient<Typed<Req, A>> {
     /// Client `port` with `options`, bound to `binding` (it is wired later).
     pub(crate) fn bind(
         binding: &Binding,
         port: &str,
         options: CallOptions,
     ) -> Result<(Self, Arc<dyn DynInput>), CallError> {
+        let (client, side) = Self::bind_kind(binding, port, options, Typed::default());
+        Ok((client, side))
+    }
+}
+
+impl<K: Kind> CallClient<K> {
+    /// Client `port` of `kind` with `options`, bound to `binding` (it is wired later).
+    pub(crate) fn bind_kind(
+        binding: &Binding,
+        port: &str,
+        options: CallOptions,
+        kind: K,
+    ) -> (Self, Arc<ClientSide<K>>) {
         let options =
             CallOptions { max_in_flight: options.max_in_flight.clamp(1, MAX_IN_FLIGHT), timeout: options.timeout };
         let mem = match binding {
-            Binding::Memory(bus) => Some(MemClient::new(A::spec::<Req>(port), options, bus.clone())),
+            Binding::Memory(bus) => Some(MemClient::new(kind.spec(port), options, bus.clone())),
             _ => None,
         };
         let side = Arc::new(ClientSide {
             mem,
-            spec: A::spec::<Req>(port),
+            spec: kind.spec(port),
+            kind,
             options,
             state: Mutex::new(ClientState {
                 target: None,
@@ -104,9 +116,8 @@ impl<Req: Payload, A: Answer> CallClient<Req, A> {
                 answered: 0,
                 last_answer_ns: None,
             }),
-            _types: PhantomData,
         });
-        Ok((CallClient { side: side.clone() }, side))
+        (CallClient { side: side.clone() }, side)
     }
 
     /// Sends `request` to the service the client is wired to and returns
@@ -114,9 +125,9 @@ impl<Req: Payload, A: Answer> CallClient<Req, A> {
     /// [`Client::take`]. Refused, with nothing sent, when the client is not
     /// wired, when no server answers the service, or past the bound of
     /// calls in flight.
-    pub fn call(&self, request: &Req) -> Result<CallId, CallError> {
+    pub fn call(&self, request: &K::Request) -> Result<CallId, CallError> {
         if let Some(mem) = &self.side.mem {
-            return mem.call(*request);
+            return mem.call(self.side.kind.queued(request, &self.side.spec.name)?);
         }
         let name = &self.side.spec.name;
         let mut st = lock(&self.side.state);
@@ -125,11 +136,7 @@ impl<Req: Payload, A: Answer> CallClient<Req, A> {
         if st.in_flight.len() >= self.side.options.max_in_flight {
             return Err(CallError::TooManyInFlight { client: name.clone(), max: self.side.options.max_in_flight });
         }
-        let pending = t.client.send_copy(*request).map_err(|source| CallError::Send {
-            client: name.clone(),
-            service: t.service.clone(),
-            source,
-        })?;
+        let pending = self.side.kind.send(&t.client, request, name, &t.service)?;
         if pending.number_of_server_connections() == 0 {
             return Err(CallError::NoServer { client: name.clone(), service: t.service.clone() });
         }
@@ -146,7 +153,7 @@ impl<Req: Payload, A: Answer> CallClient<Req, A> {
     /// The next finished call, oldest first: its answer, or why there is
     /// none (a timeout, the server gone mid-call, the client unwired).
     /// `None` while no call has finished. Never blocks.
-    pub fn take(&self) -> Option<(CallId, Result<A::Value, CallError>)> {
+    pub fn take(&self) -> Option<(CallId, Result<K::Value, CallError>)> {
         if let Some(mem) = &self.side.mem {
             return mem.take();
         }
@@ -181,17 +188,22 @@ impl<Req: Payload, A: Answer> CallClient<Req, A> {
     pub fn options(&self) -> CallOptions {
         self.side.options
     }
+
+    /// The call's kind (its request and answer).
+    pub(crate) fn kind(&self) -> &K {
+        &self.side.kind
+    }
 }
 
-impl<Req: Payload, A: Answer> ClientSide<Req, A> {
+impl<K: Kind> ClientSide<K> {
     /// Moves every call that finished (answered, timed out, its server
     /// gone) from in flight to done.
-    fn settle(&self, st: &mut ClientState<Req, A>, now: u64) {
+    fn settle(&self, st: &mut ClientState<K>, now: u64) {
         let name = &self.spec.name;
         let mut i = 0;
         while i < st.in_flight.len() {
             let f = &st.in_flight[i];
-            let answer = |f: &InFlight<Req, A>| A::receive::<Req>(&f.pending, name, &f.service);
+            let answer = |f: &InFlight<K>| self.kind.receive(&f.pending, name, &f.service);
             let outcome = match answer(f) {
                 Some(o) => Some(o),
                 // gone: look once more, the answer may have come just before the server let go
@@ -220,7 +232,7 @@ impl<Req: Payload, A: Answer> ClientSide<Req, A> {
     }
 }
 
-impl<Req: Payload, A: Answer> DynInput for ClientSide<Req, A> {
+impl<K: Kind> DynInput for ClientSide<K> {
     fn name(&self) -> &str {
         &self.spec.name
     }
@@ -231,7 +243,7 @@ impl<Req: Payload, A: Answer> DynInput for ClientSide<Req, A> {
         self.spec.clone()
     }
     fn payload_layout(&self) -> (usize, usize) {
-        A::layout()
+        self.kind.answer_layout()
     }
 
     /// Wires the client to service `from_port` of `from_agent`; one
@@ -251,8 +263,8 @@ impl<Req: Payload, A: Answer> DynInput for ClientSide<Req, A> {
             }
         }
         let service = robot.port_service(from_agent, from_port);
-        let wire = || -> Result<Target<Req, A>, CallError> {
-            let factory = call_service::<Req, A>(node, &service, false)?;
+        let wire = || -> Result<Target<K>, CallError> {
+            let factory = call_service(node, &self.kind, &service, false)?;
             let client = factory.client_builder().create().map_err(|e| open_err(&service, e))?;
             let requests = event_service(node, &service, false)?;
             let notifier = requests.notifier_builder().create().map_err(|e| open_err(&service, e))?;
@@ -315,9 +327,9 @@ impl<Req: Payload, A: Answer> DynInput for ClientSide<Req, A> {
     }
 }
 
-impl<Req: Payload, A: Answer> ClientSide<Req, A> {
+impl<K: Kind> ClientSide<K> {
     /// Drops the wire; the calls in flight finish as [`CallError::Unwired`].
-    fn unwire(&self, st: &mut ClientState<Req, A>) {
+    fn unwire(&self, st: &mut ClientState<K>) {
         self.settle(st, now_ns());
         for f in st.in_flight.drain(..) {
             st.done.push_back((f.id, Err(CallError::Unwired { client: self.spec.name.clone(), service: f.service })));

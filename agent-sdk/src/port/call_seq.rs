@@ -32,7 +32,7 @@
 
 use super::bytes::{Binding, DynInput};
 use super::call::memory::{MemCallPort, Unanswered};
-use super::call::{Answer, CallError, Factory, MAX_IN_FLIGHT, Pending, ServerPort, call_settings, received};
+use super::call::{Answer, CallError, Factory, MAX_IN_FLIGHT, Pending, ServerPort, Typed, call_settings, received};
 use super::call_client::CallClient;
 use super::call_server::CallServer;
 use super::seq::{shape_of, view};
@@ -104,7 +104,7 @@ impl<T: SeqPart, H: SeqPart> Answer for SeqAnswer<T, H> {
         name: &ServiceName,
         attributes: &AttributeVerifier,
         create: bool,
-    ) -> Result<Factory<Req, Self>, RequestResponseOpenOrCreateError> {
+    ) -> Result<Factory<Typed<Req, Self>>, RequestResponseOpenOrCreateError> {
         let builder = call_settings!(
             node.service_builder(name).request_response::<Req, [u64]>().response_user_header::<SeqAnswerHeader>()
         );
@@ -115,24 +115,19 @@ impl<T: SeqPart, H: SeqPart> Answer for SeqAnswer<T, H> {
         }
     }
     fn server<Req: Payload>(
-        factory: &Factory<Req, Self>,
+        factory: &Factory<Typed<Req, Self>>,
         max_len: usize,
-    ) -> Result<ServerPort<Req, Self>, ServerCreateError> {
-        // every answer slot holds the longest answer: iceoryx2 0.10's
-        // growing (dynamic) response memory made each new client take
-        // about 1.5 s to open and to be answered, and the server spin
-        let slot = rust_shape::<T, H>().len_of(max_len).unwrap_or(usize::MAX).max(WORD);
+    ) -> Result<ServerPort<Typed<Req, Self>>, ServerCreateError> {
+        let (words, slots) = answer_slots(&rust_shape::<T, H>(), max_len);
         factory
             .server_builder()
-            .initial_max_slice_len(slot.div_ceil(WORD))
+            .initial_max_slice_len(words)
             .allocation_strategy(AllocationStrategy::Static)
-            // the slots iceoryx2 would make for every client's every call in
-            // flight, at most MEMORY_BUDGET bytes of them (at least MIN_SLOTS)
-            .override_response_preallocation(move |n| n.min((MEMORY_BUDGET / slot).max(MIN_SLOTS)))
+            .override_response_preallocation(slots)
             .create()
     }
     fn receive<Req: Payload>(
-        pending: &Pending<Req, Self>,
+        pending: &Pending<Typed<Req, Self>>,
         client: &str,
         service: &str,
     ) -> Option<Result<(H, Vec<T>), CallError>> {
@@ -147,45 +142,84 @@ impl<T: SeqPart, H: SeqPart> SeqAnswer<T, H> {
         client: &str,
         service: &str,
     ) -> Result<(H, Vec<T>), CallError> {
-        let header = *response.user_header();
-        if header.status == SEQ_TOO_LONG {
-            return Err(CallError::RefusedTooLong {
-                client: client.into(),
-                service: service.into(),
-                len: header.items,
-                max: header.max,
-            });
-        }
-        let malformed =
-            |detail: String| CallError::Malformed { client: client.into(), service: service.into(), detail };
-        if header.status != SEQ_ANSWERED {
-            return Err(malformed(format!("an answer of unknown status {}", header.status)));
-        }
         let shape = rust_shape::<T, H>();
         let bytes = word_bytes(response.payload());
-        let len = usize::try_from(header.items)
-            .ok()
-            .and_then(|n| shape.len_of(n))
-            .filter(|l| *l <= bytes.len() && *l as u64 == header.bytes);
-        let Some(len) = len else {
-            return Err(malformed(format!(
-                "{} elements in {} bytes said, in {} bytes",
-                header.items,
-                header.bytes,
-                bytes.len()
-            )));
-        };
+        let len = answer_len(response.user_header(), &shape, bytes.len(), client, service)?;
         match view::<T, H>(&shape, &bytes[..len]) {
             Some((h, items)) => Ok((*h, items.to_vec())),
-            None => Err(malformed(format!("{len} bytes that are not a header and whole elements, aligned"))),
+            None => Err(CallError::Malformed {
+                client: client.into(),
+                service: service.into(),
+                detail: format!("{len} bytes that are not a header and whole elements, aligned"),
+            }),
         }
     }
+}
+
+/// The answer slots of a sequence server whose answers hold at most
+/// `max_len` elements of `shape`: the 8-byte words of one slot, and how
+/// many slots to make of the `n` iceoryx2 would (every client's every call
+/// in flight), at most [`MEMORY_BUDGET`] bytes of them (at least
+/// [`MIN_SLOTS`]). Every slot holds the longest answer: iceoryx2 0.10's
+/// growing (dynamic) response memory made each new client take about
+/// 1.5 s to open and to be answered, and the server spin.
+pub(crate) fn answer_slots(shape: &SeqShape, max_len: usize) -> (usize, impl Fn(usize) -> usize + 'static) {
+    let slot = shape.len_of(max_len).unwrap_or(usize::MAX).max(WORD);
+    (slot.div_ceil(WORD), move |n: usize| n.min((MEMORY_BUDGET / slot).max(MIN_SLOTS)))
+}
+
+/// Refuses a sequence service `service` of `type_name` whose answers of
+/// `max_len` elements of `shape` would not fit in a payload.
+pub(crate) fn check_max_len(service: &str, type_name: &str, shape: &SeqShape, max_len: usize) -> Result<(), CallError> {
+    if shape.len_of(max_len).is_none_or(|b| b > shm_schemas::schema::MAX_SIZE) {
+        return Err(CallError::Open {
+            service: service.into(),
+            detail: format!(
+                "answers of {max_len} elements of {type_name} would be larger than the {} bytes a payload may \
+                 have; declare a smaller max_len",
+                shm_schemas::schema::MAX_SIZE
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The bytes of the sequence answer `header` says its payload of
+/// `payload_len` bytes holds (of `shape`), for client `client` of
+/// `service`; why there are none: the server refused an answer too long,
+/// or the answer is malformed.
+pub(crate) fn answer_len(
+    header: &SeqAnswerHeader,
+    shape: &SeqShape,
+    payload_len: usize,
+    client: &str,
+    service: &str,
+) -> Result<usize, CallError> {
+    if header.status == SEQ_TOO_LONG {
+        return Err(CallError::RefusedTooLong {
+            client: client.into(),
+            service: service.into(),
+            len: header.items,
+            max: header.max,
+        });
+    }
+    let malformed = |detail: String| CallError::Malformed { client: client.into(), service: service.into(), detail };
+    if header.status != SEQ_ANSWERED {
+        return Err(malformed(format!("an answer of unknown status {}", header.status)));
+    }
+    usize::try_from(header.items)
+        .ok()
+        .and_then(|n| shape.len_of(n))
+        .filter(|l| *l <= payload_len && *l as u64 == header.bytes)
+        .ok_or_else(|| {
+            malformed(format!("{} elements in {} bytes said, in {payload_len} bytes", header.items, header.bytes))
+        })
 }
 
 /// A service an agent answers with sequences: requests `Req`, answers of
 /// header `H` and up to the declared maximum of `T`.
 pub struct SeqServer<Req: Payload, T: SeqPart, H: SeqPart = shm_schemas::NoHeader> {
-    server: CallServer<Req, SeqAnswer<T, H>>,
+    server: CallServer<Typed<Req, SeqAnswer<T, H>>>,
     max_len: usize,
     shape: SeqShape,
 }
@@ -198,7 +232,7 @@ impl<Req: Payload, T: SeqPart, H: SeqPart> std::fmt::Debug for SeqServer<Req, T,
 
 /// A client of a service answered with sequences of `T` after header `H`;
 /// its `take` hands out each answer as an owned `(H, Vec<T>)`.
-pub type SeqClient<Req, T, H = shm_schemas::NoHeader> = CallClient<Req, SeqAnswer<T, H>>;
+pub type SeqClient<Req, T, H = shm_schemas::NoHeader> = CallClient<Typed<Req, SeqAnswer<T, H>>>;
 
 impl<Req: Payload, T: SeqPart, H: SeqPart> SeqServer<Req, T, H> {
     /// Service `port` (iceoryx2 service `service`), bound to `binding`,
@@ -211,17 +245,7 @@ impl<Req: Payload, T: SeqPart, H: SeqPart> SeqServer<Req, T, H> {
     ) -> Result<(Self, Arc<dyn DynInput>), CallError> {
         let (schema, shape) = shape_of::<T, H>(service)
             .map_err(|e| CallError::Open { service: service.into(), detail: e.to_string() })?;
-        if shape.len_of(max_len).is_none_or(|b| b > shm_schemas::schema::MAX_SIZE) {
-            return Err(CallError::Open {
-                service: service.into(),
-                detail: format!(
-                    "answers of {max_len} elements of {} would be larger than the {} bytes a payload may have; \
-                     declare a smaller max_len",
-                    schema.type_name,
-                    shm_schemas::schema::MAX_SIZE
-                ),
-            });
-        }
+        check_max_len(service, &schema.type_name, &shape, max_len)?;
         let (server, side) = CallServer::bind(binding, port, service, max_len)?;
         Ok((SeqServer { server, max_len, shape }, side))
     }
@@ -291,7 +315,7 @@ impl<Req: Payload, T: SeqPart, H: SeqPart> SeqServer<Req, T, H> {
                 tracing::warn!(service, len = n, max = self.max_len, "an answer longer than the maximum was refused");
                 return Err(CallError::AnswerTooLong { service: service.into(), len: n, max: self.max_len });
             }
-            Ok(())
+            Ok(true)
         })
     }
 

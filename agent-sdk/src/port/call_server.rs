@@ -1,19 +1,20 @@
 //! The server side of a call ([`CallServer`]): the service an agent
 //! answers, in its own task, which a request wakes like an input. Generic
-//! over how the answer travels ([`Answer`]): [`Server`] answers with a
-//! fixed-size payload, [`super::SeqServer`] (`call_seq`) with a sequence.
+//! over the call's [`Kind`]: [`Server`] answers Rust requests with a
+//! fixed-size payload, [`super::SeqServer`] (`call_seq`) with a sequence,
+//! `schema_call`'s server requests and answers of layouts learnt at run
+//! time (Python and C agents).
 
 use super::bytes::{Binding, DynInput};
 use super::call::memory::{MemCallPort, MemServer};
 use super::call::{
-    ANSWERED_SUFFIX, Answer, CallError, Factory, Fixed, MAX_IN_FLIGHT, ServerPort, call_service, event_service,
-    open_err,
+    ANSWERED_SUFFIX, Answer, CallError, Factory, Fixed, Kind, MAX_IN_FLIGHT, ServerPort, Typed, call_service,
+    event_service, open_err,
 };
 use super::error::PortError;
 use super::memory::SampleBuf;
 use super::service::lock;
 use crate::world::Ipc;
-use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
@@ -25,39 +26,42 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// A request as the server holds it while it answers.
-pub(crate) type Request<Req, A> = ActiveRequest<Ipc, Req, (), <A as Answer>::Payload, <A as Answer>::Header>;
+pub(crate) use super::call::ActiveRequest as Request;
 
 /// A service an agent answers: requests `Req`, answers with a fixed-size `Resp`.
-pub type Server<Req, Resp> = CallServer<Req, Fixed<Resp>>;
+pub type Server<Req, Resp> = CallServer<Typed<Req, Fixed<Resp>>>;
 
-/// A service an agent answers: requests `Req`, answered as `A` says.
-pub struct CallServer<Req: Payload, A: Answer> {
-    side: Arc<ServerSide<Req, A>>,
+/// A service an agent answers, of the call kind `K` (its request and answer).
+pub struct CallServer<K: Kind> {
+    side: Arc<ServerSide<K>>,
 }
 
-impl<Req: Payload, A: Answer> std::fmt::Debug for CallServer<Req, A> {
+impl<K: Kind> std::fmt::Debug for CallServer<K> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Server").field("service", &self.side.service).field("type", &self.side.spec.type_name).finish()
     }
 }
 
-struct ServerLive<Req: Payload, A: Answer> {
-    port: Mutex<ServerPort<Req, A>>,
+struct ServerLive<K: Kind> {
+    port: Mutex<ServerPort<K>>,
     listener: Arc<Listener<Ipc>>,
     answered: Mutex<Notifier<Ipc>>,
-    _factories: (Factory<Req, A>, event::PortFactory<Ipc>, event::PortFactory<Ipc>),
+    _factories: (Factory<K>, event::PortFactory<Ipc>, event::PortFactory<Ipc>),
 }
 
-pub(crate) struct ServerSide<Req: Payload, A: Answer> {
+pub(crate) struct ServerSide<K: Kind> {
+    kind: K,
     spec: PortSpec,
     service: String,
-    live: Option<ServerLive<Req, A>>,
+    live: Option<ServerLive<K>>,
+    /// the most elements an answer holds (1 for a fixed answer)
+    max_len: usize,
     /// in the test harness: the requests waiting for the step
-    mem: Option<Arc<MemServer<Req, A::Value>>>,
+    mem: Option<Arc<MemServer<K::Queued, K::Value>>>,
     answered: AtomicU64,
 }
 
-impl<Req: Payload, A: Answer> CallServer<Req, A> {
+impl<Req: Payload, A: Answer> CallServer<Typed<Req, A>> {
     /// Service `port` (iceoryx2 service `service`), bound to `binding`,
     /// answering with at most `max_len` elements (1 for a fixed answer).
     pub(crate) fn bind(
@@ -66,11 +70,26 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
         service: &str,
         max_len: usize,
     ) -> Result<(Self, Arc<dyn DynInput>), CallError> {
+        let (server, side) = Self::bind_kind(binding, port, service, max_len, Typed::default())?;
+        Ok((server, side))
+    }
+}
+
+impl<K: Kind> CallServer<K> {
+    /// Service `port` of `kind` (iceoryx2 service `service`), bound to
+    /// `binding`, answering with at most `max_len` elements (1 for a fixed answer).
+    pub(crate) fn bind_kind(
+        binding: &Binding,
+        port: &str,
+        service: &str,
+        max_len: usize,
+        kind: K,
+    ) -> Result<(Self, Arc<ServerSide<K>>), CallError> {
         let mut mem = None;
         let live = match binding {
             Binding::Nothing => None,
             Binding::Memory(_) => {
-                mem = Some(MemServer::new(A::spec::<Req>(port), service));
+                mem = Some(MemServer::new(kind.spec(port), service));
                 None
             }
             Binding::Shm(node) => {
@@ -78,13 +97,13 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
                     node.config(),
                     "serve",
                     |e: &CallError| matches!(e, CallError::Open { .. }),
-                    || call_service::<Req, A>(node, service, true),
+                    || call_service(node, &kind, service, true),
                 )?;
                 let server = crate::world::retry_after_cleanup(
                     node.config(),
                     "serve",
                     |_| true,
-                    || A::server::<Req>(&factory, max_len),
+                    || kind.server(&factory, max_len),
                 )
                 .map_err(|e| open_err(service, e))?;
                 let requests = event_service(node, service, true)?;
@@ -101,7 +120,9 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
             }
         };
         let side = Arc::new(ServerSide {
-            spec: A::spec::<Req>(port),
+            spec: kind.spec(port),
+            kind,
+            max_len,
             service: service.into(),
             live,
             mem,
@@ -114,11 +135,12 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
     /// arrives meanwhile is left for the next step, whose wake-up is
     /// pending), then wakes the clients; returns how many were handled.
     /// An error of `answer` is remembered and the next request handled:
-    /// the first one is returned once all are.
+    /// the first one is returned once all are; `Ok(false)` ends the turn
+    /// after this request (the rest wait for the next step).
     pub(crate) fn each_request(
         &self,
         max: usize,
-        mut answer: impl FnMut(&Request<Req, A>) -> Result<(), CallError>,
+        mut answer: impl FnMut(&Request<K>) -> Result<bool, CallError>,
     ) -> Result<usize, CallError> {
         let Some(live) = &self.side.live else { return Ok(0) };
         let mut n = 0;
@@ -126,7 +148,7 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
         {
             let port = lock(&live.port);
             while n < max {
-                let request = match port.receive() {
+                let request = match self.side.kind.next_request(&port) {
                     Ok(Some(r)) => r,
                     Ok(None) => break,
                     Err(source) => {
@@ -137,10 +159,14 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
                         });
                     }
                 };
-                if let Err(e) = answer(&request) {
-                    first_error.get_or_insert(e);
-                }
                 n += 1;
+                match answer(&request) {
+                    Ok(true) => {}
+                    Ok(false) => break,
+                    Err(e) => {
+                        first_error.get_or_insert(e);
+                    }
+                }
             }
         }
         if n > 0 {
@@ -161,7 +187,7 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
     }
 
     /// In the test harness: the requests waiting for the step.
-    pub(crate) fn memory(&self) -> Option<&Arc<MemServer<Req, A::Value>>> {
+    pub(crate) fn memory(&self) -> Option<&Arc<MemServer<K::Queued, K::Value>>> {
         self.side.mem.as_ref()
     }
 
@@ -179,9 +205,24 @@ impl<Req: Payload, A: Answer> CallServer<Req, A> {
     pub fn service(&self) -> &str {
         &self.side.service
     }
+
+    /// The service's port name, as the agent declared it.
+    pub fn name(&self) -> &str {
+        &self.side.spec.name
+    }
+
+    /// The call's kind (its request and answer).
+    pub(crate) fn kind(&self) -> &K {
+        &self.side.kind
+    }
+
+    /// The most elements an answer may hold, as declared (1 for a fixed answer).
+    pub fn max_len(&self) -> usize {
+        self.side.max_len
+    }
 }
 
-impl<Req: Payload, Resp: Payload> CallServer<Req, Fixed<Resp>> {
+impl<Req: Payload, Resp: Payload> CallServer<Typed<Req, Fixed<Resp>>> {
     /// Answers each waiting request with `answer` (at most `max` of them:
     /// what arrives meanwhile is left for the next step, whose wake-up is
     /// pending); returns how many were answered.
@@ -196,7 +237,7 @@ impl<Req: Payload, Resp: Payload> CallServer<Req, Fixed<Resp>> {
                 // the client went away: nobody waits for this answer
                 tracing::debug!(service = %self.side.service, "an answer found no client: {e:?}");
             }
-            Ok(())
+            Ok(true)
         })
     }
 
@@ -216,7 +257,7 @@ pub(crate) fn not_an_input(port: &str) -> PortError {
     }
 }
 
-impl<Req: Payload, A: Answer> DynInput for ServerSide<Req, A> {
+impl<K: Kind> DynInput for ServerSide<K> {
     fn name(&self) -> &str {
         &self.spec.name
     }
@@ -227,7 +268,7 @@ impl<Req: Payload, A: Answer> DynInput for ServerSide<Req, A> {
         self.spec.clone()
     }
     fn payload_layout(&self) -> (usize, usize) {
-        (std::mem::size_of::<Req>(), std::mem::align_of::<Req>())
+        self.kind.request_layout()
     }
     fn connect(
         &self,
