@@ -18,10 +18,12 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
 use iceoryx2::sample_mut::SampleMut;
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
 use iceoryx2::service::marker::{CustomHeaderMarker, CustomPayloadMarker};
 use shm_schemas::{FixedName, SampleHeader, Schema, SeqShape};
+use std::mem::MaybeUninit;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
 /// An output port of the payload layout a [`Schema`] describes: the byte
 /// port every output is.
@@ -33,6 +35,10 @@ pub struct SchemaOutput {
     sender: FixedName,
     seq: AtomicU64,
     sink: Sink,
+    /// how far a loaned sample's payload lies after its user header
+    /// ([`UNKNOWN_OFFSET`] until the first loan): the same for every sample
+    /// of the port, so that a loan finds its payload without iceoryx2's look
+    payload_offset: AtomicUsize,
     /// a sequence port's shape and bound; `None` for a fixed size
     limit: Option<SeqLimit>,
 }
@@ -43,6 +49,9 @@ struct SeqLimit {
     shape: SeqShape,
     max_len: usize,
 }
+
+/// [`SchemaOutput::payload_offset`] before the port's first loan.
+const UNKNOWN_OFFSET: usize = usize::MAX;
 
 /// The bytes a sequence port's publisher reserves per sample at first
 /// (its memory then grows, power of two, with the largest sample sent).
@@ -183,6 +192,7 @@ impl SchemaOutput {
             sender: FixedName::new(sender),
             seq: AtomicU64::new(0),
             sink,
+            payload_offset: AtomicUsize::new(UNKNOWN_OFFSET),
             limit,
         }
     }
@@ -285,18 +295,9 @@ impl SchemaOutput {
                 // (`Carried::of_sequence`), the count iceoryx2 sets to `len`
                 let mut sample =
                     unsafe { publisher.loan_custom_payload(units) }.map_err(port_err!(Loan, &self.service))?;
-                // the one look at the payload's place: iceoryx2 takes the
-                // port's locks for a custom payload's length on every look
-                let payload = sample.payload_mut();
-                if payload.len() != len {
-                    return Err(PortError::Ipc {
-                        service: self.service.clone(),
-                        detail: format!("loaned {} bytes for a {len}-byte sample", payload.len()),
-                    });
-                }
-                let at = PayloadAt::of(payload.as_mut_ptr().cast::<u8>(), len);
+                let at = self.payload_of(&mut sample, len)?;
                 if zeroed {
-                    // SAFETY: `payload` is `len` one-byte elements, writable
+                    // SAFETY: `at` is the loan's `len` payload bytes, writable
                     unsafe { std::ptr::write_bytes(at.ptr.as_ptr(), 0, len) };
                 }
                 // SAFETY: the payload lies in the service's shared memory,
@@ -309,6 +310,53 @@ impl SchemaOutput {
                 Ok(Loan(LoanInner::Detached(SampleBuf::zeroed(&self.service, len, self.carried.align())?)))
             }
         }
+    }
+
+    /// Where the payload of `sample`, a loan of `len` bytes, lies.
+    ///
+    /// iceoryx2 places a sample's payload at a fixed distance after its user
+    /// header (`align(user header + its size, payload alignment)` in a chunk
+    /// aligned for both), the same for every chunk of the service. The
+    /// first loan asks iceoryx2 (`payload_mut`, which takes the port's two
+    /// locks for a custom payload's length) and keeps that distance; later
+    /// loans add it to the user header's address, which iceoryx2 hands out
+    /// without a lock. A debug build (every test) checks every later loan
+    /// against iceoryx2's own answer.
+    fn payload_of(
+        &self,
+        sample: &mut SampleMutUninit<Ipc, [MaybeUninit<CustomPayloadMarker>], CustomHeaderMarker>,
+        len: usize,
+    ) -> Result<PayloadAt, PortError> {
+        // an address: iceoryx2 makes its own pointers into a chunk from
+        // addresses too (`message_type_details`), so the payload's pointer is
+        // made from one the same way, with the shared memory's exposed provenance
+        let header = std::ptr::from_mut(sample.user_header_mut()).addr();
+        let offset = self.payload_offset.load(Ordering::Relaxed);
+        if offset != UNKNOWN_OFFSET {
+            // `offset` is the distance from a user header of this port's
+            // samples to its payload (measured at the first loan, the same
+            // for every chunk): the loaned chunk's payload
+            let ptr = std::ptr::with_exposed_provenance_mut::<u8>(header.wrapping_add(offset));
+            #[cfg(debug_assertions)]
+            {
+                let payload = sample.payload_mut();
+                let theirs = (payload.as_mut_ptr().addr(), payload.len());
+                debug_assert_eq!(theirs, (ptr.addr(), len), "a sample's payload is not where the port's first one was");
+            }
+            return Ok(PayloadAt::of(ptr, len));
+        }
+        let payload = sample.payload_mut();
+        if payload.len() != len {
+            return Err(PortError::Ipc {
+                service: self.service.clone(),
+                detail: format!("loaned {} bytes for a {len}-byte sample", payload.len()),
+            });
+        }
+        let ptr = payload.as_mut_ptr().cast::<u8>();
+        if let Some(measured) = ptr.expose_provenance().checked_sub(header) {
+            self.payload_offset.store(measured, Ordering::Relaxed);
+        }
+        Ok(PayloadAt::of(ptr, len))
     }
 
     /// Sends a loaned sample, stamped now, and wakes the readers.
