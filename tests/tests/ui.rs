@@ -338,9 +338,10 @@ fn read_only_offers_nothing_and_actions_need_the_token() {
     let (status, body) = http(&ro.addr, "GET", "/api/image?port=t1%2Ftick", &[("X-Nerve-Token", READ)], None);
     assert_eq!(status, 409, "{body}");
     assert!(body.contains("not ring notices"), "{body}");
+    sequence_port(&r, &ro.addr, &b);
     // the editing server's page opened with the read token watches only; the token left the address bar
     b.open(&rw.url(Some(READ)));
-    b.wait_for("the agents", WAIT, &format!("const a = {PAGE_AGENTS}; return a === 'cam,r1,r2,t1' && a"));
+    b.wait_for("the agents", WAIT, &format!("const a = {PAGE_AGENTS}; return a === 'cam,det,r1,r2,t1' && a"));
     assert_eq!(b.eval("return nerveUi.editable"), Value::Bool(false));
     assert_eq!(b.eval("return document.getElementById('mode').textContent"), Value::String("watching".into()));
     assert_eq!(b.eval("return location.search"), Value::String(String::new()));
@@ -361,6 +362,85 @@ fn read_only_offers_nothing_and_actions_need_the_token() {
     ro.stop();
     rw.stop();
     r.down_and_check_clean();
+}
+
+/// Looking inside a sequence port (issue 42): the `detector` test agent
+/// sends 0, 1, 400 and 401 detections in turn (detection `j` at `x = j`,
+/// `id = j`). `/api/samples` gives each sample's header, length, at most
+/// 50 elements and its last; the page shows the header, the length, the
+/// elements as a table of the first 50 rows "and K more", an empty table for
+/// a sample of none, and plots the last element's `x`.
+fn sequence_port(r: &Robot, addr: &str, b: &Browser) {
+    const ROWS: u64 = 50;
+    r.ok(&["start", "detector", "--name", "det"]);
+    b.wait_for("the detector", WAIT, "return !!document.querySelector('.port[data-port=\"det/dets\"]')");
+    b.click(".port[data-port=\"det/dets\"] circle");
+    let mut lens = std::collections::BTreeSet::new();
+    let t0 = std::time::Instant::now();
+    while lens.len() < 4 && t0.elapsed() < WAIT {
+        let (status, body) = http(addr, "GET", "/api/samples?port=det%2Fdets", &[("X-Nerve-Token", READ)], None);
+        assert_eq!(status, 200, "{body}");
+        let v: Value = serde_json::from_str(&body).expect("the answer is JSON");
+        assert_eq!(v["sequence"]["rows"], ROWS, "{}", v["sequence"]);
+        for s in v["samples"].as_array().expect("samples") {
+            let len = s["len"].as_u64().unwrap_or_else(|| panic!("no length: {s}"));
+            assert_eq!(s["value"]["header"]["count"].as_u64(), Some(len), "{}", s["value"]["header"]);
+            let items = s["value"]["items"].as_array().expect("items");
+            assert_eq!(items.len() as u64, len.min(ROWS), "sample of {len}");
+            assert!(items.iter().enumerate().all(|(j, d)| d["id"].as_u64() == Some(j as u64)), "{s}");
+            match len.checked_sub(1) {
+                Some(j) => assert_eq!((s["last"]["id"].as_u64(), s["last"]["x"].as_f64()), (Some(j), Some(j as f64))),
+                None => assert_eq!(s["last"], Value::Null, "an empty sample has no last element"),
+            }
+            lens.insert(len);
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert_eq!(lens.into_iter().collect::<Vec<_>>(), [0, 1, 400, 401], "the lengths seen by the page's API");
+    let (_, body) = http(addr, "GET", "/api/samples?port=det%2Fdets", &[("X-Nerve-Token", READ)], None);
+    let v: Value = serde_json::from_str(&body).expect("json");
+    assert_eq!(v["sequence"]["longest"], 401, "{}", v["sequence"]);
+
+    // the page: the type, the header and the length; 50 rows and how many more; empty, not an error
+    assert_eq!(
+        b.eval("return document.getElementById('port-type').textContent"),
+        Value::String("nerve::Seq<acme::Detection, acme::DetectionsHeader>".into())
+    );
+    let note = b.wait_for(
+        "a table of the first 50 rows",
+        WAIT,
+        "const n = document.getElementById('items-note').textContent; \
+         return document.querySelectorAll('#items tbody tr').length === 50 && /and 35[01] more/.test(n) && n",
+    );
+    assert!(note.as_str().is_some_and(|n| n.starts_with("elements 0-49 of 40")), "{note}");
+    let head = b.eval("return [...document.querySelectorAll('#items thead th')].map(t => t.textContent).join(',')");
+    assert_eq!(head, Value::String("#,x,y,id".into()));
+    b.wait_for(
+        "a sample's header and length",
+        WAIT,
+        "const t = document.getElementById('sample').textContent; return /header\\.frame/.test(t) && /length/.test(t)",
+    );
+    b.wait_for(
+        "an empty table for a sample of none",
+        WAIT,
+        "return !document.getElementById('items').hidden && document.querySelectorAll('#items tbody tr').length === 0 \
+         && document.getElementById('items-note').textContent === 'no elements in this sample'",
+    );
+    // the last element's x, plotted as `nerve plot --field items[-1].x` would (no point for an empty sample)
+    b.wait_for(
+        "items[-1].x offered",
+        WAIT,
+        "return [...document.getElementById('plot-field').options].some(o => o.textContent === 'items[-1].x')",
+    );
+    b.eval("const s = document.getElementById('plot-field'); s.value = 'items[-1].x'; s.dispatchEvent(new Event('change')); return 1");
+    let ys = b.wait_for(
+        "a plot of items[-1].x",
+        WAIT,
+        "return nerveUi.plotted.length > 3 && nerveUi.plotted.map(p => p[1])",
+    );
+    let ys: Vec<f64> = ys.as_array().expect("values").iter().filter_map(Value::as_f64).collect();
+    assert!(ys.iter().all(|y| [0.0, 399.0, 400.0].contains(y)), "plotted {ys:?}");
+    assert_eq!(b.eval("return nerveUi.errors.join('; ')"), Value::String(String::new()));
 }
 
 /// Every route of the API, as (method, target, body).

@@ -25,7 +25,7 @@ if (params.has('token')) {
 const api = (path, opts = {}) => fetch(path, { ...opts, headers: { ...(opts.headers || {}), 'X-Nerve-Token': token } });
 const NODE_W = 210, PORT_GAP = 18, HEAD_H = 58, COL_W = 360, ROW_GAP = 26;
 
-const ui = window.nerveUi = { updates: 0, lastSeq: 0, drawMs: [], lastDrawMs: 0, editable: false, graph: null, errors: [], source: null };
+const ui = window.nerveUi = { updates: 0, lastSeq: 0, drawMs: [], lastDrawMs: 0, editable: false, graph: null, errors: [], source: null, plotted: [] };
 window.addEventListener('error', (e) => ui.errors.push(String(e.message)));
 const pos = new Map();          // agent name -> {x, y, pinned}
 const nodeEls = new Map();      // agent name -> {g, shape}
@@ -415,13 +415,14 @@ function inspect(ref, dir) {
     if (sources.length === 0) { say(`${ref} is connected to nothing`); return; }
     ref = sources[0];
   }
-  inspected = ref; inspectAfter = 0; series = [];
+  inspected = ref; inspectAfter = 0; ui.plotted = series = [];
   for (const p of document.querySelectorAll('.port.inspected')) p.classList.remove('inspected');
   const p = document.querySelector(`.port[data-port="${CSS.escape(ref)}"]`);
   if (p) p.classList.add('inspected');
   $('port-panel').hidden = false;
   $('port-title').textContent = ref;
   $('plot-field').replaceChildren();
+  $('items').hidden = $('items-note').hidden = true;
   clearInterval(inspectTimer);
   inspectTimer = setInterval(poll, 300);
   poll();
@@ -436,6 +437,59 @@ function flatten(v, path = '', out = []) {
   return out;
 }
 
+// The number at a plot path of a sample: `pose.x`; in a sequence
+// `header.frame`, `items[3].x` (none when the sample has fewer elements, or
+// the element is past the rows sent) or `items[-1].x`, the last element's,
+// as `nerve plot` takes them.
+function valueAt(s, path) {
+  const lookup = (v, p) => { const f = flatten(v).find(([k]) => k === p); return f && f[1]; };
+  const m = /^items\[(-1|\d+)\]\.?(.*)$/.exec(path);
+  if (s.len === undefined || !m) return lookup(s.value, path);
+  const item = m[1] === '-1' ? s.last : (s.value.items || [])[+m[1]];
+  return item == null ? undefined : lookup(item, m[2]);
+}
+
+// The fields a sample offers to plot (a sequence's element's in the order
+// of `columns`).
+function plotPaths(s, columns) {
+  const numbers = (v, prefix) => flatten(v).filter(([, x]) => typeof x === 'number').map(([k]) => prefix(k));
+  if (s.len === undefined) return numbers(s.value, (k) => k);
+  const element = s.last == null ? [] : (columns || []).filter((k) => typeof valueAt(s, `items[-1].${k}`) === 'number' ||
+    (k === '' && typeof s.last === 'number'));
+  return [...numbers(s.value.header, (k) => `header${k ? '.' + k : ''}`),
+    ...element.map((k) => `items[-1]${k ? '.' + k : ''}`), ...element.map((k) => `items[0]${k ? '.' + k : ''}`)];
+}
+
+const fmt = (v) => (typeof v === 'number' ? +v.toPrecision(6) : v);
+const MAX_COLUMNS = 20;
+
+// A sequence's sample: its header's fields and length above, its elements
+// as a table (the rows the server sent: the first `sequence.rows`), and
+// how many more there are. A sample of no element is an empty table.
+function showSequence(body, last) {
+  facts($('sample'), [['sample #', last.seq], ['length', `${last.len} (longest seen ${body.sequence.longest})`],
+    ...flatten(last.value.header).map(([k, v]) => [`header${k ? '.' + k : ''}`, fmt(v)])]);
+  const rows = (last.value.items || []).map((r) => flatten(r));
+  // the element's fields in declaration order, from its schema
+  const itemColumns = (body.sequence.columns || []).slice(0, MAX_COLUMNS);
+  const table = $('items');
+  table.replaceChildren();
+  const head = table.createTHead().insertRow();
+  for (const k of ['#', ...itemColumns]) { const th = document.createElement('th'); th.textContent = k || 'value'; head.appendChild(th); }
+  const tbody = table.createTBody();
+  rows.forEach((r, i) => {
+    const tr = tbody.insertRow();
+    tr.insertCell().textContent = i;
+    const at = new Map(r);
+    for (const k of itemColumns) tr.insertCell().textContent = fmt(at.get(k));
+  });
+  const more = last.len - rows.length;
+  $('items-note').textContent = last.len === 0 ? 'no elements in this sample'
+    : more > 0 ? `elements 0-${rows.length - 1} of ${last.len}, and ${more} more` : `${last.len} elements`;
+  table.hidden = false;
+  $('items-note').hidden = false;
+}
+
 async function poll() {
   const ref = inspected;
   const r = await api(`/api/samples?port=${encodeURIComponent(ref)}&after=${inspectAfter}`);
@@ -446,23 +500,32 @@ async function poll() {
   if (body.samples.length === 0) return;
   const last = body.samples[body.samples.length - 1];
   inspectAfter = last.seq;
-  const fields = flatten(last.value);
-  facts($('sample'), [['sample #', last.seq], ...fields.map(([k, v]) => [k, typeof v === 'number' ? +v.toPrecision(6) : v])]);
+  if (body.sequence && last.len !== undefined) {
+    showSequence(body, last);
+  } else {
+    $('items').hidden = $('items-note').hidden = true;
+    facts($('sample'), [['sample #', last.seq], ...flatten(last.value).map(([k, v]) => [k, fmt(v)])]);
+  }
+  // fields to plot: a sequence's element fields appear with its first non-empty sample
   const select = $('plot-field');
-  if (select.options.length === 0) {
-    for (const [k, v] of fields) if (typeof v === 'number') { const o = document.createElement('option'); o.textContent = k; select.appendChild(o); }
+  const offered = new Set([...select.options].map((o) => o.textContent));
+  for (const s of body.samples) {
+    for (const k of plotPaths(s, body.sequence && body.sequence.columns)) {
+      if (!offered.has(k)) { offered.add(k); const o = document.createElement('option'); o.textContent = k; select.appendChild(o); }
+    }
   }
   for (const s of body.samples) {
-    const v = flatten(s.value).find(([k]) => k === select.value);
-    if (v && typeof v[1] === 'number') series.push([s.stamp_ns / 1e9, v[1]]);
+    const v = valueAt(s, select.value);
+    if (typeof v === 'number') series.push([s.stamp_ns / 1e9, v]);
   }
   if (series.length > 300) series = series.slice(-300);
+  ui.plotted = series;
   plot();
   const img = $('port-image');
   img.hidden = !body.image;
   if (body.image) img.src = `/api/image?port=${encodeURIComponent(ref)}&seq=${last.seq}`;
 }
-$('plot-field').addEventListener('change', () => { series = []; inspectAfter = 0; });
+$('plot-field').addEventListener('change', () => { ui.plotted = series = []; inspectAfter = 0; });
 
 function plot() {
   const c = $('plot'), ctx = c.getContext('2d');

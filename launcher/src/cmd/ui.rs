@@ -27,6 +27,7 @@ use nerve_ui::{Action, Options, Robot};
 use serde_json::{Value, json};
 use shm_schemas::control::cli_to_router::{CliRequest, RouterReply};
 use shm_schemas::ring::RingNotice;
+use shm_schemas::schema::Kind;
 use shm_schemas::{PortRef, Schema};
 use std::collections::{BTreeMap, VecDeque};
 use std::io::{IsTerminal as _, Write as _};
@@ -425,6 +426,25 @@ fn page_sample(schema: &Schema, bytes: &[u8], sample: &mut Value) -> Option<usiz
     Some(len)
 }
 
+/// The most columns of a sequence's element table.
+const SEQ_COLUMNS: usize = 20;
+
+/// The paths of `schema`'s numbers, bools and strings in declaration order,
+/// named as the page flattens a decoded value (`pose.x`, `ranges.3`), at
+/// most [`SEQ_COLUMNS`]; `""` for an element that is one number.
+fn leaf_paths(schema: &Schema, prefix: &str, out: &mut Vec<String>) {
+    let join = |name: &str| if prefix.is_empty() { name.to_owned() } else { format!("{prefix}.{name}") };
+    match &schema.kind {
+        Kind::Struct { fields } => fields.iter().for_each(|f| leaf_paths(&f.schema, &join(&f.name), out)),
+        Kind::Array { len, element } => {
+            (0..*len).take(SEQ_COLUMNS).for_each(|i| leaf_paths(element, &join(&i.to_string()), out));
+        }
+        Kind::Sequence { .. } => {}
+        Kind::Primitive { .. } | Kind::String { .. } => out.push(prefix.to_owned()),
+    }
+    out.truncate(SEQ_COLUMNS);
+}
+
 impl Robot for UiRobot {
     fn graph(&mut self) -> Result<Value, String> {
         match self.call(CliRequest::Graph)? {
@@ -475,12 +495,16 @@ impl Robot for UiRobot {
         let tap = self.tap(port)?;
         let samples: Vec<&Value> =
             tap.kept.iter().filter(|s| s["seq"].as_u64().is_some_and(|seq| seq > after)).collect();
-        // a sequence port: how many of its elements a sample shows, and its longest yet
-        let sequence = tap
-            .schema
-            .as_ref()
-            .and_then(Schema::sequence_shape)
-            .map(|_| json!({ "rows": SEQ_ROWS, "longest": tap.longest }));
+        // a sequence port: how many of its elements a sample shows, its longest yet, and
+        // its element's fields in declaration order (a JSON object's keys lose it)
+        let sequence = match tap.schema.as_ref().map(|s| &s.kind) {
+            Some(Kind::Sequence { element, .. }) => {
+                let mut columns = Vec::new();
+                leaf_paths(element, "", &mut columns);
+                Some(json!({ "rows": SEQ_ROWS, "longest": tap.longest, "columns": columns }))
+            }
+            _ => None,
+        };
         Ok(json!({
             "port": port,
             "type_name": tap.type_name,
@@ -552,5 +576,19 @@ mod tests {
         assert_eq!(page_sample(&Tick::schema(), &ticks(0), &mut sample), None);
         assert_eq!(sample["value"], json!({ "seq": 7, "stamp_ns": 0 }));
         assert!(sample.get("len").is_none());
+    }
+
+    #[test]
+    fn an_elements_columns_are_its_fields_in_order_and_bounded() {
+        let mut cols = Vec::new();
+        leaf_paths(&Tick::schema(), "", &mut cols);
+        assert_eq!(cols, ["seq", "stamp_ns"]);
+        let mut cols = Vec::new();
+        leaf_paths(&f32::schema(), "", &mut cols);
+        assert_eq!(cols, [""]);
+        let mut cols = Vec::new();
+        leaf_paths(&<[u8; 100]>::schema(), "", &mut cols);
+        assert_eq!(cols.len(), SEQ_COLUMNS);
+        assert_eq!((cols[0].as_str(), cols[19].as_str()), ("0", "19"));
     }
 }
