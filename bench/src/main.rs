@@ -307,9 +307,6 @@ enum Scenario {
         /// Image events, as many Twist events, and as many raw puts of each (default 300; 40 with --quick).
         #[arg(long)]
         count: Option<usize>,
-        /// The ros2 agent's period, ms (default: its own, 20 ms).
-        #[arg(long)]
-        period_ms: Option<u64>,
     },
     /// Periodic-task lateness: an SDK periodic agent vs cyclictest.
     Jitter {
@@ -595,10 +592,9 @@ fn run(cli: Cli) -> Result<()> {
             let report = removing_work(&opts.work, || c_hop::run(&opts))?;
             publish(&common, "c", &report, report.seconds, |_| Ok(vec![]), c_hop::print_tables)?;
         }
-        Scenario::Ros2 { common, count, period_ms } => {
+        Scenario::Ros2 { common, count } => {
             let opts = ros2::Ros2Opts {
                 count: count.unwrap_or(if common.quick { 40 } else { 300 }),
-                period_ms,
                 verbose: common.verbose,
                 work: ros2::work_dir(&common.out),
             };

@@ -1,11 +1,17 @@
 //! The `ros2` agent itself (the `agent` feature, on by default): its ports,
 //! the conversions each step, and the Zenoh link thread it hands CDR to.
+//!
+//! The task is event-driven: it steps when one of its inputs gets a sample
+//! (the nerve side, published at once) or when the link thread's
+//! subscribers leave a ROS message in an inbox and wake it through the
+//! agent's waker ([`agent_sdk::Waker`]: the ROS side, sent on a port at
+//! once). No clock runs on either path.
 //! Without the feature the crate is the messages, their CDR and the bag
 //! conversions only, with no Zenoh: what `nerve export --ros2` needs, so
 //! that the `nerve` command does not build Zenoh (issue 41's first run).
 
 use crate::{cdr, config, convert, link, msgs};
-use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task};
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task, Waker};
 use config::{Config, PubMap, SubMap};
 use link::{Arrived, Inbox, Outgoing, Stats};
 use msgs::RosMessage;
@@ -16,9 +22,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError};
 use std::thread::JoinHandle;
-use std::time::Duration;
 
-/// How many samples per input one step converts at most.
+/// How many samples per input one step converts at most (more wait for
+/// the next step, which the agent's waker makes at once).
 const BATCH: usize = 64;
 /// How many messages may wait for the link thread.
 const OUTGOING: usize = 256;
@@ -62,6 +68,9 @@ pub struct Ros2 {
     tx: Option<SyncSender<Outgoing>>,
     stop: Arc<AtomicBool>,
     link_thread: Option<JoinHandle<()>>,
+    /// wakes the task: the inboxes' (the link thread's), and the step's
+    /// own when it left samples for the next
+    waker: Waker,
 }
 
 impl std::fmt::Debug for Ros2 {
@@ -74,7 +83,7 @@ impl Agent for Ros2 {
     const KIND: &'static str = "ros2";
 
     fn task() -> Task {
-        Task::Periodic(Duration::from_millis(20))
+        Task::EventDriven
     }
 
     fn new(setup: &mut Setup) -> Result<Self, AgentError> {
@@ -99,6 +108,7 @@ impl Agent for Ros2 {
                 },
             });
         }
+        let waker = setup.waker()?;
         let mut outputs = Vec::new();
         for s in &cfg.subscribe {
             let out = match (s.map, &s.user) {
@@ -108,7 +118,7 @@ impl Agent for Ros2 {
                     return Err(AgentError::Config(format!("{}: a mapping without its plan", s.topic)));
                 }
             };
-            outputs.push(SubOutput { out, inbox: Arc::new(Inbox::default()) });
+            outputs.push(SubOutput { out, inbox: Arc::new(Inbox::waking(waker.clone())) });
         }
         let stats = Arc::new(Stats::new(cfg.publish.len()));
         {
@@ -124,7 +134,16 @@ impl Agent for Ros2 {
                 v
             });
         }
-        Ok(Ros2 { cfg, inputs, outputs, stats, tx: None, stop: Arc::new(AtomicBool::new(false)), link_thread: None })
+        Ok(Ros2 {
+            cfg,
+            inputs,
+            outputs,
+            stats,
+            tx: None,
+            stop: Arc::new(AtomicBool::new(false)),
+            link_thread: None,
+            waker,
+        })
     }
 
     fn start(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
@@ -153,6 +172,8 @@ impl Agent for Ros2 {
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
         let now = ctx.now_ns();
         let epoch = convert::epoch_now_ns();
+        // an input that had more than a batch waiting: step again at once
+        let mut more = false;
         for (i, (input, spec)) in self.inputs.iter_mut().zip(&self.cfg.publish).enumerate() {
             let mut encoded: Vec<Vec<u8>> = Vec::new();
             let mut failed = None;
@@ -161,42 +182,36 @@ impl Agent for Ros2 {
                 Err(e) => failed = Some(e),
             };
             let (frame, child) = (spec.frame_id.as_str(), spec.child_frame_id.as_str());
-            match input {
-                PubInput::Odometry(inp) => {
-                    inp.drain_up_to(BATCH, |_, o| {
-                        let stamp = convert::ros_stamp(o.stamp_ns, now, epoch);
-                        push(if spec.map == PubMap::OdometryToTf {
-                            convert::odometry_to_tf(o, stamp, frame, child).to_cdr()
-                        } else {
-                            convert::odometry_to_ros(o, stamp, frame, child).to_cdr()
-                        })
-                    });
-                }
-                PubInput::Truth(inp) => {
-                    inp.drain_up_to(BATCH, |_, t| {
-                        let stamp = convert::ros_stamp(t.stamp_ns, now, epoch);
-                        push(convert::truth_to_ros(t, stamp, frame, child).to_cdr())
-                    });
-                }
-                PubInput::Velocity(inp) => {
-                    inp.drain_up_to(BATCH, |_, c| push(convert::velocity_to_twist(c).to_cdr()));
-                }
-                PubInput::Sonar(inp) => {
-                    inp.drain_up_to(BATCH, |_, s| {
-                        let stamp = convert::ros_stamp(s.stamp_ns, now, epoch);
-                        if spec.map == PubMap::SonarToRange {
-                            for r in convert::sonar_to_ranges(s, stamp, frame) {
-                                push(r.to_cdr());
-                            }
-                        } else {
-                            push(convert::sonar_to_scan(s, stamp, frame).to_cdr())
+            // how many samples the input gave (the ring and the layouts' drain: all there are)
+            let taken = match input {
+                PubInput::Odometry(inp) => inp.drain_up_to(BATCH, |_, o| {
+                    let stamp = convert::ros_stamp(o.stamp_ns, now, epoch);
+                    push(if spec.map == PubMap::OdometryToTf {
+                        convert::odometry_to_tf(o, stamp, frame, child).to_cdr()
+                    } else {
+                        convert::odometry_to_ros(o, stamp, frame, child).to_cdr()
+                    })
+                }),
+                PubInput::Truth(inp) => inp.drain_up_to(BATCH, |_, t| {
+                    let stamp = convert::ros_stamp(t.stamp_ns, now, epoch);
+                    push(convert::truth_to_ros(t, stamp, frame, child).to_cdr())
+                }),
+                PubInput::Velocity(inp) => inp.drain_up_to(BATCH, |_, c| push(convert::velocity_to_twist(c).to_cdr())),
+                PubInput::Sonar(inp) => inp.drain_up_to(BATCH, |_, s| {
+                    let stamp = convert::ros_stamp(s.stamp_ns, now, epoch);
+                    if spec.map == PubMap::SonarToRange {
+                        for r in convert::sonar_to_ranges(s, stamp, frame) {
+                            push(r.to_cdr());
                         }
-                    });
-                }
+                    } else {
+                        push(convert::sonar_to_scan(s, stamp, frame).to_cdr())
+                    }
+                }),
                 PubInput::User(inp) => {
                     if let Some(m) = &spec.user {
                         inp.drain(|meta, b| push(m.encode(b, convert::ros_stamp(meta.stamp_ns, now, epoch), frame)));
                     }
+                    0
                 }
                 PubInput::Frames(ring) => {
                     // the newest frame only, read in place from the ring and
@@ -215,8 +230,10 @@ impl Agent for Ros2 {
                         Err(agent_sdk::memory::MemoryError::Read(e)) => tracing::debug!(error = %e, "frame skipped"),
                         Err(e) => return Err(e.into()),
                     }
+                    0
                 }
-            }
+            };
+            more |= taken >= BATCH;
             if let Some(e) = failed {
                 tracing::warn!(topic = %spec.topic, error = %e, "a sample could not be written as CDR");
             }
@@ -244,6 +261,9 @@ impl Agent for Ros2 {
                     _ => o.inbox.refuse("a message of another mapping"),
                 }
             }
+        }
+        if more {
+            self.waker.wake();
         }
         Ok(())
     }

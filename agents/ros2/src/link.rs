@@ -7,7 +7,9 @@
 //! that Zenoh's runtime (started by the session) never competes with the
 //! robot's real-time tasks. The task hands it CDR bytes through a bounded
 //! channel ([`Outgoing`]); the subscribers' callbacks leave what arrives in a
-//! bounded [`Inbox`] per topic, which the task empties every step.
+//! bounded [`Inbox`] per topic and wake the event-driven task through the
+//! agent's waker ([`agent_sdk::Waker`]); the task empties the inboxes in the
+//! step that wake makes.
 //!
 //! A transient-local topic (`durability = "transient_local"`, and
 //! /tf_static) keeps its last `depth` messages, attachments included, and
@@ -110,10 +112,14 @@ pub enum Arrived {
     Sample(Vec<u8>),
 }
 
-/// What one subscription received, for the task; and its counters.
+/// What one subscription received, for the task; and its counters. Each
+/// message put wakes the task through the agent's waker, so that it steps
+/// at once (the wakes coalesce: one step takes all that waits).
 #[derive(Debug, Default)]
 pub struct Inbox {
     queue: Mutex<VecDeque<Arrived>>,
+    /// wakes the agent's event-driven task (`None`: nothing to wake)
+    waker: Option<agent_sdk::Waker>,
     received: AtomicU64,
     refused: AtomicU64,
     overflow: AtomicU64,
@@ -121,15 +127,26 @@ pub struct Inbox {
 }
 
 impl Inbox {
-    /// Keeps a decoded message (dropping the oldest when full).
+    /// An inbox whose messages wake the task through `waker`.
+    pub fn waking(waker: agent_sdk::Waker) -> Self {
+        Inbox { waker: Some(waker), ..Inbox::default() }
+    }
+
+    /// Keeps a decoded message (dropping the oldest when full), then wakes
+    /// the task.
     pub fn put(&self, t: Arrived) {
         self.received.fetch_add(1, Ordering::Relaxed);
-        let mut q = lock(&self.queue);
-        if q.len() >= INBOX {
-            q.pop_front();
-            self.overflow.fetch_add(1, Ordering::Relaxed);
+        {
+            let mut q = lock(&self.queue);
+            if q.len() >= INBOX {
+                q.pop_front();
+                self.overflow.fetch_add(1, Ordering::Relaxed);
+            }
+            q.push_back(t);
         }
-        q.push_back(t);
+        if let Some(w) = &self.waker {
+            w.wake();
+        }
     }
 
     /// Everything waiting, oldest first.

@@ -3,8 +3,8 @@
 //!
 //! Event-driven with no input, started suspended: its one step (at `nerve
 //! resume`) runs the whole schedule: `2 * count` events after
-//! pseudo-random gaps (so that they fall at every phase of the `ros2`
-//! agent's periodic step), image and Twist events in turn:
+//! pseudo-random gaps (so that the agent is idle when each comes), image
+//! and Twist events in turn:
 //!
 //! * image event `i`: a 640x480 rgb8 frame into the ring of port `frames`,
 //!   its first 8 bytes `i`;
