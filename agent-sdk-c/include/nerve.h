@@ -125,8 +125,8 @@ typedef enum nerve_status {
    */
   NERVE_AGENT_FAILED = 12,
   /*
-   A sequence loan of more elements than the output's `max_len`:
-   nothing was loaned.
+   A sequence loan of more elements than the output's (or the
+   service's) `max_len`: nothing was loaned.
    */
   NERVE_TOO_LONG = 13,
   /*
@@ -141,6 +141,13 @@ typedef enum nerve_status {
    */
   NERVE_NOT_IN_HARNESS = 15,
 } nerve_status;
+
+/*
+ The answer to one request of a sequence service, given to a
+ [`nerve_answer_seq_fn`] during its call only: loan it with
+ [`nerve_answer_loan`], then write it in place. Opaque.
+ */
+typedef struct nerve_answer nerve_answer;
 
 /*
  What `start`, `step` and `stop` get: the agent's ports and the
@@ -290,27 +297,6 @@ typedef struct nerve_agent_vtable {
 typedef int (*nerve_answer_fn)(const void *request, void *answer, void *user);
 
 /*
- A received sequence sample, read in place: its header (`header`, NULL
- for a sequence without one), its `len` elements at `items` (NULL when
- `len` is 0). Both point into shared memory, read-only, valid until the
- callback that got them returns.
- */
-typedef struct nerve_seq {
-  /*
-   The sample's header (the header struct), or NULL if it has none.
-   */
-  const void *header;
-  /*
-   Its first element (an array of `len` element structs), or NULL if `len` is 0.
-   */
-  const void *items;
-  /*
-   How many elements it holds.
-   */
-  size_t len;
-} nerve_seq;
-
-/*
  A loaned sequence sample to write in place before `nerve_send`: its
  header (zeroed; NULL for a sequence without one) and room for `len`
  elements at `items` (NULL when `len` is 0), which hold what the slot
@@ -330,6 +316,38 @@ typedef struct nerve_seq_loan {
    */
   size_t len;
 } nerve_seq_loan;
+
+/*
+ Answers one request of a sequence service: reads the request (the
+ request struct), loans the answer at the length it needs with
+ [`nerve_answer_loan`] and writes its header and elements in place.
+ Returns 0 to send it (an answer never loaned is one of 0 elements and a
+ zeroed header; after a loan refused past `max_len`, its caller is told
+ the answer was too long); anything else drops the request unanswered
+ (its caller sees the server gone).
+ */
+typedef int (*nerve_answer_seq_fn)(const void *request, struct nerve_answer *answer, void *user);
+
+/*
+ A received sequence sample, read in place: its header (`header`, NULL
+ for a sequence without one), its `len` elements at `items` (NULL when
+ `len` is 0). Both point into shared memory, read-only, valid until the
+ callback that got them returns.
+ */
+typedef struct nerve_seq {
+  /*
+   The sample's header (the header struct), or NULL if it has none.
+   */
+  const void *header;
+  /*
+   Its first element (an array of `len` element structs), or NULL if `len` is 0.
+   */
+  const void *items;
+  /*
+   How many elements it holds.
+   */
+  size_t len;
+} nerve_seq;
 
 #ifdef __cplusplus
 extern "C" {
@@ -657,6 +675,117 @@ enum nerve_status nerve_call_wait(struct nerve_ctx *ctx,
                                   size_t size);
 
 /*
+ Declares service `name`: requests of layout `request` (a fixed-size
+ `nerve_type`) answered with sequences of `element` after `header`
+ (NULL: none), at most `max_len` elements an answer; element and header
+ are the agent's own structs (`NERVE_TYPE`) or built-ins
+ (`NERVE_BUILTIN`), as for `nerve_setup_output_seq`. It is the service
+ a Rust agent's `setup.serve_seq::<Req, T, H>(name, max_len)` of those
+ layouts makes: `nerve call AGENT/NAME '<json>'` and any client of those
+ layouts call it. A request wakes the agent's task like an input;
+ answer in `step` with [`nerve_serve_seq`]. Writes its handle to `*port`.
+
+ Call it in `init` only, with the `setup` given to it, from that thread.
+ The layouts and strings are read during the call and not kept.
+
+ # Safety
+ `setup` is null or the pointer given to `init`; `name` is null or a
+ NUL-terminated string; `request`, `element` and `header` are null or
+ valid `nerve_type`s; `port` is null or writable.
+ */
+enum nerve_status nerve_setup_serve_seq(struct nerve_setup *setup,
+                                        const char *name,
+                                        const struct nerve_type *request,
+                                        const struct nerve_type *element,
+                                        const struct nerve_type *header,
+                                        size_t max_len,
+                                        nerve_port *port);
+
+/*
+ Declares client `name` of a service of requests `request` answered
+ with sequences of `element` after `header` (NULL: none), as
+ [`nerve_setup_serve_seq`] takes them; each call waits at most
+ `timeout_ns` for its answer (0: the SDK's default), at most 16 calls in
+ flight. Send with `nerve_call`, take answers with
+ [`nerve_call_take_seq`]. It calls the service it is wired to (`nerve
+ connect AGENT/NAME SERVER/SERVICE`, or `[[connect]]` in a launch file).
+ Writes its handle to `*port`.
+
+ # Safety
+ As for [`nerve_setup_serve_seq`].
+ */
+enum nerve_status nerve_setup_client_seq(struct nerve_setup *setup,
+                                         const char *name,
+                                         const struct nerve_type *request,
+                                         const struct nerve_type *element,
+                                         const struct nerve_type *header,
+                                         uint64_t timeout_ns,
+                                         nerve_port *port);
+
+/*
+ Loans `answer` at `n` elements and writes where to write it to
+ `*loan`: its header (zeroed; NULL for a sequence without one), room for
+ `n` elements (zeroed; NULL when `n` is 0) and `n`. A second loan
+ replaces the first. Past the service's `max_len`, `NERVE_TOO_LONG`:
+ nothing is loaned (`*loan` is zeroed), and if the answer function
+ returns 0 its caller is told the answer was too long.
+
+ Call it from inside the answer function only, with the `answer` it got.
+
+ # Safety
+ `answer` is null or the pointer given to the running answer function;
+ `loan` is null or writable.
+ */
+enum nerve_status nerve_answer_loan(struct nerve_answer *answer,
+                                    size_t n,
+                                    struct nerve_seq_loan *loan);
+
+/*
+ Answers the requests waiting on sequence service `port` (at most 64;
+ the rest wait for the next step, which they wake): `answer` is called
+ once per request, in this thread, before this returns, with the
+ request, a [`nerve_answer`] to loan and fill, and `user`. Writes how
+ many were answered to `*answered` (may be NULL). When `answer` returns
+ non-zero, that request is dropped unanswered, the others are kept for
+ the next call, and the status is `NERVE_AGENT_FAILED`. When an answer
+ was refused past `max_len`, the other requests are answered and the
+ status is `NERVE_TOO_LONG`.
+
+ Call it from inside a `start`, `step` or `stop` callback, in its thread.
+ The pointers `answer` gets are valid during its call only.
+
+ # Safety
+ `ctx` is null or the pointer given to the running callback; `answer`
+ is null or a function of this signature, safe to call with `user`;
+ `answered` is null or writable.
+ */
+enum nerve_status nerve_serve_seq(struct nerve_ctx *ctx,
+                                  nerve_port port,
+                                  nerve_answer_seq_fn answer,
+                                  void *user,
+                                  size_t *answered);
+
+/*
+ Takes the oldest finished call of sequence client `port`: writes its
+ id to `*call` (may be NULL) and its answer to `*answer`: the header
+ (NULL for a sequence without one), the elements (NULL when there are
+ none) and their number, valid until the next `nerve_call_take_seq` on
+ this client. `NERVE_NO_SAMPLE` while none has finished;
+ `NERVE_CALL_FAILED` for a call that ended without an answer (timed out,
+ its server gone, the client unwired, or its answer refused as longer
+ than the service's `max_len`), `*call` naming it and the message saying
+ why. Never blocks.
+
+ # Safety
+ `ctx` is null or the pointer given to the running callback; `answer`
+ is null or writable; `call` is null or writable.
+ */
+enum nerve_status nerve_call_take_seq(struct nerve_ctx *ctx,
+                                      nerve_port port,
+                                      uint64_t *call,
+                                      struct nerve_seq *answer);
+
+/*
  Starts C agent `agent` in a test harness: runs its `init` (its ports
  bound to in-memory queues, no router, no shared memory), applies the
  `n_params` settings of `params` (`"KEY=VALUE"`, as `--param` is), runs
@@ -781,6 +910,47 @@ enum nerve_status nerve_harness_set_period(struct nerve_harness *h, uint64_t per
  `h` is null or a live harness; `now_ns` and `cycles` are null or writable.
  */
 enum nerve_status nerve_harness_clock(struct nerve_harness *h, uint64_t *now_ns, uint64_t *cycles);
+
+/*
+ Calls service `service` of the agent with a copy of the `len` bytes at
+ `request` (the request struct: another size is `NERVE_LAYOUT_MISMATCH`)
+ and writes the call's id to `*call` (may be NULL). The request waits for
+ the agent's next step (`nerve_harness_step`, or a deadline of
+ `nerve_harness_advance`), which answers it; take the answer with
+ [`nerve_harness_call_take`].
+
+ # Safety
+ `h` is null or a live harness; `service` is null or a NUL-terminated
+ string; `request` is null or readable for `len` bytes; `call` is null
+ or writable.
+ */
+enum nerve_status nerve_harness_call(struct nerve_harness *h,
+                                     const char *service,
+                                     const void *request,
+                                     size_t len,
+                                     uint64_t *call);
+
+/*
+ Takes the oldest answer service `service` gave the test's calls: writes
+ its call's id to `*call` (may be NULL), copies the answer into `dst`
+ (`size` bytes: at least the answer's; a sequence answer is its
+ sample's bytes, header then elements) and writes its size to `*len`.
+ `NERVE_NO_SAMPLE` when no answer is left; `NERVE_CALL_FAILED` for a
+ call that ended without one (its answer refused past the service's
+ `max_len`, or the answer function failed), `*call` naming it and the
+ message saying why.
+
+ # Safety
+ `h` is null or a live harness; `service` is null or a NUL-terminated
+ string; `dst` is null or writable for `size` bytes; `call` and `len`
+ are null or writable.
+ */
+enum nerve_status nerve_harness_call_take(struct nerve_harness *h,
+                                          const char *service,
+                                          uint64_t *call,
+                                          void *dst,
+                                          size_t size,
+                                          size_t *len);
 
 /*
  As `nerve_loan`, but the slot is not zeroed: `*data` points

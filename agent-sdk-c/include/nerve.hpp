@@ -219,6 +219,33 @@ class client {
   nerve_port port_ = 0;
 };
 
+/* A service this agent answers: requests Req, answers of a Header and
+ * at most the declared max_len of Elem (a Rust serve_seq's). */
+template <class Req, class Elem, class Header = no_header>
+class seq_server {
+ public:
+  seq_server() = default;
+  nerve_port handle() const noexcept { return port_; }
+
+ private:
+  friend class setup;
+  explicit seq_server(nerve_port p) : port_(p) {}
+  nerve_port port_ = 0;
+};
+
+/* A client of another agent's service of Req answered with sequences. */
+template <class Req, class Elem, class Header = no_header>
+class seq_client {
+ public:
+  seq_client() = default;
+  nerve_port handle() const noexcept { return port_; }
+
+ private:
+  friend class setup;
+  explicit seq_client(nerve_port p) : port_(p) {}
+  nerve_port port_ = 0;
+};
+
 /* What init declares ports and parameters on; valid during init only. */
 class setup {
  public:
@@ -300,6 +327,28 @@ class setup {
     nerve_type q = part<Req>(), a = part<Resp>();
     detail::check(nerve_setup_client(s_, name, &q, &a, timeout_ns, &p), "nerve_setup_client");
     return nerve::client<Req, Resp>(p);
+  }
+
+  /* Declares service `name` answered with sequences of at most `max_len`
+   * Elem after a Header, answered in a step with context::serve_seq. */
+  template <class Req, class Elem, class Header = no_header>
+  nerve::seq_server<Req, Elem, Header> serve_seq(const char *name, std::size_t max_len) {
+    nerve_port p = 0;
+    nerve_type q = part<Req>(), e = part<Elem>(), h = part<Header>();
+    detail::check(nerve_setup_serve_seq(s_, name, &q, &e, header_or_null<Header>(h), max_len, &p),
+                  "nerve_setup_serve_seq");
+    return nerve::seq_server<Req, Elem, Header>(p);
+  }
+
+  /* Declares client `name` of a service of Req answered with sequences;
+   * each call waits at most `timeout_ns` (0: the default) for its answer. */
+  template <class Req, class Elem, class Header = no_header>
+  nerve::seq_client<Req, Elem, Header> client_seq(const char *name, std::uint64_t timeout_ns = 0) {
+    nerve_port p = 0;
+    nerve_type q = part<Req>(), e = part<Elem>(), h = part<Header>();
+    detail::check(nerve_setup_client_seq(s_, name, &q, &e, header_or_null<Header>(h), timeout_ns, &p),
+                  "nerve_setup_client_seq");
+    return nerve::seq_client<Req, Elem, Header>(p);
   }
 
   nerve_setup *raw() const noexcept { return s_; }
@@ -409,6 +458,51 @@ class seq_loan {
   Header *h_;
   Elem *items_;
   std::size_t n_;
+};
+
+/* A sequence answer loaned at size() elements, written in place during
+ * the answer function: header() zeroed, the elements zeroed. */
+template <class Elem, class Header = no_header>
+class seq_answer {
+ public:
+  Header &header() const noexcept { return *h_; }
+  Elem *begin() const noexcept { return items_; }
+  Elem *end() const noexcept { return items_ + n_; }
+  Elem &operator[](std::size_t i) const noexcept { return items_[i]; }
+  std::size_t size() const noexcept { return n_; }
+
+ private:
+  template <class, class>
+  friend class answer_loan;
+  explicit seq_answer(const nerve_seq_loan &l) noexcept
+      : h_(static_cast<Header *>(l.header)), items_(static_cast<Elem *>(l.items)), n_(l.len) {}
+  Header *h_;
+  Elem *items_;
+  std::size_t n_;
+};
+
+/* The answer to one request of a seq_server, during context::serve_seq's
+ * function: loan(n) it at the length it needs. */
+template <class Elem, class Header = no_header>
+class answer_loan {
+ public:
+  /* The answer at `n` elements to write in place; empty optional past the
+   * service's max_len (nothing loaned: the caller is told its answer was
+   * too long). Not loaned at all, the answer is 0 elements, header zeroed. */
+  std::optional<seq_answer<Elem, Header>> loan(std::size_t n) {
+    nerve_seq_loan l{};
+    nerve_status s = nerve_answer_loan(a_, n, &l);
+    if (s == NERVE_TOO_LONG) {
+      return std::nullopt;
+    }
+    detail::check(s, "nerve_answer_loan");
+    return seq_answer<Elem, Header>(l);
+  }
+
+ private:
+  friend class context;
+  explicit answer_loan(nerve_answer *a) noexcept : a_(a) {}
+  nerve_answer *a_;
 };
 
 /* A finished call of a client: its id, and its answer or why none came. */
@@ -558,6 +652,68 @@ class context {
     detail::check(s, "nerve_call_take");
     f.answer = r;
     return f;
+  }
+
+  /* Answers the requests waiting on `srv` with `f(const Req &,
+   * answer_loan<Elem, Header> &)`, called here once per request, which
+   * loans the answer and writes it in place; returns how many. An
+   * exception from `f` drops that request unanswered and is thrown on from
+   * here; an answer refused past max_len throws nerve::error
+   * (NERVE_TOO_LONG) once the others are answered. */
+  template <class Req, class Elem, class Header, class F>
+  std::size_t serve_seq(const seq_server<Req, Elem, Header> &srv, F &&f) {
+    struct answering {
+      F *f;
+      std::exception_ptr thrown;
+    } c{&f, nullptr};
+    auto answer = [](const void *req, nerve_answer *ans, void *user) -> int {
+      answering *k = static_cast<answering *>(user);
+      try {
+        answer_loan<Elem, Header> loan(ans);
+        (*k->f)(*static_cast<const Req *>(req), loan);
+        return 0;
+      } catch (...) {
+        k->thrown = std::current_exception();
+        return 1;
+      }
+    };
+    std::size_t n = 0;
+    nerve_status s = nerve_serve_seq(c_, srv.handle(), answer, &c, &n);
+    if (c.thrown) {
+      std::rethrow_exception(c.thrown);
+    }
+    detail::check(s, "nerve_serve_seq");
+    return n;
+  }
+
+  /* Sends `req` on the sequence client `cl`, as call does. */
+  template <class Req, class Elem, class Header>
+  std::uint64_t call(const seq_client<Req, Elem, Header> &cl, const Req &req) {
+    std::uint64_t id = 0;
+    detail::check(nerve_call(c_, cl.handle(), &req, sizeof req, &id), "nerve_call");
+    return id;
+  }
+
+  /* The oldest finished call of `cl`: its id, and its answer read in place
+   * (valid until the next take_answer on `cl`) or why none came; empty
+   * optional while none has finished. Never blocks. */
+  template <class Req, class Elem, class Header>
+  std::optional<std::pair<std::uint64_t, std::optional<seq_view<Elem, Header>>>> take_answer(
+      const seq_client<Req, Elem, Header> &cl, std::string *error = nullptr) {
+    std::uint64_t id = 0;
+    nerve_seq s{};
+    nerve_status st = nerve_call_take_seq(c_, cl.handle(), &id, &s);
+    if (st == NERVE_NO_SAMPLE) {
+      return std::nullopt;
+    }
+    if (st == NERVE_CALL_FAILED) {
+      if (error != nullptr) {
+        *error = nerve_last_error();
+      }
+      return std::make_pair(id, std::optional<seq_view<Elem, Header>>());
+    }
+    detail::check(st, "nerve_call_take_seq");
+    return std::make_pair(id, std::optional<seq_view<Elem, Header>>(seq_view<Elem, Header>(s)));
   }
 
   /* Calls and waits in the step for the answer, at most the client's

@@ -22,6 +22,7 @@
 
 use crate::error::{Failure, guard, nerve_status};
 use crate::own_type::{nerve_type, part_schema};
+use crate::seq::sequence;
 use crate::{live, nerve_ctx, nerve_port, nerve_setup, text};
 use agent_sdk::AgentError;
 use agent_sdk::dynamic::{SchemaClient, SchemaServer, ServeError};
@@ -32,12 +33,12 @@ use std::time::{Duration, Instant};
 
 /// The first server handle: servers are `SERVER_BASE`, ... (apart from
 /// inputs, outputs and clients, so one given for another is refused).
-const SERVER_BASE: nerve_port = 0x0002_0000;
+pub(crate) const SERVER_BASE: nerve_port = 0x0002_0000;
 /// The first client handle.
 const CLIENT_BASE: nerve_port = 0x0003_0000;
 /// The most requests one [`nerve_serve`] answers; what arrives meanwhile
 /// waits for the next step, which its wake-up brings.
-const SERVE_AT_MOST: usize = 64;
+pub(crate) const SERVE_AT_MOST: usize = 64;
 
 /// A finished call as the SDK gives it.
 type Finished = (agent_sdk::port::CallId, Result<Vec<u8>, CallError>);
@@ -45,17 +46,19 @@ type Finished = (agent_sdk::port::CallId, Result<Vec<u8>, CallError>);
 /// A client and the finished calls [`nerve_call_wait`] took while it waited
 /// for its own, for [`nerve_call_take`] to give out.
 #[derive(Debug)]
-struct ClientPort {
-    client: SchemaClient,
-    stash: VecDeque<Finished>,
+pub(crate) struct ClientPort {
+    pub(crate) client: SchemaClient,
+    pub(crate) stash: VecDeque<Finished>,
+    /// the last sequence answer `nerve_call_take_seq` gave (8-aligned), valid until the next
+    pub(crate) held: Vec<u64>,
 }
 
 /// The call ports of a C agent: `None` for one declared in the test
 /// harness, which does not carry calls.
 #[derive(Debug, Default)]
 pub(crate) struct Calls {
-    servers: Vec<Option<SchemaServer>>,
-    clients: Vec<Option<ClientPort>>,
+    pub(crate) servers: Vec<Option<SchemaServer>>,
+    pub(crate) clients: Vec<Option<ClientPort>>,
 }
 
 /// Answers one request: reads the request (`request`, the request
@@ -67,22 +70,31 @@ pub type nerve_answer_fn =
     Option<unsafe extern "C" fn(request: *const c_void, answer: *mut c_void, user: *mut c_void) -> c_int>;
 
 /// The port's index past `base`, or the failure naming what it is not.
-fn index(port: nerve_port, base: nerve_port, len: usize, what: &'static str) -> Result<usize, Failure> {
+pub(crate) fn index(port: nerve_port, base: nerve_port, len: usize, what: &'static str) -> Result<usize, Failure> {
     port.checked_sub(base)
         .and_then(|i| usize::try_from(i).ok())
         .filter(|i| *i < len)
         .ok_or(Failure::UnknownPort { port, what })
 }
 
+/// How a call port's answer is declared.
+pub(crate) enum AnswerDecl {
+    /// a fixed-size answer of this layout
+    Fixed(*const nerve_type),
+    /// a sequence of `element` after `header` (null: none); a service's
+    /// answers hold at most `max_len` elements
+    Seq { element: *const nerve_type, header: *const nerve_type, max_len: usize },
+}
+
 /// Declares a call port (`serve`: a service, else a client with `timeout_ns`).
 ///
 /// # Safety
-/// As for [`nerve_setup_serve`].
-unsafe fn declare_call(
+/// As for [`nerve_setup_serve`]; the types in `answer` null or valid.
+pub(crate) unsafe fn declare_call(
     setup: *mut nerve_setup,
     name: *const c_char,
     request: *const nerve_type,
-    answer: *const nerve_type,
+    answer: AnswerDecl,
     client_timeout_ns: Option<u64>,
     port: *mut nerve_port,
 ) -> Result<(), Failure> {
@@ -96,14 +108,22 @@ unsafe fn declare_call(
     let sdk = unsafe { setup.sdk.as_mut() }.ok_or(Failure::Stale("setup"))?;
     // SAFETY: the caller's contract
     let request = unsafe { part_schema(request, name, "request") }?;
-    // SAFETY: the caller's contract
-    let answer = unsafe { part_schema(answer, name, "answer") }?;
+    let (answer, max_len) = match answer {
+        // SAFETY: the caller's contract
+        AnswerDecl::Fixed(answer) => (unsafe { part_schema(answer, name, "answer") }?, None),
+        // SAFETY: the caller's contract
+        AnswerDecl::Seq { element, header, max_len } => (unsafe { sequence(name, element, header) }?, Some(max_len)),
+    };
     let sdk_err = |source| Failure::Sdk { port: name.to_owned(), source };
     // a call port in the test harness: kept, refused when used
     let harness = |e: &AgentError| matches!(e, AgentError::Call(CallError::NotInHarness { .. }));
     let (base, index) = match client_timeout_ns {
         None => {
-            let server = match sdk.serve_of(name, request, answer) {
+            let server = match max_len {
+                None => sdk.serve_of(name, request, answer),
+                Some(max_len) => sdk.serve_seq_of(name, request, answer, max_len),
+            };
+            let server = match server {
                 Ok(s) => Some(s),
                 Err(e) if harness(&e) => None,
                 Err(e) => return Err(sdk_err(e)),
@@ -115,7 +135,7 @@ unsafe fn declare_call(
             let timeout = if ns == 0 { CallOptions::default().timeout } else { Duration::from_nanos(ns) };
             let options = CallOptions { timeout, ..CallOptions::default() };
             let client = match sdk.client_of(name, request, answer, options) {
-                Ok(client) => Some(ClientPort { client, stash: VecDeque::new() }),
+                Ok(client) => Some(ClientPort { client, stash: VecDeque::new(), held: Vec::new() }),
                 Err(e) if harness(&e) => None,
                 Err(e) => return Err(sdk_err(e)),
             };
@@ -152,7 +172,7 @@ pub unsafe extern "C" fn nerve_setup_serve(
     port: *mut nerve_port,
 ) -> nerve_status {
     // SAFETY: the caller's contract
-    guard(|| unsafe { declare_call(setup, name, request, answer, None, port) })
+    guard(|| unsafe { declare_call(setup, name, request, AnswerDecl::Fixed(answer), None, port) })
 }
 
 /// Declares client `name` of a service of layouts `request` and `answer`
@@ -174,7 +194,7 @@ pub unsafe extern "C" fn nerve_setup_client(
     port: *mut nerve_port,
 ) -> nerve_status {
     // SAFETY: the caller's contract
-    guard(|| unsafe { declare_call(setup, name, request, answer, Some(timeout_ns), port) })
+    guard(|| unsafe { declare_call(setup, name, request, AnswerDecl::Fixed(answer), Some(timeout_ns), port) })
 }
 
 /// Answers the requests waiting on service `port` (at most 64; the rest
@@ -212,6 +232,13 @@ pub unsafe extern "C" fn nerve_serve(
         let ctx = unsafe { live(ctx) }?;
         let i = index(port, SERVER_BASE, ctx.calls.servers.len(), "serve")?;
         let server = ctx.calls.servers.get(i).and_then(Option::as_ref).ok_or(Failure::NotInHarness(port))?;
+        if server.response_schema().sequence_shape().is_some() {
+            return Err(Failure::WrongKind {
+                port,
+                what: "a service of sequence answers",
+                use_instead: "nerve_serve_seq",
+            });
+        }
         let result = server.serve_up_to(SERVE_AT_MOST, |request, slot| {
             // SAFETY: `f` is the caller's function of this signature; the
             // request's bytes and the answer's slot (zeroed, of the answer
@@ -236,7 +263,7 @@ pub unsafe extern "C" fn nerve_serve(
 ///
 /// # Safety
 /// `ctx` is null or a callback's context.
-unsafe fn client<'a>(ctx: *mut nerve_ctx, port: nerve_port) -> Result<&'a mut ClientPort, Failure> {
+pub(crate) unsafe fn client<'a>(ctx: *mut nerve_ctx, port: nerve_port) -> Result<&'a mut ClientPort, Failure> {
     // SAFETY: the caller's contract
     let ctx = unsafe { live(ctx) }?;
     let i = index(port, CLIENT_BASE, ctx.calls.clients.len(), "client")?;
@@ -302,6 +329,13 @@ fn check_answer(c: &ClientPort, port: nerve_port, answer: *mut c_void, size: usi
         return Err(Failure::Null("answer"));
     }
     let schema = c.client.response_schema();
+    if schema.sequence_shape().is_some() {
+        return Err(Failure::WrongKind {
+            port,
+            what: "a client of sequence answers",
+            use_instead: "nerve_call_take_seq",
+        });
+    }
     if size != schema.size {
         return Err(Failure::CallSize {
             port,

@@ -42,8 +42,8 @@ pub enum nerve_status {
     /// The agent's own callback (`init`, `start`, `step`) returned an error
     /// in a test harness; the message is the agent's.
     NERVE_AGENT_FAILED = 12,
-    /// A sequence loan of more elements than the output's `max_len`:
-    /// nothing was loaned.
+    /// A sequence loan of more elements than the output's (or the
+    /// service's) `max_len`: nothing was loaned.
     NERVE_TOO_LONG = 13,
     /// A call ended without an answer (timed out, its server gone, the
     /// client unwired or not wired, no server, too many in flight); the
@@ -122,6 +122,8 @@ pub(crate) enum Failure {
         "service {port}: the answer function returned {code}; that request was dropped unanswered (its caller sees the server gone)"
     )]
     AnswerFailed { port: u32, code: i32 },
+    #[error("port {port} is {what}: use {use_instead} for it")]
+    WrongKind { port: u32, what: &'static str, use_instead: &'static str },
     #[error("too many ports")]
     TooManyPorts,
     #[error("port {port:?} cannot be declared")]
@@ -165,7 +167,7 @@ impl Failure {
                 NERVE_INVALID_ARGUMENT
             }
             Failure::Stale(_) => NERVE_STALE,
-            Failure::UnknownPort { .. } => NERVE_UNKNOWN_PORT,
+            Failure::UnknownPort { .. } | Failure::WrongKind { .. } => NERVE_UNKNOWN_PORT,
             Failure::UnknownType(_) => NERVE_UNKNOWN_TYPE,
             Failure::Layout { .. } => NERVE_LAYOUT_MISMATCH,
             Failure::NoSample(_) | Failure::NoOutput(_) => NERVE_NO_SAMPLE,

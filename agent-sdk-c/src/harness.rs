@@ -27,9 +27,11 @@ use crate::error::nerve_status;
 /// functions only.
 #[allow(non_camel_case_types)]
 pub struct nerve_harness {
-    h: Harness<CAgent>,
+    pub(crate) h: Harness<CAgent>,
     /// what each output sent that the test has not read yet, oldest first
     unread: HashMap<String, VecDeque<Vec<u8>>>,
+    /// each service's answers to the test's calls not taken yet, oldest first
+    pub(crate) answers: HashMap<String, VecDeque<crate::harness_call::Answered>>,
 }
 
 impl std::fmt::Debug for nerve_harness {
@@ -83,7 +85,7 @@ impl Drop for Starting {
 ///
 /// # Safety
 /// `h` is null or a harness from [`nerve_harness_new`] not yet freed.
-unsafe fn harness<'a>(h: *mut nerve_harness) -> Result<&'a mut nerve_harness, Failure> {
+pub(crate) unsafe fn harness<'a>(h: *mut nerve_harness) -> Result<&'a mut nerve_harness, Failure> {
     // SAFETY: the caller's contract
     unsafe { h.as_mut() }.ok_or(Failure::Null("harness"))
 }
@@ -142,7 +144,7 @@ pub unsafe extern "C" fn nerve_harness_new(
             builder.start()
         };
         let h = started.map_err(|source| Failure::Harness { source })?;
-        *out = Box::into_raw(Box::new(nerve_harness { h, unread: HashMap::new() }));
+        *out = Box::into_raw(Box::new(nerve_harness { h, unread: HashMap::new(), answers: HashMap::new() }));
         Ok(())
     })
 }

@@ -29,8 +29,10 @@
 //! cbindgen from this file (`tests/header.rs` keeps it current).
 
 mod call;
+mod call_seq;
 mod error;
 mod harness;
+mod harness_call;
 mod loan;
 mod own_type;
 mod seq;
@@ -44,6 +46,7 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 pub use call::nerve_answer_fn;
+pub use call_seq::{nerve_answer, nerve_answer_seq_fn};
 pub use error::nerve_status;
 pub use harness::nerve_harness;
 pub use own_type::{

@@ -54,7 +54,11 @@ pub struct nerve_seq_loan {
 ///
 /// # Safety
 /// `element` and `header` are null or valid `nerve_type`s.
-unsafe fn sequence(port: &str, element: *const nerve_type, header: *const nerve_type) -> Result<Schema, Failure> {
+pub(crate) unsafe fn sequence(
+    port: &str,
+    element: *const nerve_type,
+    header: *const nerve_type,
+) -> Result<Schema, Failure> {
     // SAFETY: the caller's contract
     let element = unsafe { part_schema(element, port, "element") }?;
     let header = if header.is_null() {

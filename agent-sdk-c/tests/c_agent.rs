@@ -29,7 +29,8 @@ const LENGTHS: [usize; 4] = [0, 1, 400, 401];
 /// relay's launch file: the C agent `cseq` (`examples/c/seq_call.c`, built
 /// at `exe`), the Rust `detector` of its sequence type wired to it both
 /// ways, a Rust server (`nerve-caller --serve`) its client calls and a Rust
-/// client (`nerve-caller`) that calls its service.
+/// client (`nerve-caller`) that calls its service, and the same two of a
+/// call answered with a sequence (`--seq`: `Seq<Scalar, Tick>`).
 fn seq_call_agents(exe: &Path) -> String {
     format!(
         r#"
@@ -47,8 +48,26 @@ name = "k"
 kind = "caller"
 
 [[agent]]
+name = "ss"
+kind = "caller"
+args = ["--serve", "--seq"]
+
+[[agent]]
+name = "ks"
+kind = "caller"
+args = ["--seq"]
+
+[[agent]]
 name = "cseq"
 exe = "{}"
+
+[[connect]]
+from = "cseq/planner_seq"
+to = "ss/plan"
+
+[[connect]]
+from = "ks/planner"
+to = "cseq/plan_seq"
 
 [[connect]]
 from = "d/dets"
@@ -77,6 +96,9 @@ to = "cseq/plan"
 /// agent, and its loans past `max_len` refused; its service answers `nerve
 /// call` and a Rust client, and its client (one call in flight, and one
 /// that waits in the step now and then) is answered by a Rust server.
+/// Its sequence service answers a Rust `client_seq` and `nerve call`
+/// (past its max_len: refused, the caller told so), and its sequence
+/// client reads a Rust `serve_seq`'s answers in place.
 fn seq_call_cross(r: &Robot) {
     let want = Value::from("nerve::Seq<acme::Detection, acme::DetectionsHeader>");
     let dets_type = r.agent("cseq").and_then(|a| {
@@ -99,10 +121,13 @@ fn seq_call_cross(r: &Robot) {
             && d["answered"].as_u64() >= Some(3)
             && d["replies"].as_u64() >= Some(3)
             && d["waited"].as_u64() >= Some(1)
+            && d["seq_answered"].as_u64() >= Some(3)
+            && d["seq_replies"].as_u64() >= Some(3)
     };
     assert!(wait_until(Duration::from_secs(10), || done(&report(r))), "the C agent reports {}", report(r));
     let d = report(r);
-    assert_eq!((d["bad"].as_u64(), d["wrong"].as_u64()), (Some(0), Some(0)), "{d}");
+    assert_eq!((d["bad"].as_u64(), d["wrong"].as_u64(), d["seq_wrong"].as_u64()), (Some(0), Some(0), Some(0)), "{d}");
+    assert!(d["seq_largest"].as_u64() > Some(1), "sequence answers of many elements: {d}");
     assert!(d["refused"].as_u64() > Some(0), "a loan past max_len was refused: {d}");
 
     // the C service, to a Rust client and to `nerve call`
@@ -115,6 +140,26 @@ fn seq_call_cross(r: &Robot) {
     let out = r.ok(&["call", "cseq/plan", r#"{"seq": 21}"#]);
     let answer: Value = serde_json::from_str(&out).expect("the answer as JSON");
     assert_eq!(answer["value"].as_f64(), Some(42.0), "{out}");
+
+    // the C sequence service, to a Rust client_seq, to `nerve call`, and past its max_len
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("ks", "answered") >= 3),
+        "the Rust client_seq got no answers from the C service: {:?}",
+        r.figures("ks")
+    );
+    assert_eq!(r.figure("ks", "wrong"), "0", "{:?}", r.figures("ks"));
+    let out = r.ok(&["call", "cseq/plan_seq", r#"{"seq": 3, "stamp_ns": 8}"#]);
+    let answer: Value = serde_json::from_str(&out).expect("the answer as JSON");
+    assert_eq!(answer["header"]["seq"].as_u64(), Some(3), "{out}");
+    let values: Vec<_> = answer["items"].as_array().expect("items").iter().map(|i| i["value"].as_f64()).collect();
+    assert_eq!(values, [Some(0.0), Some(1.0), Some(2.0)], "{out}");
+    let refused = r.fails(&["call", "cseq/plan_seq", r#"{"seq": 501, "stamp_ns": 8}"#]);
+    assert!(refused.contains("refused") && refused.contains("500"), "{refused}");
+    assert!(
+        wait_until(Duration::from_secs(5), || report(r)["seq_refused"].as_u64() >= Some(1)),
+        "the C service counted no refusal: {}",
+        report(r)
+    );
 
     // each C sample at its own length, as nerve echo decodes it by the registered schema
     for s in r.echo("cseq/dets", 4) {

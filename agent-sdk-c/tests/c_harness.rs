@@ -62,7 +62,9 @@ fn the_c_relay_passes_its_harness_test() {
 
 /// The sequence-and-call agent's harness test (`examples/c/seq_call_test.c`):
 /// sequences of 0, 1 and 401 elements in, 0, 1 and 400 out at their own
-/// length, loans past `max_len` refused, and the misuse of every sequence
+/// length, loans past `max_len` refused, the test's calls of its services
+/// answered (a sequence written in place by the agent, one past its
+/// `max_len` refused, a fixed answer), and the misuse of every sequence
 /// and call function a status with a message; plain, then under ASan and
 /// UBSan with nothing reported.
 #[test]
@@ -75,7 +77,13 @@ fn the_c_sequence_agent_passes_its_harness_test_clean_under_asan() {
         let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
         assert!(!sanitizer_reports(&stderr), "{name}: a sanitizer reported:\n{stderr}");
         assert!(out.status.success() && stdout.contains("PASSED: 0 failure(s)"), "{name} failed:\n{stdout}\n{stderr}");
-        for said in ["1001 elements are more than its max_len of 1000", "not a sequence", "was used after"] {
+        for said in [
+            "1001 elements are more than its max_len of 1000",
+            "not a sequence",
+            "was used after",
+            "ok a sequence answer of 3 elements, written in place by the agent",
+            "refused its answer of 501 elements",
+        ] {
             assert!(stdout.contains(said), "no {said:?} in:\n{stdout}");
         }
     }
@@ -85,7 +93,8 @@ fn the_c_sequence_agent_passes_its_harness_test_clean_under_asan() {
 /// typed sequence ports of own element and header types, read with a
 /// range-for in place, written in place, a loan past `max_len` thrown as
 /// `nerve::error(NERVE_TOO_LONG)`; a service and a client declared by
-/// their payload structs, served with a lambda.
+/// their payload structs, served with a lambda; a sequence service and
+/// client (`serve_seq`, `client_seq`), served with a lambda that loans.
 #[test]
 fn the_cpp_sequence_agent_passes_its_harness_test() {
     let r = Robot::new("chcppseq");

@@ -14,27 +14,7 @@
 #include "relay.c"
 
 #include <string.h>
-
-static int failures = 0;
-
-/* Checks that `got` is `want`, and that a failure has a message. */
-static void expect(const char *what, nerve_status got, nerve_status want) {
-  const char *msg = nerve_last_error();
-  if (got != want) {
-    printf("FAIL %s: status %d, not %d (%s)\n", what, (int)got, (int)want, msg);
-    failures++;
-  } else if (want != NERVE_OK && strlen(msg) == 0) {
-    printf("FAIL %s: status %d without a message\n", what, (int)got);
-    failures++;
-  } else {
-    printf("ok %s%s%s\n", what, want == NERVE_OK ? "" : ": ", msg);
-  }
-}
-
-static void expect_true(const char *what, int ok) {
-  printf("%s %s\n", ok ? "ok" : "FAIL", what);
-  failures += !ok;
-}
+#include "harness_check.h"
 
 /* Queues ticks 1..n on the relay's input. */
 static void send_ticks(nerve_harness *h, uint64_t n) {

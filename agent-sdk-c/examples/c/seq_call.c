@@ -15,6 +15,14 @@
  * - client `planner` of such a service (300 ms timeout): one call in
  *   flight (nerve_call, then nerve_call_take in a later step), and every
  *   tenth step one call that waits in the step (nerve_call_wait);
+ * - service `plan_seq`: a nerve::Tick answered with a sequence of
+ *   nerve::Scalar after a nerve::Tick (`Seq<Scalar, Tick>`, as
+ *   nerve-caller --serve --seq answers): the request as header, then seq
+ *   scalars 0, 1, ... written in place, at most 500 (past them the loan is
+ *   refused, NERVE_TOO_LONG, and the caller told so);
+ * - client `planner_seq` of such a service: one call in flight of a
+ *   length (37 n) % 400, its answer read in place (nerve_call_take_seq)
+ *   and checked element by element;
  * - output `report` (ctest::Report, a struct of its own): what it read,
  *   refused and was answered, since a C agent has no figures.
  *
@@ -56,25 +64,34 @@ typedef struct {
   uint64_t wrong;    /* answers its client took, wrong */
   uint64_t waited;   /* right answers of nerve_call_wait */
   uint64_t failed;   /* calls that ended without an answer */
+  uint64_t seq_answered; /* requests its sequence service answered */
+  uint64_t seq_refused;  /* answers past its max_len refused (NERVE_TOO_LONG) */
+  uint64_t seq_replies;  /* sequence answers its client took, right */
+  uint64_t seq_wrong;    /* sequence answers its client took, wrong */
+  uint64_t seq_largest;  /* the most elements of one of them */
 } report;
 static const nerve_field report_fields[] = {
     NERVE_FIELD(report, received, NERVE_U64), NERVE_FIELD(report, largest, NERVE_U64),
     NERVE_FIELD(report, bad, NERVE_U64),      NERVE_FIELD(report, refused, NERVE_U64),
     NERVE_FIELD(report, answered, NERVE_U64), NERVE_FIELD(report, replies, NERVE_U64),
     NERVE_FIELD(report, wrong, NERVE_U64),    NERVE_FIELD(report, waited, NERVE_U64),
-    NERVE_FIELD(report, failed, NERVE_U64)};
+    NERVE_FIELD(report, failed, NERVE_U64),   NERVE_FIELD(report, seq_answered, NERVE_U64),
+    NERVE_FIELD(report, seq_refused, NERVE_U64), NERVE_FIELD(report, seq_replies, NERVE_U64),
+    NERVE_FIELD(report, seq_wrong, NERVE_U64), NERVE_FIELD(report, seq_largest, NERVE_U64)};
 static const nerve_type report_type = NERVE_TYPE(report, "ctest::Report", report_fields);
 
 static const nerve_type tick_type = NERVE_BUILTIN(nerve_Tick);
 static const nerve_type scalar_type = NERVE_BUILTIN(nerve_Scalar);
 
 #define MAX_DETS 1000
+#define MAX_PATH 500
 static const size_t LENGTHS[4] = {0, 1, 400, 401};
 
 typedef struct {
-  nerve_port dets, dets_in, rep, plan, planner;
+  nerve_port dets, dets_in, rep, plan, planner, plan_seq, planner_seq;
   uint64_t n;         /* steps */
   uint64_t in_flight; /* calls of nerve_call not taken yet */
+  uint64_t seq_in_flight; /* sequence calls not taken yet */
   report r;
 } agent;
 
@@ -99,6 +116,83 @@ static int cseq_init(nerve_setup *setup, void *user) {
   }
   if (nerve_setup_client(setup, "planner", &tick_type, &scalar_type, 300000000, &a->planner) != NERVE_OK) {
     return fail("client planner");
+  }
+  if (nerve_setup_serve_seq(setup, "plan_seq", &tick_type, &scalar_type, &tick_type, MAX_PATH, &a->plan_seq) !=
+      NERVE_OK) {
+    return fail("serve_seq plan_seq");
+  }
+  if (nerve_setup_client_seq(setup, "planner_seq", &tick_type, &scalar_type, &tick_type, 300000000, &a->planner_seq) !=
+      NERVE_OK) {
+    return fail("client_seq planner_seq");
+  }
+  return 0;
+}
+
+/* The sequence service's answer: the request as header, then seq scalars
+ * 0, 1, ... stamped with the request's stamp, written in place. */
+static int answer_path(const void *request, nerve_answer *answer, void *user) {
+  const nerve_Tick *t = request;
+  agent *a = user;
+  nerve_seq_loan l;
+  nerve_status st = nerve_answer_loan(answer, (size_t)t->seq, &l);
+  if (st == NERVE_TOO_LONG) { /* past max_len: its caller is told so */
+    a->r.seq_refused++;
+    return 0;
+  }
+  if (st != NERVE_OK) {
+    return fail("answer_loan plan_seq");
+  }
+  *(nerve_Tick *)l.header = *t;
+  nerve_Scalar *items = l.items;
+  for (size_t i = 0; i < l.len; i++) {
+    items[i].value = (double)i;
+    items[i].stamp_ns = t->stamp_ns;
+  }
+  a->r.seq_answered++;
+  return 0;
+}
+
+/* Takes the sequence client's answers, read in place and checked, and keeps one call in flight. */
+static int call_path(nerve_ctx *ctx, agent *a) {
+  for (;;) {
+    nerve_seq s;
+    uint64_t id = 0;
+    nerve_status st = nerve_call_take_seq(ctx, a->planner_seq, &id, &s);
+    if (st == NERVE_NO_SAMPLE || st == NERVE_NOT_IN_HARNESS) {
+      break;
+    }
+    a->seq_in_flight--;
+    if (st == NERVE_CALL_FAILED) {
+      a->r.failed++;
+      continue;
+    }
+    if (st != NERVE_OK) {
+      return fail("call_take_seq planner_seq");
+    }
+    const nerve_Tick *h = s.header;
+    const nerve_Scalar *items = s.items;
+    int right = h != NULL && h->seq == s.len;
+    for (size_t i = 0; right && i < s.len; i++) {
+      right = items[i].value == (double)i && items[i].stamp_ns == h->stamp_ns;
+    }
+    if (right) {
+      a->r.seq_replies++;
+      if (s.len > a->r.seq_largest) {
+        a->r.seq_largest = s.len;
+      }
+    } else {
+      a->r.seq_wrong++;
+    }
+  }
+  if (a->seq_in_flight == 0) {
+    nerve_Tick t = {(a->n * 37) % 400, a->n};
+    uint64_t id = 0;
+    nerve_status st = nerve_call(ctx, a->planner_seq, &t, sizeof t, &id);
+    if (st == NERVE_OK) {
+      a->seq_in_flight++;
+    } else if (st != NERVE_CALL_FAILED && st != NERVE_NOT_IN_HARNESS) {
+      return fail("call planner_seq");
+    }
   }
   return 0;
 }
@@ -233,7 +327,11 @@ static int cseq_step(nerve_ctx *ctx, void *user) {
   if (st != NERVE_OK && st != NERVE_NOT_IN_HARNESS) {
     return fail("serve plan");
   }
-  if (call_plan(ctx, a)) {
+  st = nerve_serve_seq(ctx, a->plan_seq, answer_path, a, &answered);
+  if (st != NERVE_OK && st != NERVE_NOT_IN_HARNESS && st != NERVE_TOO_LONG) {
+    return fail("serve_seq plan_seq");
+  }
+  if (call_plan(ctx, a) || call_path(ctx, a)) {
     return 1;
   }
   void *slot = NULL;

@@ -3,10 +3,10 @@
  * from its output, a loan past max_len refused, and every misuse of the
  * sequence and call functions (NULL, an unknown or wrong kind of port, a
  * length past the maximum, a context kept past its step) a status with a
- * message, never a crash. The agent's service and client are declared in
- * the harness too (its init succeeds); whether the harness carries calls
- * is the SDK harness's matter (NERVE_NOT_IN_HARNESS where it does not),
- * so they are not checked here: tests/c_agent.rs checks them on a robot.
+ * message, never a crash. The test calls the agent's services
+ * (nerve_harness_call, nerve_harness_call_take): a sequence answer written
+ * in place by the agent, one past its max_len refused, a fixed answer;
+ * tests/c_agent.rs checks its calls on a robot, against Rust agents.
  *
  * Run by agent-sdk-c/tests/c_harness.rs (plain and under ASan/UBSan).
  * Exits 0 when every check passed. */
@@ -15,26 +15,7 @@
 
 #include <stdlib.h>
 #include <string.h>
-
-static int failures = 0;
-
-static void expect(const char *what, nerve_status got, nerve_status want) {
-  const char *msg = nerve_last_error();
-  if (got != want) {
-    printf("FAIL %s: status %d, not %d (%s)\n", what, (int)got, (int)want, msg);
-    failures++;
-  } else if (want != NERVE_OK && strlen(msg) == 0) {
-    printf("FAIL %s: status %d without a message\n", what, (int)got);
-    failures++;
-  } else {
-    printf("ok %s%s%s\n", what, want == NERVE_OK ? "" : ": ", msg);
-  }
-}
-
-static void expect_true(const char *what, int ok) {
-  printf("%s %s\n", ok ? "ok" : "FAIL", what);
-  failures += !ok;
-}
+#include "harness_check.h"
 
 /* A sequence sample as it lies in memory: the header, then the elements. */
 typedef struct {
@@ -93,6 +74,9 @@ static int misuse_step(nerve_ctx *ctx, void *user) {
   see(4, nerve_loan_seq(ctx, a->dets, 2, &l));
   see(5, nerve_loan_seq(ctx, a->dets, 2, &l)); /* one loan per output at a time */
   see(6, nerve_serve(ctx, a->planner, answer_plan, a, NULL)); /* a client's handle */
+  see(7, nerve_serve(ctx, a->plan_seq, answer_plan, a, NULL)); /* a sequence service */
+  see(8, nerve_serve_seq(ctx, a->plan, answer_path, a, NULL)); /* a fixed service */
+  see(9, nerve_call_take_seq(ctx, a->planner_seq, NULL, NULL));
   return 0;
 }
 
@@ -134,6 +118,58 @@ static void runs_in_the_harness(void) {
   expect("free", nerve_harness_free(h), NERVE_OK);
 }
 
+/* An answer of plan_seq as it lies in memory: the request's tick, then the scalars. */
+typedef struct {
+  nerve_Tick h;
+  nerve_Scalar s[8];
+} path_sample;
+
+/* The test calls the agent's services: a sequence answer written in place
+ * by the agent, one past its max_len refused, a fixed answer. */
+static void calls_in_the_harness(void) {
+  static agent a;
+  memset(&a, 0, sizeof a);
+  nerve_harness *h = NULL;
+  expect("start the agent", nerve_harness_new(&cseq_agent, &a, NULL, 0, &h), NERVE_OK);
+  if (h == NULL) {
+    failures++;
+    return;
+  }
+  nerve_Tick ask = {3, 77}, past = {501, 78}, fixed = {21, 79};
+  uint64_t asked = 0, refused = 0, plain = 0, id = 7;
+  expect("call plan_seq (3 elements)", nerve_harness_call(h, "plan_seq", &ask, sizeof ask, &asked), NERVE_OK);
+  expect("call plan_seq (501, past max_len)", nerve_harness_call(h, "plan_seq", &past, sizeof past, &refused), NERVE_OK);
+  expect("call plan", nerve_harness_call(h, "plan", &fixed, sizeof fixed, &plain), NERVE_OK);
+  expect("call with a request of another size", nerve_harness_call(h, "plan_seq", &ask, 4, &id), NERVE_LAYOUT_MISMATCH);
+  expect("call an unknown service", nerve_harness_call(h, "nope", &ask, sizeof ask, &id), NERVE_UNKNOWN_PORT);
+  expect_true("a refused call has no id", id == 0);
+  path_sample p;
+  size_t len = 9;
+  expect("no answer before the step", nerve_harness_call_take(h, "plan_seq", &id, &p, sizeof p, &len),
+         NERVE_NO_SAMPLE);
+  expect("step", nerve_harness_step(h), NERVE_OK);
+  memset(&p, 0xff, sizeof p);
+  expect("take plan_seq's answer", nerve_harness_call_take(h, "plan_seq", &id, &p, sizeof p, &len), NERVE_OK);
+  int right = id == asked && len == sizeof(nerve_Tick) + 3 * sizeof(nerve_Scalar) && p.h.seq == 3 && p.h.stamp_ns == 77;
+  for (size_t i = 0; right && i < 3; i++) {
+    right = p.s[i].value == (double)i && p.s[i].stamp_ns == 77;
+  }
+  expect_true("a sequence answer of 3 elements, written in place by the agent", right);
+  nerve_status st = nerve_harness_call_take(h, "plan_seq", &id, &p, sizeof p, &len);
+  int says = strstr(nerve_last_error(), "refused") != NULL;
+  expect("the answer past max_len: refused", st, NERVE_CALL_FAILED);
+  expect_true("the refused call named, no bytes, the message says refused", id == refused && len == 0 && says);
+  expect("nothing more", nerve_harness_call_take(h, "plan_seq", &id, &p, sizeof p, &len), NERVE_NO_SAMPLE);
+  nerve_Scalar s;
+  expect("take plan's answer", nerve_harness_call_take(h, "plan", &id, &s, sizeof s, &len), NERVE_OK);
+  expect_true("a fixed answer: twice the seq", id == plain && len == sizeof s && s.value == 42.0);
+  report r;
+  expect("read a report", nerve_harness_output(h, "report", &r, sizeof r, &len), NERVE_OK);
+  expect_true("the agent answered one sequence, refused one, and one fixed",
+              r.seq_answered == 1 && r.seq_refused == 1 && r.answered == 1);
+  expect("free", nerve_harness_free(h), NERVE_OK);
+}
+
 static void misuse(void) {
   static agent a;
   memset(&a, 0, sizeof a);
@@ -153,6 +189,11 @@ static void misuse(void) {
   expect_seen(4, "loan_seq(2)", NERVE_OK);
   expect_seen(5, "loan_seq(a loan pending)", NERVE_LOAN_PENDING);
   expect_seen(6, "serve(a client's handle)", NERVE_UNKNOWN_PORT);
+  expect_seen(7, "serve(a sequence service)", NERVE_UNKNOWN_PORT);
+  expect_seen(8, "serve_seq(a fixed service)", NERVE_UNKNOWN_PORT);
+  expect_seen(9, "call_take_seq(NULL answer)", NERVE_NULL_POINTER);
+  nerve_seq_loan none;
+  expect("answer_loan(NULL answer)", nerve_answer_loan(NULL, 1, &none), NERVE_NULL_POINTER);
   size_t len = 0;
   dets_sample out;
   expect("a loan not sent was not sent", nerve_harness_output(h, "dets", &out, sizeof out, &len), NERVE_NO_SAMPLE);
@@ -163,6 +204,8 @@ static void misuse(void) {
   expect("latest_seq(a context kept past its step)", nerve_latest_seq(kept, a.dets_in, &s), NERVE_STALE);
   expect("loan_seq(a context kept past its step)", nerve_loan_seq(kept, a.dets, 1, &l), NERVE_STALE);
   expect("serve(a context kept past its step)", nerve_serve(kept, a.plan, answer_plan, &a, NULL), NERVE_STALE);
+  expect("serve_seq(a context kept past its step)", nerve_serve_seq(kept, a.plan_seq, answer_path, &a, NULL),
+         NERVE_STALE);
   expect_true("a refused call hands out no pointer",
               s.header == NULL && s.items == NULL && s.len == 0 && l.header == NULL && l.items == NULL);
   expect("free", nerve_harness_free(h), NERVE_OK);
@@ -198,6 +241,7 @@ static void refused_declarations(void) {
 
 int main(void) {
   runs_in_the_harness();
+  calls_in_the_harness();
   misuse();
   refused_declarations();
   printf("%s: %d failure(s)\n", failures ? "FAILED" : "PASSED", failures);

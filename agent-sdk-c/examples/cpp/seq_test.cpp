@@ -50,6 +50,9 @@ int main() {
   nerve::seq_output<detection, dets_header> out;
   nerve::server<nerve_Tick, nerve_Scalar> plan;
   nerve::client<nerve_Tick, nerve_Scalar> planner;
+  nerve::seq_server<nerve_Tick, nerve_Scalar, nerve_Tick> path;
+  nerve::seq_client<nerve_Tick, nerve_Scalar, nerve_Tick> pather;
+  std::size_t sent = 0, taken = 0;
   std::size_t read = 0, bad = 0, refused = 0;
   nerve::agent a("cppseq", 20000000);
   a.on_init([&](nerve::setup &s) {
@@ -57,6 +60,8 @@ int main() {
     out = s.output_seq<detection, dets_header>("dets", 8);
     plan = s.serve<nerve_Tick, nerve_Scalar>("plan");
     planner = s.client<nerve_Tick, nerve_Scalar>("planner", 300000000);
+    path = s.serve_seq<nerve_Tick, nerve_Scalar, nerve_Tick>("path", 16);
+    pather = s.client_seq<nerve_Tick, nerve_Scalar, nerve_Tick>("pather", 300000000);
   });
   a.on_step([&](nerve::context &c) {
     while (auto s = c.take(in)) {
@@ -88,6 +93,23 @@ int main() {
         throw;
       }
     }
+    /* a sequence service: nothing waits in the harness, so nothing is answered */
+    c.serve_seq(path, [](const nerve_Tick &t, nerve::answer_loan<nerve_Scalar, nerve_Tick> &ans) {
+      if (auto l = ans.loan(t.seq)) {
+        l->header() = t;
+        for (std::size_t i = 0; i < l->size(); i++) {
+          (*l)[i] = nerve_Scalar{static_cast<double>(i), t.stamp_ns};
+        }
+      }
+    });
+    /* a sequence client: in the harness its call goes to the test, which does not answer it */
+    if (c.cycle() == 0) {
+      sent += c.call(pather, nerve_Tick{3, 0}) != 0;
+    }
+    std::string why;
+    if (c.take_answer(pather, &why)) {
+      taken++;
+    }
   });
   nerve::harness h(a);
   sample<4> s4{};
@@ -103,6 +125,7 @@ int main() {
          o && o->h.frame == 1 && o->h.count == 3 && o->d[0].id == 0 && o->d[2].id == 2 && o->d[2].x == 2.0f);
   expect("the queued sequence read in place, every element right", read == 1 && bad == 0);
   expect("a loan past max_len refused with NERVE_TOO_LONG", refused == 1);
+  expect("a sequence client's call sent (to the test), not answered yet", sent == 1 && taken == 0);
   std::printf("%s: %d failure(s)\n", failures ? "FAILED" : "PASSED", failures);
   return failures ? 1 : 0;
 }
