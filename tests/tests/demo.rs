@@ -303,6 +303,10 @@ fn run_demo_with(r: &Robot, launch: &Path, args: &[&str], during: impl FnOnce(&R
         assert_eq!(s["time_scale"].as_f64(), Some(SCALE), "{s:#}");
         let sim_log = std::fs::read_to_string(out.join("logs/sim.log")).unwrap_or_default();
         assert!(sim_log.contains("the simulator owns the robot's clock"), "the simulator's log:\n{sim_log}");
+        // a busy machine holds the simulator's clock: the resource manager
+        // does not judge the machine's CPU (agents/resource, docs/time.md)
+        let rm_log = std::fs::read_to_string(out.join("logs/resource.log")).unwrap_or_default();
+        assert!(rm_log.contains("the machine's CPU is not judged"), "the resource manager's log:\n{rm_log}");
     } else {
         assert!(s["time_scale"].is_null(), "{s:#}");
     }
@@ -344,19 +348,6 @@ fn launch_copy(r: &Robot, name: &str, kb: &Path, extra: &str) -> PathBuf {
     assert!(template.contains("\"kb/explore.toml\""), "the launch file names its knowledge base");
     let kb = kb.display().to_string();
     r.launch_file(name, &(template.replace("\"kb/explore.toml\"", &format!("{kb:?}")) + extra))
-}
-
-/// `kb/explore.toml` without its `machine_cpu` thresholds, in `r`'s home:
-/// the resource manager then judges the robot's agents' CPU and memory
-/// only (see [`demo_explore_island_leaves_the_island`]).
-fn kb_without_machine_cpu(r: &Robot) -> PathBuf {
-    let kb = std::fs::read_to_string(repo().join("kb/explore.toml")).expect("kb/explore.toml");
-    let kept: Vec<&str> = kb.lines().filter(|l| !l.trim_start().starts_with("machine_cpu")).collect();
-    assert_eq!(kept.len() + 1, kb.lines().count(), "kb/explore.toml sets machine_cpu on one line");
-    std::fs::create_dir_all(&r.home).expect("the robot's home");
-    let path = r.home.join("explore-kb.toml");
-    std::fs::write(&path, kept.join("\n") + "\n").expect("write the knowledge base");
-    path
 }
 
 /// Removes the robot's home (the run's output) once a test has passed; a
@@ -475,9 +466,8 @@ fn sim_time_launch_puts_the_agents_on_the_clock() {
 /// seeds): about 31 s of wall time for the three instead of 30 s each
 /// (session 37, load 3-4). The simulator holds each robot's clock when the
 /// machine is too busy for it, so a run beside others is longer, not
-/// different — provided the robots are not judged by the machine's CPU,
-/// which the three of them fill: their knowledge base does not judge it
-/// ([`kb_without_machine_cpu`], as the island's run).
+/// different — and on simulated time the resource manager does not judge
+/// the machine's CPU, which the three of them fill (as the island's run).
 #[test]
 fn demo_explore_seeds_2_and_3_and_the_second_world_side_by_side() {
     let runs = [("demob", "2", "explore.toml"), ("demo3", "3", "explore.toml"), ("democ", "3", "explore-2.toml")];
@@ -487,9 +477,7 @@ fn demo_explore_seeds_2_and_3_and_the_second_world_side_by_side() {
             .map(|&(tag, seed, name)| {
                 let handle = scope.spawn(move || {
                     let r = Robot::new(tag);
-                    let launch = launch_copy(&r, "explore-side.toml", &kb_without_machine_cpu(&r), "");
-                    let s =
-                        run_demo_with(&r, &launch, &at_4x(&["--seed", seed, "--world", world(name).as_str()]), |_| {});
+                    let s = run_demo(&r, &at_4x(&["--seed", seed, "--world", world(name).as_str()]), |_| {});
                     assert_success(&s);
                     assert_eq!(s["world"], name.trim_end_matches(".toml"), "{s:#}");
                     clean_up(&r);
@@ -509,10 +497,8 @@ fn demo_explore_seeds_2_and_3_and_the_second_world_side_by_side() {
 /// leaves the island for the room's walls, and so finds the door and the
 /// person — within the same time limit as the other runs.
 ///
-/// At 4x, with a knowledge base that judges the robot by its own agents'
-/// CPU and memory but not by the machine's CPU ([`kb_without_machine_cpu`]).
-/// The machine's CPU was why this run failed at 4x (stop 47; found in
-/// session 37): the resource manager reads it in real time, where the
+/// At 4x. The machine's CPU was why this run failed at 4x (stop 47; found
+/// in session 37): the resource manager read it in real time, where the
 /// robot at 4x weighs four times what it weighs at 1x (about 40 % of a
 /// core against 10 %) beside whatever else the machine runs (here, the
 /// rest of the suite). Over 95 % the decision maker goes `lean` and the
@@ -525,23 +511,20 @@ fn demo_explore_seeds_2_and_3_and_the_second_world_side_by_side() {
 /// 111 s). The same drift is the real-time flake `.config/nextest.toml`
 /// records (2026-11-25: left the island before a lap, without switching).
 /// On simulated time a busy machine holds the simulator's clock instead
-/// (docs/time.md), so those thresholds make a busy run different, not
-/// safer; the resource manager's answer to load is
-/// `demo_with_a_cpu_hungry_agent`'s to test, on the robot's own agents.
+/// (docs/time.md), so those thresholds made a busy run different, not
+/// safer: the resource manager no longer judges the machine's CPU there
+/// (`run_demo_with` checks its log). Its answer to load is
+/// `demo_with_a_cpu_hungry_agent`'s to test, on the wall clock.
 #[test]
 fn demo_explore_island_leaves_the_island() {
     let r = Robot::new("demoi");
-    let launch = launch_copy(&r, "explore-island.toml", &kb_without_machine_cpu(&r), "");
-    let s =
-        run_demo_with(&r, &launch, &at_4x(&["--seed", "1", "--world", world("explore-island.toml").as_str()]), |_| {});
+    let s = run_demo(&r, &at_4x(&["--seed", "1", "--world", world("explore-island.toml").as_str()]), |_| {});
     let log = std::fs::read_to_string(r.home.join("out/logs/wall-follow.log")).unwrap_or_default();
     let switches = log.lines().filter(|l| l.contains("back at a place passed before: switching to the")).count();
     assert!(switches >= 1, "the wall follower never switched sides; its log:\n{log}");
     println!("wall follower: {switches} side switch(es)");
     assert_success(&s);
     assert_eq!(s["world"], "explore-island");
-    let ran = std::fs::read_to_string(r.home.join("out/launch.toml")).unwrap_or_default();
-    assert!(ran.contains("explore-kb.toml"), "the run's launch file has another knowledge base:\n{ran}");
     clean_up(&r);
 }
 

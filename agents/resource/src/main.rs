@@ -137,6 +137,21 @@ impl Resource {
     }
 }
 
+/// On simulated time the machine's CPU is not judged: a busy machine
+/// already holds the simulator's clock (docs/time.md), so shedding the
+/// robot's work would only make a busy run behave differently, never
+/// safer. The agents' CPU (per simulated second) and memory are judged as
+/// on the wall clock.
+fn on_simulated_time(mut policy: ResourcePolicy, simulated: bool) -> ResourcePolicy {
+    if simulated && policy.machine_cpu.take().is_some() {
+        tracing::info!(
+            "on simulated time: the machine's CPU is not judged (a busy machine holds the simulator's clock); \
+             the agents' CPU and memory are"
+        );
+    }
+    policy
+}
+
 impl Agent for Resource {
     const KIND: &'static str = "resource";
 
@@ -153,6 +168,7 @@ impl Agent for Resource {
             }
             None => ResourcePolicy::default(),
         };
+        let policy = on_simulated_time(policy, agent_sdk::simclock::active().is_some());
         Ok(Resource {
             planner: Planner::new(policy, setup.name()),
             world: setup.world().clone(),
@@ -277,4 +293,20 @@ impl Agent for Resource {
 
 fn main() -> std::process::ExitCode {
     agent_sdk::run::<Resource>()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn on_simulated_time_the_machine_cpu_is_not_judged_but_the_rest_is() {
+        let p = ResourcePolicy::default();
+        assert!(p.machine_cpu.is_some() && p.memory.is_some());
+        let sim = on_simulated_time(p.clone(), true);
+        assert!(sim.machine_cpu.is_none());
+        assert_eq!(sim.memory.map(|t| t.high), p.memory.map(|t| t.high));
+        let wall = on_simulated_time(p, false);
+        assert!(wall.machine_cpu.is_some());
+    }
 }
