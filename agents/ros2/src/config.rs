@@ -28,7 +28,7 @@
 //!
 //! [[type]]                            # a payload of your own (its #[repr(C)] fields in order)
 //! name = "lab::Gripper"
-//! fields = [["width_m", "f32"], ["force_n", "f32"], ["closed", "u8"]]
+//! fields = [["width_m", "f32"], ["force_n", "f32"], ["closed", "u8"], ["_pad", "[u8; 3]"]]   # no implicit padding
 //!
 //! [[publish]]                         # any payload as a vendored ROS message, field by field
 //! input = "gripper"
@@ -723,6 +723,7 @@ fields = [
   ["width_m", "f32"],
   ["force_n", "f32"],
   ["closed", "u8"],
+  ["_pad", "[u8; 3]"],
 ]
 [[publish]]
 input = "gripper"
@@ -735,16 +736,16 @@ topic = "/gripper"
         .expect("valid");
         let m = c.publish[0].user.as_ref().expect("a user mapping");
         assert_eq!((c.publish[0].map, m.schema.type_name.as_str(), m.schema.size), (PubMap::User, "lab::Gripper", 12));
-        // a ROS field that does not exist: line 15 (its entry)
+        // a ROS field that does not exist: line 16 (its entry)
         let e = p(&format!(
             "{head}type = \"geometry_msgs/msg/Vector3\"\n[publish.fields]\nx = \"width_m\"\nw = \"closed\"\n"
         ))
         .expect_err("no ROS field w");
-        assert!(e.starts_with("r.toml:15: [[publish]] /gripper: geometry_msgs/msg/Vector3 has no field \"w\""), "{e}");
+        assert!(e.starts_with("r.toml:16: [[publish]] /gripper: geometry_msgs/msg/Vector3 has no field \"w\""), "{e}");
         // a nerve field that does not exist, and a float into an integer
         let e = p(&format!("{head}type = \"std_msgs/msg/Int32\"\nfields = {{ data = \"width\" }}\n"))
             .expect_err("no width");
-        assert!(e.starts_with("r.toml:13:") && e.contains("lab::Gripper has no field \"width\""), "{e}");
+        assert!(e.starts_with("r.toml:14:") && e.contains("lab::Gripper has no field \"width\""), "{e}");
         let e =
             p(&format!("{head}type = \"std_msgs/msg/Int32\"\nfields = {{ data = \"force_n\" }}\n")).expect_err("float");
         assert!(e.contains("data (int32) cannot take lab::Gripper field force_n (f32)"), "{e}");
@@ -765,6 +766,23 @@ topic = "/gripper"
         assert!(e.contains("unknown field") || e.starts_with("r.toml:"), "{e}");
         let e = p("[[type]]\nname = \"lab::T\"\nfields = [[\"a\", \"float\"]]\n").expect_err("bad field type");
         assert!(e.starts_with("r.toml:2: [[type]] lab::T: field \"a\""), "{e}");
+        // implicit padding, which a Rust agent's #[derive(Payload)] refuses:
+        // the gap named, and the _pad field that fills it
+        let e = p("[[type]]\nname = \"lab::T\"\nfields = [[\"a\", \"u8\"], [\"b\", \"f32\"]]\n").expect_err("a gap");
+        assert!(
+            e.starts_with(
+                "r.toml:2: [[type]] lab::T: 3 bytes of implicit padding at offset 1, before field \"b\" (at 4)"
+            ) && e.contains("[\"_pad1\", \"[u8; 3]\"]"),
+            "{e}"
+        );
+        let e = p("[[type]]\nname = \"lab::T\"\nfields = [[\"b\", \"f32\"], [\"a\", \"u8\"]]\n").expect_err("a tail");
+        assert!(
+            e.contains("3 bytes of implicit padding at offset 5, after the last field") && e.contains("_pad5"),
+            "{e}"
+        );
+        let e = p("[[type]]\nname = \"lab::T\"\nfields = [[\"b\", \"f32\"], [\"_pad\", \"u32\"]]\n")
+            .expect_err("not bytes");
+        assert!(e.contains("its type must be [u8; N]"), "{e}");
     }
 
     /// A ROS message received as a user's own type (`[[subscribe]]` with
@@ -777,6 +795,7 @@ name = "lab::Pose2D"
 fields = [
   ["x", "f64"],
   ["y", "f32"],
+  ["_pad", "[u8; 4]"],
   ["sec", "i64"],
 ]
 [[subscribe]]
@@ -790,26 +809,26 @@ to = "lab::Pose2D"
         .expect("valid");
         let m = c.subscribe[0].user.as_ref().expect("a user mapping");
         assert_eq!((c.subscribe[0].map, m.schema.type_name.as_str(), m.schema.size), (SubMap::User, "lab::Pose2D", 24));
-        // a ROS field that does not exist: line 15 (its entry)
+        // a ROS field that does not exist: line 16 (its entry)
         let e = p(&format!(
             "{head}type = \"nav_msgs/msg/Odometry\"\n[subscribe.fields]\nx = \"pose.pose.position.x\"\ny = \"pose.position.y\"\n"
         ))
         .expect_err("no such ROS field");
         assert!(
-            e.starts_with("r.toml:15: [[subscribe]] /odom_in: nav_msgs/msg/Odometry has no field \"pose.position.y\""),
+            e.starts_with("r.toml:16: [[subscribe]] /odom_in: nav_msgs/msg/Odometry has no field \"pose.position.y\""),
             "{e}"
         );
         // a float into an integer, at its entry's line
         let e = p(&format!("{head}type = \"geometry_msgs/msg/Vector3\"\nfields = {{ sec = \"x\" }}\n"))
             .expect_err("float into i64");
         assert!(
-            e.starts_with("r.toml:13:") && e.contains("sec (i64) cannot take geometry_msgs/msg/Vector3 field x"),
+            e.starts_with("r.toml:14:") && e.contains("sec (i64) cannot take geometry_msgs/msg/Vector3 field x"),
             "{e}"
         );
         // by name: the first nerve field without a ROS field of its path,
         // at its line in [[type]]
         let e = p(&format!("{head}type = \"geometry_msgs/msg/Vector3\"\n")).expect_err("by name");
-        assert!(e.starts_with("r.toml:6:") && e.contains("\"sec\" has no counterpart"), "{e}");
+        assert!(e.starts_with("r.toml:7:") && e.contains("\"sec\" has no counterpart"), "{e}");
         // neither built in nor declared; no conversion and no fields
         let e = p("[[subscribe]]\ntopic = \"/a\"\ntype = \"std_msgs/msg/Int32\"\noutput = \"a\"\nto = \"lab::Nope\"\nfields = { n = \"data\" }\n")
             .expect_err("unknown type");

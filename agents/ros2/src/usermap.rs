@@ -103,6 +103,13 @@ fn field_schema(t: &str, declared: &BTreeMap<String, Schema>) -> Result<Schema, 
 /// as the Rust compiler lays it out: each field at the next multiple of its
 /// alignment, the size a multiple of the largest one (what the Python
 /// SDK's `nerve.payload` computes, so that the schemas are equal).
+///
+/// Implicit padding is refused, as `#[derive(Payload)]` refuses it, so
+/// that a Rust agent can declare the same type: every gap, before a field
+/// or after the last one, is named (offset and size) with the `_pad` field
+/// that fills it. Fields named `_pad…` of type `[u8; N]` are explicit
+/// padding: they take their bytes but stay out of the schema, as the
+/// derive leaves them out (the fingerprint is that of the padded layout).
 pub fn struct_layout(
     type_name: &str,
     fields: &[(String, String)],
@@ -115,11 +122,35 @@ pub fn struct_layout(
     for (name, t) in fields {
         let schema = field_schema(t, declared).map_err(|e| format!("field {name:?}: {e}"))?;
         let offset = round(at, schema.align.max(1)).ok_or_else(too_large)?;
+        if offset != at {
+            let gap = offset - at;
+            return Err(format!(
+                "{gap} bytes of implicit padding at offset {at}, before field {name:?} (at {offset}): \
+                 a Rust agent's #[derive(Payload)] refuses padding, so add a field [\"_pad{at}\", \"[u8; {gap}]\"] \
+                 before {name:?}"
+            ));
+        }
         at = offset.checked_add(schema.size).ok_or_else(too_large)?;
         align = align.max(schema.align);
+        if name.starts_with("_pad") {
+            let bytes = matches!(&schema.kind, Kind::Array { element, .. }
+                if matches!(element.kind, Kind::Primitive { primitive: Primitive::U8 }));
+            if !bytes {
+                return Err(format!("field {name:?}: a _pad field is explicit padding: its type must be [u8; N]"));
+            }
+            continue;
+        }
         laid.push(Field { name: name.clone(), offset, schema });
     }
     let size = round(at, align).ok_or_else(too_large)?;
+    if size != at {
+        let gap = size - at;
+        return Err(format!(
+            "{gap} bytes of implicit padding at offset {at}, after the last field (the size is \
+             rounded up to {size}, a multiple of the alignment {align}): a Rust agent's #[derive(Payload)] refuses \
+             padding, so add a last field [\"_pad{at}\", \"[u8; {gap}]\"]"
+        ));
+    }
     let s = Schema { type_name: type_name.to_owned(), size, align, kind: Kind::Struct { fields: laid } };
     s.validate().map_err(|e| format!("{type_name}: {e}"))?;
     Ok(s)

@@ -9,7 +9,15 @@ fn gripper() -> Schema {
     let f = |n: &str, t: &str| (n.to_owned(), t.to_owned());
     struct_layout(
         "lab::Gripper",
-        &[f("width_m", "f32"), f("force_n", "f64"), f("closed", "u8"), f("fingers", "[f32; 3]"), f("id", "i64")],
+        &[
+            f("width_m", "f32"),
+            f("_pad0", "[u8; 4]"),
+            f("force_n", "f64"),
+            f("closed", "u8"),
+            f("_pad1", "[u8; 3]"),
+            f("fingers", "[f32; 3]"),
+            f("id", "i64"),
+        ],
         &BTreeMap::new(),
     )
     .expect("layout")
@@ -46,6 +54,13 @@ fn layouts_are_repr_c() {
         struct_layout("lab::Two", &[("l".into(), "lab::Gripper".into()), ("r".into(), "lab::Gripper".into())], &known)
             .expect("nested");
     assert_eq!(two.field("r.id").map(|(o, _)| o), Some(72));
+    // explicit padding takes its bytes but stays out of the schema, as a
+    // #[derive(Payload)]'s `_pad` fields do; implicit padding is refused
+    assert!(s.field("_pad0").is_none() && s.field("_pad1").is_none());
+    let f = |n: &str, t: &str| (n.to_owned(), t.to_owned());
+    let e = struct_layout("lab::G", &[f("width_m", "f32"), f("force_n", "f64")], &BTreeMap::new()).expect_err("gap");
+    assert!(e.starts_with("4 bytes of implicit padding at offset 4, before field \"force_n\" (at 8)"), "{e}");
+    assert!(e.contains("[\"_pad4\", \"[u8; 4]\"]"), "{e}");
 }
 
 #[test]

@@ -67,7 +67,12 @@ fn nested_ros_fields_fill_the_users_type() {
 #[test]
 fn by_name_including_nested_types() {
     // a nerve type of two nested ones fills geometry_msgs/Twist by path
-    let v3 = struct_layout("lab::V3", &[f("x", "f64"), f("y", "f32"), f("z", "f64")], &BTreeMap::new()).expect("v3");
+    let v3 = struct_layout(
+        "lab::V3",
+        &[f("x", "f64"), f("y", "f32"), f("_pad", "[u8; 4]"), f("z", "f64")],
+        &BTreeMap::new(),
+    )
+    .expect("v3");
     let mut known = BTreeMap::new();
     known.insert("lab::V3".to_owned(), v3);
     let t = struct_layout("lab::Twist", &[f("linear", "lab::V3"), f("angular", "lab::V3")], &known).expect("twist");
@@ -88,7 +93,8 @@ fn by_name_including_nested_types() {
 fn arrays_sequences_strings_and_skipped_fields() {
     // sensor_msgs/LaserScan: header (a string to skip), seven float32, then
     // float32[] ranges and intensities
-    let s = struct_layout("lab::Ring", &[f("r", "[f32; 3]"), f("max", "f64")], &BTreeMap::new()).expect("layout");
+    let s = struct_layout("lab::Ring", &[f("r", "[f32; 3]"), f("_pad", "[u8; 4]"), f("max", "f64")], &BTreeMap::new())
+        .expect("layout");
     let fields = pairs(&[("r", "ranges"), ("max", "range_max")]);
     let m = UserSub::new(s, "sensor_msgs/msg/LaserScan", Some(&fields)).expect("valid");
     let scan = |ranges: &[f32]| {
@@ -200,4 +206,24 @@ fn the_layout_is_a_rust_agents() {
     assert_eq!(pose2d(), rust);
     assert_eq!(pose2d().fingerprint(), <Pose2D as shm_schemas::Payload>::layout_fingerprint());
     let _ = Pose2D::default();
+    // with its gaps filled by `_pad` fields, as the derive asks and as the
+    // [[type]] check asks: the same schema and fingerprint both ways
+    #[derive(Debug, Clone, Copy, Default, shm_schemas::Payload, serde::Serialize)]
+    #[repr(C)]
+    #[payload(name = "lab::Gripper")]
+    struct Gripper {
+        width_m: f32,
+        #[serde(skip)]
+        _pad0: [u8; 4],
+        force_n: f64,
+        closed: u8,
+        #[serde(skip)]
+        _pad1: [u8; 7],
+    }
+    let fields =
+        [f("width_m", "f32"), f("_pad0", "[u8; 4]"), f("force_n", "f64"), f("closed", "u8"), f("_pad1", "[u8; 7]")];
+    let declared = struct_layout("lab::Gripper", &fields, &BTreeMap::new()).expect("padded layout");
+    assert_eq!(declared, <Gripper as shm_schemas::schema::Described>::schema());
+    assert_eq!(declared.fingerprint(), <Gripper as shm_schemas::Payload>::layout_fingerprint());
+    let _ = Gripper::default();
 }
