@@ -247,4 +247,49 @@ mod tests {
         .expect("wait");
         assert!(!again, "a taken wake wakes no more");
     }
+
+    /// Counts the steps its waker woke; sends one tick per such step.
+    struct Woken {
+        waker: Waker,
+        out: crate::Output<shm_schemas::payloads::Tick>,
+    }
+
+    impl crate::Agent for Woken {
+        const KIND: &'static str = "woken";
+        fn task() -> crate::Task {
+            crate::Task::EventDriven
+        }
+        fn new(setup: &mut crate::Setup) -> Result<Self, crate::AgentError> {
+            let waker = setup.waker()?;
+            assert!(Arc::ptr_eq(&waker.inner, &setup.waker()?.inner), "one waker per agent");
+            Ok(Woken { waker, out: setup.output("out")? })
+        }
+        fn step(&mut self, ctx: &mut crate::Context) -> Result<(), crate::AgentError> {
+            if ctx.woken_by_waker() {
+                self.out.send(shm_schemas::payloads::Tick { seq: ctx.cycle(), stamp_ns: ctx.now_ns() })?;
+            }
+            Ok(())
+        }
+    }
+
+    /// In a Wiring, `settle` steps an agent whose waker was woken (once for
+    /// many wakes), and a suspended one only after it resumes.
+    #[test]
+    fn a_wiring_steps_an_agent_its_waker_woke() {
+        use crate::testing::Wiring;
+        use shm_schemas::payloads::Tick;
+        let mut w = Wiring::new();
+        w.add::<Woken>("w").expect("add");
+        assert_eq!(w.settle().expect("settle"), 0, "nothing woke it");
+        let waker = w.agent::<Woken>("w").expect("agent").waker.clone();
+        waker.wake();
+        waker.wake();
+        assert_eq!(w.settle().expect("settle"), 1, "two wakes, one step");
+        assert_eq!(w.output::<Tick>("w/out").expect("out").len(), 1);
+        w.suspend("w").expect("suspend");
+        waker.wake();
+        assert_eq!(w.settle().expect("settle"), 0, "no step while suspended");
+        assert_eq!(w.resume("w").expect("resume"), 1, "the wake counts after resuming");
+        assert_eq!(w.output::<Tick>("w/out").expect("out").len(), 1);
+    }
 }
