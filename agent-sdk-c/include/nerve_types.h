@@ -527,29 +527,37 @@ NERVE_STATIC_ASSERT(offsetof(nerve_CheckpointSighting, reserved) == 41, "nerve::
 #define nerve_CheckpointSighting_FINGERPRINT UINT64_C(0xe1c49ed283b91601)
 #define NERVE_CHECKPOINT_SIGHTING_FINGERPRINT nerve_CheckpointSighting_FINGERPRINT
 
-/* nerve::ViaPath */
-typedef struct nerve_ViaPath {
+/* nerve::ViaPathHeader */
+typedef struct nerve_ViaPathHeader {
   uint64_t stamp_ns;
   uint32_t path_id;
-  uint32_t count;
-  double points[16][2];
-  double landmarks[16][2];
-  uint8_t kinds[16];
-  uint8_t checkpoint_ids[16];
-} nerve_ViaPath;
-NERVE_STATIC_ASSERT(sizeof(nerve_ViaPath) == 560, "nerve::ViaPath is 560 bytes");
-NERVE_STATIC_ASSERT(NERVE_ALIGNOF(nerve_ViaPath) == 8, "nerve::ViaPath is aligned to 8 bytes");
-NERVE_STATIC_ASSERT(offsetof(nerve_ViaPath, stamp_ns) == 0, "nerve::ViaPath.stamp_ns is at byte 0");
-NERVE_STATIC_ASSERT(offsetof(nerve_ViaPath, path_id) == 8, "nerve::ViaPath.path_id is at byte 8");
-NERVE_STATIC_ASSERT(offsetof(nerve_ViaPath, count) == 12, "nerve::ViaPath.count is at byte 12");
-NERVE_STATIC_ASSERT(offsetof(nerve_ViaPath, points) == 16, "nerve::ViaPath.points is at byte 16");
-NERVE_STATIC_ASSERT(offsetof(nerve_ViaPath, landmarks) == 272, "nerve::ViaPath.landmarks is at byte 272");
-NERVE_STATIC_ASSERT(offsetof(nerve_ViaPath, kinds) == 528, "nerve::ViaPath.kinds is at byte 528");
-NERVE_STATIC_ASSERT(offsetof(nerve_ViaPath, checkpoint_ids) == 544, "nerve::ViaPath.checkpoint_ids is at byte 544");
+} nerve_ViaPathHeader;
+NERVE_STATIC_ASSERT(sizeof(nerve_ViaPathHeader) == 16, "nerve::ViaPathHeader is 16 bytes");
+NERVE_STATIC_ASSERT(NERVE_ALIGNOF(nerve_ViaPathHeader) == 8, "nerve::ViaPathHeader is aligned to 8 bytes");
+NERVE_STATIC_ASSERT(offsetof(nerve_ViaPathHeader, stamp_ns) == 0, "nerve::ViaPathHeader.stamp_ns is at byte 0");
+NERVE_STATIC_ASSERT(offsetof(nerve_ViaPathHeader, path_id) == 8, "nerve::ViaPathHeader.path_id is at byte 8");
 
-#define nerve_ViaPath_TYPE_NAME "nerve::ViaPath"
-#define nerve_ViaPath_FINGERPRINT UINT64_C(0xfea3e5ddfb65b85e)
-#define NERVE_VIA_PATH_FINGERPRINT nerve_ViaPath_FINGERPRINT
+#define nerve_ViaPathHeader_TYPE_NAME "nerve::ViaPathHeader"
+#define nerve_ViaPathHeader_FINGERPRINT UINT64_C(0x8f8c36ef336e1b47)
+#define NERVE_VIA_PATH_HEADER_FINGERPRINT nerve_ViaPathHeader_FINGERPRINT
+
+/* nerve::ViaPoint */
+typedef struct nerve_ViaPoint {
+  double point[2];
+  double landmark[2];
+  uint8_t kind;
+  uint8_t checkpoint_id;
+} nerve_ViaPoint;
+NERVE_STATIC_ASSERT(sizeof(nerve_ViaPoint) == 40, "nerve::ViaPoint is 40 bytes");
+NERVE_STATIC_ASSERT(NERVE_ALIGNOF(nerve_ViaPoint) == 8, "nerve::ViaPoint is aligned to 8 bytes");
+NERVE_STATIC_ASSERT(offsetof(nerve_ViaPoint, point) == 0, "nerve::ViaPoint.point is at byte 0");
+NERVE_STATIC_ASSERT(offsetof(nerve_ViaPoint, landmark) == 16, "nerve::ViaPoint.landmark is at byte 16");
+NERVE_STATIC_ASSERT(offsetof(nerve_ViaPoint, kind) == 32, "nerve::ViaPoint.kind is at byte 32");
+NERVE_STATIC_ASSERT(offsetof(nerve_ViaPoint, checkpoint_id) == 33, "nerve::ViaPoint.checkpoint_id is at byte 33");
+
+#define nerve_ViaPoint_TYPE_NAME "nerve::ViaPoint"
+#define nerve_ViaPoint_FINGERPRINT UINT64_C(0xd60e2a3f0416ab6e)
+#define NERVE_VIA_POINT_FINGERPRINT nerve_ViaPoint_FINGERPRINT
 
 /* nerve::MissionCommand */
 typedef struct nerve_MissionCommand {
@@ -761,7 +769,8 @@ NERVE_STATIC_ASSERT(offsetof(nerve_PathHeader, status) == 52, "nerve::PathHeader
   X(nerve_PoseEstimate) \
   X(nerve_PoseCorrection) \
   X(nerve_CheckpointSighting) \
-  X(nerve_ViaPath) \
+  X(nerve_ViaPathHeader) \
+  X(nerve_ViaPoint) \
   X(nerve_MissionCommand) \
   X(nerve_GraspRequest) \
   X(nerve_ArmGraspState) \

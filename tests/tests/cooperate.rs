@@ -42,7 +42,7 @@ fn two_robots(tag: &str) -> (Robot, Robot, PathBuf) {
 lease = "1s"
 [[export]]
 port = "mission/path"
-type = "nerve::ViaPath"
+type = "nerve::Seq<nerve::ViaPoint, nerve::ViaPathHeader>"
 reliable = true
 [[export]]
 port = "mission/order"
@@ -68,7 +68,7 @@ type = "nerve::MissionCommand"
 reliable = true
 [[import]]
 port = "{r1}/mission/path"
-type = "nerve::ViaPath"
+type = "nerve::Seq<nerve::ViaPoint, nerve::ViaPathHeader>"
 as = "path"
 [[import]]
 port = "{r1}/mission/order"

@@ -63,7 +63,7 @@ pub mod plan;
 
 pub use grid::{Cell, VisitedGrid};
 pub use shm_schemas::geom::{Pose, wrap_angle};
-use shm_schemas::payloads::{CheckpointSighting, MAX_VIA_POINTS, ViaKind, ViaPath};
+use shm_schemas::payloads::{CheckpointSighting, ViaKind, ViaPathBuf, ViaPoint};
 use std::f64::consts::FRAC_PI_2;
 
 /// Settings (the agent's parameters).
@@ -337,7 +337,7 @@ impl MapBuilder {
     /// order first seen (detours left out), then the target's via point and
     /// the target. `None` until a target is confirmed and robot 1 has
     /// driven `clear_m` on from where it was then.
-    pub fn path(&self, path_id: u32, stamp_ns: u64) -> Option<ViaPath> {
+    pub fn path(&self, path_id: u32, stamp_ns: u64) -> Option<ViaPathBuf> {
         let target = self.target()?;
         let from = self.found_at.unwrap_or(0).saturating_sub(1).min(self.trail.len());
         let driven: f64 = self.trail[from..].windows(2).map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1])).sum();
@@ -391,11 +391,9 @@ impl MapBuilder {
                 }
             }
         }
-        // keep the last MAX_VIA_POINTS (the target's end of the path matters most)
-        let skip = pts.len().saturating_sub(MAX_VIA_POINTS);
         // robot 1 must not stand in robot 2's way
         if let (true, Some(at)) = (self.settings.clear_m > 0.0, self.trail.last()) {
-            let near = pts.iter().skip(skip).map(|p| p.0).collect::<Vec<_>>().windows(2).any(|leg| {
+            let near = pts.iter().map(|p| p.0).collect::<Vec<_>>().windows(2).any(|leg| {
                 let (a, b) = (leg[0], leg[1]);
                 let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
                 let len2 = (dx * dx + dy * dy).max(1e-12);
@@ -406,14 +404,8 @@ impl MapBuilder {
                 return None;
             }
         }
-        let mut path = ViaPath { stamp_ns, path_id, ..Default::default() };
-        for (k, (p, kind, id, landmark)) in pts.iter().skip(skip).enumerate() {
-            path.points[k] = *p;
-            path.landmarks[k] = *landmark;
-            path.kinds[k] = *kind as u8;
-            path.checkpoint_ids[k] = *id;
-            path.count = k as u32 + 1;
-        }
+        let mut path = ViaPathBuf::new(path_id, stamp_ns);
+        path.points = pts.iter().map(|&(p, kind, id, landmark)| ViaPoint::new(p, kind, id, landmark)).collect();
         Some(path)
     }
 }
@@ -648,9 +640,9 @@ mod tests {
         }
         assert!(confirmed);
         let p = m.path(7, 42).unwrap();
-        assert_eq!((p.path_id, p.stamp_ns, p.count), (7, 42, 5));
-        assert_eq!(p.landmarks[1], [6.0, 1.2]);
-        assert!((p.landmarks[3][1] + 3.0).abs() < 0.03, "the target approach looks at the target");
+        assert_eq!((p.path_id(), p.header.stamp_ns, p.points.len()), (7, 42, 5));
+        assert_eq!(p.points[1].landmark, [6.0, 1.2]);
+        assert!((p.points[3].landmark[1] + 3.0).abs() < 0.03, "the target approach looks at the target");
         let e: Vec<_> = p.entries().collect();
         let want = [
             ([1.2, -0.4], 1, 1),
@@ -678,7 +670,7 @@ mod tests {
         assert_eq!(ids, vec![1, 2, 3, 0, 0], "checkpoint 4 lies past the target's turn");
         // with detours allowed it stays
         m.set_settings(Settings { min_sightings: 1, detour_factor: 0.0, ..Settings::default() });
-        assert_eq!(m.path(1, 0).unwrap().count, 6);
+        assert_eq!(m.path(1, 0).unwrap().points.len(), 6);
     }
 
     #[test]

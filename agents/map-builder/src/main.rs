@@ -8,7 +8,8 @@
 //!   "arrived"), through the bridge.
 //!
 //! Outputs:
-//! * `path` (`nerve::ViaPath`): the via points for robot 2, once the target
+//! * `path` (`nerve::ViaPath` = `Seq<ViaPoint, ViaPathHeader>`, any length up to
+//!   `VIA_PATH_MAX_LEN`): the via points for robot 2, once the target
 //!   is confirmed; repeated every `republish_ms` until robot 2 arrives (the
 //!   receiver keys on `path_id`), for the bridge to carry;
 //! * `mission` (`nerve::MissionCommand`): "come" with the path, repeated
@@ -47,7 +48,7 @@ use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
 use nerve_map_builder::{MapBuilder, Pose, Settings, SightingEvent, VisitedGrid, plan::plan};
 use shm_schemas::payloads::{
     CheckpointSighting, MapCell, MapHeader, MissionCode, MissionCommand, PathHeader, PathPoint, PlanRequest,
-    PoseEstimate, Scalar, ViaKind, ViaPath,
+    PoseEstimate, Scalar, VIA_PATH_MAX_LEN, ViaKind, ViaPathBuf, ViaPathHeader, ViaPoint,
 };
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -77,7 +78,7 @@ enum Mission {
     /// No target yet (or robot 2 has arrived at the last one).
     Exploring,
     /// The path was sent; waiting for "arrived".
-    Sent { path: Box<ViaPath>, last_sent_ns: u64 },
+    Sent { path: ViaPathBuf, last_sent_ns: u64 },
     /// Robot 2 arrived at the target of `path_id`.
     Done { path_id: u32 },
 }
@@ -86,7 +87,7 @@ struct MapBuilderAgent {
     pose: Input<PoseEstimate>,
     sighting: Input<CheckpointSighting>,
     mission_in: Input<MissionCommand>,
-    path_out: Output<ViaPath>,
+    path_out: SeqOutput<ViaPoint, ViaPathHeader>,
     mission_out: Output<MissionCommand>,
     revisit_out: Output<Scalar>,
     map_out: SeqOutput<MapCell, MapHeader>,
@@ -130,9 +131,9 @@ impl MapBuilderAgent {
         }
     }
 
-    fn send_path(&mut self, path: &ViaPath, now: u64) -> Result<(), AgentError> {
-        self.path_out.send(ViaPath { stamp_ns: now, ..*path })?;
-        let mut come = MissionCommand::new(MissionCode::Come, path.path_id, now);
+    fn send_path(&mut self, path: &ViaPathBuf, now: u64) -> Result<(), AgentError> {
+        self.path_out.send(&ViaPathHeader { stamp_ns: now, ..path.header }, &path.points)?;
+        let mut come = MissionCommand::new(MissionCode::Come, path.path_id(), now);
         if let Some(p) = self.last_pose {
             (come.x, come.y) = (p.x, p.y);
         }
@@ -222,7 +223,7 @@ impl Agent for MapBuilderAgent {
             pose: setup.input("pose")?,
             sighting: setup.input("sighting")?,
             mission_in: setup.input("mission_in")?,
-            path_out: setup.output("path")?,
+            path_out: setup.output_seq("path", VIA_PATH_MAX_LEN)?,
             mission_out: setup.output("mission")?,
             revisit_out: setup.output("revisit")?,
             map_out: setup.output_seq("map", MAX_CELLS)?,
@@ -312,7 +313,7 @@ impl Agent for MapBuilderAgent {
                 (Some(MissionCode::ViaReached), _) => {
                     tracing::info!(path = r.path_id, index = r.index, x = r.x, y = r.y, %sender, "robot 2 reached a via point");
                 }
-                (Some(MissionCode::Arrived), Mission::Sent { path, .. }) if r.path_id == path.path_id => {
+                (Some(MissionCode::Arrived), Mission::Sent { path, .. }) if r.path_id == path.path_id() => {
                     tracing::info!(path = r.path_id, x = r.x, y = r.y, %sender, "robot 2 arrived: resume exploring");
                     self.mission_out.send(MissionCommand::new(MissionCode::Resume, r.path_id, now))?;
                     self.mission = Mission::Done { path_id: r.path_id };
@@ -339,20 +340,20 @@ impl Agent for MapBuilderAgent {
                         })
                         .collect();
                     tracing::info!(
-                        path = path.path_id,
-                        points = path.count,
+                        path = path.path_id(),
+                        points = path.points.len(),
                         "target found: path sent: {}",
                         pts.join(" -> ")
                     );
                     self.send_path(&path, now)?;
-                    self.mission = Mission::Sent { path: Box::new(path), last_sent_ns: now };
+                    self.mission = Mission::Sent { path, last_sent_ns: now };
                 }
             }
             Mission::Sent { path, last_sent_ns } => {
                 if now.saturating_sub(*last_sent_ns) >= self.republish_ms.get().saturating_mul(1_000_000) {
-                    let path = **path;
+                    let path = path.clone();
                     self.send_path(&path, now)?;
-                    self.mission = Mission::Sent { path: Box::new(path), last_sent_ns: now };
+                    self.mission = Mission::Sent { path, last_sent_ns: now };
                 }
             }
             Mission::Done { .. } => {}
@@ -399,6 +400,12 @@ mod tests {
         CheckpointSighting { stamp_ns, x, y, range_m: 2.0, is_target: 1, from_camera: 1, ..Default::default() }
     }
 
+    /// The paths sent on `path` since the last look.
+    fn paths(h: &mut Harness<MapBuilderAgent>) -> Vec<ViaPathBuf> {
+        let sent = h.output_bytes("path").expect("path");
+        sent.iter().map(|(_, b)| ViaPathBuf::from_bytes(b).expect("a whole path")).collect()
+    }
+
     fn codes(h: &mut Harness<MapBuilderAgent>) -> Vec<(MissionCode, u32)> {
         h.output::<MissionCommand>("mission")
             .expect("mission")
@@ -413,7 +420,7 @@ mod tests {
         h.send("pose", pose(0.0, h.now_ns())).expect("pose");
         h.send("sighting", target_at(3.0, 0.0, h.now_ns())).expect("sighting");
         h.step().expect("step");
-        assert!(h.output::<ViaPath>("path").expect("path").is_empty(), "one sighting does not confirm");
+        assert!(paths(&mut h).is_empty(), "one sighting does not confirm");
         assert_eq!(h.param("landmarks").as_deref(), Ok("1"));
         assert_eq!(h.param("confirmed").as_deref(), Ok("0"));
 
@@ -422,25 +429,25 @@ mod tests {
             h.send("sighting", target_at(3.0, 0.0, h.now_ns())).expect("sighting");
             h.step().expect("step");
         }
-        let paths = h.output::<ViaPath>("path").expect("path");
-        let p = paths.last().expect("the third sighting confirms: a path");
+        let sent = paths(&mut h);
+        let p = sent.last().expect("the third sighting confirms: a path");
         let (last, kind, _) = p.entries().last().expect("points");
         assert_eq!((last, ViaKind::from_code(kind)), ([3.0, 0.0], Some(ViaKind::Target)), "{p:?}");
-        assert_eq!(codes(&mut h), [(MissionCode::Come, p.path_id)]);
+        assert_eq!(codes(&mut h), [(MissionCode::Come, p.path_id())]);
         assert_eq!(h.param("paths_sent").as_deref(), Ok("1"));
 
         // sent again every republish_ms until robot 2 arrives
         h.advance(Duration::from_millis(1200)).expect("steps");
-        assert!(h.output::<ViaPath>("path").expect("path").iter().any(|q| q.path_id == p.path_id));
-        assert!(codes(&mut h).contains(&(MissionCode::Come, p.path_id)));
+        assert!(paths(&mut h).iter().any(|q| q.path_id() == p.path_id()));
+        assert!(codes(&mut h).contains(&(MissionCode::Come, p.path_id())));
 
-        let mut arrived = MissionCommand::new(MissionCode::Arrived, p.path_id, h.now_ns());
-        arrived.index = p.count - 1;
+        let mut arrived = MissionCommand::new(MissionCode::Arrived, p.path_id(), h.now_ns());
+        arrived.index = p.points.len() as u32 - 1;
         h.send_from("mission_in", "bridge", arrived).expect("arrived");
         h.step().expect("step");
-        assert_eq!(codes(&mut h), [(MissionCode::Resume, p.path_id)]);
+        assert_eq!(codes(&mut h), [(MissionCode::Resume, p.path_id())]);
         h.advance(Duration::from_millis(1200)).expect("steps");
-        assert!(h.output::<ViaPath>("path").expect("path").is_empty(), "done: no more paths");
+        assert!(paths(&mut h).is_empty(), "done: no more paths");
     }
 
     /// The `map` output as (header.count, revision, elements) of each sample sent since the last look.
@@ -517,7 +524,7 @@ mod tests {
         h.send("pose", pose(0.0, h.now_ns())).expect("pose");
         h.send("sighting", target_at(2.5, 1.0, h.now_ns())).expect("sighting");
         h.step().expect("step");
-        assert_eq!(h.output::<ViaPath>("path").expect("path").len(), 1, "confirmed by one sighting");
+        assert_eq!(paths(&mut h).len(), 1, "confirmed by one sighting");
         assert!(h.set_param("confirmed", "0").expect_err("a figure").contains("read-only"));
     }
 }

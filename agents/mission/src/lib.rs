@@ -39,7 +39,8 @@
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
 use shm_schemas::payloads::{
-    ArmGraspState, GraspAction, GraspPhase, GraspRequest, MissionCode, MissionCommand, TargetState, ViaKind, ViaPath,
+    ArmGraspState, GraspAction, GraspPhase, GraspRequest, MissionCode, MissionCommand, TargetState, ViaKind,
+    ViaPathBuf, ViaPathHeader,
 };
 
 /// Which robot an agent speaks for.
@@ -79,7 +80,7 @@ pub enum MissionError {
     )]
     UnknownRole(String),
     /// A path that cannot be followed.
-    #[error("path {path_id} has {count} points; a path to follow has 1 … 16")]
+    #[error("path {path_id} has {count} points; a path to follow has at least 1, all finite")]
     BadPath {
         /// the path
         path_id: u32,
@@ -88,12 +89,13 @@ pub enum MissionError {
     },
 }
 
-/// Whether `path` can be sent or followed: an id and 1 … 16 finite points.
-pub fn check_path(path: &ViaPath) -> Result<(), MissionError> {
-    let n = path.count as usize;
+/// Whether `path` can be sent or followed: an id and at least one point,
+/// every one finite (its length is bounded by the port it came on).
+pub fn check_path(path: &ViaPathBuf) -> Result<(), MissionError> {
     let finite = path.entries().all(|(p, _, _)| p[0].is_finite() && p[1].is_finite());
-    if path.path_id == 0 || n == 0 || n > shm_schemas::payloads::MAX_VIA_POINTS || !finite {
-        return Err(MissionError::BadPath { path_id: path.path_id, count: path.count });
+    if path.path_id() == 0 || path.points.is_empty() || !finite {
+        let count = u32::try_from(path.points.len()).unwrap_or(u32::MAX);
+        return Err(MissionError::BadPath { path_id: path.path_id(), count });
     }
     Ok(())
 }
@@ -102,7 +104,7 @@ pub fn check_path(path: &ViaPath) -> Result<(), MissionError> {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Send {
     /// The path (explorer: to robot 2; executor: to the target achiever).
-    Path(Box<ViaPath>),
+    Path(ViaPathBuf),
     /// An order (explorer: "come", "resume" to robot 2; executor: "come",
     /// "abort" to the target achiever).
     Order(MissionCommand),
@@ -142,7 +144,7 @@ pub struct Explorer {
     /// Repeat the path and "come" this often while waiting, ns.
     pub resend_ns: u64,
     phase: ExplorerPhase,
-    path: Option<ViaPath>,
+    path: Option<ViaPathBuf>,
     mode: Option<String>,
     last_sent_ns: u64,
 }
@@ -177,24 +179,24 @@ impl Explorer {
     /// The map builder's path. A path already taken (same id; the map
     /// builder repeats it) changes nothing; a new one while exploring or
     /// done starts a mission; a bad one is refused.
-    pub fn on_path(&mut self, path: &ViaPath) -> Result<bool, MissionError> {
+    pub fn on_path(&mut self, path: &ViaPathBuf) -> Result<bool, MissionError> {
         check_path(path)?;
         let busy = match self.phase {
             ExplorerPhase::Exploring => None,
             ExplorerPhase::Done { path_id } => Some(path_id),
             ExplorerPhase::Found { path_id } | ExplorerPhase::Sent { path_id } => {
-                if path_id == path.path_id {
+                if path_id == path.path_id() {
                     // the same path again, perhaps with more points: keep the newest
-                    self.path = Some(*path);
+                    self.path = Some(path.clone());
                 }
                 return Ok(false);
             }
         };
-        if busy == Some(path.path_id) {
+        if busy == Some(path.path_id()) {
             return Ok(false);
         }
-        self.path = Some(*path);
-        self.phase = ExplorerPhase::Found { path_id: path.path_id };
+        self.path = Some(path.clone());
+        self.phase = ExplorerPhase::Found { path_id: path.path_id() };
         Ok(true)
     }
 
@@ -224,7 +226,7 @@ impl Explorer {
     /// The clock: sends the path and "come" once the decision maker has
     /// stopped the robot, and again every `resend_ns` until "arrived".
     pub fn tick(&mut self, now_ns: u64) -> Vec<Send> {
-        let Some(path) = self.path else { return Vec::new() };
+        let Some(path) = &self.path else { return Vec::new() };
         let due = match self.phase {
             ExplorerPhase::Found { .. } => {
                 self.wait_mode.is_empty() || self.mode.as_deref() == Some(self.wait_mode.as_str())
@@ -235,12 +237,12 @@ impl Explorer {
         if !due {
             return Vec::new();
         }
-        self.phase = ExplorerPhase::Sent { path_id: path.path_id };
+        let path_id = path.path_id();
+        let mut out = path.clone();
+        out.header.stamp_ns = now_ns;
+        self.phase = ExplorerPhase::Sent { path_id };
         self.last_sent_ns = now_ns;
-        vec![
-            Send::Path(Box::new(ViaPath { stamp_ns: now_ns, ..path })),
-            Send::Order(MissionCommand::new(MissionCode::Come, path.path_id, now_ns)),
-        ]
+        vec![Send::Path(out), Send::Order(MissionCommand::new(MissionCode::Come, path_id, now_ns))]
     }
 }
 
@@ -294,7 +296,7 @@ pub struct Executor {
     /// Whether to grasp at a path's target.
     pub grasp: bool,
     phase: ExecutorPhase,
-    paths: Vec<ViaPath>,
+    paths: Vec<ViaPathBuf>,
     come_for: Option<u32>,
     /// Done and acknowledged paths are not followed again.
     finished: Vec<u32>,
@@ -355,10 +357,10 @@ impl Executor {
     }
 
     /// A path from robot 1 (kept by id; the last few only).
-    pub fn on_path(&mut self, path: &ViaPath, now_ns: u64) -> Result<Vec<Send>, MissionError> {
+    pub fn on_path(&mut self, path: &ViaPathBuf, now_ns: u64) -> Result<Vec<Send>, MissionError> {
         check_path(path)?;
-        self.paths.retain(|p| p.path_id != path.path_id);
-        self.paths.push(*path);
+        self.paths.retain(|p| p.path_id() != path.path_id());
+        self.paths.push(path.clone());
         if self.paths.len() > 4 {
             self.paths.remove(0);
         }
@@ -474,8 +476,8 @@ impl Executor {
         }
     }
 
-    fn path(&self, path_id: u32) -> Option<&ViaPath> {
-        self.paths.iter().find(|p| p.path_id == path_id)
+    fn path(&self, path_id: u32) -> Option<&ViaPathBuf> {
+        self.paths.iter().find(|p| p.path_id() == path_id)
     }
 
     fn start_if_ready(&mut self, now_ns: u64) -> Vec<Send> {
@@ -497,7 +499,10 @@ impl Executor {
     fn follow_orders(&self, path_id: u32, now_ns: u64) -> Vec<Send> {
         match self.path(path_id) {
             Some(p) => vec![
-                Send::Path(Box::new(ViaPath { stamp_ns: now_ns, ..*p })),
+                Send::Path(ViaPathBuf {
+                    header: ViaPathHeader { stamp_ns: now_ns, ..p.header },
+                    points: p.points.clone(),
+                }),
                 Send::Order(MissionCommand::new(MissionCode::Come, path_id, now_ns)),
             ],
             None => Vec::new(),
@@ -540,7 +545,7 @@ impl Executor {
 }
 
 /// The target of a path: its last point when that is of kind `target`.
-pub fn target_of(path: &ViaPath) -> Option<[f64; 2]> {
+pub fn target_of(path: &ViaPathBuf) -> Option<[f64; 2]> {
     let (p, kind, _) = path.entries().last()?;
     (ViaKind::from_code(kind) == Some(ViaKind::Target)).then_some(p)
 }
@@ -552,16 +557,13 @@ mod tests {
 
     const S: u64 = 1_000_000_000;
 
-    fn path(id: u32, pts: &[([f64; 2], ViaKind)]) -> ViaPath {
-        let mut p = ViaPath { path_id: id, count: pts.len() as u32, ..Default::default() };
-        for (i, (xy, k)) in pts.iter().enumerate() {
-            p.points[i] = *xy;
-            p.kinds[i] = *k as u8;
-        }
+    fn path(id: u32, pts: &[([f64; 2], ViaKind)]) -> ViaPathBuf {
+        let mut p = ViaPathBuf::new(id, 0);
+        p.points = pts.iter().map(|&(xy, k)| shm_schemas::payloads::ViaPoint::new(xy, k, 0, xy)).collect();
         p
     }
 
-    fn corridor() -> ViaPath {
+    fn corridor() -> ViaPathBuf {
         path(
             1,
             &[
@@ -576,7 +578,7 @@ mod tests {
         sends
             .iter()
             .map(|s| match s {
-                Send::Path(p) => format!("path {}", p.path_id),
+                Send::Path(p) => format!("path {}", p.path_id()),
                 Send::Order(o) => format!("order {} {}", o.code().map_or("?", |c| c.name()), o.path_id),
                 Send::Report(r) => format!("report {} {}", r.code().map_or("?", |c| c.name()), r.path_id),
                 Send::Grasp(g) => format!("grasp {}", g.request_id),
@@ -620,17 +622,16 @@ mod tests {
         // the map builder's old path again: no new mission; a new one: yes
         assert!(!ex.on_path(&corridor()).unwrap());
         let mut p2 = corridor();
-        p2.path_id = 2;
+        p2.header.path_id = 2;
         assert!(ex.on_path(&p2).unwrap());
     }
 
     #[test]
     fn explorer_without_a_decision_maker_sends_at_once_and_refuses_bad_paths() {
         let mut ex = Explorer::new("", S);
-        assert!(ex.on_path(&ViaPath { path_id: 3, count: 0, ..Default::default() }).is_err());
-        assert!(ex.on_path(&ViaPath { path_id: 3, count: 99, ..Default::default() }).is_err());
+        assert!(ex.on_path(&ViaPathBuf::new(3, 0)).is_err(), "no point");
         let mut nan = corridor();
-        nan.points[0][0] = f64::NAN;
+        nan.points[0].point[0] = f64::NAN;
         assert!(ex.on_path(&nan).is_err());
         assert!(ex.on_path(&path(0, &[([1.0, 1.0], ViaKind::Waypoint)])).is_err(), "path id 0 is none");
         assert_eq!(ex.phase(), ExplorerPhase::Exploring);
@@ -724,6 +725,6 @@ mod tests {
     fn target_of_is_the_last_point_of_kind_target() {
         assert_eq!(target_of(&corridor()), Some([12.8, -3.0]));
         assert_eq!(target_of(&path(2, &[([1.0, 2.0], ViaKind::TargetApproach)])), None);
-        assert_eq!(target_of(&ViaPath::default()), None);
+        assert_eq!(target_of(&ViaPathBuf::default()), None);
     }
 }

@@ -26,10 +26,11 @@
 //! (30000). Read-only figures: `phase`, `path_id`, `sent`, `received`,
 //! `refused`, and the executor's `grasp`.
 
-use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, SeqInput, SeqOutput, Setup, Task};
 use nerve_mission::{Executor, ExecutorPhase, Explorer, ExplorerPhase, Role, Send};
 use shm_schemas::payloads::{
-    ArmGraspState, GraspRequest, MissionCommand, Mode, PoseEstimate, Situation, ViaKind, ViaPath,
+    ArmGraspState, GraspRequest, MissionCommand, Mode, PoseEstimate, Situation, VIA_PATH_MAX_LEN, ViaKind, ViaPathBuf,
+    ViaPathHeader, ViaPoint,
 };
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -57,14 +58,14 @@ struct Figures {
 #[allow(clippy::large_enum_variant)]
 enum Side {
     Explorer {
-        path_in: Input<ViaPath>,
+        path_in: SeqInput<ViaPoint, ViaPathHeader>,
         mode: Input<Mode>,
         report: Input<MissionCommand>,
         wait_mode: Param<String>,
         logic: Explorer,
     },
     Executor {
-        path_in: Input<ViaPath>,
+        path_in: SeqInput<ViaPoint, ViaPathHeader>,
         order_in: Input<MissionCommand>,
         progress: Input<MissionCommand>,
         arm: Input<ArmGraspState>,
@@ -80,7 +81,7 @@ enum Side {
 struct Mission {
     role: Role,
     side: Side,
-    path_out: Output<ViaPath>,
+    path_out: SeqOutput<ViaPoint, ViaPathHeader>,
     order_out: Output<MissionCommand>,
     situation: Output<Situation>,
     resend_ms: Param<u64>,
@@ -91,7 +92,7 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
-fn describe_path(p: &ViaPath) -> String {
+fn describe_path(p: &ViaPathBuf) -> String {
     p.entries()
         .map(|(xy, k, _)| format!("({:.2}, {:.2}) {}", xy[0], xy[1], ViaKind::from_code(k).map_or("?", |k| k.name())))
         .collect::<Vec<_>>()
@@ -103,7 +104,7 @@ impl Mission {
     fn send(&mut self, sends: Vec<Send>) -> Result<(), AgentError> {
         for s in sends {
             match (&self.side, s) {
-                (_, Send::Path(p)) => self.path_out.send(*p)?,
+                (_, Send::Path(p)) => self.path_out.send(&p.header, &p.points)?,
                 (_, Send::Order(o)) => self.order_out.send(o)?,
                 (Side::Executor { report_out, .. }, Send::Report(r)) => report_out.send(r)?,
                 (Side::Executor { grasp_out, .. }, Send::Grasp(g)) => grasp_out.send(g)?,
@@ -125,23 +126,23 @@ impl Mission {
             logic.on_mode(m.name.as_str());
         }
         let mut paths = Vec::new();
-        path_in.drain(|_, p| paths.push(*p));
+        path_in.drain(|_, h, pts| paths.push(ViaPathBuf::of(h, pts)));
         let mut sends = Vec::new();
         let mut figs = Figures::default();
         for p in &paths {
             match logic.on_path(p) {
                 Ok(true) => tracing::info!(
-                    path = p.path_id,
-                    points = p.count,
+                    path = p.path_id(),
+                    points = p.points.len(),
                     wait_mode = %logic.wait_mode,
                     "target found: path {} to send once the decision maker stops the robot: {}",
-                    p.path_id,
+                    p.path_id(),
                     describe_path(p)
                 ),
                 Ok(false) => {}
                 Err(e) => {
                     figs.refused += 1;
-                    tracing::warn!(path = p.path_id, "path refused: {e}");
+                    tracing::warn!(path = p.path_id(), "path refused: {e}");
                 }
             }
         }
@@ -207,14 +208,14 @@ impl Mission {
         let mut figs = Figures::default();
         let before = logic.phase();
         let mut paths = Vec::new();
-        path_in.drain(|_, p| paths.push(*p));
+        path_in.drain(|_, h, pts| paths.push(ViaPathBuf::of(h, pts)));
         figs.received += paths.len() as u64;
         for p in &paths {
             match logic.on_path(p, now) {
                 Ok(s) => sends.extend(s),
                 Err(e) => {
                     figs.refused += 1;
-                    tracing::warn!(path = p.path_id, "path from robot 1 refused: {e}");
+                    tracing::warn!(path = p.path_id(), "path from robot 1 refused: {e}");
                 }
             }
         }
@@ -242,7 +243,8 @@ impl Mission {
         if after != before {
             match after {
                 ExecutorPhase::Following { path_id } => {
-                    let desc = paths.iter().rev().find(|p| p.path_id == path_id).map(describe_path).unwrap_or_default();
+                    let desc =
+                        paths.iter().rev().find(|p| p.path_id() == path_id).map(describe_path).unwrap_or_default();
                     tracing::info!(path = path_id, "come: following path {path_id}: {desc}");
                 }
                 ExecutorPhase::Grasping { path_id, request_id } => {
@@ -297,7 +299,7 @@ impl Agent for Mission {
             Role::Explorer => {
                 let wait_mode = setup.param("wait_mode", "wait".to_owned());
                 Side::Explorer {
-                    path_in: setup.input("path_in")?,
+                    path_in: setup.input_seq("path_in")?,
                     mode: setup.input("mode")?,
                     report: setup.input("report")?,
                     logic: Explorer::new(&wait_mode.get(), 2_000_000_000),
@@ -305,7 +307,7 @@ impl Agent for Mission {
                 }
             }
             Role::Executor => Side::Executor {
-                path_in: setup.input("path_in")?,
+                path_in: setup.input_seq("path_in")?,
                 order_in: setup.input("order_in")?,
                 progress: setup.input("progress")?,
                 arm: setup.input("arm")?,
@@ -343,7 +345,7 @@ impl Agent for Mission {
         Ok(Mission {
             role,
             side,
-            path_out: setup.output("path")?,
+            path_out: setup.output_seq("path", VIA_PATH_MAX_LEN)?,
             order_out: setup.output("order")?,
             situation: setup.output("situation")?,
             resend_ms,
@@ -377,13 +379,17 @@ mod tests {
     use shm_schemas::FixedName;
     use shm_schemas::payloads::MissionCode;
 
-    fn path(id: u32) -> ViaPath {
-        let mut p = ViaPath { path_id: id, count: 2, ..Default::default() };
-        p.points[0] = [1.0, 0.0];
-        p.kinds[0] = ViaKind::TargetApproach as u8;
-        p.points[1] = [2.0, 0.0];
-        p.kinds[1] = ViaKind::Target as u8;
+    fn path(id: u32) -> ViaPathBuf {
+        let mut p = ViaPathBuf::new(id, 0);
+        p.points.push(ViaPoint::new([1.0, 0.0], ViaKind::TargetApproach, 0, [2.0, 0.0]));
+        p.points.push(ViaPoint::new([2.0, 0.0], ViaKind::Target, 0, [2.0, 0.0]));
         p
+    }
+
+    /// The paths sent on `path` since the last look.
+    fn paths(h: &mut Harness<Mission>) -> Vec<ViaPathBuf> {
+        let sent = h.output_bytes("path").expect("path");
+        sent.iter().map(|(_, b)| ViaPathBuf::from_bytes(b).expect("a whole path")).collect()
     }
 
     fn orders(h: &mut Harness<Mission>) -> Vec<(MissionCode, u32)> {
@@ -410,14 +416,15 @@ mod tests {
             .start()
             .expect("the explorer starts");
         assert_eq!(h.param("role").as_deref(), Ok("explorer"));
-        h.send("path_in", path(4)).expect("path");
+        h.send_bytes_from("path_in", "test", &path(4).to_bytes()).expect("path");
         h.step().expect("step");
-        assert!(h.output::<ViaPath>("path").expect("path").is_empty(), "not before the robot waits");
+        assert!(paths(&mut h).is_empty(), "not before the robot waits");
         assert_eq!(h.param("phase").as_deref(), Ok("found"));
 
         h.send("mode", Mode { name: FixedName::new("wait"), ..Default::default() }).expect("mode");
         h.step().expect("step");
-        assert_eq!(h.output::<ViaPath>("path").expect("path").iter().map(|p| p.path_id).collect::<Vec<_>>(), [4]);
+        let sent: Vec<_> = paths(&mut h).into_iter().map(|p| (p.path_id(), p.points)).collect();
+        assert_eq!(sent, [(4, path(4).points)], "the whole path, at its length");
         assert_eq!(orders(&mut h), [(MissionCode::Come, 4)]);
         assert_eq!(h.param("phase").as_deref(), Ok("sent"));
 
@@ -431,7 +438,7 @@ mod tests {
         assert_eq!(h.param("phase").as_deref(), Ok("done"));
 
         // a path without points is refused and counted
-        h.send("path_in", ViaPath { path_id: 5, ..Default::default() }).expect("empty path");
+        h.send_bytes_from("path_in", "test", &ViaPathBuf::new(5, 0).to_bytes()).expect("empty path");
         h.step().expect("step");
         assert_eq!(h.param("refused").as_deref(), Ok("1"));
         let e = h.set_param("resend_ms", "10").expect_err("too often");

@@ -36,7 +36,7 @@
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
 pub use shm_schemas::geom::{Pose, wrap_angle};
-use shm_schemas::payloads::{MAX_VIA_POINTS, ViaKind, ViaPath};
+use shm_schemas::payloads::{ViaKind, ViaPathBuf};
 use std::f64::consts::PI;
 
 /// Settings (the agent's parameters).
@@ -111,16 +111,6 @@ pub enum PathError {
         /// The path.
         path_id: u32,
     },
-    /// More points than a path holds.
-    #[error("path {path_id} says it has {count} points, a path holds at most {max}; is the sender of another build?")]
-    TooLong {
-        /// The path.
-        path_id: u32,
-        /// Its count.
-        count: u32,
-        /// The most.
-        max: usize,
-    },
     /// A point that is not a number or of an unknown kind.
     #[error("path {path_id}, point {index}: {problem}")]
     BadPoint {
@@ -149,18 +139,16 @@ pub struct Via {
 }
 
 /// Checks a path and returns its points.
-pub fn read_path(p: &ViaPath) -> Result<Vec<Via>, PathError> {
-    let path_id = p.path_id;
-    if p.count == 0 {
+pub fn read_path(p: &ViaPathBuf) -> Result<Vec<Via>, PathError> {
+    let path_id = p.path_id();
+    if p.points.is_empty() {
         return Err(PathError::Empty { path_id });
     }
-    if p.count as usize > MAX_VIA_POINTS {
-        return Err(PathError::TooLong { path_id, count: p.count, max: MAX_VIA_POINTS });
-    }
-    p.entries()
+    p.points
+        .iter()
         .enumerate()
-        .map(|(index, (pt, kind, checkpoint))| {
-            let lm = p.landmarks[index];
+        .map(|(index, v)| {
+            let (pt, kind, checkpoint, lm) = (v.point, v.kind, v.checkpoint_id, v.landmark);
             if !(pt[0].is_finite() && pt[1].is_finite() && lm[0].is_finite() && lm[1].is_finite()) {
                 return Err(PathError::BadPoint { path_id, index, problem: "not a number".into() });
             }
@@ -266,9 +254,9 @@ impl Follower {
     }
 
     /// Starts following `path` from its first point.
-    pub fn follow(&mut self, path: &ViaPath) -> Result<(), PathError> {
+    pub fn follow(&mut self, path: &ViaPathBuf) -> Result<(), PathError> {
         self.points = read_path(path)?;
-        self.path_id = path.path_id;
+        self.path_id = path.path_id();
         self.index = 0;
         self.phase = Phase::Driving;
         self.look = None;
@@ -441,13 +429,11 @@ impl Follower {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shm_schemas::payloads::ViaPoint;
 
-    fn path(points: &[(f64, f64, ViaKind)]) -> ViaPath {
-        let mut p = ViaPath { path_id: 1, count: points.len() as u32, ..Default::default() };
-        for (i, (x, y, k)) in points.iter().enumerate() {
-            p.points[i] = [*x, *y];
-            p.kinds[i] = *k as u8;
-        }
+    fn path(points: &[(f64, f64, ViaKind)]) -> ViaPathBuf {
+        let mut p = ViaPathBuf::new(1, 0);
+        p.points = points.iter().map(|&(x, y, k)| ViaPoint::new([x, y], k, 0, [0.0, 0.0])).collect();
         p
     }
 
@@ -520,14 +506,11 @@ mod tests {
     #[test]
     fn bad_paths_are_refused() {
         let mut f = Follower::new(Settings::default());
-        assert!(matches!(f.follow(&ViaPath::default()), Err(PathError::Empty { .. })));
-        let mut p = path(&[(1.0, 0.0, ViaKind::Target)]);
-        p.count = 99;
-        assert!(matches!(f.follow(&p), Err(PathError::TooLong { .. })));
+        assert!(matches!(f.follow(&ViaPathBuf::default()), Err(PathError::Empty { .. })));
         let mut p = path(&[(f64::NAN, 0.0, ViaKind::Target)]);
         assert!(matches!(f.follow(&p), Err(PathError::BadPoint { index: 0, .. })));
-        p.points[0] = [1.0, 1.0];
-        p.kinds[0] = 77;
+        p.points[0].point = [1.0, 1.0];
+        p.points[0].kind = 77;
         assert!(f.follow(&p).unwrap_err().to_string().contains("kind code 77"));
         assert_eq!(f.phase(), Phase::Idle);
         // idle: no motion
@@ -590,9 +573,9 @@ mod tests {
     #[test]
     fn at_a_checkpoints_via_point_it_looks_and_waits_for_the_correction() {
         let mut p = path(&[(2.0, 0.0, ViaKind::Checkpoint), (4.0, 0.0, ViaKind::Waypoint)]);
-        p.checkpoint_ids[0] = 1;
-        p.landmarks[0] = [2.0, 1.6]; // the checkpoint, to the left of its via point
-        p.landmarks[1] = [4.0, 0.0];
+        p.points[0].checkpoint_id = 1;
+        p.points[0].landmark = [2.0, 1.6]; // the checkpoint, to the left of its via point
+        p.points[1].landmark = [4.0, 0.0];
         let mut f = Follower::new(Settings::default());
         f.follow(&p).unwrap();
         let mut pose = Pose { x: 1.9, y: 0.0, theta: 0.0 };
@@ -621,10 +604,12 @@ mod tests {
         assert_eq!(f.phase(), Phase::Rotating, "on to the next point (behind its right shoulder)");
         assert_eq!(f.index(), 1);
         // a path without landmarks (all zeros, far from the via point): no look
-        let mut bare = p;
-        bare.landmarks = [[0.0; 2]; MAX_VIA_POINTS];
-        bare.points[0] = [5.0, 0.0];
-        bare.points[1] = [8.0, 0.0];
+        let mut bare = p.clone();
+        for v in &mut bare.points {
+            v.landmark = [0.0; 2];
+        }
+        bare.points[0].point = [5.0, 0.0];
+        bare.points[1].point = [8.0, 0.0];
         let mut f = Follower::new(Settings::default());
         f.follow(&bare).unwrap();
         f.step(&Pose { x: 4.9, y: 0.0, theta: 0.0 }, 0.05);

@@ -3,7 +3,8 @@
 //!
 //! Inputs:
 //! * `pose` (`nerve::PoseEstimate`): the odometry agent's `pose`;
-//! * `path` (`nerve::ViaPath`): robot 1's map builder's `path`, through the bridge;
+//! * `path` (`nerve::ViaPath`, a sequence of via points of any length): robot
+//!   1's map builder's `path`, through the bridge;
 //! * `mission_in` (`nerve::MissionCommand`): `come` (follow path N; needs
 //!   that path), `abort` (stop), through the bridge;
 //! * `sighting` (`nerve::CheckpointSighting`, optional): robot 2's own
@@ -28,9 +29,11 @@
 //! (6).
 
 use agent_sdk::params::positive;
-use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
+use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, SeqInput, Setup, Task};
 use nerve_target::{Event, Follower, Phase, Pose, Settings};
-use shm_schemas::payloads::{CheckpointSighting, MissionCode, MissionCommand, PoseEstimate, VelocityCommand, ViaPath};
+use shm_schemas::payloads::{
+    CheckpointSighting, MissionCode, MissionCommand, PoseEstimate, VelocityCommand, ViaPathBuf, ViaPathHeader, ViaPoint,
+};
 use std::time::Duration;
 
 /// A pose older than this is not followed: the robot stops, ns.
@@ -40,7 +43,7 @@ const HOLD_AFTER_ARRIVAL_NS: u64 = 1_000_000_000;
 
 struct Target {
     pose: Input<PoseEstimate>,
-    path: Input<ViaPath>,
+    path: SeqInput<ViaPoint, ViaPathHeader>,
     mission_in: Input<MissionCommand>,
     sighting: Input<CheckpointSighting>,
     target_shift_m: Param<f64>,
@@ -57,7 +60,7 @@ struct Target {
     look_timeout_s: Param<f64>,
     follower: Follower,
     corrections_seen: Option<u32>,
-    latest_path: Option<ViaPath>,
+    latest_path: Option<ViaPathBuf>,
     come_for: Option<u32>,
     finished: Option<u32>,
     last_pose: Option<PoseEstimate>,
@@ -95,9 +98,10 @@ impl Target {
     }
 
     fn start_if_asked(&mut self) {
-        let Some(path) = self.latest_path else { return };
-        let asked = self.auto_start.get() || self.come_for == Some(path.path_id);
-        let new = self.follower.path_id() != path.path_id && self.finished != Some(path.path_id);
+        let Some(path) = self.latest_path.clone() else { return };
+        let id = path.path_id();
+        let asked = self.auto_start.get() || self.come_for == Some(id);
+        let new = self.follower.path_id() != id && self.finished != Some(id);
         if !(asked && new) {
             return;
         }
@@ -109,10 +113,10 @@ impl Target {
                     .iter()
                     .map(|p| format!("({:.2}, {:.2}) {}", p.x, p.y, p.kind.name()))
                     .collect();
-                tracing::info!(path = path.path_id, points = pts.len(), "following: {}", pts.join(" -> "));
+                tracing::info!(path = id, points = pts.len(), "following: {}", pts.join(" -> "));
                 self.arrived_at = None;
             }
-            Err(e) => tracing::warn!(path = path.path_id, "refused: {e}"),
+            Err(e) => tracing::warn!(path = id, "refused: {e}"),
         }
     }
 }
@@ -128,7 +132,7 @@ impl Agent for Target {
         let d = Settings::default();
         Ok(Target {
             pose: setup.input("pose")?,
-            path: setup.input("path")?,
+            path: setup.input_seq("path")?,
             mission_in: setup.input("mission_in")?,
             sighting: setup.input("sighting")?,
             target_shift_m: setup.param_checked("target_shift_m", 1.0, in_range(0.0, 5.0)),
@@ -171,10 +175,10 @@ impl Agent for Target {
             self.last_pose = Some(p);
         }
         let mut paths = Vec::new();
-        self.path.drain(|_, p| paths.push(*p));
+        self.path.drain(|_, h, pts| paths.push(ViaPathBuf::of(h, pts)));
         for p in paths {
-            if self.latest_path.is_none_or(|l| l.path_id != p.path_id) {
-                tracing::info!(path = p.path_id, points = p.count, "path received");
+            if self.latest_path.as_ref().is_none_or(|l| l.path_id() != p.path_id()) {
+                tracing::info!(path = p.path_id(), points = p.points.len(), "path received");
             }
             self.latest_path = Some(p);
         }
@@ -292,15 +296,11 @@ mod tests {
     use shm_schemas::payloads::ViaKind;
 
     /// One waypoint at (1, 0), then the target at (3, 0).
-    fn path(id: u32) -> ViaPath {
-        let mut p = ViaPath { path_id: id, count: 2, ..Default::default() };
-        p.points[0] = [1.0, 0.0];
-        p.landmarks[0] = [1.0, 0.0];
-        p.kinds[0] = ViaKind::Waypoint as u8;
-        p.points[1] = [3.0, 0.0];
-        p.landmarks[1] = [3.0, 0.0];
-        p.kinds[1] = ViaKind::Target as u8;
-        p
+    fn path(id: u32) -> Vec<u8> {
+        let mut p = ViaPathBuf::new(id, 0);
+        p.points.push(ViaPoint::new([1.0, 0.0], ViaKind::Waypoint, 0, [1.0, 0.0]));
+        p.points.push(ViaPoint::new([3.0, 0.0], ViaKind::Target, 0, [3.0, 0.0]));
+        p.to_bytes()
     }
 
     fn pose(x: f64, stamp_ns: u64) -> PoseEstimate {
@@ -314,7 +314,7 @@ mod tests {
     #[test]
     fn a_path_is_followed_only_when_asked_and_stopped_on_abort() {
         let mut h = Harness::<Target>::new().expect("the target agent starts");
-        h.send("path", path(7)).expect("path");
+        h.send_bytes_from("path", "test", &path(7)).expect("path");
         h.send("pose", pose(0.0, h.now_ns())).expect("pose");
         h.step().expect("step");
         assert_eq!(last_cmd(&mut h), None, "a path alone is not followed (auto_start is off)");
@@ -351,7 +351,7 @@ mod tests {
             .param("v_cruise", "0.2")
             .start()
             .expect("the target agent starts");
-        h.send("path", path(1)).expect("path");
+        h.send_bytes_from("path", "test", &path(1)).expect("path");
         h.send("pose", pose(0.0, h.now_ns())).expect("pose");
         h.step().expect("step");
         let c = last_cmd(&mut h).expect("auto_start follows at once");

@@ -17,7 +17,7 @@ use nerve_checkpoint::sensor::{FrameInput, Sensor, SensorSettings};
 use nerve_odometry::{DeadReckoning, Settings as OdoSettings};
 use nerve_target::{Event, Follower, Phase, Settings};
 use shm_schemas::geom::wrap_angle;
-use shm_schemas::payloads::{IrSighting, Odometry, ViaKind, ViaPath};
+use shm_schemas::payloads::{IrSighting, Odometry, ViaKind, ViaPathBuf, ViaPoint};
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
@@ -29,7 +29,7 @@ fn camera() -> Camera {
 }
 
 /// The path robot 1's map builder makes of the corridor (via points 1.6 m in front).
-fn path() -> ViaPath {
+fn path() -> ViaPathBuf {
     let pts = [
         (1.2, -0.4, ViaKind::Checkpoint, 1, (1.2, 1.2)),
         (6.0, -0.4, ViaKind::Checkpoint, 2, (6.0, 1.2)),
@@ -37,13 +37,8 @@ fn path() -> ViaPath {
         (12.8, -1.4, ViaKind::TargetApproach, 0, TARGET),
         (12.8, -3.0, ViaKind::Target, 0, TARGET),
     ];
-    let mut p = ViaPath { path_id: 1, count: pts.len() as u32, ..Default::default() };
-    for (i, (x, y, k, id, lm)) in pts.iter().enumerate() {
-        p.points[i] = [*x, *y];
-        p.kinds[i] = *k as u8;
-        p.checkpoint_ids[i] = *id;
-        p.landmarks[i] = [lm.0, lm.1];
-    }
+    let mut p = ViaPathBuf::new(1, 0);
+    p.points = pts.iter().map(|&(x, y, k, id, lm)| ViaPoint::new([x, y], k, id, [lm.0, lm.1])).collect();
     p
 }
 

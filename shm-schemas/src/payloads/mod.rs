@@ -26,8 +26,8 @@ pub use map::{
 pub use motion::{GroundTruth, LinguisticCommand, LinguisticTerm, Odometry, SafetyStop, VelocityCommand};
 pub use navigation::{ArmGraspState, GraspAction, GraspMiss, GraspPhase, GraspRequest, HELD_NOTHING};
 pub use navigation::{
-    CheckpointSighting, MAX_VIA_POINTS, MissionCode, MissionCommand, PoseCorrection, PoseEstimate, PoseSource, ViaKind,
-    ViaPath,
+    CheckpointSighting, MissionCode, MissionCommand, PoseCorrection, PoseEstimate, PoseSource, VIA_PATH_MAX_LEN,
+    ViaKind, ViaPath, ViaPathBuf, ViaPathHeader, ViaPoint,
 };
 pub use resources::{AgentLoad, LoadLevel, MAX_AGENT_LOADS, ResourceHeader, ResourceReport};
 pub use router::RouterEpoch;
@@ -91,7 +91,8 @@ macro_rules! for_each_payload {
         $m!($crate::payloads::PoseEstimate);
         $m!($crate::payloads::PoseCorrection);
         $m!($crate::payloads::CheckpointSighting);
-        $m!($crate::payloads::ViaPath);
+        $m!($crate::payloads::ViaPathHeader);
+        $m!($crate::payloads::ViaPoint);
         $m!($crate::payloads::MissionCommand);
         $m!($crate::payloads::GraspRequest);
         $m!($crate::payloads::ArmGraspState);

@@ -12,8 +12,10 @@
 //! * `nerve::CheckpointSighting` — a checkpoint or the target seen: its id,
 //!   the IR transmitters received, range and bearing from the robot, and its
 //!   position and facing direction in the world frame;
-//! * `nerve::ViaPath` — up to [`MAX_VIA_POINTS`] via points in order, the
-//!   last one possibly the target itself;
+//! * [`ViaPath`] = `Seq<ViaPoint, ViaPathHeader>` — a path of any length:
+//!   its via points in order (each with its kind, checkpoint and landmark),
+//!   the last one possibly the target itself; [`ViaPathBuf`] is a copy of one
+//!   an agent keeps;
 //! * `nerve::MissionCommand` — "come" (follow path N), "via point reached",
 //!   "arrived", "resume", "abort".
 //!
@@ -24,6 +26,7 @@
 //! return `None` for a code this build does not know.
 
 use super::Payload;
+use crate::seq::Seq;
 use serde::Serialize;
 
 /// Where a pose estimate or correction comes from.
@@ -174,8 +177,9 @@ pub struct CheckpointSighting {
     pub reserved: [u8; 7],
 }
 
-/// Most via points a [`ViaPath`] carries.
-pub const MAX_VIA_POINTS: usize = 16;
+/// The most via points the nerve agents' path ports are declared with (a
+/// path's `max_len`); a path is as long as it is, up to this.
+pub const VIA_PATH_MAX_LEN: usize = 1024;
 
 /// What a point of a [`ViaPath`] is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
@@ -211,36 +215,123 @@ impl ViaKind {
     }
 }
 
-/// A path of via points (output `path` of the map builder, carried to
-/// robot 2 by the bridge, input `path` of the target achiever).
+/// The header of a [`ViaPath`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
 #[repr(C)]
-#[payload(name = "nerve::ViaPath")]
-pub struct ViaPath {
+#[payload(name = "nerve::ViaPathHeader")]
+pub struct ViaPathHeader {
     /// When the path was made (sender's clock).
     pub stamp_ns: u64,
     /// Identifies this path; a new path gets a new id (from 1).
     pub path_id: u32,
-    /// Valid entries of `points`, `kinds` and `checkpoint_ids`.
-    pub count: u32,
-    /// The points in the order to visit, `[x, y]`, metres, world frame.
-    pub points: [[f64; 2]; MAX_VIA_POINTS],
-    /// The landmark each point belongs to (the checkpoint's or the
-    /// target's position, `[x, y]`, world frame), for the follower to look
-    /// at and localise by; the point itself when it belongs to none.
-    pub landmarks: [[f64; 2]; MAX_VIA_POINTS],
-    /// A [`ViaKind`] code per point.
-    pub kinds: [u8; MAX_VIA_POINTS],
-    /// The checkpoint each point belongs to, 0 for none.
-    pub checkpoint_ids: [u8; MAX_VIA_POINTS],
+    /// Padding, zero.
+    #[serde(skip)]
+    pub _pad: [u8; 4],
 }
 
-impl ViaPath {
-    /// The valid points with their kind codes and checkpoint ids (`count`
-    /// clamped to [`MAX_VIA_POINTS`]); their landmarks are in `landmarks`.
+/// One via point of a [`ViaPath`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Payload, Serialize)]
+#[repr(C)]
+#[payload(name = "nerve::ViaPoint")]
+pub struct ViaPoint {
+    /// Where to go, `[x, y]`, metres, world frame.
+    pub point: [f64; 2],
+    /// The landmark the point belongs to (the checkpoint's or the target's
+    /// position, `[x, y]`, world frame), for the follower to look at and
+    /// localise by; the point itself when it belongs to none.
+    pub landmark: [f64; 2],
+    /// A [`ViaKind`] code.
+    pub kind: u8,
+    /// The checkpoint the point belongs to, 0 for none.
+    pub checkpoint_id: u8,
+    /// Padding, zero.
+    #[serde(skip)]
+    pub _pad: [u8; 6],
+}
+
+impl ViaPoint {
+    /// A point of `kind` at `point`, of checkpoint `checkpoint_id` (0: none),
+    /// belonging to `landmark`.
+    pub fn new(point: [f64; 2], kind: ViaKind, checkpoint_id: u8, landmark: [f64; 2]) -> Self {
+        ViaPoint { point, landmark, kind: kind as u8, checkpoint_id, _pad: [0; 6] }
+    }
+}
+
+/// A path of via points of any length (output `path` of the map builder or
+/// of robot 1's mission agent, carried to robot 2 by the bridge, input
+/// `path` of the target achiever): a [`ViaPathHeader`], then the points in
+/// the order to visit.
+pub type ViaPath = Seq<ViaPoint, ViaPathHeader>;
+
+/// A copy of a [`ViaPath`] sample, for an agent that keeps it past a step.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct ViaPathBuf {
+    /// Its header.
+    pub header: ViaPathHeader,
+    /// Its points, in the order to visit.
+    pub points: Vec<ViaPoint>,
+}
+
+impl ViaPathBuf {
+    /// An empty path `path_id`, made at `stamp_ns`.
+    pub fn new(path_id: u32, stamp_ns: u64) -> Self {
+        ViaPathBuf { header: ViaPathHeader { stamp_ns, path_id, _pad: [0; 4] }, points: Vec::new() }
+    }
+
+    /// A copy of a sample's header and points.
+    pub fn of(header: &ViaPathHeader, points: &[ViaPoint]) -> Self {
+        ViaPathBuf { header: *header, points: points.to_vec() }
+    }
+
+    /// The path's id.
+    pub fn path_id(&self) -> u32 {
+        self.header.path_id
+    }
+
+    /// The points with their kind codes and checkpoint ids.
     pub fn entries(&self) -> impl Iterator<Item = ([f64; 2], u8, u8)> + '_ {
-        let n = (self.count as usize).min(MAX_VIA_POINTS);
-        (0..n).map(move |i| (self.points[i], self.kinds[i], self.checkpoint_ids[i]))
+        self.points.iter().map(|p| (p.point, p.kind, p.checkpoint_id))
+    }
+
+    /// The sample's bytes (the header, then the points), as a sequence port
+    /// carries them: for tools and tests that handle bytes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(size_of::<ViaPathHeader>() + self.points.len() * size_of::<ViaPoint>());
+        // SAFETY: `ViaPathHeader` and `ViaPoint` are `#[repr(C)]`, `Copy` and
+        // without padding (`#[derive(Payload)]` checks it: `_pad` fills
+        // theirs), so all their bytes are initialised; the views live only
+        // for the copies.
+        unsafe {
+            out.extend_from_slice(std::slice::from_raw_parts(
+                (&self.header as *const ViaPathHeader).cast::<u8>(),
+                size_of::<ViaPathHeader>(),
+            ));
+            out.extend_from_slice(std::slice::from_raw_parts(
+                self.points.as_ptr().cast::<u8>(),
+                self.points.len() * size_of::<ViaPoint>(),
+            ));
+        }
+        out
+    }
+
+    /// A sample read from its bytes; `None` unless they are a header and
+    /// whole points.
+    pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
+        let (head, rest) = bytes.split_at_checked(size_of::<ViaPathHeader>())?;
+        if !rest.len().is_multiple_of(size_of::<ViaPoint>()) {
+            return None;
+        }
+        // SAFETY: `head` holds size_of::<ViaPathHeader>() bytes and each chunk
+        // size_of::<ViaPoint>(); both types are plain data of any bits
+        // (`AnyBitPattern`, given by `#[derive(Payload)]`), and
+        // `read_unaligned` needs no alignment.
+        let header = unsafe { std::ptr::read_unaligned(head.as_ptr().cast::<ViaPathHeader>()) };
+        let points = rest
+            .chunks_exact(size_of::<ViaPoint>())
+            // SAFETY: as above, for one point's bytes
+            .map(|c| unsafe { std::ptr::read_unaligned(c.as_ptr().cast::<ViaPoint>()) })
+            .collect();
+        Some(ViaPathBuf { header, points })
     }
 }
 
@@ -333,17 +424,19 @@ mod tests {
         assert_eq!(std::mem::offset_of!(CheckpointSighting, facing_rad), 32);
         assert_eq!(std::mem::offset_of!(CheckpointSighting, checkpoint_id), 36);
         assert_eq!(std::mem::offset_of!(CheckpointSighting, is_target), 40);
-        assert_eq!(std::mem::size_of::<ViaPath>(), 16 + 2 * 16 * 16 + 32);
-        assert_eq!(std::mem::offset_of!(ViaPath, points), 16);
-        assert_eq!(std::mem::offset_of!(ViaPath, landmarks), 272);
-        assert_eq!(std::mem::offset_of!(ViaPath, kinds), 528);
+        assert_eq!(std::mem::size_of::<ViaPathHeader>(), 16);
+        assert_eq!(std::mem::size_of::<ViaPoint>(), 40);
+        assert_eq!(std::mem::offset_of!(ViaPoint, landmark), 16);
+        assert_eq!(std::mem::offset_of!(ViaPoint, kind), 32);
+        assert_eq!(std::mem::offset_of!(ViaPoint, checkpoint_id), 33);
         assert_eq!(std::mem::size_of::<MissionCommand>(), 40);
         assert_eq!(std::mem::offset_of!(MissionCommand, code), 24);
         for (name, got) in [
             ("nerve::PoseEstimate", <PoseEstimate as Payload>::stable_type_name()),
             ("nerve::PoseCorrection", <PoseCorrection as Payload>::stable_type_name()),
             ("nerve::CheckpointSighting", <CheckpointSighting as Payload>::stable_type_name()),
-            ("nerve::ViaPath", <ViaPath as Payload>::stable_type_name()),
+            ("nerve::ViaPathHeader", <ViaPathHeader as Payload>::stable_type_name()),
+            ("nerve::ViaPoint", <ViaPoint as Payload>::stable_type_name()),
             ("nerve::MissionCommand", <MissionCommand as Payload>::stable_type_name()),
         ] {
             assert_eq!(got, name);
@@ -370,15 +463,27 @@ mod tests {
         assert_eq!(PoseEstimate { source: 2, ..Default::default() }.source(), Some(PoseSource::Checkpoint));
     }
 
+    /// A path is a sequence of any length; its bytes are the header and
+    /// its points, as a sequence port carries them, and read back the same.
     #[test]
-    fn path_entries_clamp_the_count() {
-        let mut p = ViaPath { count: 2, ..Default::default() };
-        p.points[1] = [1.0, 2.0];
-        p.kinds[1] = ViaKind::Target as u8;
-        let e: Vec<_> = p.entries().collect();
-        assert_eq!(e, vec![([0.0, 0.0], 0, 0), ([1.0, 2.0], 3, 0)]);
-        p.count = 1000;
-        assert_eq!(p.entries().count(), MAX_VIA_POINTS);
+    fn a_path_is_a_sequence_and_round_trips_through_its_bytes() {
+        use crate::schema::Described;
+        let schema = ViaPath::schema();
+        assert_eq!(schema.type_name, "nerve::Seq<nerve::ViaPoint, nerve::ViaPathHeader>");
+        assert_eq!(schema.validate(), Ok(()));
+        let shape = schema.sequence_shape().expect("a sequence");
+        assert_eq!((shape.items_at, shape.element), (16, 40));
+        let mut p = ViaPathBuf::new(7, 9);
+        assert_eq!(ViaPathBuf::from_bytes(&p.to_bytes()), Some(p.clone()), "no point");
+        p.points.push(ViaPoint::new([1.0, 2.0], ViaKind::Checkpoint, 3, [1.0, 3.6]));
+        p.points.push(ViaPoint::new([4.0, 2.0], ViaKind::Target, 0, [4.0, 2.0]));
+        let bytes = p.to_bytes();
+        assert_eq!(bytes.len(), 16 + 2 * 40);
+        assert_eq!(schema.decode_path("items[1].kind", &bytes), Some(crate::schema::Value::Unsigned(3)));
+        assert_eq!(ViaPathBuf::from_bytes(&bytes), Some(p.clone()));
+        assert_eq!(p.entries().nth(1), Some(([4.0, 2.0], ViaKind::Target as u8, 0)));
+        assert_eq!(ViaPathBuf::from_bytes(&bytes[..17]), None, "not whole points");
+        assert_eq!(ViaPathBuf::from_bytes(&bytes[..8]), None, "not a header");
     }
 }
 

@@ -1,4 +1,5 @@
-//! `via-path`: a hand-driven source of `nerve::ViaPath` (output `path`),
+//! `via-path`: a hand-driven source of `nerve::ViaPath` (output `path`, a
+//! sequence: as many points as given, up to `VIA_PATH_MAX_LEN`),
 //! to drive robot 2's mission agent or target achiever without robot 1, and
 //! to script the multi-process tests. It publishes the path given with
 //! `-- --points "X,Y[,KIND];..."` (KIND: `checkpoint`, `target-approach`,
@@ -11,8 +12,8 @@
 //! nerve connect plan/path mission/path_in
 //! ```
 
-use agent_sdk::{Agent, AgentError, Context, Output, Param, Setup, Task};
-use shm_schemas::payloads::{MAX_VIA_POINTS, ViaKind, ViaPath};
+use agent_sdk::{Agent, AgentError, Context, Param, SeqOutput, Setup, Task};
+use shm_schemas::payloads::{VIA_PATH_MAX_LEN, ViaKind, ViaPathBuf, ViaPathHeader, ViaPoint};
 use std::time::Duration;
 
 /// Arguments after `--`.
@@ -28,11 +29,11 @@ struct Args {
 }
 
 /// Parses `X,Y[,KIND];...` into a path.
-fn parse_points(s: &str, path_id: u32) -> Result<ViaPath, String> {
-    let mut p = ViaPath { path_id, ..Default::default() };
+fn parse_points(s: &str, path_id: u32) -> Result<ViaPathBuf, String> {
+    let mut p = ViaPathBuf::new(path_id, 0);
     for (i, item) in s.split(';').map(str::trim).filter(|t| !t.is_empty()).enumerate() {
-        if i >= MAX_VIA_POINTS {
-            return Err(format!("more than {MAX_VIA_POINTS} points"));
+        if i >= VIA_PATH_MAX_LEN {
+            return Err(format!("more than {VIA_PATH_MAX_LEN} points"));
         }
         let f: Vec<&str> = item.split(',').map(str::trim).collect();
         let num = |k: usize| -> Result<f64, String> {
@@ -53,11 +54,10 @@ fn parse_points(s: &str, path_id: u32) -> Result<ViaPath, String> {
         if f.len() > 3 {
             return Err(format!("point {} ({item:?}): X,Y[,KIND] only", i + 1));
         }
-        p.points[i] = [num(0)?, num(1)?];
-        p.kinds[i] = kind as u8;
-        p.count = i as u32 + 1;
+        let xy = [num(0)?, num(1)?];
+        p.points.push(ViaPoint::new(xy, kind, 0, xy));
     }
-    if p.count == 0 {
+    if p.points.is_empty() {
         return Err("no points: give `-- --points \"X,Y[,KIND];...\"`".into());
     }
     if path_id == 0 {
@@ -67,8 +67,8 @@ fn parse_points(s: &str, path_id: u32) -> Result<ViaPath, String> {
 }
 
 struct ViaPathSource {
-    out: Output<ViaPath>,
-    path: ViaPath,
+    out: SeqOutput<ViaPoint, ViaPathHeader>,
+    path: ViaPathBuf,
     path_id: Param<u32>,
 }
 
@@ -84,7 +84,7 @@ impl Agent for ViaPathSource {
         let path =
             parse_points(&args.points, args.path_id).map_err(|e| AgentError::Config(format!("--points: {e}")))?;
         Ok(ViaPathSource {
-            out: setup.output("path")?,
+            out: setup.output_seq("path", VIA_PATH_MAX_LEN)?,
             path,
             path_id: setup.param_checked("path_id", args.path_id, |v| {
                 if *v >= 1 { Ok(()) } else { Err("path_id is at least 1".into()) }
@@ -93,7 +93,8 @@ impl Agent for ViaPathSource {
     }
 
     fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
-        self.out.send(ViaPath { stamp_ns: ctx.now_ns(), path_id: self.path_id.get(), ..self.path })?;
+        let header = ViaPathHeader { stamp_ns: ctx.now_ns(), path_id: self.path_id.get(), ..self.path.header };
+        self.out.send(&header, &self.path.points)?;
         Ok(())
     }
 }
@@ -110,10 +111,10 @@ mod tests {
     #[test]
     fn points_parse_with_kinds_and_bad_ones_are_named() {
         let p = parse_points("-3,0; -2.4, 0.5, target", 2).unwrap();
-        assert_eq!((p.path_id, p.count), (2, 2));
-        assert_eq!(p.points[1], [-2.4, 0.5]);
-        assert_eq!(p.kinds[0], ViaKind::Waypoint as u8);
-        assert_eq!(p.kinds[1], ViaKind::Target as u8);
+        assert_eq!((p.path_id(), p.points.len()), (2, 2));
+        assert_eq!(p.points[1].point, [-2.4, 0.5]);
+        assert_eq!(p.points[0].kind, ViaKind::Waypoint as u8);
+        assert_eq!(p.points[1].kind, ViaKind::Target as u8);
         assert!(parse_points("", 1).unwrap_err().contains("no points"));
         assert!(parse_points("1", 1).unwrap_err().contains("needs X,Y"));
         assert!(parse_points("1,x", 1).unwrap_err().contains("not a number"));

@@ -34,13 +34,14 @@
 use super::{End, absolutize_args, find_file, set_flag};
 use crate::nerve::{self, SimClock, Tap, cli_node, copy_logs};
 use agent_sdk::World;
+use agent_sdk::port::RawPort;
 use agent_sdk::world::Ipc;
 use anyhow::{Context as _, Result, bail};
 use iceoryx2::prelude::Node;
 use nerve_demo::Scene;
 use nerve_demo::cooperate::{self, EstPose, PlannedPoint, Reached, Records, TruePose};
 use shm_schemas::payloads::{
-    CheckpointSighting, GroundTruth, MissionCode, MissionCommand, Odometry, PoseEstimate, ViaKind, ViaPath,
+    CheckpointSighting, GroundTruth, MissionCode, MissionCommand, Odometry, PoseEstimate, ViaKind, ViaPathBuf,
 };
 use std::collections::BTreeMap;
 use std::io::Write as _;
@@ -316,10 +317,10 @@ struct Taps {
     r1_pose: Option<Tap<PoseEstimate>>,
     r2_pose: Option<Tap<PoseEstimate>>,
     r2_odom: Option<Tap<Odometry>>,
-    r1_path: Option<Tap<ViaPath>>,
+    r1_path: Option<RawPort>,
     r1_sighting: Option<Tap<CheckpointSighting>>,
     r1_mission: Option<Tap<MissionCommand>>,
-    r2_path: Option<Tap<ViaPath>>,
+    r2_path: Option<RawPort>,
     r2_report: Option<Tap<MissionCommand>>,
 }
 
@@ -330,6 +331,31 @@ fn open<T: shm_schemas::Payload>(slot: &mut Option<Tap<T>>, world: &World, node:
             Ok(t) => *slot = t,
             Err(e) => tracing::debug!("{e:#}"),
         }
+    }
+}
+
+/// Opens `slot`, a port of a sequence type (read by its bytes), if it exists now.
+fn open_seq(slot: &mut Option<RawPort>, world: &World, node: &Node<Ipc>, agent: &str, port: &str) {
+    if slot.is_none() {
+        match RawPort::open(node, &world.robot().port_service(agent, port)) {
+            Ok(t) => *slot = Some(t),
+            Err(e) => tracing::debug!("{agent}/{port} not open yet: {e}"),
+        }
+    }
+}
+
+/// Hands every path waiting on `slot` (a `nerve::ViaPath` port) to `f`.
+fn drain_paths(slot: &Option<RawPort>, mut f: impl FnMut(&shm_schemas::SampleHeader, &ViaPathBuf)) {
+    let Some(port) = slot else { return };
+    let read = port.receive(|h, bytes| {
+        match ViaPathBuf::from_bytes(bytes) {
+            Some(p) => f(h, &p),
+            None => tracing::debug!(len = bytes.len(), "a sample that is not a whole path"),
+        }
+        true
+    });
+    if let Err(e) = read {
+        tracing::debug!("{e}");
     }
 }
 
@@ -349,7 +375,7 @@ fn est_pose(p: &PoseEstimate) -> EstPose {
     EstPose { stamp_ns: p.stamp_ns, x: p.x, y: p.y, theta: p.theta, corrections: p.corrections }
 }
 
-fn planned(p: &ViaPath) -> Vec<PlannedPoint> {
+fn planned(p: &ViaPathBuf) -> Vec<PlannedPoint> {
     p.entries()
         .map(|(at, k, id)| PlannedPoint {
             at,
@@ -382,12 +408,12 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs, scale: f6
         open(&mut taps.r1_truth, w1, n1, "sim", "truth");
         open(&mut taps.r2_truth, w1, n1, "sim", &truth2_port);
         open(&mut taps.r1_pose, w1, n1, "odometry", "pose");
-        open(&mut taps.r1_path, w1, n1, "map-builder", "path");
+        open_seq(&mut taps.r1_path, w1, n1, "map-builder", "path");
         open(&mut taps.r1_sighting, w1, n1, "checkpoint", "sighting");
         open(&mut taps.r1_mission, w1, n1, "map-builder", "mission");
         open(&mut taps.r2_pose, w2, n2, "odometry", "pose");
         open(&mut taps.r2_odom, w2, n2, "motor", "odom");
-        open(&mut taps.r2_path, w2, n2, "mission", "path");
+        open_seq(&mut taps.r2_path, w2, n2, "mission", "path");
         open(&mut taps.r2_report, w2, n2, "mission", "report");
         let before = rec.r1_truth.len();
         drain(&taps.r1_truth, |_, t| rec.r1_truth.push(true_pose(t)));
@@ -412,7 +438,7 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs, scale: f6
                 });
             });
         }
-        drain(&taps.r1_path, |h, _| {
+        drain_paths(&taps.r1_path, |h, _| {
             rec.path_sent_ns.get_or_insert(h.stamp_ns);
         });
         drain(&taps.r1_sighting, |h, s| {
@@ -425,7 +451,7 @@ fn follow(worlds: &[World; 2], names: &[String; 2], a: &CooperateArgs, scale: f6
                 rec.resumed_ns.get_or_insert(h.stamp_ns);
             }
         });
-        drain(&taps.r2_path, |_, p| rec.path = planned(p));
+        drain_paths(&taps.r2_path, |_, p| rec.path = planned(p));
         drain(&taps.r2_report, |h, m| {
             let arrived = m.code() == Some(MissionCode::Arrived);
             if arrived || m.code() == Some(MissionCode::ViaReached) {
