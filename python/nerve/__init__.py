@@ -406,13 +406,26 @@ class Setup:
         ``max_len`` of ``element`` (as Rust's ``setup.output_seq::<T, H>(port, max_len)``)."""
         return self.output(port, sequence(element, header), max_len=max_len)
 
-    def serve(self, port: str, request, response) -> "Server":
+    def serve(self, port: str, request, response, *, max_len: int | None = None) -> "Server":
         """Declares service ``port``: requests of payload ``request``
-        answered with ``response`` (names or ``Payload``s), in this agent's
+        answered with ``response`` (names or ``Payload``s, or a
+        ``nerve.sequence`` of at most ``max_len`` elements), in this agent's
         task, which a request wakes like an input (as Rust's
-        ``setup.serve::<Req, Resp>(port)``)."""
-        req, resp = _payload_of(request), _payload_of(response)
-        made = Server(_native.serve(self._n, port, req.schema_json, resp.schema_json), req, resp)
+        ``setup.serve::<Req, Resp>(port)`` and ``setup.serve_seq::<Req, T,
+        H>(port, max_len)``)."""
+        req = _payload_of(request)
+        if isinstance(response, Sequence):
+            if max_len is None:
+                raise TypeError(f"service {port!r} answering {response.type_name}: give max_len, "
+                                "the most elements an answer holds")
+            resp = response
+            native = _native.serve(self._n, port, req.schema_json, resp.schema_json, int(max_len))
+        elif max_len is not None:
+            raise TypeError(f"service {port!r}: max_len is for a sequence answer (nerve.sequence), not {response!r}")
+        else:
+            resp = _payload_of(response)
+            native = _native.serve(self._n, port, req.schema_json, resp.schema_json)
+        made = Server(native, req, resp)
         self.services[port] = (req, resp)
         return made
 
@@ -420,8 +433,11 @@ class Setup:
         """Declares client ``port`` of a service of ``request`` answered with
         ``response``; the router wires it (``nerve connect AGENT/PORT
         SERVER/SERVICE``). Each call waits at most ``timeout`` seconds for
-        its answer; at most ``max_in_flight`` (1 to 64) are in flight."""
-        req, resp = _payload_of(request), _payload_of(response)
+        its answer; at most ``max_in_flight`` (1 to 64) are in flight.
+        ``response`` may be a ``nerve.sequence``: answers are then
+        ``SeqMessage``s."""
+        req = _payload_of(request)
+        resp = response if isinstance(response, Sequence) else _payload_of(response)
         native = _native.client(self._n, port, req.schema_json, resp.schema_json, float(timeout), int(max_in_flight))
         self.clients[port] = (req, resp)
         return Client(native, req, resp)

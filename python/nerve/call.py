@@ -18,9 +18,13 @@ A request wakes the server's task like an input (``ctx.woken_by`` names
 the service). The router wires a client to a service as it wires an input
 to an output (``nerve connect a/planner b/plan``, ``[[connect]]``),
 checking both types; ``nerve call b/plan '{"x": 1}'`` calls a service from
-the terminal. Requests and answers are fixed-size payloads (copied: a
-call is small); the types are ``nerve.payload`` or built-in ones, the same
-layouts as a Rust agent's ``setup.serve::<Req, Resp>``.
+the terminal. Requests are fixed-size payloads; answers are fixed-size
+payloads or sequences (``setup.serve("plan", Goal, nerve.sequence(Point,
+PathHeader), max_len=500)``, answered with ``(header, items)``: a dict or
+Message and a numpy array or list; the client's answer is a
+``SeqMessage``), the same layouts as a Rust agent's ``setup.serve::<Req,
+Resp>`` and ``setup.serve_seq::<Req, T, H>``. Both are copied (a call is
+small).
 """
 
 from __future__ import annotations
@@ -63,6 +67,37 @@ class Finished(NamedTuple):
         return self.error is None
 
 
+def _answer_bytes(response, value) -> bytes:
+    """An answer's bytes: for a sequence a ``SeqMessage``, a ``(header,
+    items)`` pair or a dict ``{"header": ..., "items": ...}`` (or bytes of a
+    whole sample); for a fixed payload what ``_bytes_of`` takes."""
+    from .seq import SeqMessage, Sequence, encoded
+
+    if not isinstance(response, Sequence):
+        return _bytes_of(response, value, "an answer")
+    if isinstance(value, (bytes, bytearray, memoryview)):
+        return bytes(value)
+    if isinstance(value, SeqMessage):
+        return encoded(response, value)
+    if isinstance(value, tuple) and len(value) == 2:
+        return encoded(response, None, value[0], value[1])
+    if isinstance(value, dict) and set(value) <= {"header", "items"}:
+        return encoded(response, None, value.get("header"), value.get("items"))
+    raise TypeError(f"an answer of {response.type_name} is (header, items), a dict of header= and items=, "
+                    f"a SeqMessage or bytes, not {type(value).__name__}")
+
+
+def _answer_of(response, data: bytes):
+    """A finished call's answer over a copy of ``data``: a ``SeqMessage``
+    for a sequence, else a ``nerve.Message``."""
+    from . import Message
+    from .seq import Sequence, decoded
+
+    if isinstance(response, Sequence):
+        return decoded(data, response)
+    return Message(np.frombuffer(data, dtype=response.dtype, count=1).copy())
+
+
 def _bytes_of(payload, value, what: str) -> bytes:
     """The bytes of ``value`` laid out as ``payload``: a Message, a dict of
     fields (the rest zero), or bytes of exactly its size."""
@@ -95,15 +130,18 @@ class Server:
         """Answers each waiting request (at most ``max``; the rest wait for
         the next step) with ``answer(request)``: ``request`` is a
         ``nerve.Message``, and ``answer`` returns a Message, a dict of the
-        answer's fields (the rest zero) or bytes. Returns how many were
+        answer's fields (the rest zero) or bytes; for a sequence answer,
+        ``(header, items)`` (see ``_answer_bytes``). Returns how many were
         answered. An exception of ``answer`` is raised here; its request
-        goes unanswered (its caller sees ``server_gone``)."""
+        goes unanswered (its caller sees ``server_gone``). A sequence longer
+        than the service's ``max_len`` is refused (its caller sees
+        ``refused_too_long``) and raised here (ValueError) after the others are answered."""
         from . import Message
 
         req_dtype, resp = self.request.dtype, self.response
 
         def one(data: bytes) -> bytes:
-            return _bytes_of(resp, answer(Message(np.frombuffer(data, dtype=req_dtype, count=1))), "an answer")
+            return _answer_bytes(resp, answer(Message(np.frombuffer(data, dtype=req_dtype, count=1))))
 
         return self._n.serve(int(max), one)
 
@@ -148,7 +186,7 @@ class Client:
         id, data, kind, message = got
         if data is None:
             return Finished(id, None, CallError(kind, message))
-        return Finished(id, Message(np.frombuffer(data, dtype=self.response.dtype, count=1)), None)
+        return Finished(id, _answer_of(self.response, data), None)
 
     def drain(self):
         """Every finished call, oldest first."""

@@ -38,7 +38,7 @@ import numpy as np
 
 from . import Agent, Message, Meta, _kind_of, _native
 from . import seq as _seq
-from .call import CallError, Finished, _bytes_of
+from .call import CallError, Finished, _answer_bytes, _answer_of, _bytes_of
 
 __all__ = ["Harness"]
 
@@ -137,7 +137,7 @@ class Harness:
             if data is None:
                 out.append(Finished(id, None, CallError(kind, message)))
             else:
-                out.append(Finished(id, Message(np.frombuffer(data, dtype=resp.dtype, count=1).copy()), None))
+                out.append(Finished(id, _answer_of(resp, data), None))
         return out
 
     def ask(self, service: str, message=None, /, **fields):
@@ -176,7 +176,7 @@ class Harness:
             message = fields
         elif fields:
             raise TypeError("answer takes a message or fields, not both")
-        self._h.answer_bytes(client, int(id), _bytes_of(resp, message, "an answer"))
+        self._h.answer_bytes(client, int(id), _answer_bytes(resp, message))
 
     def step(self) -> None:
         """Runs one step; a step's exception is raised here."""

@@ -22,11 +22,26 @@ pyo3::create_exception!(
     "A call refused before anything was sent: the client is not wired, no server answers, or too many are in flight."
 );
 
-/// Declares service `port` of requests `request` answered with `response` (layouts, JSON).
+/// Declares service `port` of requests `request` answered with `response`
+/// (layouts, JSON): fixed-size answers, or with `max_len` sequences of at
+/// most that many elements (`response` a sequence's schema).
 #[pyfunction]
-fn serve(setup: &Bound<'_, Setup>, port: &str, request: &str, response: &str) -> PyResult<CallServer> {
+#[pyo3(signature = (setup, port, request, response, max_len=None))]
+fn serve(
+    setup: &Bound<'_, Setup>,
+    port: &str,
+    request: &str,
+    response: &str,
+    max_len: Option<usize>,
+) -> PyResult<CallServer> {
     let (request, response) = (schema_from(request)?, schema_from(response)?);
-    let server = setup.borrow_mut().get()?.serve_of(port, request, response).map_err(to_py_err)?;
+    let mut setup = setup.borrow_mut();
+    let setup = setup.get()?;
+    let server = match max_len {
+        Some(max_len) => setup.serve_seq_of(port, request, response, max_len),
+        None => setup.serve_of(port, request, response),
+    }
+    .map_err(to_py_err)?;
     Ok(CallServer { server })
 }
 
@@ -63,30 +78,72 @@ struct CallServer {
 #[pymethods]
 impl CallServer {
     /// Answers each waiting request (at most `max`) with what `answer`
-    /// returns for it: `answer(request: bytes) -> bytes` of exactly the
-    /// answer's size. Returns how many were answered. An exception of
-    /// `answer` is raised here; its request goes unanswered (its caller
-    /// sees the server gone), the others wait for the next step.
-    fn serve(&self, py: Python<'_>, max: usize, answer: &Bound<'_, PyAny>) -> PyResult<usize> {
-        let size = self.server.response_schema().size;
-        let type_name = &self.server.response_schema().type_name;
-        let done = self.server.serve_up_to(max, |request, out| -> PyResult<()> {
+    /// returns for it: `answer(request: bytes) -> bytes`, of exactly the
+    /// answer's size, or for a sequence service a whole sample (the
+    /// header's bytes, then whole elements from the items' offset), loaned
+    /// at its length and copied in. Returns how many were answered. An
+    /// exception of `answer` is raised here; its request goes unanswered
+    /// (its caller sees the server gone), the others wait for the next
+    /// step. A sequence answer past `max_len` is refused (its caller sees
+    /// `refused_too_long`) and raised here (ValueError) once the rest are
+    /// answered.
+    fn serve<'py>(&self, py: Python<'py>, max: usize, answer: &Bound<'py, PyAny>) -> PyResult<usize> {
+        let schema = self.server.response_schema();
+        let type_name = &schema.type_name;
+        let answer_bytes = |request: &[u8]| -> PyResult<Bound<'py, PyBytes>> {
             let got = answer.call1((PyBytes::new(py, request),))?;
-            let bytes: &[u8] = got.extract().map_err(|_| {
-                PyValueError::new_err(format!("an answer of {type_name} is bytes, not {}", type_name_of(&got)))
-            })?;
-            if bytes.len() != size {
-                return Err(PyValueError::new_err(format!(
-                    "a {}-byte answer for the {size}-byte {type_name}",
-                    bytes.len()
-                )));
+            got.cast_into::<PyBytes>().map_err(|e| {
+                PyValueError::new_err(format!(
+                    "an answer of {type_name} is bytes, not {}",
+                    type_name_of(&e.into_inner())
+                ))
+            })
+        };
+        let done = match schema.sequence_shape() {
+            None => {
+                let size = schema.size;
+                self.server.serve_up_to(max, |request, out| -> PyResult<()> {
+                    let got = answer_bytes(request)?;
+                    let bytes = got.as_bytes();
+                    if bytes.len() != size {
+                        return Err(PyValueError::new_err(format!(
+                            "a {}-byte answer for the {size}-byte {type_name}",
+                            bytes.len()
+                        )));
+                    }
+                    out.copy_from_slice(bytes);
+                    Ok(())
+                })
             }
-            out.copy_from_slice(bytes);
-            Ok(())
-        });
+            Some(shape) => self.server.serve_seq_up_to(max, |request, loan| -> PyResult<()> {
+                let got = answer_bytes(request)?;
+                let bytes = got.as_bytes();
+                let items = bytes.get(shape.items_at..).unwrap_or_default();
+                if bytes.len() < shape.items_at || items.len() % shape.element.max(1) != 0 {
+                    return Err(PyValueError::new_err(format!(
+                        "a {}-byte answer is not a {type_name} ({}-byte header and whole {}-byte elements)",
+                        bytes.len(),
+                        shape.items_at,
+                        shape.element
+                    )));
+                }
+                let n = items.len() / shape.element.max(1);
+                match loan.loan(n) {
+                    Ok((header, elements)) => {
+                        header.copy_from_slice(&bytes[..header.len()]);
+                        elements.copy_from_slice(items);
+                        Ok(())
+                    }
+                    // refused past max_len: the loan answers with the refusal
+                    Err(CallError::AnswerTooLong { .. }) => Ok(()),
+                    Err(e) => Err(to_py_err(e)),
+                }
+            }),
+        };
         match done {
             Ok(n) => Ok(n),
             Err(ServeError::Answer(e)) => Err(e),
+            Err(ServeError::Call(e @ CallError::AnswerTooLong { .. })) => Err(PyValueError::new_err(e.to_string())),
             Err(ServeError::Call(e)) => Err(to_py_err(e)),
         }
     }

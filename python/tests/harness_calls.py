@@ -30,6 +30,19 @@ class HarnessCalls(unittest.TestCase):
         with self.assertRaisesRegex(ValueError, "no service 'nope'"):
             h.call("nope", seq=1)
 
+    def test_the_test_calls_a_python_service_of_sequence_answers(self):
+        h = Harness(PyServer)
+        a = h.ask("plans", seq=3, stamp_ns=7)
+        self.assertEqual((int(a.header.seq), len(a)), (3, 3))
+        self.assertEqual(a.items["value"].tolist(), [0.0, 1.0, 2.0])
+        self.assertEqual(set(a.items["stamp_ns"].tolist()), {7})
+        self.assertEqual(len(h.ask("plans", seq=0)), 0)
+        # past the service's 500: its caller is refused, the step says why
+        id = h.call("plans", seq=501)
+        h.step()
+        [f] = h.answers("plans")
+        self.assertEqual((f.id, f.error.kind if f.error else None), (id, "refused_too_long"))
+
     def test_the_agents_calls_come_to_the_test_which_answers_them(self):
         h = Harness(PyClient)
         h.step()

@@ -4,7 +4,10 @@ the two sides of a call of a ``nerve::Tick`` answered by a ``nerve::Scalar``
 whose value is twice the request's ``seq``.
 
 * ``-- --serve``: answers service ``plan``, event-driven (woken by
-  requests); it reports how many it answered on ``report``;
+  requests), and service ``plans`` with a sequence (``Seq<Scalar, Tick>``,
+  at most 500), as the Rust ``caller --serve --seq`` does: the request
+  back as the header, then ``seq`` scalars 0, 1, ... stamped as the
+  request; it reports how many it answered on ``report``;
 * default: a periodic (10 ms) client ``planner`` (timeout 400 ms) that
   keeps one call in flight and checks every answer; it reports on
   ``report`` (``test::CallReport``) what became of its calls: ``answered``,
@@ -16,6 +19,8 @@ Run by tests/tests/python_calls.rs on a robot (shared memory).
 """
 
 import sys
+
+import numpy as np
 
 import nerve
 
@@ -31,12 +36,24 @@ class PyServer(nerve.Agent):
 
     def new(self, setup):
         self.plan = setup.serve("plan", "nerve::Tick", "nerve::Scalar")
+        self.plans = setup.serve("plans", "nerve::Tick", nerve.sequence("nerve::Scalar", "nerve::Tick"), max_len=500)
         self.report = setup.output("report", REPORT)
 
     def step(self, ctx):
         n = self.plan.serve(lambda req: {"value": 2.0 * int(req.seq), "stamp_ns": int(req.stamp_ns)})
+        try:
+            n += self.plans.serve(self.path)
+        except ValueError as e:  # an answer past max_len: refused to its caller, said here
+            print(f"py-server: {e}", file=sys.stderr)
         if n:
-            self.report.send(answered=self.plan.answered, steps=ctx.cycle + 1)
+            self.report.send(answered=self.plan.answered + self.plans.answered, steps=ctx.cycle + 1)
+
+    def path(self, req):
+        """The request back as the header, then ``seq`` scalars 0, 1, ... stamped as it."""
+        items = np.zeros(int(req.seq), dtype=self.plans.response.element.dtype)
+        items["value"] = np.arange(len(items))
+        items["stamp_ns"] = int(req.stamp_ns)
+        return req, items
 
 
 class PyClient(nerve.Agent):

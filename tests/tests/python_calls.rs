@@ -1,7 +1,8 @@
 //! Calls in Python (issue 42): a Python agent (`python/tests/py_caller.py`)
 //! serves and calls, on the same iceoryx2 request-response services as
 //! the Rust test agent `caller` (`src/bin/caller.rs`), in a real robot:
-//! `nerve call` and a Rust client call a Python server; a Python client
+//! `nerve call` and a Rust client call a Python server, of fixed and of
+//! sequence answers (refused past the service's `max_len`); a Python client
 //! calls a Rust server, is refused while unwired, sees its calls fail in
 //! bounded time when the server is killed and steps on, and is rewired to
 //! the restarted server. The same agents under the Python test harness
@@ -68,6 +69,26 @@ fn nerve_call_and_a_rust_client_call_a_python_server() {
     );
     assert_eq!(r.figure("c", "wrong"), "0", "{:?}", r.figures("c"));
     assert!(report(&r, "p")["answered"].as_u64() >= Some(10), "{}", report(&r, "p"));
+
+    // sequence answers: `nerve call` prints the header and the items ...
+    let out = ok(&r, &bin, &["call", "p/plans", r#"{"seq": 3, "stamp_ns": 7}"#]);
+    let answer: Value = serde_json::from_str(&out).expect("the answer as JSON");
+    assert_eq!(answer["header"]["seq"].as_u64(), Some(3), "{out}");
+    let values: Vec<f64> =
+        answer["items"].as_array().into_iter().flatten().filter_map(|i| i["value"].as_f64()).collect();
+    assert_eq!(values, [0.0, 1.0, 2.0], "{out}");
+    // ... an answer past the service's 500 is refused to its caller ...
+    let fails = r.fails(&["call", "p/plans", r#"{"seq": 501}"#]);
+    assert!(fails.contains("500") || fails.contains("long"), "an answer past max_len: {fails}");
+    // ... and a Rust sequence client checks every answer (lengths 0 to 399)
+    r.ok(&["start", "caller", "--name", "cs", "--", "--seq"]);
+    r.ok(&["connect", "cs/planner", "p/plans"]);
+    assert!(
+        wait_until(Duration::from_secs(10), || r.figure_u64("cs", "answered") >= 10),
+        "the Rust sequence client had no 10 answers from Python: {:?}",
+        r.figures("cs")
+    );
+    assert_eq!(r.figure("cs", "wrong"), "0", "{:?}", r.figures("cs"));
     r.down_and_check_clean();
 }
 
@@ -126,7 +147,8 @@ fn a_python_client_calls_a_rust_server_and_outlives_it() {
 
 /// The Python harness (`nerve.testing.Harness`) carries calls, in the
 /// test's own process (`python/tests/harness_calls.py`): the test calls
-/// the Python server's service and its step answers; the Python client's
+/// the Python server's services (fixed and sequence answers, one refused
+/// past `max_len`) and its step answers; the Python client's
 /// calls come to the test, which answers one, answers one wrongly, ends
 /// one as the server gone and lets one time out on the harness clock.
 #[test]
@@ -139,5 +161,5 @@ fn the_python_harness_carries_calls_both_ways() {
         .output()
         .expect("unittest");
     let text = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success() && text.contains("Ran 2 tests") && text.contains("OK"), "{text}");
+    assert!(out.status.success() && text.contains("Ran 3 tests") && text.contains("OK"), "{text}");
 }
