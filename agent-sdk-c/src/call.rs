@@ -197,6 +197,42 @@ pub unsafe extern "C" fn nerve_setup_client(
     guard(|| unsafe { declare_call(setup, name, request, AnswerDecl::Fixed(answer), Some(timeout_ns), port) })
 }
 
+/// What `nerve_serve` and `nerve_serve_seq` first do: `*answered` zeroed
+/// (when given), the answer function present, and server `port`, whose
+/// answers are sequences when `seq` (else the status names the function
+/// to use instead).
+///
+/// # Safety
+/// `ctx` is null or the pointer given to the running callback; `answered`
+/// is null or writable.
+pub(crate) unsafe fn serving<'a, F>(
+    ctx: *mut nerve_ctx,
+    port: nerve_port,
+    answer: Option<F>,
+    answered: *mut usize,
+    seq: bool,
+) -> Result<(Option<&'a mut usize>, F, &'a SchemaServer), Failure> {
+    // SAFETY: the caller's contract
+    let mut count = unsafe { answered.as_mut() };
+    if let Some(c) = count.as_deref_mut() {
+        *c = 0;
+    }
+    let f = answer.ok_or(Failure::Null("answer"))?;
+    // SAFETY: the caller's contract
+    let ctx = unsafe { live(ctx) }?;
+    let i = index(port, SERVER_BASE, ctx.calls.servers.len(), "serve")?;
+    let server = ctx.calls.servers.get(i).and_then(Option::as_ref).ok_or(Failure::NotInHarness(port))?;
+    if server.response_schema().sequence_shape().is_some() != seq {
+        let (what, use_instead) = if seq {
+            ("a service of fixed-size answers", "nerve_serve")
+        } else {
+            ("a service of sequence answers", "nerve_serve_seq")
+        };
+        return Err(Failure::WrongKind { port, what, use_instead });
+    }
+    Ok((count, f, server))
+}
+
 /// Answers the requests waiting on service `port` (at most 64; the rest
 /// wait for the next step, which they wake): `answer` is called once per
 /// request, in this thread, before this returns, with the request, an
@@ -223,22 +259,7 @@ pub unsafe extern "C" fn nerve_serve(
 ) -> nerve_status {
     guard(|| {
         // SAFETY: the caller's contract
-        let mut count = unsafe { answered.as_mut() };
-        if let Some(c) = count.as_deref_mut() {
-            *c = 0;
-        }
-        let f = answer.ok_or(Failure::Null("answer"))?;
-        // SAFETY: the caller's contract
-        let ctx = unsafe { live(ctx) }?;
-        let i = index(port, SERVER_BASE, ctx.calls.servers.len(), "serve")?;
-        let server = ctx.calls.servers.get(i).and_then(Option::as_ref).ok_or(Failure::NotInHarness(port))?;
-        if server.response_schema().sequence_shape().is_some() {
-            return Err(Failure::WrongKind {
-                port,
-                what: "a service of sequence answers",
-                use_instead: "nerve_serve_seq",
-            });
-        }
+        let (count, f, server) = unsafe { serving(ctx, port, answer, answered, false) }?;
         let result = server.serve_up_to(SERVE_AT_MOST, |request, slot| {
             // SAFETY: `f` is the caller's function of this signature; the
             // request's bytes and the answer's slot (zeroed, of the answer

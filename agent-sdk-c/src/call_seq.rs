@@ -17,11 +17,11 @@
 //! [`nerve_call_take_seq`]: header, elements and length, valid until its
 //! next take on that client.
 
-use crate::call::{AnswerDecl, SERVE_AT_MOST, SERVER_BASE, client, declare_call, index};
+use crate::call::{AnswerDecl, SERVE_AT_MOST, client, declare_call, serving};
 use crate::error::{Failure, guard, nerve_status};
 use crate::own_type::nerve_type;
 use crate::seq::{nerve_seq, nerve_seq_loan};
-use crate::{live, nerve_ctx, nerve_port, nerve_setup};
+use crate::{nerve_ctx, nerve_port, nerve_setup};
 use agent_sdk::dynamic::{SeqAnswerLoan, ServeError};
 use agent_sdk::port::CallError;
 use std::ffi::{c_char, c_int, c_void};
@@ -176,23 +176,8 @@ pub unsafe extern "C" fn nerve_serve_seq(
 ) -> nerve_status {
     guard(|| {
         // SAFETY: the caller's contract
-        let mut count = unsafe { answered.as_mut() };
-        if let Some(c) = count.as_deref_mut() {
-            *c = 0;
-        }
-        let f = answer.ok_or(Failure::Null("answer"))?;
-        // SAFETY: the caller's contract
-        let ctx = unsafe { live(ctx) }?;
-        let i = index(port, SERVER_BASE, ctx.calls.servers.len(), "serve")?;
-        let server = ctx.calls.servers.get(i).and_then(Option::as_ref).ok_or(Failure::NotInHarness(port))?;
-        let Some(shape) = server.response_schema().sequence_shape() else {
-            return Err(Failure::WrongKind {
-                port,
-                what: "a service of fixed-size answers",
-                use_instead: "nerve_serve",
-            });
-        };
-        let has_header = shape.items_at > 0;
+        let (count, f, server) = unsafe { serving(ctx, port, answer, answered, true) }?;
+        let has_header = server.response_schema().sequence_shape().is_some_and(|s| s.items_at > 0);
         let result = server.serve_seq_up_to(SERVE_AT_MOST, |request, seq| {
             let mut handle = nerve_answer { loan: std::ptr::from_mut(seq).cast(), has_header };
             // SAFETY: `f` is the caller's function of this signature; the
