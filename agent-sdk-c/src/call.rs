@@ -23,7 +23,7 @@
 use crate::error::{Failure, guard, nerve_status};
 use crate::own_type::{nerve_type, part_schema};
 use crate::seq::sequence;
-use crate::{live, nerve_ctx, nerve_port, nerve_setup, text};
+use crate::{live, nerve_ctx, nerve_port, nerve_setup, text, zeroed_out};
 use agent_sdk::AgentError;
 use agent_sdk::dynamic::{SchemaClient, SchemaServer, ServeError};
 use agent_sdk::port::{CallError, CallOptions};
@@ -213,10 +213,7 @@ pub(crate) unsafe fn serving<'a, F>(
     seq: bool,
 ) -> Result<(Option<&'a mut usize>, F, &'a SchemaServer), Failure> {
     // SAFETY: the caller's contract
-    let mut count = unsafe { answered.as_mut() };
-    if let Some(c) = count.as_deref_mut() {
-        *c = 0;
-    }
+    let count = unsafe { zeroed_out(answered) };
     let f = answer.ok_or(Failure::Null("answer"))?;
     // SAFETY: the caller's contract
     let ctx = unsafe { live(ctx) }?;
@@ -388,10 +385,7 @@ pub unsafe extern "C" fn nerve_call(
 ) -> nerve_status {
     guard(|| {
         // SAFETY: the caller's contract
-        let mut id_out = unsafe { call.as_mut() };
-        if let Some(o) = id_out.as_deref_mut() {
-            *o = 0;
-        }
+        let id_out = unsafe { zeroed_out(call) };
         // SAFETY: the caller's contract
         let c = unsafe { client(ctx, port) }?;
         // SAFETY: the caller's contract
@@ -424,10 +418,7 @@ pub unsafe extern "C" fn nerve_call_take(
 ) -> nerve_status {
     guard(|| {
         // SAFETY: the caller's contract
-        let mut id_out = unsafe { call.as_mut() };
-        if let Some(o) = id_out.as_deref_mut() {
-            *o = 0;
-        }
+        let id_out = unsafe { zeroed_out(call) };
         // SAFETY: the caller's contract
         let c = unsafe { client(ctx, port) }?;
         check_answer(c, port, answer, size)?;

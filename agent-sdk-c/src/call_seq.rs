@@ -21,7 +21,7 @@ use crate::call::{AnswerDecl, SERVE_AT_MOST, client, declare_call, serving};
 use crate::error::{Failure, guard, nerve_status};
 use crate::own_type::nerve_type;
 use crate::seq::{nerve_seq, nerve_seq_loan};
-use crate::{nerve_ctx, nerve_port, nerve_setup};
+use crate::{nerve_ctx, nerve_port, nerve_setup, zeroed_out};
 use agent_sdk::dynamic::{SeqAnswerLoan, ServeError};
 use agent_sdk::port::CallError;
 use std::ffi::{c_char, c_int, c_void};
@@ -223,10 +223,7 @@ pub unsafe extern "C" fn nerve_call_take_seq(
 ) -> nerve_status {
     guard(|| {
         // SAFETY: the caller's contract
-        let mut id_out = unsafe { call.as_mut() };
-        if let Some(o) = id_out.as_deref_mut() {
-            *o = 0;
-        }
+        let id_out = unsafe { zeroed_out(call) };
         // SAFETY: the caller's contract
         let out = unsafe { answer.as_mut() }.ok_or(Failure::Null("answer"))?;
         *out = nerve_seq { header: std::ptr::null(), items: std::ptr::null(), len: 0 };

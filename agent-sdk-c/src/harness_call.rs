@@ -9,7 +9,7 @@
 
 use crate::error::{Failure, guard, nerve_status};
 use crate::harness::{harness, nerve_harness};
-use crate::text;
+use crate::{text, zeroed_out};
 use agent_sdk::port::{CallError, CallId};
 use std::ffi::{c_char, c_void};
 
@@ -37,10 +37,7 @@ pub unsafe extern "C" fn nerve_harness_call(
 ) -> nerve_status {
     guard(|| {
         // SAFETY: the caller's contract
-        let mut id_out = unsafe { call.as_mut() };
-        if let Some(o) = id_out.as_deref_mut() {
-            *o = 0;
-        }
+        let id_out = unsafe { zeroed_out(call) };
         // SAFETY: the caller's contract
         let h = unsafe { harness(h) }?;
         // SAFETY: the caller's contract
@@ -101,10 +98,7 @@ pub unsafe extern "C" fn nerve_harness_call_take(
         let len = unsafe { len.as_mut() }.ok_or(Failure::Null("len"))?;
         *len = 0;
         // SAFETY: the caller's contract
-        let mut id_out = unsafe { call.as_mut() };
-        if let Some(o) = id_out.as_deref_mut() {
-            *o = 0;
-        }
+        let id_out = unsafe { zeroed_out(call) };
         // SAFETY: the caller's contract
         let h = unsafe { harness(h) }?;
         // SAFETY: the caller's contract

@@ -341,6 +341,20 @@ unsafe fn no_sample_yet(data: *mut *const c_void, len: *mut usize) -> Result<(),
     Ok(())
 }
 
+/// An optional out-pointer (a call's id, a count) set to 0 before anything
+/// can fail, so a failed call leaves 0 there; `None` when it is null.
+///
+/// # Safety
+/// `p` is null or writable for `'a`.
+pub(crate) unsafe fn zeroed_out<'a, T: Default>(p: *mut T) -> Option<&'a mut T> {
+    // SAFETY: the caller's contract
+    let out = unsafe { p.as_mut() };
+    out.map(|o| {
+        *o = T::default();
+        o
+    })
+}
+
 /// A C string argument as UTF-8, or the failure naming `what`.
 ///
 /// # Safety
