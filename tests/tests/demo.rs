@@ -341,12 +341,12 @@ fn assert_success(s: &Value) {
 }
 
 /// A copy of `launch/explore.toml` in `r`'s home (as `name`), with `extra`
-/// appended and its knowledge base replaced by `kb` (the copy lives outside
-/// the source tree: the path is absolute).
-fn launch_copy(r: &Robot, name: &str, kb: &Path, extra: &str) -> PathBuf {
+/// appended and its knowledge base named by its absolute path (the copy
+/// lives outside the source tree).
+fn launch_copy(r: &Robot, name: &str, extra: &str) -> PathBuf {
     let template = std::fs::read_to_string(repo().join("launch/explore.toml")).expect("launch/explore.toml");
     assert!(template.contains("\"kb/explore.toml\""), "the launch file names its knowledge base");
-    let kb = kb.display().to_string();
+    let kb = repo().join("kb/explore.toml").display().to_string();
     r.launch_file(name, &(template.replace("\"kb/explore.toml\"", &format!("{kb:?}")) + extra))
 }
 
@@ -571,7 +571,7 @@ args = ["--mode", "burn"]
 #[test]
 fn demo_with_a_cpu_hungry_agent() {
     let r = Robot::new("demoh");
-    let launch = launch_copy(&r, "explore-hog.toml", &repo().join("kb/explore.toml"), HOG);
+    let launch = launch_copy(&r, "explore-hog.toml", HOG);
     let s = run_demo_with(&r, &launch, &["--seed", "4", "--world", world("explore.toml").as_str()], |_| {});
     let log = std::fs::read_to_string(r.home.join("out/logs/resource.log")).unwrap_or_default();
     assert!(s["cpu"].as_object().is_some_and(|c| c.contains_key("hog")), "the hog ran: {s:#}");
