@@ -3,13 +3,18 @@
 //! explicit endpoints), and the simulator serving robot 2's motor and arm.
 //!
 //! Robot 1 runs the simulator (which serves robot 2's boards too), the
-//! mission agent as the explorer, and a scripted path (`via-path`) in place
-//! of the map builder; robot 2 runs its motor, odometry, target achiever,
-//! arm and the mission agent as the executor. The path goes out from robot
-//! 1's mission agent, crosses the bridges, reaches robot 2's target
-//! achiever, which drives robot 2 to the last point; the arm tries the grasp
-//! (the only target of the world is far away: missed, out of reach); robot
-//! 2's "arrived" crosses back, robot 1's mission agent answers "resume".
+//! mission agent as the explorer, a scripted path (`via-path`) in place of
+//! the map builder's `path` (the target found, with its approach), and a
+//! real map builder whose `plan` the explorer calls for robot 2's path
+//! (issue 42): its pose comes from robot 1's motor and odometry, the cells
+//! behind robot 1 from `nerve pub`, as if robot 1 had come from where robot
+//! 2 stands. Robot 2 runs its motor, odometry, target achiever, arm and the
+//! mission agent as the executor. The test plays robot 1's decision maker:
+//! its mode `wait` lets the path go out. The path goes out from robot 1's
+//! mission agent, crosses the bridges, reaches robot 2's target achiever,
+//! which drives robot 2 to the last point; the arm tries the grasp (the only
+//! target of the world is far away: missed, out of reach); robot 2's
+//! "arrived" crosses back, robot 1's mission agent answers "resume".
 
 use nerve_tests::{Robot, free_port, wait_until, write_file};
 use std::path::{Path, PathBuf};
@@ -24,10 +29,44 @@ fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
+/// Robot 1's map builder has been in the cells from robot 2's start (-4, 0)
+/// to its own (0, 0), its 0.5 m cells along y = 0 … 0.5 (`stamp_ns` 1: older than
+/// every pose of the odometry, which stays the robot's pose); then the test,
+/// as robot 1's decision maker, stops the robot: mode `wait`.
+fn trail_then_wait(r1: &Robot) {
+    for i in 0..8 {
+        let x = -0.25 - 0.5 * f64::from(i);
+        let pose = format!(
+            r#"{{"x": {x}, "y": 0.25, "theta": 0, "v": 0, "omega": 0, "stamp_ns": 1, "corrections": 0, "source": 1, "last_checkpoint": 0, "reserved": [0, 0]}}"#
+        );
+        r1.ok(&["pub", "map-builder/pose", &pose]);
+    }
+    let cells = || r1.figure_u64("map-builder", "cells");
+    assert!(
+        wait_until(Duration::from_secs(10), || cells() >= 9),
+        "the trail did not reach the map builder: {}",
+        cells()
+    );
+    r1.ok(&[
+        "pub",
+        "mission/mode",
+        r#"{"name": "wait", "index": 0, "since_ns": 0, "changes": 0, "danger_level": 255, "target": 255, "load_level": 255, "reserved": [0, 0, 0, 0, 0]}"#,
+    ]);
+}
+
+/// Robot 1's explorer made robot 2's path from the map builder's `plan`.
+fn path_came_from_plan(r1: &Robot) {
+    assert_eq!(r1.figure("mission", "path_from"), "plan", "{:?}", r1.figures("mission"));
+    assert!(r1.figure_u64("mission", "plans") >= 1, "{:?}", r1.figures("mission"));
+    assert!(r1.figure_u64("map-builder", "plans") >= 1, "{:?}", r1.figures("map-builder"));
+}
+
 /// The two robots of the tests, launched: robot 1 with the simulator, a
-/// scripted path (id 7) and the explorer; robot 2 with motor, odometry,
-/// target achiever, arm and the executor; each with its bridge. Returns
-/// them with robot 2's bridge configuration.
+/// scripted path (id 7), a map builder (its pose from robot 1's motor and
+/// odometry) and the explorer calling its `plan`; robot 2 with motor,
+/// odometry, target achiever, arm and the executor; each with its bridge.
+/// Robot 1 has been where robot 2 stands and stopped ([`trail_then_wait`]).
+/// Returns them with robot 2's bridge configuration.
 fn two_robots(tag: &str) -> (Robot, Robot, PathBuf) {
     let (r1, r2) = (Robot::new(&format!("{tag}a")), Robot::new(&format!("{tag}b")));
     let port = free_port();
@@ -78,8 +117,9 @@ as = "order"
             r1 = r1.name
         ),
     );
-    // robot 2 starts at (-4, 0) facing +x: a via point 0.5 m ahead, the
-    // "target" 1.4 m ahead (it stops 0.42 m short of it)
+    // robot 2 starts at (-4, 0) facing +x: the target's approach 0.7 m
+    // ahead, the "target" 1.4 m ahead (it stops 0.42 m short of it); plan's
+    // way from robot 1 (0, 0) to robot 2 adds robot 2's own place before them
     let r1_launch = r1.launch_file(
         "r1.toml",
         &format!(
@@ -90,21 +130,43 @@ kind = "sim"
 args = ["--world", "{world}", "--robot-model", "h1", "--seed", "1", "--dev-dir", "{{state}}/dev",
         "--extra-robot", "{r2}:h2:{r2_dev}"]
 [[agent]]
+name = "motor"
+kind = "motor"
+device = "{{state}}/dev/motor"
+args = ["--robot-model", "h1"]
+[[agent]]
+name = "odometry"
+kind = "odometry"
+args = ["--start", "0,0,0"]
+[[agent]]
+name = "map-builder"
+kind = "map-builder"
+params = {{ map_every = 0 }}
+[[agent]]
 name = "plan"
 kind = "via-path"
-args = ["--points", "-3.5,0;-2.6,0,target", "--path-id", "7"]
+args = ["--points", "-3.3,0,target-approach;-2.6,0,target", "--path-id", "7"]
 [[agent]]
 name = "mission"
 kind = "mission"
 args = ["--role", "explorer"]
-params = {{ wait_mode = "", resend_ms = 1000 }}
+params = {{ wait_mode = "wait", resend_ms = 1000, peer_start = "-4,0" }}
 [[agent]]
 name = "bridge"
 kind = "bridge"
 args = ["--config", "{cfg}"]
 [[connect]]
+from = "motor/odom"
+to = "odometry/odom"
+[[connect]]
+from = "odometry/pose"
+to = "map-builder/pose"
+[[connect]]
 from = "plan/path"
 to = "mission/path_in"
+[[connect]]
+from = "mission/planner"
+to = "map-builder/plan"
 [[connect]]
 from = "bridge/report"
 to = "mission/report"
@@ -184,6 +246,7 @@ to = "mission/pose"
     );
     launch(&r1, &r1_launch);
     launch(&r2, &r2_launch);
+    trail_then_wait(&r1);
     (r1, r2, r2_bridge)
 }
 
@@ -210,6 +273,7 @@ fn a_path_crosses_to_robot_2_and_its_arrival_comes_back() {
         r2.figures("bridge")
     );
     assert_eq!(r2.figure_u64("mission", "path_id"), 7);
+    path_came_from_plan(&r1);
     assert!(r2.figure_u64("bridge", &format!("import.{}/mission/path.msgs_in", r1.name)) >= 1);
     let edges = r2.edges();
     assert!(edges.contains(&"mission/path -> target/path".to_owned()), "{edges:?}");
@@ -268,6 +332,20 @@ fn an_arrival_reported_while_the_bridge_is_down_arrives_after_it_restarts() {
     let sent = r2.figure_u64("mission", "sent");
     assert!(wait_until(Duration::from_secs(30), || r2.figure_u64("mission", "sent") > sent + 1));
     assert_eq!(r1.figure("mission", "phase"), "sent", "robot 1 heard of an arrival with the link down");
+    // the path robot 1 repeats to robot 2 is plan's way from robot 1 to robot
+    // 2 turned round: robot 2's own place (plan's goal), then the scripted
+    // approach and target; the scripted path alone has no (-4, 0)
+    path_came_from_plan(&r1);
+    let path = r1.echo("mission/path", 1);
+    let points: Vec<(f64, f64, u64)> = path[0]["data"]["items"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no items: {path:?}"))
+        .iter()
+        .map(|p| {
+            (p["point"][0].as_f64().expect("x"), p["point"][1].as_f64().expect("y"), p["kind"].as_u64().expect("kind"))
+        })
+        .collect();
+    assert_eq!(points, [(-4.0, 0.0, 4), (-3.3, 0.0, 2), (-2.6, 0.0, 3)], "waypoint, target-approach, target: {path:?}");
     // the bridge back: the next repetition crosses
     let cfg = r2_bridge.display().to_string();
     r2.ok(&["start", "bridge", "--name", "bridge", "--", "--config", &cfg]);

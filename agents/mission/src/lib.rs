@@ -10,10 +10,28 @@
 //! from robot 2 and resume exploring the area."
 //!
 //! ```text
-//! exploring ──map builder's path──> found ──decision maker in `wait`──> sent ──"arrived"──> done
-//!   (target: none)                 (target: close: stop)      path + "come",     "resume" to robot 2
-//!                                                             again every resend  (target: none: explore)
+//! exploring ──map builder's path──> found ──decision maker in `wait`: plan──> sent ──"arrived"──> done
+//!   (target: none)                 (target: close: stop)   path + "come",     "resume" to robot 2
+//!                                                          again every resend  (target: none: explore)
 //! ```
+//!
+//! **Robot 2's path comes from the map builder's `plan` call** (issue 42).
+//! The map builder's path says that the target is found and holds its
+//! landmarks: the confirmed checkpoints' via points, the target's approach
+//! and the target. Once the robot has stopped, the explorer asks `plan` for
+//! a path from robot 1 to where robot 2 is ([`Explorer::plan_goal`]): the
+//! position robot 2 last reported ("arrived" carries where it believed it
+//! was), else the `peer_start` the launch file gives (robot 2 says nothing
+//! before its first path). The answer, turned round and ended with the
+//! target's approach and the target ([`assemble::from_plan`]), is what goes
+//! to robot 2. The call never blocks a step: the agent sends it and takes
+//! the answer at a later step ([`Explorer::on_plan`]). A call that fails
+//! (no path, no answer in time, no server) is asked again after
+//! [`PLAN_RETRY_NS`], at most [`PLAN_ATTEMPTS`] times; then the map
+//! builder's own path (its via points and robot 1's way to the target,
+//! which robot 2 has followed since before `plan` existed) goes out
+//! instead, so that robot 2 still comes, and the agent says so in its log
+//! and its `path_from` figure.
 //!
 //! Robot 2, the **executor** ([`Executor`]): "once the map data and the
 //! command from robot 1 are received, the target-achieving agent will be
@@ -37,6 +55,8 @@
 //! repetition is harmless.
 
 #![cfg_attr(test, allow(clippy::unwrap_used))]
+
+pub mod assemble;
 
 use shm_schemas::payloads::{
     ArmGraspState, GraspAction, GraspPhase, GraspRequest, MissionCode, MissionCommand, TargetState, ViaKind,
@@ -136,6 +156,50 @@ pub enum ExplorerPhase {
     },
 }
 
+/// A failed `plan` call is asked again after this long, ns.
+pub const PLAN_RETRY_NS: u64 = 1_000_000_000;
+/// A path's `plan` is asked at most this many times before the map
+/// builder's own path goes out instead.
+pub const PLAN_ATTEMPTS: u32 = 5;
+
+/// Where robot 2's path came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PathFrom {
+    /// The map builder's `plan` answer (turned round, ended at the target).
+    Plan,
+    /// The map builder's own path: `plan` failed [`PLAN_ATTEMPTS`] times,
+    /// or robot 2's position is not known.
+    MapBuilder,
+}
+
+impl PathFrom {
+    /// `plan` or `map-builder`.
+    pub fn name(self) -> &'static str {
+        match self {
+            PathFrom::Plan => "plan",
+            PathFrom::MapBuilder => "map-builder",
+        }
+    }
+}
+
+/// How a `plan` call ended, as the explorer takes it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PlanAnswer {
+    /// The way points `plan` found, from robot 1 to the goal.
+    Found(Vec<[f64; 2]>),
+    /// No path, or no answer: why (a status name, the call's error).
+    Failed(String),
+}
+
+/// The `plan` call of the path in hand.
+#[derive(Debug, Clone, Default)]
+struct Planning {
+    attempts: u32,
+    in_flight: bool,
+    last_ask_ns: u64,
+    last_error: String,
+}
+
 /// Robot 1's side; see the module documentation.
 #[derive(Debug, Clone)]
 pub struct Explorer {
@@ -143,8 +207,16 @@ pub struct Explorer {
     pub wait_mode: String,
     /// Repeat the path and "come" this often while waiting, ns.
     pub resend_ns: u64,
+    /// Where robot 2 is until it reports (the launch file's `peer_start`).
+    pub peer_start: Option<(f64, f64)>,
     phase: ExplorerPhase,
+    /// The map builder's path: the target found, and its landmarks.
     path: Option<ViaPathBuf>,
+    /// Robot 2's path, once made.
+    to_send: Option<(ViaPathBuf, PathFrom)>,
+    planning: Planning,
+    /// Where robot 2 last said it was.
+    peer: Option<(f64, f64)>,
     mode: Option<String>,
     last_sent_ns: u64,
 }
@@ -155,10 +227,96 @@ impl Explorer {
         Explorer {
             wait_mode: wait_mode.to_owned(),
             resend_ns,
+            peer_start: None,
             phase: ExplorerPhase::Exploring,
             path: None,
+            to_send: None,
+            planning: Planning::default(),
+            peer: None,
             mode: None,
             last_sent_ns: 0,
+        }
+    }
+
+    /// Where robot 2's path came from, once made.
+    pub fn path_from(&self) -> Option<PathFrom> {
+        self.to_send.as_ref().map(|(_, f)| *f)
+    }
+
+    /// Where robot 2 is, as far as robot 1 knows: where it last reported
+    /// being, else `peer_start`.
+    pub fn peer(&self) -> Option<(f64, f64)> {
+        self.peer.or(self.peer_start)
+    }
+
+    /// How many times the path in hand asked `plan`, and the last failure.
+    pub fn plan_attempts(&self) -> (u32, &str) {
+        (self.planning.attempts, &self.planning.last_error)
+    }
+
+    /// Whether the decision maker has stopped the robot (or none is waited for).
+    fn stopped(&self) -> bool {
+        self.wait_mode.is_empty() || self.mode.as_deref() == Some(self.wait_mode.as_str())
+    }
+
+    /// The goal to ask `plan` for now, if a call is due: the robot has
+    /// stopped with a path found, none is made yet, no call is in flight,
+    /// and the last failed one is [`PLAN_RETRY_NS`] old. The caller sends
+    /// the call and hands its end to [`Explorer::on_plan`] (a call that
+    /// could not even be sent too). `None` also when robot 2's position is
+    /// not known: then the map builder's path is taken at once.
+    pub fn plan_goal(&mut self, now_ns: u64) -> Option<(f64, f64)> {
+        if !matches!(self.phase, ExplorerPhase::Found { .. }) || self.to_send.is_some() || !self.stopped() {
+            return None;
+        }
+        let pl = &self.planning;
+        if pl.in_flight || (pl.attempts > 0 && now_ns.saturating_sub(pl.last_ask_ns) < PLAN_RETRY_NS) {
+            return None;
+        }
+        let Some(goal) = self.peer() else {
+            self.planning.last_error = "where robot 2 is is not known (no report, no peer_start)".into();
+            self.fall_back();
+            return None;
+        };
+        self.planning.attempts += 1;
+        self.planning.in_flight = true;
+        self.planning.last_ask_ns = now_ns;
+        Some(goal)
+    }
+
+    /// How the `plan` call ended. A path found makes robot 2's path; a
+    /// failure is asked again later, and after [`PLAN_ATTEMPTS`] the map
+    /// builder's own path is taken. Returns what the path came from once it
+    /// is made by this answer.
+    pub fn on_plan(&mut self, answer: PlanAnswer) -> Option<PathFrom> {
+        self.planning.in_flight = false;
+        if self.to_send.is_some() {
+            return None;
+        }
+        let landmarks = self.path.as_ref()?;
+        let made = match answer {
+            PlanAnswer::Found(way) => assemble::from_plan(landmarks, &way).map_err(|e| e.to_string()),
+            PlanAnswer::Failed(why) => Err(why),
+        };
+        match made {
+            Ok(p) => {
+                self.to_send = Some((p, PathFrom::Plan));
+                Some(PathFrom::Plan)
+            }
+            Err(why) => {
+                self.planning.last_error = why;
+                if self.planning.attempts >= PLAN_ATTEMPTS {
+                    self.fall_back();
+                    return Some(PathFrom::MapBuilder);
+                }
+                None
+            }
+        }
+    }
+
+    fn fall_back(&mut self) {
+        if let Some(p) = &self.path {
+            self.to_send = Some((p.clone(), PathFrom::MapBuilder));
         }
     }
 
@@ -188,6 +346,9 @@ impl Explorer {
                 if path_id == path.path_id() {
                     // the same path again, perhaps with more points: keep the newest
                     self.path = Some(path.clone());
+                    if let Some((_, PathFrom::MapBuilder)) = self.to_send {
+                        self.fall_back();
+                    }
                 }
                 return Ok(false);
             }
@@ -196,6 +357,8 @@ impl Explorer {
             return Ok(false);
         }
         self.path = Some(path.clone());
+        self.to_send = None;
+        self.planning = Planning::default();
         self.phase = ExplorerPhase::Found { path_id: path.path_id() };
         Ok(true)
     }
@@ -209,6 +372,10 @@ impl Explorer {
     /// "arrived" of the path in progress (or of the one done: the first
     /// "resume" may have been lost).
     pub fn on_report(&mut self, r: &MissionCommand, now_ns: u64) -> Vec<Send> {
+        // where robot 2 believed it was ((0, 0) is "not said": the message has no flag)
+        if r.x.is_finite() && r.y.is_finite() && (r.x, r.y) != (0.0, 0.0) {
+            self.peer = Some((r.x, r.y));
+        }
         match (r.code(), self.phase) {
             (Some(MissionCode::Arrived), ExplorerPhase::Sent { path_id } | ExplorerPhase::Found { path_id })
                 if r.path_id == path_id =>
@@ -223,14 +390,13 @@ impl Explorer {
         }
     }
 
-    /// The clock: sends the path and "come" once the decision maker has
-    /// stopped the robot, and again every `resend_ns` until "arrived".
+    /// The clock: sends robot 2's path and "come" once the decision maker
+    /// has stopped the robot and the path is made, and again every
+    /// `resend_ns` until "arrived".
     pub fn tick(&mut self, now_ns: u64) -> Vec<Send> {
-        let Some(path) = &self.path else { return Vec::new() };
+        let Some((path, _)) = &self.to_send else { return Vec::new() };
         let due = match self.phase {
-            ExplorerPhase::Found { .. } => {
-                self.wait_mode.is_empty() || self.mode.as_deref() == Some(self.wait_mode.as_str())
-            }
+            ExplorerPhase::Found { .. } => self.stopped(),
             ExplorerPhase::Sent { .. } => now_ns.saturating_sub(self.last_sent_ns) >= self.resend_ns,
             ExplorerPhase::Exploring | ExplorerPhase::Done { .. } => false,
         };
@@ -604,6 +770,9 @@ mod tests {
         ex.on_mode("explore");
         assert!(ex.tick(S).is_empty(), "the robot has not stopped yet");
         ex.on_mode("wait");
+        assert!(ex.tick(S).is_empty(), "no path for robot 2 yet");
+        assert_eq!(ex.plan_goal(S), None, "robot 2's position is not known: the map builder's path at once");
+        assert_eq!(ex.path_from(), Some(PathFrom::MapBuilder));
         assert_eq!(codes(&ex.tick(S)), ["path 1", "order come 1"]);
         assert!(ex.tick(2 * S).is_empty());
         assert!(!ex.on_path(&corridor()).unwrap(), "the map builder repeats its path: nothing new");
@@ -624,6 +793,73 @@ mod tests {
         let mut p2 = corridor();
         p2.header.path_id = 2;
         assert!(ex.on_path(&p2).unwrap());
+        assert_eq!(ex.path_from(), None, "a new mission makes a new path");
+    }
+
+    /// Robot 1 waits at (13.8, -4), past the target; `plan` answers the
+    /// way back along the corridor to robot 2's cell.
+    fn plan_to_robot_2() -> PlanAnswer {
+        PlanAnswer::Found(vec![[13.8, -4.0], [12.2, -1.2], [11.2, -0.3], [-3.75, 0.25]])
+    }
+
+    #[test]
+    fn explorer_asks_plan_once_stopped_and_sends_its_answer_turned_round() {
+        let mut ex = Explorer::new("wait", 2 * S);
+        ex.peer_start = Some((-4.0, 0.0));
+        ex.on_path(&corridor()).unwrap();
+        assert_eq!(ex.plan_goal(0), None, "not before the robot stopped: robot 1's pose is the plan's start");
+        ex.on_mode("wait");
+        assert_eq!(ex.plan_goal(S), Some((-4.0, 0.0)), "robot 2's start, from the launch file");
+        assert_eq!(ex.plan_goal(S), None, "one call in flight");
+        assert!(ex.tick(S).is_empty(), "waiting for the answer");
+        assert_eq!(ex.on_plan(plan_to_robot_2()), Some(PathFrom::Plan));
+        let sent = ex.tick(S);
+        assert_eq!(codes(&sent), ["path 1", "order come 1"]);
+        let Send::Path(p) = &sent[0] else { unreachable!() };
+        let pts: Vec<_> = p.entries().map(|(xy, k, id)| (xy, ViaKind::from_code(k).unwrap(), id)).collect();
+        assert_eq!(pts[0], ([-3.75, 0.25], ViaKind::Waypoint, 0), "from robot 2's end: {pts:?}");
+        assert_eq!(pts[1].1, ViaKind::Checkpoint, "the checkpoint on the way is kept: {pts:?}");
+        assert_eq!(
+            &pts[pts.len() - 2..],
+            &[([12.8, -1.4], ViaKind::TargetApproach, 0), ([12.8, -3.0], ViaKind::Target, 0)]
+        );
+        assert!(pts.iter().all(|p| p.0 != [13.8, -4.0]), "robot 1's own place is cut off: {pts:?}");
+        // "arrived" says where robot 2 is: the next mission plans to there
+        let mut arrived = MissionCommand::new(MissionCode::Arrived, 1, 0);
+        (arrived.x, arrived.y) = (12.8, -2.6);
+        ex.on_report(&arrived, 3 * S);
+        assert_eq!(ex.peer(), Some((12.8, -2.6)));
+        let mut p2 = corridor();
+        p2.header.path_id = 2;
+        ex.on_path(&p2).unwrap();
+        assert_eq!(ex.plan_goal(4 * S), Some((12.8, -2.6)));
+    }
+
+    #[test]
+    fn a_failing_plan_is_asked_again_then_the_map_builders_path_goes_out() {
+        let mut ex = Explorer::new("", S);
+        ex.peer_start = Some((-4.0, 0.0));
+        ex.on_path(&corridor()).unwrap();
+        let mut now = 0;
+        for attempt in 1..PLAN_ATTEMPTS {
+            assert!(ex.plan_goal(now).is_some(), "attempt {attempt}");
+            assert_eq!(ex.on_plan(PlanAnswer::Failed("goal-unseen".into())), None);
+            assert_eq!(ex.plan_attempts(), (attempt, "goal-unseen"));
+            assert_eq!(ex.plan_goal(now + PLAN_RETRY_NS / 2), None, "not again before the retry time");
+            assert!(ex.tick(now).is_empty());
+            now += PLAN_RETRY_NS;
+        }
+        assert!(ex.plan_goal(now).is_some());
+        // a broken answer counts as a failure too
+        assert_eq!(ex.on_plan(PlanAnswer::Found(vec![])), Some(PathFrom::MapBuilder));
+        assert!(ex.plan_attempts().1.contains("no way point"), "{:?}", ex.plan_attempts());
+        let sent = ex.tick(now);
+        let Send::Path(p) = &sent[0] else { panic!("{sent:?}") };
+        assert_eq!(p.points, corridor().points, "the map builder's own path");
+        assert_eq!(ex.plan_goal(now + 10 * PLAN_RETRY_NS), None, "no more calls");
+        // a late answer changes nothing
+        assert_eq!(ex.on_plan(plan_to_robot_2()), None);
+        assert_eq!(ex.path_from(), Some(PathFrom::MapBuilder));
     }
 
     #[test]
@@ -636,6 +872,9 @@ mod tests {
         assert!(ex.on_path(&path(0, &[([1.0, 1.0], ViaKind::Waypoint)])).is_err(), "path id 0 is none");
         assert_eq!(ex.phase(), ExplorerPhase::Exploring);
         ex.on_path(&corridor()).unwrap();
+        ex.peer_start = Some((-4.0, 0.0));
+        assert!(ex.plan_goal(0).is_some(), "asked at once");
+        ex.on_plan(plan_to_robot_2());
         assert_eq!(codes(&ex.tick(0)), ["path 1", "order come 1"]);
     }
 

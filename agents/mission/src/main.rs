@@ -5,11 +5,15 @@
 //! library `nerve_mission`. Periodic (default 100 ms).
 //!
 //! Explorer (robot 1). Inputs: `path_in` (`nerve::ViaPath`, the map builder's
-//! `path`), `mode` (`nerve::Mode`, the decision maker's `mode`), `report`
-//! (`nerve::MissionCommand`, robot 2's `report` through the bridge).
-//! Outputs: `path` and `order` ("come", "resume"; to robot 2 through the
-//! bridge), `situation` (`nerve::Situation`: target `close` from the path
-//! found until robot 2 arrives, else `none`; to the decision maker).
+//! `path`: the target found, with its landmarks), `mode` (`nerve::Mode`, the
+//! decision maker's `mode`), `report` (`nerve::MissionCommand`, robot 2's
+//! `report` through the bridge). Client: `planner` (`nerve::PlanRequest` →
+//! `nerve::PlannedPath`, wired to the map builder's `plan`): robot 2's path
+//! is `plan`'s answer from robot 1 to robot 2, turned round and ended at the
+//! target (`nerve_mission::assemble`). Outputs: `path` and `order` ("come",
+//! "resume"; to robot 2 through the bridge), `situation` (`nerve::Situation`:
+//! target `close` from the path found until robot 2 arrives, else `none`; to
+//! the decision maker).
 //!
 //! Executor (robot 2). Inputs: `path_in` and `order_in` (robot 1's, through the
 //! bridge), `progress` (`nerve::MissionCommand`, the target achiever's
@@ -22,15 +26,21 @@
 //!
 //! Parameters: `resend_ms` (2000: repeat the last word until answered);
 //! explorer `wait_mode` (`wait`: the decision maker's mode in which the path
-//! goes out; empty: at once); executor `grasp` (true), `grasp_timeout_ms`
+//! goes out; empty: at once), `peer_start` (`X,Y`: where robot 2 is, world
+//! frame, until it reports a position; empty: not known, and the map
+//! builder's own path goes out); executor `grasp` (true), `grasp_timeout_ms`
 //! (30000). Read-only figures: `phase`, `path_id`, `sent`, `received`,
-//! `refused`, and the executor's `grasp`.
+//! `refused`; the explorer's `path_from` (`plan`, or `map-builder` when
+//! `plan` failed `nerve_mission::PLAN_ATTEMPTS` times), `plans` (calls
+//! answered with a path), `plan_failures` and `plan_error` (the last); the
+//! executor's `grasp`.
 
+use agent_sdk::port::SeqClient;
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, SeqInput, SeqOutput, Setup, Task};
-use nerve_mission::{Executor, ExecutorPhase, Explorer, ExplorerPhase, Role, Send};
+use nerve_mission::{Executor, ExecutorPhase, Explorer, ExplorerPhase, PathFrom, PlanAnswer, Role, Send};
 use shm_schemas::payloads::{
-    ArmGraspState, GraspRequest, MissionCommand, Mode, PoseEstimate, Situation, VIA_PATH_MAX_LEN, ViaKind, ViaPathBuf,
-    ViaPathHeader, ViaPoint,
+    ArmGraspState, GraspRequest, MissionCommand, Mode, PathHeader, PathPoint, PlanRequest, PlanStatus, PoseEstimate,
+    Situation, VIA_PATH_MAX_LEN, ViaKind, ViaPathBuf, ViaPathHeader, ViaPoint,
 };
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -52,6 +62,10 @@ struct Figures {
     received: u64,
     refused: u64,
     grasp: String,
+    path_from: String,
+    plans: u64,
+    plan_failures: u64,
+    plan_error: String,
 }
 
 /// Ports and state of one role (one value per agent: the size difference does not matter).
@@ -61,7 +75,9 @@ enum Side {
         path_in: SeqInput<ViaPoint, ViaPathHeader>,
         mode: Input<Mode>,
         report: Input<MissionCommand>,
+        planner: SeqClient<PlanRequest, PathPoint, PathHeader>,
         wait_mode: Param<String>,
+        peer_start: Param<String>,
         logic: Explorer,
     },
     Executor {
@@ -99,6 +115,89 @@ fn describe_path(p: &ViaPathBuf) -> String {
         .join(" -> ")
 }
 
+/// `X,Y` (metres), or empty for none.
+fn parse_xy(s: &str) -> Result<Option<(f64, f64)>, String> {
+    let s = s.trim();
+    if s.is_empty() {
+        return Ok(None);
+    }
+    let bad = || format!("{s:?} is not X,Y in metres (e.g. `-4,0`), nor empty");
+    let (x, y) = s.split_once(',').ok_or_else(bad)?;
+    let (x, y) = (x.trim().parse::<f64>().map_err(|_| bad())?, y.trim().parse::<f64>().map_err(|_| bad())?);
+    if x.is_finite() && y.is_finite() { Ok(Some((x, y))) } else { Err(bad()) }
+}
+
+/// Robot 2's path from the map builder's `plan`: takes the calls that
+/// ended (answered, timed out, the server gone) and sends one when the
+/// logic asks for it. Never waits for an answer.
+fn plan_path(
+    planner: &SeqClient<PlanRequest, PathPoint, PathHeader>,
+    logic: &mut Explorer,
+    figures: &Mutex<Figures>,
+    now: u64,
+) {
+    while let Some((_, done)) = planner.take() {
+        let answer = match done {
+            Ok((h, pts)) if h.status() == Some(PlanStatus::Found) => {
+                tracing::info!(
+                    points = pts.len(),
+                    length_m = h.length_m,
+                    from_x = h.start_x,
+                    from_y = h.start_y,
+                    goal_x = h.goal_x,
+                    goal_y = h.goal_y,
+                    "plan: the map builder found a way from robot 1 to robot 2"
+                );
+                lock(figures).plans += 1;
+                PlanAnswer::Found(pts.iter().map(|p| [p.x, p.y]).collect())
+            }
+            Ok((h, _)) => PlanAnswer::Failed(format!("plan answered {}", h.status().map_or("?", |s| s.name()))),
+            Err(e) => PlanAnswer::Failed(e.to_string()),
+        };
+        report_plan(logic, figures, answer);
+    }
+    let before = logic.path_from();
+    let goal = logic.plan_goal(now);
+    if before.is_none() && logic.path_from() == Some(PathFrom::MapBuilder) {
+        tracing::warn!(
+            "plan: where robot 2 is is not known (no report from it, no `peer_start`); sending the map builder's own path"
+        );
+    }
+    if let Some((x, y)) = goal {
+        tracing::info!(goal_x = x, goal_y = y, attempt = logic.plan_attempts().0, "plan: asking the way to robot 2");
+        if let Err(e) = planner.call(&PlanRequest { x, y, stamp_ns: now }) {
+            report_plan(logic, figures, PlanAnswer::Failed(e.to_string()));
+        }
+    }
+}
+
+/// Hands a call's end to the logic; logs and counts a call that made no path.
+fn report_plan(logic: &mut Explorer, figures: &Mutex<Figures>, answer: PlanAnswer) {
+    if logic.path_from().is_some() {
+        return; // a late answer: the path is made already
+    }
+    let made = logic.on_plan(answer);
+    if made == Some(PathFrom::Plan) {
+        return;
+    }
+    let (attempts, error) = logic.plan_attempts();
+    {
+        let mut f = lock(figures);
+        f.plan_failures += 1;
+        f.plan_error = error.to_owned();
+    }
+    if made == Some(PathFrom::MapBuilder) {
+        tracing::warn!(
+            attempts,
+            error,
+            "plan: no way to robot 2 after {attempts} calls; sending the map builder's own path instead"
+        );
+    } else {
+        let retry_ms = nerve_mission::PLAN_RETRY_NS / 1_000_000;
+        tracing::warn!(attempts, error, retry_ms, "plan: no way to robot 2 yet; asking again");
+    }
+}
+
 impl Mission {
     /// Sends what the logic asked for on the ports of this role.
     fn send(&mut self, sends: Vec<Send>) -> Result<(), AgentError> {
@@ -119,8 +218,11 @@ impl Mission {
     }
 
     fn step_explorer(&mut self, now: u64) -> Result<(), AgentError> {
-        let Side::Explorer { path_in, mode, report, wait_mode, logic } = &mut self.side else { return Ok(()) };
+        let Side::Explorer { path_in, mode, report, planner, wait_mode, peer_start, logic } = &mut self.side else {
+            return Ok(());
+        };
         logic.wait_mode = wait_mode.get();
+        logic.peer_start = parse_xy(&peer_start.get()).ok().flatten();
         logic.resend_ns = self.resend_ms.get().saturating_mul(1_000_000);
         if let Some((_, m)) = mode.latest() {
             logic.on_mode(m.name.as_str());
@@ -168,10 +270,12 @@ impl Mission {
             }
             sends.extend(out);
         }
+        plan_path(planner, logic, &self.figures, now);
         let before = logic.phase();
         let out = logic.tick(now);
         if let (ExplorerPhase::Found { path_id }, ExplorerPhase::Sent { .. }) = (before, logic.phase()) {
-            tracing::info!(path = path_id, "path and \"come\" sent to robot 2; waiting for it to arrive");
+            let from = logic.path_from().map_or("?", |f| f.name());
+            tracing::info!(path = path_id, from, "path and \"come\" sent to robot 2; waiting for it to arrive");
         }
         sends.extend(out);
         let target = logic.target_state();
@@ -187,6 +291,7 @@ impl Mission {
             f.path_id = path_id;
             f.received += figs.received;
             f.refused += figs.refused;
+            f.path_from = logic.path_from().map_or_else(String::new, |p| p.name().to_owned());
         }
         self.situation.send(Situation::target(target, 0.0, 0.0, now))?;
         self.send(sends)
@@ -298,12 +403,15 @@ impl Agent for Mission {
         let side = match role {
             Role::Explorer => {
                 let wait_mode = setup.param("wait_mode", "wait".to_owned());
+                let peer_start = setup.param_checked("peer_start", String::new(), |v| parse_xy(v).map(|_| ()));
                 Side::Explorer {
                     path_in: setup.input_seq("path_in")?,
                     mode: setup.input("mode")?,
                     report: setup.input("report")?,
+                    planner: setup.client_seq("planner")?,
                     logic: Explorer::new(&wait_mode.get(), 2_000_000_000),
                     wait_mode,
+                    peer_start,
                 }
             }
             Role::Executor => Side::Executor {
@@ -337,8 +445,14 @@ impl Agent for Mission {
                 ("received".into(), f.received.to_string()),
                 ("refused".into(), f.refused.to_string()),
             ];
-            if role == Role::Executor {
-                v.push(("grasp".into(), f.grasp));
+            match role {
+                Role::Executor => v.push(("grasp".into(), f.grasp)),
+                Role::Explorer => v.extend([
+                    ("path_from".into(), f.path_from),
+                    ("plans".into(), f.plans.to_string()),
+                    ("plan_failures".into(), f.plan_failures.to_string()),
+                    ("plan_error".into(), f.plan_error),
+                ]),
             }
             v
         });
@@ -413,6 +527,7 @@ mod tests {
         let mut h = Harness::<Mission>::builder()
             .args(["--role", "explorer"])
             .param("resend_ms", "500")
+            .param("peer_start", "-4,0.5")
             .start()
             .expect("the explorer starts");
         assert_eq!(h.param("role").as_deref(), Ok("explorer"));
@@ -423,8 +538,24 @@ mod tests {
 
         h.send("mode", Mode { name: FixedName::new("wait"), ..Default::default() }).expect("mode");
         h.step().expect("step");
-        let sent: Vec<_> = paths(&mut h).into_iter().map(|p| (p.path_id(), p.points)).collect();
-        assert_eq!(sent, [(4, path(4).points)], "the whole path, at its length");
+        // stopped: robot 2's path is asked of the map builder's `plan`, to robot 2's start
+        let asked = h.requests::<PlanRequest>("planner").expect("planner");
+        assert_eq!(asked.iter().map(|(_, r)| (r.x, r.y)).collect::<Vec<_>>(), [(-4.0, 0.5)]);
+        assert!(paths(&mut h).is_empty(), "not before the answer");
+        // the way from robot 1 (at 2.5, past the target) back to robot 2
+        let header = PathHeader { status: PlanStatus::Found as u8, ..Default::default() };
+        let way = vec![PathPoint { x: 2.5, y: 0.0 }, PathPoint { x: -3.8, y: 0.3 }];
+        h.answer("planner", asked[0].0, Ok((header, way))).expect("answered");
+        h.step().expect("step");
+        let sent: Vec<_> = paths(&mut h)
+            .into_iter()
+            .map(|p| (p.path_id(), p.entries().map(|(xy, k, _)| (xy, k)).collect::<Vec<_>>()))
+            .collect();
+        let (approach, target) = (ViaKind::TargetApproach as u8, ViaKind::Target as u8);
+        let want = vec![([-3.8, 0.3], ViaKind::Waypoint as u8), ([1.0, 0.0], approach), ([2.0, 0.0], target)];
+        assert_eq!(sent, [(4, want)], "plan's way turned round, cut at the approach, ended at the target");
+        assert_eq!(h.param("path_from").as_deref(), Ok("plan"));
+        assert_eq!(h.param("plans").as_deref(), Ok("1"));
         assert_eq!(orders(&mut h), [(MissionCode::Come, 4)]);
         assert_eq!(h.param("phase").as_deref(), Ok("sent"));
 
@@ -443,5 +574,37 @@ mod tests {
         assert_eq!(h.param("refused").as_deref(), Ok("1"));
         let e = h.set_param("resend_ms", "10").expect_err("too often");
         assert!(e.contains("100"), "{e}");
+        let e = h.set_param("peer_start", "-4").expect_err("not X,Y");
+        assert!(e.contains("X,Y"), "{e}");
+    }
+
+    /// A `plan` that finds no way is asked again, a bounded number of
+    /// times, one call at a time; then the map builder's path goes out.
+    #[test]
+    fn a_plan_that_fails_is_asked_again_then_the_map_builders_path_goes_out() {
+        let mut h = Harness::<Mission>::builder()
+            .args(["--role", "explorer"])
+            .param("wait_mode", "")
+            .param("peer_start", "-4,0")
+            .start()
+            .expect("the explorer starts");
+        h.send_bytes_from("path_in", "test", &path(4).to_bytes()).expect("path");
+        let unseen = PathHeader { status: PlanStatus::GoalUnseen as u8, ..Default::default() };
+        let mut asked = 0;
+        for _ in 0..(nerve_mission::PLAN_ATTEMPTS * 12) {
+            h.step().expect("step");
+            for (id, _) in h.requests::<PlanRequest>("planner").expect("planner") {
+                asked += 1;
+                h.answer("planner", id, Ok((unseen, Vec::<PathPoint>::new()))).expect("answered");
+            }
+            if !paths(&mut h).is_empty() {
+                break;
+            }
+            h.advance(Duration::from_millis(100)).expect("time");
+        }
+        assert_eq!(asked, nerve_mission::PLAN_ATTEMPTS);
+        assert_eq!(h.param("path_from").as_deref(), Ok("map-builder"));
+        assert_eq!(h.param("plan_failures").as_deref(), Ok("5"));
+        assert!(h.param("plan_error").expect("figure").contains("goal-unseen"), "{:?}", h.param("plan_error"));
     }
 }
