@@ -303,20 +303,11 @@ pub(crate) type ActiveRequest<K> = iceoryx2::active_request::ActiveRequest<
 pub(crate) type Pending<K> =
     PendingResponse<Ipc, <K as Kind>::ReqPayload, <K as Kind>::ReqHeader, <K as Kind>::Payload, <K as Kind>::Header>;
 
-/// What a [`Pending`] call's `receive` gave: none yet, an answer made a
-/// value by `value`, or iceoryx2's error.
-pub(crate) fn received<P: ?Sized + std::fmt::Debug + IceoryxSend, H: std::fmt::Debug + ZeroCopySend, V>(
-    got: Result<Option<Response<Ipc, P, H>>, iceoryx2::port::ReceiveError>,
-    client: &str,
-    service: &str,
-    value: impl FnOnce(&Response<Ipc, P, H>) -> Result<V, CallError>,
-) -> Option<Result<V, CallError>> {
-    match got {
-        Ok(Some(r)) => Some(value(&r)),
-        Ok(None) => None,
-        Err(source) => Some(Err(CallError::Receive { port: client.into(), service: service.into(), source })),
-    }
-}
+/// An answer as its client holds it until taken: the response sample in
+/// the server's shared memory.
+pub(crate) type Answered<K> = Response<Ipc, <K as Kind>::Payload, <K as Kind>::Header>;
+/// A received response of an answer travelling as `A` says.
+pub(crate) type Received<A> = Response<Ipc, <A as Answer>::Payload, <A as Answer>::Header>;
 
 /// The kind of a call: its request and how its answer travels, as the
 /// generic server ([`CallServer`]) and client ([`CallClient`]) need them.
@@ -339,6 +330,8 @@ pub trait Kind: Send + Sync + 'static {
     type Queued: Send + 'static;
     /// What the client's `take` hands out for an answer.
     type Value: Send + 'static;
+    /// An answer as the client's `take_with` reads it, in place.
+    type View<'a>;
     /// The spec of call port `port` of this kind (its call type and fingerprint).
     fn spec(&self, port: &str) -> PortSpec;
     /// Adds the schemas of the request and the answer to an agent's registration.
@@ -369,9 +362,16 @@ pub trait Kind: Send + Sync + 'static {
     ) -> Result<Pending<Self>, CallError>;
     /// `request` as the test harness queues it, or why it is not one (for `client`).
     fn queued(&self, request: &Self::Request, client: &str) -> Result<Self::Queued, CallError>;
-    /// The answer `pending` received, if any: its value for client
-    /// `client` of `service`, or why it is none.
-    fn receive(&self, pending: &Pending<Self>, client: &str, service: &str) -> Option<Result<Self::Value, CallError>>;
+    /// The answer that came for `pending`, if any.
+    fn next_answer(&self, pending: &Pending<Self>) -> Result<Option<Answered<Self>>, ReceiveError>;
+    /// The answer `response` holds, read in place in its shared memory,
+    /// for client `client` of `service`; or why it is none (a refusal, a
+    /// malformed answer).
+    fn view<'a>(&self, response: &'a Answered<Self>, client: &str, service: &str) -> Result<Self::View<'a>, CallError>;
+    /// An answer the test harness holds as a value, as a view.
+    fn view_of<'a>(&self, value: &'a Self::Value) -> Self::View<'a>;
+    /// A view copied out: what the client's `take` hands out.
+    fn to_value(&self, view: Self::View<'_>) -> Self::Value;
 }
 
 /// A call of Rust types: requests `Req` answered as `A` says
@@ -398,6 +398,7 @@ impl<Req: Payload, A: Answer> Kind for Typed<Req, A> {
     type Request = Req;
     type Queued = Req;
     type Value = A::Value;
+    type View<'a> = A::View<'a>;
     fn spec(&self, port: &str) -> PortSpec {
         A::spec::<Req>(port)
     }
@@ -442,16 +443,25 @@ impl<Req: Payload, A: Answer> Kind for Typed<Req, A> {
     fn queued(&self, request: &Req, _client: &str) -> Result<Req, CallError> {
         Ok(*request)
     }
-    fn receive(&self, pending: &Pending<Self>, client: &str, service: &str) -> Option<Result<A::Value, CallError>> {
-        A::receive::<Req>(pending, client, service)
+    fn next_answer(&self, pending: &Pending<Self>) -> Result<Option<Answered<Self>>, ReceiveError> {
+        A::next_answer::<Req>(pending)
+    }
+    fn view<'a>(&self, response: &'a Answered<Self>, client: &str, service: &str) -> Result<A::View<'a>, CallError> {
+        A::view(response, client, service)
+    }
+    fn view_of<'a>(&self, value: &'a A::Value) -> A::View<'a> {
+        A::view_of(value)
+    }
+    fn to_value(&self, view: A::View<'_>) -> A::Value {
+        A::to_value(view)
     }
 }
 
 /// How a call's answer travels: a fixed-size payload ([`Fixed`]) or a
 /// sequence (`call_seq::SeqAnswer`). It names the iceoryx2 response
 /// payload and user header, types the port for the router, and turns a
-/// received response into what the client's `take` hands out. Implemented
-/// by nerve only.
+/// received response into what the client reads in place and what its
+/// `take` hands out. Implemented by nerve only.
 pub trait Answer: Sized + Send + Sync + 'static {
     /// The iceoryx2 response payload.
     type Payload: ?Sized + std::fmt::Debug + IceoryxSend + 'static;
@@ -459,6 +469,8 @@ pub trait Answer: Sized + Send + Sync + 'static {
     type Header: std::fmt::Debug + ZeroCopySend + Default + 'static;
     /// What the client's `take` hands out for an answer.
     type Value: Send + 'static;
+    /// An answer as the client's `take_with` reads it, in place.
+    type View<'a>;
     /// The spec of call port `port` of requests `Req` answered this way.
     fn spec<Req: Payload>(port: &str) -> PortSpec;
     /// Adds the schemas of the answer to an agent's registration.
@@ -477,13 +489,15 @@ pub trait Answer: Sized + Send + Sync + 'static {
         factory: &Factory<Typed<Req, Self>>,
         max_len: usize,
     ) -> Result<ServerPort<Typed<Req, Self>>, ServerCreateError>;
-    /// The answer `pending` received, if any: its value for client
-    /// `client` of `service`, or why it is none.
-    fn receive<Req: Payload>(
-        pending: &Pending<Typed<Req, Self>>,
-        client: &str,
-        service: &str,
-    ) -> Option<Result<Self::Value, CallError>>;
+    /// The answer that came for `pending`, if any.
+    fn next_answer<Req: Payload>(pending: &Pending<Typed<Req, Self>>) -> Result<Option<Received<Self>>, ReceiveError>;
+    /// The answer `response` holds, read in place, for client `client` of
+    /// `service`; or why it is none.
+    fn view<'a>(response: &'a Received<Self>, client: &str, service: &str) -> Result<Self::View<'a>, CallError>;
+    /// An answer the test harness holds as a value, as a view.
+    fn view_of(value: &Self::Value) -> Self::View<'_>;
+    /// A view copied out: what the client's `take` hands out.
+    fn to_value(view: Self::View<'_>) -> Self::Value;
 }
 
 /// A fixed-size answer `Resp`: the call of [`Server`] and [`Client`].
@@ -499,6 +513,7 @@ impl<Resp: Payload> Answer for Fixed<Resp> {
     type Payload = Resp;
     type Header = ();
     type Value = Resp;
+    type View<'a> = &'a Resp;
     fn spec<Req: Payload>(port: &str) -> PortSpec {
         call_spec::<Req, Resp>(port)
     }
@@ -527,12 +542,19 @@ impl<Resp: Payload> Answer for Fixed<Resp> {
     ) -> Result<ServerPort<Typed<Req, Self>>, ServerCreateError> {
         factory.server_builder().create()
     }
-    fn receive<Req: Payload>(
+    fn next_answer<Req: Payload>(
         pending: &Pending<Typed<Req, Self>>,
-        client: &str,
-        service: &str,
-    ) -> Option<Result<Resp, CallError>> {
-        received(pending.receive(), client, service, |r| Ok(*r.payload()))
+    ) -> Result<Option<Response<Ipc, Resp, ()>>, ReceiveError> {
+        pending.receive()
+    }
+    fn view<'a>(response: &'a Response<Ipc, Resp, ()>, _client: &str, _service: &str) -> Result<&'a Resp, CallError> {
+        Ok(response.payload())
+    }
+    fn view_of(value: &Resp) -> &Resp {
+        value
+    }
+    fn to_value(view: &Resp) -> Resp {
+        *view
     }
 }
 
@@ -632,3 +654,8 @@ impl Declared {
         self.services.iter().chain(&self.clients).any(|p| p.name == port)
     }
 }
+
+// in port/ beside this file: calls answered and read in place, over iceoryx2
+#[cfg(test)]
+#[path = "call_tests.rs"]
+mod tests;

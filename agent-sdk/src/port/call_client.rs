@@ -7,8 +7,8 @@
 use super::bytes::{Binding, DynInput};
 use super::call::memory::{MemCallPort, MemClient};
 use super::call::{
-    ANSWERED_SUFFIX, Answer, CallError, CallId, CallOptions, ClientPort, Factory, Fixed, Kind, MAX_IN_FLIGHT, Pending,
-    Typed, call_service, event_service, open_err,
+    ANSWERED_SUFFIX, Answer, Answered, CallError, CallId, CallOptions, ClientPort, Factory, Fixed, Kind, MAX_IN_FLIGHT,
+    Pending, Typed, call_service, event_service, open_err,
 };
 use super::call_server::not_an_input;
 use super::error::PortError;
@@ -24,6 +24,7 @@ use shm_schemas::Payload;
 use shm_schemas::control::agent_to_router::PortSpec;
 use shm_schemas::stats::InputStats;
 use std::collections::VecDeque;
+use std::mem::MaybeUninit;
 use std::sync::{Arc, Mutex};
 
 /// A client of a service of requests `Req` answered by a fixed-size `Resp`.
@@ -59,10 +60,20 @@ struct InFlight<K: Kind> {
     pending: Pending<K>,
 }
 
+/// A finished call, as its client holds it until taken.
+enum Finished<K: Kind> {
+    /// answered, the answer left in the server's shared memory for
+    /// `take_with` to read in place; its call is let go after its answer
+    /// (fields drop in order)
+    Held { response: Answered<K>, _call: Pending<K>, service: String },
+    /// answered and copied out (for `take`), or why there is no answer
+    Done(Result<K::Value, CallError>),
+}
+
 struct ClientState<K: Kind> {
     target: Option<Target<K>>,
     in_flight: Vec<InFlight<K>>,
-    done: VecDeque<(CallId, Result<K::Value, CallError>)>,
+    done: VecDeque<(CallId, Finished<K>)>,
     next_id: u64,
     answered: u64,
     last_answer_ns: Option<u64>,
@@ -86,6 +97,43 @@ impl<Req: Payload, A: Answer> CallClient<Typed<Req, A>> {
     ) -> Result<(Self, Arc<dyn DynInput>), CallError> {
         let (client, side) = Self::bind_kind(binding, port, options, Typed::default());
         Ok((client, side))
+    }
+}
+
+impl<Req: Payload, A: Answer> CallClient<Typed<Req, A>> {
+    /// Sends a request written in place by `fill`, in shared memory (a
+    /// default `Req` first, which `fill` changes), as [`CallClient::call`]
+    /// sends: for requests too large to build on the stack and copy.
+    pub fn call_with(&self, fill: impl FnOnce(&mut Req)) -> Result<CallId, CallError>
+    where
+        Req: Default,
+    {
+        // SAFETY: a default value is written whole before `fill` changes it
+        unsafe { self.call_uninit(|slot| fill(slot.write(Req::default()))) }
+    }
+
+    /// Sends a request written in place by `fill`, without a default value
+    /// written first: a large request costs one write into shared memory.
+    /// Otherwise as [`CallClient::call`].
+    ///
+    /// # Safety
+    /// `fill` must leave the request initialised: every field the server
+    /// looks at written, and only bit patterns valid for `Req` in the rest
+    /// (for plain numeric and byte-array payloads any bytes are valid).
+    pub unsafe fn call_uninit(&self, fill: impl FnOnce(&mut MaybeUninit<Req>)) -> Result<CallId, CallError> {
+        if let Some(mem) = &self.side.mem {
+            let mut request = Box::new(MaybeUninit::<Req>::uninit());
+            fill(&mut request);
+            // SAFETY: the caller guarantees that `fill` initialised it
+            return mem.call(unsafe { request.assume_init_read() });
+        }
+        self.send(|port, client, service| {
+            let send_err = |source| CallError::Send { client: client.into(), service: service.into(), source };
+            let mut loan = port.loan_uninit().map_err(|e| send_err(e.into()))?;
+            fill(loan.payload_mut());
+            // SAFETY: the caller guarantees that `fill` initialised the payload
+            unsafe { loan.assume_init() }.send().map_err(send_err)
+        })
     }
 }
 
@@ -129,6 +177,16 @@ impl<K: Kind> CallClient<K> {
         if let Some(mem) = &self.side.mem {
             return mem.call(self.side.kind.queued(request, &self.side.spec.name)?);
         }
+        self.send(|port, name, service| self.side.kind.send(port, request, name, service))
+    }
+
+    /// Sends the request `send` sends through the client's port (for
+    /// client `name` of `service`), if the client is wired and below its
+    /// bound of calls in flight; refused, with nothing sent, otherwise.
+    fn send(
+        &self,
+        send: impl FnOnce(&ClientPort<K>, &str, &str) -> Result<Pending<K>, CallError>,
+    ) -> Result<CallId, CallError> {
         let name = &self.side.spec.name;
         let mut st = lock(&self.side.state);
         let st = &mut *st;
@@ -136,7 +194,7 @@ impl<K: Kind> CallClient<K> {
         if st.in_flight.len() >= self.side.options.max_in_flight {
             return Err(CallError::TooManyInFlight { client: name.clone(), max: self.side.options.max_in_flight });
         }
-        let pending = self.side.kind.send(&t.client, request, name, &t.service)?;
+        let pending = send(&t.client, name, &t.service)?;
         if pending.number_of_server_connections() == 0 {
             return Err(CallError::NoServer { client: name.clone(), service: t.service.clone() });
         }
@@ -157,9 +215,39 @@ impl<K: Kind> CallClient<K> {
         if let Some(mem) = &self.side.mem {
             return mem.take();
         }
-        let mut st = lock(&self.side.state);
-        self.side.settle(&mut st, now_ns());
-        st.done.pop_front()
+        let (id, finished) = {
+            let mut st = lock(&self.side.state);
+            self.side.settle(&mut st, now_ns(), false);
+            st.done.pop_front()?
+        };
+        let kind = &self.side.kind;
+        Some((id, self.side.read(finished, |answer| answer.map(|view| kind.to_value(view)))))
+    }
+
+    /// The next finished call, oldest first, handed to `read` with its
+    /// answer read in place, in the server's shared memory (a fixed
+    /// answer as `&Resp`, a sequence's as `(&H, &[T])`), or why there is
+    /// none, as [`CallClient::take`] says; returns what `read` returns.
+    /// Nothing is copied: a large answer costs what reading it costs. An
+    /// answer waits in the server's memory from the moment this finds it
+    /// until it is taken (at most the client's calls in flight).
+    /// `None` while no call has finished. Never blocks.
+    pub fn take_with<R>(&self, read: impl FnOnce(CallId, Result<K::View<'_>, CallError>) -> R) -> Option<R> {
+        let kind = &self.side.kind;
+        if let Some(mem) = &self.side.mem {
+            let (id, outcome) = mem.take()?;
+            return Some(match outcome {
+                Ok(value) => read(id, Ok(kind.view_of(&value))),
+                Err(e) => read(id, Err(e)),
+            });
+        }
+        let (id, finished) = {
+            let mut st = lock(&self.side.state);
+            self.side.settle(&mut st, now_ns(), true);
+            st.done.pop_front()?
+        };
+        // the lock is not held while `read` runs: it may call again
+        Some(self.side.read(finished, |answer| read(id, answer)))
     }
 
     /// How many calls are in flight (sent, not yet finished).
@@ -196,14 +284,28 @@ impl<K: Kind> CallClient<K> {
 }
 
 impl<K: Kind> ClientSide<K> {
+    /// Hands `finished`'s answer, read in place, or why there is none, to `read`.
+    fn read<R>(&self, finished: Finished<K>, read: impl FnOnce(Result<K::View<'_>, CallError>) -> R) -> R {
+        match finished {
+            Finished::Held { response, service, .. } => read(self.kind.view(&response, &self.spec.name, &service)),
+            Finished::Done(Ok(value)) => read(Ok(self.kind.view_of(&value))),
+            Finished::Done(Err(e)) => read(Err(e)),
+        }
+    }
+
     /// Moves every call that finished (answered, timed out, its server
-    /// gone) from in flight to done.
-    fn settle(&self, st: &mut ClientState<K>, now: u64) {
+    /// gone) from in flight to done; an answer is copied out, or (`hold`)
+    /// left in the server's memory for `take_with`.
+    fn settle(&self, st: &mut ClientState<K>, now: u64, hold: bool) {
         let name = &self.spec.name;
         let mut i = 0;
         while i < st.in_flight.len() {
             let f = &st.in_flight[i];
-            let answer = |f: &InFlight<K>| self.kind.receive(&f.pending, name, &f.service);
+            let answer = |f: &InFlight<K>| match self.kind.next_answer(&f.pending) {
+                Ok(Some(response)) => Some(Ok(response)),
+                Ok(None) => None,
+                Err(source) => Some(Err(CallError::Receive { port: name.clone(), service: f.service.clone(), source })),
+            };
             let outcome = match answer(f) {
                 Some(o) => Some(o),
                 // gone: look once more, the answer may have come just before the server let go
@@ -220,11 +322,26 @@ impl<K: Kind> ClientSide<K> {
             match outcome {
                 Some(o) => {
                     let f = st.in_flight.remove(i);
-                    if o.is_ok() {
+                    let finished = match o {
+                        Ok(response) => {
+                            // a refused or malformed answer is its error, as `take` gives it
+                            let checked = self
+                                .kind
+                                .view(&response, name, &f.service)
+                                .map(|view| (!hold).then(|| self.kind.to_value(view)));
+                            match checked {
+                                Ok(None) => Finished::Held { response, _call: f.pending, service: f.service },
+                                Ok(Some(value)) => Finished::Done(Ok(value)),
+                                Err(e) => Finished::Done(Err(e)),
+                            }
+                        }
+                        Err(e) => Finished::Done(Err(e)),
+                    };
+                    if !matches!(finished, Finished::Done(Err(_))) {
                         st.answered = st.answered.saturating_add(1);
                         st.last_answer_ns = Some(now);
                     }
-                    st.done.push_back((f.id, o));
+                    st.done.push_back((f.id, finished));
                 }
                 None => i += 1,
             }
@@ -330,9 +447,10 @@ impl<K: Kind> DynInput for ClientSide<K> {
 impl<K: Kind> ClientSide<K> {
     /// Drops the wire; the calls in flight finish as [`CallError::Unwired`].
     fn unwire(&self, st: &mut ClientState<K>) {
-        self.settle(st, now_ns());
+        self.settle(st, now_ns(), false);
         for f in st.in_flight.drain(..) {
-            st.done.push_back((f.id, Err(CallError::Unwired { client: self.spec.name.clone(), service: f.service })));
+            let unwired = CallError::Unwired { client: self.spec.name.clone(), service: f.service };
+            st.done.push_back((f.id, Finished::Done(Err(unwired))));
         }
         if let Some(t) = st.target.take() {
             tracing::info!(client = %self.spec.name, service = %t.service, "client unwired");

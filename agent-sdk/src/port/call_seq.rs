@@ -32,11 +32,12 @@
 
 use super::bytes::{Binding, DynInput};
 use super::call::memory::{MemCallPort, Unanswered};
-use super::call::{Answer, CallError, Factory, MAX_IN_FLIGHT, Pending, ServerPort, Typed, call_settings, received};
+use super::call::{Answer, CallError, Factory, MAX_IN_FLIGHT, Pending, ServerPort, Typed, call_settings};
 use super::call_client::CallClient;
 use super::call_server::CallServer;
 use super::seq::{shape_of, view};
 use crate::world::Ipc;
+use iceoryx2::port::ReceiveError;
 use iceoryx2::prelude::*;
 use iceoryx2::response::Response;
 use iceoryx2::service::attribute::AttributeVerifier;
@@ -89,6 +90,7 @@ impl<T: SeqPart, H: SeqPart> Answer for SeqAnswer<T, H> {
     type Payload = [u64];
     type Header = SeqAnswerHeader;
     type Value = (H, Vec<T>);
+    type View<'a> = (&'a H, &'a [T]);
     fn spec<Req: Payload>(port: &str) -> PortSpec {
         call_seq_spec::<Req, T, H>(port)
     }
@@ -126,33 +128,30 @@ impl<T: SeqPart, H: SeqPart> Answer for SeqAnswer<T, H> {
             .override_response_preallocation(slots)
             .create()
     }
-    fn receive<Req: Payload>(
+    fn next_answer<Req: Payload>(
         pending: &Pending<Typed<Req, Self>>,
-        client: &str,
-        service: &str,
-    ) -> Option<Result<(H, Vec<T>), CallError>> {
-        received(pending.receive(), client, service, |r| Self::value(r, client, service))
+    ) -> Result<Option<Response<Ipc, [u64], SeqAnswerHeader>>, ReceiveError> {
+        pending.receive()
     }
-}
-
-impl<T: SeqPart, H: SeqPart> SeqAnswer<T, H> {
-    /// The header and elements of `response`, copied out, or why there are none.
-    fn value(
-        response: &Response<Ipc, [u64], SeqAnswerHeader>,
+    fn view<'a>(
+        response: &'a Response<Ipc, [u64], SeqAnswerHeader>,
         client: &str,
         service: &str,
-    ) -> Result<(H, Vec<T>), CallError> {
+    ) -> Result<(&'a H, &'a [T]), CallError> {
         let shape = rust_shape::<T, H>();
         let bytes = word_bytes(response.payload());
         let len = answer_len(response.user_header(), &shape, bytes.len(), client, service)?;
-        match view::<T, H>(&shape, &bytes[..len]) {
-            Some((h, items)) => Ok((*h, items.to_vec())),
-            None => Err(CallError::Malformed {
-                client: client.into(),
-                service: service.into(),
-                detail: format!("{len} bytes that are not a header and whole elements, aligned"),
-            }),
-        }
+        view::<T, H>(&shape, &bytes[..len]).ok_or_else(|| CallError::Malformed {
+            client: client.into(),
+            service: service.into(),
+            detail: format!("{len} bytes that are not a header and whole elements, aligned"),
+        })
+    }
+    fn view_of(value: &(H, Vec<T>)) -> (&H, &[T]) {
+        (&value.0, &value.1)
+    }
+    fn to_value((header, items): (&H, &[T])) -> (H, Vec<T>) {
+        (*header, items.to_vec())
     }
 }
 

@@ -22,6 +22,7 @@ use iceoryx2::service::port_factory::event;
 use shm_schemas::Payload;
 use shm_schemas::control::agent_to_router::PortSpec;
 use shm_schemas::stats::InputStats;
+use std::mem::MaybeUninit;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -225,26 +226,97 @@ impl<K: Kind> CallServer<K> {
 impl<Req: Payload, Resp: Payload> CallServer<Typed<Req, Fixed<Resp>>> {
     /// Answers each waiting request with `answer` (at most `max` of them:
     /// what arrives meanwhile is left for the next step, whose wake-up is
-    /// pending); returns how many were answered.
+    /// pending); returns how many were answered. The answer is returned by
+    /// value and copied into shared memory; [`CallServer::serve_in_place`]
+    /// writes it there.
     pub fn serve_up_to(&self, max: usize, mut answer: impl FnMut(&Req) -> Resp) -> Result<usize, CallError> {
-        if let Some(mem) = &self.side.mem {
-            let (n, _) = mem.serve::<std::convert::Infallible>(max, |request| Ok(answer(request)));
-            self.count_answered(n);
-            return Ok(n);
+        // SAFETY: the answer is written whole
+        unsafe {
+            self.serve_uninit_up_to(max, |request, slot| {
+                slot.write(answer(request));
+            })
         }
-        self.each_request(max, |request| {
-            if let Err(e) = request.send_copy(answer(request.payload())) {
-                // the client went away: nobody waits for this answer
-                tracing::debug!(service = %self.side.service, "an answer found no client: {e:?}");
-            }
-            Ok(true)
-        })
     }
 
     /// Answers every waiting request with `answer` (at most
     /// [`MAX_IN_FLIGHT`] per step); returns how many were answered.
     pub fn serve(&self, answer: impl FnMut(&Req) -> Resp) -> Result<usize, CallError> {
         self.serve_up_to(MAX_IN_FLIGHT, answer)
+    }
+
+    /// Answers every waiting request in place (at most [`MAX_IN_FLIGHT`]
+    /// per step): `answer` reads the request where the client wrote it and
+    /// writes its answer straight into the response's shared memory,
+    /// which holds a default `Resp` first. Nothing is copied, so a large
+    /// answer costs what writing it costs. Returns how many were answered.
+    pub fn serve_in_place(&self, answer: impl FnMut(&Req, &mut Resp)) -> Result<usize, CallError>
+    where
+        Resp: Default,
+    {
+        self.serve_in_place_up_to(MAX_IN_FLIGHT, answer)
+    }
+
+    /// As [`CallServer::serve_in_place`], for at most `max` requests.
+    pub fn serve_in_place_up_to(&self, max: usize, mut answer: impl FnMut(&Req, &mut Resp)) -> Result<usize, CallError>
+    where
+        Resp: Default,
+    {
+        // SAFETY: a default value is written whole before `answer` changes it
+        unsafe { self.serve_uninit_up_to(max, |request, slot| answer(request, slot.write(Resp::default()))) }
+    }
+
+    /// Answers every waiting request in place (at most [`MAX_IN_FLIGHT`]
+    /// per step), without a default value written first: a large answer
+    /// costs one write into shared memory. Returns how many were answered.
+    ///
+    /// # Safety
+    /// `answer` must leave the answer initialised: every field the client
+    /// looks at written, and only bit patterns valid for `Resp` in the rest
+    /// (for plain numeric and byte-array payloads any bytes are valid).
+    pub unsafe fn serve_uninit(&self, answer: impl FnMut(&Req, &mut MaybeUninit<Resp>)) -> Result<usize, CallError> {
+        // SAFETY: the caller's guarantee, passed on
+        unsafe { self.serve_uninit_up_to(MAX_IN_FLIGHT, answer) }
+    }
+
+    /// As [`CallServer::serve_uninit`], for at most `max` requests.
+    ///
+    /// # Safety
+    /// As [`CallServer::serve_uninit`].
+    pub unsafe fn serve_uninit_up_to(
+        &self,
+        max: usize,
+        mut answer: impl FnMut(&Req, &mut MaybeUninit<Resp>),
+    ) -> Result<usize, CallError> {
+        if let Some(mem) = &self.side.mem {
+            let (n, _) = mem.serve::<std::convert::Infallible>(max, |request| {
+                let mut slot = Box::new(MaybeUninit::<Resp>::uninit());
+                answer(request, &mut slot);
+                // SAFETY: the caller guarantees that `answer` initialised it
+                Ok(unsafe { slot.assume_init_read() })
+            });
+            self.count_answered(n);
+            return Ok(n);
+        }
+        let service = &self.side.service;
+        self.each_request(max, |request| {
+            let mut loan = match request.loan_uninit() {
+                Ok(loan) => loan,
+                Err(e) => {
+                    // no memory for this answer: the handler still runs, its
+                    // answer is dropped, and the client's call times out
+                    tracing::warn!(service = %service, "cannot loan an answer: {e:?}");
+                    answer(request.payload(), &mut Box::new(MaybeUninit::uninit()));
+                    return Ok(true);
+                }
+            };
+            answer(request.payload(), loan.payload_mut());
+            // SAFETY: the caller guarantees that `answer` initialised the payload
+            if let Err(e) = unsafe { loan.assume_init() }.send() {
+                // the client went away: nobody waits for this answer
+                tracing::debug!(service = %service, "an answer found no client: {e:?}");
+            }
+            Ok(true)
+        })
     }
 }
 

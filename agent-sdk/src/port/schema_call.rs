@@ -24,7 +24,7 @@
 use super::bytes::payload_bytes;
 use super::call::memory::Unanswered;
 use super::call::{
-    ActiveRequest, CallError, CallOptions, ClientPort, Factory, Kind, Pending, ServerPort, call_settings, received,
+    ActiveRequest, Answered, CallError, CallOptions, ClientPort, Factory, Kind, Pending, ServerPort, call_settings,
 };
 use super::call_seq::{answer_len, answer_slots, check_max_len};
 use super::{CallClient, CallServer};
@@ -130,6 +130,7 @@ impl Kind for Layout {
     type Request = [u8];
     type Queued = Vec<u8>;
     type Value = Vec<u8>;
+    type View<'a> = &'a [u8];
 
     fn spec(&self, port: &str) -> PortSpec {
         PortSpec { name: port.into(), type_name: self.type_name.clone(), fingerprint: self.fingerprint }
@@ -263,25 +264,32 @@ impl Kind for Layout {
         Ok(request.to_vec())
     }
 
-    fn receive(&self, pending: &Pending<Self>, client: &str, service: &str) -> Option<Result<Vec<u8>, CallError>> {
-        received(pending.receive(), client, service, |r| {
-            let bytes = payload_bytes(r.payload());
-            let len = match &self.seq {
-                None if bytes.len() == self.response.size => Ok(bytes.len()),
-                None => Err(CallError::Malformed {
-                    client: client.into(),
-                    service: service.into(),
-                    detail: format!("{} bytes for the {}-byte answer", bytes.len(), self.response.size),
-                }),
-                Some(shape) => {
-                    // SAFETY: the service's answers carry a SeqAnswerHeader (`open`)
-                    let header =
-                        unsafe { std::ptr::from_ref(r.user_header()).cast::<SeqAnswerHeader>().read_unaligned() };
-                    answer_len(&header, shape, bytes.len(), client, service)
-                }
-            }?;
-            Ok(bytes[..len].to_vec())
-        })
+    fn next_answer(&self, pending: &Pending<Self>) -> Result<Option<Answered<Self>>, ReceiveError> {
+        pending.receive()
+    }
+    fn view<'a>(&self, response: &'a Answered<Self>, client: &str, service: &str) -> Result<&'a [u8], CallError> {
+        let bytes = payload_bytes(response.payload());
+        let len = match &self.seq {
+            None if bytes.len() == self.response.size => Ok(bytes.len()),
+            None => Err(CallError::Malformed {
+                client: client.into(),
+                service: service.into(),
+                detail: format!("{} bytes for the {}-byte answer", bytes.len(), self.response.size),
+            }),
+            Some(shape) => {
+                // SAFETY: the service's answers carry a SeqAnswerHeader (`open`)
+                let header =
+                    unsafe { std::ptr::from_ref(response.user_header()).cast::<SeqAnswerHeader>().read_unaligned() };
+                answer_len(&header, shape, bytes.len(), client, service)
+            }
+        }?;
+        Ok(&bytes[..len])
+    }
+    fn view_of<'a>(&self, value: &'a Vec<u8>) -> &'a [u8] {
+        value
+    }
+    fn to_value(&self, view: &[u8]) -> Vec<u8> {
+        view.to_vec()
     }
 }
 

@@ -358,6 +358,78 @@ mod tests {
         assert!(e.contains("Scalar") && e.contains("Tick"), "{e}");
     }
 
+    /// Answers `double` in place; calls `sensor` with a request written in
+    /// place and `planner` (a sequence service) by value, and reads both
+    /// answers in place. Event-driven.
+    struct InPlace {
+        double: Server<Scalar, Scalar>,
+        sensor: Client<Tick, Scalar>,
+        planner: SeqClient<Tick, Tick, Scalar>,
+        got: Vec<Result<f64, String>>,
+        plans: Vec<(f64, Vec<Tick>)>,
+    }
+
+    impl Agent for InPlace {
+        const KIND: &'static str = "in-place";
+        fn task() -> Task {
+            Task::EventDriven
+        }
+        fn new(setup: &mut Setup) -> Result<Self, AgentError> {
+            let options = CallOptions { timeout: Duration::from_millis(500), max_in_flight: 2 };
+            Ok(InPlace {
+                double: setup.serve("double")?,
+                sensor: setup.client_with("sensor", options)?,
+                planner: setup.client_seq("planner")?,
+                got: Vec::new(),
+                plans: Vec::new(),
+            })
+        }
+        fn step(&mut self, ctx: &mut Context) -> Result<(), AgentError> {
+            self.double.serve_in_place(|s, answer| {
+                answer.value = 2.0 * s.value;
+                answer.stamp_ns = s.stamp_ns;
+            })?;
+            while let Some(got) = self.sensor.take_with(|_, answer| answer.map(|s| s.value).map_err(|e| e.to_string()))
+            {
+                self.got.push(got);
+            }
+            while let Some(plan) =
+                self.planner.take_with(|_, answer| answer.map(|(h, items)| (h.value, items.to_vec())))
+            {
+                self.plans.push(plan?);
+            }
+            if self.sensor.in_flight() == 0 {
+                self.sensor.call_with(|t| t.seq = ctx.cycle())?;
+                self.planner.call(&Tick { seq: ctx.cycle(), stamp_ns: 0 })?;
+            }
+            Ok(())
+        }
+    }
+
+    /// The in-place forms in the harness behave as the by-value ones: the
+    /// test asks a service answered in place, answers calls made in place
+    /// and read in place (a fixed answer and a sequence), and a call
+    /// unanswered times out on the harness clock.
+    #[test]
+    fn calls_answered_and_read_in_place_work_in_the_harness() {
+        let mut h = Harness::<InPlace>::new().expect("start");
+        assert_eq!(h.ask::<Scalar, Scalar>("double", Scalar { value: 4.0, stamp_ns: 9 }).expect("ask").value, 8.0);
+        assert_eq!(h.agent().double.answered(), 1);
+        let [(id, tick)] = h.requests::<Tick>("sensor").expect("requests")[..] else { panic!("one call") };
+        assert_eq!(tick.seq, 0);
+        h.answer("sensor", id, Ok(scalar(7.0))).expect("answer");
+        let [(plan, _)] = h.requests::<Tick>("planner").expect("requests")[..] else { panic!("one plan") };
+        let items = vec![Tick { seq: 1, stamp_ns: 2 }, Tick { seq: 3, stamp_ns: 4 }];
+        h.answer("planner", plan, Ok((scalar(2.0), items.clone()))).expect("answer");
+        h.step().expect("step");
+        assert_eq!(h.agent().got, [Ok(7.0)]);
+        assert_eq!(h.agent().plans, [(2.0, items)]);
+        // unanswered: the call times out, read in place as an error
+        h.advance(Duration::from_millis(500)).expect("advance");
+        h.step().expect("step");
+        assert!(h.agent().got[1].as_ref().is_err_and(|e| e.contains("within 500ms")), "{:?}", h.agent().got);
+    }
+
     /// Asks its `planner` (a sequence service) for a plan of `n` points
     /// whenever told to by an input; keeps the lengths it got. Periodic.
     struct Asker {
