@@ -1,7 +1,7 @@
 //! `nerve-bench`: the benchmarks behind BENCHMARKS.md.
 //!
 //! ```text
-//! nerve-bench hop    [--quick] [--json] [--out DIR] [--payloads 8,230400,6220800] [--rounds N]
+//! nerve-bench hop    [--quick] [--json] [--out DIR] [--payloads 8,230400,6220800] [--rounds N] [--rows R,..]
 //! nerve-bench jitter [--quick] [--json] [--out DIR] [--rates 1000,100] [--seconds S] [--rounds N]
 //! nerve-bench control [--quick] [--json] [--out DIR] [--rounds N] [--launch 10,50]
 //! nerve-bench bridge [--quick] [--json] [--out DIR] [--payloads 8,4096,230400] [--rounds N]
@@ -109,6 +109,9 @@ enum Scenario {
         /// Round trips per batch (default by payload size).
         #[arg(long)]
         count: Option<usize>,
+        /// Only these rows (e.g. `nerve-poll,iox2-poll,iox2-poll-ts`); all by default.
+        #[arg(long, value_delimiter = ',')]
+        rows: Option<Vec<String>>,
     },
     /// Control plane: hot-add, rewire, launch of 10 and 50 agents.
     Control {
@@ -503,12 +506,13 @@ fn run(cli: Cli) -> Result<()> {
             };
             publish(&common, "soak", &report, report.seconds, plot, soak::print_tables)?;
         }
-        Scenario::Hop { common, payloads, rounds, count } => {
+        Scenario::Hop { common, payloads, rounds, count, rows } => {
             let opts = hop::HopOpts {
                 quick: common.quick,
                 sizes: payloads,
                 rounds: rounds.unwrap_or(if common.quick { 1 } else { 7 }).max(1),
                 count,
+                rows,
                 verbose: common.verbose,
                 work: hop::work_dir(&common.out),
             };

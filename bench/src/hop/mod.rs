@@ -82,6 +82,11 @@
 //! neighbour, and a short batch (250 frames of 1080p: 5 ms) ran entirely
 //! beside it.
 //!
+//! `--rows` measures only the rows it names, e.g. `--rows
+//! nerve-poll,iox2-poll,iox2-poll-ts` (the polling pairs, a 16 s run at
+//! 8 B): the nerve agents of every row still start and idle, and dora,
+//! Python and Cyclone DDS start only when one of their rows is named.
+//!
 //! The scenario's files, by transport: [`nerve`] (the SDK agents, wired
 //! through the router), [`python`] (the Python pong), [`floors`] (raw
 //! iceoryx2, the Unix socket and the futex), [`dora_rows`] (dora-rs and
@@ -172,6 +177,8 @@ pub const PERIODIC: [&str; 8] = [
 ];
 /// nerve may be this much slower than raw iceoryx2 (the issue's target).
 pub const TARGET_RATIO: f64 = 1.1;
+/// nerve's polling round trip may be this many times raw iceoryx2 polling's (issue 42).
+pub const POLL_TARGET: f64 = 1.5;
 /// A Python agent's round trip may be this many times a Rust agent's (issue 15).
 pub const PYTHON_TARGET: f64 = 1.5;
 /// dora should take at least this many times nerve's latency (issue 18).
@@ -190,6 +197,8 @@ pub struct HopOpts {
     pub rounds: usize,
     /// round trips per batch, by size; None for the defaults
     pub count: Option<usize>,
+    /// only these rows (`--rows`); None for all
+    pub rows: Option<Vec<String>>,
     /// show children's output
     pub verbose: bool,
     /// where batch files go
@@ -205,6 +214,28 @@ pub(crate) fn default_count(size: usize, quick: bool) -> usize {
         (_, false) => 250,
         (_, true) => 30,
     }
+}
+
+impl HopOpts {
+    /// Whether row `row` is measured (`--rows`, or all).
+    pub(crate) fn wants(&self, row: &str) -> bool {
+        self.rows.as_ref().is_none_or(|rows| rows.iter().any(|r| r == row))
+    }
+
+    /// Whether any row starting with `prefix` is measured.
+    fn wants_any(&self, prefix: &str) -> bool {
+        self.rows.as_ref().is_none_or(|rows| rows.iter().any(|r| r.starts_with(prefix)))
+    }
+}
+
+/// Refuses a `--rows` name that is no row of the scenario.
+fn check_rows(opts: &HopOpts) -> Result<()> {
+    for r in opts.rows.iter().flatten() {
+        if !TRANSPORTS.contains(&r.as_str()) && !PERIODIC.contains(&r.as_str()) {
+            bail!("--rows: no row {r:?}; the rows are {} and {}", TRANSPORTS.join(","), PERIODIC.join(","));
+        }
+    }
+    Ok(())
 }
 
 /// Round trips per batch at `size` ([`HopOpts::count`] or the default).
@@ -223,6 +254,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
             bail!("no payload of {s} bytes; use 8, 230400 or 6220800");
         }
     }
+    check_rows(opts)?;
     let counts: Vec<(usize, usize)> =
         opts.sizes.iter().map(|&s| (s, opts.count.unwrap_or_else(|| default_count(s, opts.quick)))).collect();
 
@@ -238,9 +270,9 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
         if opts.quick { "" } else { " + warm-up" }
     );
     let router = robot.start_router()?;
-    let dora = dora_rows::find_peer(opts);
+    let dora = if opts.wants_any("dora") || opts.wants_any("nerve-5ms") { dora_rows::find_peer(opts) } else { None };
     let periodic_count = if opts.quick { PERIODIC_COUNT.1 } else { PERIODIC_COUNT.0 };
-    let python = python::find();
+    let python = if opts.wants_any("nerve-python") { python::find() } else { None };
     let agents = nerve::Agents { python: python.as_deref(), periodic: dora.is_some(), periodic_count };
     let mut children = nerve::start(&robot, opts, &counts, &agents)?;
     eprintln!("hop: nerve agents running and connected");
@@ -249,10 +281,11 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
 
     let pingers = pingers(&robot, opts, &mut floor_pings, python.is_some(), dora.as_ref(), periodic_count)?;
     let mut pingers = pinger::with_pm_qos_rows(pingers, pm_qos_permitted("hop"));
+    pingers.retain(|p| opts.wants(p.1));
     // where an idle robot's CPUs spend their time, without and with the bound
     let idle_span = Duration::from_secs(if opts.quick { 1 } else { 3 });
     let idle = vec![crate::idle::measure(false, idle_span), crate::idle::measure(true, idle_span)];
-    let dds_peer = start_dds(opts)?;
+    let dds_peer = if opts.wants("ddsperf") { start_dds(opts)? } else { None };
     // from here on this thread runs like an agent's task
     realtime_like_an_agent(20);
     let mut measured = rounds::Measured::new(pingers.len(), &opts.sizes);
@@ -266,7 +299,7 @@ pub fn run(opts: &HopOpts) -> Result<HopReport> {
     stop_all(children);
     result?;
 
-    let results = report::round_trips(&opts.sizes, &keys, &measured)?;
+    let results = report::round_trips(&opts.sizes, &keys, &measured, |t| opts.wants(t))?;
     let periodic = report::one_way(&opts.sizes, &keys, &measured.rounds);
     let ratios = report::ratios(&opts.sizes, &results, &periodic);
     drop(router);

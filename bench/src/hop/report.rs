@@ -176,11 +176,17 @@ pub struct HopResults {
 
 /// The round-trip rows of every size, in table order ([`TRANSPORTS`]);
 /// `keys` names each pinger's (size, row). A row without samples is an
-/// error, except the optional peers' (dora, Python, ddsperf).
-pub(super) fn round_trips(sizes: &[usize], keys: &[(usize, &'static str)], m: &Measured) -> Result<Vec<HopResult>> {
+/// error, except the optional peers' (dora, Python, ddsperf) and the rows
+/// not `wanted` (`--rows`).
+pub(super) fn round_trips(
+    sizes: &[usize],
+    keys: &[(usize, &'static str)],
+    m: &Measured,
+    wanted: impl Fn(&str) -> bool,
+) -> Result<Vec<HopResult>> {
     let mut results = Vec::new();
     for &size in sizes {
-        for t in TRANSPORTS {
+        for t in TRANSPORTS.into_iter().filter(|t| wanted(t)) {
             if t == "ddsperf" {
                 if let Some((_, iv, dds_round_p50)) = m.dds.iter().find(|d| d.0 == size && !d.1.is_empty()) {
                     results.push(HopResult {

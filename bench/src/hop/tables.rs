@@ -1,6 +1,6 @@
 //! The hop report as markdown tables (stdout), as BENCHMARKS.md shows them.
 
-use super::{DORA_TARGET, FUTEX_TARGET, HopReport, PINNED_CPU, PYTHON_TARGET, TARGET_RATIO};
+use super::{DORA_TARGET, FUTEX_TARGET, HopReport, PINNED_CPU, POLL_TARGET, PYTHON_TARGET, TARGET_RATIO};
 use crate::dora;
 use crate::payloads::label;
 use crate::stats::{Summary, ratio_cell, verdict};
@@ -20,9 +20,29 @@ fn latency_table<'a>(who: &str, rows: impl Iterator<Item = (&'a str, &'a str, &'
     }
 }
 
+/// The polling rows' ratios, per size with `nerve-poll` and `iox2-poll`
+/// (also in a run of only those rows, `--rows`).
+fn polling_ratios(r: &HopReport) {
+    let p50 =
+        |t: &str, size: usize| r.results.iter().find(|x| x.transport == t && x.size == size).map(|x| x.rtt.p50_ns);
+    for size in r.batch.iter().map(|b| b.0) {
+        let Some((nerve, raw)) = p50("nerve-poll", size).zip(p50("iox2-poll", size)) else { continue };
+        let ts = p50("iox2-poll-ts", size).map(|ts| crate::stats::ratio(nerve, ts));
+        let ratio = crate::stats::ratio(nerve, raw);
+        println!(
+            "polling, {}: nerve-poll/iox2-poll p50 {ratio:.2}, nerve-poll/iox2-poll-ts p50 {}, target ≤{POLL_TARGET}: {}",
+            label(size),
+            ratio_cell(ts),
+            if ratio <= POLL_TARGET { "met" } else { "missed" }
+        );
+    }
+}
+
 /// Prints the tables of a hop report (markdown).
 pub fn print_tables(r: &HopReport) {
     latency_table("transport", r.results.iter().map(|x| (x.label.as_str(), x.transport.as_str(), &x.rtt)));
+    println!();
+    polling_ratios(r);
     println!();
     println!(
         "| payload | nerve/iox2-waitset p50 | (median of rounds) | p99 | nerve/iox2-listener p50 | p99 | nerve/iox2-waitset-fill p50 | p99 | uds/nerve p50 | ddsperf/nerve p50 | nerve-poll/iox2-poll p50 | target ≤{TARGET_RATIO} |"
