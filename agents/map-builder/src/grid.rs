@@ -14,6 +14,11 @@ use crate::Pose;
 use shm_schemas::payloads::{MAP_CELL_HERE, MAP_CELL_VISITED, MapCell, MapHeader};
 use std::collections::HashMap;
 
+/// [`VisitedGrid::visit_along`] fills in the cells between two positions
+/// at most this far apart, metres (a step of the odometry, or a checkpoint's
+/// correction of the pose); farther is a jump the robot did not drive.
+pub const FILL_MAX_M: f64 = 2.0;
+
 /// A cell of the [`VisitedGrid`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Cell {
@@ -33,6 +38,8 @@ pub struct VisitedGrid {
     max_cells: usize,
     cells: HashMap<(i64, i64), Cell>,
     current: Option<(i64, i64)>,
+    /// The last position given to [`VisitedGrid::visit_along`].
+    last_point: Option<(f64, f64)>,
     full: bool,
     revision: u32,
 }
@@ -47,6 +54,7 @@ impl VisitedGrid {
             max_cells,
             cells: HashMap::new(),
             current: None,
+            last_point: None,
             full: false,
             revision: 0,
         }
@@ -58,6 +66,31 @@ impl VisitedGrid {
         let (i, j) = ((x / self.cell_m).floor(), (y / self.cell_m).floor());
         // beyond ±1e9 cells is nonsense (and would not fit an i64 exactly)
         (i.abs() < 1e9 && j.abs() < 1e9).then_some((i as i64, j as i64))
+    }
+
+    /// The robot went from the last position given here to `(x, y)` at
+    /// `now_ns`: it visits every cell on the straight line between (sampled
+    /// every eighth of a cell) when the two are at most [`FILL_MAX_M`]
+    /// apart, then `(x, y)`'s. Poses come often, but a checkpoint's
+    /// correction moves the pose by decimetres at once, and a robot at 4x
+    /// simulated time may step farther than a cell: without the cells
+    /// between, the planner would find no way across the gap.
+    pub fn visit_along(&mut self, x: f64, y: f64, now_ns: u64) {
+        if !(x.is_finite() && y.is_finite()) {
+            return;
+        }
+        if let Some((px, py)) = self.last_point {
+            let d = (x - px).hypot(y - py);
+            if d <= FILL_MAX_M {
+                let n = (d / (self.cell_m / 8.0)).ceil().clamp(1.0, 1000.0) as u32;
+                for s in 1..n {
+                    let t = f64::from(s) / f64::from(n);
+                    self.visit(px + t * (x - px), py + t * (y - py), now_ns);
+                }
+            }
+        }
+        self.visit(x, y, now_ns);
+        self.last_point = Some((x, y));
     }
 
     /// The robot is at `(x, y)` at `now_ns`.
@@ -213,6 +246,30 @@ impl VisitedGrid {
 mod tests {
     use super::*;
     use std::f64::consts::PI;
+
+    #[test]
+    fn the_cells_between_two_near_positions_are_visited_and_a_far_jump_is_not_filled() {
+        let mut g = VisitedGrid::new(0.5, 0, 10_000);
+        g.visit_along(0.25, 0.25, 0);
+        // a correction moves the pose 0.7 m diagonally: the cells on the way count
+        g.visit_along(0.75, 0.75, 1);
+        g.visit_along(0.95, 0.75, 2);
+        g.visit_along(0.25, 1.45, 3);
+        let keys = |g: &VisitedGrid| {
+            let mut k: Vec<_> = g.cells.keys().copied().collect();
+            k.sort_unstable();
+            k
+        };
+        assert!(keys(&g).contains(&(1, 1)) && keys(&g).contains(&(0, 2)), "{:?}", keys(&g));
+        let n = g.len();
+        assert!(n >= 4, "{:?}", keys(&g));
+        // 3 m away: a jump, only its own cell
+        g.visit_along(3.25, 1.45, 4);
+        assert_eq!(g.len(), n + 1, "{:?}", keys(&g));
+        // nonsense is not a position
+        g.visit_along(f64::NAN, 0.0, 5);
+        assert_eq!(g.len(), n + 1);
+    }
 
     #[test]
     fn the_grid_knows_a_place_passed_before() {

@@ -266,7 +266,7 @@ impl Agent for MapBuilderAgent {
         let mut poses = Vec::new();
         self.pose.drain(|_, p| poses.push(*p));
         for p in poses.iter().filter(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite()) {
-            self.grid.visit(p.x, p.y, p.stamp_ns);
+            self.grid.visit_along(p.x, p.y, p.stamp_ns);
             self.map.on_pose(p.x, p.y);
             if self.last_pose.is_none_or(|l| p.stamp_ns >= l.stamp_ns) {
                 self.last_pose = Some(*p);
