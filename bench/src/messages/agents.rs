@@ -9,9 +9,13 @@
 //!   same size is. The pong answers each sample with one of the same length,
 //!   writing only its header.
 //! * `callping` / `callserve`: a call's round trip (`setup.client` /
-//!   `setup.serve`, request and answer both the fixed payload of `--size`):
-//!   the client calls, and calls again when the answer comes; the server
-//!   answers each request with the request itself.
+//!   `setup.serve`, request and answer both the fixed payload of `--size`),
+//!   written and read in place as the ping-pong's samples are: the client
+//!   writes only the sequence number of its request in shared memory
+//!   (`Client::call_uninit`) and reads the answer's where the server wrote
+//!   it (`Client::take_with`), and calls again when the answer comes; the
+//!   server answers each request in place (`Server::serve_uninit`), writing
+//!   only the request's sequence number into the answer.
 //!
 //! Both ping sides keep their round trips as the hop scenario's ping does
 //! ([`Recorder`]): a batch starts at a `nerve resume`, records after
@@ -209,9 +213,8 @@ struct CallPing<P: BenchPayload> {
 impl<P: BenchPayload> CallPing<P> {
     fn call_next(&mut self) -> Result<(), AgentError> {
         let seq = self.rec.next();
-        let mut req = P::default();
-        req.set_seq(seq);
-        self.client.call(&req)?;
+        // SAFETY: bench payloads are a sequence number plus plain bytes; any bytes are valid.
+        unsafe { self.client.call_uninit(|req| P::write_seq_raw(req.as_mut_ptr(), seq)) }?;
         Ok(())
     }
 }
@@ -230,10 +233,11 @@ impl<P: BenchPayload> Agent for CallPing<P> {
 
     fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
         let (mut taken, mut next) = (0usize, false);
-        while let Some((_, answer)) = self.client.take() {
+        // the answer's sequence number, read in place, and when it was found
+        while let Some(answer) = self.client.take_with(|_, answer| answer.map(|resp| (resp.seq(), now_ns()))) {
             taken += 1;
             match answer {
-                Ok(resp) => next |= self.rec.answer(resp.seq(), now_ns())? == Answered::Next,
+                Ok((seq, at_ns)) => next |= self.rec.answer(seq, at_ns)? == Answered::Next,
                 // a lost call: the batch goes on at the next `nerve resume`
                 Err(e) => eprintln!("warning: a call of the benchmark failed: {e}"),
             }
@@ -245,7 +249,8 @@ impl<P: BenchPayload> Agent for CallPing<P> {
     }
 }
 
-/// The server side of a call's round trip: answers each request with itself.
+/// The server side of a call's round trip: answers each request in place
+/// with its sequence number.
 struct CallServe<P: BenchPayload> {
     server: Server<P, P>,
 }
@@ -263,7 +268,8 @@ impl<P: BenchPayload> Agent for CallServe<P> {
     }
 
     fn step(&mut self, _ctx: &mut Context) -> Result<(), AgentError> {
-        self.server.serve(|req| *req)?;
+        // SAFETY: as in `CallPing::call_next`: any bytes are valid beside the sequence number.
+        unsafe { self.server.serve_uninit(|req, answer| P::write_seq_raw(answer.as_mut_ptr(), req.seq())) }?;
         Ok(())
     }
 }

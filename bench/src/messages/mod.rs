@@ -18,11 +18,12 @@
 //!   smallest's): zero copy, whatever the length;
 //! * `call`: a call's round trip (`setup.client` / `setup.serve`, request
 //!   and answer both the fixed payload of `size`): the client calls again
-//!   when the answer comes, the server answers each request with itself.
-//!   Target: at most [`CALL_TARGET`] times `fixed`'s round trip of the same
-//!   size. A call copies its request and its answer (iceoryx2's
-//!   `send_copy`, and the answer handed out by value), so it is measured up
-//!   to [`CALL_MAX`] bytes.
+//!   when the answer comes, the server answers each request with its
+//!   sequence number. Both are written and read in place, as `fixed`'s
+//!   samples are (`Client::call_uninit`, `Server::serve_uninit`,
+//!   `Client::take_with`: only the sequence number written, nothing
+//!   copied). Target: at most [`CALL_TARGET`] times `fixed`'s round trip of
+//!   the same size. Measured up to [`CALL_MAX`] bytes.
 //!
 //! Sizes are any number of bytes from 8 to 8 MiB for `seq`; `fixed` runs at
 //! the sizes the benchmark has a type for (8, 4096, 230400, 1048576,
@@ -52,7 +53,7 @@ pub const SEQ_TARGET: f64 = 1.1;
 pub const FLAT_TARGET: f64 = 1.1;
 /// A call's round trip may be this many times a one-hop ping-pong's of the same size.
 pub const CALL_TARGET: f64 = 1.2;
-/// The largest payload a call is measured with: a call copies its request and answer.
+/// The largest payload a call is measured with.
 pub const CALL_MAX: usize = 230_400;
 /// The largest sequence sample (bytes).
 const SEQ_MAX: usize = 8 << 20;
