@@ -64,6 +64,21 @@ fn a_polling_relay_relays_is_rewired_suspended_and_stopped_promptly() {
     assert_eq!(r.echo("p/out", 2).len(), 2);
     assert_eq!(received_from(&r, "p", "t1"), 0, "t1 is no longer a source");
 
+    // the input's figures, which a poller counts at its step's start
+    // (`runtime::step_clock`): t2's rate (a tick every 10 ms, so about 100
+    // Hz; bounds wide for a loaded machine) and a recent last sample
+    let t2_input = || {
+        r.agent("p").and_then(|a| {
+            let i = a["stats"]["inputs"].as_array()?.iter().find(|i| i["from_agent"] == "t2")?.clone();
+            Some((i["rate_hz"].as_f64()?, i["last_age_ns"].as_u64()?))
+        })
+    };
+    assert!(
+        wait_until(WITHIN, || t2_input().is_some_and(|(hz, age)| (20.0..500.0).contains(&hz) && age < 2_000_000_000)),
+        "the poller's input figures are off: {:?}",
+        t2_input()
+    );
+
     // its CPU is reported: a spinning task uses a good share of its CPU
     // (not asserted whole: CI's CPUs are shared with other tests)
     let cpu = || r.agent("p").and_then(|a| a["stats"]["cpu_percent"].as_f64()).unwrap_or(0.0);

@@ -17,7 +17,6 @@ use super::memory::{Queue, SampleBuf};
 use super::output::PayloadAt;
 use super::service::{Carried, MAX_SOURCES, SUBSCRIBER_BUFFER, lock, source_event, source_service};
 use super::tally::Tally;
-use crate::clock::now_ns;
 use crate::world::Ipc;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
@@ -73,6 +72,13 @@ impl Received {
         Received(ReceivedInner::Shm(sample, at))
     }
 
+    /// [`Received::in_place`] for a source whose payloads lie where `place`
+    /// says, once it has measured one: without iceoryx2's lock.
+    fn in_place_at(sample: ShmSample, place: &mut PayloadPlace) -> Self {
+        let at = place.of(&sample);
+        Received(ReceivedInner::Shm(sample, at))
+    }
+
     /// A sample copied out of shared memory (an input's own queue, a test's).
     pub(super) fn copied(header: SampleHeader, bytes: SampleBuf) -> Self {
         Received(ReceivedInner::Memory(header, bytes))
@@ -91,10 +97,65 @@ pub(super) struct Source {
     pub(super) keep_all: Option<KeepAllFeed>,
     /// the sample the polling task received when it looked ([`Source::look`])
     pub(super) peeked: Option<ShmSample>,
+    /// where this source's payloads lie ([`PayloadPlace`])
+    pub(super) place: PayloadPlace,
 }
 
 /// A sample in place in a source port's shared memory.
 pub(super) type ShmSample = Sample<Ipc, [CustomPayloadMarker], SampleHeader>;
+
+/// Where one source's payloads lie in their samples.
+///
+/// A received sample's payload (`Sample::payload` of a slice) is found under
+/// the subscriber's lock, a mutex on the thread-safe service type that
+/// nerve's ports use: a second lock per sample beside the receive's, on the
+/// hop's path (a polling hop costs about a microsecond, issue 42). iceoryx2
+/// places the payload at a fixed distance after the user header, the same
+/// for every chunk of a service (as `SchemaOutput::payload_of` uses for
+/// loans), and its length is the header's element count times the
+/// service's element size. Both are measured at the source's first sample
+/// with elements; later samples add them to the user header's address and
+/// the header's count, which iceoryx2 hands out without a lock. A debug
+/// build (every test) checks every sample against iceoryx2's own answer.
+#[derive(Debug, Default)]
+pub(super) struct PayloadPlace {
+    /// (distance from the user header to the payload, bytes per element)
+    measured: Option<(usize, usize)>,
+}
+
+impl PayloadPlace {
+    /// Where `sample`'s payload lies.
+    fn of(&mut self, sample: &ShmSample) -> PayloadAt {
+        let header = std::ptr::from_ref(sample.user_header()).addr();
+        let elements = usize::try_from(sample.header().number_of_elements()).ok();
+        if let Some((offset, unit)) = self.measured
+            && let Some(len) = elements.and_then(|n| n.checked_mul(unit))
+        {
+            // `offset` and `unit` are this source's service's (measured
+            // below, the same for every chunk): the sample's payload, made
+            // from an address with the shared memory's exposed provenance,
+            // as iceoryx2 makes its own pointers into a chunk
+            let ptr = std::ptr::with_exposed_provenance_mut::<u8>(header.wrapping_add(offset));
+            #[cfg(debug_assertions)]
+            {
+                let theirs = payload_bytes(sample.payload());
+                debug_assert_eq!(
+                    (theirs.as_ptr().addr(), theirs.len()),
+                    (ptr.addr(), len),
+                    "a received sample's payload is not where the source's first one was"
+                );
+            }
+            return PayloadAt::of(ptr, len);
+        }
+        let bytes = payload_bytes(sample.payload());
+        let ptr = bytes.as_ptr().cast_mut();
+        let offset = ptr.expose_provenance().checked_sub(header);
+        // a sample of no elements (an empty sequence) tells no element size
+        let unit = elements.filter(|&n| n > 0).and_then(|n| bytes.len().is_multiple_of(n).then(|| bytes.len() / n));
+        self.measured = offset.zip(unit);
+        PayloadAt::of(ptr, bytes.len())
+    }
+}
 
 /// Where a source's samples come from.
 pub(super) enum Feed {
@@ -125,9 +186,9 @@ impl Source {
                     .and_then(|held| held.take(subscriber, input))
                     .map(|(h, b)| (h, Received::copied(h, b))),
                 Feed::Shm { subscriber, .. } => match self.peeked.take() {
-                    Some(sample) => Some((*sample.user_header(), Received::in_place(sample))),
+                    Some(sample) => Some((*sample.user_header(), Received::in_place_at(sample, &mut self.place))),
                     None => match subscriber.receive() {
-                        Ok(sample) => sample.map(|s| (*s.user_header(), Received::in_place(s))),
+                        Ok(sample) => sample.map(|s| (*s.user_header(), Received::in_place_at(s, &mut self.place))),
                         Err(e) => return Err(self.receive_error(input, e)),
                     },
                 },
@@ -135,7 +196,8 @@ impl Source {
             },
         };
         if let Some((h, _)) = &got {
-            self.tally.account(h, now_ns());
+            // at the step's start, when the task found it (`runtime::step_clock`)
+            self.tally.account(h, crate::runtime::step_clock::counted_at());
         }
         Ok(got)
     }
@@ -415,6 +477,7 @@ impl DynInput for InputInner {
             held: super::depth::Held::of(self.depth.options(), self.payload_layout().1),
             keep_all,
             peeked: None,
+            place: PayloadPlace::default(),
         });
         Ok(true)
     }
@@ -501,6 +564,7 @@ impl DynInput for InputInner {
                     held: None,
                     keep_all: None,
                     peeked: None,
+                    place: PayloadPlace::default(),
                 });
                 subs.len() - 1
             }

@@ -268,10 +268,8 @@ impl Checker<'_> {
     /// a periodic task has completed a cycle recently.
     fn task_alive(&self, now: u64, wd: Duration) -> bool {
         let wd_ns = wd.as_nanos() as u64;
-        let (last, in_step) = {
-            let f = self.shared.figures();
-            (f.last_cycle_ns, f.in_step_since_ns)
-        };
+        let last = self.shared.figures().last_cycle_ns;
+        let in_step = self.shared.in_step_since_ns.load(Ordering::Acquire);
         if in_step != 0 && now.saturating_sub(in_step) > wd_ns {
             return false;
         }

@@ -22,6 +22,8 @@
 //!   restarted router, unregister);
 //! * `checker`: the message checker, serving the control service;
 //! * `poll`: polling mode (`--poll`), the task that never sleeps;
+//! * `step_clock`: the time the running step began, which the inputs count
+//!   what it takes at;
 //! * `runaway`: the guard that demotes a real-time task that takes a whole
 //!   CPU for seconds (a step that never yields, an event storm).
 
@@ -30,6 +32,7 @@ mod poll;
 mod router_link;
 mod runaway;
 mod startup;
+pub(crate) mod step_clock;
 mod task;
 #[cfg(test)]
 mod waker_tests;
@@ -54,8 +57,6 @@ struct TaskFigures {
     lateness: LatenessRecorder,
     errors: u64,
     last_cycle_ns: u64,
-    /// when the running step started; 0 between steps
-    in_step_since_ns: u64,
 }
 
 /// State shared by the message checker and the task.
@@ -68,6 +69,9 @@ struct Shared {
     /// the PM QoS bound held (fixed at start-up)
     cpu_latency: shm_schemas::stats::CpuLatency,
     figures: Mutex<TaskFigures>,
+    /// when the running step started; 0 between steps (the watchdog's look,
+    /// `checker`): an atomic, so that a step's start takes no lock
+    in_step_since_ns: AtomicU64,
     gate: task::SuspendGate,
     wake: Notifier<Ipc>,
     /// `--poll`: the task polls instead of sleeping (`poll`)

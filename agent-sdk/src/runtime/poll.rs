@@ -8,7 +8,8 @@
 //! So it is only allowed with a placement (`--cpus`): the poller takes the
 //! CPUs it is placed on and no other. Everything else is unchanged: the
 //! message checker's changes (stop, suspend, resume, rewiring, the period)
-//! are atomics the loop reads on every turn; a suspended poller waits at the
+//! are atomics the loop reads every few hundred turns (tens of µs), and
+//! a suspend before every step; a suspended poller waits at the
 //! suspend gate without spinning; the runaway guard, which demotes a
 //! real-time task that keeps its CPU, leaves a poller alone (keeping its CPU
 //! is what it was asked to do). `nerve ps` shows its CPU (about 100 %) and
@@ -85,8 +86,29 @@ pub(super) fn spin_toward_ns(next: u64, sh: &Shared) {
     }
 }
 
-/// Turns of a periodic poller's spin between looks at its shared state.
+/// Turns of a poller's spin between looks at its shared state (stop,
+/// rewiring; a few tens of µs): a turn looks at the inputs only, and a
+/// suspend is looked at before every step.
 const SPINS_BETWEEN_LOOKS: u32 = 256;
+
+/// One look at every input: marks in `woken` those with something
+/// waiting; whether any has.
+fn look(inputs: &[Arc<dyn DynInput>], by_listener: &[(usize, Arc<Listener<Ipc>>)], woken: &mut [bool]) -> bool {
+    let mut got_input = false;
+    for (k, input) in inputs.iter().enumerate() {
+        if input.waiting() == Some(true) {
+            woken[k] = true;
+            got_input = true;
+        }
+    }
+    for (k, l) in by_listener {
+        if l.try_wait(|_| {}).is_ok_and(|n| n > 0) {
+            woken[*k] = true;
+            got_input = true;
+        }
+    }
+    got_input
+}
 
 /// The polling event loop: steps whenever an input has something waiting,
 /// never sleeps but while suspended.
@@ -121,18 +143,16 @@ pub(super) fn event_loop(
             to_refill = refilled(inputs);
             tracing::debug!(listened = by_listener.len(), "inputs changed: polling the new sources");
         }
+        // turns of looks at the inputs and the waker only, until something
+        // waits or the shared state is due a look (the hop's path: a turn
+        // as short as it can be)
         let mut got_input = false;
-        for (k, input) in inputs.iter().enumerate() {
-            if input.waiting() == Some(true) {
-                ctx.woken[k] = true;
-                got_input = true;
+        for _ in 0..SPINS_BETWEEN_LOOKS {
+            got_input = look(inputs, &by_listener, &mut ctx.woken);
+            if got_input || waker.is_some_and(Waker::pending) {
+                break;
             }
-        }
-        for (k, l) in &by_listener {
-            if l.try_wait(|_| {}).is_ok_and(|n| n > 0) {
-                ctx.woken[*k] = true;
-                got_input = true;
-            }
+            std::hint::spin_loop();
         }
         if got_input {
             // deep and keep-all inputs take what waits into their own queues, as in the event loop
@@ -162,8 +182,6 @@ pub(super) fn event_loop(
             });
             ctx.woken.fill(false);
             ctx.waker = false;
-        } else {
-            std::hint::spin_loop();
         }
     }
 }

@@ -360,6 +360,7 @@ fn start(
         realtime: AtomicBool::new(false),
         cpu_latency,
         figures: Mutex::new(TaskFigures { last_cycle_ns: now_ns(), ..TaskFigures::default() }),
+        in_step_since_ns: AtomicU64::new(0),
         gate: SuspendGate::default(),
         wake,
         polling,

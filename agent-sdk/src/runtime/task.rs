@@ -102,19 +102,22 @@ pub(super) fn run_step(agent: &mut dyn Stepper, sh: &Shared, ctx: &mut Context) 
     run_step_then(agent, sh, ctx, |_| {});
 }
 
-/// [`run_step`], then `after` on the task's figures under the same lock
-/// that ends the step (a polling task's bookkeeping: one lock a step less).
+/// [`run_step`], then `after` on the task's figures under the lock that
+/// ends the step (a polling task's bookkeeping: one lock a step less). The
+/// step's start takes no lock: the hop's path runs through it. Samples the
+/// step takes are counted at its start ([`super::step_clock`]): when the
+/// task found them, one clock read a step instead of one a sample.
 pub(super) fn run_step_then(
     agent: &mut dyn Stepper,
     sh: &Shared,
     ctx: &mut Context,
     after: impl FnOnce(&mut super::TaskFigures),
 ) {
-    sh.figures().in_step_since_ns = ctx.now_ns.max(1);
-    let result = agent.step(ctx);
+    sh.in_step_since_ns.store(ctx.now_ns.max(1), Ordering::Release);
+    let result = super::step_clock::during_step(ctx.now_ns, || agent.step(ctx));
+    sh.in_step_since_ns.store(0, Ordering::Release);
     {
         let mut f = sh.figures();
-        f.in_step_since_ns = 0;
         after(&mut f);
         if let Err(e) = result {
             f.errors += 1;

@@ -91,6 +91,7 @@ impl Running {
             realtime: AtomicBool::new(false),
             cpu_latency: Default::default(),
             figures: Mutex::new(TaskFigures::default()),
+            in_step_since_ns: AtomicU64::new(0),
             gate: SuspendGate::default(),
             wake,
             polling,
