@@ -9,9 +9,12 @@
 //!
 //! Outputs:
 //! * `path` (`nerve::ViaPath` = `Seq<ViaPoint, ViaPathHeader>`, any length up to
-//!   `VIA_PATH_MAX_LEN`): the via points for robot 2, once the target
-//!   is confirmed; repeated every `republish_ms` until robot 2 arrives (the
-//!   receiver keys on `path_id`), for the bridge to carry;
+//!   `VIA_PATH_MAX_LEN`): once the target is confirmed, the via points
+//!   ([`MapBuilder::path`]); repeated every `republish_ms` until robot 2
+//!   arrives (the receiver keys on `path_id`). Robot 1's mission agent takes
+//!   it as "target found" and makes robot 2's path from `plan` with its
+//!   checkpoints and ending (`nerve_mission::assemble`); this path goes to
+//!   robot 2 itself only when `plan` fails or no mission agent runs;
 //! * `mission` (`nerve::MissionCommand`): "come" with the path, repeated
 //!   with it; "resume" once robot 2 reports "arrived" (for robot 1's decision
 //!   maker: explore again);
