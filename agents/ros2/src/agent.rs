@@ -1,5 +1,7 @@
 //! The `ros2` agent itself (the `agent` feature, on by default): its ports,
-//! the conversions each step, and the Zenoh link thread it hands CDR to.
+//! the conversions each step, and the Zenoh link thread that owns the
+//! session. The task puts small messages itself and hands Images to the
+//! link thread ([`crate::route`] says which and why).
 //!
 //! The task is event-driven: it steps when one of its inputs gets a sample
 //! (the nerve side, published at once) or when the link thread's
@@ -10,11 +12,12 @@
 //! conversions only, with no Zenoh: what `nerve export --ros2` needs, so
 //! that the `nerve` command does not build Zenoh (issue 41's first run).
 
-use crate::{cdr, config, convert, link, msgs};
+use crate::{cdr, config, convert, link, msgs, route};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Setup, Task, Waker};
 use config::{Config, PubMap, SubMap};
 use link::{Arrived, Inbox, Outgoing, Stats};
 use msgs::RosMessage;
+use route::{Put, Route, TaskPublishers};
 use shm_schemas::payloads::motion::{GroundTruth, Odometry, VelocityCommand};
 use shm_schemas::payloads::sonar::SonarScan;
 use std::path::PathBuf;
@@ -26,7 +29,7 @@ use std::thread::JoinHandle;
 /// How many samples per input one step converts at most (more wait for
 /// the next step, which the agent's waker makes at once).
 const BATCH: usize = 64;
-/// How many messages may wait for the link thread.
+/// How many messages (Images) may wait for the link thread.
 const OUTGOING: usize = 256;
 
 /// The agent's own arguments (after `--`).
@@ -63,8 +66,13 @@ struct SubOutput {
 pub struct Ros2 {
     cfg: Config,
     inputs: Vec<PubInput>,
+    /// which thread puts each published topic (by `cfg.publish`)
+    routes: Vec<Route>,
     outputs: Vec<SubOutput>,
     stats: Arc<Stats>,
+    /// the task's own publishers (its [`Route::Task`] topics), lent by the
+    /// link thread while its session is open
+    direct: Arc<TaskPublishers>,
     tx: Option<SyncSender<Outgoing>>,
     stop: Arc<AtomicBool>,
     link_thread: Option<JoinHandle<()>>,
@@ -134,11 +142,14 @@ impl Agent for Ros2 {
                 v
             });
         }
+        let routes = cfg.publish.iter().map(Route::of).collect();
         Ok(Ros2 {
             cfg,
             inputs,
+            routes,
             outputs,
             stats,
+            direct: Arc::new(TaskPublishers::default()),
             tx: None,
             stop: Arc::new(AtomicBool::new(false)),
             link_thread: None,
@@ -153,12 +164,12 @@ impl Agent for Ros2 {
         let (tx, rx) = std::sync::mpsc::sync_channel::<Outgoing>(OUTGOING);
         let cfg = self.cfg.clone();
         let inboxes: Vec<Arc<Inbox>> = self.outputs.iter().map(|o| o.inbox.clone()).collect();
-        let (stats, stop) = (self.stats.clone(), self.stop.clone());
+        let (stats, stop, direct) = (self.stats.clone(), self.stop.clone(), self.direct.clone());
         let handle = std::thread::Builder::new()
             .name("ros2-link".into())
             .spawn(move || {
                 agent_sdk::rt::drop_realtime();
-                if let Some(mut link) = link::Link::open_retrying(&cfg, &inboxes, &rx, &stats, &stop) {
+                if let Some(mut link) = link::Link::open_retrying(&cfg, &inboxes, &direct, &rx, &stats, &stop) {
                     link.run(&rx, &stats, &stop);
                     link.close();
                 }
@@ -237,13 +248,30 @@ impl Agent for Ros2 {
             if let Some(e) = failed {
                 tracing::warn!(topic = %spec.topic, error = %e, "a sample could not be written as CDR");
             }
-            if let Some(tx) = &self.tx {
-                for bytes in encoded {
-                    match tx.try_send(Outgoing { topic: i, bytes }) {
-                        Ok(()) => {}
-                        Err(TrySendError::Full(_)) => self.stats.dropped(i),
-                        Err(TrySendError::Disconnected(_)) => {
-                            return Err(AgentError::Other("the ros2 link thread ended".into()));
+            match self.routes.get(i) {
+                // small messages: put here and now (see crate::route)
+                Some(Route::Task) => {
+                    for bytes in encoded {
+                        match self.direct.put(i, bytes) {
+                            Put::Sent => self.stats.published(i),
+                            Put::NotOpen => self.stats.dropped(i),
+                            Put::Failed(e) => {
+                                self.stats.dropped(i);
+                                tracing::debug!(topic = %spec.topic, error = %e, "put failed");
+                            }
+                        }
+                    }
+                }
+                _ => {
+                    if let Some(tx) = &self.tx {
+                        for bytes in encoded {
+                            match tx.try_send(Outgoing { topic: i, bytes }) {
+                                Ok(()) => {}
+                                Err(TrySendError::Full(_)) => self.stats.dropped(i),
+                                Err(TrySendError::Disconnected(_)) => {
+                                    return Err(AgentError::Other("the ros2 link thread ended".into()));
+                                }
+                            }
                         }
                     }
                 }
@@ -269,6 +297,8 @@ impl Agent for Ros2 {
     }
 
     fn stop(&mut self, _ctx: &mut Context) {
+        // the link thread takes the task's publishers back before it closes
+        // the session (Link::close); no step runs any more
         self.stop.store(true, Ordering::Release);
         self.tx = None;
         if let Some(h) = self.link_thread.take() {

@@ -13,16 +13,19 @@
 //! * [`usermap`]: any payload (a user's own type) as a vendored ROS
 //!   message, field by field as the configuration says, and [`usersub`]:
 //!   a vendored ROS message received as any payload, the other way;
-//! * [`link`]: the Zenoh session, in a thread of its own (not real-time);
-//!   it and the agent are the `agent` feature (default): without it the
-//!   crate has no Zenoh, as the `nerve` command uses it;
+//! * [`link`]: the Zenoh session, in a thread of its own (not real-time),
+//!   and [`route`]: which topics the task puts itself (small messages) and
+//!   which it hands to the link thread (Images); they and the agent are the
+//!   `agent` feature (default): without it the crate has no Zenoh, as the
+//!   `nerve` command uses it;
 //! * [`bag`]: recorded samples as the CDR messages, definitions and
 //!   metadata of a rosbag2 MCAP file (`nerve export --ros2`), and
 //!   [`bag_image`]: recorded camera frames as `sensor_msgs/Image`.
 //!
-//! The task is periodic: each step it converts what arrived on the inputs
-//! and hands the CDR bytes to the link thread, and delivers on the outputs
-//! what the link's subscribers received.
+//! The task is event-driven: each step it converts what arrived on the
+//! inputs, puts the small messages itself and hands Images to the link
+//! thread, and delivers on the outputs what the link's subscribers
+//! received (they wake it through the SDK's waker).
 
 #[cfg(feature = "agent")]
 mod agent;
@@ -37,6 +40,8 @@ pub use agent::Ros2;
 #[cfg(feature = "agent")]
 pub mod link;
 pub mod msgs;
+#[cfg(feature = "agent")]
+pub mod route;
 pub mod usermap;
 pub mod usersub;
 pub mod wire;

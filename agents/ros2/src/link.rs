@@ -5,8 +5,11 @@
 //!
 //! It runs in a thread of its own that first drops real-time scheduling, so
 //! that Zenoh's runtime (started by the session) never competes with the
-//! robot's real-time tasks. The task hands it CDR bytes through a bounded
-//! channel ([`Outgoing`]); the subscribers' callbacks leave what arrives in a
+//! robot's real-time tasks. The task puts the messages of its small topics
+//! itself, with the publishers this thread lends it once the session is
+//! open ([`crate::route`]), and hands the rest (Images) to this thread as
+//! CDR bytes through a bounded channel ([`Outgoing`]); the subscribers'
+//! callbacks leave what arrives in a
 //! bounded [`Inbox`] per topic and wake the event-driven task through the
 //! agent's waker ([`agent_sdk::Waker`]); the task empties the inboxes in the
 //! step that wake makes.
@@ -20,6 +23,7 @@
 
 use crate::config::{Config, Mode};
 use crate::msgs::{RosMessage, Twist};
+use crate::route::{Route, TaskPublishers};
 use crate::wire::{self, Attachment, EntityKind, NodeId};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -194,7 +198,15 @@ impl Stats {
         }
     }
 
-    /// A message of topic `i` found the link thread's queue full.
+    /// A message of topic `i` went out (to Zenoh's queue).
+    pub fn published(&self, i: usize) {
+        if let Some(c) = self.published.get(i) {
+            c.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// A message of topic `i` found the link thread's queue full, no
+    /// session, or a put that failed.
     pub fn dropped(&self, i: usize) {
         if let Some(d) = self.dropped.get(i) {
             d.fetch_add(1, Ordering::Relaxed);
@@ -243,13 +255,21 @@ impl Cache {
     }
 }
 
-struct Publisher {
+/// A topic's publisher, with its attachment's state: its GID and its last
+/// sequence number. One thread puts with it ([`Route`]).
+pub struct Publisher {
     publisher: zenoh::pubsub::Publisher<'static>,
     gid: [u8; 16],
     /// transient local: the cache, its queryable and its detection token
     cache: Option<(Arc<Cache>, zenoh::query::Queryable<()>, zenoh::liveliness::LivelinessToken)>,
     /// the last sequence number sent
     seq: i64,
+}
+
+impl std::fmt::Debug for Publisher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Publisher").field("key", &self.publisher.key_expr().as_str()).field("seq", &self.seq).finish()
+    }
 }
 
 impl Publisher {
@@ -261,7 +281,7 @@ impl Publisher {
         entity: u32,
         topic: &str,
         ros_type: (&str, &str),
-        qos: &wire::Qos,
+        (qos, route): (&wire::Qos, Route),
         tokens: &mut Vec<zenoh::liveliness::LivelinessToken>,
     ) -> Result<Publisher, LinkError> {
         let (dds, hash) = ros_type;
@@ -269,6 +289,7 @@ impl Publisher {
         let publisher = session
             .declare_publisher(key.clone())
             .congestion_control(CongestionControl::Drop)
+            .priority(route.priority())
             .wait()
             .map_err(declare_err("publisher", &key))?;
         let cache = if qos.transient_local {
@@ -314,7 +335,7 @@ impl Publisher {
 
     /// Sends `bytes` with the next attachment (and keeps them for late
     /// joiners when transient local).
-    fn put(&mut self, bytes: Vec<u8>) -> Result<(), zenoh::Error> {
+    pub fn put(&mut self, bytes: Vec<u8>) -> Result<(), zenoh::Error> {
         self.seq = self.seq.saturating_add(1);
         let att = Attachment {
             sequence_number: self.seq,
@@ -332,7 +353,10 @@ impl Publisher {
 /// An open session with everything declared; dropping it undeclares all.
 pub struct Link {
     session: zenoh::Session,
-    publishers: Vec<Publisher>,
+    /// the link thread's publishers, by topic (`None`: the task's)
+    publishers: Vec<Option<Publisher>>,
+    /// the task's publishers, lent to it while the session is open
+    task: Arc<TaskPublishers>,
     /// /tf_static, when the configuration has static transforms
     _tf_static: Option<Publisher>,
     _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
@@ -382,8 +406,9 @@ fn declare_err(what: &'static str, key: &str) -> impl FnOnce(zenoh::Error) -> Li
 impl Link {
     /// Opens the session, declares the node, its publishers and
     /// subscriptions with their tokens. `inboxes` are the subscriptions'
-    /// (in the order of `cfg.subscribe`).
-    pub fn open(cfg: &Config, inboxes: Vec<Arc<Inbox>>) -> Result<Link, LinkError> {
+    /// (in the order of `cfg.subscribe`); the publishers of the task's
+    /// topics ([`Route::Task`]) are lent to `task`.
+    pub fn open(cfg: &Config, inboxes: Vec<Arc<Inbox>>, task: Arc<TaskPublishers>) -> Result<Link, LinkError> {
         let session = zenoh::open(zenoh_config(cfg)?).wait().map_err(|source| LinkError::Open {
             mode: cfg.mode,
             connect: cfg.connect.clone(),
@@ -404,13 +429,24 @@ impl Link {
         };
         tokens.push(token(node.node_token())?);
         let mut entity = 0u32;
-        let mut publishers = Vec::new();
+        let (mut publishers, mut lent) = (Vec::new(), Vec::new());
         for p in &cfg.publish {
             entity += 1;
             let (dds, hash) = type_of(cfg, &p.ros_type)?;
-            let publisher = Publisher::declare(&session, &node, entity, &p.topic, (&dds, hash), &p.qos, &mut tokens)?;
-            tracing::info!(topic = %p.topic, key = %publisher.publisher.key_expr(), "publishing {} as {}", p.input, p.ros_type);
-            publishers.push(publisher);
+            let route = Route::of(p);
+            let publisher =
+                Publisher::declare(&session, &node, entity, &p.topic, (&dds, hash), (&p.qos, route), &mut tokens)?;
+            tracing::info!(topic = %p.topic, key = %publisher.publisher.key_expr(), ?route, "publishing {} as {}", p.input, p.ros_type);
+            match route {
+                Route::Task => {
+                    publishers.push(None);
+                    lent.push(Some(publisher));
+                }
+                Route::Link => {
+                    publishers.push(Some(publisher));
+                    lent.push(None);
+                }
+            }
         }
         let tf_static = if cfg.static_transforms.is_empty() {
             None
@@ -424,7 +460,7 @@ impl Link {
                 entity,
                 &topic,
                 (&dds, hash),
-                &Config::tf_static_qos(),
+                (&Config::tf_static_qos(), Route::Task),
                 &mut tokens,
             )?;
             let stamp = crate::msgs::Time::from_ns(crate::convert::epoch_now_ns());
@@ -480,7 +516,8 @@ impl Link {
             cfg.node,
             cfg.domain
         );
-        Ok(Link { session, publishers, _tf_static: tf_static, _subscribers: subscribers, _tokens: tokens })
+        task.fill(lent);
+        Ok(Link { session, publishers, task, _tf_static: tf_static, _subscribers: subscribers, _tokens: tokens })
     }
 
     /// Opens the link, trying again (every 0.2 s, growing to 2 s) while no
@@ -489,6 +526,7 @@ impl Link {
     pub fn open_retrying(
         cfg: &Config,
         inboxes: &[Arc<Inbox>],
+        task: &Arc<TaskPublishers>,
         rx: &Receiver<Outgoing>,
         stats: &Stats,
         stop: &AtomicBool,
@@ -499,7 +537,7 @@ impl Link {
             if stop.load(Ordering::Acquire) {
                 return None;
             }
-            match Link::open(cfg, inboxes.to_vec()) {
+            match Link::open(cfg, inboxes.to_vec(), task.clone()) {
                 Ok(l) => {
                     if attempts > 0 {
                         tracing::info!(attempts, "zenoh session open after {attempts} failed attempt(s)");
@@ -534,13 +572,9 @@ impl Link {
                 Err(RecvTimeoutError::Timeout) => continue,
                 Err(RecvTimeoutError::Disconnected) => break,
             };
-            let Some(p) = self.publishers.get_mut(out.topic) else { continue };
+            let Some(p) = self.publishers.get_mut(out.topic).and_then(Option::as_mut) else { continue };
             match p.put(out.bytes) {
-                Ok(()) => {
-                    if let Some(c) = stats.published.get(out.topic) {
-                        c.fetch_add(1, Ordering::Relaxed);
-                    }
-                }
+                Ok(()) => stats.published(out.topic),
                 Err(e) => {
                     stats.dropped(out.topic);
                     tracing::debug!(key = %p.publisher.key_expr(), error = %e, "put failed");
@@ -551,8 +585,10 @@ impl Link {
 
     /// Undeclares everything and closes the session.
     pub fn close(self) {
-        let Link { session, publishers, _tf_static, _subscribers, _tokens } = self;
-        drop((publishers, _tf_static, _subscribers, _tokens));
+        let Link { session, publishers, task, _tf_static, _subscribers, _tokens } = self;
+        // the task's publishers back first: none is put with after the close
+        let lent = task.take();
+        drop((lent, publishers, _tf_static, _subscribers, _tokens));
         if let Err(e) = session.close().wait() {
             tracing::debug!(error = %e, "zenoh session close");
         }
