@@ -280,8 +280,9 @@ impl InputInner {
     /// Moves what waits in iceoryx2 into each source's own queue (when the
     /// agent wakes, so a deep input holds what arrives between reads).
     pub(crate) fn refill_held(&self) {
-        let name = self.name().to_string();
-        self.each_held(|subscriber, held| held.refill(subscriber, &name));
+        // borrowed, not copied: this runs for every input at every wake-up
+        let name = self.name();
+        self.each_held(|subscriber, held| held.refill(subscriber, name));
     }
 
     /// What the own queues counted, summed over the sources.
