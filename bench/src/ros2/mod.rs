@@ -32,9 +32,11 @@
 //! * Twist through the agent, `step → received` (the step that took the
 //!   command and its clock frame, when one step took both: the Twist's
 //!   input comes first) and `sent → received` (from the command on the
-//!   nerve port: the agent's wake-up, its step, the link thread, the
-//!   wire); raw `put → received`; the ratios of the medians (target ≤ 1.2x,
-//!   issue 44's "one way through the agent": `sent → received`).
+//!   nerve port: the agent's wake-up, its step and put, the wire; the task
+//!   puts a Twist itself, `nerve_ros2::route`); its parts `sent → step`
+//!   (the wake-up) and `step → put` (the agent's share); raw `put →
+//!   received`; the ratios of the medians (target ≤ 1.2x, issue 44's "one
+//!   way through the agent": `sent → received`).
 
 mod source;
 mod wire;
@@ -139,6 +141,13 @@ pub struct TwistSpans {
     pub agent_step_to_received: Summary,
     /// the command on the nerve port → received (with the wait for the step)
     pub agent_sent_to_received: Summary,
+    /// the command on the nerve port → the start of the step that took it
+    /// (the agent's wake-up; paired events only)
+    pub agent_sent_to_step: Summary,
+    /// the start of that step → the agent's put (the attachment's stamp:
+    /// conversion, CDR, the put's own work in the task; paired
+    /// events only)
+    pub agent_step_to_put: Summary,
     /// the agent's put → received
     pub agent_put_to_received: Summary,
     /// the raw put → received
@@ -216,6 +225,7 @@ fn spans(src: &source::Schedule, got: &wire::Received3) -> (ImageSpans, TwistSpa
         step_of[i] = Some(r.t_stamp);
     }
     let (mut a_step, mut a_sent, mut a_put) = (vec![], vec![], vec![]);
+    let (mut a_wake, mut a_share) = (vec![], vec![]);
     for (i, r) in kept(&got.twist, n_tw) {
         let t_send = src.twists[i].0;
         a_sent.push(span(t_send, r.t_recv));
@@ -224,6 +234,8 @@ fn spans(src: &source::Schedule, got: &wire::Received3) -> (ImageSpans, TwistSpa
         // began after the command was sent and before the Twist was put
         if let Some(step) = step_of[i].filter(|&s| s >= t_send && s <= r.t_put) {
             a_step.push(span(step, r.t_recv));
+            a_wake.push(span(t_send, step));
+            a_share.push(span(step, r.t_put));
         }
     }
     let raw: Vec<u64> = kept(&got.raw, n_tw).map(|(_, r)| span(r.t_put, r.t_recv)).collect();
@@ -237,6 +249,8 @@ fn spans(src: &source::Schedule, got: &wire::Received3) -> (ImageSpans, TwistSpa
         ratio_put: ratio(put.p50_ns, raw_s.p50_ns),
         agent_step_to_received: step,
         agent_sent_to_received: sent,
+        agent_sent_to_step: Summary::of(&a_wake),
+        agent_step_to_put: Summary::of(&a_share),
         agent_put_to_received: put,
         raw_put_to_received: raw_s,
     };
@@ -341,7 +355,9 @@ fn span_notes() -> Vec<(String, String)> {
             "Twist step → received",
             "from the start of the step that took the command (its clock frame's header stamp; the Twist's input first) to the subscriber",
         ),
-        ("Twist sent → received", "from the command sent on the nerve port: the agent's wake-up on its input, its step, the link thread, the wire (issue 44's one way through the agent)"),
+        ("Twist sent → step", "from the command sent on the nerve port to the start of the step that took it: the agent's wake-up on its input"),
+        ("Twist step → put", "from the start of that step to the agent's put (the attachment's stamp): conversion, CDR, the attachment (the task puts a Twist itself; it handed it to the link thread before issue 44's change)"),
+        ("Twist sent → received", "from the command sent on the nerve port: the agent's wake-up on its input, its step and put, the wire (issue 44's one way through the agent)"),
         ("raw put → received", "a second Zenoh session of the bench puts the same Twist CDR and an attachment through the same router"),
     ]
     .iter()
@@ -377,6 +393,8 @@ pub fn print_tables(r: &Ros2Report) {
     println!("|---|---:|---:|---:|---:|");
     row("agent: step → received", &r.twist.agent_step_to_received);
     row("agent: sent → received", &r.twist.agent_sent_to_received);
+    row("agent: sent → step (wake-up)", &r.twist.agent_sent_to_step);
+    row("agent: step → put (agent)", &r.twist.agent_step_to_put);
     row("agent: put → received", &r.twist.agent_put_to_received);
     row("raw put → received", &r.twist.raw_put_to_received);
     println!(
@@ -420,6 +438,9 @@ mod tests {
         assert_eq!(img.raw_put_to_received.p50_ns, 800);
         assert_eq!(tw.paired, 1);
         assert_eq!(tw.agent_step_to_received.p50_ns, 100);
+        // twist a: sent at ta, its step at ta + 100, put at ta + 150
+        assert_eq!((tw.agent_sent_to_step.n, tw.agent_sent_to_step.p50_ns), (1, 100));
+        assert_eq!(tw.agent_step_to_put.p50_ns, 50);
         assert_eq!(tw.agent_sent_to_received.n, 2);
         assert_eq!((tw.raw_put_to_received.min_ns, tw.raw_put_to_received.max_ns), (75, 124));
         assert!(agent_config("tcp/127.0.0.1:7447").contains("[[publish]]"));

@@ -278,7 +278,7 @@ pub fn raw_puts(cfg: &nerve_ros2::config::Config, keys: &Keys, count: usize, mut
         } else {
             (&twist, twist_cdr(i as u64)?)
         };
-        // as the agent's link thread: the attachment's stamp, then the put
+        // as the agent's publishers: the attachment's stamp, then the put
         let t_put = epoch_ns();
         let att = Attachment { sequence_number: e as i64 + 1, source_timestamp: t_put, gid }.encode();
         publisher.put(bytes).attachment(att.to_vec()).wait().map_err(|e| anyhow!("raw put: {e}"))?;
