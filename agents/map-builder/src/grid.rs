@@ -69,8 +69,8 @@ impl VisitedGrid {
     }
 
     /// The robot went from the last position given here to `(x, y)` at
-    /// `now_ns`: it visits every cell on the straight line between (sampled
-    /// every eighth of a cell) when the two are at most [`FILL_MAX_M`]
+    /// `now_ns`: it visits every cell the straight line between crosses
+    /// (each sharing a side with the one before) when the two are at most [`FILL_MAX_M`]
     /// apart, then `(x, y)`'s. Poses come often, but a checkpoint's
     /// correction moves the pose by decimetres at once, and a robot at 4x
     /// simulated time may step farther than a cell: without the cells
@@ -79,18 +79,53 @@ impl VisitedGrid {
         if !(x.is_finite() && y.is_finite()) {
             return;
         }
-        if let Some((px, py)) = self.last_point {
-            let d = (x - px).hypot(y - py);
-            if d <= FILL_MAX_M {
-                let n = (d / (self.cell_m / 8.0)).ceil().clamp(1.0, 1000.0) as u32;
-                for s in 1..n {
-                    let t = f64::from(s) / f64::from(n);
-                    self.visit(px + t * (x - px), py + t * (y - py), now_ns);
-                }
-            }
+        if let Some((px, py)) = self.last_point
+            && (x - px).hypot(y - py) <= FILL_MAX_M
+        {
+            self.visit_crossed((px, py), (x, y), now_ns);
         }
         self.visit(x, y, now_ns);
         self.last_point = Some((x, y));
+    }
+
+    /// Visits every cell the straight line from `a` to `b` crosses, in
+    /// order, each sharing a side with the one before (a grid walk, not
+    /// samples: a line that passes a corner by millimetres still crosses
+    /// the cell beside it, and the planner needs that cell to step
+    /// diagonally; through a corner exactly, the cell beside it in x is
+    /// taken). `b`'s own cell is left to the caller.
+    fn visit_crossed(&mut self, a: (f64, f64), b: (f64, f64), now_ns: u64) {
+        let (Some(mut k), Some(end)) = (self.key(a.0, a.1), self.key(b.0, b.1)) else { return };
+        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+        let cell = self.cell_m;
+        // the line's parameter t (0 at a, 1 at b) where it crosses the next
+        // cell side in x (in y), and how far t goes from one side to the next
+        let first = |i: i64, d: f64, from: f64| {
+            let side = if d > 0.0 { (i + 1) as f64 * cell } else { i as f64 * cell };
+            if d == 0.0 { f64::INFINITY } else { (side - from) / d }
+        };
+        let (mut tx, mut ty) = (first(k.0, dx, a.0), first(k.1, dy, a.1));
+        let (ddx, ddy) = (
+            if dx == 0.0 { f64::INFINITY } else { cell / dx.abs() },
+            if dy == 0.0 { f64::INFINITY } else { cell / dy.abs() },
+        );
+        let (si, sj) = (if dx > 0.0 { 1 } else { -1 }, if dy > 0.0 { 1 } else { -1 });
+        // one side crossed a step: at most as many steps as cells between the ends
+        let steps = k.0.abs_diff(end.0).saturating_add(k.1.abs_diff(end.1)).min(10_000);
+        for _ in 0..steps {
+            if k == end {
+                break;
+            }
+            if tx <= ty {
+                k.0 += si;
+                tx += ddx;
+            } else {
+                k.1 += sj;
+                ty += ddy;
+            }
+            let (cx, cy) = self.centre(k);
+            self.visit(cx, cy, now_ns);
+        }
     }
 
     /// The robot is at `(x, y)` at `now_ns`.

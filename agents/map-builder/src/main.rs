@@ -48,10 +48,13 @@
 
 use agent_sdk::port::{SeqOutput, SeqServer};
 use agent_sdk::{Agent, AgentError, Context, Input, Output, Param, Setup, Task};
-use nerve_map_builder::{MapBuilder, Pose, Settings, SightingEvent, VisitedGrid, plan::plan};
+use nerve_map_builder::{
+    MapBuilder, Pose, Settings, SightingEvent, VisitedGrid,
+    plan::{islands, plan},
+};
 use shm_schemas::payloads::{
     CheckpointSighting, MapCell, MapHeader, MissionCode, MissionCommand, PathHeader, PathPoint, PlanRequest,
-    PoseEstimate, Scalar, VIA_PATH_MAX_LEN, ViaKind, ViaPathBuf, ViaPathHeader, ViaPoint,
+    PlanStatus, PoseEstimate, Scalar, VIA_PATH_MAX_LEN, ViaKind, ViaPathBuf, ViaPathHeader, ViaPoint,
 };
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -61,6 +64,8 @@ use std::time::Duration;
 const POSE_FRESH_NS: u64 = 1_000_000_000;
 /// Most cells the visited grid keeps (0.5 m cells: a 100 m × 100 m area).
 const MAX_CELLS: usize = 40_000;
+/// An `unreachable` answer's log counts each end's island up to this many cells.
+const ISLAND_LIMIT: usize = 100_000;
 /// Most way points a `plan` answer holds.
 const MAX_PATH_POINTS: usize = 4096;
 /// An unchanged map is sent again every this many times `map_every` cycles.
@@ -185,6 +190,19 @@ impl MapBuilderAgent {
                 length_m = p.header.length_m,
                 "plan asked"
             );
+            if p.status() == Some(PlanStatus::Unreachable) {
+                // which islands of cells the two ends are in (issue 42: why no way)
+                if let Some(i) = start.and_then(|s| islands(grid, s, (goal.x, goal.y), tolerance, ISLAND_LIMIT)) {
+                    tracing::warn!(
+                        start_cell = ?i.start_cell,
+                        start_island_cells = i.start_cells,
+                        goal_cell = ?i.goal_cell,
+                        goal_island_cells = i.goal_cells,
+                        grid_cells = grid.len(),
+                        "plan: no chain of cells driven between the robot and the goal"
+                    );
+                }
+            }
             (p.header, p.points)
         });
         match served {

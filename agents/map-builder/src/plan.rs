@@ -129,6 +129,63 @@ fn snap(grid: &VisitedGrid, p: (f64, f64), tolerance_m: f64) -> Option<Key> {
     best.map(|b| b.1)
 }
 
+/// The two ends of a `plan` and the islands of cells they are in (see
+/// [`islands`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Islands {
+    /// The cell the start snapped to.
+    pub start_cell: (i64, i64),
+    /// Seen cells chained to it by the steps A* takes (up to the limit).
+    pub start_cells: usize,
+    /// The cell the goal snapped to.
+    pub goal_cell: (i64, i64),
+    /// Seen cells chained to it.
+    pub goal_cells: usize,
+}
+
+/// Why `plan` found no way from `start` to `goal` (for the log of an
+/// `unreachable` answer): the cells the two ends snap to and how many seen
+/// cells each one's island holds (cells chained by the steps A* takes).
+/// Each island is counted up to `limit` cells; `None` when an end snaps to
+/// no cell.
+pub fn islands(
+    grid: &VisitedGrid,
+    start: (f64, f64),
+    goal: (f64, f64),
+    tolerance_m: f64,
+    limit: usize,
+) -> Option<Islands> {
+    let tolerance_m = if tolerance_m.is_finite() { tolerance_m.max(0.0) } else { 0.0 };
+    let (from, to) = (snap(grid, start, tolerance_m)?, snap(grid, goal, tolerance_m)?);
+    let island = |k: Key| {
+        let mut seen = HashSet::from([k]);
+        let mut todo = vec![k];
+        while let Some(k) = todo.pop() {
+            if seen.len() >= limit {
+                break;
+            }
+            for n in steps(grid, k) {
+                if seen.insert(n) {
+                    todo.push(n);
+                }
+            }
+        }
+        seen.len()
+    };
+    Some(Islands { start_cell: from, start_cells: island(from), goal_cell: to, goal_cells: island(to) })
+}
+
+/// The seen cells one A* step from `k`: its 4 neighbours, and its diagonal
+/// ones with a cell beside the step seen too.
+fn steps(grid: &VisitedGrid, k: Key) -> impl Iterator<Item = Key> + '_ {
+    [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)].into_iter().filter_map(move |(di, dj)| {
+        let n = (k.0 + di, k.1 + dj);
+        let diagonal = di != 0 && dj != 0;
+        let cut = diagonal && !grid.seen((k.0 + di, k.1)) && !grid.seen((k.0, k.1 + dj));
+        (grid.seen(n) && !cut).then_some(n)
+    })
+}
+
 /// The octile distance between two cells, in cost units (never more than
 /// the cost of the cheapest chain of steps: A*'s heuristic).
 fn octile(a: Key, b: Key) -> u64 {
@@ -160,16 +217,11 @@ fn astar(grid: &VisitedGrid, from: Key, to: Key) -> Option<Vec<Key>> {
             continue;
         }
         let g = cost.get(&k).copied().unwrap_or(u64::MAX);
-        for (di, dj) in [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)] {
-            let n = (k.0 + di, k.1 + dj);
-            if !grid.seen(n) || done.contains(&n) {
+        for n in steps(grid, k) {
+            if done.contains(&n) {
                 continue;
             }
-            let diagonal = di != 0 && dj != 0;
-            if diagonal && !grid.seen((k.0 + di, k.1)) && !grid.seen((k.0, k.1 + dj)) {
-                continue;
-            }
-            let step = if diagonal { DIAGONAL } else { STRAIGHT };
+            let step = if n.0 != k.0 && n.1 != k.1 { DIAGONAL } else { STRAIGHT };
             let ng = g.saturating_add(step);
             if cost.get(&n).is_none_or(|c| ng < *c) {
                 cost.insert(n, ng);
@@ -287,6 +339,10 @@ mod tests {
         let g = grid(&["ooo ooo"]);
         let p = plan(&g, Some((0.5, 0.5)), (5.5, 0.5), 0.5, 100, 0);
         assert_eq!((p.status(), p.points.len()), (Some(PlanStatus::Unreachable), 0));
+        assert_eq!(
+            islands(&g, (0.5, 0.5), (5.5, 0.5), 0.5, 100),
+            Some(Islands { start_cell: (0, 0), start_cells: 3, goal_cell: (5, 0), goal_cells: 3 })
+        );
         // cells that touch only at a corner are not a way through …
         let corner = grid(&[" o", "o "]);
         assert_eq!(plan(&corner, Some((0.5, 0.5)), (1.5, 1.5), 0.0, 100, 0).status(), Some(PlanStatus::Unreachable));
@@ -297,6 +353,31 @@ mod tests {
         // far from every cell seen
         let p = plan(&g, Some((0.5, 0.5)), (20.0, 20.0), 2.0, 100, 0);
         assert_eq!((p.status(), p.points.len()), (Some(PlanStatus::GoalUnseen), 0));
+    }
+
+    #[test]
+    fn a_robot_driving_close_past_a_corner_leaves_a_way_plan_can_follow() {
+        // issue 42, the demo's "unreachable": a pose step that passes a cell
+        // corner by a centimetre crosses the cell beside it (0, 1) only for
+        // 1 cm; cells sampled every eighth of a cell missed it and the two
+        // cells driven through touched only at the corner
+        for (a, b) in [((0.3, 0.31), (0.7, 0.71)), ((0.3, 0.3), (0.7, 0.7)), ((0.71, 0.7), (0.31, 0.3))] {
+            let mut g = VisitedGrid::new(0.5, 0, 10_000);
+            g.visit_along(a.0, a.1, 0);
+            g.visit_along(b.0, b.1, 1);
+            let p = plan(&g, Some(b), a, 0.0, 100, 0);
+            assert_eq!(p.status(), Some(PlanStatus::Found), "{a:?} -> {b:?}: {p:?}");
+            assert!(on_seen_cells(&g, &p), "{a:?} -> {b:?}: {p:?}");
+        }
+        // a long step along a row's edge, wiggling across it: every cell crossed is a way
+        let mut g = VisitedGrid::new(0.5, 0, 10_000);
+        let mut at = (0.0, -0.49);
+        g.visit_along(at.0, at.1, 0);
+        for k in 1..40u64 {
+            at = (k as f64 * 0.37, if k % 2 == 0 { -0.49 } else { -0.52 });
+            g.visit_along(at.0, at.1, k);
+        }
+        assert_eq!(plan(&g, Some(at), (0.0, -0.49), 0.0, 100, 0).status(), Some(PlanStatus::Found));
     }
 
     #[test]
