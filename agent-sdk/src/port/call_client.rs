@@ -66,8 +66,12 @@ enum Finished<K: Kind> {
     /// `take_with` to read in place; its call is let go after its answer
     /// (fields drop in order)
     Held { response: Answered<K>, _call: Pending<K>, service: String },
-    /// answered and copied out (for `take`), or why there is no answer
-    Done(Result<K::Value, CallError>),
+    /// answered and copied out (for `take`), or why there is no answer;
+    /// a value is boxed so that the queue's entries stay small: an entry
+    /// as large as the answer (230 KB for an image) would be copied
+    /// whole at each push and pop, held answers too (two passes over the
+    /// answer's size per call, found by a profile of the messages bench)
+    Done(Result<Box<K::Value>, CallError>),
 }
 
 struct ClientState<K: Kind> {
@@ -331,7 +335,7 @@ impl<K: Kind> ClientSide<K> {
                                 .map(|view| (!hold).then(|| self.kind.to_value(view)));
                             match checked {
                                 Ok(None) => Finished::Held { response, _call: f.pending, service: f.service },
-                                Ok(Some(value)) => Finished::Done(Ok(value)),
+                                Ok(Some(value)) => Finished::Done(Ok(Box::new(value))),
                                 Err(e) => Finished::Done(Err(e)),
                             }
                         }
