@@ -156,6 +156,10 @@ fn demo_cooperate_robot_2_reaches_the_target_through_bridge_restarts_and_misses_
     let corrections = with["corrections"][&r2.name].as_u64().expect("robot 2's corrections");
     assert!(corrections >= 3, "robot 2 was corrected at the checkpoints: {with:#}");
     assert!(with["via_points"].as_array().is_some_and(|v| v.len() >= 5), "{with:#}");
+    // the path came from robot 1's `plan` call: it starts at the seen cell
+    // robot 2's start snaps to, a way point (the map builder's own path, the
+    // fallback, starts at checkpoint 1's via point)
+    assert_eq!(with["planned_path"][0]["kind"], "waypoint", "{with:#}");
     // in the same run, the raw dead reckoning (uncorrected) drifts away from
     // the recorded pose's error
     let (recorded, raw) =
@@ -228,6 +232,7 @@ fn demo_cooperate_seeds_2_and_3_reach_the_target_at_4x() {
         assert_eq!(s["time_scale"].as_f64(), Some(SCALE), "seed {seed}: {s:#}");
         assert_eq!(s["end_reason"], "robot 2 arrived and robot 1 resumed", "seed {seed}: {s:#}");
         assert!(distance(&s) <= 0.5, "seed {seed}: robot 2 ended {} m from the target: {s:#}", distance(&s));
+        assert_eq!(s["planned_path"][0]["kind"], "waypoint", "seed {seed}: the path came from `plan`: {s:#}");
         for (robot, n) in s["collisions"].as_object().expect("collisions per robot") {
             assert_eq!(n.as_u64(), Some(0), "seed {seed}: robot {robot} collided: {s:#}");
         }
