@@ -339,6 +339,7 @@ fn read_only_offers_nothing_and_actions_need_the_token() {
     assert_eq!(status, 409, "{body}");
     assert!(body.contains("not ring notices"), "{body}");
     sequence_port(&r, &ro.addr, &b);
+    call_edge(&r, &b);
     // the editing server's page opened with the read token watches only; the token left the address bar
     b.open(&rw.url(Some(READ)));
     b.wait_for("the agents", WAIT, &format!("const a = {PAGE_AGENTS}; return a === 'cam,det,r1,r2,t1' && a"));
@@ -362,6 +363,25 @@ fn read_only_offers_nothing_and_actions_need_the_token() {
     ro.stop();
     rw.stop();
     r.down_and_check_clean();
+}
+
+/// A call on the page (issue 42): a client wired to a service is an edge
+/// from the service, drawn on its agent's right among the outputs, to the
+/// client, on the left among the inputs, both marked as call ports.
+fn call_edge(r: &Robot, b: &Browser) {
+    r.ok(&["start", "caller", "--name", "srv", "--", "--serve"]);
+    r.ok(&["start", "caller", "--name", "asker"]);
+    r.ok(&["connect", "asker/planner", "srv/plan"]);
+    b.wait_for(
+        "the call's edge",
+        WAIT,
+        "const e = document.querySelector('.edge[data-from=\"srv/plan\"][data-to=\"asker/planner\"]'); \
+         return !!e && e.style.display !== 'none' \
+           && !!document.querySelector('.port.out.call.service[data-port=\"srv/plan\"]') \
+           && !!document.querySelector('.port.in.call.client[data-port=\"asker/planner\"]')",
+    );
+    r.ok(&["stop", "asker"]);
+    r.ok(&["stop", "srv"]);
 }
 
 /// Looking inside a sequence port (issue 42): the `detector` test agent

@@ -111,7 +111,13 @@ function update(snap) {
   if (ui.drawMs.length > 200) ui.drawMs.shift();
 }
 
-function nodeHeight(a) { return HEAD_H + PORT_GAP * Math.max(a.inputs.length, a.outputs.length, 1); }
+// An agent's ports as the page draws them: a client (it calls a service)
+// on the left among the inputs, a service it answers on the right among the
+// outputs, since the router wires a service to a client as a connection.
+function ins(a) { return a.inputs.concat((a.clients || []).map((p) => ({ ...p, call: 'client' }))); }
+function outs(a) { return a.outputs.concat((a.services || []).map((p) => ({ ...p, call: 'service' }))); }
+
+function nodeHeight(a) { return HEAD_H + PORT_GAP * Math.max(ins(a).length, outs(a).length, 1); }
 
 // Sources on the left, actuators (agents without outputs) on the right,
 // every other agent one column right of its furthest source.
@@ -128,7 +134,7 @@ function layout(g) {
     if (!moved) break;
   }
   const last = Math.max(0, ...col.values());
-  for (const a of g.agents) if (a.outputs.length === 0 && a.inputs.length > 0) col.set(a.name, Math.max(last, 1));
+  for (const a of g.agents) if (outs(a).length === 0 && ins(a).length > 0) col.set(a.name, Math.max(last, 1));
   const y = new Map();
   const sorted = [...g.agents].sort((a, b) => a.name.localeCompare(b.name));
   for (const a of sorted) {
@@ -145,7 +151,7 @@ function portXY(ref, dir) {
   const a = ui.graph && ui.graph.agents.find((x) => x.name === agent);
   const p = pos.get(agent);
   if (!a || !p) return null;
-  const list = dir === 'in' ? a.inputs : a.outputs;
+  const list = dir === 'in' ? ins(a) : outs(a);
   const i = list.findIndex((x) => x.name === port);
   if (i < 0) return null;
   return { x: p.x + (dir === 'in' ? 0 : NODE_W), y: p.y + HEAD_H + PORT_GAP * i + PORT_GAP / 2 };
@@ -159,7 +165,7 @@ function isPeriodic(a) { return String(a.task).toLowerCase() === 'periodic'; }
 function stateOf(a) { return String(a.state).toLowerCase(); }
 
 function drawNode(a) {
-  const shape = JSON.stringify([a.inputs, a.outputs]);
+  const shape = JSON.stringify([ins(a), outs(a)]);
   let n = nodeEls.get(a.name);
   if (!n || n.shape !== shape) {
     if (n) n.g.remove();
@@ -170,8 +176,8 @@ function drawNode(a) {
     el('text', { class: 'state', x: NODE_W - 8, y: 16, 'text-anchor': 'end' }, g);
     el('text', { class: 'info kind', x: 10, y: 32 }, g);
     el('text', { class: 'info figures', x: 10, y: 46 }, g);
-    a.inputs.forEach((p, i) => drawPort(g, a, p, 'in', i));
-    a.outputs.forEach((p, i) => drawPort(g, a, p, 'out', i));
+    ins(a).forEach((p, i) => drawPort(g, a, p, 'in', i));
+    outs(a).forEach((p, i) => drawPort(g, a, p, 'out', i));
     name.addEventListener('pointerdown', (ev) => startNodeDrag(ev, a.name));
     g.querySelector('rect.body').addEventListener('pointerdown', (ev) => startNodeDrag(ev, a.name));
     n = { g, shape, state: g.querySelector('text.state'), kind: g.querySelector('text.kind'), figures: g.querySelector('text.figures') };
@@ -191,7 +197,7 @@ function drawNode(a) {
 function drawPort(g, a, p, dir, i) {
   const x = dir === 'in' ? 0 : NODE_W, y = HEAD_H + PORT_GAP * i + PORT_GAP / 2;
   const ref = `${a.name}/${p.name}`;
-  const pg = el('g', { class: `port ${dir}`, 'data-port': ref, 'data-dir': dir, 'data-type': p.type_name }, g);
+  const pg = el('g', { class: `port ${dir}` + (p.call ? ` call ${p.call}` : ''), 'data-port': ref, 'data-dir': dir, 'data-type': p.type_name }, g);
   el('circle', { cx: x, cy: y, r: 6 }, pg);
   const label = el('text', { x: dir === 'in' ? 10 : NODE_W - 10, y: y + 3, 'text-anchor': dir === 'in' ? 'start' : 'end' }, pg);
   label.textContent = p.name;

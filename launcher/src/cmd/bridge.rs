@@ -209,6 +209,8 @@ mod tests {
             restarts: 0,
             importance: None,
             schemas: vec![],
+            services: vec![],
+            clients: vec![],
         };
         let s = status_of(&a);
         assert_eq!(s.peers, vec!["r2/bridge"]);

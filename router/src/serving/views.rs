@@ -31,6 +31,8 @@ impl State {
                 restarts: sup.total,
                 importance: Some(sup.spec.importance),
                 schemas: vec![],
+                services: vec![],
+                clients: vec![],
             });
         }
         out.sort_by(|a, b| a.name.cmp(&b.name));
@@ -55,6 +57,8 @@ impl State {
             restarts: sup.map(|s| s.total).unwrap_or(0),
             importance: sup.map(|s| s.spec.importance),
             schemas: e.reg.schemas.clone(),
+            services: e.reg.services.clone(),
+            clients: e.reg.clients.clone(),
         }
     }
 }

@@ -362,6 +362,12 @@ pub struct AgentView {
     /// the schema of each type its ports carry (by fingerprint)
     #[serde(default)]
     pub schemas: Vec<crate::Schema>,
+    /// the services it answers (`setup.serve`), typed as calls (protocol 12)
+    #[serde(default)]
+    pub services: Vec<PortSpec>,
+    /// the clients it calls services through (`setup.client`, protocol 12)
+    #[serde(default)]
+    pub clients: Vec<PortSpec>,
 }
 
 impl AgentView {

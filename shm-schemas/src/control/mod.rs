@@ -15,7 +15,7 @@ pub mod router_to_agent;
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 
 /// Version of the control protocol. Bump it on any change to a control type.
-pub const PROTOCOL_VERSION: u16 = 11;
+pub const PROTOCOL_VERSION: u16 = 12;
 
 /// A control message with the protocol version of its sender.
 #[derive(Debug, Serialize, Deserialize)]
