@@ -224,8 +224,15 @@ impl<K: Kind> CallClient<K> {
             self.side.settle(&mut st, now_ns(), false);
             st.done.pop_front()?
         };
-        let kind = &self.side.kind;
-        Some((id, self.side.read(finished, |answer| answer.map(|view| kind.to_value(view)))))
+        let answer = match finished {
+            // copied out when it settled: handed out as it is, not copied again
+            Finished::Done(outcome) => outcome.map(|value| *value),
+            held @ Finished::Held { .. } => {
+                let kind = &self.side.kind;
+                self.side.read(held, |answer| answer.map(|view| kind.to_value(view)))
+            }
+        };
+        Some((id, answer))
     }
 
     /// The next finished call, oldest first, handed to `read` with its
