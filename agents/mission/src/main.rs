@@ -78,6 +78,9 @@ enum Side {
         planner: SeqClient<PlanRequest, PathPoint, PathHeader>,
         wait_mode: Param<String>,
         peer_start: Param<String>,
+        /// the `peer_start` text last parsed into `logic` (parsed again only
+        /// when it changes, not at every step)
+        peer_start_seen: String,
         logic: Explorer,
     },
     Executor {
@@ -218,11 +221,16 @@ impl Mission {
     }
 
     fn step_explorer(&mut self, now: u64) -> Result<(), AgentError> {
-        let Side::Explorer { path_in, mode, report, planner, wait_mode, peer_start, logic } = &mut self.side else {
+        let Side::Explorer { path_in, mode, report, planner, wait_mode, peer_start, peer_start_seen, logic } =
+            &mut self.side
+        else {
             return Ok(());
         };
         logic.wait_mode = wait_mode.get();
-        logic.peer_start = parse_xy(&peer_start.get()).ok().flatten();
+        if peer_start.with(|text| text != peer_start_seen) {
+            *peer_start_seen = peer_start.get();
+            logic.peer_start = parse_xy(peer_start_seen).ok().flatten();
+        }
         logic.resend_ns = self.resend_ms.get().saturating_mul(1_000_000);
         if let Some((_, m)) = mode.latest() {
             logic.on_mode(m.name.as_str());
@@ -412,6 +420,7 @@ impl Agent for Mission {
                     logic: Explorer::new(&wait_mode.get(), 2_000_000_000),
                     wait_mode,
                     peer_start,
+                    peer_start_seen: String::new(),
                 }
             }
             Role::Executor => Side::Executor {
